@@ -1,0 +1,55 @@
+// The camera interface every backend implements (mock, and later OpenNI2, V4L2,
+// libcamera, libusb). Errors are values; acquire() never allocates or throws.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+
+#include "hal/frame.h"
+#include "hal/result.h"
+
+namespace fovea::hal {
+
+struct CameraInfo {
+  std::string name;              // e.g. "mock:living-room"
+  CameraIntrinsics intrinsics;
+  double depth_scale_m = 0.001;
+  double fps = 30.0;
+};
+
+// Named counters instead of per-event logging; the supervisor reports them.
+struct CameraCounters {
+  uint64_t frames_delivered = 0;
+  uint64_t timeouts = 0;
+  uint64_t errors = 0;
+};
+
+class Camera {
+ public:
+  virtual ~Camera() = default;
+
+  // Probes the device and prepares buffers; may allocate. Clear error when absent.
+  virtual Status open() = 0;
+  virtual Status start() = 0;
+  // Fills the caller's slot with the next frame (size, intrinsics, pose, stamp).
+  // kUnavailable on timeout or when not started; kCapacityExceeded when the slot
+  // is smaller than the frame. Never allocates.
+  virtual Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) = 0;
+  virtual void stop() = 0;
+
+  virtual const CameraInfo& info() const = 0;
+  virtual CameraCounters counters() const = 0;
+};
+
+// Creates a camera from a spec "backend:name[,key=value...]", e.g.
+// "mock:living-room,seed=7,path=orbit,size=640x480,fps=30". The backends compiled
+// in are listed in one table in camera.cpp (no static self-registration).
+Result<std::unique_ptr<Camera>> createCamera(std::string_view spec);
+
+// One line per backend and its options, for --help.
+std::string cameraSpecHelp();
+
+}  // namespace fovea::hal

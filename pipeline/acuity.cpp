@@ -1,0 +1,126 @@
+#include "pipeline/acuity.h"
+
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+
+namespace fovea::pipeline {
+
+namespace {
+
+// Table I: outer eccentricity of each named retinal region, in degrees.
+constexpr std::array<double, 5> kTableIBoundsDeg = {5.0, 8.0, 18.0, 30.0, 60.0};
+constexpr std::array<const char*, 6> kTableINames = {
+    "fovea", "parafovea", "perifovea", "near-periphery", "mid-periphery", "far-periphery"};
+constexpr std::array<const char*, kMaxRegions> kCustomNames = {
+    "region0", "region1", "region2", "region3", "region4", "region5", "region6", "region7"};
+
+std::string formatDouble(double v) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.17g", v);
+  return buffer;
+}
+
+Status invalid(const std::string& field, const std::string& what) {
+  return {ErrorCode::kInvalidArgument, "acuity." + field + ": " + what};
+}
+
+}  // namespace
+
+double foveaVoxelSizeM(double d0_m) {
+  return d0_m * std::tan(kMar0Deg * std::numbers::pi / 180.0);
+}
+
+std::string_view presetName(Preset preset) {
+  switch (preset) {
+    case Preset::kF1: return "F1";
+    case Preset::kF2: return "F2";
+    case Preset::kF3: return "F3";
+    case Preset::kFRef: return "FREF";
+    case Preset::kCustom: return "custom";
+  }
+  return "?";
+}
+
+Result<Preset> parsePreset(std::string_view text) {
+  std::string upper;
+  for (char c : text) upper.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
+  if (upper == "F1") return Preset::kF1;
+  if (upper == "F2") return Preset::kF2;
+  if (upper == "F3") return Preset::kF3;
+  if (upper == "FREF") return Preset::kFRef;
+  if (upper == "CUSTOM") return Preset::kCustom;
+  return Result<Preset>(ErrorCode::kInvalidArgument,
+                        "preset: unknown name '" + std::string(text) + "' (use F1, F2, F3 or FREF)");
+}
+
+Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
+  if (!std::isfinite(config.slope)) return invalid("slope", "must be a finite number, got " + formatDouble(config.slope));
+  if (config.slope < 0.0) return invalid("slope", "must not be negative, got " + formatDouble(config.slope));
+
+  RegionModel model;
+  model.preset_ = config.preset;
+  model.slope_ = config.slope;
+
+  // Section III: F1 = fovea, parafovea, perifovea and the rest; F2 adds the near
+  // periphery; F3 uses all six regions of Table I; FREF does not foveate.
+  int table_bounds = 0;
+  switch (config.preset) {
+    case Preset::kF1: table_bounds = 3; break;
+    case Preset::kF2: table_bounds = 4; break;
+    case Preset::kF3: table_bounds = 5; break;
+    case Preset::kFRef: table_bounds = 0; break;
+    case Preset::kCustom: table_bounds = -1; break;
+  }
+  if (table_bounds >= 0) {
+    for (int n = 0; n < table_bounds; ++n) model.bound_deg_[n] = kTableIBoundsDeg[n];
+    model.region_count_ = table_bounds + 1;
+    for (int n = 0; n < table_bounds; ++n) model.names_[n] = kTableINames[n];
+    // The outermost region is "the rest", sampled like the far periphery.
+    model.names_[table_bounds] = table_bounds == 0 ? "all" : (table_bounds == 5 ? "far-periphery" : "rest");
+  } else {
+    const auto& bounds = config.custom_bounds_deg;
+    if (bounds.size() > kMaxRegions - 1) {
+      return invalid("bounds_deg", "at most " + std::to_string(kMaxRegions - 1) + " bounds, got " +
+                                       std::to_string(bounds.size()));
+    }
+    for (std::size_t i = 0; i < bounds.size(); ++i) {
+      const std::string field = "bounds_deg[" + std::to_string(i) + "]";
+      const double b = bounds[i];
+      if (!std::isfinite(b)) return invalid(field, "must be a finite number, got " + formatDouble(b));
+      if (!(b > 0.0 && b < 180.0)) return invalid(field, formatDouble(b) + " is outside (0, 180) degrees");
+      if (i > 0 && !(b > bounds[i - 1])) {
+        return invalid(field, formatDouble(b) + " is not greater than the previous bound " +
+                                  formatDouble(bounds[i - 1]) + " (bounds must increase strictly)");
+      }
+      model.bound_deg_[i] = b;
+    }
+    model.region_count_ = static_cast<int>(bounds.size()) + 1;
+    for (int n = 0; n < model.region_count_; ++n) model.names_[n] = kCustomNames[n];
+  }
+
+  const double far = config.far_ecc_deg;
+  if (!std::isfinite(far)) return invalid("far_ecc_deg", "must be a finite number, got " + formatDouble(far));
+  if (!(far > 0.0 && far <= 180.0)) return invalid("far_ecc_deg", formatDouble(far) + " is outside (0, 180] degrees");
+  if (model.region_count_ > 1 && far < model.bound_deg_[model.region_count_ - 2]) {
+    return invalid("far_ecc_deg", formatDouble(far) + " is below the last region bound " +
+                                      formatDouble(model.bound_deg_[model.region_count_ - 2]) +
+                                      " (the outermost voxels would be smaller than the next inner ones)");
+  }
+  model.far_ecc_deg_ = far;
+  return model;
+}
+
+double RegionModel::voxelEccDeg(int n) const {
+  if (n <= 0) return 0.0;
+  if (n == region_count_ - 1) return far_ecc_deg_;
+  return bound_deg_[n];
+}
+
+double RegionModel::voxelScale(int n) const {
+  if (n <= 0) return 1.0;
+  return marDeg(slope_, voxelEccDeg(n)) / kMar0Deg;
+}
+
+}  // namespace fovea::pipeline

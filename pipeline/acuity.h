@@ -1,0 +1,78 @@
+// The acuity model of the paper (Eq. 1, 5, 6) and its regions (Table I).
+//
+// MAR(E) = m * E + MAR0, E and MAR in degrees, MAR0 = 1 arcmin. Region n >= 1 is
+// sampled with voxels of v_n = v_0 * MAR(E_n) / MAR0 where v_0 = d0 * tan(MAR0)
+// and E_n is the region's outer bound (the far periphery, which has none, uses a
+// configurable eccentricity). The fovea (region 0) is never resampled.
+// docs/acuity.md explains this reading of the paper.
+#pragma once
+
+#include <array>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "hal/result.h"
+
+namespace fovea::pipeline {
+
+inline constexpr double kMar0Deg = 1.0 / 60.0;  // 1 arcmin: 20/20 acuity
+inline constexpr int kMaxRegions = 8;            // region index fits 3 bits of a voxel key
+inline constexpr double kDefaultSlope = 0.022;   // the paper's range is 0.022 .. 0.034
+inline constexpr double kDefaultFarEccDeg = 90.0;
+
+// Eq. 1: minimum angle of resolution at eccentricity ecc_deg, in degrees.
+inline double marDeg(double slope, double ecc_deg) { return slope * ecc_deg + kMar0Deg; }
+
+// Eq. 5: v_0 = d0 * tan(MAR0), the smallest resolvable length at distance d0.
+double foveaVoxelSizeM(double d0_m);
+
+// The paper's test conditions (section III) and a user-defined list.
+enum class Preset { kF1, kF2, kF3, kFRef, kCustom };
+
+std::string_view presetName(Preset preset);
+// Accepts "F1", "F2", "F3", "FREF" (any case).
+Result<Preset> parsePreset(std::string_view text);
+
+struct AcuityConfig {
+  Preset preset = Preset::kF1;
+  // For Preset::kCustom: the outer eccentricity bound of each region but the last,
+  // strictly increasing, each in (0, 180) degrees. Empty means no foveation.
+  std::vector<double> custom_bounds_deg;
+  double slope = kDefaultSlope;                 // m of Eq. 1
+  double far_ecc_deg = kDefaultFarEccDeg;       // E used for the outermost region
+};
+
+// A validated region list. Region n < count-1 holds the points whose eccentricity
+// is within bound_deg[n] (and beyond the previous bound); the last region holds
+// the rest. With a single region (FREF) every point is in the untouched fovea.
+class RegionModel {
+ public:
+  // Validates the configuration; the message names the offending field.
+  static Result<RegionModel> create(const AcuityConfig& config);
+
+  int regionCount() const { return region_count_; }
+  int boundCount() const { return region_count_ - 1; }
+  double boundDeg(int n) const { return bound_deg_[n]; }
+  // Eccentricity whose MAR sets region n's voxel size (n >= 1).
+  double voxelEccDeg(int n) const;
+  // v_n / v_0 = MAR(E_n) / MAR0; 1 for the fovea.
+  double voxelScale(int n) const;
+  // v_n for fixation distance d0_m.
+  double voxelSizeM(int n, double d0_m) const { return foveaVoxelSizeM(d0_m) * voxelScale(n); }
+  const char* regionName(int n) const { return names_[n]; }
+  double slope() const { return slope_; }
+  double farEccDeg() const { return far_ecc_deg_; }
+  Preset preset() const { return preset_; }
+
+ private:
+  RegionModel() = default;
+  Preset preset_ = Preset::kFRef;
+  int region_count_ = 1;
+  std::array<double, kMaxRegions - 1> bound_deg_{};
+  std::array<const char*, kMaxRegions> names_{};
+  double slope_ = kDefaultSlope;
+  double far_ecc_deg_ = kDefaultFarEccDeg;
+};
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,86 @@
+#include "pipeline/foveator.h"
+
+#include <chrono>
+
+namespace fovea::pipeline {
+
+namespace {
+
+int64_t nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+Result<Foveator> Foveator::create(const PipelineCapacity& capacity, const FoveationConfig& config) {
+  if (capacity.max_points == 0 || capacity.max_points > UINT32_MAX) {
+    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_points: must be in [1, 2^32)");
+  }
+  if (capacity.max_voxels == 0) {
+    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_voxels: must be at least 1");
+  }
+  if (Status s = config.fixation.validate(); !s) return s;
+  Result<RegionModel> model = RegionModel::create(config.acuity);
+  if (!model) return model.status();
+  return Foveator(capacity, config, model.value());
+}
+
+Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model)
+    : capacity_(capacity),
+      config_(config),
+      model_(model),
+      bounds_(ConeBounds::fromModel(model)),
+      region_(capacity.max_points),
+      t_scratch_(capacity.max_points),
+      sampler_(capacity.max_points, capacity.max_voxels) {}
+
+Status Foveator::setConfig(const FoveationConfig& config) {
+  if (Status s = config.fixation.validate(); !s) return s;
+  Result<RegionModel> model = RegionModel::create(config.acuity);
+  if (!model) return model.status();
+  model_ = model.value();
+  bounds_ = ConeBounds::fromModel(model_);
+  config_ = config;
+  return Status::ok();
+}
+
+Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats) {
+  stats = {};
+  stats.region_count = model_.regionCount();
+  out.clear();
+  if (in.size() > capacity_.max_points) {
+    return {ErrorCode::kCapacityExceeded, "foveator: cloud has " + std::to_string(in.size()) +
+                                              " points, capacity is " + std::to_string(capacity_.max_points) +
+                                              ": raise pipeline.max_points"};
+  }
+  Result<Gaze> unit_gaze = normalizeGaze(gaze);
+  if (!unit_gaze) return unit_gaze.status();
+
+  const int64_t t0 = nowNs();
+  PartitionCounts partition_counts;
+  partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  const int64_t t1 = nowNs();
+  stats.fixation = computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+  std::array<double, kMaxRegions> voxel_size_m{};
+  for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
+  const int64_t t2 = nowNs();
+  SampleCounts sample_counts;
+  Status sampled = sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts);
+  const int64_t t3 = nowNs();
+
+  stats.partition_ns = t1 - t0;
+  stats.fixation_ns = t2 - t1;
+  stats.sample_ns = t3 - t2;
+  stats.dropped_nonfinite = partition_counts.invalid;
+  stats.points_in = static_cast<uint32_t>(in.size()) - partition_counts.invalid;
+  for (int r = 0; r < model_.regionCount(); ++r) {
+    stats.regions[r].points_in = partition_counts.per_region[r];
+    stats.regions[r].points_out = sample_counts.out[r];
+    stats.regions[r].voxel_size_m = voxel_size_m[r];
+  }
+  stats.points_out = static_cast<uint32_t>(out.size());
+  return sampled;
+}
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,79 @@
+// The foveation pipeline for one cloud: partition (Algorithm 1), fixation
+// distance d0, voxel sizes (Eq. 5-6), foveated sampling (Eq. 7).
+// All memory is allocated by create(); foveate() allocates nothing.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "hal/result.h"
+#include "pipeline/acuity.h"
+#include "pipeline/fixation.h"
+#include "pipeline/partition.h"
+#include "pipeline/point_cloud.h"
+#include "pipeline/voxel_sampler.h"
+
+namespace fovea::pipeline {
+
+struct PipelineCapacity {
+  std::size_t max_points = 640 * 480;  // points per input cloud
+  std::size_t max_voxels = 640 * 480;  // occupied voxels per output cloud
+};
+
+struct FoveationConfig {
+  AcuityConfig acuity;
+  FixationConfig fixation;
+};
+
+struct RegionStats {
+  uint32_t points_in = 0;
+  uint32_t points_out = 0;
+  double voxel_size_m = 0.0;  // 0 for the untouched fovea
+};
+
+struct FoveationStats {
+  int region_count = 0;
+  std::array<RegionStats, kMaxRegions> regions{};
+  uint32_t points_in = 0;          // valid input points
+  uint32_t points_out = 0;
+  uint32_t dropped_nonfinite = 0;  // input points with NaN/Inf coordinates
+  Fixation fixation;
+  int64_t partition_ns = 0;
+  int64_t fixation_ns = 0;
+  int64_t sample_ns = 0;
+};
+
+class Foveator {
+ public:
+  static Result<Foveator> create(const PipelineCapacity& capacity, const FoveationConfig& config);
+
+  // Replaces the foveation parameters (preset, m, fixation) without allocating;
+  // on error the previous configuration stays.
+  Status setConfig(const FoveationConfig& config);
+
+  // Foveates `in` for `gaze` into `out` (whose capacity must be at least
+  // in.size()). kInvalidInput for a bad gaze; kCapacityExceeded / kRangeExceeded
+  // as the sampler reports. Never allocates on success.
+  Status foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats);
+
+  const RegionModel& model() const { return model_; }
+  const FoveationConfig& config() const { return config_; }
+  const PipelineCapacity& capacity() const { return capacity_; }
+  // Region of each input point of the last foveate() call.
+  const uint8_t* lastRegions() const { return region_.data(); }
+
+ private:
+  Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
+
+  PipelineCapacity capacity_;
+  FoveationConfig config_;
+  RegionModel model_;
+  ConeBounds bounds_;
+  std::vector<uint8_t> region_;
+  std::vector<double> t_scratch_;
+  VoxelSampler sampler_;
+};
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,221 @@
+#include "pipeline/voxel_sampler.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "pipeline/partition.h"
+
+namespace fovea::pipeline {
+
+namespace {
+
+// |index| below 2^52 converts to int64 exactly, far beyond any usable span.
+constexpr double kMaxAbsIndex = 4503599627370496.0;
+
+struct AxisRange {
+  int64_t lo = INT64_MAX;
+  int64_t hi = INT64_MIN;
+  void add(int64_t v) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+};
+
+const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
+
+}  // namespace
+
+VoxelSampler::VoxelSampler(std::size_t max_points, std::size_t max_voxels)
+    : max_voxels_(max_voxels),
+      keys_(max_points),
+      keys_scratch_(max_points),
+      index_(max_points),
+      index_scratch_(max_points) {}
+
+void radixSortPairs(uint64_t* keys, uint32_t* index, uint64_t* keys_scratch, uint32_t* index_scratch,
+                    std::size_t n) {
+  if (n < 2) return;
+  uint32_t histogram[8][256];
+  std::memset(histogram, 0, sizeof histogram);
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint64_t k = keys[i];
+    for (int b = 0; b < 8; ++b) ++histogram[b][(k >> (8 * b)) & 0xFF];
+  }
+  uint64_t* src_k = keys;
+  uint32_t* src_i = index;
+  uint64_t* dst_k = keys_scratch;
+  uint32_t* dst_i = index_scratch;
+  for (int b = 0; b < 8; ++b) {
+    uint32_t* h = histogram[b];
+    // A byte that is the same in every key does not reorder anything.
+    if (h[(src_k[0] >> (8 * b)) & 0xFF] == n) continue;
+    uint32_t offset = 0;
+    for (int v = 0; v < 256; ++v) {
+      const uint32_t c = h[v];
+      h[v] = offset;
+      offset += c;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const uint32_t slot = h[(src_k[i] >> (8 * b)) & 0xFF]++;
+      dst_k[slot] = src_k[i];
+      dst_i[slot] = src_i[i];
+    }
+    std::swap(src_k, dst_k);
+    std::swap(src_i, dst_i);
+  }
+  if (src_k != keys) {
+    std::memcpy(keys, src_k, n * sizeof *keys);
+    std::memcpy(index, src_i, n * sizeof *index);
+  }
+}
+
+Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
+                            const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
+                            SampleCounts& counts) {
+  counts = {};
+  out.clear();
+  out.points.origin_m = in.origin_m;
+  out.points.has_color = in.has_color;
+  const std::size_t n = in.size();
+  if (n > keys_.size()) {
+    return {ErrorCode::kCapacityExceeded,
+            "voxel sampler: cloud has " + std::to_string(n) + " points, capacity is " +
+                std::to_string(keys_.size()) + ": raise pipeline.max_points"};
+  }
+  if (region_count < 1 || region_count > kMaxRegions) {
+    return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};
+  }
+
+  std::array<double, kMaxRegions> inv_voxel{};
+  for (int r = 1; r < region_count; ++r) {
+    const double v = voxel_size_m[r];
+    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
+      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) +
+                                               " voxel size " + std::to_string(v) + " m is not a positive number"};
+    }
+    inv_voxel[r] = 1.0 / v;
+  }
+
+  const float* coord[3] = {in.x(), in.y(), in.z()};
+  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
+
+  // Pass 1: index ranges per region and axis, and the range check.
+  std::array<std::array<AxisRange, 3>, kMaxRegions> range{};
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = region[i];
+    if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
+    ++counts.in[r];
+    if (r == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const double k = voxelIndex(origin[a], coord[a][i], inv_voxel[r]);
+      if (!(std::fabs(k) < kMaxAbsIndex)) {
+        return {ErrorCode::kRangeExceeded,
+                "voxel sampler: region " + std::to_string(r) + " point " + std::to_string(i) + " has voxel index " +
+                    std::to_string(k) + " along " + axisName(a) + " (not a finite coordinate within range)"};
+      }
+      range[r][a].add(static_cast<int64_t>(k));
+    }
+  }
+  for (int r = 1; r < region_count; ++r) {
+    if (counts.in[r] == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t span = range[r][a].hi - range[r][a].lo + 1;
+      if (span > kMaxVoxelSpan) {
+        return {ErrorCode::kRangeExceeded,
+                "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) +
+                    " voxels of " + std::to_string(voxel_size_m[r]) + " m along " + axisName(a) + ", more than " +
+                    std::to_string(kMaxVoxelSpan) + ": crop the cloud or raise fixation.min_m"};
+      }
+    }
+  }
+
+  // Pass 2: packed keys (region, i, j, k) of the non-fovea points.
+  std::size_t m = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = region[i];
+    if (r == 0 || r >= region_count) continue;
+    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+    for (int a = 0; a < 3; ++a) {
+      const auto k = static_cast<int64_t>(voxelIndex(origin[a], coord[a][i], inv_voxel[r]));
+      key |= static_cast<uint64_t>(k - range[r][a].lo) << ((2 - a) * kVoxelAxisBits);
+    }
+    keys_[m] = key;
+    index_[m] = static_cast<uint32_t>(i);
+    ++m;
+  }
+  radixSortPairs(keys_.data(), index_.data(), keys_scratch_.data(), index_scratch_.data(), m);
+
+  std::size_t voxels = 0;
+  for (std::size_t s = 0; s < m; ++s) voxels += (s == 0 || keys_[s] != keys_[s - 1]);
+  if (voxels > max_voxels_) {
+    return {ErrorCode::kCapacityExceeded, "voxel sampler: " + std::to_string(voxels) + " occupied voxels, capacity is " +
+                                              std::to_string(max_voxels_) + ": raise pipeline.max_voxels"};
+  }
+  const std::size_t fovea = counts.in[0];
+  if (fovea + voxels > out.points.capacity()) {
+    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
+                                              " points, capacity is " + std::to_string(out.points.capacity())};
+  }
+
+  // The fovea, untouched and in input order.
+  std::size_t o = 0;
+  float* ox = out.points.x();
+  float* oy = out.points.y();
+  float* oz = out.points.z();
+  uint32_t* orgb = out.points.rgb();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (region[i] != 0) continue;
+    ox[o] = in.x()[i];
+    oy[o] = in.y()[i];
+    oz[o] = in.z()[i];
+    orgb[o] = in.rgb()[i];
+    out.region[o] = 0;
+    out.weight[o] = 1;
+    ++o;
+  }
+  counts.out[0] = static_cast<uint32_t>(fovea);
+
+  // One centroid per run of equal keys.
+  for (std::size_t s = 0; s < m;) {
+    std::size_t e = s + 1;
+    while (e < m && keys_[e] == keys_[s]) ++e;
+    const uint32_t first = index_[s];
+    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
+    double sx = 0.0, sy = 0.0, sz = 0.0;
+    uint64_t sr = 0, sg = 0, sb = 0;
+    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
+    for (std::size_t q = s; q < e; ++q) {
+      const uint32_t i = index_[q];
+      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
+      sx += static_cast<double>(px) - fx;
+      sy += static_cast<double>(py) - fy;
+      sz += static_cast<double>(pz) - fz;
+      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
+      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
+      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
+      const uint32_t c = in.rgb()[i];
+      sr += rgbRed(c);
+      sg += rgbGreen(c);
+      sb += rgbBlue(c);
+    }
+    const auto count = static_cast<uint64_t>(e - s);
+    const double inv_count = 1.0 / static_cast<double>(count);
+    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
+    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
+    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
+    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
+                      static_cast<uint8_t>((sb + count / 2) / count));
+    const auto r = static_cast<uint8_t>(keys_[s] >> (3 * kVoxelAxisBits));
+    out.region[o] = r;
+    out.weight[o] = static_cast<uint32_t>(count);
+    ++counts.out[r];
+    ++o;
+    s = e;
+  }
+  (void)out.points.resize(o);
+  return Status::ok();
+}
+
+}  // namespace fovea::pipeline

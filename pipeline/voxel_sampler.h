@@ -1,0 +1,72 @@
+// Foveated voxel sampling (Eq. 7): every region but the fovea is reduced to one
+// point per occupied voxel of its own size, at the centroid of the voxel's points,
+// with their mean colour. The fovea passes untouched.
+//
+// - The lattice is anchored at the world origin: voxel (i, j, k) of size v covers
+//   [i v, (i+1) v) x [j v, (j+1) v) x [k v, (k+1) v) in world coordinates, with
+//   i = floor((origin_m.x + x) * (1 / v)) evaluated in double. A static scene
+//   therefore gives the same voxels whatever the cloud's extent or origin.
+// - Output order: the fovea's points in input order, then each region's voxels in
+//   increasing (i, j, k). Deterministic, and independent of the input order.
+// - Centroids are accumulated in double relative to the voxel's first point, so a
+//   million points in one voxel or a cloud 10 km from the world origin stay exact
+//   to float rounding; each output coordinate is clamped to the range of its
+//   voxel's points, which keeps it inside the voxel.
+// - Voxel indices are packed per region relative to the frame's smallest index,
+//   20 bits per axis. A region spanning more than 2^20 voxels along an axis is
+//   refused with kRangeExceeded; nothing wraps silently.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "hal/result.h"
+#include "pipeline/acuity.h"
+#include "pipeline/point_cloud.h"
+
+namespace fovea::pipeline {
+
+inline constexpr int kVoxelAxisBits = 20;
+inline constexpr int64_t kMaxVoxelSpan = int64_t{1} << kVoxelAxisBits;
+
+struct SampleCounts {
+  std::array<uint32_t, kMaxRegions> in{};   // input points per region
+  std::array<uint32_t, kMaxRegions> out{};  // output points per region
+};
+
+// World voxel index along one axis; the specification shared by every kernel.
+inline double voxelIndex(double origin_m, float coord, double inv_voxel_m) {
+  return std::floor((origin_m + static_cast<double>(coord)) * inv_voxel_m);
+}
+
+class VoxelSampler {
+ public:
+  VoxelSampler() = default;
+  // Allocates all scratch memory for clouds of up to max_points points and
+  // outputs of up to max_voxels voxels.
+  VoxelSampler(std::size_t max_points, std::size_t max_voxels);
+
+  // region[i] is point i's region (0 = fovea, kRegionInvalid = skip);
+  // voxel_size_m[n] is region n's voxel edge (n >= 1). Never allocates.
+  Status sample(const PointCloud& in, const uint8_t* region, int region_count,
+                const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
+                SampleCounts& counts);
+
+  std::size_t maxPoints() const { return keys_.size(); }
+  std::size_t maxVoxels() const { return max_voxels_; }
+
+ private:
+  std::size_t max_voxels_ = 0;
+  std::vector<uint64_t> keys_, keys_scratch_;
+  std::vector<uint32_t> index_, index_scratch_;
+};
+
+// Sorts (key, index) pairs by key, stably, with LSD radix passes over the bytes
+// that vary. Uses the scratch arrays (each n long); never allocates.
+void radixSortPairs(uint64_t* keys, uint32_t* index, uint64_t* keys_scratch, uint32_t* index_scratch,
+                    std::size_t n);
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,94 @@
+// The design card's fixed-memory promise: after start-up, processing frames
+// allocates nothing. The allocator of this binary is replaced by a counting one.
+#include <chrono>
+#include <memory>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "hal/camera.h"
+#include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
+#include "tests/support/alloc_counter.h"
+#include "tests/support/clouds.h"
+
+namespace fovea {
+namespace {
+
+TEST(ZeroAllocation, CounterSeesAllocations) {
+  // The test below means something only if the counter works.
+  test::AllocationScope scope;
+  auto p = std::make_unique<std::vector<int>>(1000);
+  void* raw = std::malloc(10);
+  std::free(raw);
+  EXPECT_GE(scope.allocations(), 3u);
+}
+
+TEST(ZeroAllocation, HundredMockFramesAfterWarmUp) {
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit");
+  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
+  hal::Camera& cam = *camera.value();
+  ASSERT_TRUE(cam.open().isOk());
+  ASSERT_TRUE(cam.start().isOk());
+  const hal::CameraIntrinsics& k = cam.info().intrinsics;
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
+
+  hal::RgbdFrame frame(k.width, k.height);
+  pipeline::PointCloud cloud(pixels);
+  pipeline::FoveatedCloud out(pixels);
+  pipeline::FoveationConfig config;
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, config).value();
+  pipeline::FoveationConfig f3 = config;
+  f3.acuity.preset = pipeline::Preset::kF3;
+
+  auto runFrame = [&](int i) {
+    pipeline::BackprojectCounts bc;
+    pipeline::FoveationStats stats;
+    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2) + Eigen::Vector3d(0.01 * (i % 7), 0.0, 0.0);
+    return foveator.foveate(cloud, gaze, out, stats).isOk() && out.size() > 0;
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(runFrame(i));  // warm-up
+
+  test::AllocationScope scope;
+  bool all_ok = true;
+  for (int i = 0; i < 100; ++i) {
+    all_ok = runFrame(i) && all_ok;
+    if (i == 50) all_ok = foveator.setConfig(f3).isOk() && all_ok;  // a live preset change is on the frame path too
+  }
+  const uint64_t allocations = scope.allocations();
+  EXPECT_TRUE(all_ok);
+  EXPECT_EQ(allocations, 0u);
+  cam.stop();
+}
+
+TEST(ZeroAllocation, FoveatingRandomCloudsWithEveryPreset) {
+  std::vector<pipeline::PointCloud> clouds;
+  for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
+  pipeline::FoveatedCloud out(50000);
+  pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000}, {}).value();
+  std::vector<pipeline::FoveationConfig> configs(4);
+  configs[0].acuity.preset = pipeline::Preset::kF1;
+  configs[1].acuity.preset = pipeline::Preset::kF2;
+  configs[2].acuity.preset = pipeline::Preset::kF3;
+  configs[3].acuity.preset = pipeline::Preset::kFRef;
+  configs[1].fixation.mode = pipeline::FixationMode::kCentroid;
+  pipeline::FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(clouds[0], pipeline::Gaze{}, out, stats).isOk());
+
+  test::AllocationScope scope;
+  bool all_ok = true;
+  for (int i = 0; i < 100; ++i) {
+    all_ok = foveator.setConfig(configs[i % 4]).isOk() && all_ok;
+    all_ok = foveator.foveate(clouds[i % 4], pipeline::Gaze{}, out, stats).isOk() && all_ok;
+  }
+  const uint64_t allocations = scope.allocations();
+  EXPECT_TRUE(all_ok);
+  EXPECT_EQ(allocations, 0u);
+}
+
+}  // namespace
+}  // namespace fovea

@@ -1,0 +1,140 @@
+// The whole foveation of a cloud against the brute-force reference.
+#include <map>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/foveator.h"
+#include "tests/support/clouds.h"
+
+namespace fovea::pipeline {
+namespace {
+
+FoveationConfig configFor(Preset preset, double slope = 0.022, FixationMode mode = FixationMode::kHit) {
+  FoveationConfig config;
+  config.acuity.preset = preset;
+  config.acuity.slope = slope;
+  config.fixation.mode = mode;
+  return config;
+}
+
+struct Case {
+  Preset preset;
+  double slope;
+  double offset_m;
+  uint64_t seed;
+};
+
+class FoveatorMatchesBruteForce : public ::testing::TestWithParam<Case> {};
+
+// Property: regions, voxel set, counts and centroids equal a reference that
+// partitions with atan2 in long double and groups with a std::map.
+TEST_P(FoveatorMatchesBruteForce, RandomCloud) {
+  const Case& c = GetParam();
+  std::mt19937_64 rng(c.seed);
+  const Eigen::Vector3d origin(c.offset_m, c.offset_m * 0.5, 1.0);
+  PointCloud in = test::randomCloud(40000, origin, 4.0f, c.seed);
+  Gaze gaze;
+  gaze.origin_m = origin + Eigen::Vector3d(0.1, -0.2, 0.05);
+  gaze.direction = test::randomUnit(rng);
+  Foveator foveator = Foveator::create({in.size(), in.size()}, configFor(c.preset, c.slope)).value();
+  FoveatedCloud out(in.size());
+  FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(in, gaze, out, stats).isOk());
+
+  const RegionModel& model = foveator.model();
+  std::vector<double> bounds;
+  for (int j = 0; j < model.boundCount(); ++j) bounds.push_back(model.boundDeg(j));
+  const double d0 = stats.fixation.d0_m;
+  std::map<test::BruteKey, test::BruteVoxel> voxels;
+  std::vector<std::size_t> fovea;
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    const int r = test::bruteRegion(
+        test::bruteEccentricityDeg(in.origin_m, in.x()[i], in.y()[i], in.z()[i], gaze.origin_m, gaze.direction.normalized()),
+        bounds);
+    ASSERT_EQ(foveator.lastRegions()[i], r) << "point " << i;
+    if (r == 0) {
+      fovea.push_back(i);
+      continue;
+    }
+    const Eigen::Vector3d w = in.world(i);
+    auto& v = voxels[test::bruteKey(r, w.x(), w.y(), w.z(), model.voxelSizeM(r, d0))];
+    ++v.count;
+    v.sx += w.x();
+    v.sy += w.y();
+    v.sz += w.z();
+  }
+  ASSERT_EQ(out.size(), fovea.size() + voxels.size());
+  for (std::size_t o = 0; o < fovea.size(); ++o) EXPECT_EQ(out.points.x()[o], in.x()[fovea[o]]);
+  auto it = voxels.begin();
+  for (std::size_t o = fovea.size(); o < out.size(); ++o, ++it) {
+    // Both are in (region, i, j, k) order.
+    const Eigen::Vector3d w = out.points.world(o);
+    const int r = out.region[o];
+    ASSERT_EQ(test::bruteKey(r, w.x(), w.y(), w.z(), model.voxelSizeM(r, d0)), it->first);
+    EXPECT_EQ(out.weight[o], it->second.count);
+    EXPECT_NEAR(w.x(), static_cast<double>(it->second.sx / it->second.count), 1e-5);
+    EXPECT_NEAR(w.y(), static_cast<double>(it->second.sy / it->second.count), 1e-5);
+    EXPECT_NEAR(w.z(), static_cast<double>(it->second.sz / it->second.count), 1e-5);
+  }
+  // The statistics agree with the output.
+  uint32_t total_in = 0, total_out = 0;
+  for (int r = 0; r < stats.region_count; ++r) {
+    total_in += stats.regions[r].points_in;
+    total_out += stats.regions[r].points_out;
+  }
+  EXPECT_EQ(total_in, in.size());
+  EXPECT_EQ(total_out, out.size());
+  EXPECT_EQ(stats.regions[0].points_in, stats.regions[0].points_out);
+}
+
+INSTANTIATE_TEST_SUITE_P(Presets, FoveatorMatchesBruteForce,
+                         ::testing::Values(Case{Preset::kF1, 0.022, 0.0, 1}, Case{Preset::kF2, 0.028, 0.0, 2},
+                                           Case{Preset::kF3, 0.034, 0.0, 3}, Case{Preset::kF3, 0.022, 1e4, 4},
+                                           Case{Preset::kFRef, 0.022, 0.0, 5}));
+
+TEST(Foveator, FrefPassesEveryPointThrough) {
+  PointCloud in = test::randomCloud(1000, Eigen::Vector3d::Zero(), 3.0f, 7);
+  Foveator foveator = Foveator::create({1000, 1000}, configFor(Preset::kFRef)).value();
+  FoveatedCloud out(1000);
+  FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(in, Gaze{}, out, stats).isOk());
+  ASSERT_EQ(out.size(), in.size());
+  for (std::size_t i = 0; i < in.size(); ++i) EXPECT_EQ(out.points.z()[i], in.z()[i]);
+}
+
+TEST(Foveator, FoveationReducesThePeriphery) {
+  PointCloud in = test::randomCloud(50000, Eigen::Vector3d::Zero(), 3.0f, 8);
+  // d0 = 40 m: outermost voxels of 1.4 m, coarse enough for this sparse cloud.
+  FoveationConfig config = configFor(Preset::kF1, 0.022, FixationMode::kFixed);
+  config.fixation.fixed_m = 40.0;
+  Foveator foveator = Foveator::create({50000, 50000}, config).value();
+  FoveatedCloud out(50000);
+  FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(in, Gaze{}, out, stats).isOk());
+  EXPECT_NEAR(stats.regions[3].voxel_size_m, 40.0 * std::tan(kMar0Deg * M_PI / 180.0) * 119.8, 1e-12);
+  EXPECT_LT(stats.regions[3].points_out, stats.regions[3].points_in / 10);
+  for (int r = 1; r < 4; ++r) EXPECT_GT(stats.regions[r].voxel_size_m, stats.regions[r - 1].voxel_size_m);
+}
+
+TEST(Foveator, SetConfigSwitchesPresetAndKeepsOldOnError) {
+  Foveator foveator = Foveator::create({10, 10}, configFor(Preset::kF1)).value();
+  EXPECT_EQ(foveator.model().regionCount(), 4);
+  ASSERT_TRUE(foveator.setConfig(configFor(Preset::kF3)).isOk());
+  EXPECT_EQ(foveator.model().regionCount(), 6);
+  FoveationConfig bad = configFor(Preset::kF1, -1.0);
+  EXPECT_EQ(foveator.setConfig(bad).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(foveator.model().regionCount(), 6);
+}
+
+TEST(Foveator, RejectsCloudsOverCapacity) {
+  PointCloud in = test::randomCloud(100, Eigen::Vector3d::Zero(), 1.0f, 9);
+  Foveator foveator = Foveator::create({50, 50}, configFor(Preset::kF1)).value();
+  FoveatedCloud out(100);
+  FoveationStats stats;
+  EXPECT_EQ(foveator.foveate(in, Gaze{}, out, stats).code(), ErrorCode::kCapacityExceeded);
+  EXPECT_FALSE(Foveator::create({0, 10}, configFor(Preset::kF1)).isOk());
+}
+
+}  // namespace
+}  // namespace fovea::pipeline
