@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -18,6 +19,9 @@ struct CameraInfo {
   CameraIntrinsics intrinsics;
   double depth_scale_m = 0.001;
   double fps = 30.0;
+  // A world point of interest the backend knows, e.g. the centre of a mock
+  // scene; demos aim the gaze at it. Empty for real cameras.
+  std::optional<Eigen::Vector3d> focus_point_m;
 };
 
 // Named counters instead of per-event logging; the supervisor reports them.

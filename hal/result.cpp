@@ -1,5 +1,8 @@
 #include "hal/result.h"
 
+#include <cstdio>
+#include <cstdlib>
+
 namespace fovea {
 
 const char* errorCodeName(ErrorCode code) {
@@ -20,6 +23,11 @@ const char* errorCodeName(ErrorCode code) {
 std::string Status::toString() const {
   if (isOk()) return "ok";
   return std::string(errorCodeName(code_)) + ": " + message_;
+}
+
+void resultValueOfError(const Status& status) {
+  std::fprintf(stderr, "fovea: bug: value() of an error result (%s)\n", status.toString().c_str());
+  std::abort();
 }
 
 }  // namespace fovea

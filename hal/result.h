@@ -43,6 +43,9 @@ class [[nodiscard]] Status {
   std::string message_;
 };
 
+// Prints the status and aborts (Result::value() of an error).
+[[noreturn]] void resultValueOfError(const Status& status);
+
 // A value or a Status. (std::expected is C++23 and missing from clang-14 tooling.)
 template <typename T>
 class [[nodiscard]] Result {
@@ -54,14 +57,21 @@ class [[nodiscard]] Result {
   bool isOk() const { return value_.has_value(); }
   explicit operator bool() const { return isOk(); }
   const Status& status() const { return status_; }
-  T& value() & { assert(value_); return *value_; }
-  const T& value() const& { assert(value_); return *value_; }
-  T&& value() && { assert(value_); return std::move(*value_); }
+  // Taking the value of an error is a bug, never bad input: it aborts, in
+  // release builds too, rather than read an empty optional.
+  T& value() & { checkHasValue(); return *value_; }
+  const T& value() const& { checkHasValue(); return *value_; }
+  T&& value() && { checkHasValue(); return std::move(*value_); }
   T* operator->() { return &value(); }
   const T* operator->() const { return &value(); }
   T& operator*() & { return value(); }
 
  private:
+  void checkHasValue() const {
+    if (!value_) [[unlikely]] {
+      resultValueOfError(status_);
+    }
+  }
   std::optional<T> value_;
   Status status_;
 };

@@ -1,0 +1,771 @@
+#include "hal/camera/mock/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <utility>
+
+#include <Eigen/Geometry>
+
+#include "hal/camera/mock/hash.h"
+
+namespace fovea::hal::mock {
+
+namespace {
+
+using Eigen::Vector3d;
+using Eigen::Vector3f;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+Vector3d v3(double x, double y, double z) { return Vector3d(x, y, z); }
+Vector3f rgb(float r, float g, float b) { return Vector3f(r, g, b); }
+
+// Entry and exit of the ray through an axis-aligned box, and the axes of the
+// slabs crossed there; false when it misses. A direction component of exactly
+// zero is handled apart (0 * inf would be NaN).
+bool slabs(const Vector3d& o, const Vector3d& d, const Vector3d& inv, const Vector3d& lo,
+           const Vector3d& hi, double& t_enter, double& t_exit, int& axis_enter, int& axis_exit) {
+  t_enter = -kInf;
+  t_exit = kInf;
+  axis_enter = 0;
+  axis_exit = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (d[k] == 0.0) {
+      if (o[k] < lo[k] || o[k] > hi[k]) return false;
+      continue;
+    }
+    double ta = (lo[k] - o[k]) * inv[k];
+    double tb = (hi[k] - o[k]) * inv[k];
+    if (ta > tb) std::swap(ta, tb);
+    if (ta > t_enter) {
+      t_enter = ta;
+      axis_enter = k;
+    }
+    if (tb < t_exit) {
+      t_exit = tb;
+      axis_exit = k;
+    }
+  }
+  return t_enter <= t_exit;
+}
+
+// Whether the ray can meet the box before t_best: a conservative test for
+// culling. Where 0 * inf gives NaN the comparisons fail and that slab is ignored.
+inline bool hitsBounds(const Vector3d& o, const Vector3d& inv, const Vector3d& lo,
+                       const Vector3d& hi, double t_best) {
+  double t0 = Scene::kMinT;
+  double t1 = t_best;
+  for (int k = 0; k < 3; ++k) {
+    const double ta = (lo[k] - o[k]) * inv[k];
+    const double tb = (hi[k] - o[k]) * inv[k];
+    const double near = ta < tb ? ta : tb;
+    const double far = ta < tb ? tb : ta;
+    if (near > t0) t0 = near;
+    if (far < t1) t1 = far;
+  }
+  return !(t0 > t1);
+}
+
+// A box is seen from outside (furniture), a room from inside; either way the
+// first crossing beyond kMinT counts.
+bool intersectBox(const Shape& s, const Vector3d& o, const Vector3d& d, const Vector3d& inv,
+                  double& t_best, Hit& hit) {
+  double t_enter, t_exit;
+  int axis_enter, axis_exit;
+  if (!slabs(o, d, inv, s.min_m, s.max_m, t_enter, t_exit, axis_enter, axis_exit)) return false;
+  double t;
+  int axis;
+  bool max_side;  // the face at max_m[axis]
+  if (t_enter > Scene::kMinT) {
+    t = t_enter;
+    axis = axis_enter;
+    max_side = d[axis] < 0.0;
+  } else if (t_exit > Scene::kMinT) {
+    t = t_exit;
+    axis = axis_exit;
+    max_side = d[axis] > 0.0;
+  } else {
+    return false;
+  }
+  if (t >= t_best) return false;
+  t_best = t;
+  hit.t = t;
+  hit.normal = Vector3d::Zero();
+  hit.normal[axis] = d[axis] > 0.0 ? -1.0 : 1.0;
+  hit.shape = &s;
+  hit.material =
+      s.kind == ShapeKind::kRoom ? s.face_material[2 * axis + (max_side ? 1 : 0)] : s.material;
+  hit.face_axis = axis;
+  return true;
+}
+
+bool intersectSphere(const Shape& s, const Vector3d& center_m, const Vector3d& o, const Vector3d& d,
+                     double& t_best, Hit& hit) {
+  const Vector3d oc = o - center_m;
+  const double a = d.squaredNorm();
+  const double b = oc.dot(d);
+  const double c = oc.squaredNorm() - s.radius_m * s.radius_m;
+  const double disc = b * b - a * c;
+  if (disc < 0.0) return false;
+  const double sq = std::sqrt(disc);
+  double t = (-b - sq) / a;
+  if (t <= Scene::kMinT) t = (-b + sq) / a;
+  if (t <= Scene::kMinT || t >= t_best) return false;
+  Vector3d n = (oc + t * d) / s.radius_m;
+  if (n.dot(d) > 0.0) n = -n;
+  t_best = t;
+  hit.t = t;
+  hit.normal = n.normalized();
+  hit.shape = &s;
+  hit.material = s.material;
+  hit.face_axis = -1;
+  hit.center_m = center_m;
+  return true;
+}
+
+bool intersectCylinder(const Shape& s, const Vector3d& o, const Vector3d& d, double& t_best,
+                       Hit& hit) {
+  const double ox = o.x() - s.center_m.x();
+  const double oy = o.y() - s.center_m.y();
+  const double r2 = s.radius_m * s.radius_m;
+  const double z_min = s.min_m.z();
+  const double z_max = s.max_m.z();
+  double best = t_best;
+  bool found = false;
+  Vector3d n = Vector3d::Zero();
+  int face = -1;
+  const double a = d.x() * d.x() + d.y() * d.y();
+  if (a > 0.0) {
+    const double b = ox * d.x() + oy * d.y();
+    const double c = ox * ox + oy * oy - r2;
+    const double disc = b * b - a * c;
+    if (disc >= 0.0) {
+      const double sq = std::sqrt(disc);
+      for (const double t : {(-b - sq) / a, (-b + sq) / a}) {
+        if (t <= Scene::kMinT || t >= best) continue;
+        const double z = o.z() + t * d.z();
+        if (z < z_min || z > z_max) continue;
+        best = t;
+        found = true;
+        face = -1;
+        n = v3(ox + t * d.x(), oy + t * d.y(), 0.0);
+        break;
+      }
+    }
+  }
+  if (d.z() != 0.0) {
+    for (const double z_cap : {z_min, z_max}) {
+      const double t = (z_cap - o.z()) / d.z();
+      if (t <= Scene::kMinT || t >= best) continue;
+      const double x = ox + t * d.x();
+      const double y = oy + t * d.y();
+      if (x * x + y * y > r2) continue;
+      best = t;
+      found = true;
+      face = 2;
+      n = Vector3d::UnitZ();
+    }
+  }
+  if (!found) return false;
+  n.normalize();
+  if (n.dot(d) > 0.0) n = -n;
+  t_best = best;
+  hit.t = best;
+  hit.normal = n;
+  hit.shape = &s;
+  hit.material = s.material;
+  hit.face_axis = face;
+  return true;
+}
+
+bool intersectPlane(const Shape& s, const Vector3d& o, const Vector3d& d, double& t_best,
+                    Hit& hit) {
+  const double denom = s.normal.dot(d);
+  if (std::abs(denom) < 1e-12) return false;
+  const double t = (s.offset_m - s.normal.dot(o)) / denom;
+  if (t <= Scene::kMinT || t >= t_best) return false;
+  t_best = t;
+  hit.t = t;
+  hit.normal = denom > 0.0 ? Vector3d(-s.normal) : s.normal;
+  hit.shape = &s;
+  hit.material = s.material;
+  hit.face_axis = -1;
+  return true;
+}
+
+// floor() without the libm call (x86-64 without SSE4.1 has no inline floor).
+// Texture coordinates stay far inside the int64_t range.
+int64_t floorToInt(double x) {
+  const auto i = static_cast<int64_t>(x);  // truncates towards zero
+  return i - (static_cast<double>(i) > x ? 1 : 0);
+}
+
+// Value noise in [0, 1): smoothstep interpolation of lattice values from a
+// fixed 128 x 128 table of 8-bit hashes. 16 KB stay in L1 (a 256 KB float
+// table made texturing a third of the frame time); the pattern repeats every
+// 128 cells, metres away at the cell sizes used. Computed at compile time.
+constexpr int kLatticeBits = 7;
+constexpr int kLatticeSize = 1 << kLatticeBits;
+constexpr uint64_t kLatticeMask = kLatticeSize - 1;
+
+struct LatticeTable {
+  uint8_t values[kLatticeSize * kLatticeSize] = {};
+  constexpr LatticeTable() {
+    for (int i = 0; i < kLatticeSize * kLatticeSize; ++i) {
+      values[i] = static_cast<uint8_t>(mix64(static_cast<uint64_t>(i) ^ 0x5EED1A771CE5ull) >> 56);
+    }
+  }
+};
+
+constexpr LatticeTable kLattice;
+
+const uint8_t* latticeValues() { return kLattice.values; }
+
+// One lattice value in [0, 1): a per-plank or per-cell random number.
+float latticeValue(int64_t iu, int64_t iv, uint32_t salt) {
+  const uint64_t u = (static_cast<uint64_t>(iu) + salt) & kLatticeMask;
+  const uint64_t v =
+      (static_cast<uint64_t>(iv) + salt * 7u + (salt >> kLatticeBits)) & kLatticeMask;
+  return static_cast<float>(latticeValues()[u + (v << kLatticeBits)]) * (1.0f / 256.0f);
+}
+
+float valueNoise(double u, double v, uint32_t salt) {
+  const uint8_t* lattice = latticeValues();
+  const int64_t iu = floorToInt(u);
+  const int64_t iv = floorToInt(v);
+  auto smooth = [](double s) { return static_cast<float>(s * s * (3.0 - 2.0 * s)); };
+  const float su = smooth(u - static_cast<double>(iu));
+  const float sv = smooth(v - static_cast<double>(iv));
+  // The salt shifts the table so that materials do not share a pattern.
+  const uint64_t u0 = (static_cast<uint64_t>(iu) + salt) & kLatticeMask;
+  const uint64_t v0 =
+      (static_cast<uint64_t>(iv) + salt * 7u + (salt >> kLatticeBits)) & kLatticeMask;
+  const uint64_t u1 = (u0 + 1) & kLatticeMask;
+  const uint64_t v1 = (v0 + 1) & kLatticeMask;
+  const auto a = static_cast<float>(lattice[u0 + (v0 << kLatticeBits)]);
+  const auto b = static_cast<float>(lattice[u1 + (v0 << kLatticeBits)]);
+  const auto c = static_cast<float>(lattice[u0 + (v1 << kLatticeBits)]);
+  const auto e = static_cast<float>(lattice[u1 + (v1 << kLatticeBits)]);
+  const float top = a + (b - a) * su;
+  const float bottom = c + (e - c) * su;
+  return (top + (bottom - top) * sv) * (1.0f / 256.0f);
+}
+
+Vector3f mix(const Vector3f& a, const Vector3f& b, float w) { return a + (b - a) * w; }
+
+}  // namespace
+
+Vector3d Motion::offsetAt(double time_s) const {
+  Vector3d offset;
+  for (int k = 0; k < 3; ++k) {
+    offset[k] = amplitude_m[k] * std::sin(kTwoPi * frequency_hz[k] * time_s + phase_rad[k]);
+  }
+  return offset;
+}
+
+Pose lookAtPose(const Vector3d& eye_m, const Vector3d& target_m) {
+  Pose pose;
+  Vector3d forward = target_m - eye_m;
+  const double length = forward.norm();
+  forward = length > 0.0 ? Vector3d(forward / length) : Vector3d::UnitY();
+  Vector3d right = forward.cross(Vector3d::UnitZ());
+  if (right.norm() < 1e-9) right = forward.cross(Vector3d::UnitY());
+  right.normalize();
+  const Vector3d down = forward.cross(right);
+  pose.R_world_cam.col(0) = right;
+  pose.R_world_cam.col(1) = down;
+  pose.R_world_cam.col(2) = forward;
+  pose.t_world_cam = eye_m;
+  return pose;
+}
+
+Result<Scene> Scene::create(std::string_view name) {
+  if (name == "living-room") return livingRoom();
+  if (name == "balloon") return balloon();
+  return Result<Scene>(ErrorCode::kInvalidArgument,
+                       "scene: unknown name '" + std::string(name) + "'; accepted: " + names());
+}
+
+std::string Scene::names() { return "living-room|balloon"; }
+
+bool Scene::isKnown(std::string_view name) { return name == "living-room" || name == "balloon"; }
+
+Pose Scene::defaultPose() const { return lookAtPose(info_.default_eye_m, info_.default_target_m); }
+
+int Scene::addMaterial(const Material& material) {
+  materials_.push_back(material);
+  return static_cast<int>(materials_.size()) - 1;
+}
+
+void Scene::beginGroup() {
+  Group group;
+  group.min_m = Vector3d::Constant(kInf);
+  group.max_m = Vector3d::Constant(-kInf);
+  group.first = static_cast<int>(shapes_.size());
+  groups_.push_back(group);
+  group_open_ = true;
+}
+
+void Scene::endGroup() { group_open_ = false; }
+
+void Scene::addShape(const Shape& shape) {
+  const bool singleton = !group_open_;
+  if (singleton) beginGroup();
+  Group& group = groups_.back();
+  shapes_.push_back(shape);
+  ++group.count;
+  if (shape.kind == ShapeKind::kPlane || shape.kind == ShapeKind::kRoom) {
+    group.bounded = false;  // a room's bounds would only cull rays from outside the room
+  } else {
+    group.min_m = group.min_m.cwiseMin(shape.min_m);
+    group.max_m = group.max_m.cwiseMax(shape.max_m);
+  }
+  if (singleton) endGroup();
+}
+
+void Scene::addBox(const Vector3d& min_m, const Vector3d& max_m, int material) {
+  Shape s;
+  s.kind = ShapeKind::kBox;
+  s.material = material;
+  s.min_m = min_m;
+  s.max_m = max_m;
+  addShape(s);
+}
+
+void Scene::addRoom(const Vector3d& min_m, const Vector3d& max_m, const int (&face_material)[6]) {
+  Shape s;
+  s.kind = ShapeKind::kRoom;
+  s.material = face_material[0];
+  std::copy(std::begin(face_material), std::end(face_material), std::begin(s.face_material));
+  s.min_m = min_m;
+  s.max_m = max_m;
+  addShape(s);
+}
+
+void Scene::addSphere(const Vector3d& center_m, double radius_m, int material) {
+  Shape s;
+  s.kind = ShapeKind::kSphere;
+  s.material = material;
+  s.center_m = center_m;
+  s.radius_m = radius_m;
+  s.min_m = center_m - Vector3d::Constant(radius_m);
+  s.max_m = center_m + Vector3d::Constant(radius_m);
+  addShape(s);
+}
+
+void Scene::addCylinder(double x_m, double y_m, double radius_m, double z_min_m, double z_max_m,
+                        int material) {
+  Shape s;
+  s.kind = ShapeKind::kCylinder;
+  s.material = material;
+  s.center_m = v3(x_m, y_m, 0.5 * (z_min_m + z_max_m));
+  s.radius_m = radius_m;
+  s.min_m = v3(x_m - radius_m, y_m - radius_m, z_min_m);
+  s.max_m = v3(x_m + radius_m, y_m + radius_m, z_max_m);
+  addShape(s);
+}
+
+void Scene::addPlane(const Vector3d& normal, double offset_m, const Vector3d& u_axis,
+                     int material) {
+  Shape s;
+  s.kind = ShapeKind::kPlane;
+  s.material = material;
+  s.normal = normal.normalized();
+  s.offset_m = offset_m;
+  s.u_axis = u_axis.normalized();
+  s.v_axis = s.normal.cross(s.u_axis);
+  addShape(s);
+}
+
+void Scene::addMovingSphere(const Vector3d& center_m, double radius_m, const Motion& motion,
+                            int material) {
+  Shape s;
+  s.kind = ShapeKind::kSphere;
+  s.material = material;
+  s.center_m = center_m;
+  s.radius_m = radius_m;
+  s.min_m = center_m - Vector3d::Constant(radius_m);
+  s.max_m = center_m + Vector3d::Constant(radius_m);
+  s.motion = motion;
+  dynamic_shapes_.push_back(s);
+}
+
+bool Scene::intersectShape(const Shape& s, const Vector3d& origin, const Vector3d& dir,
+                           const Vector3d& inv_dir, double& t_best, Hit& hit) const {
+  switch (s.kind) {
+    case ShapeKind::kBox:
+    case ShapeKind::kRoom: return intersectBox(s, origin, dir, inv_dir, t_best, hit);
+    case ShapeKind::kSphere: return intersectSphere(s, s.center_m, origin, dir, t_best, hit);
+    case ShapeKind::kCylinder: return intersectCylinder(s, origin, dir, t_best, hit);
+    case ShapeKind::kPlane: return intersectPlane(s, origin, dir, t_best, hit);
+  }
+  return false;
+}
+
+bool Scene::intersect(const Vector3d& origin, const Vector3d& dir, double time_s, SceneLayer layer,
+                      double t_max, Hit& hit) const {
+  const Vector3d inv_dir = dir.cwiseInverse();  // +-inf where a component is 0; see slabs()
+  double t_best = t_max;
+  bool found = false;
+  if (layer != SceneLayer::kDynamic) {
+    for (const Group& group : groups_) {
+      if (group.bounded && !hitsBounds(origin, inv_dir, group.min_m, group.max_m, t_best)) continue;
+      const Shape* end = shapes_.data() + group.first + group.count;
+      for (const Shape* s = shapes_.data() + group.first; s != end; ++s) {
+        found |= intersectShape(*s, origin, dir, inv_dir, t_best, hit);
+      }
+    }
+  }
+  if (layer != SceneLayer::kStatic) {
+    for (const Shape& s : dynamic_shapes_) {
+      // Only spheres move (addMovingSphere).
+      found |= intersectSphere(s, s.center_m + s.motion.offsetAt(time_s), origin, dir, t_best, hit);
+    }
+  }
+  return found;
+}
+
+bool Scene::intersectShapes(const Vector3d& origin, const Vector3d& dir, const uint16_t* shapes,
+                            std::size_t shape_count, double t_max, Hit& hit) const {
+  const Vector3d inv_dir = dir.cwiseInverse();
+  double t_best = t_max;
+  bool found = false;
+  for (std::size_t i = 0; i < shape_count; ++i) {
+    found |= intersectShape(shapes_[shapes[i]], origin, dir, inv_dir, t_best, hit);
+  }
+  return found;
+}
+
+bool Scene::staticShapeBounds(std::size_t shape, Vector3d& min_m, Vector3d& max_m) const {
+  const Shape& s = shapes_[shape];
+  min_m = s.min_m;
+  max_m = s.max_m;
+  return s.kind != ShapeKind::kPlane && s.kind != ShapeKind::kRoom;
+}
+
+bool Scene::dynamicBounds(double time_s, Vector3d& min_m, Vector3d& max_m) const {
+  if (dynamic_shapes_.empty()) return false;
+  min_m = Vector3d::Constant(kInf);
+  max_m = Vector3d::Constant(-kInf);
+  for (const Shape& s : dynamic_shapes_) {
+    const Vector3d c = s.center_m + s.motion.offsetAt(time_s);
+    min_m = min_m.cwiseMin(c - Vector3d::Constant(s.radius_m));
+    max_m = max_m.cwiseMax(c + Vector3d::Constant(s.radius_m));
+  }
+  return true;
+}
+
+Vector3f Scene::albedo(const Material& m, double u, double v) const {
+  if (m.swap_uv) std::swap(u, v);
+  const double s = m.scale_m;
+  switch (m.texture) {
+    case TextureKind::kSolid: return m.color_a;
+    case TextureKind::kChecker:
+      return ((floorToInt(u / s) + floorToInt(v / s)) & 1) != 0 ? m.color_b : m.color_a;
+    case TextureKind::kStripes: return (floorToInt(u / s) & 1) != 0 ? m.color_b : m.color_a;
+    case TextureKind::kWood: {
+      // Planks 12 grain spacings wide run along u; each plank gets its own grain
+      // offset and tone; wavy grain lines follow u; dark seams between planks.
+      const double plank_w = 12.0 * s;
+      const double pv = v / plank_w;
+      const int64_t plank = floorToInt(pv);
+      const double across = pv - static_cast<double>(plank);
+      const double shift_m = 40.0 * latticeValue(plank, 0, m.salt);
+      const float tone = 0.85f + 0.3f * latticeValue(plank, 1, m.salt);
+      const double g = v / s + 1.5 * valueNoise((u + shift_m) / (8.0 * s), v / (3.0 * s), m.salt);
+      // Grain lines: a smoothed triangle wave of g, peaking (dark) once per unit.
+      const double f = g - static_cast<double>(floorToInt(g));
+      const auto tri = static_cast<float>(1.0 - std::abs(2.0 * f - 1.0));
+      const float ring = tri * tri * (3.0f - 2.0f * tri);
+      Vector3f c = mix(m.color_a, m.color_b, ring * ring * ring) * tone;
+      if (across < 0.03 || across > 0.97) c *= 0.55f;
+      return c;
+    }
+    case TextureKind::kNoise: {
+      const float n = 0.65f * valueNoise(u / s, v / s, m.salt) +
+                      0.35f * valueNoise(2.0 * u / s, 2.0 * v / s, m.salt + 1u);
+      return mix(m.color_a, m.color_b, n);
+    }
+  }
+  return m.color_a;
+}
+
+Vector3f Scene::shade(const Vector3d& origin, const Vector3d& dir, const Hit& hit) const {
+  const Shape& s = *hit.shape;
+  const Material& m = materials_[hit.material];
+  const Vector3d p = origin + hit.t * dir;
+  double u = 0.0;
+  double v = 0.0;
+  switch (s.kind) {
+    case ShapeKind::kBox:
+    case ShapeKind::kRoom:
+      u = hit.face_axis == 0 ? p.y() : p.x();
+      v = hit.face_axis == 2 ? p.y() : p.z();
+      break;
+    case ShapeKind::kSphere: {
+      const Vector3d q = p - hit.center_m;
+      u = std::atan2(q.y(), q.x()) * s.radius_m;
+      v = q.z();
+      break;
+    }
+    case ShapeKind::kCylinder:
+      if (hit.face_axis == 2) {
+        u = p.x();
+        v = p.y();
+      } else {
+        u = std::atan2(p.y() - s.center_m.y(), p.x() - s.center_m.x()) * s.radius_m;
+        v = p.z();
+      }
+      break;
+    case ShapeKind::kPlane:
+      u = p.dot(s.u_axis);
+      v = p.dot(s.v_axis);
+      break;
+  }
+  const Vector3f base = albedo(m, u, v);
+  if (m.emissive) return base;
+  const Vector3d to_light = (info_.light_m - p).normalized();
+  const auto lambert = static_cast<float>(std::max(0.0, hit.normal.dot(to_light)));
+  return base * (info_.ambient + (1.0f - info_.ambient) * lambert);
+}
+
+// The living room, after the synthetic "LIV" room: floor, four walls and a
+// ceiling (one room box seen from inside), a sofa against the north wall
+// with a picture above it, a coffee table with legs on a rug, a bookshelf with
+// books against the west wall, a cabinet and a TV against the east wall, a
+// window, a door, a floor lamp and a plant.
+Scene Scene::livingRoom() {
+  Scene scene;
+  SceneInfo& info = scene.info_;
+  info.name = "living-room";
+  info.focus_point_m = v3(3.0, 2.25, 1.35);
+  info.default_eye_m = v3(3.0, 0.35, 1.55);
+  info.default_target_m = v3(3.0, 3.5, 0.9);
+  info.light_m = v3(3.0, 2.0, 2.55);
+  info.ambient = 0.35f;
+  info.pan_amplitude_rad = 0.5;
+  info.pan_period_s = 8.0;
+  info.orbit_radius_m = 1.4;
+  info.orbit_height_m = 1.5;
+  info.orbit_sweep_rad = 0.0;
+  info.orbit_period_s = 24.0;
+  info.dolly_distance_m = 1.0;
+  info.dolly_period_s = 10.0;
+
+  auto material = [&](TextureKind texture, Vector3f a, Vector3f b, double scale_m) {
+    Material m;
+    m.texture = texture;
+    m.color_a = a;
+    m.color_b = b;
+    m.scale_m = scale_m;
+    m.salt = static_cast<uint32_t>(scene.materials_.size()) * 7919u + 17u;
+    return m;
+  };
+  const int wall = scene.addMaterial(
+      material(TextureKind::kNoise, rgb(0.85f, 0.82f, 0.74f), rgb(0.74f, 0.71f, 0.62f), 0.25));
+  const int wallpaper = scene.addMaterial(
+      material(TextureKind::kStripes, rgb(0.76f, 0.81f, 0.71f), rgb(0.66f, 0.73f, 0.62f), 0.12));
+  const int ceiling = scene.addMaterial(
+      material(TextureKind::kSolid, rgb(0.93f, 0.93f, 0.92f), rgb(0.93f, 0.93f, 0.92f), 1.0));
+  const int floor = scene.addMaterial(
+      material(TextureKind::kWood, rgb(0.58f, 0.40f, 0.23f), rgb(0.38f, 0.24f, 0.13f), 0.02));
+  const int rug = scene.addMaterial(
+      material(TextureKind::kChecker, rgb(0.62f, 0.16f, 0.15f), rgb(0.86f, 0.79f, 0.60f), 0.2));
+  const int fabric = scene.addMaterial(
+      material(TextureKind::kNoise, rgb(0.22f, 0.34f, 0.58f), rgb(0.12f, 0.21f, 0.40f), 0.04));
+  const int cushion = scene.addMaterial(
+      material(TextureKind::kStripes, rgb(0.90f, 0.55f, 0.15f), rgb(0.95f, 0.88f, 0.70f), 0.05));
+  const int table_wood = scene.addMaterial(
+      material(TextureKind::kWood, rgb(0.64f, 0.45f, 0.28f), rgb(0.44f, 0.29f, 0.16f), 0.015));
+  const int dark_wood = scene.addMaterial(
+      material(TextureKind::kSolid, rgb(0.25f, 0.18f, 0.12f), rgb(0.25f, 0.18f, 0.12f), 1.0));
+  const int shelf_wood = scene.addMaterial(
+      material(TextureKind::kWood, rgb(0.78f, 0.62f, 0.42f), rgb(0.60f, 0.45f, 0.28f), 0.02));
+  Material cabinet_material =
+      material(TextureKind::kStripes, rgb(0.90f, 0.90f, 0.87f), rgb(0.72f, 0.72f, 0.69f), 0.28);
+  cabinet_material.swap_uv = true;  // horizontal bands: drawer fronts
+  const int cabinet = scene.addMaterial(cabinet_material);
+  Material screen_material =
+      material(TextureKind::kSolid, rgb(0.03f, 0.03f, 0.04f), rgb(0.03f, 0.03f, 0.04f), 1.0);
+  screen_material.ir_dropout = 0.5f;  // black glossy screens return little IR
+  const int screen = scene.addMaterial(screen_material);
+  const int frame = scene.addMaterial(
+      material(TextureKind::kSolid, rgb(0.16f, 0.11f, 0.06f), rgb(0.16f, 0.11f, 0.06f), 1.0));
+  const int canvas = scene.addMaterial(
+      material(TextureKind::kChecker, rgb(0.92f, 0.62f, 0.12f), rgb(0.10f, 0.40f, 0.72f), 0.11));
+  const int metal = scene.addMaterial(
+      material(TextureKind::kSolid, rgb(0.60f, 0.60f, 0.62f), rgb(0.60f, 0.60f, 0.62f), 1.0));
+  Material lamp_material =
+      material(TextureKind::kSolid, rgb(1.0f, 0.95f, 0.80f), rgb(1.0f, 0.95f, 0.80f), 1.0);
+  lamp_material.emissive = true;
+  const int lamp = scene.addMaterial(lamp_material);
+  const int pot = scene.addMaterial(
+      material(TextureKind::kStripes, rgb(0.66f, 0.34f, 0.20f), rgb(0.54f, 0.26f, 0.15f), 0.04));
+  const int foliage = scene.addMaterial(
+      material(TextureKind::kNoise, rgb(0.16f, 0.46f, 0.12f), rgb(0.06f, 0.25f, 0.06f), 0.04));
+  Material door_material =
+      material(TextureKind::kWood, rgb(0.52f, 0.34f, 0.20f), rgb(0.36f, 0.22f, 0.12f), 0.02);
+  door_material.swap_uv = true;  // vertical grain
+  const int door = scene.addMaterial(door_material);
+  Material window_material =
+      material(TextureKind::kSolid, rgb(0.72f, 0.86f, 0.97f), rgb(0.72f, 0.86f, 0.97f), 1.0);
+  window_material.emissive = true;  // daylight
+  window_material.ir_dropout = 0.3f;
+  const int window = scene.addMaterial(window_material);
+  int book_colors[8];
+  const Vector3f book_palette[8] = {rgb(0.60f, 0.10f, 0.10f), rgb(0.10f, 0.30f, 0.55f),
+                                    rgb(0.15f, 0.45f, 0.20f), rgb(0.85f, 0.75f, 0.30f),
+                                    rgb(0.30f, 0.20f, 0.40f), rgb(0.90f, 0.90f, 0.85f),
+                                    rgb(0.10f, 0.10f, 0.12f), rgb(0.75f, 0.40f, 0.15f)};
+  for (int i = 0; i < 8; ++i) {
+    book_colors[i] =
+        scene.addMaterial(material(TextureKind::kSolid, book_palette[i], book_palette[i], 1.0));
+  }
+
+  // The shell first: every ray from inside hits it, which then culls the
+  // furniture groups behind the hit.
+  const int shell[6] = {wall, wall, wall, wallpaper, floor, ceiling};  // W, E, S, N, floor, ceiling
+  scene.addRoom(v3(0.0, 0.0, 0.0), v3(6.0, 4.5, 2.7), shell);
+
+  // Sofa against the north wall, two cushions, the picture above it.
+  scene.beginGroup();
+  scene.addBox(v3(1.6, 3.6, 0.0), v3(3.8, 4.45, 0.42), fabric);
+  scene.addBox(v3(1.6, 4.15, 0.42), v3(3.8, 4.45, 0.88), fabric);
+  scene.addBox(v3(1.6, 3.6, 0.42), v3(1.8, 4.15, 0.62), fabric);
+  scene.addBox(v3(3.6, 3.6, 0.42), v3(3.8, 4.15, 0.62), fabric);
+  scene.addBox(v3(1.9, 4.0, 0.42), v3(2.4, 4.15, 0.78), cushion);
+  scene.addBox(v3(3.0, 4.0, 0.42), v3(3.5, 4.15, 0.78), cushion);
+  scene.endGroup();
+  scene.beginGroup();
+  scene.addBox(v3(2.2, 4.46, 1.25), v3(3.2, 4.5, 1.95), frame);
+  scene.addBox(v3(2.26, 4.45, 1.31), v3(3.14, 4.46, 1.89), canvas);
+  scene.endGroup();
+
+  // Rug, coffee table with four legs.
+  scene.addBox(v3(1.6, 2.0, 0.0), v3(4.0, 3.45, 0.008), rug);
+  scene.beginGroup();
+  scene.addBox(v3(2.25, 2.45, 0.40), v3(3.35, 3.05, 0.45), table_wood);
+  for (const double x : {2.29, 3.26}) {
+    for (const double y : {2.49, 2.96})
+      scene.addBox(v3(x, y, 0.0), v3(x + 0.05, y + 0.05, 0.40), dark_wood);
+  }
+  scene.endGroup();
+
+  // Bookshelf against the west wall: sides, back, top, bottom, three shelves.
+  constexpr double kShelfX0 = 0.02, kShelfX1 = 0.36, kShelfY0 = 1.2, kShelfY1 = 2.4;
+  scene.beginGroup();
+  scene.addBox(v3(kShelfX0, kShelfY0, 0.0), v3(kShelfX1, kShelfY0 + 0.03, 2.0), shelf_wood);
+  scene.addBox(v3(kShelfX0, kShelfY1 - 0.03, 0.0), v3(kShelfX1, kShelfY1, 2.0), shelf_wood);
+  scene.addBox(v3(kShelfX0, kShelfY0, 0.0), v3(0.04, kShelfY1, 2.0), shelf_wood);
+  scene.addBox(v3(kShelfX0, kShelfY0, 1.97), v3(kShelfX1, kShelfY1, 2.0), shelf_wood);
+  scene.addBox(v3(0.04, kShelfY0, 0.0), v3(kShelfX1, kShelfY1, 0.08), shelf_wood);
+  constexpr double kBoardZ[3] = {0.52, 0.99, 1.46};
+  for (const double z : kBoardZ) {
+    scene.addBox(v3(0.04, kShelfY0 + 0.03, z), v3(kShelfX1, kShelfY1 - 0.03, z + 0.025),
+                 shelf_wood);
+  }
+  scene.endGroup();
+  // Books: one group per shelf, sizes and colours from a fixed hash.
+  constexpr double kRowZ[4] = {0.08, 0.545, 1.015, 1.485};
+  uint64_t book = 0;
+  for (const double z0 : kRowZ) {
+    scene.beginGroup();
+    double y = kShelfY0 + 0.04;
+    while (true) {
+      const uint64_t h = hash2(book++, 0xB00C5ull);
+      const double width_m = 0.02 + 0.04 * unitFromHash(h);
+      const double height_m = 0.18 + 0.16 * unitFromHash(mix64(h ^ 1u));
+      const double depth_m = 0.17 + 0.10 * unitFromHash(mix64(h ^ 2u));
+      if (y + width_m > kShelfY1 - 0.04) break;
+      if ((h & 15u) == 0u) {  // a gap now and then
+        y += 0.08;
+        continue;
+      }
+      scene.addBox(v3(0.04, y, z0), v3(0.04 + depth_m, y + width_m, z0 + height_m),
+                   book_colors[(h >> 8) & 7u]);
+      y += width_m + 0.002;
+    }
+    scene.endGroup();
+  }
+
+  // Cabinet with a TV above it against the east wall; a window further north.
+  scene.beginGroup();
+  scene.addBox(v3(5.55, 1.5, 0.0), v3(5.98, 2.7, 0.85), cabinet);
+  scene.addBox(v3(5.52, 1.48, 0.85), v3(5.99, 2.72, 0.88), dark_wood);
+  scene.addBox(v3(5.9, 1.6, 1.05), v3(5.97, 2.6, 1.65), screen);
+  scene.endGroup();
+  scene.addBox(v3(5.985, 3.1, 1.0), v3(6.0, 4.1, 2.1), window);
+  // Door in the south wall, slightly proud of it.
+  scene.addBox(v3(4.5, 0.0, 0.0), v3(5.4, 0.03, 2.05), door);
+
+  // Floor lamp in the north-east corner, plant in the north-west corner.
+  scene.beginGroup();
+  scene.addCylinder(5.4, 4.05, 0.16, 0.0, 0.03, metal);
+  scene.addCylinder(5.4, 4.05, 0.015, 0.03, 1.45, metal);
+  scene.addSphere(v3(5.4, 4.05, 1.6), 0.17, lamp);
+  scene.endGroup();
+  scene.beginGroup();
+  scene.addCylinder(0.45, 4.05, 0.17, 0.0, 0.38, pot);
+  scene.addSphere(v3(0.45, 4.05, 0.75), 0.32, foliage);
+  scene.endGroup();
+  return scene;
+}
+
+// The balloon, after the synthetic "BAL" sequence: a striped sphere of radius
+// 0.3 m drifting on a Lissajous path (periods 4 s, 8 s and 2 s along x, y, z;
+// 8 s in all) in front of a plastered wall (the plane y = 3.5) over a tiled floor
+// (z = 0). Its mean position, the focus point, is its rest position.
+Scene Scene::balloon() {
+  Scene scene;
+  SceneInfo& info = scene.info_;
+  info.name = "balloon";
+  const Vector3d rest_m = v3(0.0, 2.0, 1.15);
+  info.focus_point_m = rest_m;
+  info.default_eye_m = v3(0.0, 0.0, 1.2);
+  info.default_target_m = v3(0.0, 3.5, 0.95);
+  info.light_m = v3(-1.0, 0.3, 2.5);
+  info.ambient = 0.3f;
+  info.pan_amplitude_rad = 0.35;
+  info.pan_period_s = 8.0;
+  info.orbit_radius_m = 2.0;
+  info.orbit_height_m = 1.2;
+  info.orbit_sweep_rad = 0.6;
+  info.orbit_period_s = 12.0;
+  info.dolly_distance_m = 0.8;
+  info.dolly_period_s = 10.0;
+
+  Material plaster;
+  plaster.texture = TextureKind::kNoise;
+  plaster.color_a = rgb(0.82f, 0.80f, 0.74f);
+  plaster.color_b = rgb(0.62f, 0.60f, 0.53f);
+  plaster.scale_m = 0.15;
+  plaster.salt = 101u;
+  Material tiles;
+  tiles.texture = TextureKind::kChecker;
+  tiles.color_a = rgb(0.58f, 0.57f, 0.52f);
+  tiles.color_b = rgb(0.30f, 0.30f, 0.28f);
+  tiles.scale_m = 0.3;
+  Material skin;
+  skin.texture = TextureKind::kStripes;
+  skin.color_a = rgb(0.85f, 0.12f, 0.10f);
+  skin.color_b = rgb(0.95f, 0.80f, 0.15f);
+  constexpr double kRadius = 0.3;
+  skin.scale_m = kTwoPi * kRadius / 8.0;  // eight segments around the equator
+  const int wall = scene.addMaterial(plaster);
+  const int floor = scene.addMaterial(tiles);
+  const int balloon = scene.addMaterial(skin);
+
+  scene.addPlane(Vector3d::UnitY(), 3.5, Vector3d::UnitX(), wall);
+  scene.addPlane(Vector3d::UnitZ(), 0.0, Vector3d::UnitX(), floor);
+  Motion motion;
+  motion.amplitude_m = v3(0.6, 0.3, 0.25);
+  motion.frequency_hz = v3(0.25, 0.125, 0.5);
+  motion.phase_rad = v3(0.0, std::numbers::pi / 2.0, 0.0);
+  scene.addMovingSphere(rest_m, kRadius, motion, balloon);
+  return scene;
+}
+
+}  // namespace fovea::hal::mock
