@@ -92,6 +92,8 @@ struct BadConfig {
   const char* field;
 };
 
+void PrintTo(const BadConfig& c, std::ostream* os) { *os << c.field; }
+
 class AcuityRejects : public ::testing::TestWithParam<BadConfig> {};
 
 TEST_P(AcuityRejects, NamesTheField) {

@@ -25,6 +25,10 @@ struct Case {
   uint64_t seed;
 };
 
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << presetName(c.preset) << "_m" << c.slope << "_offset" << c.offset_m;
+}
+
 class FoveatorMatchesBruteForce : public ::testing::TestWithParam<Case> {};
 
 // Property: regions, voxel set, counts and centroids equal a reference that

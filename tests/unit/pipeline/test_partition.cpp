@@ -89,6 +89,10 @@ struct BruteCase {
   uint64_t seed;
 };
 
+void PrintTo(const BruteCase& c, std::ostream* os) {
+  *os << presetName(c.preset) << "_offset" << c.origin_offset_m << "_seed" << c.seed;
+}
+
 class PartitionMatchesBruteForce : public ::testing::TestWithParam<BruteCase> {};
 
 // Property: on random clouds, every point gets exactly the region that the
@@ -96,7 +100,7 @@ class PartitionMatchesBruteForce : public ::testing::TestWithParam<BruteCase> {}
 TEST_P(PartitionMatchesBruteForce, EveryPoint) {
   const BruteCase& c = GetParam();
   std::mt19937_64 rng(c.seed);
-  const RegionModel model = modelFor(c.preset, c.custom, 150.0);
+  const RegionModel model = modelFor(c.preset, c.custom, 179.0);
   const std::vector<double> bounds = boundsOf(model);
   const Eigen::Vector3d origin(c.origin_offset_m, -0.5 * c.origin_offset_m, 0.25 * c.origin_offset_m);
   for (int trial = 0; trial < 8; ++trial) {

@@ -96,6 +96,8 @@ struct RandomCase {
   uint64_t seed;
 };
 
+void PrintTo(const RandomCase& c, std::ostream* os) { *os << "offset" << c.origin_offset_m << "_seed" << c.seed; }
+
 class SamplerMatchesBruteForce : public ::testing::TestWithParam<RandomCase> {};
 
 TEST_P(SamplerMatchesBruteForce, SameVoxelsAndCentroids) {

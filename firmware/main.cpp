@@ -1,0 +1,39 @@
+// fovead: the fovea service. For now its offline modes: run (a camera through
+// the foveation pipeline) and foveate (a recorded PLY cloud).
+#include <cstdio>
+#include <cstring>
+
+#include "firmware/commands.h"
+
+namespace {
+
+const char* kHelp =
+    "usage: fovead COMMAND [options]\n"
+    "\n"
+    "Foveated point clouds for immersive telerobotics: full detail where the operator\n"
+    "looks, voxel sizes growing with eccentricity as the eye's acuity falls off.\n"
+    "\n"
+    "commands:\n"
+    "  run       run the pipeline on a camera (default: the mock living room) and report\n"
+    "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
+    "\n"
+    "'fovead COMMAND --help' describes each command.\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace fovea::firmware;
+  if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0 ||
+      std::strcmp(argv[1], "help") == 0) {
+    std::fputs(kHelp, argc < 2 ? stderr : stdout);
+    return argc < 2 ? kExitUsage : kExitOk;
+  }
+  if (std::strcmp(argv[1], "--version") == 0) {
+    std::printf("fovead %s\n", FOVEA_VERSION);
+    return kExitOk;
+  }
+  if (std::strcmp(argv[1], "run") == 0) return runCommand(argc, argv);
+  if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
+  std::fprintf(stderr, "fovead: unknown command '%s' (see fovead --help)\n", argv[1]);
+  return kExitUsage;
+}

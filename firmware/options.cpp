@@ -1,0 +1,177 @@
+#include "firmware/options.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+namespace fovea::firmware {
+
+namespace {
+
+Status badValue(std::string_view flag, std::string_view text, std::string_view expected) {
+  return {ErrorCode::kInvalidArgument,
+          std::string(flag) + ": '" + std::string(text) + "' is not " + std::string(expected)};
+}
+
+std::vector<std::string_view> splitCommas(std::string_view text) {
+  std::vector<std::string_view> parts;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = text.find(',', start);
+    parts.push_back(text.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return parts;
+}
+
+}  // namespace
+
+Result<Args> Args::parse(int argc, char** argv, int first, const std::vector<std::string>& value_flags,
+                         const std::vector<std::string>& switches) {
+  Args args;
+  for (int i = first; i < argc; ++i) {
+    std::string token = argv[i];
+    std::string value;
+    bool inline_value = false;
+    if (const std::size_t eq = token.find('='); token.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = token.substr(eq + 1);
+      token = token.substr(0, eq);
+      inline_value = true;
+    }
+    const bool is_value_flag = std::find(value_flags.begin(), value_flags.end(), token) != value_flags.end();
+    const bool is_switch = std::find(switches.begin(), switches.end(), token) != switches.end();
+    if (!is_value_flag && !is_switch) {
+      return Result<Args>(ErrorCode::kInvalidArgument, "unknown argument '" + token + "' (see --help)");
+    }
+    if (is_switch) {
+      if (inline_value) return Result<Args>(ErrorCode::kInvalidArgument, token + " takes no value");
+      args.values_[token] = "";
+      continue;
+    }
+    if (!inline_value) {
+      if (i + 1 >= argc) return Result<Args>(ErrorCode::kInvalidArgument, token + " needs a value");
+      value = argv[++i];
+    }
+    args.values_[token] = value;
+  }
+  return args;
+}
+
+const std::string* Args::get(const std::string& flag) const {
+  auto it = values_.find(flag);
+  return it == values_.end() ? nullptr : &it->second;
+}
+
+std::string Args::getOr(const std::string& flag, const std::string& fallback) const {
+  const std::string* v = get(flag);
+  return v ? *v : fallback;
+}
+
+Result<double> parseDouble(std::string_view flag, std::string_view text) {
+  const std::string s(text);
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(v)) return badValue(flag, text, "a finite number");
+  return v;
+}
+
+Result<long> parseInteger(std::string_view flag, std::string_view text, long min, long max) {
+  long v = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+  if (ec != std::errc() || ptr != text.data() + text.size() || v < min || v > max) {
+    return badValue(flag, text, "an integer in [" + std::to_string(min) + ", " + std::to_string(max) + "]");
+  }
+  return v;
+}
+
+Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_view text) {
+  std::vector<double> values;
+  for (std::string_view part : splitCommas(text)) {
+    Result<double> v = parseDouble(flag, part);
+    if (!v) return v.status();
+    values.push_back(v.value());
+  }
+  return values;
+}
+
+Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text) {
+  Result<std::vector<double>> values = parseDoubleList(flag, text);
+  if (!values) return values.status();
+  if (values->size() != 3) return badValue(flag, text, "three comma-separated numbers X,Y,Z");
+  return Eigen::Vector3d((*values)[0], (*values)[1], (*values)[2]);
+}
+
+Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args) {
+  pipeline::FoveationConfig config;
+  if (const std::string* preset = args.get("--preset")) {
+    Result<pipeline::Preset> p = pipeline::parsePreset(*preset);
+    if (!p) return p.status();
+    config.acuity.preset = p.value();
+  }
+  if (const std::string* bounds = args.get("--bounds")) {
+    if (args.has("--preset") && config.acuity.preset != pipeline::Preset::kCustom) {
+      return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument,
+                                               "--bounds: defines a custom region list; drop --preset or say --preset custom");
+    }
+    Result<std::vector<double>> list = parseDoubleList("--bounds", *bounds);
+    if (!list) return list.status();
+    config.acuity.preset = pipeline::Preset::kCustom;
+    config.acuity.custom_bounds_deg = list.value();
+  } else if (config.acuity.preset == pipeline::Preset::kCustom) {
+    return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument, "--preset custom: needs --bounds E1,E2,...");
+  }
+  if (const std::string* m = args.get("--m")) {
+    Result<double> v = parseDouble("--m", *m);
+    if (!v) return v.status();
+    config.acuity.slope = v.value();
+  }
+  if (const std::string* far = args.get("--far-ecc")) {
+    Result<double> v = parseDouble("--far-ecc", *far);
+    if (!v) return v.status();
+    config.acuity.far_ecc_deg = v.value();
+  }
+  if (const std::string* fixation = args.get("--fixation")) {
+    if (fixation->rfind("fixed:", 0) == 0) {
+      Result<double> d0 = parseDouble("--fixation fixed:D0", fixation->substr(6));
+      if (!d0) return d0.status();
+      config.fixation.mode = pipeline::FixationMode::kFixed;
+      config.fixation.fixed_m = d0.value();
+    } else {
+      Result<pipeline::FixationMode> mode = pipeline::parseFixationMode(*fixation);
+      if (!mode) return mode.status();
+      if (mode.value() == pipeline::FixationMode::kFixed) {
+        return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument, "--fixation fixed: say fixed:D0 with D0 in metres");
+      }
+      config.fixation.mode = mode.value();
+    }
+  }
+  // Validate here so that the error names the flags, before any work starts.
+  Result<pipeline::RegionModel> model = pipeline::RegionModel::create(config.acuity);
+  if (!model) return model.status();
+  if (Status s = config.fixation.validate(); !s) return s;
+  return config;
+}
+
+std::string foveationFlagsHelp() {
+  return "  --preset F1|F2|F3|FREF   regions of the paper's section III (default F1)\n"
+         "  --bounds E1,E2,...       custom region bounds in degrees, strictly increasing in (0, 180)\n"
+         "  --m SLOPE                slope of MAR(E) = m E + 1 arcmin (default 0.022; the paper: 0.022..0.034)\n"
+         "  --far-ecc DEG            eccentricity whose MAR sizes the outermost region (default 90)\n"
+         "  --fixation MODE          d0: hit (first surface along the gaze, default), centroid (the paper's\n"
+         "                           fovea centroid) or fixed:D0 (metres)\n";
+}
+
+std::string describeFoveation(const pipeline::FoveationConfig& config) {
+  char buffer[160];
+  std::snprintf(buffer, sizeof buffer, "%s (m %.3f, far periphery at %g deg), fixation %s",
+                std::string(pipeline::presetName(config.acuity.preset)).c_str(), config.acuity.slope,
+                config.acuity.far_ecc_deg, std::string(pipeline::fixationModeName(config.fixation.mode)).c_str());
+  std::string text = buffer;
+  if (config.fixation.mode == pipeline::FixationMode::kFixed) text += " " + std::to_string(config.fixation.fixed_m) + " m";
+  return text;
+}
+
+}  // namespace fovea::firmware

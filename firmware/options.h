@@ -1,0 +1,48 @@
+// Command-line parsing shared by fovead's commands. Every parser returns a
+// Status naming the flag and the accepted values; nothing throws.
+#pragma once
+
+#include <map>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hal/result.h"
+#include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
+
+namespace fovea::firmware {
+
+// "--name value" and "--name=value" pairs, plus bare "--flag" switches.
+class Args {
+ public:
+  // Parses argv[first..argc). `switches` take no value. Unknown flags are errors.
+  static Result<Args> parse(int argc, char** argv, int first, const std::vector<std::string>& value_flags,
+                            const std::vector<std::string>& switches);
+  bool has(const std::string& flag) const { return values_.count(flag) > 0; }
+  const std::string* get(const std::string& flag) const;
+  std::string getOr(const std::string& flag, const std::string& fallback) const;
+
+ private:
+  std::map<std::string, std::string> values_;
+};
+
+Result<double> parseDouble(std::string_view flag, std::string_view text);
+Result<long> parseInteger(std::string_view flag, std::string_view text, long min, long max);
+// "X,Y,Z", each a finite number.
+Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text);
+// "a,b,c" of finite numbers.
+Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_view text);
+
+// The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
+// --fixation hit|centroid|fixed:D0.
+inline const std::vector<std::string> kFoveationFlags = {"--preset", "--bounds", "--m", "--far-ecc", "--fixation"};
+Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args);
+std::string foveationFlagsHelp();
+
+// One-line description: "F1 (m 0.022, far periphery at 90 deg), fixation hit".
+std::string describeFoveation(const pipeline::FoveationConfig& config);
+
+}  // namespace fovea::firmware

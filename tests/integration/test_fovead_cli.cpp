@@ -1,0 +1,168 @@
+// fovead run and fovead foveate, as separate processes, the way users call them.
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/foveator.h"
+#include "pipeline/io/ply.h"
+#include "tests/support/clouds.h"
+
+namespace fovea {
+namespace {
+
+struct ProcessResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+ProcessResult run(const std::string& command) {
+  ProcessResult r;
+  std::FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return r;
+  char buffer[4096];
+  std::size_t n;
+  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string fovead() { return FOVEAD_PATH; }
+
+class TempDir {
+ public:
+  TempDir() {
+    path_ = std::filesystem::temp_directory_path() / ("fovea-cli-" + std::to_string(::getpid()) + "-" +
+                                                      std::to_string(std::random_device{}()));
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() { std::filesystem::remove_all(path_); }
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+TEST(FoveadCli, ReadmeRunCommandWorks) {
+  // The README's first command, on the build tree under test (setup and build are no-ops here).
+  const ProcessResult r = run(std::string("FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR + " " + FOVEA_SOURCE_DIR +
+                    "/toolchain/run-demo --camera mock:living-room --preset F1 --frames 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* expected : {"fovea", "parafovea", "perifovea", "rest", "summary: 3 frames foveated, 0 failed",
+                               "d0 median", "voxel sampling", "back-projection"}) {
+    EXPECT_NE(r.output.find(expected), std::string::npos) << "missing '" << expected << "' in:\n" << r.output;
+  }
+}
+
+TEST(FoveadCli, RunReducesThePointCountAndSavesAPly) {
+  TempDir dir;
+  const std::string ply = dir.file("last.ply");
+  const ProcessResult r = run(fovead() + " run --camera mock:balloon --preset F3 --frames 2 --every 0 --save-ply " + ply);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  Result<pipeline::PlyCloud> saved = pipeline::readPly(ply);
+  ASSERT_TRUE(saved.isOk()) << saved.status().toString();
+  EXPECT_TRUE(saved->has_region);
+  EXPECT_GT(saved->points.size(), 1000u);
+  EXPECT_LT(saved->points.size(), 640u * 480u / 2);
+}
+
+TEST(FoveadCli, HelpAndBadArguments) {
+  EXPECT_EQ(run(fovead() + " --help").exit_code, 0);
+  EXPECT_EQ(run(fovead() + " run --help").exit_code, 0);
+  const ProcessResult foveate_help = run(fovead() + " foveate --help");
+  EXPECT_EQ(foveate_help.exit_code, 0);
+  EXPECT_NE(foveate_help.output.find("--fixation"), std::string::npos);
+
+  struct Bad {
+    const char* args;
+    const char* message;
+  };
+  const Bad bad[] = {{"", "usage"},
+                     {"fly", "unknown command"},
+                     {"run --frames -3", "--frames"},
+                     {"run --preset F9", "F9"},
+                     {"run --m -1", "slope"},
+                     {"run --bounds 5,3", "bounds_deg[1]"},
+                     {"run --camera mock:kitchen", "kitchen"},
+                     {"run --camera usb:0", "usb"},
+                     {"run --gaze sideways", "--gaze"},
+                     {"run --gaze-origin 1,2,3", "--gaze-dir"},
+                     {"run --fixation fixed:abc", "--fixation"},
+                     {"run --bogus 1", "--bogus"},
+                     {"foveate --in a.ply", "required"},
+                     {"foveate --in a.ply --out b.ply --gaze-origin 0,0,0 --gaze-dir 0,0,0", "zero length"},
+                     {"foveate --in a.ply --out b.ply --gaze-origin 0,nan,0 --gaze-dir 0,0,1", "--gaze-origin"}};
+  for (const Bad& b : bad) {
+    const ProcessResult r = run(fovead() + " " + b.args);
+    EXPECT_EQ(r.exit_code, 2) << b.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(b.message), std::string::npos) << b.args << "\n" << r.output;
+  }
+}
+
+TEST(FoveadCli, UnreadableAndMalformedFilesFailCleanly) {
+  TempDir dir;
+  const std::string args = " --out " + dir.file("out.ply") + " --gaze-origin 0,0,0 --gaze-dir 0,0,1";
+  ProcessResult r = run(fovead() + " foveate --in " + dir.file("missing.ply") + args);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("missing.ply"), std::string::npos) << r.output;
+
+  std::ofstream(dir.file("bad.ply")) << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n";
+  r = run(fovead() + " foveate --in " + dir.file("bad.ply") + args);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("bad.ply"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("out.ply")));
+}
+
+// fovead foveate on a recorded cloud gives exactly what the library gives, and
+// keeps double coordinates double far from the world origin.
+TEST(FoveadCli, FoveatePlyRoundTripMatchesTheLibrary) {
+  TempDir dir;
+  const Eigen::Vector3d origin(10000.0, -2500.0, 3.0);
+  pipeline::PointCloud cloud = test::randomCloud(30000, origin, 3.0f, 31);
+  pipeline::PlyWriteOptions write;
+  write.double_coords = true;
+  ASSERT_TRUE(pipeline::writePly(dir.file("in.ply"), cloud, nullptr, write).isOk());
+
+  const ProcessResult r = run(fovead() + " foveate --in " + dir.file("in.ply") + " --out " + dir.file("out.ply") +
+                    " --gaze-origin 10000,-2500,3 --gaze-dir 0.3,0.1,1 --preset F2 --m 0.028 --fixation centroid");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("centroid"), std::string::npos) << r.output;
+
+  // The same through the library, from the cloud as the PLY reader sees it.
+  Result<pipeline::PlyCloud> input = pipeline::readPly(dir.file("in.ply"));
+  ASSERT_TRUE(input.isOk());
+  pipeline::FoveationConfig config;
+  config.acuity.preset = pipeline::Preset::kF2;
+  config.acuity.slope = 0.028;
+  config.fixation.mode = pipeline::FixationMode::kCentroid;
+  pipeline::Foveator foveator = pipeline::Foveator::create({30000, 30000}, config).value();
+  pipeline::FoveatedCloud expected(30000);
+  pipeline::FoveationStats stats;
+  pipeline::Gaze gaze;
+  gaze.origin_m = origin;
+  gaze.direction = Eigen::Vector3d(0.3, 0.1, 1);
+  ASSERT_TRUE(foveator.foveate(input->points, gaze, expected, stats).isOk());
+
+  Result<pipeline::PlyCloud> output = pipeline::readPly(dir.file("out.ply"));
+  ASSERT_TRUE(output.isOk()) << output.status().toString();
+  EXPECT_TRUE(output->coords_were_double);
+  EXPECT_TRUE(output->has_color);
+  ASSERT_TRUE(output->has_region);
+  ASSERT_EQ(output->points.size(), expected.size());
+  EXPECT_LT(expected.size(), cloud.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    ASSERT_EQ(output->region[i], expected.region[i]) << i;
+    // Written in double; read back as float relative to the output's own origin.
+    EXPECT_NEAR((output->points.world(i) - expected.points.world(i)).norm(), 0.0, 1e-6) << i;
+    EXPECT_EQ(output->points.rgb()[i], expected.points.rgb()[i]) << i;
+  }
+}
+
+}  // namespace
+}  // namespace fovea
