@@ -45,7 +45,8 @@ Status Foveator::setConfig(const FoveationConfig& config) {
   return Status::ok();
 }
 
-Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats) {
+Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,
+                         uint32_t* representative) {
   stats = {};
   stats.region_count = model_.regionCount();
   out.clear();
@@ -66,7 +67,8 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();
   SampleCounts sample_counts;
-  Status sampled = sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts);
+  Status sampled = sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
+                                    representative);
   const int64_t t3 = nowNs();
 
   stats.partition_ns = t1 - t0;

@@ -55,8 +55,11 @@ class Foveator {
 
   // Foveates `in` for `gaze` into `out` (whose capacity must be at least
   // in.size()). kInvalidInput for a bad gaze; kCapacityExceeded / kRangeExceeded
-  // as the sampler reports. Never allocates on success.
-  Status foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats);
+  // as the sampler reports. representative, if not null, gets for each input
+  // point the index of its output point (see VoxelSampler::sample). Never
+  // allocates on success.
+  Status foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,
+                 uint32_t* representative = nullptr);
 
   const RegionModel& model() const { return model_; }
   const FoveationConfig& config() const { return config_; }

@@ -73,7 +73,7 @@ void radixSortPairs(uint64_t* keys, uint32_t* index, uint64_t* keys_scratch, uin
 
 Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                             const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
-                            SampleCounts& counts) {
+                            SampleCounts& counts, uint32_t* representative) {
   counts = {};
   out.clear();
   out.points.origin_m = in.origin_m;
@@ -166,7 +166,11 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
   float* oz = out.points.z();
   uint32_t* orgb = out.points.rgb();
   for (std::size_t i = 0; i < n; ++i) {
-    if (region[i] != 0) continue;
+    if (region[i] != 0) {
+      if (representative) representative[i] = kNoRepresentative;  // set below for sampled points
+      continue;
+    }
+    if (representative) representative[i] = static_cast<uint32_t>(o);
     ox[o] = in.x()[i];
     oy[o] = in.y()[i];
     oz[o] = in.z()[i];
@@ -188,6 +192,7 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
     float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
     for (std::size_t q = s; q < e; ++q) {
       const uint32_t i = index_[q];
+      if (representative) representative[i] = static_cast<uint32_t>(o);
       const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
       sx += static_cast<double>(px) - fx;
       sy += static_cast<double>(py) - fy;

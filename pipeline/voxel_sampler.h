@@ -30,6 +30,7 @@
 namespace fovea::pipeline {
 
 inline constexpr int kVoxelAxisBits = 20;
+inline constexpr uint32_t kNoRepresentative = UINT32_MAX;
 inline constexpr int64_t kMaxVoxelSpan = int64_t{1} << kVoxelAxisBits;
 
 struct SampleCounts {
@@ -50,10 +51,13 @@ class VoxelSampler {
   VoxelSampler(std::size_t max_points, std::size_t max_voxels);
 
   // region[i] is point i's region (0 = fovea, kRegionInvalid = skip);
-  // voxel_size_m[n] is region n's voxel edge (n >= 1). Never allocates.
+  // voxel_size_m[n] is region n's voxel edge (n >= 1). If representative is not
+  // null, representative[i] receives the index in `out` of the point that stands
+  // for input point i (kNoRepresentative for skipped points): what error metrics
+  // need. Never allocates.
   Status sample(const PointCloud& in, const uint8_t* region, int region_count,
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
-                SampleCounts& counts);
+                SampleCounts& counts, uint32_t* representative = nullptr);
 
   std::size_t maxPoints() const { return keys_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }

@@ -253,3 +253,41 @@ TEST(VoxelSampler, RejectsNonPositiveVoxelSizes) {
 
 }  // namespace
 }  // namespace fovea::pipeline
+
+namespace fovea::pipeline {
+namespace {
+
+TEST(VoxelSampler, RepresentativeMapsEveryInputPointToItsOutputPoint) {
+  PointCloud in = test::randomCloud(5000, Eigen::Vector3d(3, -2, 1), 1.5f, 33);
+  std::vector<uint8_t> region = randomRegions(in.size(), 4, 34);
+  region[7] = kRegionInvalid;
+  const std::array<double, kMaxRegions> voxel_m{0, 0.05, 0.2, 0.5};
+  VoxelSampler sampler(in.size(), in.size());
+  FoveatedCloud out(in.size());
+  SampleCounts counts;
+  std::vector<uint32_t> representative(in.size(), 12345);
+  ASSERT_TRUE(sampler.sample(in, region.data(), 4, voxel_m, out, counts, representative.data()).isOk());
+  std::vector<uint32_t> members(out.size(), 0);
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    if (region[i] == kRegionInvalid) {
+      EXPECT_EQ(representative[i], kNoRepresentative);
+      continue;
+    }
+    const uint32_t o = representative[i];
+    ASSERT_LT(o, out.size());
+    ASSERT_EQ(out.region[o], region[i]);
+    ++members[o];
+    if (region[i] == 0) {
+      EXPECT_EQ(out.points.x()[o], in.x()[i]);
+    } else {
+      // Same voxel as its representative.
+      const Eigen::Vector3d p = in.world(i), q = out.points.world(o);
+      EXPECT_EQ(test::bruteKey(region[i], p.x(), p.y(), p.z(), voxel_m[region[i]]),
+                test::bruteKey(region[i], q.x(), q.y(), q.z(), voxel_m[region[i]]));
+    }
+  }
+  for (std::size_t o = 0; o < out.size(); ++o) EXPECT_EQ(members[o], out.weight[o]) << o;
+}
+
+}  // namespace
+}  // namespace fovea::pipeline
