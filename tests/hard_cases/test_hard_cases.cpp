@@ -12,13 +12,7 @@
 namespace fovea::pipeline {
 namespace {
 
-RegionModel model(Preset preset, std::vector<double> custom = {}, double far = 90.0) {
-  AcuityConfig config;
-  config.preset = preset;
-  config.custom_bounds_deg = std::move(custom);
-  config.far_ecc_deg = far;
-  return RegionModel::create(config).value();
-}
+using test::regionModel;
 
 std::vector<uint8_t> partition(const PointCloud& cloud, const Gaze& gaze, const RegionModel& m,
                                PartitionCounts* counts_out = nullptr) {
@@ -37,7 +31,7 @@ Gaze gazeAlong(const Eigen::Vector3d& dir, const Eigen::Vector3d& eye = Eigen::V
 }
 
 TEST(HardCases, GazeAlongEachAxisExactly) {
-  const RegionModel f3 = model(Preset::kF3);
+  const RegionModel f3 = regionModel(Preset::kF3);
   const Eigen::Vector3d axes[] = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
                                   -Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
   for (const Eigen::Vector3d& axis : axes) {
@@ -56,7 +50,7 @@ TEST(HardCases, GazeAlongEachAxisExactly) {
 }
 
 TEST(HardCases, PointExactlyOnARegionBoundaryBelongsToTheInnerRegion) {
-  const RegionModel f1 = model(Preset::kF1);
+  const RegionModel f1 = regionModel(Preset::kF1);
   const ConeBounds bounds = ConeBounds::fromModel(f1);
   for (int j = 0; j < bounds.count; ++j) {
     // t = 2 (a power of two) makes d = tan(e) * t exact, and |(d, 0, 0)| = d exactly.
@@ -78,7 +72,7 @@ TEST(HardCases, PointAtTheEyeGoesToTheFoveaWithoutNaN) {
   PointCloud cloud(1);
   cloud.origin_m = Eigen::Vector3d(5, 6, 7);
   (void)cloud.push(0.0f, 0.0f, 0.0f, 0);
-  const auto region = partition(cloud, gazeAlong(Eigen::Vector3d(1, 1, 0), Eigen::Vector3d(5, 6, 7)), model(Preset::kF3));
+  const auto region = partition(cloud, gazeAlong(Eigen::Vector3d(1, 1, 0), Eigen::Vector3d(5, 6, 7)), regionModel(Preset::kF3));
   EXPECT_EQ(region[0], 0);
   Foveator f = Foveator::create({1, 1}, {}).value();
   FoveatedCloud out(1);
@@ -94,7 +88,7 @@ TEST(HardCases, PointsBehindTheEyeGoToTheOutermostRegion) {
   (void)cloud.push(0.0f, 5.0f, -1e-6f, 0);    // just behind the eye's plane
   (void)cloud.push(0.0f, 1e-7f, -100.0f, 0);  // far behind, near the axis
   for (Preset p : {Preset::kF1, Preset::kF2, Preset::kF3}) {
-    const RegionModel m = model(p);
+    const RegionModel m = regionModel(p);
     for (uint8_t r : partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), m)) EXPECT_EQ(r, m.regionCount() - 1);
   }
 }
@@ -104,11 +98,11 @@ TEST(HardCases, PointAtExactly90Degrees) {
   (void)cloud.push(1.0f, 0.0f, 0.0f, 0);  // t = 0 exactly
   (void)cloud.push(0.0f, 1e30f, 0.0f, 0);
   // A 90-degree bound includes its boundary; with bounds below 90 it is outermost.
-  const RegionModel m = model(Preset::kCustom, {10.0, 90.0, 120.0}, 130.0);
+  const RegionModel m = regionModel(Preset::kCustom, {10.0, 90.0, 120.0}, 130.0);
   auto region = partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), m);
   EXPECT_EQ(region[0], 1);
   EXPECT_EQ(region[1], 1);
-  region = partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), model(Preset::kF3));
+  region = partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), regionModel(Preset::kF3));
   EXPECT_EQ(region[0], 5);
 }
 
@@ -120,7 +114,7 @@ TEST(HardCases, FarPointNearTheAxisKeepsItsEccentricity) {
   (void)cloud.push(0.5f, 0.0f, 0.0f, 0);
   const double off = 10000.0 * std::tan(5.0 * std::numbers::pi / 180.0);
   (void)cloud.push(static_cast<float>(off + 0.01), 0.0f, 0.0f, 0);  // just outside 5 degrees
-  const auto region = partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), model(Preset::kF1));
+  const auto region = partition(cloud, gazeAlong(Eigen::Vector3d::UnitZ()), regionModel(Preset::kF1));
   EXPECT_EQ(region[0], 0);
   EXPECT_EQ(region[1], 1);
 }

@@ -11,11 +11,28 @@
 
 #include <Eigen/Core>
 
+#include "pipeline/acuity.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::test {
 
 using pipeline::PointCloud;
+
+// A validated region model (aborts on an invalid one: a bug in the test).
+inline pipeline::RegionModel regionModel(pipeline::Preset preset, std::vector<double> custom_bounds_deg = {},
+                                         double far_ecc_deg = 90.0) {
+  pipeline::AcuityConfig config;
+  config.preset = preset;
+  config.custom_bounds_deg = std::move(custom_bounds_deg);
+  config.far_ecc_deg = far_ecc_deg;
+  return pipeline::RegionModel::create(config).value();
+}
+
+inline std::vector<double> boundsOf(const pipeline::RegionModel& model) {
+  std::vector<double> bounds;
+  for (int j = 0; j < model.boundCount(); ++j) bounds.push_back(model.boundDeg(j));
+  return bounds;
+}
 
 // n points uniform in origin +- half_extent (each axis), random colours.
 inline PointCloud randomCloud(std::size_t n, const Eigen::Vector3d& origin_m, float half_extent_m, uint64_t seed) {

@@ -47,8 +47,7 @@ TEST_P(FoveatorMatchesBruteForce, RandomCloud) {
   ASSERT_TRUE(foveator.foveate(in, gaze, out, stats).isOk());
 
   const RegionModel& model = foveator.model();
-  std::vector<double> bounds;
-  for (int j = 0; j < model.boundCount(); ++j) bounds.push_back(model.boundDeg(j));
+  const std::vector<double> bounds = test::boundsOf(model);
   const double d0 = stats.fixation.d0_m;
   std::map<test::BruteKey, test::BruteVoxel> voxels;
   std::vector<std::size_t> fovea;

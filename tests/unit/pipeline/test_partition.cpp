@@ -11,19 +11,8 @@
 namespace fovea::pipeline {
 namespace {
 
-RegionModel modelFor(Preset preset, std::vector<double> custom = {}, double far = 90.0) {
-  AcuityConfig config;
-  config.preset = preset;
-  config.custom_bounds_deg = std::move(custom);
-  config.far_ecc_deg = far;
-  return RegionModel::create(config).value();
-}
-
-std::vector<double> boundsOf(const RegionModel& model) {
-  std::vector<double> bounds;
-  for (int j = 0; j < model.boundCount(); ++j) bounds.push_back(model.boundDeg(j));
-  return bounds;
-}
+using test::boundsOf;
+using test::regionModel;
 
 // Point at eccentricity ecc_deg, distance r from the eye, gaze +z from the origin.
 PointCloud pointAt(double ecc_deg, double r) {
@@ -41,21 +30,21 @@ uint8_t regionOf(const PointCloud& cloud, const RegionModel& model, const Gaze& 
 }
 
 TEST(Partition, HandPlacedPointsFallInTableIRegions) {
-  const RegionModel f3 = modelFor(Preset::kF3);
+  const RegionModel f3 = regionModel(Preset::kF3);
   // Midway inside each band of Table I, and beyond 60 degrees.
   const double ecc[] = {2.0, 6.5, 12.0, 25.0, 45.0, 75.0, 120.0, 179.0};
   const int expected[] = {0, 1, 2, 3, 4, 5, 5, 5};
   for (int i = 0; i < 8; ++i) EXPECT_EQ(regionOf(pointAt(ecc[i], 3.0), f3), expected[i]) << ecc[i] << " deg";
   // F1 puts everything beyond the perifovea in its fourth region.
-  const RegionModel f1 = modelFor(Preset::kF1);
+  const RegionModel f1 = regionModel(Preset::kF1);
   EXPECT_EQ(regionOf(pointAt(25.0, 3.0), f1), 3);
   EXPECT_EQ(regionOf(pointAt(170.0, 3.0), f1), 3);
   // FREF: one region.
-  EXPECT_EQ(regionOf(pointAt(170.0, 3.0), modelFor(Preset::kFRef)), 0);
+  EXPECT_EQ(regionOf(pointAt(170.0, 3.0), regionModel(Preset::kFRef)), 0);
 }
 
 TEST(Partition, BoundsBeyond90DegreesReachBehindTheEye) {
-  const RegionModel model = modelFor(Preset::kCustom, {30.0, 90.0, 135.0}, 150.0);
+  const RegionModel model = regionModel(Preset::kCustom, {30.0, 90.0, 135.0}, 150.0);
   EXPECT_EQ(regionOf(pointAt(10.0, 1.0), model), 0);
   EXPECT_EQ(regionOf(pointAt(60.0, 1.0), model), 1);
   EXPECT_EQ(regionOf(pointAt(100.0, 1.0), model), 2);
@@ -66,7 +55,7 @@ TEST(Partition, BoundsBeyond90DegreesReachBehindTheEye) {
 
 TEST(Partition, CountsPerRegionAddUp) {
   PointCloud cloud = test::randomCloud(5000, Eigen::Vector3d::Zero(), 4.0f, 3);
-  const RegionModel model = modelFor(Preset::kF3);
+  const RegionModel model = regionModel(Preset::kF3);
   std::vector<uint8_t> region(cloud.size());
   PartitionCounts counts;
   Gaze gaze;
@@ -100,7 +89,7 @@ class PartitionMatchesBruteForce : public ::testing::TestWithParam<BruteCase> {}
 TEST_P(PartitionMatchesBruteForce, EveryPoint) {
   const BruteCase& c = GetParam();
   std::mt19937_64 rng(c.seed);
-  const RegionModel model = modelFor(c.preset, c.custom, 179.0);
+  const RegionModel model = regionModel(c.preset, c.custom, 179.0);
   const std::vector<double> bounds = boundsOf(model);
   const Eigen::Vector3d origin(c.origin_offset_m, -0.5 * c.origin_offset_m, 0.25 * c.origin_offset_m);
   for (int trial = 0; trial < 8; ++trial) {
