@@ -228,6 +228,16 @@ std::string hostDescription() {
          ", CMake build type " + FOVEA_BUILD_TYPE;
 }
 
+// The 1-minute load average; NaN where /proc is absent.
+double loadAverage() {
+  std::FILE* f = std::fopen("/proc/loadavg", "r");
+  if (!f) return kNaN;
+  double one = 0.0;
+  const int n = std::fscanf(f, "%lf", &one);
+  std::fclose(f);
+  return n == 1 ? one : kNaN;
+}
+
 std::string utcNow() {
   const std::time_t now = std::time(nullptr);
   char buffer[32];
@@ -310,6 +320,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", info.name.c_str(), s.message().c_str());
     return kExitFailure;
   }
+  const double load_before = loadAverage();
   long failed = 0;
   const bool interactive = isatty(STDOUT_FILENO) != 0;  // progress only on a terminal
   for (long f = 0; f < options.frames; ++f) {
@@ -405,11 +416,20 @@ int run(int argc, char** argv) {
   ReportContext context;
   for (int i = 0; i < argc; ++i) {
     if (i > 0) context.command_line += ' ';
-    context.command_line += i == 0 ? std::filesystem::path(argv[0]).filename().string() : std::string(argv[i]);
+    // argv[0] as typed when relative (build/tools/fovea-error-report), else just the name.
+    const std::filesystem::path self(argv[0]);
+    context.command_line += i > 0 ? std::string(argv[i]) : self.is_relative() ? self.string() : self.filename().string();
   }
   context.camera = info.name + " " + std::to_string(width) + "x" + std::to_string(height);
   context.gaze = gaze_text;
-  context.host = hostDescription();
+  char load_text[160] = "load average unknown";
+  if (!std::isnan(load_before)) {
+    std::snprintf(load_text, sizeof load_text, "1-minute load average %.2f before the run%s", load_before,
+                  load_before > 0.5 ? " (other processes shared the CPU: times are noisier than on an idle machine)"
+                                    : "");
+  }
+  context.host = hostDescription() + "; " + load_text;
+  context.pixel_pitch_arcmin = std::atan(1.0 / info.intrinsics.fx) * 180.0 / 3.14159265358979323846 * 60.0;
   context.frames = static_cast<int>(options.frames - failed);
   context.date_utc = utcNow();
 

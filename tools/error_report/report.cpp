@@ -93,6 +93,8 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
      << "- camera: " << context.camera << "; gaze: " << context.gaze << "\n"
      << "- " << context.frames << " frames; every configuration foveates the same frames, side by side in this run\n"
      << "- host: " << context.host << "\n"
+     << "- the camera's pixel pitch at the image centre: " << fixed(context.pixel_pitch_arcmin, 1)
+     << " arcmin (the eye sits at the camera), against MAR0 = 1 arcmin\n"
      << "- **bytes**: raw payload, " << fixed(kBytesPerPoint, 0)
      << " bytes per output point (x, y, z float + r, g, b uchar); the network codec comes later (issue 4)\n"
      << "- **time**: median (and p90) wall-clock time per frame of back-projection + partition + fixation + voxel "
@@ -116,15 +118,16 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
 
   md << "## Per configuration\n\n"
      << "| preset | m | points out | kept | bytes / frame | time / frame [ms] median (p90) | RMS [mm] | max [mm] | "
-        "above MAR, all points | above MAR, outside the fovea |\n"
-     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        "above MAR, all points | above MAR, outside the fovea | d0 [m] |\n"
+     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const ConfigSummary& c : configs) {
     const double kept = c.all.points_in > 0 ? c.all.points_out / c.all.points_in : 0.0;
     md << "| " << c.preset << " | " << fixed(c.slope, 3) << " | " << fixed(c.all.points_out, 0) << " | "
        << percent(kept) << " | " << fixed(c.bytesPerFrame() / 1e6, 3) << " MB | " << fixed(c.time_ms_median, 2)
        << " (" << fixed(c.time_ms_p90, 2) << ") | " << fixed(c.all.rms_mm, 2) << " | " << fixed(c.all.max_mm, 1)
        << " | " << percent(c.all.share_above_mar) << " | "
-       << (c.regions.size() > 1 ? percent(peripheralShare(c)) : std::string("-")) << " |\n";
+       << (c.regions.size() > 1 ? percent(peripheralShare(c)) : std::string("-")) << " | "
+       << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |\n";
   }
 
   md << "\n## Per region\n\n"
@@ -147,9 +150,10 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
   md << "\n## Steps at region borders\n\n"
      << "Median alpha/MAR of the points within 1 degree inside a border (the inner region's last degree) and within 1 "
         "degree outside it (the outer region's first degree). MAR is continuous across the border, so the ratio of the "
-        "two is the step in displacement angle the eye sees there. The fovea is untouched (alpha = 0).\n\n"
-     << "| preset | m | border [deg] | inside (region) | outside (region) | step |\n"
-     << "|---|---|---:|---:|---:|---:|\n";
+        "two is the step in displacement angle the eye sees there. The fovea is untouched (alpha = 0). *voxel ratio* is "
+        "the step the voxel sizes make there, v_outside / v_inside = MAR(E_outside) / MAR(E_inside) (Eq. 6).\n\n"
+     << "| preset | m | border [deg] | inside (region) | outside (region) | step | voxel ratio |\n"
+     << "|---|---|---:|---:|---:|---:|---:|\n";
   for (const ConfigSummary& c : configs) {
     for (std::size_t j = 0; j + 1 < c.regions.size(); ++j) {
       const RegionSummary& inner = c.regions[j];
@@ -158,17 +162,20 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
       const double out_ratio = outer.ratio_first_deg;
       std::string step = "-";
       if (in_ratio > 0.0 && !std::isnan(out_ratio)) step = "x " + fixed(out_ratio / in_ratio, 1);
+      if (in_ratio == 0.0 && out_ratio > 0.0) step = "from 0";
+      const std::string voxel_ratio = inner.voxel_mm > 0.0 ? "x " + fixed(outer.voxel_mm / inner.voxel_mm, 1) : "-";
       md << "| " << c.preset << " | " << fixed(c.slope, 3) << " | " << fixed(inner.ecc_max_deg, 0) << " | "
          << fixed(in_ratio, 2) << " (" << inner.name << ") | " << fixed(out_ratio, 2) << " (" << outer.name << ") | "
-         << step << " |\n";
+         << step << " | " << voxel_ratio << " |\n";
     }
   }
 
   // Observations that follow from the numbers alone; the interpretation is in README.md.
   md << "\n## What the numbers say, region by region\n\n"
-     << "For each foveated region: *over-sampled* when the median displacement is below the MAR at the point's "
-        "eccentricity (alpha/MAR median < 1: more points are sent than the eye can separate there), *visible* when "
-        "above.\n\n";
+     << "For each foveated region, from alpha/MAR: *below MAR* when even its 95th percentile is below 1 (the eye "
+        "cannot tell the displacements: the region is over-sampled, it could be thinned further); *mostly below* when "
+        "the median is below 1 but the 95th percentile above; *above MAR* when the median is above 1 (most "
+        "displacements are visible).\n\n";
   for (const ConfigSummary& c : configs) {
     if (c.regions.size() < 2) continue;
     md << "- " << c.preset << ", m " << fixed(c.slope, 3) << ":";
@@ -178,8 +185,9 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
         md << (j > 1 ? ";" : "") << " " << r.name << " empty";
         continue;
       }
-      md << (j > 1 ? ";" : "") << " " << r.name << " " << (r.ratio_median < 1.0 ? "over-sampled" : "visible") << " ("
-         << fixed(r.ratio_median, 2) << "x MAR, " << percent(r.share_above_mar) << " above)";
+      const char* verdict = r.ratio_p95 < 1.0 ? "below MAR" : r.ratio_median < 1.0 ? "mostly below MAR" : "above MAR";
+      md << (j > 1 ? ";" : "") << " " << r.name << " " << verdict << " (median " << fixed(r.ratio_median, 2)
+         << "x, p95 " << fixed(r.ratio_p95, 2) << "x MAR, " << percent(r.share_above_mar) << " of points above)";
     }
     md << "\n";
   }
@@ -231,13 +239,14 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
       p << "'" << data_name << "' index " << s << " using " << x_col << ':' << y_col << (lines ? " with linespoints lw 1.5 pt " : " with points pt ")
         << (5 + 2 * static_cast<int>(s)) << " ps 1.6 lc " << s + 1 << " title 'm = " << csvNumber(slopes[s])
         << "', \\\n     '' index " << s << " using " << x_col << ':' << y_col
-        << ":1 with labels offset char 1.2," << (s == 0 ? "0.8" : s == 1 ? "-0.8" : "1.6") << " tc lt " << s + 1
+        << ":1 with labels offset char " << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt " << s + 1
         << " notitle";
     }
     return p.str();
   };
   gp << series(3, 6, true) << "\n"
      << "unset logscale x\n"
+     << "set key top left box opaque\n"
      << "set xlabel 'time per frame [ms], median: back-projection through sampled output'\n"
      << "set ylabel 'RMS distance from each input point to its representative [mm]'\n"
      << "set title 'geometric error against time'\n"

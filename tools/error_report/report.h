@@ -57,8 +57,9 @@ struct ReportContext {
   std::string command_line;  // as the user typed it (argv joined)
   std::string camera;        // e.g. "mock:living-room 640x480"
   std::string gaze;          // how the gaze was chosen
-  std::string host;          // CPU architecture, cores, compiler, build type
+  std::string host;          // CPU architecture, cores, compiler, build type, load
   int frames = 0;            // frames measured
+  double pixel_pitch_arcmin = 0.0;  // atan(1 / fx) of the camera
   std::string date_utc;
 };
 
