@@ -37,6 +37,9 @@ double RegionError::rmsM() const { return points ? std::sqrt(sum_sq_m2 / points)
 double RegionError::rmsOverVoxel() const { return voxel_size_m > 0.0 ? rmsM() / voxel_size_m : kNaN; }
 double RegionError::maxOverVoxel() const { return voxel_size_m > 0.0 ? max_m / voxel_size_m : kNaN; }
 double RegionError::shareAboveMar() const { return seen ? static_cast<double>(above_mar) / seen : 0.0; }
+double RegionError::shareAboveReferenceMar() const {
+  return seen ? static_cast<double>(above_reference_mar) / seen : 0.0;
+}
 
 double angleBetweenDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   if (a.isZero(0.0) || b.isZero(0.0)) return 0.0;
@@ -80,6 +83,10 @@ Status ErrorEvaluator::evaluate(const PointCloud& in, const uint8_t* region, con
   const Eigen::Vector3d in_to_eye = in.origin_m - unit_gaze->origin_m;
   const Eigen::Vector3d shift = out.origin_m - in.origin_m;
   const double slope = model.slope();
+  const double reference_slope = error_model.reference_slope;
+  if (!(std::isfinite(reference_slope) && reference_slope >= 0.0)) {
+    return {ErrorCode::kInvalidArgument, "error evaluator: reference slope must be finite and >= 0"};
+  }
   for (std::size_t i = 0; i < n; ++i) {
     ratio_[i] = kNaN;
     const uint8_t r = region[i];
@@ -115,12 +122,14 @@ Status ErrorEvaluator::evaluate(const PointCloud& in, const uint8_t* region, con
     const double alpha_deg = displacementAngleDeg(a, d);
     const double ecc_deg = eccentricityDeg(a, l);
     const double mar_deg = marDeg(slope, ecc_deg);
+    const double reference_mar_deg = marDeg(reference_slope, ecc_deg);
     const double ratio = alpha_deg / mar_deg;
     ratio_[i] = ratio;
     ecc_deg_[i] = ecc_deg;
     for (RegionError* e : {&metrics.regions[r], &metrics.all}) {
       ++e->seen;
       e->above_mar += alpha_deg > mar_deg ? 1u : 0u;
+      e->above_reference_mar += alpha_deg > reference_mar_deg ? 1u : 0u;
       e->ratio_max = std::max(e->ratio_max, ratio);
     }
   }

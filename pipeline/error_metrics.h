@@ -57,6 +57,9 @@ struct RegionError {
   // ratio alpha / MAR(ecc) (nearest-rank quantiles; 0 when no point).
   uint32_t seen = 0;
   uint32_t above_mar = 0;
+  // The same test against a fixed observer, MAR = reference_slope * ecc + MAR0
+  // (ErrorModel): configurations with different m judged by the same eye.
+  uint32_t above_reference_mar = 0;
   double ratio_median = 0.0;
   double ratio_p95 = 0.0;
   double ratio_max = 0.0;
@@ -72,6 +75,7 @@ struct RegionError {
   double rmsOverVoxel() const;  // NaN when voxel_size_m is 0
   double maxOverVoxel() const;  // NaN when voxel_size_m is 0
   double shareAboveMar() const; // above_mar / seen; 0 when seen is 0
+  double shareAboveReferenceMar() const;
 };
 
 struct ErrorMetrics {
@@ -83,10 +87,13 @@ struct ErrorMetrics {
 };
 
 // The geometry the metrics need from the foveation: the region model (bounds,
-// slope m) and the voxel size per region for this cloud (FoveationStats).
+// slope m) and the voxel size per region for this cloud (FoveationStats). The
+// perceptual test uses the model's m; reference_slope gives a second, fixed
+// observer (default: the paper's most acute, m = 0.022).
 struct ErrorModel {
   const RegionModel* model = nullptr;
   std::array<double, kMaxRegions> voxel_size_m{};
+  double reference_slope = kDefaultSlope;
 };
 
 class ErrorEvaluator {

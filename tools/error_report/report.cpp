@@ -34,17 +34,13 @@ std::string eccBand(const RegionSummary& r) {
   return fixed(r.ecc_min_deg, 0) + "-" + fixed(r.ecc_max_deg, 0);
 }
 
-uint64_t aboveMar(const RegionSummary& r) {
-  return static_cast<uint64_t>(std::llround(r.share_above_mar * static_cast<double>(r.seen)));
-}
-
 // Share above MAR over every region but the fovea, pooled.
 double peripheralShare(const ConfigSummary& c) {
   uint64_t seen = 0, above = 0;
   for (const RegionSummary& r : c.regions) {
     if (r.index == 0) continue;
     seen += r.seen;
-    above += aboveMar(r);
+    above += static_cast<uint64_t>(std::llround(r.share_above_mar * static_cast<double>(r.seen)));
   }
   return seen ? static_cast<double>(above) / static_cast<double>(seen) : std::nan("");
 }
@@ -63,7 +59,7 @@ Status writeFile(const std::string& path, const std::string& text) {
 Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& configs) {
   std::ostringstream out;
   out << "preset,m,region,region_name,ecc_min_deg,ecc_max_deg,frames,voxel_mm,points_in,points_out,bytes_per_frame,"
-         "time_ms_median,time_ms_p90,rms_mm,max_mm,rms_over_voxel,max_over_voxel,points_seen,share_above_mar,"
+         "time_ms_median,time_ms_p90,wall_ms_median,rms_mm,max_mm,rms_over_voxel,max_over_voxel,points_seen,share_above_mar,share_above_reference_mar,"
          "ratio_median,ratio_p95,ratio_max,ratio_median_first_deg,ratio_median_last_deg\n";
   for (const ConfigSummary& c : configs) {
     auto row = [&](const RegionSummary& r) {
@@ -72,9 +68,11 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
           << ',' << r.name << ',' << csvNumber(r.ecc_min_deg) << ',' << csvNumber(r.ecc_max_deg) << ',' << c.frames
           << ',' << csvNumber(r.voxel_mm) << ',' << csvNumber(r.points_in) << ',' << csvNumber(r.points_out) << ','
           << csvNumber(r.points_out * kBytesPerPoint) << ',' << (all ? csvNumber(c.time_ms_median) : "") << ','
-          << (all ? csvNumber(c.time_ms_p90) : "") << ',' << csvNumber(r.rms_mm) << ',' << csvNumber(r.max_mm) << ','
+          << (all ? csvNumber(c.time_ms_p90) : "") << ',' << (all ? csvNumber(c.wall_ms_median) : "") << ','
+          << csvNumber(r.rms_mm) << ',' << csvNumber(r.max_mm) << ','
           << csvNumber(r.rms_over_voxel) << ',' << csvNumber(r.max_over_voxel) << ',' << r.seen << ','
-          << csvNumber(r.share_above_mar) << ',' << csvNumber(r.ratio_median) << ',' << csvNumber(r.ratio_p95) << ','
+          << csvNumber(r.share_above_mar) << ',' << csvNumber(r.share_above_reference_mar) << ','
+          << csvNumber(r.ratio_median) << ',' << csvNumber(r.ratio_p95) << ','
           << csvNumber(r.ratio_max) << ',' << csvNumber(r.ratio_first_deg) << ',' << csvNumber(r.ratio_last_deg)
           << '\n';
     };
@@ -97,9 +95,10 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
      << " arcmin (the eye sits at the camera), against MAR0 = 1 arcmin\n"
      << "- **bytes**: raw payload, " << fixed(kBytesPerPoint, 0)
      << " bytes per output point (x, y, z float + r, g, b uchar); the network codec comes later (issue 4)\n"
-     << "- **time**: median (and p90) wall-clock time per frame of back-projection + partition + fixation + voxel "
-        "sampling, the **scalar reference** kernels (no SIMD yet); capture and the error computation are not "
-        "included. Times vary from run to run and machine to machine\n"
+     << "- **time**: per frame, back-projection + partition + fixation + voxel sampling with the **scalar reference** "
+        "kernels (no SIMD yet), one thread; capture and the error computation are not included. *CPU time* is the "
+        "thread's CPU time (median and p90 over the frames): other processes on a shared host do not inflate it. "
+        "*wall* is the wall-clock median. Times vary from run to run and machine to machine\n"
      << "- **geometric error**: distance from each input point P to its representative R (the output point that "
         "stands for it: itself in the fovea, its voxel's centroid elsewhere); RMS pooled over all points of all frames, "
         "max over all frames; `/ v` divides by the region's voxel size (at most sqrt(3) = 1.73, since P and R share a "
@@ -108,7 +107,9 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
         "1/60 degrees (Eq. 1) at P's own eccentricity. *above MAR* is the share of points with alpha > MAR(ecc(P)); "
         "alpha/MAR is summarised by its median, 95th percentile (median over frames of each frame's value) and max. "
         "Below 1 the displacement is finer than the eye resolves there (over-sampling); above 1 it is visible. "
-        "Points with P or R at the eye have no angle and are left out (see README.md)\n\n";
+        "Points with P or R at the eye have no angle and are left out (see README.md). The MAR is each "
+        "configuration's own (its m); *m = " << fixed(context.reference_slope, 3) << " eye* judges every "
+        "configuration by one fixed observer instead\n\n";
 
   if (have_plot) {
     md << "![bytes and time against error](report.png)\n\n";
@@ -117,32 +118,33 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
   }
 
   md << "## Per configuration\n\n"
-     << "| preset | m | points out | kept | bytes / frame | time / frame [ms] median (p90) | RMS [mm] | max [mm] | "
-        "above MAR, all points | above MAR, outside the fovea | d0 [m] |\n"
-     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+     << "| preset | m | points out | kept | bytes / frame | CPU time / frame [ms] median (p90) | wall [ms] median | RMS [mm] | max [mm] | "
+        "above MAR, all points | above MAR, outside the fovea | above MAR of the m = " << fixed(context.reference_slope, 3)
+     << " eye | d0 [m] |\n"
+     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const ConfigSummary& c : configs) {
     const double kept = c.all.points_in > 0 ? c.all.points_out / c.all.points_in : 0.0;
     md << "| " << c.preset << " | " << fixed(c.slope, 3) << " | " << fixed(c.all.points_out, 0) << " | "
        << percent(kept) << " | " << fixed(c.bytesPerFrame() / 1e6, 3) << " MB | " << fixed(c.time_ms_median, 2)
-       << " (" << fixed(c.time_ms_p90, 2) << ") | " << fixed(c.all.rms_mm, 2) << " | " << fixed(c.all.max_mm, 1)
+       << " (" << fixed(c.time_ms_p90, 2) << ") | " << fixed(c.wall_ms_median, 2) << " | " << fixed(c.all.rms_mm, 2) << " | " << fixed(c.all.max_mm, 1)
        << " | " << percent(c.all.share_above_mar) << " | "
        << (c.regions.size() > 1 ? percent(peripheralShare(c)) : std::string("-")) << " | "
-       << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |\n";
+       << percent(c.all.share_above_reference_mar) << " | " << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |\n";
   }
 
   md << "\n## Per region\n\n"
      << "Points are means per frame; ecc is the region's eccentricity band in degrees; v its voxel size (mean over "
         "frames).\n\n"
      << "| preset | m | region | ecc [deg] | v [mm] | points in > out | RMS [mm] | max [mm] | RMS / v | max / v | "
-        "above MAR | alpha/MAR median | p95 | max |\n"
-     << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        "above MAR | above MAR, m = " << fixed(context.reference_slope, 3) << " eye | alpha/MAR median | p95 | max |\n"
+     << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const ConfigSummary& c : configs) {
     for (const RegionSummary& r : c.regions) {
       md << "| " << c.preset << " | " << fixed(c.slope, 3) << " | " << r.name << " | " << eccBand(r) << " | "
          << (r.voxel_mm > 0.0 ? fixed(r.voxel_mm, 2) : std::string("-")) << " | " << fixed(r.points_in, 0) << " > "
          << fixed(r.points_out, 0) << " | " << fixed(r.rms_mm, 2) << " | " << fixed(r.max_mm, 1) << " | "
          << fixed(r.rms_over_voxel, 2) << " | " << fixed(r.max_over_voxel, 2) << " | " << percent(r.share_above_mar)
-         << " | " << fixed(r.ratio_median, 2) << " | " << fixed(r.ratio_p95, 2) << " | " << fixed(r.ratio_max, 1)
+         << " | " << percent(r.share_above_reference_mar) << " | " << fixed(r.ratio_median, 2) << " | " << fixed(r.ratio_p95, 2) << " | " << fixed(r.ratio_max, 1)
          << " |\n";
     }
   }
@@ -202,7 +204,8 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
     if (std::find(slopes.begin(), slopes.end(), c.slope) == slopes.end()) slopes.push_back(c.slope);
   }
   std::ostringstream data;
-  data << "# preset m bytes_per_frame_MB time_ms_median rms_mm share_above_mar_percent points_out\n";
+  data << "# preset m bytes_per_frame_MB cpu_time_ms_median rms_mm share_above_mar_percent points_out "
+          "share_above_reference_mar_percent\n";
   for (std::size_t s = 0; s < slopes.size(); ++s) {
     if (s > 0) data << "\n\n";  // a new gnuplot index block per slope
     data << "# m " << csvNumber(slopes[s]) << "\n";
@@ -210,7 +213,8 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
       if (c.slope != slopes[s]) continue;
       data << c.preset << ' ' << csvNumber(c.slope) << ' ' << csvNumber(c.bytesPerFrame() / 1e6) << ' '
            << csvNumber(c.time_ms_median) << ' ' << csvNumber(c.all.rms_mm) << ' '
-           << csvNumber(100.0 * c.all.share_above_mar) << ' ' << csvNumber(c.all.points_out) << "\n";
+           << csvNumber(100.0 * c.all.share_above_mar) << ' ' << csvNumber(c.all.points_out) << ' '
+           << csvNumber(100.0 * c.all.share_above_reference_mar) << "\n";
     }
   }
   if (Status s = writeFile(data_path, data.str()); !s) return s;
@@ -226,8 +230,9 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
      << "set key top right box opaque\n"
      << "set offsets graph 0.05, graph 0.05, graph 0.05, graph 0.05\n"
      << "set logscale x\n"
+     << "set yrange [-2:*]\n"
      << "set xlabel 'bytes per frame [MB] (raw, 15 B per point: x,y,z float + r,g,b uchar; log scale)'\n"
-     << "set ylabel 'input points displaced by more than their MAR [%]'\n"
+     << "set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'\n"
      << "set title 'perceptual error against size'\n"
      << "plot ";
   // Lines join the presets of one slope in the left panel (sizes fall from FREF to
@@ -244,10 +249,17 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
     }
     return p.str();
   };
-  gp << series(3, 6, true) << "\n"
+  gp << series(3, 6, true);
+  for (std::size_t s = 0; s < slopes.size(); ++s) {
+    if (slopes[s] == context.reference_slope) continue;  // the same as its solid line
+    gp << ", \\\n     '" << data_name << "' index " << s << " using 3:8 with linespoints dt 2 lw 1 pt "
+       << (4 + 2 * static_cast<int>(s)) << " ps 1.3 lc " << s + 1 << " title 'm = " << csvNumber(slopes[s])
+       << ", judged by an m = " << csvNumber(context.reference_slope) << " eye'";
+  }
+  gp << "\n"
      << "unset logscale x\n"
      << "set key top left box opaque\n"
-     << "set xlabel 'time per frame [ms], median: back-projection through sampled output'\n"
+     << "set xlabel 'CPU time per frame [ms], median: back-projection through sampled output'\n"
      << "set ylabel 'RMS distance from each input point to its representative [mm]'\n"
      << "set title 'geometric error against time'\n"
      << "plot " << series(4, 5, false) << "\n"

@@ -29,6 +29,7 @@ struct RegionSummary {
   double max_over_voxel = 0.0;  // NaN without a voxel
   uint64_t seen = 0;            // points with a defined angle, over the frames
   double share_above_mar = 0.0; // pooled: above / seen
+  double share_above_reference_mar = 0.0;  // the same for the fixed observer (ReportContext)
   // alpha / MAR(ecc): median over frames of each frame's median / p95; max over all.
   double ratio_median = 0.0;
   double ratio_p95 = 0.0;
@@ -43,8 +44,11 @@ struct ConfigSummary {
   std::string preset;  // "F1", "F2", "F3", "FREF"
   double slope = 0.0;
   int frames = 0;
-  double time_ms_median = 0.0;  // back-projection through sampled output, wall clock
+  // Back-projection through sampled output, per frame: thread CPU time (median,
+  // p90) and wall-clock time (median).
+  double time_ms_median = 0.0;
   double time_ms_p90 = 0.0;
+  double wall_ms_median = 0.0;
   double d0_median_m = 0.0;
   uint64_t at_eye = 0;
   uint64_t no_representative = 0;
@@ -60,6 +64,7 @@ struct ReportContext {
   std::string host;          // CPU architecture, cores, compiler, build type, load
   int frames = 0;            // frames measured
   double pixel_pitch_arcmin = 0.0;  // atan(1 / fx) of the camera
+  double reference_slope = 0.022;   // the fixed observer's m
   std::string date_utc;
 };
 

@@ -99,6 +99,7 @@ TEST(ErrorMetrics, KnownAngleAtKnownEccentricity) {
   EXPECT_EQ(fovea.points, 1u);
   EXPECT_EQ(fovea.seen, 1u);
   EXPECT_EQ(fovea.above_mar, 1u);
+  EXPECT_EQ(fovea.above_reference_mar, 1u);  // the reference is the same m here
   EXPECT_NEAR(fovea.ratio_max, ratio0, 1e-4);
   EXPECT_NEAR(fovea.ratio_median, ratio0, 1e-4);
   EXPECT_DOUBLE_EQ(fovea.shareAboveMar(), 1.0);
@@ -135,6 +136,24 @@ TEST(ErrorMetrics, SlopeMovesTheThreshold) {
   const ErrorMetrics m = evaluateTiny(t, model, eyeAlongX());
   EXPECT_EQ(m.all.above_mar, 0u);
   EXPECT_NEAR(m.all.ratio_max, 0.3 / (0.034 * 10.0 + 1.0 / 60.0), 1e-4);
+  // The fixed observer (m = 0.022 by default) still sees it.
+  EXPECT_EQ(m.all.above_reference_mar, 1u);
+  EXPECT_DOUBLE_EQ(m.all.shareAboveReferenceMar(), 1.0);
+}
+
+TEST(ErrorMetrics, ReferenceObserver) {
+  const RegionModel model = customModel({20.0}, 0.022);
+  Tiny t;
+  t.add(atEcc(10.0, 2.0), atEcc(10.3, 2.0), 0);  // 0.3 deg at 10 deg
+  ErrorEvaluator evaluator = ErrorEvaluator::create(16).value();
+  ErrorMetrics m;
+  // MAR(10) for m = 0.034 is 0.356667 > 0.3; for m = 0.022 it is 0.236667 < 0.3.
+  ASSERT_TRUE(evaluator.evaluate(t.in, t.region.data(), t.rep.data(), t.out, eyeAlongX(), {&model, {}, 0.034}, m)
+                  .isOk());
+  EXPECT_EQ(m.all.above_mar, 1u);
+  EXPECT_EQ(m.all.above_reference_mar, 0u);
+  EXPECT_EQ(evaluator.evaluate(t.in, t.region.data(), t.rep.data(), t.out, eyeAlongX(), {&model, {}, -1.0}, m).code(),
+            ErrorCode::kInvalidArgument);
 }
 
 // RMS of known displacements: 3 cm, 4 cm and 0 -> sqrt(25e-4 / 3) = 2.8868 cm, max 4 cm.
