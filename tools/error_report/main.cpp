@@ -10,7 +10,6 @@
 #include <ctime>
 #include <filesystem>
 #include <limits>
-#include <map>
 #include <memory>
 #include <string>
 #include <string_view>
