@@ -1,0 +1,161 @@
+// fovea-error-report as a user runs it, on a tiny camera: the files it writes and
+// the rows of its CSV. No timing is asserted.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace fovea {
+namespace {
+
+struct ProcessResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+ProcessResult run(const std::string& command) {
+  ProcessResult r;
+  std::FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return r;
+  char buffer[4096];
+  std::size_t n;
+  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class TempDir {
+ public:
+  TempDir() {
+    path_ = std::filesystem::temp_directory_path() / ("fovea-report-" + std::to_string(::getpid()) + "-" +
+                                                      std::to_string(std::random_device{}()));
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() { std::filesystem::remove_all(path_); }
+  std::string path() const { return path_.string(); }
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+std::vector<std::string> splitCsvLine(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream in(line);
+  std::string field;
+  while (std::getline(in, field, ',')) fields.push_back(field);
+  if (!line.empty() && line.back() == ',') fields.emplace_back();
+  return fields;
+}
+
+std::string readAll(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+const std::string kTool = FOVEA_ERROR_REPORT_PATH;
+
+TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
+  TempDir dir;
+  const ProcessResult r =
+      run(kTool + " --camera mock:living-room,size=160x120 --frames 1 --out-dir " + dir.path());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* name : {"report.csv", "report.md", "report.gp", "report_plot.dat"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir.file(name))) << name << "\n" << r.output;
+  }
+  // The plot is optional at run time: either drawn or the program says why not.
+  EXPECT_TRUE(std::filesystem::exists(dir.file("report.png")) ||
+              r.output.find("gnuplot not found") != std::string::npos)
+      << r.output;
+
+  std::ifstream csv(dir.file("report.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  const std::vector<std::string> header = splitCsvLine(line);
+  std::map<std::string, std::size_t> column;
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  for (const char* name : {"preset", "m", "region", "region_name", "points_out", "bytes_per_frame", "time_ms_median",
+                           "rms_mm", "max_mm", "rms_over_voxel", "share_above_mar", "ratio_median"}) {
+    ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
+  }
+  // Regions per preset, plus one "all" row: F1 4, F2 5, F3 6, FREF 1.
+  const std::map<std::string, int> regions = {{"F1", 4}, {"F2", 5}, {"F3", 6}, {"FREF", 1}};
+  std::set<std::string> seen;
+  std::map<std::string, double> fref_rms, f1_points, fref_points;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    ASSERT_EQ(f.size(), header.size()) << line;
+    const std::string key = f[column["preset"]] + "/" + f[column["m"]] + "/" + f[column["region"]];
+    EXPECT_TRUE(seen.insert(key).second) << "duplicate row " << key;
+    ASSERT_TRUE(regions.count(f[column["preset"]])) << line;
+    if (f[column["region"]] == "all") {
+      EXPECT_FALSE(f[column["time_ms_median"]].empty()) << line;
+      const double points = std::stod(f[column["points_out"]]);
+      EXPECT_DOUBLE_EQ(std::stod(f[column["bytes_per_frame"]]), 15.0 * points) << line;
+      if (f[column["preset"]] == "FREF") {
+        fref_rms[f[column["m"]]] = std::stod(f[column["rms_mm"]]);
+        fref_points[f[column["m"]]] = points;
+        EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
+      }
+      if (f[column["preset"]] == "F1") f1_points[f[column["m"]]] = points;
+    } else {
+      EXPECT_LT(std::stoi(f[column["region"]]), regions.at(f[column["preset"]])) << line;
+    }
+  }
+  std::size_t expected_rows = 0;
+  for (const auto& [preset, count] : regions) expected_rows += 3 * static_cast<std::size_t>(count + 1);
+  EXPECT_EQ(seen.size(), expected_rows);
+  for (const char* m : {"0.022", "0.028", "0.034"}) {
+    for (const auto& [preset, count] : regions) {
+      EXPECT_TRUE(seen.count(preset + "/" + m + "/all")) << preset << " m " << m;
+      for (int r = 0; r < count; ++r) EXPECT_TRUE(seen.count(preset + "/" + m + "/" + std::to_string(r)));
+    }
+    EXPECT_EQ(fref_rms[m], 0.0);
+    EXPECT_GT(fref_points[m], 1000.0);
+    EXPECT_LT(f1_points[m], fref_points[m]);
+  }
+  const std::string md = readAll(dir.file("report.md"));
+  for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "15 bytes per output point",
+                               "Steps at region borders", "--frames 1"}) {
+    EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
+  }
+}
+
+TEST(ErrorReportCli, SubsetOfPresetsAndSlopes) {
+  TempDir dir;
+  const ProcessResult r = run(kTool + " --camera mock:balloon,size=96x72 --frames 2 --presets F3,FREF --slopes 0.03 "
+                                      "--no-plot --out-dir " + dir.path());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("report.png")));
+  const std::string csv = readAll(dir.file("report.csv"));
+  std::size_t rows = 0;
+  for (char c : csv) rows += c == '\n';
+  EXPECT_EQ(rows, 1u + 7u + 2u) << csv;  // header, F3's 6 regions + all, FREF's 1 + all
+  EXPECT_NE(csv.find("\nF3,0.03,5,far-periphery,"), std::string::npos) << csv;
+}
+
+TEST(ErrorReportCli, HelpAndBadArguments) {
+  EXPECT_EQ(run(kTool + " --help").exit_code, 0);
+  EXPECT_EQ(run(kTool + " --frames 0").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --frames").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --presets F9").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --slopes -0.1").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --camera mock:nowhere-scene-x,size=1x").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --bogus").exit_code, 2);
+}
+
+}  // namespace
+}  // namespace fovea

@@ -1,0 +1,510 @@
+// fovea-error-report: the "speed against error" report of issue 3. Runs every
+// configuration (preset x slope m) on the same camera frames, side by side, and
+// writes report.md, report.csv, report_plot.dat, report.gp (and report.png when
+// gnuplot is installed) to an output directory.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include <unistd.h>
+
+#include "hal/camera.h"
+#include "pipeline/backproject.h"
+#include "pipeline/error_metrics.h"
+#include "pipeline/foveator.h"
+#include "tools/error_report/report.h"
+
+#ifndef FOVEA_BUILD_TYPE
+#define FOVEA_BUILD_TYPE "unknown"
+#endif
+
+namespace fovea::tools {
+namespace {
+
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+const char* kHelp =
+    "usage: fovea-error-report [--camera SPEC] [--frames N] [--out-dir DIR] [--presets LIST] [--slopes LIST]\n"
+    "                          [--reference-m M] [--no-plot]\n"
+    "\n"
+    "Foveates the same camera frames with every preset and slope m, side by side, and reports per\n"
+    "configuration the output points, bytes (15 per point), median time per frame (back-projection\n"
+    "through sampled output, scalar reference kernels) and the error against the full cloud: the\n"
+    "distance from each input point to its representative (RMS, max, per region, / voxel size) and the\n"
+    "share of points displaced, seen from the eye, by more than the MAR at their eccentricity (Eq. 1).\n"
+    "The gaze goes from the camera towards the scene's focus point (the camera's optical axis when it\n"
+    "has none), as `fovead run` does by default.\n"
+    "\n"
+    "  --camera SPEC     camera (default mock:living-room); e.g. mock:living-room,size=160x120\n"
+    "  --frames N        frames to average over (default 30)\n"
+    "  --out-dir DIR     where report.md, report.csv, report.gp, report_plot.dat, report.png go\n"
+    "                    (default docs/report; created if missing)\n"
+    "  --presets LIST    comma-separated presets (default F1,F2,F3,FREF)\n"
+    "  --slopes LIST     comma-separated slopes m of MAR = m E + 1 arcmin (default 0.022,0.028,0.034)\n"
+    "  --reference-m M   slope of a fixed observer every configuration is also judged by (default 0.022)\n"
+    "  --no-plot         do not run gnuplot (report.gp is still written)\n";
+
+struct Options {
+  std::string camera = "mock:living-room";
+  long frames = 30;
+  std::string out_dir = "docs/report";
+  std::vector<pipeline::Preset> presets = {pipeline::Preset::kF1, pipeline::Preset::kF2, pipeline::Preset::kF3,
+                                           pipeline::Preset::kFRef};
+  std::vector<double> slopes = {0.022, 0.028, 0.034};
+  double reference_slope = pipeline::kDefaultSlope;
+  bool plot = true;
+};
+
+std::vector<std::string> splitCommas(std::string_view text) {
+  std::vector<std::string> parts;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = text.find(',', start);
+    parts.emplace_back(text.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return parts;
+}
+
+Result<double> parseNumber(const std::string& flag, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v)) {
+    return Result<double>(ErrorCode::kInvalidArgument, flag + ": '" + text + "' is not a finite number");
+  }
+  return v;
+}
+
+Result<Options> parseArgs(int argc, char** argv, bool& help) {
+  Options options;
+  help = false;
+  for (int i = 1; i < argc; ++i) {
+    std::string flag = argv[i];
+    std::string value;
+    const bool takes_value = flag != "--help" && flag != "-h" && flag != "--no-plot";
+    if (const std::size_t eq = flag.find('='); flag.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = flag.substr(eq + 1);
+      flag = flag.substr(0, eq);
+    } else if (takes_value) {
+      if (i + 1 >= argc) return Result<Options>(ErrorCode::kInvalidArgument, flag + " needs a value");
+      value = argv[++i];
+    }
+    if (flag == "--help" || flag == "-h") {
+      help = true;
+    } else if (flag == "--no-plot") {
+      options.plot = false;
+    } else if (flag == "--camera") {
+      options.camera = value;
+    } else if (flag == "--out-dir") {
+      if (value.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--out-dir: must not be empty");
+      options.out_dir = value;
+    } else if (flag == "--frames") {
+      Result<double> n = parseNumber(flag, value);
+      if (!n) return n.status();
+      if (*n < 1 || *n > 100000 || std::floor(*n) != *n) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--frames: '" + value + "' is not an integer in [1, 100000]");
+      }
+      options.frames = static_cast<long>(*n);
+    } else if (flag == "--presets") {
+      options.presets.clear();
+      for (const std::string& name : splitCommas(value)) {
+        Result<pipeline::Preset> p = pipeline::parsePreset(name);
+        if (!p || p.value() == pipeline::Preset::kCustom) {
+          return Result<Options>(ErrorCode::kInvalidArgument, "--presets: '" + name + "' is not F1, F2, F3 or FREF");
+        }
+        options.presets.push_back(p.value());
+      }
+    } else if (flag == "--reference-m") {
+      Result<double> m = parseNumber(flag, value);
+      if (!m) return m.status();
+      if (*m < 0.0) return Result<Options>(ErrorCode::kInvalidArgument, "--reference-m: '" + value + "' is negative");
+      options.reference_slope = *m;
+    } else if (flag == "--slopes") {
+      options.slopes.clear();
+      for (const std::string& text : splitCommas(value)) {
+        Result<double> m = parseNumber("--slopes", text);
+        if (!m) return m.status();
+        if (*m < 0.0) return Result<Options>(ErrorCode::kInvalidArgument, "--slopes: '" + text + "' is negative");
+        options.slopes.push_back(*m);
+      }
+    } else {
+      return Result<Options>(ErrorCode::kInvalidArgument, "unknown argument '" + flag + "' (see --help)");
+    }
+  }
+  return options;
+}
+
+// Sorted-copy nearest-rank quantile, as fovead's report does; NaN when empty.
+double quantileOf(std::vector<double> values, double q) {
+  values.erase(std::remove_if(values.begin(), values.end(), [](double v) { return std::isnan(v); }), values.end());
+  if (values.empty()) return kNaN;
+  std::sort(values.begin(), values.end());
+  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(values.size())));
+  return values[std::clamp<std::size_t>(rank, 1, values.size()) - 1];
+}
+
+// One region's (or all regions') measurements over the frames.
+struct RegionAccumulator {
+  uint64_t points_in = 0, points_out = 0;
+  double voxel_sum_m = 0.0;
+  uint64_t points = 0, seen = 0, above = 0, above_reference = 0;
+  double sum_sq_m2 = 0.0, max_m = 0.0, ratio_max = 0.0;
+  std::vector<double> ratio_median, ratio_p95, ratio_first, ratio_last;  // one per frame
+
+  void add(const pipeline::RegionError& e, uint32_t in, uint32_t out, double voxel_m) {
+    points_in += in;
+    points_out += out;
+    voxel_sum_m += voxel_m;
+    points += e.points;
+    seen += e.seen;
+    above += e.above_mar;
+    above_reference += e.above_reference_mar;
+    sum_sq_m2 += e.sum_sq_m2;
+    max_m = std::max(max_m, e.max_m);
+    ratio_max = std::max(ratio_max, e.ratio_max);
+    if (e.seen > 0) {
+      ratio_median.push_back(e.ratio_median);
+      ratio_p95.push_back(e.ratio_p95);
+    }
+    ratio_first.push_back(e.first_deg_points ? e.ratio_median_first_deg : kNaN);
+    ratio_last.push_back(e.last_deg_points ? e.ratio_median_last_deg : kNaN);
+  }
+
+  RegionSummary summarise(int frames) const {
+    RegionSummary s;
+    const double n = std::max(frames, 1);
+    s.voxel_mm = 1e3 * voxel_sum_m / n;
+    s.points_in = static_cast<double>(points_in) / n;
+    s.points_out = static_cast<double>(points_out) / n;
+    s.rms_mm = points ? 1e3 * std::sqrt(sum_sq_m2 / static_cast<double>(points)) : 0.0;
+    s.max_mm = 1e3 * max_m;
+    s.rms_over_voxel = s.voxel_mm > 0.0 ? s.rms_mm / s.voxel_mm : kNaN;
+    s.max_over_voxel = s.voxel_mm > 0.0 ? s.max_mm / s.voxel_mm : kNaN;
+    s.seen = seen;
+    s.share_above_mar = seen ? static_cast<double>(above) / static_cast<double>(seen) : 0.0;
+    s.share_above_reference_mar = seen ? static_cast<double>(above_reference) / static_cast<double>(seen) : 0.0;
+    s.ratio_median = ratio_median.empty() ? 0.0 : quantileOf(ratio_median, 0.5);
+    s.ratio_p95 = ratio_p95.empty() ? 0.0 : quantileOf(ratio_p95, 0.5);
+    s.ratio_max = ratio_max;
+    s.ratio_first_deg = quantileOf(ratio_first, 0.5);
+    s.ratio_last_deg = quantileOf(ratio_last, 0.5);
+    return s;
+  }
+};
+
+struct ConfigRun {
+  pipeline::FoveationConfig config;
+  std::vector<double> time_ms;  // thread CPU time
+  std::vector<double> wall_ms;  // wall clock
+  std::vector<double> d0_m;
+  std::array<RegionAccumulator, pipeline::kMaxRegions> regions;
+  RegionAccumulator all;
+  uint64_t at_eye = 0, no_representative = 0;
+  int frames = 0;
+};
+
+double msBetween(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// CPU time of the calling thread, in ms: unlike the wall clock, it does not count
+// the time other processes on a shared host take from us.
+double threadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+
+std::string hostDescription() {
+  std::string arch = "unknown";
+#if defined(__x86_64__)
+  arch = "x86-64";
+#elif defined(__aarch64__)
+  arch = "aarch64";
+#endif
+  return arch + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads (the run uses one), " +
+#if defined(__clang__)
+         "clang " + std::string(__clang_version__) +
+#else
+         "g++ " + std::string(__VERSION__) +
+#endif
+         ", CMake build type " + FOVEA_BUILD_TYPE;
+}
+
+// The 1-minute load average; NaN where /proc is absent.
+double loadAverage() {
+  std::FILE* f = std::fopen("/proc/loadavg", "r");
+  if (!f) return kNaN;
+  double one = 0.0;
+  const int n = std::fscanf(f, "%lf", &one);
+  std::fclose(f);
+  return n == 1 ? one : kNaN;
+}
+
+std::string utcNow() {
+  const std::time_t now = std::time(nullptr);
+  char buffer[32];
+  std::strftime(buffer, sizeof buffer, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+  return buffer;
+}
+
+int run(int argc, char** argv) {
+  bool help = false;
+  Result<Options> parsed = parseArgs(argc, argv, help);
+  if (!parsed) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", parsed.status().message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s\ncameras:\n%s\n", kHelp, hal::cameraSpecHelp().c_str());
+    return kExitOk;
+  }
+  const Options& options = parsed.value();
+
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(options.camera);
+  if (!created) {
+    std::fprintf(stderr, "fovea-error-report: --camera: %s\n", created.status().message().c_str());
+    return kExitUsage;
+  }
+  hal::Camera& camera = *created.value();
+  if (Status s = camera.open(); !s) {
+    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", options.camera.c_str(), s.message().c_str());
+    return kExitFailure;
+  }
+  const hal::CameraInfo& info = camera.info();
+  const int width = info.intrinsics.width, height = info.intrinsics.height;
+  const std::size_t max_points = static_cast<std::size_t>(width) * height;
+
+  // Start-up: every buffer sized once; one Foveator reconfigured per configuration.
+  std::vector<ConfigRun> runs;
+  for (pipeline::Preset preset : options.presets) {
+    for (double slope : options.slopes) {
+      ConfigRun r;
+      r.config.acuity.preset = preset;
+      r.config.acuity.slope = slope;
+      r.time_ms.reserve(options.frames);
+      r.wall_ms.reserve(options.frames);
+      runs.push_back(std::move(r));
+    }
+  }
+  Result<pipeline::Foveator> foveator = pipeline::Foveator::create({max_points, max_points}, runs.front().config);
+  if (!foveator) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", foveator.status().message().c_str());
+    return kExitUsage;
+  }
+  for (const ConfigRun& r : runs) {
+    if (Status s = foveator->setConfig(r.config); !s) {
+      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+      return kExitUsage;
+    }
+  }
+  Result<pipeline::ErrorEvaluator> evaluator = pipeline::ErrorEvaluator::create(max_points);
+  if (!evaluator) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", evaluator.status().message().c_str());
+    return kExitFailure;
+  }
+  hal::RgbdFrame frame(width, height);
+  pipeline::PointCloud cloud(max_points);
+  pipeline::FoveatedCloud out(max_points);
+  std::vector<uint32_t> representative(max_points);
+  const pipeline::DepthRange range;  // the same as fovead's defaults
+
+  const bool have_focus = info.focus_point_m.has_value();
+  char gaze_text[160];
+  if (have_focus) {
+    std::snprintf(gaze_text, sizeof gaze_text, "from the camera towards the scene's focus point (%.2f, %.2f, %.2f) m",
+                  info.focus_point_m->x(), info.focus_point_m->y(), info.focus_point_m->z());
+  } else {
+    std::snprintf(gaze_text, sizeof gaze_text, "along the camera's optical axis (the camera has no focus point)");
+  }
+  std::printf("fovea-error-report: camera %s %dx%d, %ld frames, %zu configurations; gaze %s\n", info.name.c_str(),
+              width, height, options.frames, runs.size(), gaze_text);
+
+  if (Status s = camera.start(); !s) {
+    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", info.name.c_str(), s.message().c_str());
+    return kExitFailure;
+  }
+  const double load_before = loadAverage();
+  long failed = 0;
+  const bool interactive = isatty(STDOUT_FILENO) != 0;  // progress only on a terminal
+  for (long f = 0; f < options.frames; ++f) {
+    if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
+      std::fprintf(stderr, "frame %ld: capture: %s\n", f, s.toString().c_str());
+      ++failed;
+      continue;
+    }
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = have_focus ? Eigen::Vector3d(*info.focus_point_m - gaze.origin_m)
+                                : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
+    // Side by side: every configuration on this frame, starting with a different
+    // one each frame so that no configuration always runs first (cold caches).
+    for (std::size_t k = 0; k < runs.size(); ++k) {
+      ConfigRun& r = runs[(k + static_cast<std::size_t>(f)) % runs.size()];
+      if (Status s = foveator->setConfig(r.config); !s) return kExitFailure;  // validated above
+      pipeline::BackprojectCounts counts;
+      pipeline::FoveationStats stats;
+      // Timed: what the service does per frame (no representative output).
+      const double cpu0 = threadCpuMs();
+      const auto t0 = std::chrono::steady_clock::now();
+      Status s = pipeline::backprojectRef(frame, range, cloud, counts);
+      if (s) s = foveator->foveate(cloud, gaze, out, stats);
+      const auto t1 = std::chrono::steady_clock::now();
+      const double cpu1 = threadCpuMs();
+      // Untimed: the same foveation again, with each input point's representative.
+      if (s) s = foveator->foveate(cloud, gaze, out, stats, representative.data());
+      pipeline::ErrorModel error_model{&foveator->model(), {}, options.reference_slope};
+      for (int reg = 0; reg < stats.region_count; ++reg) error_model.voxel_size_m[reg] = stats.regions[reg].voxel_size_m;
+      pipeline::ErrorMetrics metrics;
+      if (s) {
+        s = evaluator->evaluate(cloud, foveator->lastRegions(), representative.data(), out.points, gaze, error_model,
+                                metrics);
+      }
+      if (!s) {
+        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f,
+                     std::string(pipeline::presetName(r.config.acuity.preset)).c_str(), r.config.acuity.slope,
+                     s.toString().c_str());
+        return kExitFailure;
+      }
+      r.time_ms.push_back(cpu1 - cpu0);
+      r.wall_ms.push_back(msBetween(t0, t1));
+      r.d0_m.push_back(stats.fixation.d0_m);
+      for (int reg = 0; reg < stats.region_count; ++reg) {
+        r.regions[reg].add(metrics.regions[reg], stats.regions[reg].points_in, stats.regions[reg].points_out,
+                           stats.regions[reg].voxel_size_m);
+      }
+      r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0);
+      r.at_eye += metrics.at_eye;
+      r.no_representative += metrics.no_representative;
+      ++r.frames;
+    }
+    if (interactive) {
+      std::printf("\rframe %ld/%ld", f + 1, options.frames);
+      std::fflush(stdout);
+    }
+  }
+  if (interactive) std::printf("\n");
+  camera.stop();
+  if (failed == options.frames) {
+    std::fprintf(stderr, "fovea-error-report: no frame could be captured\n");
+    return kExitFailure;
+  }
+
+  // Summaries, in the order presets x slopes.
+  std::vector<ConfigSummary> summaries;
+  for (const ConfigRun& r : runs) {
+    Result<pipeline::RegionModel> model = pipeline::RegionModel::create(r.config.acuity);
+    ConfigSummary c;
+    c.preset = std::string(pipeline::presetName(r.config.acuity.preset));
+    c.slope = r.config.acuity.slope;
+    c.frames = r.frames;
+    c.time_ms_median = quantileOf(r.time_ms, 0.5);
+    c.time_ms_p90 = quantileOf(r.time_ms, 0.9);
+    c.wall_ms_median = quantileOf(r.wall_ms, 0.5);
+    c.d0_median_m = quantileOf(r.d0_m, 0.5);
+    c.at_eye = r.at_eye;
+    c.no_representative = r.no_representative;
+    for (int reg = 0; reg < model->regionCount(); ++reg) {
+      RegionSummary s = r.regions[reg].summarise(r.frames);
+      s.index = reg;
+      s.name = model->regionName(reg);
+      s.ecc_min_deg = reg == 0 ? 0.0 : model->boundDeg(reg - 1);
+      s.ecc_max_deg = reg < model->boundCount() ? model->boundDeg(reg) : 180.0;
+      if (reg == 0) s.voxel_mm = 0.0, s.rms_over_voxel = kNaN, s.max_over_voxel = kNaN;
+      c.regions.push_back(s);
+    }
+    c.all = r.all.summarise(r.frames);
+    c.all.name = "all";
+    c.all.voxel_mm = 0.0;
+    c.all.ratio_first_deg = kNaN;
+    c.all.ratio_last_deg = kNaN;
+    summaries.push_back(std::move(c));
+  }
+
+  ReportContext context;
+  for (int i = 0; i < argc; ++i) {
+    if (i > 0) context.command_line += ' ';
+    // argv[0] as typed when relative (build/tools/fovea-error-report), else just the name.
+    const std::filesystem::path self(argv[0]);
+    context.command_line += i > 0 ? std::string(argv[i]) : self.is_relative() ? self.string() : self.filename().string();
+  }
+  context.camera = info.name + " " + std::to_string(width) + "x" + std::to_string(height);
+  context.gaze = gaze_text;
+  char load_text[160] = "load average unknown";
+  if (!std::isnan(load_before)) {
+    std::snprintf(load_text, sizeof load_text, "1-minute load average %.2f before the run%s", load_before,
+                  load_before > 0.5 ? " (other processes shared the CPU: times are noisier than on an idle machine)"
+                                    : "");
+  }
+  context.host = hostDescription() + "; " + load_text;
+  context.reference_slope = options.reference_slope;
+  context.pixel_pitch_arcmin = std::atan(1.0 / info.intrinsics.fx) * 180.0 / 3.14159265358979323846 * 60.0;
+  context.frames = static_cast<int>(options.frames - failed);
+  context.date_utc = utcNow();
+
+  std::error_code ec;
+  std::filesystem::create_directories(options.out_dir, ec);
+  if (ec) {
+    std::fprintf(stderr, "fovea-error-report: --out-dir %s: %s\n", options.out_dir.c_str(), ec.message().c_str());
+    return kExitFailure;
+  }
+  const std::filesystem::path dir(options.out_dir);
+  bool have_plot = false;
+  if (Status s = writePlotFiles((dir / "report_plot.dat").string(), (dir / "report.gp").string(), context, summaries);
+      !s) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+    return kExitFailure;
+  }
+  if (options.plot) {
+    if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) {
+      std::printf("gnuplot not found: no report.png (install gnuplot-nox, then run 'gnuplot report.gp' in %s)\n",
+                  options.out_dir.c_str());
+    } else {
+      std::string quoted = "'";
+      for (char ch : std::filesystem::absolute(dir).string()) quoted += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
+      quoted += "'";
+      std::filesystem::remove(dir / "report.png", ec);
+      const int rc = std::system(("cd " + quoted + " && gnuplot report.gp").c_str());
+      have_plot = rc == 0 && std::filesystem::exists(dir / "report.png");
+      if (!have_plot) std::printf("gnuplot failed (status %d): no report.png\n", rc);
+    }
+  }
+  for (const auto& [writer, name] :
+       {std::pair{0, "report.csv"}, std::pair{1, "report.md"}}) {
+    const std::string path = (dir / name).string();
+    Status s = writer == 0 ? writeCsv(path, summaries) : writeMarkdown(path, context, summaries, have_plot);
+    if (!s) {
+      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+  }
+
+  std::printf("%-5s %6s %9s %10s %9s %9s %8s %9s\n", "preset", "m", "points", "MB/frame", "ms/frame", "RMS[mm]",
+              "max[mm]", ">MAR");
+  for (const ConfigSummary& c : summaries) {
+    std::printf("%-5s %6.3f %9.0f %10.3f %9.2f %9.2f %8.1f %8.1f%%\n", c.preset.c_str(), c.slope, c.all.points_out,
+                c.bytesPerFrame() / 1e6, c.time_ms_median, c.all.rms_mm, c.all.max_mm, 100.0 * c.all.share_above_mar);
+  }
+  std::printf("wrote report.md, report.csv, report.gp, report_plot.dat%s to %s\n", have_plot ? ", report.png" : "",
+              options.out_dir.c_str());
+  return kExitOk;
+}
+
+}  // namespace
+}  // namespace fovea::tools
+
+int main(int argc, char** argv) { return fovea::tools::run(argc, argv); }
