@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <new>
 #include <string>
@@ -247,6 +248,42 @@ TEST(TumCamera, CorruptPngIsAParseErrorNamingTheFile) {
   writeText(dir.path() / "depth" / "a.png", "hello");
   TumCamera text({dir.path().string()});
   EXPECT_EQ(text.open().code(), ErrorCode::kParseError);
+}
+
+// Truncations and single-byte corruptions of a valid depth PNG give
+// an error value or (for bytes libpng does not check, e.g. in a chunk's CRC of
+// an ancillary chunk) a decoded image, never a crash or a hang.
+TEST(TumPng, EveryTruncationAndByteFlipIsAnErrorValue) {
+  TempDir dir;
+  const fs::path good = dir.path() / "good.png";
+  ASSERT_TRUE(writePng(good, 640, 480, 16, PNG_COLOR_TYPE_GRAY));
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 100u);
+  std::vector<uint16_t> depth(640 * 480);
+  ASSERT_TRUE(readDepthPng(good.string(), 640, 480, depth.data()).isOk());
+  const fs::path cut = dir.path() / "cut.png";
+  // Every byte through the header and the start of the image data, then 100 cuts
+  // spread over the rest (each decode of 640x480 costs milliseconds).
+  const auto next = [&](std::size_t i) { return i < 128 ? i + 1 : i + std::max<std::size_t>(1, bytes.size() / 100); };
+  for (std::size_t n = 0; n < bytes.size(); n = next(n)) {
+    writeText(cut, bytes.substr(0, n));
+    const Status s = readDepthPng(cut.string(), 640, 480, depth.data());
+    EXPECT_EQ(s.code(), ErrorCode::kParseError) << "truncated to " << n << " bytes: " << s.toString();
+  }
+  std::size_t errors = 0, tried = 0;
+  for (std::size_t i = 0; i < bytes.size(); i = next(i), ++tried) {
+    std::string flipped = bytes;
+    flipped[i] = static_cast<char>(flipped[i] ^ 0x5A);
+    writeText(cut, flipped);
+    const Status s = readDepthPng(cut.string(), 640, 480, depth.data());
+    EXPECT_TRUE(s.isOk() || s.code() == ErrorCode::kParseError) << "byte " << i << ": " << s.toString();
+    errors += !s.isOk();
+  }
+  EXPECT_GT(errors, tried / 2);  // the CRCs catch most flips
 }
 
 TEST(TumCamera, WrongSizeOrFormatIsAParseErrorSayingWhat) {
