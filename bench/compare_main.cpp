@@ -543,9 +543,9 @@ int run(int argc, char** argv) {
       std::printf(
           "    why: PCL's lattice is world-anchored too (it floors p * inverse_leaf), but in float: the world\n"
           "    coordinate, 1/leaf and their product are rounded to float, so %zu of %zu sampled points (%.4f %%)\n"
-          "    fall into a neighbouring voxel; those voxels gain or lose a point (centroids millimetres apart,\n"
-          "    or unmatched voxels). Elsewhere PCL sums in float (Eigen::Vector4f) where fovea sums in double\n"
-          "    relative to the voxel's first point: differences of float rounding (micrometres).\n",
+          "    fall into a neighbouring voxel; those voxels gain or lose a point (centroids up to millimetres\n"
+          "    apart, or unmatched voxels). Elsewhere PCL sums in float (pcl::CentroidPoint, Vector3f) where\n"
+          "    fovea sums in double relative to the voxel's first point: float rounding (micrometres).\n",
           differ, sampled, sampled ? 100.0 * static_cast<double>(differ) / static_cast<double>(sampled) : 0.0);
     }
   }
