@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -16,7 +17,9 @@
 #include <iterator>
 #include <memory>
 #include <new>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "hal/camera.h"
@@ -389,6 +392,77 @@ TEST(TumTeddy, AllSixtyFramesLoadAndTheSecondMatchesTheHandComputedPose) {
   EXPECT_EQ(delivered, 60);
   EXPECT_TRUE(camera.finished());
   EXPECT_EQ(camera.counters().frames_delivered, 60u);
+}
+
+// The pose convention (T_world_cam, OpenCV axes): frames 0 and 59, two seconds
+// and about 0.85 m apart, back-projected into the world with their ground-truth
+// poses, must land on the same surfaces. Measured as the fraction of frame 59's
+// points (up to 4 m) whose 3 cm voxel (or a neighbour) is occupied by frame 0; the same with
+// the inverted pose (T_cam_world taken for T_world_cam) or with the camera's
+// y and z axes flipped (OpenGL convention) must be far worse.
+TEST(TumTeddy, GroundTruthPosesAlignFramesTwoSecondsApart) {
+  REQUIRE_TEDDY(path);
+  TumCamera camera({path, /*loop=*/false});
+  ASSERT_TRUE(camera.open().isOk());
+  ASSERT_TRUE(camera.start().isOk());
+  RgbdFrame first(640, 480), last(640, 480);
+  ASSERT_TRUE(camera.acquire(first, milliseconds(100)).isOk());
+  while (camera.acquire(last, milliseconds(100)).isOk()) {
+  }
+  EXPECT_GT((last.T_world_cam.t_world_cam - first.T_world_cam.t_world_cam).norm(), 0.5);
+
+  constexpr double kVoxelM = 0.03;
+  using Key = std::tuple<int64_t, int64_t, int64_t>;
+  const auto keyOf = [](const Eigen::Vector3d& p) {
+    return Key{static_cast<int64_t>(std::floor(p.x() / kVoxelM)), static_cast<int64_t>(std::floor(p.y() / kVoxelM)),
+               static_cast<int64_t>(std::floor(p.z() / kVoxelM))};
+  };
+  // Every 4th pixel of a frame in world coordinates under `pose`, camera axes flipped by `axes`.
+  const auto points = [](const RgbdFrame& f, const Pose& pose, const Eigen::Vector3d& axes) {
+    std::vector<Eigen::Vector3d> out;
+    for (int v = 0; v < 480; v += 4) {
+      for (int u = 0; u < 640; u += 4) {
+        const uint16_t raw = f.depth()[static_cast<std::size_t>(v) * 640 + u];
+        if (raw == 0 || raw > 5000 * 4) continue;  // up to 4 m: where Kinect depth is good
+        const double z = raw / 5000.0;
+        const Eigen::Vector3d p_cam((u - kCx) / kFx * z, (v - kCy) / kFy * z, z);
+        out.push_back(pose.R_world_cam * p_cam.cwiseProduct(axes) + pose.t_world_cam);
+      }
+    }
+    return out;
+  };
+  const auto overlap = [&](const Pose& pose_first, const Pose& pose_last, const Eigen::Vector3d& axes) {
+    std::set<Key> occupied;
+    for (const Eigen::Vector3d& p : points(first, pose_first, axes)) occupied.insert(keyOf(p));
+    std::size_t hits = 0, total = 0;
+    for (const Eigen::Vector3d& p : points(last, pose_last, axes)) {
+      ++total;
+      const Key k = keyOf(p);
+      bool near = false;
+      for (int dx = -1; dx <= 1 && !near; ++dx)
+        for (int dy = -1; dy <= 1 && !near; ++dy)
+          for (int dz = -1; dz <= 1 && !near; ++dz)
+            near = occupied.count({std::get<0>(k) + dx, std::get<1>(k) + dy, std::get<2>(k) + dz}) != 0;
+      hits += near;
+    }
+    return static_cast<double>(hits) / static_cast<double>(total);
+  };
+  const auto inverse = [](const Pose& p) {
+    Pose q;
+    q.R_world_cam = p.R_world_cam.transpose();
+    q.t_world_cam = -(p.R_world_cam.transpose() * p.t_world_cam);
+    return q;
+  };
+  const Eigen::Vector3d opencv(1, 1, 1), opengl(1, -1, -1);
+  const double right = overlap(first.T_world_cam, last.T_world_cam, opencv);
+  const double inverted = overlap(inverse(first.T_world_cam), inverse(last.T_world_cam), opencv);
+  const double flipped = overlap(first.T_world_cam, last.T_world_cam, opengl);
+  std::printf("overlap of frame 59 with frame 0: %.3f (T_world_cam, OpenCV axes), %.3f (inverted), %.3f (OpenGL axes)\n",
+              right, inverted, flipped);
+  // Measured: 0.589, 0.003, 0.000 (frame 59 also sees what frame 0 did not).
+  EXPECT_GT(right, 0.45);
+  EXPECT_LT(inverted, 0.1);
+  EXPECT_LT(flipped, 0.1);
 }
 
 TEST(TumTeddy, AcquireAllocatesNothingAndLoopingKeepsStampsIncreasing) {
