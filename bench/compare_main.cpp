@@ -389,6 +389,7 @@ int run(int argc, char** argv) {
     }
   }
   if (!tum_path.empty() && !ply_path.empty()) return usage("--tum and --ply exclude each other");
+  if (frame_index != 0 && tum_path.empty()) return usage("--frame needs --tum");
   if (!ply_path.empty() && (!gaze_origin || !gaze_dir)) return usage("--ply needs --gaze-origin and --gaze-dir");
 
   Input input;
