@@ -235,7 +235,7 @@ int runCommand(int argc, char** argv) {
   auto row = [](const char* name, const Samples& s) {
     std::printf("  %-30s %8.2f %8.2f %8.2f\n", name, s.median(), s.quantile(0.9), s.max());
   };
-  row("capture (mock render)", capture_ms);
+  row("capture (camera acquire)", capture_ms);
   row("back-projection", backproject_ms);
   row("partition", partition_ms);
   row("fixation d0", fixation_ms);

@@ -3,6 +3,9 @@
 #include <string>
 
 #include "hal/camera/mock/mock_camera.h"
+#ifdef FOVEA_HAVE_PNG
+#include "hal/camera/tum/tum_camera.h"
+#endif
 
 namespace fovea::hal {
 
@@ -19,6 +22,9 @@ struct Backend {
 
 const Backend kBackends[] = {
     {"mock", &mock::MockCamera::create, &mock::mockCameraHelp},
+#ifdef FOVEA_HAVE_PNG
+    {"tum", &tum::TumCamera::create, &tum::tumCameraHelp},
+#endif
 };
 
 std::string backendNames() {

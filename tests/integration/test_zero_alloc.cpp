@@ -1,6 +1,9 @@
 // The design card's fixed-memory promise: after start-up, processing frames
 // allocates nothing. The allocator of this binary is replaced by a counting one.
 #include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <string>
 #include <memory>
 #include <vector>
 
@@ -64,6 +67,47 @@ TEST(ZeroAllocation, HundredMockFramesAfterWarmUp) {
   EXPECT_EQ(allocations, 0u);
   cam.stop();
 }
+
+#ifdef FOVEA_HAVE_PNG
+// The same on real frames: the 60 TUM frames of shared/data, looped (open()
+// decodes them all; acquire() must only copy).
+TEST(ZeroAllocation, HundredTumFramesAfterWarmUp) {
+  const char* shared = std::getenv("FOVEA_SHARED_DIR");
+  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
+  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
+    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
+  }
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("tum:" + path + ",loop=on");
+  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
+  hal::Camera& cam = *camera.value();
+  ASSERT_TRUE(cam.open().isOk());
+  ASSERT_TRUE(cam.start().isOk());
+  const std::size_t pixels = 640 * 480;
+  hal::RgbdFrame frame(640, 480);
+  pipeline::PointCloud cloud(pixels);
+  pipeline::FoveatedCloud out(pixels);
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, {}).value();
+  auto runFrame = [&] {
+    pipeline::BackprojectCounts bc;
+    pipeline::FoveationStats stats;
+    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2);
+    return foveator.foveate(cloud, gaze, out, stats).isOk() && out.size() > 0;
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(runFrame());
+
+  test::AllocationScope scope;
+  bool all_ok = true;
+  for (int i = 0; i < 100; ++i) all_ok = runFrame() && all_ok;
+  const uint64_t allocations = scope.allocations();
+  EXPECT_TRUE(all_ok);
+  EXPECT_EQ(allocations, 0u);
+  cam.stop();
+}
+#endif
 
 TEST(ZeroAllocation, FoveatingRandomCloudsWithEveryPreset) {
   std::vector<pipeline::PointCloud> clouds;

@@ -1,0 +1,56 @@
+#include "bench/bench_input.h"
+
+#include <chrono>
+#include <memory>
+
+#include "hal/camera.h"
+
+namespace fovea::bench {
+
+namespace {
+
+Result<FrameInput> grab(const std::string& spec, int index) {
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(spec);
+  if (!created) return created.status();
+  hal::Camera& camera = *created.value();
+  if (Status s = camera.open(); !s) return s;
+  if (Status s = camera.start(); !s) return s;
+  const hal::CameraIntrinsics& k = camera.info().intrinsics;
+  FrameInput input{hal::RgbdFrame(k.width, k.height), {}, {}};
+  for (int i = 0; i <= index; ++i) {
+    if (Status s = camera.acquire(input.frame, std::chrono::seconds(5)); !s) {
+      return Status(s.code(), spec + ": frame " + std::to_string(i) + ": " + s.message());
+    }
+  }
+  camera.stop();
+  input.gaze.origin_m = input.frame.T_world_cam.t_world_cam;
+  if (camera.info().focus_point_m) {
+    input.gaze.direction = *camera.info().focus_point_m - input.gaze.origin_m;
+    input.description = camera.info().name + " " + std::to_string(k.width) + "x" + std::to_string(k.height) +
+                        ", gaze from the camera to the scene centre";
+  } else {
+    input.gaze.direction = input.frame.T_world_cam.R_world_cam.col(2);
+    input.description = camera.info().name + " frame " + std::to_string(index) + " " + std::to_string(k.width) +
+                        "x" + std::to_string(k.height) + ", gaze along the optical axis";
+  }
+  return input;
+}
+
+}  // namespace
+
+Result<FrameInput> mockLivingRoom(int width, int height) {
+  return grab("mock:living-room,size=" + std::to_string(width) + "x" + std::to_string(height), 0);
+}
+
+Result<FrameInput> tumFrame(const std::string& path, int index) {
+#ifdef FOVEA_HAVE_PNG
+  if (index < 0) return Status(ErrorCode::kInvalidArgument, "--frame: must be >= 0");
+  return grab("tum:" + path + ",loop=off,frames=" + std::to_string(index + 1), index);
+#else
+  (void)path;
+  (void)index;
+  return Status(ErrorCode::kNotFound, "TUM input: this build has no TUM backend (libpng was not found)");
+#endif
+}
+
+}  // namespace fovea::bench

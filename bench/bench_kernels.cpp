@@ -1,0 +1,189 @@
+// fovea-bench-kernels: Google Benchmark of each pipeline kernel on the mock
+// living-room frame (640x480, gaze at the scene centre, preset F1, fixation hit).
+// Each benchmark reports per_point: CPU time per valid input point (302k); the
+// Time column is wall time. Multi-threaded variants should add ->UseRealTime().
+//
+// Kernels are rows of kKernels below. A SIMD variant is one more row with a
+// function of the same shape (see the "SIMD kernels" comment); the fixture
+// gives every row the same input.
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <vector>
+
+#include "bench/bench_input.h"
+#include "pipeline/backproject.h"
+#include "pipeline/fixation.h"
+#include "pipeline/foveator.h"
+#include "pipeline/partition.h"
+#include "pipeline/voxel_sampler.h"
+
+namespace fovea::bench {
+namespace {
+
+using pipeline::PointCloud;
+
+// Built once; every benchmark reads it (and writes only its own scratch).
+struct Fixture {
+  FrameInput input;
+  pipeline::Gaze gaze;  // normalised
+  pipeline::DepthRange range;
+  pipeline::FoveationConfig config;
+  PointCloud cloud;                       // back-projected input
+  std::vector<uint8_t> region;            // partition of cloud
+  int region_count = 0;
+  pipeline::ConeBounds bounds;
+  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
+  std::size_t points = 0;
+
+  static Fixture& get() {
+    static Fixture* fixture = build();
+    return *fixture;
+  }
+
+ private:
+  static Fixture* build() {
+    auto* f = new Fixture;
+    Result<FrameInput> input = mockLivingRoom();
+    if (!input) {
+      std::fprintf(stderr, "fovea-bench-kernels: %s\n", input.status().toString().c_str());
+      std::exit(1);
+    }
+    f->input = std::move(input).value();
+    f->gaze = pipeline::normalizeGaze(f->input.gaze).value();
+    const std::size_t pixels = f->input.frame.pixelCount();
+    f->cloud = PointCloud(pixels);
+    pipeline::BackprojectCounts bc;
+    if (Status s = pipeline::backprojectRef(f->input.frame, f->range, f->cloud, bc); !s) {
+      std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
+      std::exit(1);
+    }
+    f->points = f->cloud.size();
+    pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, f->config).value();
+    pipeline::FoveatedCloud out(pixels);
+    pipeline::FoveationStats stats;
+    if (Status s = foveator.foveate(f->cloud, f->gaze, out, stats); !s) {
+      std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
+      std::exit(1);
+    }
+    f->region.assign(foveator.lastRegions(), foveator.lastRegions() + f->cloud.size());
+    f->region_count = stats.region_count;
+    f->bounds = pipeline::ConeBounds::fromModel(foveator.model());
+    for (int r = 0; r < stats.region_count; ++r) f->voxel_size_m[r] = stats.regions[r].voxel_size_m;
+    return f;
+  }
+};
+
+void setPointCounter(benchmark::State& state, std::size_t points) {
+  // points per second, inverted: seconds per point, printed with an SI prefix ("4.3ns").
+  state.counters["per_point"] = benchmark::Counter(
+      static_cast<double>(points), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  state.counters["points"] = static_cast<double>(points);
+}
+
+// --- The scalar reference -------------------------------------------------
+
+void bmBackprojectRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  PointCloud out(f.input.frame.pixelCount());
+  pipeline::BackprojectCounts counts;
+  for (auto _ : state) {
+    Status s = pipeline::backprojectRef(f.input.frame, f.range, out, counts);
+    benchmark::DoNotOptimize(s);
+    benchmark::DoNotOptimize(out.x());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+void bmPartitionRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  std::vector<uint8_t> region(f.cloud.size());
+  pipeline::PartitionCounts counts;
+  for (auto _ : state) {
+    pipeline::partitionRef(f.cloud, f.gaze, f.bounds, region.data(), counts);
+    benchmark::DoNotOptimize(region.data());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+void bmVoxelSampleRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  pipeline::VoxelSampler sampler(f.cloud.size(), f.cloud.size());
+  pipeline::FoveatedCloud out(f.cloud.size());
+  pipeline::SampleCounts counts;
+  for (auto _ : state) {
+    Status s = sampler.sample(f.cloud, f.region.data(), f.region_count, f.voxel_size_m, out, counts);
+    benchmark::DoNotOptimize(s);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+// Partition, fixation, voxel sizes and sampling: Foveator::foveate on the cloud.
+void bmFoveatorRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  pipeline::Foveator foveator =
+      pipeline::Foveator::create({f.cloud.size(), f.cloud.size()}, f.config).value();
+  pipeline::FoveatedCloud out(f.cloud.size());
+  pipeline::FoveationStats stats;
+  for (auto _ : state) {
+    Status s = foveator.foveate(f.cloud, f.gaze, out, stats);
+    benchmark::DoNotOptimize(s);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+// The whole frame: back-projection from the depth image, then foveate.
+void bmPipelineRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  const std::size_t pixels = f.input.frame.pixelCount();
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, f.config).value();
+  PointCloud cloud(pixels);
+  pipeline::FoveatedCloud out(pixels);
+  pipeline::BackprojectCounts bc;
+  pipeline::FoveationStats stats;
+  for (auto _ : state) {
+    Status s = pipeline::backprojectRef(f.input.frame, f.range, cloud, bc);
+    if (s) s = foveator.foveate(cloud, f.gaze, out, stats);
+    benchmark::DoNotOptimize(s);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+struct KernelBench {
+  const char* name;  // "<kernel>/<variant>"
+  void (*run)(benchmark::State&);
+};
+
+const KernelBench kKernels[] = {
+    {"backproject/ref", &bmBackprojectRef},
+    {"partition/ref", &bmPartitionRef},
+    {"voxel_sample/ref", &bmVoxelSampleRef},
+    {"foveate/ref", &bmFoveatorRef},    // partition + fixation + voxel sampling
+    {"pipeline/ref", &bmPipelineRef},   // back-projection + foveate
+    // SIMD kernels (issue 3) go here, one row each, e.g.
+    //   {"backproject/simd", &bmBackprojectSimd},
+    //   {"partition/simd", &bmPartitionSimd},
+    // with a function shaped like the _ref one above calling the SIMD entry point
+    // on the same Fixture. Rows for variants a build lacks can be #ifdef'ed out.
+};
+
+}  // namespace
+}  // namespace fovea::bench
+
+int main(int argc, char** argv) {
+  for (const fovea::bench::KernelBench& k : fovea::bench::kKernels) {
+    benchmark::RegisterBenchmark(k.name, k.run)->Unit(benchmark::kMicrosecond);
+  }
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  std::fprintf(stderr, "input: %s\n", fovea::bench::Fixture::get().input.description.c_str());
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

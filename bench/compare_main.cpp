@@ -1,0 +1,567 @@
+// fovea-compare: foveation methods side by side, in one process, on the same input.
+//
+//   fovea-compare [--runs N] [--preset F1|F2|F3|FREF]
+//                 [--tum PATH [--frame N] | --ply FILE --gaze-origin X,Y,Z --gaze-dir X,Y,Z]
+//
+// Input: the mock living-room frame at 640x480 (default), a TUM RGB-D frame, or a
+// PLY cloud. Each method runs once to warm up, then --runs times (default 20);
+// every run is timed from the depth image to the sampled output (for a PLY input,
+// from the cloud). The methods are rows of the table in makeMethods().
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <string_view>
+#include <tuple>
+#include <vector>
+
+#include "bench/bench_input.h"
+#include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/partition.h"
+#include "pipeline/voxel_sampler.h"
+#ifdef FOVEA_HAVE_PCL
+#include "bench/pcl_method.h"
+#endif
+
+namespace fovea::bench {
+namespace {
+
+using pipeline::PointCloud;
+
+struct Input {
+  bool has_frame = false;
+  hal::RgbdFrame frame;         // has_frame: the RGB-D frame every method starts from
+  PointCloud cloud;             // !has_frame: the PLY cloud every method starts from
+  pipeline::Gaze gaze;          // normalised
+  pipeline::DepthRange range;   // back-projection range (fovead's default 0.1..10 m)
+  pipeline::FoveationConfig config;
+  std::string description;
+  std::size_t input_points = 0;  // valid points after back-projection (the ns/point denominator)
+};
+
+// A method's output in world coordinates, for the comparison against PCL.
+struct Output {
+  std::vector<std::array<double, 3>> world;
+  std::vector<uint8_t> region;
+  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
+  int region_count = 0;
+};
+
+class Method {
+ public:
+  virtual ~Method() = default;
+  virtual Status run() = 0;  // the timed part
+  virtual std::size_t outputSize() const = 0;
+  virtual bool output(Output&) const { return false; }  // false: nothing to compare
+};
+
+// (iv) The memory-bandwidth floor: one pass that reads the input images (depth
+// and colour; for a PLY input the cloud's x, y, z and colour arrays) and sums
+// them. No method that looks at every pixel can be faster.
+class FloorMethod final : public Method {
+ public:
+  explicit FloorMethod(const Input& input) : input_(input) {}
+  Status run() override {
+    uint64_t sum = 0;
+    if (input_.has_frame) {
+      const std::size_t n = input_.frame.pixelCount();
+      const uint16_t* depth = input_.frame.depth();
+      const uint8_t* rgb = input_.frame.rgb();
+      for (std::size_t i = 0; i < n; ++i) sum += depth[i];
+      for (std::size_t i = 0; i < 3 * n; ++i) sum += rgb[i];
+    } else {
+      const std::size_t n = input_.cloud.size();
+      for (const float* a : {input_.cloud.x(), input_.cloud.y(), input_.cloud.z()}) {
+        for (std::size_t i = 0; i < n; ++i) {
+          uint32_t bits;
+          std::memcpy(&bits, &a[i], sizeof bits);
+          sum += bits;
+        }
+      }
+      for (std::size_t i = 0; i < n; ++i) sum += input_.cloud.rgb()[i];
+    }
+    sink_ = sum;
+    return Status::ok();
+  }
+  std::size_t outputSize() const override { return 0; }
+
+ private:
+  const Input& input_;
+  volatile uint64_t sink_ = 0;
+};
+
+// (ii) fovea's scalar reference: backprojectRef + Foveator.
+class FoveaRefMethod final : public Method {
+ public:
+  explicit FoveaRefMethod(const Input& input)
+      : input_(input),
+        capacity_(input.has_frame ? input.frame.pixelCount() : input.cloud.size()),
+        cloud_(input.has_frame ? capacity_ : 0),
+        out_(capacity_),
+        foveator_(pipeline::Foveator::create({capacity_, capacity_}, input.config).value()) {}
+  Status run() override {
+    const PointCloud* in = &input_.cloud;
+    if (input_.has_frame) {
+      pipeline::BackprojectCounts counts;
+      if (Status s = pipeline::backprojectRef(input_.frame, input_.range, cloud_, counts); !s) return s;
+      in = &cloud_;
+    }
+    return foveator_.foveate(*in, input_.gaze, out_, stats_);
+  }
+  std::size_t outputSize() const override { return out_.size(); }
+  bool output(Output& o) const override {
+    o.world.clear();
+    o.region.clear();
+    for (std::size_t i = 0; i < out_.size(); ++i) {
+      const Eigen::Vector3d w = out_.points.world(i);
+      o.world.push_back({w.x(), w.y(), w.z()});
+      o.region.push_back(out_.region[i]);
+    }
+    o.region_count = stats_.region_count;
+    for (int r = 0; r < stats_.region_count; ++r) o.voxel_size_m[r] = stats_.regions[r].voxel_size_m;
+    return true;
+  }
+  const pipeline::FoveationStats& stats() const { return stats_; }
+  const uint8_t* regions() const { return foveator_.lastRegions(); }
+  const PointCloud& cloud() const { return input_.has_frame ? cloud_ : input_.cloud; }
+
+ private:
+  const Input& input_;
+  std::size_t capacity_;
+  PointCloud cloud_;
+  pipeline::FoveatedCloud out_;
+  pipeline::Foveator foveator_;
+  pipeline::FoveationStats stats_;
+};
+
+#ifdef FOVEA_HAVE_PCL
+// (i) The paper's method with PCL: back-projection (fovea's; PCL has no depth
+// image converter outside its grabbers), partition (fovea's partitionRef), then
+// one pcl::VoxelGrid per region with leaf = fovea's voxel size; fovea untouched.
+class PclMethod final : public Method {
+ public:
+  explicit PclMethod(const Input& input)
+      : input_(input),
+        capacity_(input.has_frame ? input.frame.pixelCount() : input.cloud.size()),
+        cloud_(input.has_frame ? capacity_ : 0),
+        pcl_(capacity_, input.config) {}
+  Status run() override {
+    const PointCloud* in = &input_.cloud;
+    if (input_.has_frame) {
+      pipeline::BackprojectCounts counts;
+      if (Status s = pipeline::backprojectRef(input_.frame, input_.range, cloud_, counts); !s) return s;
+      in = &cloud_;
+    }
+    return pcl_.run(*in, input_.gaze);
+  }
+  std::size_t outputSize() const override { return pcl_.outputSize(); }
+  bool output(Output& o) const override {
+    pcl_.output(o.world, o.region);
+    o.region_count = pcl_.regionCount();
+    o.voxel_size_m = pcl_.voxelSizes();
+    return true;
+  }
+
+ private:
+  const Input& input_;
+  std::size_t capacity_;
+  PointCloud cloud_;
+  PclFoveation pcl_;
+};
+#endif
+
+// The methods, one row each. A row whose make is null is listed as not built.
+struct MethodEntry {
+  const char* name;
+  const char* what;
+  std::unique_ptr<Method> (*make)(const Input&);
+};
+
+const MethodEntry kMethods[] = {
+#ifdef FOVEA_HAVE_PCL
+    {"pcl", "paper's method: fovea partition + one pcl::VoxelGrid per region",
+     [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<PclMethod>(in); }},
+#else
+    {"pcl", "paper's method with PCL (not built: PCL not found, FOVEA_WITH_PCL)", nullptr},
+#endif
+    {"fovea-ref", "fovea scalar reference: backprojectRef + Foveator",
+     [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FoveaRefMethod>(in); }},
+    // SIMD methods (issue 3) go here, one row each, with a Method subclass like
+    // FoveaRefMethod that calls the SIMD kernels, e.g.
+    //   {"fovea-simd-1t", "fovea SIMD kernels, one thread", &makeSimd1t},
+    //   {"fovea-simd-mt", "fovea SIMD kernels, all cores", &makeSimdMt},
+    // Until then they are listed with no numbers:
+    {"fovea-simd-1t", "fovea SIMD kernels, one thread (not implemented yet: issue 3)", nullptr},
+    {"fovea-simd-mt", "fovea SIMD kernels, multi-thread (not implemented yet: issue 3)", nullptr},
+    {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
+     [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
+};
+
+struct Timing {
+  std::vector<double> ms;
+  double median = 0, min = 0, max = 0;
+  std::size_t out_points = 0;
+  bool ran = false;
+  Output output;
+  bool has_output = false;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+void finish(Method& method, Timing& t) {
+  t.ran = true;
+  t.median = median(t.ms);
+  t.min = *std::min_element(t.ms.begin(), t.ms.end());
+  t.max = *std::max_element(t.ms.begin(), t.ms.end());
+  t.out_points = method.outputSize();
+  t.has_output = method.output(t.output);
+}
+
+// --- Comparison against PCL, voxel by voxel -------------------------------
+
+using VoxelKey = std::tuple<int, int64_t, int64_t, int64_t>;  // region, world voxel index
+
+VoxelKey keyOf(const Output& o, std::size_t i) {
+  const int r = o.region[i];
+  const double inv = 1.0 / o.voxel_size_m[r];
+  return {r, static_cast<int64_t>(std::floor(o.world[i][0] * inv)),
+          static_cast<int64_t>(std::floor(o.world[i][1] * inv)), static_cast<int64_t>(std::floor(o.world[i][2] * inv))};
+}
+
+struct Difference {
+  std::size_t fovea_here = 0, fovea_pcl = 0;  // region-0 points
+  std::size_t matched = 0, only_here = 0, only_pcl = 0;
+  double max_mm = 0, p99_mm = 0, median_mm = 0;  // all matched voxels (max) / unaffected ones (p99, median)
+  std::size_t moved_voxels = 0;    // matched voxels that gained or lost a point to PCL's float lattice
+  double moved_max_mm = 0;
+  double same_members_max_mm = 0;  // the other matched voxels
+  bool same_voxel_sizes = true;
+};
+
+// `moved`: voxels (by fovea's key) that gained or lost a point to PCL's float
+// lattice; their centroids are reported apart.
+Difference compareWithPcl(const Output& here, const Output& pcl, const std::set<VoxelKey>* moved = nullptr) {
+  Difference d;
+  for (int r = 1; r < here.region_count; ++r) {
+    d.same_voxel_sizes = d.same_voxel_sizes && here.voxel_size_m[r] == pcl.voxel_size_m[r];
+  }
+  std::map<VoxelKey, std::array<double, 3>> pcl_voxels;
+  for (std::size_t i = 0; i < pcl.world.size(); ++i) {
+    if (pcl.region[i] == 0) {
+      ++d.fovea_pcl;
+      continue;
+    }
+    // Two PCL centroids can floor into one voxel when PCL's float lattice
+    // disagrees with the double one near a face; the second counts as unmatched.
+    if (!pcl_voxels.emplace(keyOf(pcl, i), pcl.world[i]).second) ++d.only_pcl;
+  }
+  std::vector<double> diffs_mm;
+  std::size_t found = 0;
+  for (std::size_t i = 0; i < here.world.size(); ++i) {
+    if (here.region[i] == 0) {
+      ++d.fovea_here;
+      continue;
+    }
+    const auto it = pcl_voxels.find(keyOf(here, i));
+    if (it == pcl_voxels.end()) {
+      ++d.only_here;
+      continue;
+    }
+    ++found;
+    const double dx = here.world[i][0] - it->second[0];
+    const double dy = here.world[i][1] - it->second[1];
+    const double dz = here.world[i][2] - it->second[2];
+    const double mm = 1000.0 * std::sqrt(dx * dx + dy * dy + dz * dz);
+    if (moved != nullptr && moved->count(it->first) != 0) {
+      ++d.moved_voxels;
+      d.moved_max_mm = std::max(d.moved_max_mm, mm);
+      d.max_mm = std::max(d.max_mm, mm);
+      continue;
+    }
+    diffs_mm.push_back(mm);
+  }
+  d.matched = found;
+  d.only_pcl += pcl_voxels.size() - found;
+  if (!diffs_mm.empty()) {
+    std::sort(diffs_mm.begin(), diffs_mm.end());
+    d.same_members_max_mm = diffs_mm.back();
+    d.max_mm = std::max(d.max_mm, diffs_mm.back());
+    d.p99_mm = diffs_mm[std::min(diffs_mm.size() - 1, diffs_mm.size() * 99 / 100)];
+    d.median_mm = diffs_mm[diffs_mm.size() / 2];
+  }
+  return d;
+}
+
+// Sampled input points whose voxel under PCL's float lattice (float world
+// coordinate times float 1/leaf, floored: voxel_grid.hpp) differs from fovea's
+// double lattice (floor((origin + x) * (1 / v))).
+std::size_t latticeDisagreements(const PointCloud& cloud, const uint8_t* region, const Output& fovea,
+                                 std::size_t& sampled, std::set<VoxelKey>& moved) {
+  std::size_t differ = 0;
+  sampled = 0;
+  const double origin[3] = {cloud.origin_m.x(), cloud.origin_m.y(), cloud.origin_m.z()};
+  const float* coord[3] = {cloud.x(), cloud.y(), cloud.z()};
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const int r = region[i];
+    if (r == 0 || r >= fovea.region_count) continue;
+    ++sampled;
+    const double inv = 1.0 / fovea.voxel_size_m[r];
+    const float inv_f = 1.0f / static_cast<float>(fovea.voxel_size_m[r]);
+    int64_t k_double[3], k_float[3];
+    for (int a = 0; a < 3; ++a) {
+      k_double[a] = static_cast<int64_t>(pipeline::voxelIndex(origin[a], coord[a][i], inv));
+      const float world_f = static_cast<float>(origin[a] + static_cast<double>(coord[a][i]));
+      k_float[a] = static_cast<int64_t>(std::floor(world_f * inv_f));
+    }
+    if (k_double[0] != k_float[0] || k_double[1] != k_float[1] || k_double[2] != k_float[2]) {
+      ++differ;
+      moved.insert({r, k_double[0], k_double[1], k_double[2]});
+      moved.insert({r, k_float[0], k_float[1], k_float[2]});
+    }
+  }
+  return differ;
+}
+
+// --- Command line ----------------------------------------------------------
+
+int usage(const char* message) {
+  if (message) std::fprintf(stderr, "fovea-compare: %s\n", message);
+  std::fprintf(stderr,
+               "usage: fovea-compare [--runs N] [--preset F1|F2|F3|FREF]\n"
+               "                     [--tum PATH [--frame N] | --ply FILE --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
+               "Runs the foveation methods on one input (default: the mock living-room frame, 640x480)\n"
+               "and prints a table and one `method=... ms_median=...` line per method.\n");
+  return 2;
+}
+
+bool parseVector(const std::string& text, Eigen::Vector3d& out) {
+  double v[3];
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf", &v[0], &v[1], &v[2]) != 3) return false;
+  out = Eigen::Vector3d(v[0], v[1], v[2]);
+  return out.allFinite();
+}
+
+int run(int argc, char** argv) {
+  int runs = 20;
+  std::string tum_path, ply_path, preset = "F1";
+  int frame_index = 0;
+  std::optional<Eigen::Vector3d> gaze_origin, gaze_dir;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view arg = argv[i];
+    const auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
+    if (arg == "--help" || arg == "-h") {
+      usage(nullptr);
+      return 0;
+    }
+    const char* v = value();
+    if (v == nullptr) return usage(("missing value after " + std::string(arg)).c_str());
+    if (arg == "--runs") {
+      runs = std::atoi(v);
+      if (runs < 1 || runs > 100000) return usage("--runs: expected a count in 1..100000");
+    } else if (arg == "--tum") {
+      tum_path = v;
+    } else if (arg == "--frame") {
+      frame_index = std::atoi(v);
+      if (frame_index < 0) return usage("--frame: expected an index >= 0");
+    } else if (arg == "--ply") {
+      ply_path = v;
+    } else if (arg == "--preset") {
+      preset = v;
+    } else if (arg == "--gaze-origin" || arg == "--gaze-dir") {
+      Eigen::Vector3d vec;
+      if (!parseVector(v, vec)) return usage((std::string(arg) + ": expected X,Y,Z").c_str());
+      (arg == "--gaze-origin" ? gaze_origin : gaze_dir) = vec;
+    } else {
+      return usage(("unknown option " + std::string(arg)).c_str());
+    }
+  }
+  if (!tum_path.empty() && !ply_path.empty()) return usage("--tum and --ply exclude each other");
+  if (frame_index != 0 && tum_path.empty()) return usage("--frame needs --tum");
+  if (!ply_path.empty() && (!gaze_origin || !gaze_dir)) return usage("--ply needs --gaze-origin and --gaze-dir");
+
+  Input input;
+  Result<pipeline::Preset> parsed_preset = pipeline::parsePreset(preset);
+  if (!parsed_preset) return usage(parsed_preset.status().message().c_str());
+  input.config.acuity.preset = parsed_preset.value();
+  pipeline::Gaze gaze;
+  if (!ply_path.empty()) {
+    Result<pipeline::PlyCloud> ply = pipeline::readPly(ply_path);
+    if (!ply) {
+      std::fprintf(stderr, "fovea-compare: %s\n", ply.status().toString().c_str());
+      return 1;
+    }
+    input.cloud = std::move(ply.value().points);
+    input.description = ply_path + " (" + std::to_string(input.cloud.size()) + " points; no back-projection)";
+  } else {
+    Result<FrameInput> frame = tum_path.empty() ? mockLivingRoom() : tumFrame(tum_path, frame_index);
+    if (!frame) {
+      std::fprintf(stderr, "fovea-compare: %s\n", frame.status().toString().c_str());
+      return 1;
+    }
+    input.has_frame = true;
+    input.frame = std::move(frame.value().frame);
+    input.description = frame.value().description;
+    gaze = frame.value().gaze;
+  }
+  if (gaze_origin) gaze.origin_m = *gaze_origin;
+  if (gaze_dir) gaze.direction = *gaze_dir;
+  Result<pipeline::Gaze> unit = pipeline::normalizeGaze(gaze);
+  if (!unit) {
+    std::fprintf(stderr, "fovea-compare: %s\n", unit.status().toString().c_str());
+    return 1;
+  }
+  input.gaze = unit.value();
+  if (input.has_frame) {
+    PointCloud probe(input.frame.pixelCount());
+    pipeline::BackprojectCounts counts;
+    if (Status s = pipeline::backprojectRef(input.frame, input.range, probe, counts); !s) {
+      std::fprintf(stderr, "fovea-compare: %s\n", s.toString().c_str());
+      return 1;
+    }
+    input.input_points = counts.valid;
+  } else {
+    input.input_points = input.cloud.size();
+  }
+  if (input.input_points == 0) {
+    std::fprintf(stderr, "fovea-compare: the input has no valid points\n");
+    return 1;
+  }
+
+  std::printf("fovea-compare: %s\n", input.description.c_str());
+  std::printf("  gaze origin (%.3f, %.3f, %.3f) m, direction (%.4f, %.4f, %.4f); preset %s, fixation hit; "
+              "%zu input points; %d timed rounds (each method once per round) after one warm-up\n",
+              input.gaze.origin_m.x(), input.gaze.origin_m.y(), input.gaze.origin_m.z(), input.gaze.direction.x(),
+              input.gaze.direction.y(), input.gaze.direction.z(), preset.c_str(), input.input_points, runs);
+
+  struct Row {
+    const MethodEntry* entry;
+    Timing timing;
+  };
+  std::vector<Row> rows;
+  FoveaRefMethod* fovea_ref = nullptr;
+  std::vector<std::unique_ptr<Method>> methods;
+  std::vector<Method*> by_row;
+  for (const MethodEntry& entry : kMethods) {
+    rows.push_back({&entry, {}});
+    by_row.push_back(nullptr);
+    if (entry.make == nullptr) continue;
+    methods.push_back(entry.make(input));
+    by_row.back() = methods.back().get();
+    if (std::string_view(entry.name) == "fovea-ref") fovea_ref = static_cast<FoveaRefMethod*>(methods.back().get());
+  }
+  // One warm-up run each (caches, page faults, PCL's first allocations), then the
+  // timed runs in rounds, every method once per round: a load change on the
+  // machine then affects all methods alike instead of whichever ran at the time.
+  for (int round = -1; round < runs; ++round) {
+    for (std::size_t m = 0; m < rows.size(); ++m) {
+      if (by_row[m] == nullptr) continue;
+      const auto start = std::chrono::steady_clock::now();
+      const Status s = by_row[m]->run();
+      const auto end = std::chrono::steady_clock::now();
+      if (!s) {
+        std::fprintf(stderr, "fovea-compare: %s failed: %s\n", rows[m].entry->name, s.toString().c_str());
+        return 1;
+      }
+      if (round >= 0) rows[m].timing.ms.push_back(std::chrono::duration<double, std::milli>(end - start).count());
+    }
+  }
+  for (std::size_t m = 0; m < rows.size(); ++m) {
+    if (by_row[m] != nullptr) finish(*by_row[m], rows[m].timing);
+  }
+  const auto find = [&](std::string_view name) -> const Timing* {
+    for (const Row& r : rows) {
+      if (r.entry->name == name && r.timing.ran) return &r.timing;
+    }
+    return nullptr;
+  };
+  const Timing* pcl = find("pcl");
+  const Timing* floor = find("floor");
+
+  if (fovea_ref != nullptr) {
+    const pipeline::FoveationStats& s = fovea_ref->stats();
+    std::printf("  d0 %.3f m (%s); voxel sizes:", s.fixation.d0_m,
+                std::string(pipeline::fixationSourceName(s.fixation.source)).c_str());
+    for (int r = 1; r < s.region_count; ++r) std::printf(" region %d %.2f mm", r, 1000.0 * s.regions[r].voxel_size_m);
+    std::printf("\n");
+  }
+  std::printf("\n%-14s %9s %9s %9s %10s %9s %9s %9s %12s\n", "method", "median ms", "min ms", "max ms", "out points",
+              "ns/point", "vs pcl", "vs floor", "max d [mm]");
+  for (const Row& row : rows) {
+    const Timing& t = row.timing;
+    if (!t.ran) {
+      std::printf("%-14s %9s   -- %s\n", row.entry->name, "-", row.entry->what);
+      continue;
+    }
+    char vs_pcl[16] = "-", vs_floor[16] = "-", diff[24] = "-";
+    if (pcl) std::snprintf(vs_pcl, sizeof vs_pcl, "%.2fx", pcl->median / t.median);
+    if (floor) std::snprintf(vs_floor, sizeof vs_floor, "%.3fx", floor->median / t.median);
+    if (pcl && t.has_output && &t != pcl) {
+      std::snprintf(diff, sizeof diff, "%.4f", compareWithPcl(t.output, pcl->output).max_mm);
+    } else if (&t == pcl) {
+      std::snprintf(diff, sizeof diff, "(reference)");
+    }
+    std::printf("%-14s %9.3f %9.3f %9.3f %10zu %9.2f %9s %9s %12s\n", row.entry->name, t.median, t.min, t.max,
+                t.out_points, 1e6 * t.median / static_cast<double>(input.input_points), vs_pcl, vs_floor, diff);
+  }
+  std::printf(
+      "\n  ns/point: median time / %zu input points. vs pcl, vs floor: speed-up = that method's median / this "
+      "method's\n  (above 1: faster). The floor only reads the input once; it produces nothing.\n",
+      input.input_points);
+
+  // What differs from PCL, and why.
+  for (const Row& row : rows) {
+    const Timing& t = row.timing;
+    if (!pcl || !t.ran || !t.has_output || &t == pcl) continue;
+    std::set<VoxelKey> moved;
+    std::size_t sampled = 0, differ = 0;
+    const bool is_ref = fovea_ref != nullptr && &t == find("fovea-ref");
+    if (is_ref) differ = latticeDisagreements(fovea_ref->cloud(), fovea_ref->regions(), t.output, sampled, moved);
+    const Difference d = compareWithPcl(t.output, pcl->output, is_ref ? &moved : nullptr);
+    std::printf("\n  %s vs pcl, voxels matched by (region, world voxel index floor(c / v)):\n", row.entry->name);
+    std::printf("    fovea points: %zu vs %zu (%s); voxel sizes %s\n", d.fovea_here, d.fovea_pcl,
+                d.fovea_here == d.fovea_pcl ? "both untouched" : "DIFFERENT",
+                d.same_voxel_sizes ? "identical" : "DIFFERENT");
+    std::printf("    %zu voxels matched, %zu only in %s, %zu only in pcl\n", d.matched, d.only_here, row.entry->name,
+                d.only_pcl);
+    std::printf("    centroid distance, matched voxels with the same points: median %.5f mm, p99 %.5f mm, max %.5f mm\n",
+                d.median_mm, d.p99_mm, d.same_members_max_mm);
+    if (is_ref) {
+      std::printf("    centroid distance, %zu matched voxels that gained or lost a point to PCL's lattice: max %.4f mm\n",
+                  d.moved_voxels, d.moved_max_mm);
+      std::printf(
+          "    why: PCL's lattice is world-anchored too (it floors p * inverse_leaf), but in float: the world\n"
+          "    coordinate, 1/leaf and their product are rounded to float, so %zu of %zu sampled points (%.4f %%)\n"
+          "    fall into a neighbouring voxel; those voxels gain or lose a point (centroids up to millimetres\n"
+          "    apart, or unmatched voxels). Elsewhere PCL sums in float (pcl::CentroidPoint, Vector3f) where\n"
+          "    fovea sums in double relative to the voxel's first point: float rounding (micrometres).\n",
+          differ, sampled, sampled ? 100.0 * static_cast<double>(differ) / static_cast<double>(sampled) : 0.0);
+    }
+  }
+
+  std::printf("\n");
+  for (const Row& row : rows) {
+    const Timing& t = row.timing;
+    if (!t.ran) continue;
+    std::printf("method=%s ms_median=%.4f ms_min=%.4f ms_max=%.4f out_points=%zu ns_per_point=%.3f\n", row.entry->name,
+                t.median, t.min, t.max, t.out_points, 1e6 * t.median / static_cast<double>(input.input_points));
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace fovea::bench
+
+int main(int argc, char** argv) { return fovea::bench::run(argc, argv); }

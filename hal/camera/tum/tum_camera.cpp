@@ -1,0 +1,378 @@
+#include "hal/camera/tum/tum_camera.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+#include <utility>
+
+#include "hal/camera/tum/png_reader.h"
+
+namespace fovea::hal::tum {
+
+namespace {
+
+Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "tum: " + std::move(message)); }
+
+Status parseOnOff(std::string_view key, std::string_view value, bool& out) {
+  if (value == "on") {
+    out = true;
+  } else if (value == "off") {
+    out = false;
+  } else {
+    return invalid(std::string(key) + ": expected on|off, got '" + std::string(value) + "'");
+  }
+  return Status::ok();
+}
+
+// Whitespace-separated fields of one line.
+std::vector<std::string_view> splitFields(std::string_view line) {
+  std::vector<std::string_view> fields;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) ++i;
+    const std::size_t start = i;
+    while (i < line.size() && line[i] != ' ' && line[i] != '\t' && line[i] != '\r') ++i;
+    if (i > start) fields.push_back(line.substr(start, i - start));
+  }
+  return fields;
+}
+
+bool parseDouble(std::string_view text, double& out) {
+  if (text.empty()) return false;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
+  return ec == std::errc() && end == text.data() + text.size() && std::isfinite(out);
+}
+
+Result<std::string> readWholeFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) {
+      return Result<std::string>(ErrorCode::kNotFound, "tum: " + path.string() + " does not exist");
+    }
+    return Result<std::string>(ErrorCode::kIoError, "tum: cannot read " + path.string());
+  }
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Calls fn(line_number, line) for each line that is neither empty nor a comment.
+template <typename Fn>
+Status forEachDataLine(std::string_view text, Fn fn) {
+  std::size_t line_number = 0;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t eol = std::min(text.find('\n', pos), text.size());
+    std::string_view line = text.substr(pos, eol - pos);
+    pos = eol + 1;
+    ++line_number;
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (first == std::string_view::npos || line[first] == '#') continue;
+    if (Status s = fn(line_number, line); !s) return s;
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<int64_t> parseTumTimestampNs(std::string_view text) {
+  const auto fail = [&] {
+    return Result<int64_t>(ErrorCode::kParseError, "'" + std::string(text) + "' is not a timestamp (seconds)");
+  };
+  const std::size_t dot = text.find('.');
+  const std::string_view whole = text.substr(0, dot);
+  const std::string_view fraction = dot == std::string_view::npos ? std::string_view() : text.substr(dot + 1);
+  if (whole.empty() || whole.size() > 10 || fraction.size() > 9) return fail();
+  int64_t seconds = 0;
+  const auto [end, ec] = std::from_chars(whole.data(), whole.data() + whole.size(), seconds);
+  if (ec != std::errc() || end != whole.data() + whole.size() || seconds < 0) return fail();
+  int64_t ns = 0;
+  for (std::size_t i = 0; i < 9; ++i) {
+    int digit = 0;
+    if (i < fraction.size()) {
+      if (fraction[i] < '0' || fraction[i] > '9') return fail();
+      digit = fraction[i] - '0';
+    }
+    ns = ns * 10 + digit;
+  }
+  return seconds * 1'000'000'000 + ns;
+}
+
+Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const std::string& path_for_errors) {
+  std::vector<StampedPose> poses;
+  Status s = forEachDataLine(text, [&](std::size_t line_number, std::string_view line) -> Status {
+    const std::string where = path_for_errors + ":" + std::to_string(line_number) + ": ";
+    const std::vector<std::string_view> f = splitFields(line);
+    if (f.size() != 8) {
+      return {ErrorCode::kParseError, where + "expected 8 fields (timestamp tx ty tz qx qy qz qw), got " +
+                                          std::to_string(f.size())};
+    }
+    Result<int64_t> stamp = parseTumTimestampNs(f[0]);
+    if (!stamp) return {ErrorCode::kParseError, where + stamp.status().message()};
+    double v[7];
+    for (int i = 0; i < 7; ++i) {
+      if (!parseDouble(f[static_cast<std::size_t>(i) + 1], v[i])) {
+        return {ErrorCode::kParseError, where + "'" + std::string(f[static_cast<std::size_t>(i) + 1]) +
+                                            "' is not a finite number"};
+      }
+    }
+    StampedPose p;
+    p.stamp_ns = stamp.value();
+    p.t_world_cam = Eigen::Vector3d(v[0], v[1], v[2]);
+    p.q_world_cam = Eigen::Quaterniond(v[6], v[3], v[4], v[5]);  // w, x, y, z
+    const double norm = p.q_world_cam.norm();
+    if (!(norm > 0.5 && norm < 1.5)) {
+      return {ErrorCode::kParseError, where + "quaternion is not of unit length"};
+    }
+    p.q_world_cam.normalize();  // the file rounds to 4 decimals
+    if (!poses.empty() && p.stamp_ns <= poses.back().stamp_ns) {
+      return {ErrorCode::kParseError, where + "timestamps must increase"};
+    }
+    poses.push_back(p);
+    return Status::ok();
+  });
+  if (!s) return s;
+  return poses;
+}
+
+bool interpolatePose(const std::vector<StampedPose>& poses, int64_t stamp_ns, int64_t clamp_ns, Pose& out) {
+  if (poses.empty()) return false;
+  const auto toPose = [](const Eigen::Vector3d& t, const Eigen::Quaterniond& q) {
+    Pose p;
+    p.R_world_cam = q.toRotationMatrix();
+    p.t_world_cam = t;
+    return p;
+  };
+  if (stamp_ns <= poses.front().stamp_ns) {
+    if (poses.front().stamp_ns - stamp_ns > clamp_ns) return false;
+    out = toPose(poses.front().t_world_cam, poses.front().q_world_cam);
+    return true;
+  }
+  if (stamp_ns >= poses.back().stamp_ns) {
+    if (stamp_ns - poses.back().stamp_ns > clamp_ns) return false;
+    out = toPose(poses.back().t_world_cam, poses.back().q_world_cam);
+    return true;
+  }
+  const auto after = std::upper_bound(poses.begin(), poses.end(), stamp_ns,
+                                      [](int64_t t, const StampedPose& p) { return t < p.stamp_ns; });
+  const StampedPose& b = *after;
+  const StampedPose& a = *(after - 1);
+  const double alpha = static_cast<double>(stamp_ns - a.stamp_ns) / static_cast<double>(b.stamp_ns - a.stamp_ns);
+  // Eigen's slerp takes the shorter arc (q and -q are the same rotation).
+  out = toPose(a.t_world_cam + (b.t_world_cam - a.t_world_cam) * alpha, a.q_world_cam.slerp(alpha, b.q_world_cam));
+  return true;
+}
+
+Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
+  TumCameraOptions options;
+  std::size_t pos = 0;
+  bool first = true;
+  while (pos <= args.size()) {
+    const std::size_t comma = std::min(args.find(',', pos), args.size());
+    const std::string_view piece = args.substr(pos, comma - pos);
+    pos = comma + 1;
+    if (first) {
+      first = false;
+      if (piece.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N]");
+      options.path = std::string(piece);
+      continue;
+    }
+    const std::size_t eq = piece.find('=');
+    if (eq == std::string_view::npos) {
+      return invalid("option '" + std::string(piece) + "' is not key=value (keys: loop, realtime, frames)");
+    }
+    const std::string_view key = piece.substr(0, eq);
+    const std::string_view value = piece.substr(eq + 1);
+    if (key == "loop") {
+      if (Status s = parseOnOff(key, value, options.loop); !s) return s;
+    } else if (key == "realtime") {
+      if (Status s = parseOnOff(key, value, options.realtime); !s) return s;
+    } else if (key == "frames") {
+      std::size_t n = 0;
+      const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), n);
+      if (value.empty() || ec != std::errc() || end != value.data() + value.size() || n == 0) {
+        return invalid("frames: expected a positive integer, got '" + std::string(value) + "'");
+      }
+      options.max_frames = n;
+    } else {
+      return invalid("unknown option '" + std::string(key) + "' (keys: loop, realtime, frames)");
+    }
+  }
+  return options;
+}
+
+std::string tumCameraHelp() {
+  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N]  a TUM RGB-D sequence folder (associations.txt, "
+         "rgb/, depth/, groundtruth.txt); fr3 intrinsics, ground-truth poses; loop=on (default) restarts at the "
+         "end, realtime=on paces frames to their timestamps, frames=N keeps the first N (all are decoded into "
+         "memory at open, 1.5 MB each)";
+}
+
+TumCamera::TumCamera(TumCameraOptions options) : options_(std::move(options)) {
+  info_.name = "tum:" + options_.path;
+  info_.intrinsics = {kWidth, kHeight, kFx, kFy, kCx, kCy};
+  info_.depth_scale_m = kDepthScaleM;
+  info_.fps = 30.0;
+}
+
+Result<std::unique_ptr<Camera>> TumCamera::create(std::string_view args) {
+  Result<TumCameraOptions> options = parseTumCameraOptions(args);
+  if (!options) return options.status();
+  return std::unique_ptr<Camera>(std::make_unique<TumCamera>(std::move(options).value()));
+}
+
+Status TumCamera::open() {
+  namespace fs = std::filesystem;
+  opened_ = false;
+  frames_.clear();
+  frames_without_pose_ = 0;
+  const fs::path folder(options_.path);
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) {
+    return {ErrorCode::kNotFound, "tum: sequence folder " + options_.path + " does not exist (or is not a folder)"};
+  }
+  const fs::path associations_path = folder / "associations.txt";
+  const fs::path groundtruth_path = folder / "groundtruth.txt";
+  Result<std::string> associations = readWholeFile(associations_path);
+  if (!associations) {
+    return {associations.status().code(),
+            associations.status().message() +
+                " (make one with TUM's associate.py: python associate.py rgb.txt depth.txt > associations.txt)"};
+  }
+  Result<std::string> groundtruth = readWholeFile(groundtruth_path);
+  if (!groundtruth) return groundtruth.status();
+  Result<std::vector<StampedPose>> poses = parseGroundTruth(groundtruth.value(), groundtruth_path.string());
+  if (!poses) return poses.status();
+
+  struct Entry {
+    int64_t depth_ns;
+    std::string rgb, depth;
+  };
+  std::vector<Entry> entries;
+  Status listed = forEachDataLine(associations.value(), [&](std::size_t line_number, std::string_view line) -> Status {
+    const std::string where = associations_path.string() + ":" + std::to_string(line_number) + ": ";
+    const std::vector<std::string_view> f = splitFields(line);
+    if (f.size() != 4) {
+      return {ErrorCode::kParseError,
+              where + "expected 4 fields (t_rgb rgb/x.png t_depth depth/y.png), got " + std::to_string(f.size())};
+    }
+    Result<int64_t> t_rgb = parseTumTimestampNs(f[0]);
+    Result<int64_t> t_depth = parseTumTimestampNs(f[2]);
+    if (!t_rgb) return {ErrorCode::kParseError, where + t_rgb.status().message()};
+    if (!t_depth) return {ErrorCode::kParseError, where + t_depth.status().message()};
+    if (!entries.empty() && t_depth.value() <= entries.back().depth_ns) {
+      return {ErrorCode::kParseError, where + "depth timestamps must increase"};
+    }
+    entries.push_back({t_depth.value(), std::string(f[1]), std::string(f[3])});
+    return Status::ok();
+  });
+  if (!listed) return listed;
+  if (entries.empty()) {
+    return {ErrorCode::kParseError, "tum: " + associations_path.string() + " lists no frames"};
+  }
+
+  for (const Entry& e : entries) {
+    if (options_.max_frames != 0 && frames_.size() == options_.max_frames) break;
+    Pose pose;
+    if (!interpolatePose(poses.value(), e.depth_ns, kPoseClampNs, pose)) {
+      ++frames_without_pose_;
+      continue;
+    }
+    Frame frame;
+    frame.depth_stamp_ns = e.depth_ns;
+    frame.depth_file = e.depth;
+    frame.pose = pose;
+    frame.depth.resize(static_cast<std::size_t>(kWidth) * kHeight);
+    frame.rgb.resize(static_cast<std::size_t>(kWidth) * kHeight * 3);
+    if (Status s = readDepthPng((folder / e.depth).string(), kWidth, kHeight, frame.depth.data()); !s) {
+      return {s.code(), "tum: depth " + s.message()};
+    }
+    if (Status s = readRgbPng((folder / e.rgb).string(), kWidth, kHeight, frame.rgb.data()); !s) {
+      return {s.code(), "tum: rgb " + s.message()};
+    }
+    frames_.push_back(std::move(frame));
+  }
+  if (frames_.empty()) {
+    return {ErrorCode::kNotFound, "tum: none of the " + std::to_string(entries.size()) + " frames in " +
+                                      associations_path.string() + " lies within the ground truth's time span (" +
+                                      groundtruth_path.string() + ")"};
+  }
+  const int64_t span_ns = frames_.back().depth_stamp_ns - frames_.front().depth_stamp_ns;
+  const int64_t period_ns = frames_.size() > 1 ? span_ns / static_cast<int64_t>(frames_.size() - 1) : 33'333'333;
+  loop_period_ns_ = span_ns + period_ns;
+  info_.fps = 1e9 / static_cast<double>(period_ns);
+  opened_ = true;
+  next_ = 0;
+  loops_ = 0;
+  finished_ = false;
+  return Status::ok();
+}
+
+Status TumCamera::start() {
+  if (!opened_) return Status(ErrorCode::kUnavailable, "tum camera: call open() before start()");
+  started_ = true;
+  start_time_ = std::chrono::steady_clock::now();
+  start_stamp_ns_ = frames_[next_].depth_stamp_ns + static_cast<int64_t>(loops_) * loop_period_ns_;
+  return Status::ok();
+}
+
+void TumCamera::stop() { started_ = false; }
+
+CameraCounters TumCamera::counters() const {
+  CameraCounters c;
+  c.frames_delivered = frames_delivered_.load(std::memory_order_relaxed);
+  c.timeouts = timeouts_.load(std::memory_order_relaxed);
+  c.errors = errors_.load(std::memory_order_relaxed);
+  return c;
+}
+
+// Error messages stay within std::string's small-buffer capacity (15
+// characters in libstdc++), so even the error paths do not allocate.
+Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
+  if (!started_) {
+    errors_.fetch_add(1, std::memory_order_relaxed);
+    return Status(ErrorCode::kUnavailable, "not started");
+  }
+  if (finished_) return Status(ErrorCode::kUnavailable, "end of record");
+  if (!slot.setSize(kWidth, kHeight)) {
+    errors_.fetch_add(1, std::memory_order_relaxed);
+    return Status(ErrorCode::kCapacityExceeded, "slot too small");
+  }
+  const Frame& frame = frames_[next_];
+  const int64_t stamp_ns = frame.depth_stamp_ns + static_cast<int64_t>(loops_) * loop_period_ns_;
+  if (options_.realtime) {
+    using Clock = std::chrono::steady_clock;
+    const Clock::time_point due = start_time_ + std::chrono::nanoseconds(stamp_ns - start_stamp_ns_);
+    const Clock::time_point now = Clock::now();
+    if (due > now) {
+      if (due - now > timeout) {
+        std::this_thread::sleep_for(timeout);
+        timeouts_.fetch_add(1, std::memory_order_relaxed);
+        return Status(ErrorCode::kUnavailable, "timeout");
+      }
+      std::this_thread::sleep_until(due);
+    }
+  }
+  std::copy(frame.depth.begin(), frame.depth.end(), slot.depth());
+  std::copy(frame.rgb.begin(), frame.rgb.end(), slot.rgb());
+  slot.intrinsics = info_.intrinsics;
+  slot.depth_scale_m = kDepthScaleM;
+  slot.T_world_cam = frame.pose;
+  slot.has_rgb = true;
+  slot.stamp_ns = stamp_ns;
+  slot.sequence = sequence_++;
+  if (++next_ == frames_.size()) {
+    next_ = 0;
+    ++loops_;
+    if (!options_.loop) finished_ = true;
+  }
+  frames_delivered_.fetch_add(1, std::memory_order_relaxed);
+  return Status::ok();
+}
+
+}  // namespace fovea::hal::tum

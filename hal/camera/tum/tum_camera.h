@@ -1,0 +1,131 @@
+// A recorded TUM RGB-D sequence as a camera (https://cvg.cit.tum.de/data/datasets/rgbd-dataset).
+// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N]", PATH the sequence folder
+// holding associations.txt (`t_rgb rgb/x.png t_depth depth/y.png` per line),
+// rgb/*.png (8-bit RGB), depth/*.png (16-bit, 5000 units per metre, 0 = no
+// measurement) and groundtruth.txt (`timestamp tx ty tz qx qy qz qw`).
+//
+// - Intrinsics: Freiburg 3 (fx 535.4, fy 539.2, cx 320.1, cy 247.6, 640x480); the
+//   fr3 images are already undistorted and depth is registered to colour.
+// - Pose: groundtruth.txt gives T_world_cam (OpenCV camera axes: x right, y down,
+//   z forward), the convention of hal::Pose. It is interpolated at the depth
+//   timestamp: translation linearly, rotation by slerp. A frame up to
+//   kPoseClampNs outside the ground truth's time span takes the nearest pose
+//   (the slice in shared/data starts 9 ms before its first pose); frames farther
+//   out are skipped at open() and counted (framesWithoutPose()).
+// - Memory: libpng allocates internally on every decode, so open() decodes every
+//   frame into memory (1.5 MB per 640x480 frame: 92 MB for 60 frames) and
+//   acquire() only copies, allocating nothing. frames=N keeps the first N frames
+//   to bound that for long sequences.
+// - Time: stamp_ns is the depth timestamp in ns on the recording's clock, plus
+//   one recording length (and one mean frame period) per completed loop so it
+//   keeps increasing; realtime=on paces acquire() to those stamps.
+// - After the last frame with loop=off, acquire() returns kUnavailable
+//   ("end of recording") and finished() is true.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "hal/camera.h"
+
+namespace fovea::hal::tum {
+
+inline constexpr int kWidth = 640;
+inline constexpr int kHeight = 480;
+inline constexpr double kFx = 535.4;
+inline constexpr double kFy = 539.2;
+inline constexpr double kCx = 320.1;
+inline constexpr double kCy = 247.6;
+inline constexpr double kDepthScaleM = 1.0 / 5000.0;
+inline constexpr int64_t kPoseClampNs = 20'000'000;  // TUM's own association tolerance
+
+struct TumCameraOptions {
+  std::string path;
+  bool loop = true;
+  bool realtime = false;
+  std::size_t max_frames = 0;  // 0: all
+};
+
+// Parses "PATH[,loop=on|off,realtime=on|off,frames=N]" (the spec after "tum:").
+Result<TumCameraOptions> parseTumCameraOptions(std::string_view args);
+std::string tumCameraHelp();
+
+// A TUM timestamp ("1341841873.405990", seconds with up to 9 decimals) in ns,
+// parsed exactly (a double holds such a stamp only to ~0.2 us).
+Result<int64_t> parseTumTimestampNs(std::string_view text);
+
+struct StampedPose {
+  int64_t stamp_ns = 0;
+  Eigen::Vector3d t_world_cam = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_world_cam = Eigen::Quaterniond::Identity();  // normalised
+};
+
+// Reads groundtruth.txt lines (comments with '#'); stamps must increase.
+// kParseError naming the line otherwise.
+Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const std::string& path_for_errors);
+
+// The pose at stamp_ns: linear translation and slerp between the two
+// surrounding samples; the end pose within clamp_ns outside the span; false
+// when farther out or when `poses` is empty.
+bool interpolatePose(const std::vector<StampedPose>& poses, int64_t stamp_ns, int64_t clamp_ns, Pose& out);
+
+class TumCamera final : public Camera {
+ public:
+  explicit TumCamera(TumCameraOptions options);
+  static Result<std::unique_ptr<Camera>> create(std::string_view args);
+
+  // Reads the lists and ground truth and decodes every frame. kNotFound naming
+  // the path for a missing folder or file, kParseError naming the file for a
+  // malformed list, a corrupt PNG or an image that is not 640x480.
+  Status open() override;
+  Status start() override;
+  Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) override;
+  void stop() override;
+
+  const CameraInfo& info() const override { return info_; }
+  CameraCounters counters() const override;
+
+  std::size_t frameCount() const { return frames_.size(); }
+  std::size_t framesWithoutPose() const { return frames_without_pose_; }
+  bool finished() const { return finished_; }
+  // The i-th frame's recorded depth and RGB stamps (ns), after open().
+  int64_t depthStampNs(std::size_t i) const { return frames_[i].depth_stamp_ns; }
+  const std::string& depthFile(std::size_t i) const { return frames_[i].depth_file; }
+
+ private:
+  struct Frame {
+    int64_t depth_stamp_ns = 0;
+    std::string depth_file;  // relative to the folder, for messages
+    Pose pose;
+    std::vector<uint16_t> depth;
+    std::vector<uint8_t> rgb;
+  };
+
+  TumCameraOptions options_;
+  CameraInfo info_;
+  std::vector<Frame> frames_;
+  std::size_t frames_without_pose_ = 0;
+  int64_t loop_period_ns_ = 0;  // first-to-last span plus one mean frame period
+
+  bool opened_ = false;
+  bool started_ = false;
+  bool finished_ = false;
+  std::size_t next_ = 0;  // index of the next frame
+  uint64_t loops_ = 0;
+  uint64_t sequence_ = 0;
+  std::chrono::steady_clock::time_point start_time_;
+  int64_t start_stamp_ns_ = 0;
+
+  std::atomic<uint64_t> frames_delivered_{0};
+  std::atomic<uint64_t> timeouts_{0};
+  std::atomic<uint64_t> errors_{0};
+};
+
+}  // namespace fovea::hal::tum
