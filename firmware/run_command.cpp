@@ -11,6 +11,7 @@
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/io/ply.h"
+#include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::firmware {
 
@@ -167,6 +168,10 @@ int runCommand(int argc, char** argv) {
   std::printf("fovead run: camera %s %dx%d @ %g fps, depth %g..%g m\n", info.name.c_str(), width, height, info.fps,
               range.min_m, range.max_m);
   std::printf("foveation: %s\n", describeFoveation(config.value()).c_str());
+  const pipeline::KernelSet kernels = pipeline::defaultKernelSet();
+  std::printf("kernels: %s%s%s (FOVEA_FORCE_KERNEL=ref|simd)\n", std::string(pipeline::kernelSetName(kernels)).c_str(),
+              kernels == pipeline::KernelSet::kSimd ? ", target " : "",
+              kernels == pipeline::KernelSet::kSimd ? pipeline::simdTargetName(pipeline::activeSimdTarget()) : "");
   const pipeline::RegionModel& model = foveator->model();
   if (every.value() > 0) {
     std::printf("%5s %7s %7s %-8s", "frame", "valid", "d0[m]", "d0 from");
@@ -190,7 +195,7 @@ int runCommand(int argc, char** argv) {
     const double t_capture = msSince(t0);
     t0 = std::chrono::steady_clock::now();
     pipeline::BackprojectCounts bc;
-    if (Status s = pipeline::backprojectRef(frame, range, cloud, bc); !s) {
+    if (Status s = pipeline::backproject(frame, range, cloud, bc); !s) {
       std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;

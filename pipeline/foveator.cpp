@@ -2,6 +2,8 @@
 
 #include <chrono>
 
+#include "pipeline/kernels/foveation_simd.h"
+
 namespace fovea::pipeline {
 
 namespace {
@@ -60,7 +62,11 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
 
   const int64_t t0 = nowNs();
   PartitionCounts partition_counts;
-  partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  if (capacity_.kernels == KernelSet::kSimd) {
+    partitionSimd(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  } else {
+    partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  }
   const int64_t t1 = nowNs();
   stats.fixation = computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
   std::array<double, kMaxRegions> voxel_size_m{};

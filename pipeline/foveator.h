@@ -11,6 +11,7 @@
 #include "hal/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/fixation.h"
+#include "pipeline/kernels/kernel_set.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"
@@ -20,6 +21,9 @@ namespace fovea::pipeline {
 struct PipelineCapacity {
   std::size_t max_points = 640 * 480;  // points per input cloud
   std::size_t max_voxels = 640 * 480;  // occupied voxels per output cloud
+  // The kernels foveate() runs: the scalar reference or the SIMD set (identical
+  // output; docs/kernels.md). Chosen once at start-up, FOVEA_FORCE_KERNEL overrides.
+  KernelSet kernels = defaultKernelSet();
 };
 
 struct FoveationConfig {
