@@ -35,7 +35,10 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
       bounds_(ConeBounds::fromModel(model)),
       region_(capacity.max_points),
       t_scratch_(capacity.max_points),
-      sampler_(capacity.max_points, capacity.max_voxels) {}
+      sampler_(capacity.kernels == KernelSet::kRef ? VoxelSampler(capacity.max_points, capacity.max_voxels)
+                                                   : VoxelSampler()),
+      hash_sampler_(capacity.kernels == KernelSet::kSimd ? HashVoxelSampler(capacity.max_points, capacity.max_voxels)
+                                                         : HashVoxelSampler()) {}
 
 Status Foveator::setConfig(const FoveationConfig& config) {
   if (Status s = config.fixation.validate(); !s) return s;
@@ -73,8 +76,11 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();
   SampleCounts sample_counts;
-  Status sampled = sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
-                                    representative);
+  Status sampled = capacity_.kernels == KernelSet::kSimd
+                       ? hash_sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out,
+                                              sample_counts, representative)
+                       : sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
+                                         representative);
   const int64_t t3 = nowNs();
 
   stats.partition_ns = t1 - t0;

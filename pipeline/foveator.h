@@ -11,6 +11,7 @@
 #include "hal/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/fixation.h"
+#include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/kernels/kernel_set.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
@@ -80,7 +81,8 @@ class Foveator {
   ConeBounds bounds_;
   std::vector<uint8_t> region_;
   std::vector<double> t_scratch_;
-  VoxelSampler sampler_;
+  VoxelSampler sampler_;           // kernels == kRef (only the one in use is allocated)
+  HashVoxelSampler hash_sampler_;  // kernels == kSimd
 };
 
 }  // namespace fovea::pipeline
