@@ -31,11 +31,28 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       chunk_index_(3 * kChunk) {
   const std::size_t entries = std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16));
   table_.assign(entries, Entry{kEmpty, 0});
-  shift_ = 64 - std::countr_zero(entries);
 }
+
+namespace {
+constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 256 KiB
+uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
+}  // namespace
 
 void HashVoxelSampler::clearTable(std::size_t voxels) {
   for (std::size_t s = 0; s < voxels; ++s) table_[voxels_[s].table_pos].key = kEmpty;
+}
+
+void HashVoxelSampler::growTable(std::size_t voxels) {
+  clearTable(voxels);
+  active_ *= 2;
+  --shift_;
+  const std::size_t mask = active_ - 1;
+  for (std::size_t s = 0; s < voxels; ++s) {
+    std::size_t pos = hashKey(voxels_[s].key) >> shift_;
+    while (table_[pos].key != kEmpty) pos = (pos + 1) & mask;
+    table_[pos] = Entry{voxels_[s].key, static_cast<uint32_t>(s)};
+    voxels_[s].table_pos = static_cast<uint32_t>(pos);
+  }
 }
 
 Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
@@ -68,73 +85,72 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
   double* index[3] = {chunk_index_.data(), chunk_index_.data() + kChunk, chunk_index_.data() + 2 * kChunk};
 
-  // Pass 1: index ranges per region and axis, the range check (as the reference).
+  // One pass: voxel indices (voxelIndexSimd, bit-exact with voxelIndex), the
+  // reference's checks (first bad index in point order; then spans; then the voxel
+  // count), and accumulation. The hash key wraps each index to its low 20 bits:
+  // unique within a region whose span fits 2^20 voxels, and a wider region is
+  // refused below anyway. The sort key (relative to the region's smallest index,
+  // as the reference packs it) is made per voxel once the ranges are known.
   int64_t lo_index[kMaxRegions][3], hi_index[kMaxRegions][3];
   for (auto& row : lo_index) std::fill(std::begin(row), std::end(row), INT64_MAX);
   for (auto& row : hi_index) std::fill(std::begin(row), std::end(row), INT64_MIN);
-  for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
-    const std::size_t len = std::min(kChunk, n - c0);
-    for (int a = 0; a < 3; ++a) voxelIndexSimd(coord[a] + c0, region + c0, len, origin[a], inv_voxel.data(), index[a]);
-    for (std::size_t q = 0; q < len; ++q) {
-      const uint8_t r = region[c0 + q];
-      if (r >= region_count) continue;
-      ++counts.in[r];
-      if (r == 0) continue;
-      for (int a = 0; a < 3; ++a) {
-        const double k = index[a][q];
-        if (!(std::fabs(k) < kMaxAbsIndex)) {
-          return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(r) + " point " +
-                                                 std::to_string(c0 + q) + " has voxel index " + std::to_string(k) +
-                                                 " along " + axisName(a) +
-                                                 " (not a finite coordinate within range)"};
-        }
-        const auto ki = static_cast<int64_t>(k);
-        lo_index[r][a] = std::min(lo_index[r][a], ki);
-        hi_index[r][a] = std::max(hi_index[r][a], ki);
-      }
-    }
-  }
-  for (int r = 1; r < region_count; ++r) {
-    if (counts.in[r] == 0) continue;
-    for (int a = 0; a < 3; ++a) {
-      const int64_t span = hi_index[r][a] - lo_index[r][a] + 1;
-      if (span > kMaxVoxelSpan) {
-        return {ErrorCode::kRangeExceeded,
-                "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) + " voxels of " +
-                    std::to_string(voxel_size_m[r]) + " m along " + axisName(a) + ", more than " +
-                    std::to_string(kMaxVoxelSpan) + ": crop the cloud or raise fixation.min_m"};
-      }
-    }
-  }
-
-  // Pass 2: accumulate each non-fovea point into its voxel, in input order.
+  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
   std::size_t voxels = 0;
+  bool too_many_voxels = false;
   uint64_t last_key = kEmpty;
   uint32_t last_slot = 0;
-  const uint64_t table_mask = table_.size() - 1;
+  active_ = std::min(table_.size(), kInitialTableEntries);
+  shift_ = 64 - std::countr_zero(active_);
+  uint64_t table_mask = active_ - 1;
+  recent_key_.fill(kEmpty);
   for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
     const std::size_t len = std::min(kChunk, n - c0);
     for (int a = 0; a < 3; ++a) voxelIndexSimd(coord[a] + c0, region + c0, len, origin[a], inv_voxel.data(), index[a]);
     for (std::size_t q = 0; q < len; ++q) {
       const std::size_t i = c0 + q;
       const uint8_t r = region[i];
-      if (r == 0 || r >= region_count) continue;
-      uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+      if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
+      ++counts.in[r];
+      if (r == 0) continue;
+      int64_t k[3];
       for (int a = 0; a < 3; ++a) {
-        key |= static_cast<uint64_t>(static_cast<int64_t>(index[a][q]) - lo_index[r][a]) << ((2 - a) * kVoxelAxisBits);
+        const double d = index[a][q];
+        if (!(std::fabs(d) < kMaxAbsIndex)) {
+          clearTable(voxels);
+          return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(r) + " point " +
+                                                 std::to_string(i) + " has voxel index " + std::to_string(d) +
+                                                 " along " + axisName(a) + " (not a finite coordinate within range)"};
+        }
+        k[a] = static_cast<int64_t>(d);
+        lo_index[r][a] = std::min(lo_index[r][a], k[a]);
+        hi_index[r][a] = std::max(hi_index[r][a], k[a]);
       }
+      if (too_many_voxels) continue;  // still looking for the errors the reference reports first
+      const uint64_t key = (uint64_t{r} << (3 * kVoxelAxisBits)) |
+                           ((static_cast<uint64_t>(k[0]) & kAxisMask) << (2 * kVoxelAxisBits)) |
+                           ((static_cast<uint64_t>(k[1]) & kAxisMask) << kVoxelAxisBits) |
+                           (static_cast<uint64_t>(k[2]) & kAxisMask);
       const float px = coord[0][i], py = coord[1][i], pz = coord[2][i];
       uint32_t slot = last_slot;
       if (key != last_key) {
-        std::size_t pos = (key * 0x9E3779B97F4A7C15ull) >> shift_;
+        const uint64_t hash = hashKey(key);
+        // A small direct-mapped cache in front of the table: the few voxels a run
+        // of rows keeps returning to stay in L1.
+        const std::size_t line = hash >> (64 - kRecentBits);
+        if (recent_key_[line] == key) {
+          slot = recent_slot_[line];
+          last_key = key;
+          last_slot = slot;
+          goto accumulate;
+        }
+        std::size_t pos = hash >> shift_;
         while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
         if (table_[pos].key == key) {
           slot = table_[pos].slot;
         } else {
           if (voxels == max_voxels_) {
-            clearTable(voxels);
-            return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
-                                                      " occupied voxels: raise pipeline.max_voxels"};
+            too_many_voxels = true;
+            continue;
           }
           slot = static_cast<uint32_t>(voxels++);
           table_[pos] = Entry{key, slot};
@@ -142,13 +158,21 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
           v = Voxel{};
           v.key = key;
           v.table_pos = static_cast<uint32_t>(pos);
+          v.index[0] = k[0], v.index[1] = k[1], v.index[2] = k[2];
           v.first[0] = v.lo[0] = v.hi[0] = px;
           v.first[1] = v.lo[1] = v.hi[1] = py;
           v.first[2] = v.lo[2] = v.hi[2] = pz;
+          if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
+            growTable(voxels);
+            table_mask = active_ - 1;
+          }
         }
         last_key = key;
         last_slot = slot;
+        recent_key_[line] = key;
+        recent_slot_[line] = slot;
       }
+    accumulate:
       Voxel& v = voxels_[slot];
       v.sx += static_cast<double>(px) - v.first[0];
       v.sy += static_cast<double>(py) - v.first[1];
@@ -165,6 +189,22 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     }
   }
   clearTable(voxels);  // the table is empty again for the next frame
+  for (int r = 1; r < region_count; ++r) {
+    if (counts.in[r] == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t span = hi_index[r][a] - lo_index[r][a] + 1;
+      if (span > kMaxVoxelSpan) {
+        return {ErrorCode::kRangeExceeded,
+                "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) + " voxels of " +
+                    std::to_string(voxel_size_m[r]) + " m along " + axisName(a) + ", more than " +
+                    std::to_string(kMaxVoxelSpan) + ": crop the cloud or raise fixation.min_m"};
+      }
+    }
+  }
+  if (too_many_voxels) {
+    return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
+                                              " occupied voxels: raise pipeline.max_voxels"};
+  }
 
   const std::size_t fovea = counts.in[0];
   if (fovea + voxels > out.points.capacity()) {
@@ -197,12 +237,19 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
 
   // The occupied voxels in key order (keys are unique: no ties to keep stable).
   for (std::size_t s = 0; s < voxels; ++s) {
-    sort_keys_[s] = voxels_[s].key;
+    const Voxel& v = voxels_[s];
+    const auto r = static_cast<uint8_t>(v.key >> (3 * kVoxelAxisBits));
+    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);  // packed as the reference packs it
+    for (int a = 0; a < 3; ++a) {
+      key |= static_cast<uint64_t>(v.index[a] - lo_index[r][a]) << ((2 - a) * kVoxelAxisBits);
+    }
+    sort_keys_[s] = key;
     sort_slot_[s] = static_cast<uint32_t>(s);
   }
   radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
   for (std::size_t q = 0; q < voxels; ++q) {
     const uint32_t s = sort_slot_[q];
+    if (q + 8 < voxels) __builtin_prefetch(&voxels_[sort_slot_[q + 8]]);
     const Voxel& v = voxels_[s];
     out_pos_[s] = static_cast<uint32_t>(o);
     const uint64_t count = v.count;
