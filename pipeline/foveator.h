@@ -6,6 +6,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hal/result.h"
@@ -13,6 +14,7 @@
 #include "pipeline/fixation.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/kernels/kernel_set.h"
+#include "pipeline/kernels/worker_pool.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"
@@ -25,6 +27,10 @@ struct PipelineCapacity {
   // The kernels foveate() runs: the scalar reference or the SIMD set (identical
   // output; docs/kernels.md). Chosen once at start-up, FOVEA_FORCE_KERNEL overrides.
   KernelSet kernels = defaultKernelSet();
+  // Threads that share one frame's partition (kernels == kSimd; the reference runs
+  // on the calling thread). Created once by create(), in [1, 64]; the output does
+  // not depend on it.
+  int threads = 1;
 };
 
 struct FoveationConfig {
@@ -74,6 +80,7 @@ class Foveator {
 
  private:
   Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
+  void partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
 
   PipelineCapacity capacity_;
   FoveationConfig config_;
@@ -83,6 +90,8 @@ class Foveator {
   std::vector<double> t_scratch_;
   VoxelSampler sampler_;           // kernels == kRef (only the one in use is allocated)
   HashVoxelSampler hash_sampler_;  // kernels == kSimd
+  std::unique_ptr<WorkerPool> pool_;        // threads > 1 and kernels == kSimd
+  std::vector<uint32_t> part_histograms_;  // 256 per thread
 };
 
 }  // namespace fovea::pipeline

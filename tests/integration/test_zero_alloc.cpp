@@ -9,7 +9,7 @@
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
-#include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/backprojector.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/clouds.h"
 
@@ -25,11 +25,17 @@ TEST(ZeroAllocation, CounterSeesAllocations) {
   EXPECT_GE(scope.allocations(), 3u);
 }
 
-// Both kernel sets: the scalar references and the SIMD kernels with the hash sampler.
-class ZeroAllocationKernels : public ::testing::TestWithParam<pipeline::KernelSet> {};
+// Both kernel sets: the scalar references, and the SIMD kernels with the hash
+// sampler on one and on three threads.
+struct KernelChoice {
+  pipeline::KernelSet kernels;
+  int threads;
+};
+class ZeroAllocationKernels : public ::testing::TestWithParam<KernelChoice> {};
 
 TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
-  const pipeline::KernelSet kernels = GetParam();
+  const pipeline::KernelSet kernels = GetParam().kernels;
+  const int threads = GetParam().threads;
   Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit");
   ASSERT_TRUE(camera.isOk()) << camera.status().toString();
   hal::Camera& cam = *camera.value();
@@ -42,15 +48,16 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
   pipeline::PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
   pipeline::FoveationConfig config;
-  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, kernels}, config).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, kernels, threads}, config).value();
   pipeline::FoveationConfig f3 = config;
   f3.acuity.preset = pipeline::Preset::kF3;
 
+  pipeline::Backprojector backprojector(threads, kernels);
   auto runFrame = [&](int i) {
     pipeline::BackprojectCounts bc;
     pipeline::FoveationStats stats;
     if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
-    if (!pipeline::backproject(frame, pipeline::DepthRange{}, cloud, bc, kernels).isOk()) return false;
+    if (!backprojector.run(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;
     gaze.direction = frame.T_world_cam.R_world_cam.col(2) + Eigen::Vector3d(0.01 * (i % 7), 0.0, 0.0);
@@ -74,7 +81,7 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   std::vector<pipeline::PointCloud> clouds;
   for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
   pipeline::FoveatedCloud out(50000);
-  pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam()}, {}).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam().kernels, GetParam().threads}, {}).value();
   std::vector<pipeline::FoveationConfig> configs(4);
   configs[0].acuity.preset = pipeline::Preset::kF1;
   configs[1].acuity.preset = pipeline::Preset::kF2;
@@ -96,9 +103,12 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
 }
 
 INSTANTIATE_TEST_SUITE_P(KernelSets, ZeroAllocationKernels,
-                         ::testing::Values(pipeline::KernelSet::kRef, pipeline::KernelSet::kSimd),
-                         [](const ::testing::TestParamInfo<pipeline::KernelSet>& info) {
-                           return std::string(pipeline::kernelSetName(info.param));
+                         ::testing::Values(KernelChoice{pipeline::KernelSet::kRef, 1},
+                                           KernelChoice{pipeline::KernelSet::kSimd, 1},
+                                           KernelChoice{pipeline::KernelSet::kSimd, 3}),
+                         [](const ::testing::TestParamInfo<KernelChoice>& info) {
+                           return std::string(pipeline::kernelSetName(info.param.kernels)) + "_" +
+                                  std::to_string(info.param.threads) + "_threads";
                          });
 
 }  // namespace
