@@ -14,32 +14,32 @@ namespace {
 
 // As the reference: |index| below 2^52 converts to int64 exactly.
 constexpr double kMaxAbsIndex = 4503599627370496.0;
+constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 256 KiB
+constexpr uint32_t kNoSlot = UINT32_MAX;
 
 const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
+uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
 }  // namespace
 
 HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxels)
-    : max_points_(max_points),
-      max_voxels_(max_voxels),
-      voxels_(max_voxels),
+    : max_voxels_(max_voxels),
+      voxel_key_(max_voxels),
+      voxel_table_pos_(max_voxels),
+      voxel_start_(max_voxels + 1),
+      voxel_cursor_(max_voxels),
       sort_keys_(max_voxels),
       sort_keys_scratch_(max_voxels),
       sort_slot_(max_voxels),
       sort_slot_scratch_(max_voxels),
-      out_pos_(max_voxels),
+      point_slot_(max_points),
+      order_(max_points),
       chunk_index_(3 * kChunk) {
-  const std::size_t entries = std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16));
-  table_.assign(entries, Entry{kEmpty, 0});
+  table_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), Entry{kEmpty, 0});
 }
 
-namespace {
-constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 256 KiB
-uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
-}  // namespace
-
 void HashVoxelSampler::clearTable(std::size_t voxels) {
-  for (std::size_t s = 0; s < voxels; ++s) table_[voxels_[s].table_pos].key = kEmpty;
+  for (std::size_t s = 0; s < voxels; ++s) table_[voxel_table_pos_[s]].key = kEmpty;
 }
 
 void HashVoxelSampler::growTable(std::size_t voxels) {
@@ -48,10 +48,10 @@ void HashVoxelSampler::growTable(std::size_t voxels) {
   --shift_;
   const std::size_t mask = active_ - 1;
   for (std::size_t s = 0; s < voxels; ++s) {
-    std::size_t pos = hashKey(voxels_[s].key) >> shift_;
+    std::size_t pos = hashKey(voxel_key_[s]) >> shift_;
     while (table_[pos].key != kEmpty) pos = (pos + 1) & mask;
-    table_[pos] = Entry{voxels_[s].key, static_cast<uint32_t>(s)};
-    voxels_[s].table_pos = static_cast<uint32_t>(pos);
+    table_[pos] = Entry{voxel_key_[s], static_cast<uint32_t>(s)};
+    voxel_table_pos_[s] = static_cast<uint32_t>(pos);
   }
 }
 
@@ -63,14 +63,14 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   out.points.origin_m = in.origin_m;
   out.points.has_color = in.has_color;
   const std::size_t n = in.size();
-  if (n > max_points_) {
+  if (n > point_slot_.size()) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: cloud has " + std::to_string(n) + " points, capacity is " +
-                                              std::to_string(max_points_) + ": raise pipeline.max_points"};
+                                              std::to_string(point_slot_.size()) + ": raise pipeline.max_points"};
   }
   if (region_count < 1 || region_count > kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};
   }
-  // Regions outside [1, region_count) get 0: their (unused) indices stay finite or NaN.
+  // Regions outside [1, region_count) get 0: their indices are computed and ignored.
   std::array<double, 256> inv_voxel{};
   for (int r = 1; r < region_count; ++r) {
     const double v = voxel_size_m[r];
@@ -85,12 +85,8 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
   double* index[3] = {chunk_index_.data(), chunk_index_.data() + kChunk, chunk_index_.data() + 2 * kChunk};
 
-  // One pass: voxel indices (voxelIndexSimd, bit-exact with voxelIndex), the
-  // reference's checks (first bad index in point order; then spans; then the voxel
-  // count), and accumulation. The hash key wraps each index to its low 20 bits:
-  // unique within a region whose span fits 2^20 voxels, and a wider region is
-  // refused below anyway. The sort key (relative to the region's smallest index,
-  // as the reference packs it) is made per voxel once the ranges are known.
+  // 1. Indices, the reference's checks (first bad index in point order, then spans,
+  //    then the voxel count) and each point's voxel slot.
   int64_t lo_index[kMaxRegions][3], hi_index[kMaxRegions][3];
   for (auto& row : lo_index) std::fill(std::begin(row), std::end(row), INT64_MAX);
   for (auto& row : hi_index) std::fill(std::begin(row), std::end(row), INT64_MIN);
@@ -99,16 +95,20 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   bool too_many_voxels = false;
   uint64_t last_key = kEmpty;
   uint32_t last_slot = 0;
-  active_ = std::min(table_.size(), kInitialTableEntries);
+  // Start where the previous frame ended (consecutive frames have similar voxel
+  // counts), so the steady state does not rehash; the output does not depend on it.
+  active_ = std::min(table_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
   shift_ = 64 - std::countr_zero(active_);
-  uint64_t table_mask = active_ - 1;
+  std::size_t table_mask = active_ - 1;
   recent_key_.fill(kEmpty);
+  uint32_t* point_slot = point_slot_.data();
   for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
     const std::size_t len = std::min(kChunk, n - c0);
     for (int a = 0; a < 3; ++a) voxelIndexSimd(coord[a] + c0, region + c0, len, origin[a], inv_voxel.data(), index[a]);
     for (std::size_t q = 0; q < len; ++q) {
       const std::size_t i = c0 + q;
       const uint8_t r = region[i];
+      point_slot[i] = kNoSlot;
       if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
       ++counts.in[r];
       if (r == 0) continue;
@@ -130,65 +130,42 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
                            ((static_cast<uint64_t>(k[0]) & kAxisMask) << (2 * kVoxelAxisBits)) |
                            ((static_cast<uint64_t>(k[1]) & kAxisMask) << kVoxelAxisBits) |
                            (static_cast<uint64_t>(k[2]) & kAxisMask);
-      const float px = coord[0][i], py = coord[1][i], pz = coord[2][i];
-      uint32_t slot = last_slot;
       if (key != last_key) {
         const uint64_t hash = hashKey(key);
-        // A small direct-mapped cache in front of the table: the few voxels a run
-        // of rows keeps returning to stay in L1.
         const std::size_t line = hash >> (64 - kRecentBits);
         if (recent_key_[line] == key) {
-          slot = recent_slot_[line];
-          last_key = key;
-          last_slot = slot;
-          goto accumulate;
-        }
-        std::size_t pos = hash >> shift_;
-        while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
-        if (table_[pos].key == key) {
-          slot = table_[pos].slot;
+          last_slot = recent_slot_[line];
         } else {
-          if (voxels == max_voxels_) {
-            too_many_voxels = true;
-            continue;
+          std::size_t pos = hash >> shift_;
+          while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
+          if (table_[pos].key == key) {
+            last_slot = table_[pos].slot;
+          } else {
+            if (voxels == max_voxels_) {
+              too_many_voxels = true;
+              continue;
+            }
+            last_slot = static_cast<uint32_t>(voxels++);
+            table_[pos] = Entry{key, last_slot};
+            voxel_key_[last_slot] = key;
+            voxel_table_pos_[last_slot] = static_cast<uint32_t>(pos);
+            voxel_start_[last_slot] = 0;
+            if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
+              growTable(voxels);
+              table_mask = active_ - 1;
+            }
           }
-          slot = static_cast<uint32_t>(voxels++);
-          table_[pos] = Entry{key, slot};
-          Voxel& v = voxels_[slot];
-          v = Voxel{};
-          v.key = key;
-          v.table_pos = static_cast<uint32_t>(pos);
-          v.index[0] = k[0], v.index[1] = k[1], v.index[2] = k[2];
-          v.first[0] = v.lo[0] = v.hi[0] = px;
-          v.first[1] = v.lo[1] = v.hi[1] = py;
-          v.first[2] = v.lo[2] = v.hi[2] = pz;
-          if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
-            growTable(voxels);
-            table_mask = active_ - 1;
-          }
+          recent_key_[line] = key;
+          recent_slot_[line] = last_slot;
         }
         last_key = key;
-        last_slot = slot;
-        recent_key_[line] = key;
-        recent_slot_[line] = slot;
       }
-    accumulate:
-      Voxel& v = voxels_[slot];
-      v.sx += static_cast<double>(px) - v.first[0];
-      v.sy += static_cast<double>(py) - v.first[1];
-      v.sz += static_cast<double>(pz) - v.first[2];
-      v.lo[0] = std::min(v.lo[0], px), v.hi[0] = std::max(v.hi[0], px);
-      v.lo[1] = std::min(v.lo[1], py), v.hi[1] = std::max(v.hi[1], py);
-      v.lo[2] = std::min(v.lo[2], pz), v.hi[2] = std::max(v.hi[2], pz);
-      const uint32_t c = in.rgb()[i];
-      v.sr += rgbRed(c);
-      v.sg += rgbGreen(c);
-      v.sb += rgbBlue(c);
-      ++v.count;
-      if (representative) representative[i] = slot;  // remapped to the output index below
+      point_slot[i] = last_slot;
+      ++voxel_start_[last_slot];
     }
   }
   clearTable(voxels);  // the table is empty again for the next frame
+  last_voxels_ = voxels;
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
     for (int a = 0; a < 3; ++a) {
@@ -205,12 +182,41 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
                                               " occupied voxels: raise pipeline.max_voxels"};
   }
-
   const std::size_t fovea = counts.in[0];
   if (fovea + voxels > out.points.capacity()) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
                                               " points, capacity is " + std::to_string(out.points.capacity())};
   }
+
+  // 2. Group the points by voxel (counting sort; input order within a voxel).
+  uint32_t start = 0;
+  for (std::size_t s = 0; s < voxels; ++s) {
+    const uint32_t count = voxel_start_[s];
+    voxel_start_[s] = start;
+    voxel_cursor_[s] = start;
+    start += count;
+  }
+  voxel_start_[voxels] = start;
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint32_t s = point_slot[i];
+    if (s != kNoSlot) order_[voxel_cursor_[s]++] = static_cast<uint32_t>(i);
+  }
+
+  // 3. The occupied voxels in the reference's key order (keys are unique: no ties).
+  //    Within the span, k - lo is (wrapped k - wrapped lo) mod 2^20: no index is recomputed.
+  for (std::size_t s = 0; s < voxels; ++s) {
+    const uint64_t hash_key = voxel_key_[s];
+    const auto r = static_cast<uint8_t>(hash_key >> (3 * kVoxelAxisBits));
+    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+    for (int a = 0; a < 3; ++a) {
+      const int shift = (2 - a) * kVoxelAxisBits;
+      const uint64_t wrapped = (hash_key >> shift) & kAxisMask;
+      key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift;
+    }
+    sort_keys_[s] = key;
+    sort_slot_[s] = static_cast<uint32_t>(s);
+  }
+  radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
 
   // The fovea, untouched and in input order.
   std::size_t o = 0;
@@ -219,9 +225,8 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   float* oz = out.points.z();
   uint32_t* orgb = out.points.rgb();
   for (std::size_t i = 0; i < n; ++i) {
-    const uint8_t r = region[i];
-    if (r != 0) {
-      if (representative && r >= region_count) representative[i] = kNoRepresentative;
+    if (region[i] != 0) {
+      if (representative) representative[i] = kNoRepresentative;  // set below for sampled points
       continue;
     }
     if (representative) representative[i] = static_cast<uint32_t>(o);
@@ -235,41 +240,44 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   }
   counts.out[0] = static_cast<uint32_t>(fovea);
 
-  // The occupied voxels in key order (keys are unique: no ties to keep stable).
-  for (std::size_t s = 0; s < voxels; ++s) {
-    const Voxel& v = voxels_[s];
-    const auto r = static_cast<uint8_t>(v.key >> (3 * kVoxelAxisBits));
-    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);  // packed as the reference packs it
-    for (int a = 0; a < 3; ++a) {
-      key |= static_cast<uint64_t>(v.index[a] - lo_index[r][a]) << ((2 - a) * kVoxelAxisBits);
-    }
-    sort_keys_[s] = key;
-    sort_slot_[s] = static_cast<uint32_t>(s);
-  }
-  radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
+  // 4. One centroid per voxel: the reference's reduction over the same points in
+  //    the same order.
   for (std::size_t q = 0; q < voxels; ++q) {
-    const uint32_t s = sort_slot_[q];
-    if (q + 8 < voxels) __builtin_prefetch(&voxels_[sort_slot_[q + 8]]);
-    const Voxel& v = voxels_[s];
-    out_pos_[s] = static_cast<uint32_t>(o);
-    const uint64_t count = v.count;
+    const uint32_t slot = sort_slot_[q];
+    const std::size_t s = voxel_start_[slot];
+    const std::size_t e = voxel_start_[slot + 1];
+    const uint32_t first = order_[s];
+    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
+    double sx = 0.0, sy = 0.0, sz = 0.0;
+    uint64_t sr = 0, sg = 0, sb = 0;
+    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
+    for (std::size_t p = s; p < e; ++p) {
+      const uint32_t i = order_[p];
+      if (representative) representative[i] = static_cast<uint32_t>(o);
+      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
+      sx += static_cast<double>(px) - fx;
+      sy += static_cast<double>(py) - fy;
+      sz += static_cast<double>(pz) - fz;
+      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
+      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
+      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
+      const uint32_t c = in.rgb()[i];
+      sr += rgbRed(c);
+      sg += rgbGreen(c);
+      sb += rgbBlue(c);
+    }
+    const auto count = static_cast<uint64_t>(e - s);
     const double inv_count = 1.0 / static_cast<double>(count);
-    ox[o] = std::clamp(static_cast<float>(v.first[0] + v.sx * inv_count), v.lo[0], v.hi[0]);
-    oy[o] = std::clamp(static_cast<float>(v.first[1] + v.sy * inv_count), v.lo[1], v.hi[1]);
-    oz[o] = std::clamp(static_cast<float>(v.first[2] + v.sz * inv_count), v.lo[2], v.hi[2]);
-    orgb[o] = packRgb(static_cast<uint8_t>((v.sr + count / 2) / count), static_cast<uint8_t>((v.sg + count / 2) / count),
-                      static_cast<uint8_t>((v.sb + count / 2) / count));
-    const auto r = static_cast<uint8_t>(v.key >> (3 * kVoxelAxisBits));
+    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
+    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
+    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
+    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
+                      static_cast<uint8_t>((sb + count / 2) / count));
+    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));
     out.region[o] = r;
     out.weight[o] = static_cast<uint32_t>(count);
     ++counts.out[r];
     ++o;
-  }
-  if (representative) {
-    for (std::size_t i = 0; i < n; ++i) {
-      const uint8_t r = region[i];
-      if (r != 0 && r < region_count) representative[i] = out_pos_[representative[i]];
-    }
   }
   (void)out.points.resize(o);
   return Status::ok();

@@ -1,24 +1,24 @@
 // The fast voxel sampler: same contract and the same output as VoxelSampler (the
-// reference), without sorting the points.
+// reference), without radix-sorting the points.
 //
-// Per point, the voxel key (region, i, j, k packed exactly as the reference packs
-// it) is looked up in a preallocated open-addressing hash table (power-of-two size
-// >= 2 max_voxels, linear probing, multiplicative hash); consecutive points of an
-// image usually share a voxel, so the last key and its slot are cached and most
-// points skip the lookup. The table in use starts at a cache-friendly size and
-// doubles (within the preallocated memory) when half full, so a frame with few
-// voxels does not pay for cache misses all over a table sized for the worst case. Each voxel accumulates, in input order, exactly what the
-// reference accumulates after its stable sort (sums in double relative to the
-// voxel's first point, float min/max, integer colour sums), so centroids, colours
-// and weights are bit-identical. Only the occupied voxels (far fewer than points)
-// are then radix-sorted by key, which gives the reference's order (region, i, j, k).
-// Voxel indices come from voxelIndexSimd in chunks (bit-exact with voxelIndex()),
-// computed once per point (the reference computes them twice).
+// 1. One pass over the points computes their voxel indices (voxelIndexSimd, 2048
+//    points at a time, bit-exact with voxelIndex()), makes the reference's checks
+//    and gives each sampled point the slot of its voxel, found through the previous
+//    point's voxel (image coherence), a small direct-mapped cache of recent voxels,
+//    then a preallocated open-addressing hash table (power of two >= 2 max_voxels,
+//    linear probing; a frame starts on a prefix sized from the previous frame's
+//    voxel count, at least 16 Ki entries, and doubles it when half full). The key is the region and the indices wrapped to 20 bits: unique within
+//    the span the reference allows, and a wider region is refused anyway.
+// 2. A counting sort groups the points by slot, keeping input order within a voxel.
+// 3. Only the occupied voxels (far fewer than points) are radix-sorted, by the
+//    reference's packed key (region, i, j, k relative to the region's smallest index).
+// 4. Each voxel's points are reduced with the reference's code in the reference's
+//    order, so centroids, colours and weights are bit-identical.
+// Per point it keeps 8 bytes (slot and grouped index) where the reference keeps 24.
 // All memory is allocated by the constructor; sample() never allocates.
 //
-// Differences from the reference, by design: with more than max_voxels occupied
-// voxels it stops at the first voxel too many (the error says "more than"), and
-// the error paths leave `out` empty either way.
+// A difference by design: with more than max_voxels occupied voxels it stops
+// counting at the first voxel too many (the error says "more than").
 #pragma once
 
 #include <array>
@@ -43,7 +43,7 @@ class HashVoxelSampler {
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out, SampleCounts& counts,
                 uint32_t* representative = nullptr);
 
-  std::size_t maxPoints() const { return max_points_; }
+  std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
   std::size_t tableSize() const { return table_.size(); }
 
@@ -54,35 +54,29 @@ class HashVoxelSampler {
     uint64_t key;
     uint32_t slot;
   };
-  struct Voxel {
-    uint64_t key;       // the hash key (indices wrapped to 20 bits)
-    int64_t index[3];   // the voxel's world indices
-    double sx, sy, sz;
-    uint64_t sr, sg, sb;
-    float first[3];
-    float lo[3], hi[3];
-    uint32_t count;
-    uint32_t table_pos;
-  };
   static constexpr uint64_t kEmpty = UINT64_MAX;  // keys never set bit 63
+  static constexpr int kRecentBits = 10;
 
   void clearTable(std::size_t voxels);
   // Doubles the table's active prefix and reinserts the voxels found so far.
   void growTable(std::size_t voxels);
 
-  std::size_t max_points_ = 0;
   std::size_t max_voxels_ = 0;
-  // The table in use this frame is the prefix [0, active_) of table_: it starts
-  // small (cache-resident) and doubles when half full, up to table_.size().
-  std::size_t active_ = 0;
+  std::size_t active_ = 0;  // entries of table_ in use this frame (a power of two)
+  std::size_t last_voxels_ = 0;
   int shift_ = 64;
   std::vector<Entry> table_;
-  std::vector<Voxel> voxels_;
+  // Per voxel slot (max_voxels).
+  std::vector<uint64_t> voxel_key_;         // the hash key
+  std::vector<uint32_t> voxel_table_pos_;   // where it sits in table_
+  std::vector<uint32_t> voxel_start_;       // count, then start of its points in order_ (max_voxels + 1)
+  std::vector<uint32_t> voxel_cursor_;
   std::vector<uint64_t> sort_keys_, sort_keys_scratch_;
   std::vector<uint32_t> sort_slot_, sort_slot_scratch_;
-  std::vector<uint32_t> out_pos_;
-  std::vector<double> chunk_index_;  // 3 * kChunk voxel indices
-  static constexpr int kRecentBits = 10;
+  // Per point (max_points).
+  std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot
+  std::vector<uint32_t> order_;       // point indices grouped by slot, input order within
+  std::vector<double> chunk_index_;   // 3 * kChunk voxel indices
   std::array<uint64_t, std::size_t{1} << kRecentBits> recent_key_{};
   std::array<uint32_t, std::size_t{1} << kRecentBits> recent_slot_{};
 };
