@@ -46,6 +46,7 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
   if (capacity.kernels == KernelSet::kSimd && capacity.threads > 1) {
     pool_ = std::make_unique<WorkerPool>(capacity.threads);
     part_histograms_.assign(static_cast<std::size_t>(capacity.threads) * 256, 0);
+    hash_sampler_.setWorkerPool(pool_.get());
   }
 }
 

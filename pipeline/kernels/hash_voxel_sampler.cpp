@@ -22,6 +22,19 @@ uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
 }  // namespace
 
+struct HashVoxelSampler::ReduceJob {
+  HashVoxelSampler* self;
+  const PointCloud* in;
+  FoveatedCloud* out;
+  std::size_t voxels;
+  std::size_t fovea;
+  uint32_t* representative;
+};
+
+namespace {
+
+}  // namespace
+
 HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxels)
     : max_voxels_(max_voxels),
       voxel_key_(max_voxels),
@@ -38,6 +51,11 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
   table_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), Entry{kEmpty, 0});
 }
 
+void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
+  pool_ = pool;
+  part_counts_.assign(pool ? kMaxRegions * static_cast<std::size_t>(pool->parts()) : 0, 0);
+}
+
 void HashVoxelSampler::clearTable(std::size_t voxels) {
   for (std::size_t s = 0; s < voxels; ++s) table_[voxel_table_pos_[s]].key = kEmpty;
 }
@@ -52,6 +70,51 @@ void HashVoxelSampler::growTable(std::size_t voxels) {
     while (table_[pos].key != kEmpty) pos = (pos + 1) & mask;
     table_[pos] = Entry{voxel_key_[s], static_cast<uint32_t>(s)};
     voxel_table_pos_[s] = static_cast<uint32_t>(pos);
+  }
+}
+
+void HashVoxelSampler::reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end,
+                                    std::size_t fovea, uint32_t* representative, uint32_t* region_counts) const {
+  float* ox = out.points.x();
+  float* oy = out.points.y();
+  float* oz = out.points.z();
+  uint32_t* orgb = out.points.rgb();
+  for (std::size_t q = q_begin; q < q_end; ++q) {
+    const std::size_t o = fovea + q;
+    const uint32_t slot = sort_slot_[q];
+    const std::size_t s = voxel_start_[slot];
+    const std::size_t e = voxel_start_[slot + 1];
+    const uint32_t first = order_[s];
+    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
+    double sx = 0.0, sy = 0.0, sz = 0.0;
+    uint64_t sr = 0, sg = 0, sb = 0;
+    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
+    for (std::size_t p = s; p < e; ++p) {
+      const uint32_t i = order_[p];
+      if (representative) representative[i] = static_cast<uint32_t>(o);
+      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
+      sx += static_cast<double>(px) - fx;
+      sy += static_cast<double>(py) - fy;
+      sz += static_cast<double>(pz) - fz;
+      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
+      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
+      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
+      const uint32_t c = in.rgb()[i];
+      sr += rgbRed(c);
+      sg += rgbGreen(c);
+      sb += rgbBlue(c);
+    }
+    const auto count = static_cast<uint64_t>(e - s);
+    const double inv_count = 1.0 / static_cast<double>(count);
+    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
+    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
+    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
+    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
+                      static_cast<uint8_t>((sb + count / 2) / count));
+    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));
+    out.region[o] = r;
+    out.weight[o] = static_cast<uint32_t>(count);
+    ++region_counts[r];
   }
 }
 
@@ -241,44 +304,27 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   counts.out[0] = static_cast<uint32_t>(fovea);
 
   // 4. One centroid per voxel: the reference's reduction over the same points in
-  //    the same order.
-  for (std::size_t q = 0; q < voxels; ++q) {
-    const uint32_t slot = sort_slot_[q];
-    const std::size_t s = voxel_start_[slot];
-    const std::size_t e = voxel_start_[slot + 1];
-    const uint32_t first = order_[s];
-    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
-    double sx = 0.0, sy = 0.0, sz = 0.0;
-    uint64_t sr = 0, sg = 0, sb = 0;
-    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
-    for (std::size_t p = s; p < e; ++p) {
-      const uint32_t i = order_[p];
-      if (representative) representative[i] = static_cast<uint32_t>(o);
-      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
-      sx += static_cast<double>(px) - fx;
-      sy += static_cast<double>(py) - fy;
-      sz += static_cast<double>(pz) - fz;
-      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
-      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
-      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
-      const uint32_t c = in.rgb()[i];
-      sr += rgbRed(c);
-      sg += rgbGreen(c);
-      sb += rgbBlue(c);
+  //    the same order. Voxels are independent and their output places fixed
+  //    (fovea + rank), so threads can share them without changing a bit.
+  if (pool_ != nullptr && pool_->parts() > 1 && voxels >= 1024) {
+    ReduceJob job{this, &in, &out, voxels, fovea, representative};
+    pool_->run(
+        [](void* ctx, int part, int parts) {
+          auto* j = static_cast<ReduceJob*>(ctx);
+          uint32_t* region_counts = j->self->part_counts_.data() + kMaxRegions * static_cast<std::size_t>(part);
+          std::fill(region_counts, region_counts + kMaxRegions, 0u);
+          j->self->reduceVoxels(*j->in, *j->out, WorkerPool::rangeBegin(j->voxels, part, parts),
+                                WorkerPool::rangeBegin(j->voxels, part + 1, parts), j->fovea, j->representative,
+                                region_counts);
+        },
+        &job);
+    for (int part = 0; part < pool_->parts(); ++part) {
+      for (int r = 1; r < kMaxRegions; ++r) counts.out[r] += part_counts_[kMaxRegions * static_cast<std::size_t>(part) + r];
     }
-    const auto count = static_cast<uint64_t>(e - s);
-    const double inv_count = 1.0 / static_cast<double>(count);
-    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
-    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
-    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
-    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
-                      static_cast<uint8_t>((sb + count / 2) / count));
-    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));
-    out.region[o] = r;
-    out.weight[o] = static_cast<uint32_t>(count);
-    ++counts.out[r];
-    ++o;
+  } else {
+    reduceVoxels(in, out, 0, voxels, fovea, representative, counts.out.data());
   }
+  o += voxels;
   (void)out.points.resize(o);
   return Status::ok();
 }

@@ -13,7 +13,8 @@
 // 3. Only the occupied voxels (far fewer than points) are radix-sorted, by the
 //    reference's packed key (region, i, j, k relative to the region's smallest index).
 // 4. Each voxel's points are reduced with the reference's code in the reference's
-//    order, so centroids, colours and weights are bit-identical.
+//    order, so centroids, colours and weights are bit-identical (split across a
+//    WorkerPool's threads when one is set: every voxel's output place is fixed).
 // Per point it keeps 8 bytes (slot and grouped index) where the reference keeps 24.
 // All memory is allocated by the constructor; sample() never allocates.
 //
@@ -28,6 +29,7 @@
 
 #include "hal/result.h"
 #include "pipeline/acuity.h"
+#include "pipeline/kernels/worker_pool.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -43,6 +45,10 @@ class HashVoxelSampler {
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out, SampleCounts& counts,
                 uint32_t* representative = nullptr);
 
+  // Lets step 4 (one centroid per voxel) share the pool's threads; the output is
+  // the same. The pool must outlive the sampler's use of it; null: one thread.
+  void setWorkerPool(WorkerPool* pool);
+
   std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
   std::size_t tableSize() const { return table_.size(); }
@@ -57,6 +63,9 @@ class HashVoxelSampler {
   static constexpr uint64_t kEmpty = UINT64_MAX;  // keys never set bit 63
   static constexpr int kRecentBits = 10;
 
+  struct ReduceJob;
+  void reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end, std::size_t fovea,
+                    uint32_t* representative, uint32_t* region_counts) const;
   void clearTable(std::size_t voxels);
   // Doubles the table's active prefix and reinserts the voxels found so far.
   void growTable(std::size_t voxels);
@@ -79,6 +88,8 @@ class HashVoxelSampler {
   std::vector<double> chunk_index_;   // 3 * kChunk voxel indices
   std::array<uint64_t, std::size_t{1} << kRecentBits> recent_key_{};
   std::array<uint32_t, std::size_t{1} << kRecentBits> recent_slot_{};
+  WorkerPool* pool_ = nullptr;
+  std::vector<uint32_t> part_counts_;  // kMaxRegions per pool part
 };
 
 }  // namespace fovea::pipeline
