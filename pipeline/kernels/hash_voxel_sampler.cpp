@@ -22,6 +22,14 @@ uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
 }  // namespace
 
+struct HashVoxelSampler::KeyJob {
+  HashVoxelSampler* self;
+  const PointCloud* in;
+  const uint8_t* region;
+  int region_count;
+  const double* inv_voxel;
+};
+
 struct HashVoxelSampler::ReduceJob {
   HashVoxelSampler* self;
   const PointCloud* in;
@@ -46,14 +54,19 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       sort_slot_(max_voxels),
       sort_slot_scratch_(max_voxels),
       point_slot_(max_points),
+      point_key_(max_points),
       order_(max_points),
-      chunk_index_(3 * kChunk) {
+      chunk_index_(3 * kChunk),
+      part_keys_(1) {
   table_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), Entry{kEmpty, 0});
 }
 
 void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
   pool_ = pool;
-  part_counts_.assign(pool ? kMaxRegions * static_cast<std::size_t>(pool->parts()) : 0, 0);
+  const std::size_t parts = pool ? static_cast<std::size_t>(pool->parts()) : 1;
+  part_counts_.assign(kMaxRegions * parts, 0);
+  part_keys_.assign(parts, PartKeys{});
+  chunk_index_.assign(3 * kChunk * parts, 0.0);
 }
 
 void HashVoxelSampler::clearTable(std::size_t voxels) {
@@ -118,6 +131,56 @@ void HashVoxelSampler::reduceVoxels(const PointCloud& in, FoveatedCloud& out, st
   }
 }
 
+void HashVoxelSampler::computeKeys(const KeyJob& job, int part, int parts) {
+  const PointCloud& in = *job.in;
+  const std::size_t n = in.size();
+  const std::size_t begin = WorkerPool::rangeBegin(n, part, parts);
+  const std::size_t end = WorkerPool::rangeBegin(n, part + 1, parts);
+  PartKeys& pk = part_keys_[static_cast<std::size_t>(part)];
+  pk = PartKeys{};
+  for (auto& row : pk.lo) std::fill(std::begin(row), std::end(row), INT64_MAX);
+  for (auto& row : pk.hi) std::fill(std::begin(row), std::end(row), INT64_MIN);
+  const float* coord[3] = {in.x(), in.y(), in.z()};
+  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
+  double* chunk = chunk_index_.data() + 3 * kChunk * static_cast<std::size_t>(part);
+  double* index[3] = {chunk, chunk + kChunk, chunk + 2 * kChunk};
+  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
+  uint64_t* point_key = point_key_.data();
+  for (std::size_t c0 = begin; c0 < end; c0 += kChunk) {
+    const std::size_t len = std::min(kChunk, end - c0);
+    for (int a = 0; a < 3; ++a) {
+      voxelIndexSimd(coord[a] + c0, job.region + c0, len, origin[a], job.inv_voxel, index[a]);
+    }
+    for (std::size_t q = 0; q < len; ++q) {
+      const std::size_t i = c0 + q;
+      const uint8_t r = job.region[i];
+      point_key[i] = kEmpty;
+      if (r >= job.region_count) continue;  // kRegionInvalid: already counted by the partition
+      ++pk.in[r];
+      if (r == 0) continue;
+      int64_t k[3];
+      for (int a = 0; a < 3; ++a) {
+        const double d = index[a][q];
+        if (!(std::fabs(d) < kMaxAbsIndex)) {
+          pk.bad = true;
+          pk.bad_point = i;
+          pk.bad_axis = a;
+          pk.bad_value = d;
+          pk.bad_region = r;
+          return;
+        }
+        k[a] = static_cast<int64_t>(d);
+        pk.lo[r][a] = std::min(pk.lo[r][a], k[a]);
+        pk.hi[r][a] = std::max(pk.hi[r][a], k[a]);
+      }
+      point_key[i] = (uint64_t{r} << (3 * kVoxelAxisBits)) |
+                     ((static_cast<uint64_t>(k[0]) & kAxisMask) << (2 * kVoxelAxisBits)) |
+                     ((static_cast<uint64_t>(k[1]) & kAxisMask) << kVoxelAxisBits) |
+                     (static_cast<uint64_t>(k[2]) & kAxisMask);
+    }
+  }
+}
+
 Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                                 SampleCounts& counts, uint32_t* representative) {
@@ -144,91 +207,38 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     inv_voxel[r] = 1.0 / v;
   }
 
-  const float* coord[3] = {in.x(), in.y(), in.z()};
-  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
-  double* index[3] = {chunk_index_.data(), chunk_index_.data() + kChunk, chunk_index_.data() + 2 * kChunk};
-
-  // 1. Indices, the reference's checks (first bad index in point order, then spans,
-  //    then the voxel count) and each point's voxel slot.
+  // 1a. Each point's voxel indices (voxelIndexSimd), the index check, the ranges
+  //     and the hash key: the region and the indices wrapped to 20 bits. Contiguous
+  //     ranges of points on the pool's threads, each with its own ranges and first
+  //     bad point; merged in point order, so the outcome is the single-threaded one.
+  KeyJob job{this, &in, region, region_count, inv_voxel.data()};
+  const int parts = (pool_ != nullptr && n >= 4 * kChunk) ? pool_->parts() : 1;
+  if (parts > 1) {
+    pool_->run([](void* ctx, int part, int count) { static_cast<KeyJob*>(ctx)->self->computeKeys(
+                                                        *static_cast<KeyJob*>(ctx), part, count); },
+               &job);
+  } else {
+    computeKeys(job, 0, 1);
+  }
   int64_t lo_index[kMaxRegions][3], hi_index[kMaxRegions][3];
   for (auto& row : lo_index) std::fill(std::begin(row), std::end(row), INT64_MAX);
   for (auto& row : hi_index) std::fill(std::begin(row), std::end(row), INT64_MIN);
-  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
-  std::size_t voxels = 0;
-  bool too_many_voxels = false;
-  uint64_t last_key = kEmpty;
-  uint32_t last_slot = 0;
-  // Start where the previous frame ended (consecutive frames have similar voxel
-  // counts), so the steady state does not rehash; the output does not depend on it.
-  active_ = std::min(table_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
-  shift_ = 64 - std::countr_zero(active_);
-  std::size_t table_mask = active_ - 1;
-  recent_key_.fill(kEmpty);
-  uint32_t* point_slot = point_slot_.data();
-  for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
-    const std::size_t len = std::min(kChunk, n - c0);
-    for (int a = 0; a < 3; ++a) voxelIndexSimd(coord[a] + c0, region + c0, len, origin[a], inv_voxel.data(), index[a]);
-    for (std::size_t q = 0; q < len; ++q) {
-      const std::size_t i = c0 + q;
-      const uint8_t r = region[i];
-      point_slot[i] = kNoSlot;
-      if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
-      ++counts.in[r];
-      if (r == 0) continue;
-      int64_t k[3];
+  for (int part = 0; part < parts; ++part) {
+    const PartKeys& pk = part_keys_[static_cast<std::size_t>(part)];
+    if (pk.bad) {  // the first part with a bad index holds the first bad point
+      return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(pk.bad_region) + " point " +
+                                             std::to_string(pk.bad_point) + " has voxel index " +
+                                             std::to_string(pk.bad_value) + " along " + axisName(pk.bad_axis) +
+                                             " (not a finite coordinate within range)"};
+    }
+    for (int r = 0; r < kMaxRegions; ++r) {
+      counts.in[r] += pk.in[r];
       for (int a = 0; a < 3; ++a) {
-        const double d = index[a][q];
-        if (!(std::fabs(d) < kMaxAbsIndex)) {
-          clearTable(voxels);
-          return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(r) + " point " +
-                                                 std::to_string(i) + " has voxel index " + std::to_string(d) +
-                                                 " along " + axisName(a) + " (not a finite coordinate within range)"};
-        }
-        k[a] = static_cast<int64_t>(d);
-        lo_index[r][a] = std::min(lo_index[r][a], k[a]);
-        hi_index[r][a] = std::max(hi_index[r][a], k[a]);
+        lo_index[r][a] = std::min(lo_index[r][a], pk.lo[r][a]);
+        hi_index[r][a] = std::max(hi_index[r][a], pk.hi[r][a]);
       }
-      if (too_many_voxels) continue;  // still looking for the errors the reference reports first
-      const uint64_t key = (uint64_t{r} << (3 * kVoxelAxisBits)) |
-                           ((static_cast<uint64_t>(k[0]) & kAxisMask) << (2 * kVoxelAxisBits)) |
-                           ((static_cast<uint64_t>(k[1]) & kAxisMask) << kVoxelAxisBits) |
-                           (static_cast<uint64_t>(k[2]) & kAxisMask);
-      if (key != last_key) {
-        const uint64_t hash = hashKey(key);
-        const std::size_t line = hash >> (64 - kRecentBits);
-        if (recent_key_[line] == key) {
-          last_slot = recent_slot_[line];
-        } else {
-          std::size_t pos = hash >> shift_;
-          while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
-          if (table_[pos].key == key) {
-            last_slot = table_[pos].slot;
-          } else {
-            if (voxels == max_voxels_) {
-              too_many_voxels = true;
-              continue;
-            }
-            last_slot = static_cast<uint32_t>(voxels++);
-            table_[pos] = Entry{key, last_slot};
-            voxel_key_[last_slot] = key;
-            voxel_table_pos_[last_slot] = static_cast<uint32_t>(pos);
-            voxel_start_[last_slot] = 0;
-            if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
-              growTable(voxels);
-              table_mask = active_ - 1;
-            }
-          }
-          recent_key_[line] = key;
-          recent_slot_[line] = last_slot;
-        }
-        last_key = key;
-      }
-      point_slot[i] = last_slot;
-      ++voxel_start_[last_slot];
     }
   }
-  clearTable(voxels);  // the table is empty again for the next frame
-  last_voxels_ = voxels;
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
     for (int a = 0; a < 3; ++a) {
@@ -241,10 +251,64 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
       }
     }
   }
-  if (too_many_voxels) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
-                                              " occupied voxels: raise pipeline.max_voxels"};
+
+  // 1b. Each point's voxel slot, through the previous point's voxel, the recent
+  //     cache and the table (wrapped keys are unique now that the spans fit).
+  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
+  std::size_t voxels = 0;
+  uint64_t last_key = kEmpty;
+  uint32_t last_slot = 0;
+  // Start where the previous frame ended (consecutive frames have similar voxel
+  // counts), so the steady state does not rehash; the output does not depend on it.
+  active_ = std::min(table_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
+  shift_ = 64 - std::countr_zero(active_);
+  std::size_t table_mask = active_ - 1;
+  recent_key_.fill(kEmpty);
+  uint32_t* point_slot = point_slot_.data();
+  const uint64_t* point_key = point_key_.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint64_t key = point_key[i];
+    if (key == kEmpty) {  // fovea or skipped
+      point_slot[i] = kNoSlot;
+      continue;
+    }
+    if (key != last_key) {
+      const uint64_t hash = hashKey(key);
+      const std::size_t line = hash >> (64 - kRecentBits);
+      if (recent_key_[line] == key) {
+        last_slot = recent_slot_[line];
+      } else {
+        std::size_t pos = hash >> shift_;
+        while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
+        if (table_[pos].key == key) {
+          last_slot = table_[pos].slot;
+        } else {
+          if (voxels == max_voxels_) {
+            clearTable(voxels);
+            last_voxels_ = voxels;
+            return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
+                                                      " occupied voxels: raise pipeline.max_voxels"};
+          }
+          last_slot = static_cast<uint32_t>(voxels++);
+          table_[pos] = Entry{key, last_slot};
+          voxel_key_[last_slot] = key;
+          voxel_table_pos_[last_slot] = static_cast<uint32_t>(pos);
+          voxel_start_[last_slot] = 0;
+          if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
+            growTable(voxels);
+            table_mask = active_ - 1;
+          }
+        }
+        recent_key_[line] = key;
+        recent_slot_[line] = last_slot;
+      }
+      last_key = key;
+    }
+    point_slot[i] = last_slot;
+    ++voxel_start_[last_slot];
   }
+  clearTable(voxels);  // the table is empty again for the next frame
+  last_voxels_ = voxels;
   const std::size_t fovea = counts.in[0];
   if (fovea + voxels > out.points.capacity()) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +

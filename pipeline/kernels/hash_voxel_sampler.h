@@ -1,9 +1,10 @@
 // The fast voxel sampler: same contract and the same output as VoxelSampler (the
 // reference), without radix-sorting the points.
 //
-// 1. One pass over the points computes their voxel indices (voxelIndexSimd, 2048
-//    points at a time, bit-exact with voxelIndex()), makes the reference's checks
-//    and gives each sampled point the slot of its voxel, found through the previous
+// 1. A pass over the points (split across the worker pool's threads, if any)
+//    computes their voxel indices (voxelIndexSimd, 2048 points at a time, bit-exact
+//    with voxelIndex()), makes the reference's checks and a hash key per point; a
+//    second, sequential one gives each sampled point the slot of its voxel, found through the previous
 //    point's voxel (image coherence), a small direct-mapped cache of recent voxels,
 //    then a preallocated open-addressing hash table (power of two >= 2 max_voxels,
 //    linear probing; a frame starts on a prefix sized from the previous frame's
@@ -15,7 +16,7 @@
 // 4. Each voxel's points are reduced with the reference's code in the reference's
 //    order, so centroids, colours and weights are bit-identical (split across a
 //    WorkerPool's threads when one is set: every voxel's output place is fixed).
-// Per point it keeps 8 bytes (slot and grouped index) where the reference keeps 24.
+// Per point it keeps 16 bytes (key, slot, grouped index) where the reference keeps 24.
 // All memory is allocated by the constructor; sample() never allocates.
 //
 // A difference by design: with more than max_voxels occupied voxels it stops
@@ -64,6 +65,19 @@ class HashVoxelSampler {
   static constexpr int kRecentBits = 10;
 
   struct ReduceJob;
+  struct KeyJob;
+  // Per pool part: what step 1a found in its range of points.
+  struct PartKeys {
+    std::array<uint32_t, kMaxRegions> in{};
+    int64_t lo[kMaxRegions][3];
+    int64_t hi[kMaxRegions][3];
+    bool bad = false;  // a voxel index out of range: the first such point of the part
+    std::size_t bad_point = 0;
+    int bad_axis = 0;
+    double bad_value = 0.0;
+    uint8_t bad_region = 0;
+  };
+  void computeKeys(const KeyJob& job, int part, int parts);
   void reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end, std::size_t fovea,
                     uint32_t* representative, uint32_t* region_counts) const;
   void clearTable(std::size_t voxels);
@@ -84,8 +98,10 @@ class HashVoxelSampler {
   std::vector<uint32_t> sort_slot_, sort_slot_scratch_;
   // Per point (max_points).
   std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot
+  std::vector<uint64_t> point_key_;   // hash key, or kEmpty (fovea, skipped)
   std::vector<uint32_t> order_;       // point indices grouped by slot, input order within
-  std::vector<double> chunk_index_;   // 3 * kChunk voxel indices
+  std::vector<double> chunk_index_;   // 3 * kChunk voxel indices per pool part
+  std::vector<PartKeys> part_keys_;
   std::array<uint64_t, std::size_t{1} << kRecentBits> recent_key_{};
   std::array<uint32_t, std::size_t{1} << kRecentBits> recent_slot_{};
   WorkerPool* pool_ = nullptr;

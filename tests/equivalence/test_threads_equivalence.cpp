@@ -12,6 +12,7 @@
 #include "hal/camera.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
+#include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/kernels/worker_pool.h"
 #include "tests/support/clouds.h"
 
@@ -163,6 +164,62 @@ TEST(Threads, MockCameraPipelineIsIdenticalForOneToFourThreads) {
     EXPECT_TRUE(sameFoveated(expected, out)) << threads << " threads";
   }
   cam.stop();
+}
+
+TEST(Threads, HashSamplerOnAPoolMatchesTheReferenceIncludingErrors) {
+  std::mt19937_64 rng(63);
+  const std::size_t n = 40000;
+  PointCloud base = test::randomCloud(n, Eigen::Vector3d(-1e4, 0, 1e4), 3.0f, 64);
+  std::vector<uint8_t> region(n);
+  for (auto& r : region) r = static_cast<uint8_t>(rng() % 4);
+  struct Case {
+    const char* what;
+    std::size_t bad_point;  // n: none
+    float bad_value;
+    std::array<double, kMaxRegions> voxel_m;
+    std::size_t max_voxels;
+  };
+  const Case cases[] = {
+      {"ok", n, 0.0f, {0, 0.01, 0.05, 0.2}, n},
+      {"nan early", 5, std::numeric_limits<float>::quiet_NaN(), {0, 0.01, 0.05, 0.2}, n},
+      {"inf late", n - 3, std::numeric_limits<float>::infinity(), {0, 0.01, 0.05, 0.2}, n},
+      {"huge in the middle", n / 2 + 1, 3e38f, {0, 0.01, 0.05, 0.2}, n},
+      {"span", n, 0.0f, {0, 1e-6, 0.05, 0.2}, n},
+      {"too many voxels", n, 0.0f, {0, 0.01, 0.05, 0.2}, 1000},
+  };
+  for (const Case& c : cases) {
+    PointCloud cloud = base;
+    std::vector<uint8_t> reg = region;
+    if (c.bad_point < n) {
+      cloud.y()[c.bad_point] = c.bad_value;
+      reg[c.bad_point] = 2;
+      cloud.x()[c.bad_point + 2] = c.bad_value;  // a second bad point after it
+      reg[c.bad_point + 2] = 1;
+    }
+    VoxelSampler ref(n, c.max_voxels);
+    FoveatedCloud expected(n);
+    SampleCounts ce;
+    std::vector<uint32_t> rep_expected(n);
+    const Status se = ref.sample(cloud, reg.data(), 4, c.voxel_m, expected, ce, rep_expected.data());
+    for (int threads = 1; threads <= 4; ++threads) {
+      WorkerPool pool(threads);
+      HashVoxelSampler fast(n, c.max_voxels);
+      fast.setWorkerPool(&pool);
+      FoveatedCloud out(n);
+      SampleCounts cf;
+      std::vector<uint32_t> rep(n);
+      const Status sf = fast.sample(cloud, reg.data(), 4, c.voxel_m, out, cf, rep.data());
+      ASSERT_EQ(se.code(), sf.code()) << c.what << ", " << threads << " threads: " << sf.toString();
+      if (se.code() == ErrorCode::kRangeExceeded) {
+        EXPECT_EQ(se.message(), sf.message()) << c.what;
+      }
+      if (!se) continue;
+      EXPECT_TRUE(sameFoveated(expected, out)) << c.what << ", " << threads << " threads";
+      EXPECT_EQ(rep_expected, rep) << c.what;
+      EXPECT_EQ(ce.in, cf.in);
+      EXPECT_EQ(ce.out, cf.out);
+    }
+  }
 }
 
 TEST(Threads, ThreadCountIsValidated) {
