@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <numbers>
@@ -16,6 +17,7 @@
 #include <Eigen/Geometry>
 
 #include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
@@ -54,6 +56,17 @@ TEST(SimdTargets, ListWhichTargetsRun) {
     EXPECT_EQ(activeSimdTarget(), t);
   }
   forceSimdTarget(0);
+}
+
+TEST(KernelSelection, TheEnvironmentChoosesTheDefaultOnce) {
+  EXPECT_EQ(parseKernelSet("ref"), KernelSet::kRef);
+  EXPECT_EQ(parseKernelSet("simd"), KernelSet::kSimd);
+  EXPECT_EQ(parseKernelSet("SIMD"), std::nullopt);
+  const char* env = std::getenv("FOVEA_FORCE_KERNEL");
+  const KernelSet expected = (env != nullptr && std::string(env) == "ref") ? KernelSet::kRef : KernelSet::kSimd;
+  EXPECT_EQ(defaultKernelSet(), expected) << "FOVEA_FORCE_KERNEL=" << (env ? env : "(unset)");
+  EXPECT_EQ(PipelineCapacity{}.kernels, expected);
+  std::printf("default kernel set: %s\n", std::string(kernelSetName(defaultKernelSet())).c_str());
 }
 
 // ---- back-projection --------------------------------------------------------
