@@ -8,14 +8,19 @@
 // gives every row the same input.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <thread>
 #include <vector>
 
 #include "bench/bench_input.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
 #include "pipeline/foveator.h"
+#include "pipeline/kernels/backprojector.h"
+#include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -60,7 +65,8 @@ struct Fixture {
       std::exit(1);
     }
     f->points = f->cloud.size();
-    pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, f->config).value();
+    pipeline::Foveator foveator =
+        pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f->config).value();
     pipeline::FoveatedCloud out(pixels);
     pipeline::FoveationStats stats;
     if (Status s = foveator.foveate(f->cloud, f->gaze, out, stats); !s) {
@@ -126,7 +132,7 @@ void bmVoxelSampleRef(benchmark::State& state) {
 void bmFoveatorRef(benchmark::State& state) {
   Fixture& f = Fixture::get();
   pipeline::Foveator foveator =
-      pipeline::Foveator::create({f.cloud.size(), f.cloud.size()}, f.config).value();
+      pipeline::Foveator::create({f.cloud.size(), f.cloud.size(), pipeline::KernelSet::kRef, 1}, f.config).value();
   pipeline::FoveatedCloud out(f.cloud.size());
   pipeline::FoveationStats stats;
   for (auto _ : state) {
@@ -141,7 +147,8 @@ void bmFoveatorRef(benchmark::State& state) {
 void bmPipelineRef(benchmark::State& state) {
   Fixture& f = Fixture::get();
   const std::size_t pixels = f.input.frame.pixelCount();
-  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, f.config).value();
+  pipeline::Foveator foveator =
+      pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f.config).value();
   PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
   pipeline::BackprojectCounts bc;
@@ -155,6 +162,71 @@ void bmPipelineRef(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
+
+// --- The SIMD kernels (Highway, the target dispatch picks) --------------------
+
+void bmBackprojectSimd(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  PointCloud out(f.input.frame.pixelCount());
+  pipeline::BackprojectCounts counts;
+  for (auto _ : state) {
+    Status s = pipeline::backprojectSimd(f.input.frame, f.range, out, counts);
+    benchmark::DoNotOptimize(s);
+    benchmark::DoNotOptimize(out.x());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+void bmPartitionSimd(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  std::vector<uint8_t> region(f.cloud.size());
+  pipeline::PartitionCounts counts;
+  for (auto _ : state) {
+    pipeline::partitionSimd(f.cloud, f.gaze, f.bounds, region.data(), counts);
+    benchmark::DoNotOptimize(region.data());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+void bmVoxelSampleHash(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  pipeline::HashVoxelSampler sampler(f.cloud.size(), f.cloud.size());
+  pipeline::FoveatedCloud out(f.cloud.size());
+  pipeline::SampleCounts counts;
+  for (auto _ : state) {
+    Status s = sampler.sample(f.cloud, f.region.data(), f.region_count, f.voxel_size_m, out, counts);
+    benchmark::DoNotOptimize(s);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+// The whole frame with the SIMD kernel set on `threads` threads.
+void pipelineSimd(benchmark::State& state, int threads) {
+  Fixture& f = Fixture::get();
+  const std::size_t pixels = f.input.frame.pixelCount();
+  pipeline::Foveator foveator =
+      pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kSimd, threads}, f.config).value();
+  pipeline::Backprojector backprojector(threads, pipeline::KernelSet::kSimd);
+  PointCloud cloud(pixels);
+  pipeline::FoveatedCloud out(pixels);
+  pipeline::BackprojectCounts bc;
+  pipeline::FoveationStats stats;
+  for (auto _ : state) {
+    Status s = backprojector.run(f.input.frame, f.range, cloud, bc);
+    if (s) s = foveator.foveate(cloud, f.gaze, out, stats);
+    benchmark::DoNotOptimize(s);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+void bmPipelineSimd1(benchmark::State& state) { pipelineSimd(state, 1); }
+void bmPipelineSimdAll(benchmark::State& state) {
+  pipelineSimd(state, std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
+}
+
 struct KernelBench {
   const char* name;  // "<kernel>/<variant>"
   void (*run)(benchmark::State&);
@@ -166,11 +238,11 @@ const KernelBench kKernels[] = {
     {"voxel_sample/ref", &bmVoxelSampleRef},
     {"foveate/ref", &bmFoveatorRef},    // partition + fixation + voxel sampling
     {"pipeline/ref", &bmPipelineRef},   // back-projection + foveate
-    // SIMD kernels (issue 3) go here, one row each, e.g.
-    //   {"backproject/simd", &bmBackprojectSimd},
-    //   {"partition/simd", &bmPartitionSimd},
-    // with a function shaped like the _ref one above calling the SIMD entry point
-    // on the same Fixture. Rows for variants a build lacks can be #ifdef'ed out.
+    {"backproject/simd", &bmBackprojectSimd},
+    {"partition/simd", &bmPartitionSimd},
+    {"voxel_sample/hash", &bmVoxelSampleHash},
+    {"pipeline/simd-1t", &bmPipelineSimd1},
+    {"pipeline/simd-all-cores", &bmPipelineSimdAll},
 };
 
 }  // namespace
@@ -182,7 +254,8 @@ int main(int argc, char** argv) {
   }
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  std::fprintf(stderr, "input: %s\n", fovea::bench::Fixture::get().input.description.c_str());
+  std::fprintf(stderr, "input: %s; SIMD target %s\n", fovea::bench::Fixture::get().input.description.c_str(),
+               fovea::pipeline::simdTargetName(fovea::pipeline::activeSimdTarget()));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

@@ -18,6 +18,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <thread>
 #include <string_view>
 #include <tuple>
 #include <vector>
@@ -25,6 +26,8 @@
 #include "bench/bench_input.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "pipeline/kernels/backprojector.h"
+#include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
@@ -99,20 +102,23 @@ class FloorMethod final : public Method {
   volatile uint64_t sink_ = 0;
 };
 
-// (ii) fovea's scalar reference: backprojectRef + Foveator.
-class FoveaRefMethod final : public Method {
+// (ii)/(iii) fovea: back-projection from the depth image (or the given cloud)
+// through the foveated output, with the scalar reference kernels or the SIMD
+// kernels on `threads` threads. The outputs are identical (docs/kernels.md).
+class FoveaMethod final : public Method {
  public:
-  explicit FoveaRefMethod(const Input& input)
+  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads)
       : input_(input),
         capacity_(input.has_frame ? input.frame.pixelCount() : input.cloud.size()),
         cloud_(input.has_frame ? capacity_ : 0),
         out_(capacity_),
-        foveator_(pipeline::Foveator::create({capacity_, capacity_}, input.config).value()) {}
+        backprojector_(threads, kernels),
+        foveator_(pipeline::Foveator::create({capacity_, capacity_, kernels, threads}, input.config).value()) {}
   Status run() override {
     const PointCloud* in = &input_.cloud;
     if (input_.has_frame) {
       pipeline::BackprojectCounts counts;
-      if (Status s = pipeline::backprojectRef(input_.frame, input_.range, cloud_, counts); !s) return s;
+      if (Status s = backprojector_.run(input_.frame, input_.range, cloud_, counts); !s) return s;
       in = &cloud_;
     }
     return foveator_.foveate(*in, input_.gaze, out_, stats_);
@@ -139,9 +145,13 @@ class FoveaRefMethod final : public Method {
   std::size_t capacity_;
   PointCloud cloud_;
   pipeline::FoveatedCloud out_;
+  pipeline::Backprojector backprojector_;
   pipeline::Foveator foveator_;
   pipeline::FoveationStats stats_;
 };
+
+// Threads for the multi-threaded row: every core the process may use.
+int allCores() { return std::max(1, static_cast<int>(std::thread::hardware_concurrency())); }
 
 #ifdef FOVEA_HAVE_PCL
 // (i) The paper's method with PCL: back-projection (fovea's; PCL has no depth
@@ -193,15 +203,18 @@ const MethodEntry kMethods[] = {
 #else
     {"pcl", "paper's method with PCL (not built: PCL not found, FOVEA_WITH_PCL)", nullptr},
 #endif
-    {"fovea-ref", "fovea scalar reference: backprojectRef + Foveator",
-     [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FoveaRefMethod>(in); }},
-    // SIMD methods (issue 3) go here, one row each, with a Method subclass like
-    // FoveaRefMethod that calls the SIMD kernels, e.g.
-    //   {"fovea-simd-1t", "fovea SIMD kernels, one thread", &makeSimd1t},
-    //   {"fovea-simd-mt", "fovea SIMD kernels, all cores", &makeSimdMt},
-    // Until then they are listed with no numbers:
-    {"fovea-simd-1t", "fovea SIMD kernels, one thread (not implemented yet: issue 3)", nullptr},
-    {"fovea-simd-mt", "fovea SIMD kernels, multi-thread (not implemented yet: issue 3)", nullptr},
+    {"fovea-ref", "fovea scalar reference kernels: backprojectRef, partitionRef, radix-sort sampler",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kRef, 1);
+     }},
+    {"fovea-simd-1t", "fovea SIMD kernels (Highway) and hash sampler, one thread",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1);
+     }},
+    {"fovea-simd-mt", "fovea SIMD kernels and hash sampler, one thread per core",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, allCores());
+     }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
 };
@@ -441,6 +454,8 @@ int run(int argc, char** argv) {
   }
 
   std::printf("fovea-compare: %s\n", input.description.c_str());
+  std::printf("  SIMD target %s, %d cores for fovea-simd-mt\n", pipeline::simdTargetName(pipeline::activeSimdTarget()),
+              allCores());
   std::printf("  gaze origin (%.3f, %.3f, %.3f) m, direction (%.4f, %.4f, %.4f); preset %s, fixation hit; "
               "%zu input points; %d timed rounds (each method once per round) after one warm-up\n",
               input.gaze.origin_m.x(), input.gaze.origin_m.y(), input.gaze.origin_m.z(), input.gaze.direction.x(),
@@ -451,7 +466,7 @@ int run(int argc, char** argv) {
     Timing timing;
   };
   std::vector<Row> rows;
-  FoveaRefMethod* fovea_ref = nullptr;
+  FoveaMethod* fovea_ref = nullptr;
   std::vector<std::unique_ptr<Method>> methods;
   std::vector<Method*> by_row;
   for (const MethodEntry& entry : kMethods) {
@@ -460,7 +475,7 @@ int run(int argc, char** argv) {
     if (entry.make == nullptr) continue;
     methods.push_back(entry.make(input));
     by_row.back() = methods.back().get();
-    if (std::string_view(entry.name) == "fovea-ref") fovea_ref = static_cast<FoveaRefMethod*>(methods.back().get());
+    if (std::string_view(entry.name) == "fovea-ref") fovea_ref = static_cast<FoveaMethod*>(methods.back().get());
   }
   // One warm-up run each (caches, page faults, PCL's first allocations), then the
   // timed runs in rounds, every method once per round: a load change on the

@@ -11,6 +11,8 @@
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/io/ply.h"
+#include "pipeline/kernels/backprojector.h"
+#include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::firmware {
 
@@ -19,7 +21,7 @@ namespace {
 const char* kRunHelp =
     "usage: fovead run [--camera SPEC] [--frames N] [--gaze MODE | --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
     "                  [--preset F1|F2|F3|FREF] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
-    "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE]\n"
+    "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
     "\n"
     "Runs the foveation pipeline on a camera and prints, per frame and for the run,\n"
     "the points per region in and out, the voxel size per region, d0, and the time\n"
@@ -34,7 +36,11 @@ const char* kRunHelp =
     "  --gaze-dir X,Y,Z         gaze direction in world coordinates (any length > 0)\n"
     "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
     "  --every N                print every Nth frame (default 1; 0: summary only)\n"
-    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point)\n";
+    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point)\n"
+    "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
+    "                           SIMD kernels only; the output does not depend on it)\n"
+    "\n"
+    "FOVEA_FORCE_KERNEL=ref runs the scalar reference kernels instead of the SIMD ones.\n";
 
 enum class GazeMode { kSceneCentre, kAxis, kTarget, kWorld };
 
@@ -106,7 +112,7 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 
 int runCommand(int argc, char** argv) {
   std::vector<std::string> flags = {"--camera", "--frames", "--gaze", "--gaze-origin", "--gaze-dir",
-                                    "--depth-min", "--depth-max", "--every", "--save-ply"};
+                                    "--depth-min", "--depth-max", "--every", "--save-ply", "--threads"};
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
   Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h"});
   if (!args) {
@@ -127,6 +133,8 @@ int runCommand(int argc, char** argv) {
   if (!frames) return usage(frames.status());
   Result<long> every = parseInteger("--every", args->getOr("--every", "1"), 0, 100000000);
   if (!every) return usage(every.status());
+  Result<long> threads = parseInteger("--threads", args->getOr("--threads", "1"), 1, 64);
+  if (!threads) return usage(threads.status());
   pipeline::DepthRange range;
   if (const std::string* v = args->get("--depth-min")) {
     Result<double> d = parseDouble("--depth-min", *v);
@@ -157,7 +165,11 @@ int runCommand(int argc, char** argv) {
   hal::RgbdFrame frame(width, height);
   pipeline::PointCloud cloud(max_points);
   pipeline::FoveatedCloud out(max_points);
-  Result<pipeline::Foveator> foveator = pipeline::Foveator::create({max_points, max_points}, config.value());
+  const pipeline::KernelSet kernels = pipeline::defaultKernelSet();
+  const int thread_count = static_cast<int>(threads.value());
+  Result<pipeline::Foveator> foveator =
+      pipeline::Foveator::create({max_points, max_points, kernels, thread_count}, config.value());
+  pipeline::Backprojector backprojector(thread_count, kernels);
   if (!foveator) return usage(foveator.status());
   if (Status s = camera.start(); !s) {
     std::fprintf(stderr, "fovead run: camera %s: %s\n", info.name.c_str(), s.message().c_str());
@@ -167,6 +179,12 @@ int runCommand(int argc, char** argv) {
   std::printf("fovead run: camera %s %dx%d @ %g fps, depth %g..%g m\n", info.name.c_str(), width, height, info.fps,
               range.min_m, range.max_m);
   std::printf("foveation: %s\n", describeFoveation(config.value()).c_str());
+  if (kernels == pipeline::KernelSet::kSimd) {
+    std::printf("kernels: simd, target %s, %d thread%s (FOVEA_FORCE_KERNEL=ref for the references)\n",
+                pipeline::simdTargetName(pipeline::activeSimdTarget()), thread_count, thread_count == 1 ? "" : "s");
+  } else {
+    std::printf("kernels: ref (scalar references, one thread)\n");
+  }
   const pipeline::RegionModel& model = foveator->model();
   if (every.value() > 0) {
     std::printf("%5s %7s %7s %-8s", "frame", "valid", "d0[m]", "d0 from");
@@ -190,7 +208,7 @@ int runCommand(int argc, char** argv) {
     const double t_capture = msSince(t0);
     t0 = std::chrono::steady_clock::now();
     pipeline::BackprojectCounts bc;
-    if (Status s = pipeline::backprojectRef(frame, range, cloud, bc); !s) {
+    if (Status s = backprojector.run(frame, range, cloud, bc); !s) {
       std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;

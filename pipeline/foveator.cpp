@@ -1,6 +1,9 @@
 #include "pipeline/foveator.h"
 
+#include <algorithm>
 #include <chrono>
+
+#include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::pipeline {
 
@@ -16,6 +19,9 @@ int64_t nowNs() {
 Result<Foveator> Foveator::create(const PipelineCapacity& capacity, const FoveationConfig& config) {
   if (capacity.max_points == 0 || capacity.max_points > UINT32_MAX) {
     return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_points: must be in [1, 2^32)");
+  }
+  if (capacity.threads < 1 || capacity.threads > 64) {
+    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.threads: must be in [1, 64]");
   }
   if (capacity.max_voxels == 0) {
     return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_voxels: must be at least 1");
@@ -33,7 +39,48 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
       bounds_(ConeBounds::fromModel(model)),
       region_(capacity.max_points),
       t_scratch_(capacity.max_points),
-      sampler_(capacity.max_points, capacity.max_voxels) {}
+      sampler_(capacity.kernels == KernelSet::kRef ? VoxelSampler(capacity.max_points, capacity.max_voxels)
+                                                   : VoxelSampler()),
+      hash_sampler_(capacity.kernels == KernelSet::kSimd ? HashVoxelSampler(capacity.max_points, capacity.max_voxels)
+                                                         : HashVoxelSampler()) {
+  if (capacity.kernels == KernelSet::kSimd && capacity.threads > 1) {
+    pool_ = std::make_unique<WorkerPool>(capacity.threads);
+    part_histograms_.assign(static_cast<std::size_t>(capacity.threads) * 256, 0);
+    hash_sampler_.setWorkerPool(pool_.get());
+  }
+}
+
+namespace {
+
+struct PartitionJob {
+  const PointCloud* cloud;
+  const kernels::PartitionParams* params;
+  uint8_t* region;
+  uint32_t* histograms;  // 256 per part
+};
+
+void partitionPart(void* ctx, int part, int parts) {
+  auto* job = static_cast<PartitionJob*>(ctx);
+  const std::size_t n = job->cloud->size();
+  uint32_t* histogram = job->histograms + 256 * static_cast<std::size_t>(part);
+  std::fill(histogram, histogram + 256, 0u);
+  kernels::partitionRange(*job->cloud, *job->params, WorkerPool::rangeBegin(n, part, parts),
+                          WorkerPool::rangeBegin(n, part + 1, parts), job->region, histogram);
+}
+
+}  // namespace
+
+void Foveator::partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+  const kernels::PartitionParams params = kernels::preparePartition(in, gaze, bounds_);
+  PartitionJob job{&in, &params, region_.data(), part_histograms_.data()};
+  pool_->run(partitionPart, &job);
+  counts = {};
+  for (int part = 0; part < pool_->parts(); ++part) {
+    const uint32_t* histogram = part_histograms_.data() + 256 * static_cast<std::size_t>(part);
+    for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] += histogram[r];
+    counts.invalid += histogram[kRegionInvalid];
+  }
+}
 
 Status Foveator::setConfig(const FoveationConfig& config) {
   if (Status s = config.fixation.validate(); !s) return s;
@@ -60,15 +107,24 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
 
   const int64_t t0 = nowNs();
   PartitionCounts partition_counts;
-  partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  if (pool_) {
+    partitionParallel(in, unit_gaze.value(), partition_counts);
+  } else if (capacity_.kernels == KernelSet::kSimd) {
+    partitionSimd(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  } else {
+    partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
+  }
   const int64_t t1 = nowNs();
   stats.fixation = computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();
   SampleCounts sample_counts;
-  Status sampled = sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
-                                    representative);
+  Status sampled = capacity_.kernels == KernelSet::kSimd
+                       ? hash_sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out,
+                                              sample_counts, representative)
+                       : sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
+                                         representative);
   const int64_t t3 = nowNs();
 
   stats.partition_ns = t1 - t0;

@@ -6,11 +6,15 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hal/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/fixation.h"
+#include "pipeline/kernels/hash_voxel_sampler.h"
+#include "pipeline/kernels/kernel_set.h"
+#include "pipeline/kernels/worker_pool.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"
@@ -20,6 +24,13 @@ namespace fovea::pipeline {
 struct PipelineCapacity {
   std::size_t max_points = 640 * 480;  // points per input cloud
   std::size_t max_voxels = 640 * 480;  // occupied voxels per output cloud
+  // The kernels foveate() runs: the scalar reference or the SIMD set (identical
+  // output; docs/kernels.md). Chosen once at start-up, FOVEA_FORCE_KERNEL overrides.
+  KernelSet kernels = defaultKernelSet();
+  // Threads that share one frame's partition and voxel reduction (kernels == kSimd; the reference runs
+  // on the calling thread). Created once by create(), in [1, 64]; the output does
+  // not depend on it.
+  int threads = 1;
 };
 
 struct FoveationConfig {
@@ -69,6 +80,7 @@ class Foveator {
 
  private:
   Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
+  void partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
 
   PipelineCapacity capacity_;
   FoveationConfig config_;
@@ -76,7 +88,10 @@ class Foveator {
   ConeBounds bounds_;
   std::vector<uint8_t> region_;
   std::vector<double> t_scratch_;
-  VoxelSampler sampler_;
+  VoxelSampler sampler_;           // kernels == kRef (only the one in use is allocated)
+  HashVoxelSampler hash_sampler_;  // kernels == kSimd
+  std::unique_ptr<WorkerPool> pool_;        // threads > 1 and kernels == kSimd
+  std::vector<uint32_t> part_histograms_;  // 256 per thread
 };
 
 }  // namespace fovea::pipeline

@@ -12,6 +12,7 @@
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "pipeline/kernels/backprojector.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/clouds.h"
 
@@ -27,7 +28,17 @@ TEST(ZeroAllocation, CounterSeesAllocations) {
   EXPECT_GE(scope.allocations(), 3u);
 }
 
-TEST(ZeroAllocation, HundredMockFramesAfterWarmUp) {
+// Both kernel sets: the scalar references, and the SIMD kernels with the hash
+// sampler on one and on three threads.
+struct KernelChoice {
+  pipeline::KernelSet kernels;
+  int threads;
+};
+class ZeroAllocationKernels : public ::testing::TestWithParam<KernelChoice> {};
+
+TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
+  const pipeline::KernelSet kernels = GetParam().kernels;
+  const int threads = GetParam().threads;
   Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit");
   ASSERT_TRUE(camera.isOk()) << camera.status().toString();
   hal::Camera& cam = *camera.value();
@@ -40,15 +51,16 @@ TEST(ZeroAllocation, HundredMockFramesAfterWarmUp) {
   pipeline::PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
   pipeline::FoveationConfig config;
-  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, config).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, kernels, threads}, config).value();
   pipeline::FoveationConfig f3 = config;
   f3.acuity.preset = pipeline::Preset::kF3;
 
+  pipeline::Backprojector backprojector(threads, kernels);
   auto runFrame = [&](int i) {
     pipeline::BackprojectCounts bc;
     pipeline::FoveationStats stats;
     if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
-    if (!pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
+    if (!backprojector.run(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;
     gaze.direction = frame.T_world_cam.R_world_cam.col(2) + Eigen::Vector3d(0.01 * (i % 7), 0.0, 0.0);
@@ -71,7 +83,9 @@ TEST(ZeroAllocation, HundredMockFramesAfterWarmUp) {
 #ifdef FOVEA_HAVE_PNG
 // The same on real frames: the 60 TUM frames of shared/data, looped (open()
 // decodes them all; acquire() must only copy).
-TEST(ZeroAllocation, HundredTumFramesAfterWarmUp) {
+TEST_P(ZeroAllocationKernels, HundredTumFramesAfterWarmUp) {
+  const pipeline::KernelSet kernels = GetParam().kernels;
+  const int threads = GetParam().threads;
   const char* shared = std::getenv("FOVEA_SHARED_DIR");
   const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
   if (path.empty() || !std::ifstream(path + "/associations.txt")) {
@@ -86,12 +100,13 @@ TEST(ZeroAllocation, HundredTumFramesAfterWarmUp) {
   hal::RgbdFrame frame(640, 480);
   pipeline::PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
-  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, {}).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, kernels, threads}, {}).value();
+  pipeline::Backprojector backprojector(threads, kernels);
   auto runFrame = [&] {
     pipeline::BackprojectCounts bc;
     pipeline::FoveationStats stats;
     if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
-    if (!pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
+    if (!backprojector.run(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;
     gaze.direction = frame.T_world_cam.R_world_cam.col(2);
@@ -109,11 +124,11 @@ TEST(ZeroAllocation, HundredTumFramesAfterWarmUp) {
 }
 #endif
 
-TEST(ZeroAllocation, FoveatingRandomCloudsWithEveryPreset) {
+TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   std::vector<pipeline::PointCloud> clouds;
   for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
   pipeline::FoveatedCloud out(50000);
-  pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000}, {}).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam().kernels, GetParam().threads}, {}).value();
   std::vector<pipeline::FoveationConfig> configs(4);
   configs[0].acuity.preset = pipeline::Preset::kF1;
   configs[1].acuity.preset = pipeline::Preset::kF2;
@@ -133,6 +148,15 @@ TEST(ZeroAllocation, FoveatingRandomCloudsWithEveryPreset) {
   EXPECT_TRUE(all_ok);
   EXPECT_EQ(allocations, 0u);
 }
+
+INSTANTIATE_TEST_SUITE_P(KernelSets, ZeroAllocationKernels,
+                         ::testing::Values(KernelChoice{pipeline::KernelSet::kRef, 1},
+                                           KernelChoice{pipeline::KernelSet::kSimd, 1},
+                                           KernelChoice{pipeline::KernelSet::kSimd, 3}),
+                         [](const ::testing::TestParamInfo<KernelChoice>& info) {
+                           return std::string(pipeline::kernelSetName(info.param.kernels)) + "_" +
+                                  std::to_string(info.param.threads) + "_threads";
+                         });
 
 }  // namespace
 }  // namespace fovea

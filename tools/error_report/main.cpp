@@ -301,7 +301,9 @@ int run(int argc, char** argv) {
       runs.push_back(std::move(r));
     }
   }
-  Result<pipeline::Foveator> foveator = pipeline::Foveator::create({max_points, max_points}, runs.front().config);
+  // The scalar reference kernels: the report's time column says so.
+  Result<pipeline::Foveator> foveator =
+      pipeline::Foveator::create({max_points, max_points, pipeline::KernelSet::kRef, 1}, runs.front().config);
   if (!foveator) {
     std::fprintf(stderr, "fovea-error-report: %s\n", foveator.status().message().c_str());
     return kExitUsage;

@@ -1,0 +1,44 @@
+// Back-projection with the selected kernel and, for the SIMD kernel, rows split
+// across a fixed pool of threads (created here, never per frame).
+//
+// With `threads` > 1 each thread first counts the valid pixels of its block of
+// rows; the prefix sums give every block its place in the output, so the cloud is
+// identical, point for point, to the single-threaded one (and to backprojectRef).
+// The reference kernel set always runs on the calling thread: it is the spec.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "hal/frame.h"
+#include "hal/result.h"
+#include "pipeline/backproject.h"
+#include "pipeline/kernels/kernel_set.h"
+#include "pipeline/kernels/worker_pool.h"
+#include "pipeline/point_cloud.h"
+
+namespace fovea::pipeline {
+
+inline constexpr int kMaxPipelineThreads = 64;
+
+class Backprojector {
+ public:
+  // threads is clamped to [1, kMaxPipelineThreads].
+  explicit Backprojector(int threads = 1, KernelSet kernels = defaultKernelSet());
+
+  // Same contract as backprojectRef. Never allocates.
+  Status run(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out, BackprojectCounts& counts);
+
+  int threads() const { return pool_->parts(); }
+  KernelSet kernels() const { return kernels_; }
+
+ private:
+  struct Part {
+    std::size_t valid = 0, no_depth = 0, out_of_range = 0, offset = 0;
+  };
+  KernelSet kernels_;
+  std::unique_ptr<WorkerPool> pool_;
+  std::vector<Part> parts_;
+};
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,240 @@
+// Per-target bodies of the SIMD kernels; compiled once per Highway target by
+// foveation_simd.cpp (through hwy/foreach_target.h). Every function that calls a
+// Highway op sits between HWY_BEFORE_NAMESPACE and HWY_AFTER_NAMESPACE (GCC 12 on
+// aarch64 refuses to inline the ops otherwise).
+//
+// Bit-exactness rules followed here: only Mul, Add, Sub, Neg, Sqrt, Floor and
+// conversions, in the reference's order; never MulAdd (an FMA on AVX2/NEON).
+// Tails shorter than a vector run through the same vector code on a padded copy.
+
+// Per-target include guard (Highway's toggle idiom).
+#if defined(FOVEA_PIPELINE_KERNELS_FOVEATION_SIMD_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef FOVEA_PIPELINE_KERNELS_FOVEATION_SIMD_INL_H_
+#undef FOVEA_PIPELINE_KERNELS_FOVEATION_SIMD_INL_H_
+#else
+#define FOVEA_PIPELINE_KERNELS_FOVEATION_SIMD_INL_H_
+#endif
+
+#include <cstring>
+
+#include "hwy/highway.h"
+#include "pipeline/kernels/foveation_simd.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace fovea::pipeline::kernels {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// ---- back-projection --------------------------------------------------------
+
+inline std::size_t BackprojectCountRowsT(const BackprojectParams& p, int row0, int row1, std::size_t* no_depth,
+                                         std::size_t* out_of_range) {
+  const hn::ScalableTag<int32_t> di;
+  const hn::Rebind<uint16_t, decltype(di)> du16;
+  const hn::RebindToUnsigned<decltype(di)> du32;
+  const std::size_t lanes = hn::Lanes(di);
+  const auto lo = hn::Set(di, p.raw_min - 1);
+  const auto hi = hn::Set(di, p.raw_max + 1);
+  const auto zero = hn::Zero(di);
+  std::size_t valid = 0, none = 0, pixels = 0;
+  for (int v = row0; v < row1; ++v) {
+    const uint16_t* row = p.depth + static_cast<std::size_t>(v) * p.width;
+    const auto w = static_cast<std::size_t>(p.width);
+    std::size_t u = 0;
+    for (; u + lanes <= w; u += lanes) {
+      const auto raw = hn::BitCast(di, hn::PromoteTo(du32, hn::LoadU(du16, row + u)));
+      valid += hn::CountTrue(di, hn::And(hn::Gt(raw, lo), hn::Lt(raw, hi)));
+      none += hn::CountTrue(di, hn::Eq(raw, zero));
+    }
+    for (; u < w; ++u) {  // counting needs no padding trick: it is integer work
+      const int32_t raw = row[u];
+      valid += (raw >= p.raw_min && raw <= p.raw_max);
+      none += (raw == 0);
+    }
+    pixels += w;
+  }
+  *no_depth += none;
+  *out_of_range += pixels - valid - none;
+  return valid;
+}
+
+// One vector of pixels starting at column u; depth from `src` (the row, or a padded
+// copy of its tail). Writes the valid ones at out + n through CompressBlendedStore
+// (which writes only the selected lanes) and returns the new n.
+template <class DF>
+HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, const uint16_t* src, int u,
+                                         hn::Vec<DF> yn, float* ox, float* oy, float* oz, std::size_t n) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du32;
+  const hn::Rebind<uint16_t, DF> du16;
+  const auto raw = hn::BitCast(di, hn::PromoteTo(du32, hn::LoadU(du16, src)));
+  const auto valid = hn::And(hn::Gt(raw, hn::Set(di, p.raw_min - 1)), hn::Lt(raw, hn::Set(di, p.raw_max + 1)));
+  const auto mask = hn::RebindMask(df, valid);
+  // z = float(raw) * scale; x = ((float(u) - cx) * inv_fx) * z; y = yn * z
+  const auto z = hn::Mul(hn::ConvertTo(df, raw), hn::Set(df, p.scale));
+  const auto uf = hn::ConvertTo(df, hn::Iota(di, u));
+  const auto x = hn::Mul(hn::Mul(hn::Sub(uf, hn::Set(df, p.cx)), hn::Set(df, p.inv_fx)), z);
+  const auto y = hn::Mul(yn, z);
+  // p = (r0 x + r1 y) + r2 z per output axis, no FMA.
+  const auto wx = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[0]), x), hn::Mul(hn::Set(df, p.r[1]), y)),
+                          hn::Mul(hn::Set(df, p.r[2]), z));
+  const auto wy = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[3]), x), hn::Mul(hn::Set(df, p.r[4]), y)),
+                          hn::Mul(hn::Set(df, p.r[5]), z));
+  const auto wz = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[6]), x), hn::Mul(hn::Set(df, p.r[7]), y)),
+                          hn::Mul(hn::Set(df, p.r[8]), z));
+  hn::CompressBlendedStore(wx, mask, df, ox + n);
+  hn::CompressBlendedStore(wy, mask, df, oy + n);
+  return n + hn::CompressBlendedStore(wz, mask, df, oz + n);
+}
+
+inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std::size_t out_offset) {
+  const hn::ScalableTag<float> df;
+  const std::size_t lanes = hn::Lanes(df);
+  const auto w = static_cast<std::size_t>(p.width);
+  std::size_t n = out_offset;
+  HWY_ALIGN uint16_t tail_depth[HWY_MAX_BYTES / sizeof(float)];
+  HWY_ALIGN float tail_x[HWY_MAX_BYTES / sizeof(float)];
+  HWY_ALIGN float tail_y[HWY_MAX_BYTES / sizeof(float)];
+  HWY_ALIGN float tail_z[HWY_MAX_BYTES / sizeof(float)];
+  for (int v = row0; v < row1; ++v) {
+    const float yn_scalar = (static_cast<float>(v) - p.cy) * p.inv_fy;  // as the reference
+    const auto yn = hn::Set(df, yn_scalar);
+    const std::size_t row_start = static_cast<std::size_t>(v) * w;
+    const uint16_t* row = p.depth + row_start;
+    const std::size_t n_row = n;
+    std::size_t u = 0;
+    for (; u + lanes <= w; u += lanes) {
+      n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n);
+    }
+    if (u < w) {
+      // The tail: zero-padded depth (0 is never valid), results staged and copied.
+      std::memset(tail_depth, 0, sizeof tail_depth);
+      std::memcpy(tail_depth, row + u, (w - u) * sizeof(uint16_t));
+      const std::size_t got = BackprojectVector(df, p, tail_depth, static_cast<int>(u), yn, tail_x, tail_y, tail_z, 0);
+      std::memcpy(p.out_x + n, tail_x, got * sizeof(float));
+      std::memcpy(p.out_y + n, tail_y, got * sizeof(float));
+      std::memcpy(p.out_z + n, tail_z, got * sizeof(float));
+      n += got;
+    }
+    // Colours: the same pixels in the same order (a scalar gather of 3 bytes).
+    std::size_t c = n_row;
+    for (std::size_t q = 0; q < w; ++q) {
+      const int32_t raw = row[q];
+      if (raw < p.raw_min || raw > p.raw_max) continue;
+      const uint8_t* px = p.rgb + 3 * (row_start + q);
+      p.out_rgb[c++] = p.has_rgb ? packRgb(px[0], px[1], px[2]) : 0u;
+    }
+  }
+}
+
+// ---- partition ----------------------------------------------------------------
+
+// Regions of one vector of points (x, y, z: float arrays of at least Lanes(dd)).
+template <class DD>
+HWY_INLINE void PartitionVector(DD dd, const PartitionParams& p, const float* xs, const float* ys, const float* zs,
+                                double* region_out) {
+  const hn::Rebind<float, DD> df;
+  const auto px = hn::PromoteTo(dd, hn::LoadU(df, xs));
+  const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
+  const auto pz = hn::PromoteTo(dd, hn::LoadU(df, zs));
+  const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
+  const auto vx = hn::Add(hn::Set(dd, p.origin_minus_eye[0]), px);
+  const auto vy = hn::Add(hn::Set(dd, p.origin_minus_eye[1]), py);
+  const auto vz = hn::Add(hn::Set(dd, p.origin_minus_eye[2]), pz);
+  const auto lx = hn::Set(dd, p.l[0]);
+  const auto ly = hn::Set(dd, p.l[1]);
+  const auto lz = hn::Set(dd, p.l[2]);
+  // t = vx lx + vy ly + vz lz (left to right); r = v - t l; d = sqrt(rx^2 + ry^2 + rz^2)
+  const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
+  const auto rx = hn::Sub(vx, hn::Mul(t, lx));
+  const auto ry = hn::Sub(vy, hn::Mul(t, ly));
+  const auto rz = hn::Sub(vz, hn::Mul(t, lz));
+  const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+  const auto zero = hn::Zero(dd);
+  const auto ahead = hn::Ge(t, zero);
+  // The first bound that holds wins: walk them from the outermost inwards.
+  auto region = hn::Set(dd, static_cast<double>(p.bounds.count));
+  for (int j = p.bounds.count - 1; j >= 0; --j) {
+    const auto tan_e = hn::Set(dd, p.bounds.tan_e[j]);
+    const ConeBounds::Kind kind = p.bounds.kind[j];
+    const auto inside = kind == ConeBounds::Kind::kBelow90 ? hn::Le(d, hn::Mul(tan_e, t))
+                        : kind == ConeBounds::Kind::kAt90  ? ahead
+                                                           : hn::Or(ahead, hn::Ge(d, hn::Mul(tan_e, hn::Neg(t))));
+    region = hn::IfThenElse(inside, hn::Set(dd, static_cast<double>(j)), region);
+  }
+  region = hn::IfThenElse(finite, region, hn::Set(dd, static_cast<double>(kRegionInvalid)));
+  hn::StoreU(region, dd, region_out);
+}
+
+inline void PartitionRangeT(const float* x, const float* y, const float* z, const PartitionParams& p,
+                            std::size_t begin, std::size_t end, uint8_t* region_out, uint32_t* histogram) {
+  const hn::ScalableTag<double> dd;
+  const std::size_t lanes = hn::Lanes(dd);
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  HWY_ALIGN double region[kMax];
+  std::size_t i = begin;
+  for (; i + lanes <= end; i += lanes) {
+    PartitionVector(dd, p, x + i, y + i, z + i, region);
+    for (std::size_t k = 0; k < lanes; ++k) {
+      const auto r = static_cast<uint8_t>(region[k]);
+      region_out[i + k] = r;
+      ++histogram[r];
+    }
+  }
+  if (i < end) {
+    HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
+    const std::size_t rest = end - i;
+    std::memcpy(tx, x + i, rest * sizeof(float));
+    std::memcpy(ty, y + i, rest * sizeof(float));
+    std::memcpy(tz, z + i, rest * sizeof(float));
+    PartitionVector(dd, p, tx, ty, tz, region);
+    for (std::size_t k = 0; k < rest; ++k) {
+      const auto r = static_cast<uint8_t>(region[k]);
+      region_out[i + k] = r;
+      ++histogram[r];
+    }
+  }
+}
+
+// ---- voxel indices ------------------------------------------------------------
+
+template <class DD>
+HWY_INLINE void VoxelIndexVector(DD dd, const float* coord, const uint8_t* region, double origin,
+                                 const double* inv_voxel_by_region, double* out) {
+  const hn::Rebind<float, DD> df;
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  HWY_ALIGN double inv[kMax];
+  const std::size_t lanes = hn::Lanes(dd);
+  for (std::size_t k = 0; k < lanes; ++k) inv[k] = inv_voxel_by_region[region[k]];
+  const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord));
+  // floor((origin + double(p)) * inv_voxel). Highway emulates Floor where the ISA has
+  // no rounding instruction (SSSE3, scalar) and returns +0 for -0; floor(x) always
+  // has x's sign, so copying it back restores std::floor's bits exactly.
+  const auto scaled = hn::Mul(hn::Add(hn::Set(dd, origin), p), hn::Load(dd, inv));
+  hn::StoreU(hn::CopySign(hn::Floor(scaled), scaled), dd, out);
+}
+
+inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::size_t n, double origin,
+                             const double* inv_voxel_by_region, double* out) {
+  const hn::ScalableTag<double> dd;
+  const std::size_t lanes = hn::Lanes(dd);
+  std::size_t i = 0;
+  for (; i + lanes <= n; i += lanes) VoxelIndexVector(dd, coord + i, region + i, origin, inv_voxel_by_region, out + i);
+  if (i < n) {
+    constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+    HWY_ALIGN float tc[kMax] = {};
+    HWY_ALIGN uint8_t tr[kMax] = {};
+    HWY_ALIGN double to[kMax];
+    const std::size_t rest = n - i;
+    std::memcpy(tc, coord + i, rest * sizeof(float));
+    std::memcpy(tr, region + i, rest);
+    VoxelIndexVector(dd, tc, tr, origin, inv_voxel_by_region, to);
+    std::memcpy(out + i, to, rest * sizeof(double));
+  }
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace fovea::pipeline::kernels
+HWY_AFTER_NAMESPACE();
+
+#endif  // include guard

@@ -1,0 +1,149 @@
+// Dynamic dispatch of the SIMD kernels: foreach_target.h re-includes this file
+// once per Highway target, compiling foveation_simd-inl.h for each; HWY_EXPORT
+// builds the tables and HWY_DYNAMIC_DISPATCH calls the best supported target.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "pipeline/kernels/foveation_simd.cpp"
+#include "hwy/foreach_target.h"  // IWYU pragma: keep
+
+#include "hwy/highway.h"
+#include "pipeline/kernels/foveation_simd-inl.h"
+
+#if HWY_ONCE
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "hwy/targets.h"
+
+namespace fovea::pipeline {
+namespace kernels {
+
+HWY_EXPORT(BackprojectCountRowsT);
+HWY_EXPORT(BackprojectRowsT);
+HWY_EXPORT(PartitionRangeT);
+HWY_EXPORT(VoxelIndexRangeT);
+
+namespace {
+void voxelIndexDispatch(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
+                        const double* inv_voxel_by_region, double* index_out) {
+  HWY_DYNAMIC_DISPATCH(VoxelIndexRangeT)(coord, region, n, origin_m, inv_voxel_by_region, index_out);
+}
+}  // namespace
+
+Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& range, BackprojectParams& p) {
+  if (Status s = validateFrame(frame); !s) return s;
+  if (Status s = range.validate(); !s) return s;
+  // The raw-unit range test of backprojectRef, derived the same way.
+  const double scale = frame.depth_scale_m;
+  auto depthOf = [scale](int64_t raw) { return static_cast<double>(raw) * scale; };
+  int64_t raw_min = static_cast<int64_t>(std::clamp(std::ceil(range.min_m / scale), 1.0, 65536.0));
+  while (raw_min > 1 && depthOf(raw_min - 1) >= range.min_m) --raw_min;
+  while (raw_min <= 65535 && depthOf(raw_min) < range.min_m) ++raw_min;
+  int64_t raw_max = static_cast<int64_t>(std::clamp(std::floor(range.max_m / scale), 0.0, 65535.0));
+  while (raw_max < 65535 && depthOf(raw_max + 1) <= range.max_m) ++raw_max;
+  while (raw_max >= 1 && depthOf(raw_max) > range.max_m) --raw_max;
+
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  p.depth = frame.depth();
+  p.rgb = frame.rgb();
+  p.has_rgb = frame.has_rgb;
+  p.width = frame.width();
+  p.height = frame.height();
+  p.raw_min = static_cast<int32_t>(raw_min);
+  p.raw_max = static_cast<int32_t>(raw_max);
+  p.scale = static_cast<float>(scale);
+  p.cx = static_cast<float>(k.cx);
+  p.cy = static_cast<float>(k.cy);
+  p.inv_fx = static_cast<float>(1.0 / k.fx);
+  p.inv_fy = static_cast<float>(1.0 / k.fy);
+  for (int row = 0; row < 3; ++row) {
+    for (int col = 0; col < 3; ++col) p.r[3 * row + col] = static_cast<float>(frame.T_world_cam.R_world_cam(row, col));
+  }
+  return Status::ok();
+}
+
+std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int row1, std::size_t* no_depth,
+                                 std::size_t* out_of_range) {
+  return HWY_DYNAMIC_DISPATCH(BackprojectCountRowsT)(params, row0, row1, no_depth, out_of_range);
+}
+
+void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset) {
+  HWY_DYNAMIC_DISPATCH(BackprojectRowsT)(params, row0, row1, out_offset);
+}
+
+PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds) {
+  PartitionParams p;
+  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;  // as partitionRef
+  for (int a = 0; a < 3; ++a) {
+    p.origin_minus_eye[a] = origin_minus_eye[a];
+    p.l[a] = gaze.direction[a];
+  }
+  p.bounds = bounds;
+  return p;
+}
+
+void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
+                    uint8_t* region_out, uint32_t* histogram256) {
+  HWY_DYNAMIC_DISPATCH(PartitionRangeT)(cloud.x(), cloud.y(), cloud.z(), params, begin, end, region_out, histogram256);
+}
+
+}  // namespace kernels
+
+Status backprojectSimd(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
+                       BackprojectCounts& counts) {
+  counts = {};
+  out.clear();
+  kernels::BackprojectParams p;
+  if (Status s = kernels::prepareBackprojection(frame, range, p); !s) return s;
+  out.origin_m = frame.T_world_cam.t_world_cam;
+  out.has_color = frame.has_rgb;
+  counts.pixels = static_cast<std::size_t>(p.width) * p.height;
+  const std::size_t valid = kernels::backprojectCountRows(p, 0, p.height, &counts.no_depth, &counts.out_of_range);
+  if (valid > out.capacity()) {
+    // (counts are unspecified on this error: the reference stops at the first pixel too many)
+    return {ErrorCode::kCapacityExceeded, "backproject: frame has more valid pixels than the cloud capacity " +
+                                              std::to_string(out.capacity()) + ": raise pipeline.max_points"};
+  }
+  p.out_x = out.x();
+  p.out_y = out.y();
+  p.out_z = out.z();
+  p.out_rgb = out.rgb();
+  kernels::backprojectRows(p, 0, p.height, 0);
+  counts.valid = valid;
+  (void)out.resize(valid);
+  return Status::ok();
+}
+
+Status backproject(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out, BackprojectCounts& counts,
+                   KernelSet kernels) {
+  return kernels == KernelSet::kRef ? backprojectRef(frame, range, out, counts)
+                                    : backprojectSimd(frame, range, out, counts);
+}
+
+void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds, uint8_t* region_out,
+                   PartitionCounts& counts) {
+  counts = {};
+  uint32_t histogram[256] = {};
+  const kernels::PartitionParams p = kernels::preparePartition(cloud, gaze, bounds);
+  kernels::partitionRange(cloud, p, 0, cloud.size(), region_out, histogram);
+  for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] = histogram[r];
+  counts.invalid = histogram[kRegionInvalid];
+}
+
+void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
+                    const double* inv_voxel_by_region, double* index_out) {
+  kernels::voxelIndexDispatch(coord, region, n, origin_m, inv_voxel_by_region, index_out);
+}
+
+std::vector<int64_t> simdTargets() { return hwy::SupportedAndGeneratedTargets(); }
+const char* simdTargetName(int64_t target) { return hwy::TargetName(target); }
+void forceSimdTarget(int64_t targets) { hwy::SetSupportedTargetsForTest(targets); }
+int64_t activeSimdTarget() {
+  const int64_t t = hwy::SupportedTargets() & HWY_TARGETS;
+  return t & -t;  // lower bits are the better targets
+}
+
+}  // namespace fovea::pipeline
+
+#endif  // HWY_ONCE

@@ -1,0 +1,97 @@
+// SIMD kernels (Google Highway, dynamic dispatch) for the per-point stages.
+//
+// Each kernel reproduces its scalar reference BIT FOR BIT (docs/kernels.md):
+//   backprojectSimd  == backprojectRef   (float; same operation order, Mul and Add, never MulAdd)
+//   partitionSimd    == partitionRef     (double; t, rejection vector, sqrt, ConeBounds::inside)
+//   voxelIndexSimd   == voxelIndex()     (double floor((origin + double(p)) * inv_voxel))
+// The best target the CPU supports is picked at the first call (Highway's
+// HWY_DYNAMIC_DISPATCH); forceSimdTarget() restricts it (tests, benchmarks).
+//
+// The *Range/*Rows functions are the building blocks the multi-threaded pipeline
+// splits a frame into; they are public so that benchmarks can time one kernel.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "hal/frame.h"
+#include "hal/result.h"
+#include "pipeline/backproject.h"
+#include "pipeline/kernels/kernel_set.h"
+#include "pipeline/partition.h"
+#include "pipeline/point_cloud.h"
+
+namespace fovea::pipeline {
+
+// ---- Whole-cloud entry points ---------------------------------------------
+
+// Same contract as backprojectRef (validation, errors, counts, output).
+Status backprojectSimd(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
+                       BackprojectCounts& counts);
+// backprojectRef or backprojectSimd as `kernels` says.
+Status backproject(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out, BackprojectCounts& counts,
+                   KernelSet kernels = defaultKernelSet());
+
+// Same contract as partitionRef.
+void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds, uint8_t* region_out,
+                   PartitionCounts& counts);
+
+// index_out[i] = voxelIndex(origin_m, coord[i], inv_voxel_by_region[region[i]]) for i in [0, n).
+// inv_voxel_by_region has 256 entries (any region byte, kRegionInvalid included).
+void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
+                    const double* inv_voxel_by_region, double* index_out);
+
+// ---- Highway targets ------------------------------------------------------
+
+// Targets compiled into this binary and supported by this CPU (HWY_* bits), best first.
+std::vector<int64_t> simdTargets();
+const char* simdTargetName(int64_t target);
+// Restricts dispatch to `targets` (a mask of HWY_* bits; 0 restores the CPU's own set).
+// Not thread-safe with kernels running: call between frames (tests, benchmarks).
+void forceSimdTarget(int64_t targets);
+// The target the next SIMD call dispatches to.
+int64_t activeSimdTarget();
+
+// ---- Building blocks (ranges of rows or points) ---------------------------
+namespace kernels {
+
+// Everything back-projection needs per frame, derived once from the frame.
+struct BackprojectParams {
+  const uint16_t* depth = nullptr;
+  const uint8_t* rgb = nullptr;
+  bool has_rgb = false;
+  int width = 0;
+  int height = 0;
+  int32_t raw_min = 1;  // valid raw depth: raw_min <= raw <= raw_max (raw_min >= 1)
+  int32_t raw_max = 0;
+  float scale = 0, cx = 0, cy = 0, inv_fx = 0, inv_fy = 0;
+  float r[9] = {};  // row-major R_world_cam as float
+  float* out_x = nullptr;
+  float* out_y = nullptr;
+  float* out_z = nullptr;
+  uint32_t* out_rgb = nullptr;
+};
+
+// Validates the frame and range exactly like backprojectRef and fills params
+// (without the output pointers).
+Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& range, BackprojectParams& params);
+
+// Valid pixels of rows [row0, row1); adds the rejected ones to *no_depth and *out_of_range.
+std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int row1, std::size_t* no_depth,
+                                 std::size_t* out_of_range);
+// Writes the valid pixels of rows [row0, row1) at out_* + out_offset, in image order.
+void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset);
+
+struct PartitionParams {
+  double origin_minus_eye[3] = {};
+  double l[3] = {};
+  ConeBounds bounds;
+};
+PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds);
+// Regions of points [begin, end); histogram[r] += points of region r (r = kRegionInvalid too).
+void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
+                    uint8_t* region_out, uint32_t* histogram256);
+
+}  // namespace kernels
+}  // namespace fovea::pipeline

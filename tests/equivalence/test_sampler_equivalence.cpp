@@ -1,0 +1,250 @@
+// The hash-table sampler against the reference VoxelSampler: every field of the
+// output (positions bit for bit, colours, regions, weights, order), the counts, the
+// representatives and the error codes; on every Highway target (its voxel
+// indices come from voxelIndexSimd). Then the whole Foveator, kernel set simd
+// against ref, on random clouds and mock camera frames.
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "hal/camera.h"
+#include "pipeline/foveator.h"
+#include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/hash_voxel_sampler.h"
+#include "pipeline/voxel_sampler.h"
+#include "tests/support/clouds.h"
+
+namespace fovea::pipeline {
+namespace {
+
+class SamplerTarget : public ::testing::TestWithParam<int64_t> {
+ protected:
+  void SetUp() override { forceSimdTarget(GetParam()); }
+  void TearDown() override { forceSimdTarget(0); }
+};
+
+::testing::AssertionResult sameFoveated(const FoveatedCloud& a, const FoveatedCloud& b) {
+  if (a.size() != b.size()) return ::testing::AssertionFailure() << "size " << a.size() << " vs " << b.size();
+  if (a.points.origin_m != b.points.origin_m || a.points.has_color != b.points.has_color) {
+    return ::testing::AssertionFailure() << "origin or colour flag";
+  }
+  for (std::size_t o = 0; o < a.size(); ++o) {
+    const bool same = std::bit_cast<uint32_t>(a.points.x()[o]) == std::bit_cast<uint32_t>(b.points.x()[o]) &&
+                      std::bit_cast<uint32_t>(a.points.y()[o]) == std::bit_cast<uint32_t>(b.points.y()[o]) &&
+                      std::bit_cast<uint32_t>(a.points.z()[o]) == std::bit_cast<uint32_t>(b.points.z()[o]) &&
+                      a.points.rgb()[o] == b.points.rgb()[o] && a.region[o] == b.region[o] &&
+                      a.weight[o] == b.weight[o];
+    if (!same) {
+      return ::testing::AssertionFailure()
+             << "output point " << o << ": ref (" << a.points.x()[o] << ", " << a.points.y()[o] << ", "
+             << a.points.z()[o] << ") rgb " << a.points.rgb()[o] << " region " << int(a.region[o]) << " weight "
+             << a.weight[o] << "; fast (" << b.points.x()[o] << ", " << b.points.y()[o] << ", " << b.points.z()[o]
+             << ") rgb " << b.points.rgb()[o] << " region " << int(b.region[o]) << " weight " << b.weight[o];
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+void expectSameSampling(const PointCloud& in, const std::vector<uint8_t>& region, int region_count,
+                        const std::array<double, kMaxRegions>& voxel_m, std::size_t max_voxels, const char* what,
+                        std::size_t out_capacity = 0) {
+  const std::size_t cap = out_capacity ? out_capacity : std::max<std::size_t>(in.size(), 1);
+  VoxelSampler ref(in.size(), max_voxels);
+  HashVoxelSampler fast(in.size(), max_voxels);
+  FoveatedCloud out_ref(cap), out_fast(cap);
+  SampleCounts c_ref, c_fast;
+  std::vector<uint32_t> rep_ref(in.size() + 1, 12345), rep_fast(in.size() + 1, 12345);
+  const Status s_ref = ref.sample(in, region.data(), region_count, voxel_m, out_ref, c_ref, rep_ref.data());
+  const Status s_fast = fast.sample(in, region.data(), region_count, voxel_m, out_fast, c_fast, rep_fast.data());
+  ASSERT_EQ(s_ref.code(), s_fast.code()) << what << ": " << s_ref.toString() << " vs " << s_fast.toString();
+  if (!s_ref) {
+    if (s_ref.code() == ErrorCode::kRangeExceeded) {
+      EXPECT_EQ(s_ref.message(), s_fast.message()) << what;
+    }
+    return;
+  }
+  EXPECT_TRUE(sameFoveated(out_ref, out_fast)) << what;
+  EXPECT_EQ(c_ref.in, c_fast.in) << what;
+  EXPECT_EQ(c_ref.out, c_fast.out) << what;
+  EXPECT_EQ(rep_ref, rep_fast) << what;
+  // The same sampler again (its table must be clean after a frame) and without representatives.
+  FoveatedCloud again(cap);
+  ASSERT_TRUE(fast.sample(in, region.data(), region_count, voxel_m, again, c_fast).isOk());
+  EXPECT_TRUE(sameFoveated(out_ref, again)) << what << " (second run)";
+}
+
+std::vector<uint8_t> randomRegions(std::size_t n, int region_count, std::mt19937_64& rng, bool invalid = true) {
+  std::vector<uint8_t> region(n);
+  for (auto& r : region) {
+    r = static_cast<uint8_t>(rng() % region_count);
+    if (invalid && rng() % 50 == 0) r = kRegionInvalid;
+  }
+  return region;
+}
+
+TEST_P(SamplerTarget, RandomClouds) {
+  std::mt19937_64 rng(41);
+  for (std::size_t n : {0, 1, 2, 7, 100, 5000, 60001}) {
+    for (int region_count : {1, 2, 4, 8}) {
+      for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 1e4 + 0.3)}) {
+        const PointCloud cloud = test::randomCloud(n, origin, 3.0f, rng());
+        const std::vector<uint8_t> region = randomRegions(n, region_count, rng);
+        std::array<double, kMaxRegions> voxel_m{};
+        std::uniform_real_distribution<double> size(0.002, 0.5);
+        for (int r = 1; r < region_count; ++r) voxel_m[r] = size(rng);
+        expectSameSampling(cloud, region, region_count, voxel_m, std::max<std::size_t>(n, 1), "random");
+      }
+    }
+  }
+}
+
+TEST_P(SamplerTarget, ImageCoherentCloud) {
+  // A back-projected frame: neighbouring points share voxels (the last-key cache path).
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,size=320x240");
+  ASSERT_TRUE(camera.isOk());
+  ASSERT_TRUE(camera.value()->open().isOk());
+  ASSERT_TRUE(camera.value()->start().isOk());
+  hal::RgbdFrame frame(320, 240);
+  ASSERT_TRUE(camera.value()->acquire(frame, std::chrono::seconds(2)).isOk());
+  PointCloud cloud(frame.pixelCount());
+  BackprojectCounts bc;
+  ASSERT_TRUE(backprojectSimd(frame, DepthRange{}, cloud, bc).isOk());
+  std::mt19937_64 rng(42);
+  std::vector<uint8_t> region(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) region[i] = static_cast<uint8_t>((i / 5000) % 4);
+  expectSameSampling(cloud, region, 4, {0, 0.01, 0.03, 0.1}, cloud.size(), "image");
+  camera.value()->stop();
+}
+
+TEST_P(SamplerTarget, AMillionPointsInOneVoxel) {
+  constexpr std::size_t kN = 1000000;
+  PointCloud cloud(kN);
+  cloud.origin_m = Eigen::Vector3d(1e4 + 0.5, 0.5, 0.5);
+  for (std::size_t i = 0; i < kN; ++i) {
+    const float d = 0.001f * static_cast<float>(i % 200) - 0.0995f;
+    (void)cloud.push(d, -d, 0.25f * d, packRgb(static_cast<uint8_t>(i % 256), 128, 3));
+  }
+  expectSameSampling(cloud, std::vector<uint8_t>(kN, 1), 2, {0, 1.0}, 16, "million");
+}
+
+TEST_P(SamplerTarget, ManyTinyVoxelsAndFarOffsets) {
+  std::mt19937_64 rng(43);
+  // Nearly every point its own voxel: 1 mm voxels in a 0.5 m cube, 10 km from the origin.
+  for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(-1e4, 1e4, 1e4)}) {
+    const PointCloud cloud = test::randomCloud(200000, origin, 0.25f, rng());
+    expectSameSampling(cloud, std::vector<uint8_t>(cloud.size(), 1), 2, {0, 1.0 / 1024}, cloud.size(), "tiny");
+    expectSameSampling(cloud, randomRegions(cloud.size(), 8, rng), 8,
+                       {0, 1e-3, 2e-3, 3e-3, 5e-3, 1e-2, 1.0 / 1024, 0.25}, cloud.size(), "tiny, regions");
+  }
+}
+
+TEST_P(SamplerTarget, PointsOnVoxelFaces) {
+  PointCloud cloud(4000);
+  cloud.origin_m = Eigen::Vector3d(0.25, -0.5, 1e4);
+  for (int i = -10; i < 10; ++i) {
+    for (int j = -10; j < 10; ++j) {
+      const float x = 0.25f * i, y = 0.25f * j;
+      for (float dx : {0.0f, 1e-7f, -1e-7f}) {
+        (void)cloud.push(x + dx, y, std::nextafter(0.25f * j, 1.0f), static_cast<uint32_t>(i * 131 + j));
+        (void)cloud.push(std::nextafter(x, -1.0f), y + dx, 0.0f, static_cast<uint32_t>(j * 7));
+      }
+    }
+  }
+  std::mt19937_64 rng(44);
+  expectSameSampling(cloud, std::vector<uint8_t>(cloud.size(), 1), 2, {0, 0.25}, cloud.size(), "faces");
+  expectSameSampling(cloud, randomRegions(cloud.size(), 3, rng, false), 3, {0, 0.25, 0.5}, cloud.size(), "faces 3");
+}
+
+TEST_P(SamplerTarget, ErrorsMatch) {
+  std::mt19937_64 rng(45);
+  PointCloud cloud = test::randomCloud(3000, Eigen::Vector3d::Zero(), 2.0f, 46);
+  const std::vector<uint8_t> ones(cloud.size(), 1);
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 10, "too many voxels");
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 3000, "output too small", 5);
+  expectSameSampling(cloud, ones, 2, {0, 1e-7}, 3000, "span");
+  expectSameSampling(cloud, ones, 2, {0, -1.0}, 3000, "bad size");
+  expectSameSampling(cloud, ones, 9, {0, 0.1}, 3000, "bad region count");
+  cloud.x()[1234] = std::numeric_limits<float>::quiet_NaN();  // non-finite in a sampled region
+  expectSameSampling(cloud, ones, 2, {0, 0.1}, 3000, "nan");
+  cloud.x()[1234] = 3e38f;
+  expectSameSampling(cloud, ones, 2, {0, 1e-3}, 3000, "huge");
+}
+
+std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
+std::vector<int64_t> targetsHere() {
+  forceSimdTarget(0);
+  return simdTargets();
+}
+INSTANTIATE_TEST_SUITE_P(Targets, SamplerTarget, ::testing::ValuesIn(targetsHere()), targetName);
+
+// ---- the whole Foveator, kernel set simd against ref ----------------------------
+
+TEST(FoveatorKernelSets, SimdGivesTheReferenceOutput) {
+  std::mt19937_64 rng(51);
+  for (Preset preset : {Preset::kF1, Preset::kF2, Preset::kF3, Preset::kFRef}) {
+    for (FixationMode mode : {FixationMode::kHit, FixationMode::kCentroid}) {
+      FoveationConfig config;
+      config.acuity.preset = preset;
+      config.fixation.mode = mode;
+      const PointCloud cloud = test::randomCloud(30000, Eigen::Vector3d(1e4 * (rng() % 2), 2, 3), 4.0f, rng());
+      Foveator ref = Foveator::create({30000, 30000, KernelSet::kRef}, config).value();
+      Foveator simd = Foveator::create({30000, 30000, KernelSet::kSimd}, config).value();
+      Gaze gaze;
+      gaze.origin_m = cloud.origin_m + Eigen::Vector3d(0.1, -0.2, -5.0);
+      gaze.direction = Eigen::Vector3d(0.05, 0.02, 1.0);
+      FoveatedCloud a(30000), b(30000);
+      FoveationStats sa, sb;
+      std::vector<uint32_t> ra(30000), rb(30000);
+      ASSERT_TRUE(ref.foveate(cloud, gaze, a, sa, ra.data()).isOk());
+      ASSERT_TRUE(simd.foveate(cloud, gaze, b, sb, rb.data()).isOk());
+      EXPECT_TRUE(sameFoveated(a, b));
+      EXPECT_EQ(ra, rb);
+      EXPECT_EQ(sa.fixation.d0_m, sb.fixation.d0_m);
+      EXPECT_EQ(sa.dropped_nonfinite, sb.dropped_nonfinite);
+      for (int r = 0; r < kMaxRegions; ++r) {
+        EXPECT_EQ(sa.regions[r].points_in, sb.regions[r].points_in);
+        EXPECT_EQ(sa.regions[r].points_out, sb.regions[r].points_out);
+      }
+      EXPECT_EQ(0, std::memcmp(ref.lastRegions(), simd.lastRegions(), cloud.size()));
+    }
+  }
+}
+
+TEST(FoveatorKernelSets, MockCameraFramesEndToEnd) {
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:balloon,path=orbit");
+  ASSERT_TRUE(camera.isOk());
+  hal::Camera& cam = *camera.value();
+  ASSERT_TRUE(cam.open().isOk());
+  ASSERT_TRUE(cam.start().isOk());
+  const hal::CameraIntrinsics& k = cam.info().intrinsics;
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
+  hal::RgbdFrame frame(k.width, k.height);
+  PointCloud ca(pixels), cb(pixels);
+  FoveatedCloud a(pixels), b(pixels);
+  FoveationConfig config;
+  config.acuity.preset = Preset::kF3;
+  Foveator ref = Foveator::create({pixels, pixels, KernelSet::kRef}, config).value();
+  Foveator simd = Foveator::create({pixels, pixels, KernelSet::kSimd}, config).value();
+  for (int i = 0; i < 5; ++i) {
+    ASSERT_TRUE(cam.acquire(frame, std::chrono::seconds(2)).isOk());
+    BackprojectCounts ba, bb;
+    ASSERT_TRUE(backproject(frame, DepthRange{}, ca, ba, KernelSet::kRef).isOk());
+    ASSERT_TRUE(backproject(frame, DepthRange{}, cb, bb, KernelSet::kSimd).isOk());
+    Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2);
+    FoveationStats sa, sb;
+    ASSERT_TRUE(ref.foveate(ca, gaze, a, sa).isOk());
+    ASSERT_TRUE(simd.foveate(cb, gaze, b, sb).isOk());
+    EXPECT_TRUE(sameFoveated(a, b)) << "frame " << i;
+  }
+  cam.stop();
+}
+
+}  // namespace
+}  // namespace fovea::pipeline
