@@ -27,9 +27,9 @@ struct PipelineCapacity {
   // The kernels foveate() runs: the scalar reference or the SIMD set (identical
   // output; docs/kernels.md). Chosen once at start-up, FOVEA_FORCE_KERNEL overrides.
   KernelSet kernels = defaultKernelSet();
-  // Threads that share one frame's partition and voxel reduction (kernels == kSimd; the reference runs
-  // on the calling thread). Created once by create(), in [1, 64]; the output does
-  // not depend on it.
+  // Threads that share one frame's partition and voxel sampling (kernels == kSimd;
+  // the reference runs on the calling thread). Created once by create(), in
+  // [1, 64]; the output does not depend on it.
   int threads = 1;
 };
 

@@ -3,13 +3,14 @@
 //
 // 1. A pass over the points (split across the worker pool's threads, if any)
 //    computes their voxel indices (voxelIndexSimd, 2048 points at a time, bit-exact
-//    with voxelIndex()), makes the reference's checks and a hash key per point; a
-//    second, sequential one gives each sampled point the slot of its voxel, found through the previous
-//    point's voxel (image coherence), a small direct-mapped cache of recent voxels,
-//    then a preallocated open-addressing hash table (power of two >= 2 max_voxels,
-//    linear probing; a frame starts on a prefix sized from the previous frame's
-//    voxel count, at least 16 Ki entries, and doubles it when half full). The key is the region and the indices wrapped to 20 bits: unique within
-//    the span the reference allows, and a wider region is refused anyway.
+//    with voxelIndex()), makes the reference's checks and a hash key per point: the
+//    region and the indices wrapped to 20 bits, unique within the span the reference
+//    allows (a wider region is refused anyway). A second, sequential pass gives each
+//    sampled point the slot of its voxel, found through the previous point's voxel
+//    (image coherence), a small direct-mapped cache of recent voxels, then a
+//    preallocated open-addressing hash table (power of two >= 2 max_voxels, linear
+//    probing; a frame starts on a prefix sized from the previous frame's voxel
+//    count, at least 16 Ki entries, and doubles it when half full).
 // 2. A counting sort groups the points by slot, keeping input order within a voxel.
 // 3. Only the occupied voxels (far fewer than points) are radix-sorted, by the
 //    reference's packed key (region, i, j, k relative to the region's smallest index).
