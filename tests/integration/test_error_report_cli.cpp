@@ -66,7 +66,9 @@ std::string readAll(const std::string& path) {
   return s.str();
 }
 
-const std::string kTool = FOVEA_ERROR_REPORT_PATH;
+// Cross builds run the tool through the same emulator as the tests.
+const std::string kTool =
+    std::string(FOVEA_EMULATOR).empty() ? FOVEA_ERROR_REPORT_PATH : std::string(FOVEA_EMULATOR) + " " + FOVEA_ERROR_REPORT_PATH;
 
 TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
   TempDir dir;

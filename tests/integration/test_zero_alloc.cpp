@@ -34,6 +34,9 @@ struct KernelChoice {
   pipeline::KernelSet kernels;
   int threads;
 };
+void PrintTo(const KernelChoice& c, std::ostream* os) {
+  *os << pipeline::kernelSetName(c.kernels) << " on " << c.threads << " threads";
+}
 class ZeroAllocationKernels : public ::testing::TestWithParam<KernelChoice> {};
 
 TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
