@@ -185,36 +185,8 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
   for (std::size_t s = 0; s < m;) {
     std::size_t e = s + 1;
     while (e < m && keys_[e] == keys_[s]) ++e;
-    const uint32_t first = index_[s];
-    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
-    double sx = 0.0, sy = 0.0, sz = 0.0;
-    uint64_t sr = 0, sg = 0, sb = 0;
-    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
-    for (std::size_t q = s; q < e; ++q) {
-      const uint32_t i = index_[q];
-      if (representative) representative[i] = static_cast<uint32_t>(o);
-      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
-      sx += static_cast<double>(px) - fx;
-      sy += static_cast<double>(py) - fy;
-      sz += static_cast<double>(pz) - fz;
-      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
-      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
-      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
-      const uint32_t c = in.rgb()[i];
-      sr += rgbRed(c);
-      sg += rgbGreen(c);
-      sb += rgbBlue(c);
-    }
-    const auto count = static_cast<uint64_t>(e - s);
-    const double inv_count = 1.0 / static_cast<double>(count);
-    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
-    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
-    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
-    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
-                      static_cast<uint8_t>((sb + count / 2) / count));
     const auto r = static_cast<uint8_t>(keys_[s] >> (3 * kVoxelAxisBits));
-    out.region[o] = r;
-    out.weight[o] = static_cast<uint32_t>(count);
+    reduceVoxel(in, index_.data() + s, e - s, r, o, out, representative);
     ++counts.out[r];
     ++o;
     s = e;

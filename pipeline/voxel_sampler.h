@@ -17,6 +17,7 @@
 //   refused with kRangeExceeded; nothing wraps silently.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -41,6 +42,44 @@ struct SampleCounts {
 // World voxel index along one axis; the specification shared by every kernel.
 inline double voxelIndex(double origin_m, float coord, double inv_voxel_m) {
   return std::floor((origin_m + static_cast<double>(coord)) * inv_voxel_m);
+}
+
+// Reduces one voxel to output point o: the centroid of its members' positions,
+// summed in double relative to the first member and clamped to the members' range
+// (so it stays inside the voxel), the rounded mean colour, and the weight. Every
+// sampler calls this with the members in input order, which is what makes their
+// outputs bit-identical to the reference's.
+inline void reduceVoxel(const PointCloud& in, const uint32_t* members, std::size_t count, uint8_t region,
+                        std::size_t o, FoveatedCloud& out, uint32_t* representative) {
+  const uint32_t first = members[0];
+  const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
+  double sx = 0.0, sy = 0.0, sz = 0.0;
+  uint64_t sr = 0, sg = 0, sb = 0;
+  float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
+  for (std::size_t q = 0; q < count; ++q) {
+    const uint32_t i = members[q];
+    if (representative) representative[i] = static_cast<uint32_t>(o);
+    const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
+    sx += static_cast<double>(px) - fx;
+    sy += static_cast<double>(py) - fy;
+    sz += static_cast<double>(pz) - fz;
+    lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
+    lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
+    lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
+    const uint32_t c = in.rgb()[i];
+    sr += rgbRed(c);
+    sg += rgbGreen(c);
+    sb += rgbBlue(c);
+  }
+  const auto n = static_cast<uint64_t>(count);
+  const double inv_n = 1.0 / static_cast<double>(n);
+  out.points.x()[o] = std::clamp(static_cast<float>(fx + sx * inv_n), lo[0], hi[0]);
+  out.points.y()[o] = std::clamp(static_cast<float>(fy + sy * inv_n), lo[1], hi[1]);
+  out.points.z()[o] = std::clamp(static_cast<float>(fz + sz * inv_n), lo[2], hi[2]);
+  out.points.rgb()[o] = packRgb(static_cast<uint8_t>((sr + n / 2) / n), static_cast<uint8_t>((sg + n / 2) / n),
+                                static_cast<uint8_t>((sb + n / 2) / n));
+  out.region[o] = region;
+  out.weight[o] = static_cast<uint32_t>(n);
 }
 
 class VoxelSampler {

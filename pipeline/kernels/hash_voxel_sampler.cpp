@@ -88,45 +88,13 @@ void HashVoxelSampler::growTable(std::size_t voxels) {
 
 void HashVoxelSampler::reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end,
                                     std::size_t fovea, uint32_t* representative, uint32_t* region_counts) const {
-  float* ox = out.points.x();
-  float* oy = out.points.y();
-  float* oz = out.points.z();
-  uint32_t* orgb = out.points.rgb();
   for (std::size_t q = q_begin; q < q_end; ++q) {
     const std::size_t o = fovea + q;
     const uint32_t slot = sort_slot_[q];
     const std::size_t s = voxel_start_[slot];
     const std::size_t e = voxel_start_[slot + 1];
-    const uint32_t first = order_[s];
-    const float fx = in.x()[first], fy = in.y()[first], fz = in.z()[first];
-    double sx = 0.0, sy = 0.0, sz = 0.0;
-    uint64_t sr = 0, sg = 0, sb = 0;
-    float lo[3] = {fx, fy, fz}, hi[3] = {fx, fy, fz};
-    for (std::size_t p = s; p < e; ++p) {
-      const uint32_t i = order_[p];
-      if (representative) representative[i] = static_cast<uint32_t>(o);
-      const float px = in.x()[i], py = in.y()[i], pz = in.z()[i];
-      sx += static_cast<double>(px) - fx;
-      sy += static_cast<double>(py) - fy;
-      sz += static_cast<double>(pz) - fz;
-      lo[0] = std::min(lo[0], px), hi[0] = std::max(hi[0], px);
-      lo[1] = std::min(lo[1], py), hi[1] = std::max(hi[1], py);
-      lo[2] = std::min(lo[2], pz), hi[2] = std::max(hi[2], pz);
-      const uint32_t c = in.rgb()[i];
-      sr += rgbRed(c);
-      sg += rgbGreen(c);
-      sb += rgbBlue(c);
-    }
-    const auto count = static_cast<uint64_t>(e - s);
-    const double inv_count = 1.0 / static_cast<double>(count);
-    ox[o] = std::clamp(static_cast<float>(fx + sx * inv_count), lo[0], hi[0]);
-    oy[o] = std::clamp(static_cast<float>(fy + sy * inv_count), lo[1], hi[1]);
-    oz[o] = std::clamp(static_cast<float>(fz + sz * inv_count), lo[2], hi[2]);
-    orgb[o] = packRgb(static_cast<uint8_t>((sr + count / 2) / count), static_cast<uint8_t>((sg + count / 2) / count),
-                      static_cast<uint8_t>((sb + count / 2) / count));
     const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));
-    out.region[o] = r;
-    out.weight[o] = static_cast<uint32_t>(count);
+    reduceVoxel(in, order_.data() + s, e - s, r, o, out, representative);
     ++region_counts[r];
   }
 }
