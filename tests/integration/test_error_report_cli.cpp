@@ -15,40 +15,14 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/support/process.h"
+
 namespace fovea {
 namespace {
 
-struct ProcessResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-ProcessResult run(const std::string& command) {
-  ProcessResult r;
-  std::FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return r;
-  char buffer[4096];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-class TempDir {
- public:
-  TempDir() {
-    path_ = std::filesystem::temp_directory_path() / ("fovea-report-" + std::to_string(::getpid()) + "-" +
-                                                      std::to_string(std::random_device{}()));
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  std::string path() const { return path_.string(); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  std::filesystem::path path_;
-};
+using test::ProcessResult;
+using test::TempDir;
+ProcessResult run(const std::string& command) { return test::runCommand(command); }
 
 std::vector<std::string> splitCsvLine(const std::string& line) {
   std::vector<std::string> fields;

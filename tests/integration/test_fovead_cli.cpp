@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/support/process.h"
+
 #include "pipeline/foveator.h"
 #include "pipeline/io/ply.h"
 #include "tests/support/clouds.h"
@@ -16,41 +18,14 @@
 namespace fovea {
 namespace {
 
-struct ProcessResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-ProcessResult run(const std::string& command) {
-  ProcessResult r;
-  std::FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return r;
-  char buffer[4096];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using test::ProcessResult;
+using test::TempDir;
+ProcessResult run(const std::string& command) { return test::runCommand(command); }
 
 std::string fovead() {
   const std::string emulator = FOVEA_EMULATOR;
   return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
 }
-
-class TempDir {
- public:
-  TempDir() {
-    path_ = std::filesystem::temp_directory_path() / ("fovea-cli-" + std::to_string(::getpid()) + "-" +
-                                                      std::to_string(std::random_device{}()));
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  std::filesystem::path path_;
-};
 
 TEST(FoveadCli, ReadmeRunCommandWorks) {
   if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
