@@ -18,6 +18,19 @@ Status DepthRange::validate() const {
   return Status::ok();
 }
 
+RawDepthRange rawDepthRange(const DepthRange& range, double depth_scale_m) {
+  // The division's rounding is corrected by stepping until raw * scale brackets the range.
+  auto depthOf = [depth_scale_m](int64_t raw) { return static_cast<double>(raw) * depth_scale_m; };
+  RawDepthRange raw;
+  raw.min = static_cast<int64_t>(std::clamp(std::ceil(range.min_m / depth_scale_m), 1.0, 65536.0));
+  while (raw.min > 1 && depthOf(raw.min - 1) >= range.min_m) --raw.min;
+  while (raw.min <= 65535 && depthOf(raw.min) < range.min_m) ++raw.min;
+  raw.max = static_cast<int64_t>(std::clamp(std::floor(range.max_m / depth_scale_m), 0.0, 65535.0));
+  while (raw.max < 65535 && depthOf(raw.max + 1) <= range.max_m) ++raw.max;
+  while (raw.max >= 1 && depthOf(raw.max) > range.max_m) --raw.max;
+  return raw;
+}
+
 Status validateFrame(const hal::RgbdFrame& frame) {
   const hal::CameraIntrinsics& k = frame.intrinsics;
   if (k.width != frame.width() || k.height != frame.height()) {
@@ -52,16 +65,10 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
   if (Status s = validateFrame(frame); !s) return s;
   if (Status s = range.validate(); !s) return s;
 
-  // The range test on raw units: raw in [raw_min, raw_max] <=> min_m <= raw * scale <= max_m
-  // (in double), with the division's rounding corrected by stepping.
   const double scale = frame.depth_scale_m;
-  auto depthOf = [scale](int64_t raw) { return static_cast<double>(raw) * scale; };
-  int64_t raw_min = static_cast<int64_t>(std::clamp(std::ceil(range.min_m / scale), 1.0, 65536.0));
-  while (raw_min > 1 && depthOf(raw_min - 1) >= range.min_m) --raw_min;
-  while (raw_min <= 65535 && depthOf(raw_min) < range.min_m) ++raw_min;
-  int64_t raw_max = static_cast<int64_t>(std::clamp(std::floor(range.max_m / scale), 0.0, 65535.0));
-  while (raw_max < 65535 && depthOf(raw_max + 1) <= range.max_m) ++raw_max;
-  while (raw_max >= 1 && depthOf(raw_max) > range.max_m) --raw_max;
+  const RawDepthRange raw_range = rawDepthRange(range, scale);
+  const int64_t raw_min = raw_range.min;
+  const int64_t raw_max = raw_range.max;
 
   const hal::CameraIntrinsics& k = frame.intrinsics;
   const auto scale_f = static_cast<float>(scale);

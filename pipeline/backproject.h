@@ -24,6 +24,14 @@ struct DepthRange {
   Status validate() const;
 };
 
+// The depth range in raw units: raw in [min, max] <=> min_m <= raw * scale_m <= max_m
+// (in double). Every back-projection kernel tests raw values against it, exactly.
+struct RawDepthRange {
+  int64_t min = 1;
+  int64_t max = 0;  // below min: nothing is valid
+};
+RawDepthRange rawDepthRange(const DepthRange& range, double depth_scale_m);
+
 struct BackprojectCounts {
   std::size_t pixels = 0;
   std::size_t valid = 0;

@@ -34,15 +34,11 @@ void voxelIndexDispatch(const float* coord, const uint8_t* region, std::size_t n
 Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& range, BackprojectParams& p) {
   if (Status s = validateFrame(frame); !s) return s;
   if (Status s = range.validate(); !s) return s;
-  // The raw-unit range test of backprojectRef, derived the same way.
+  // The raw-unit range test of backprojectRef.
   const double scale = frame.depth_scale_m;
-  auto depthOf = [scale](int64_t raw) { return static_cast<double>(raw) * scale; };
-  int64_t raw_min = static_cast<int64_t>(std::clamp(std::ceil(range.min_m / scale), 1.0, 65536.0));
-  while (raw_min > 1 && depthOf(raw_min - 1) >= range.min_m) --raw_min;
-  while (raw_min <= 65535 && depthOf(raw_min) < range.min_m) ++raw_min;
-  int64_t raw_max = static_cast<int64_t>(std::clamp(std::floor(range.max_m / scale), 0.0, 65535.0));
-  while (raw_max < 65535 && depthOf(raw_max + 1) <= range.max_m) ++raw_max;
-  while (raw_max >= 1 && depthOf(raw_max) > range.max_m) --raw_max;
+  const RawDepthRange raw = rawDepthRange(range, scale);
+  const int64_t raw_min = raw.min;
+  const int64_t raw_max = raw.max;
 
   const hal::CameraIntrinsics& k = frame.intrinsics;
   p.depth = frame.depth();

@@ -149,3 +149,31 @@ TEST(Backproject, RejectsBadDepthRange) {
 
 }  // namespace
 }  // namespace fovea::pipeline
+
+namespace fovea::pipeline {
+namespace {
+
+TEST(Backproject, RawDepthRangeBracketsTheMetricRange) {
+  RawDepthRange r = rawDepthRange(DepthRange{0.1, 10.0}, 0.001);
+  EXPECT_EQ(r.min, 100);
+  EXPECT_EQ(r.max, 10000);
+  r = rawDepthRange(DepthRange{0.4, 8.0}, 1.0 / 5000.0);  // TUM units
+  EXPECT_EQ(r.min, 2000);
+  EXPECT_EQ(r.max, 40000);
+  // Whatever the rounding of min/scale, the bounds are the tightest raw values in range.
+  for (double scale : {0.001, 1.0 / 5000.0, 0.00025, 0.0123}) {
+    for (double lo : {0.0, 0.1, 0.33, 0.7}) {
+      const RawDepthRange b = rawDepthRange(DepthRange{lo, 7.77}, scale);
+      EXPECT_GE(static_cast<double>(b.min) * scale, lo);
+      if (b.min > 1) EXPECT_LT(static_cast<double>(b.min - 1) * scale, lo);
+      EXPECT_LE(static_cast<double>(b.max) * scale, 7.77);
+      if (b.max < 65535) EXPECT_GT(static_cast<double>(b.max + 1) * scale, 7.77);
+    }
+  }
+  // A range beyond what uint16 depth can express: empty.
+  r = rawDepthRange(DepthRange{70.0, 80.0}, 0.001);
+  EXPECT_LT(r.max, r.min);
+}
+
+}  // namespace
+}  // namespace fovea::pipeline
