@@ -165,9 +165,13 @@ TEST(Backproject, RawDepthRangeBracketsTheMetricRange) {
     for (double lo : {0.0, 0.1, 0.33, 0.7}) {
       const RawDepthRange b = rawDepthRange(DepthRange{lo, 7.77}, scale);
       EXPECT_GE(static_cast<double>(b.min) * scale, lo);
-      if (b.min > 1) EXPECT_LT(static_cast<double>(b.min - 1) * scale, lo);
+      if (b.min > 1) {
+        EXPECT_LT(static_cast<double>(b.min - 1) * scale, lo);
+      }
       EXPECT_LE(static_cast<double>(b.max) * scale, 7.77);
-      if (b.max < 65535) EXPECT_GT(static_cast<double>(b.max + 1) * scale, 7.77);
+      if (b.max < 65535) {
+        EXPECT_GT(static_cast<double>(b.max + 1) * scale, 7.77);
+      }
     }
   }
   // A range beyond what uint16 depth can express: empty.
