@@ -160,25 +160,7 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
   }
 
   // The fovea, untouched and in input order.
-  std::size_t o = 0;
-  float* ox = out.points.x();
-  float* oy = out.points.y();
-  float* oz = out.points.z();
-  uint32_t* orgb = out.points.rgb();
-  for (std::size_t i = 0; i < n; ++i) {
-    if (region[i] != 0) {
-      if (representative) representative[i] = kNoRepresentative;  // set below for sampled points
-      continue;
-    }
-    if (representative) representative[i] = static_cast<uint32_t>(o);
-    ox[o] = in.x()[i];
-    oy[o] = in.y()[i];
-    oz[o] = in.z()[i];
-    orgb[o] = in.rgb()[i];
-    out.region[o] = 0;
-    out.weight[o] = 1;
-    ++o;
-  }
+  std::size_t o = copyFovea(in, region, out, representative);
   counts.out[0] = static_cast<uint32_t>(fovea);
 
   // One centroid per run of equal keys.

@@ -44,6 +44,29 @@ inline double voxelIndex(double origin_m, float coord, double inv_voxel_m) {
   return std::floor((origin_m + static_cast<double>(coord)) * inv_voxel_m);
 }
 
+// Copies the fovea (region 0) untouched, in input order, to the front of `out`,
+// sets representative[] for every input point (kNoRepresentative for the others,
+// which the voxel reduction fills in later) and returns the number copied.
+inline std::size_t copyFovea(const PointCloud& in, const uint8_t* region, FoveatedCloud& out,
+                             uint32_t* representative) {
+  std::size_t o = 0;
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    if (region[i] != 0) {
+      if (representative) representative[i] = kNoRepresentative;
+      continue;
+    }
+    if (representative) representative[i] = static_cast<uint32_t>(o);
+    out.points.x()[o] = in.x()[i];
+    out.points.y()[o] = in.y()[i];
+    out.points.z()[o] = in.z()[i];
+    out.points.rgb()[o] = in.rgb()[i];
+    out.region[o] = 0;
+    out.weight[o] = 1;
+    ++o;
+  }
+  return o;
+}
+
 // Reduces one voxel to output point o: the centroid of its members' positions,
 // summed in double relative to the first member and clamped to the members' range
 // (so it stays inside the voxel), the rounded mean colour, and the weight. Every

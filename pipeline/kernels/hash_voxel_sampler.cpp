@@ -314,25 +314,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
 
   // The fovea, untouched and in input order.
-  std::size_t o = 0;
-  float* ox = out.points.x();
-  float* oy = out.points.y();
-  float* oz = out.points.z();
-  uint32_t* orgb = out.points.rgb();
-  for (std::size_t i = 0; i < n; ++i) {
-    if (region[i] != 0) {
-      if (representative) representative[i] = kNoRepresentative;  // set below for sampled points
-      continue;
-    }
-    if (representative) representative[i] = static_cast<uint32_t>(o);
-    ox[o] = in.x()[i];
-    oy[o] = in.y()[i];
-    oz[o] = in.z()[i];
-    orgb[o] = in.rgb()[i];
-    out.region[o] = 0;
-    out.weight[o] = 1;
-    ++o;
-  }
+  std::size_t o = copyFovea(in, region, out, representative);
   counts.out[0] = static_cast<uint32_t>(fovea);
 
   // 4. One centroid per voxel: the reference's reduction over the same points in
