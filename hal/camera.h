@@ -2,6 +2,7 @@
 // libcamera, libusb). Errors are values; acquire() never allocates or throws.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -29,6 +30,27 @@ struct CameraCounters {
   uint64_t frames_delivered = 0;
   uint64_t timeouts = 0;
   uint64_t errors = 0;
+};
+
+// What a backend counts as it runs: bumped on the thread that calls acquire(),
+// read by the supervisor on another. Every backend holds one of these.
+class CameraCounterSet {
+ public:
+  void frameDelivered() { frames_delivered_.fetch_add(1, std::memory_order_relaxed); }
+  void timeout() { timeouts_.fetch_add(1, std::memory_order_relaxed); }
+  void error() { errors_.fetch_add(1, std::memory_order_relaxed); }
+  CameraCounters snapshot() const {
+    CameraCounters c;
+    c.frames_delivered = frames_delivered_.load(std::memory_order_relaxed);
+    c.timeouts = timeouts_.load(std::memory_order_relaxed);
+    c.errors = errors_.load(std::memory_order_relaxed);
+    return c;
+  }
+
+ private:
+  std::atomic<uint64_t> frames_delivered_{0};
+  std::atomic<uint64_t> timeouts_{0};
+  std::atomic<uint64_t> errors_{0};
 };
 
 class Camera {

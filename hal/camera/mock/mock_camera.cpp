@@ -387,23 +387,15 @@ Status MockCamera::start() {
 
 void MockCamera::stop() { started_ = false; }
 
-CameraCounters MockCamera::counters() const {
-  CameraCounters c;
-  c.frames_delivered = frames_delivered_.load(std::memory_order_relaxed);
-  c.timeouts = timeouts_.load(std::memory_order_relaxed);
-  c.errors = errors_.load(std::memory_order_relaxed);
-  return c;
-}
-
 // Error messages here stay within std::string's small-buffer capacity (15
 // characters in libstdc++), so even the error paths do not allocate.
 Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   if (!started_) {
-    errors_.fetch_add(1, std::memory_order_relaxed);
+    counters_.error();
     return Status(ErrorCode::kUnavailable, "not started");
   }
   if (!slot.setSize(options_.width, options_.height)) {
-    errors_.fetch_add(1, std::memory_order_relaxed);
+    counters_.error();
     return Status(ErrorCode::kCapacityExceeded, "slot too small");
   }
   if (options_.realtime) {
@@ -421,7 +413,7 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     if (due > now) {
       if (due - now > timeout) {
         std::this_thread::sleep_for(timeout);
-        timeouts_.fetch_add(1, std::memory_order_relaxed);
+        counters_.timeout();
         return Status(ErrorCode::kUnavailable, "timeout");
       }
       std::this_thread::sleep_until(due);
@@ -441,7 +433,7 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
       static_cast<int64_t>(std::llround(static_cast<double>(sequence) * 1e9 / options_.fps));
   slot.sequence = sequence;
   ++sequence_;
-  frames_delivered_.fetch_add(1, std::memory_order_relaxed);
+  counters_.frameDelivered();
   return Status::ok();
 }
 

@@ -28,7 +28,6 @@
 // slow for, as a real sensor drops frames).
 #pragma once
 
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -101,7 +100,7 @@ class MockCamera final : public Camera {
   void stop() override;
 
   const CameraInfo& info() const override { return info_; }
-  CameraCounters counters() const override;
+  CameraCounters counters() const override { return counters_.snapshot(); }
 
   const MockCameraOptions& options() const { return options_; }
   // scene().info().focus_point_m (also in info().focus_point_m) is where the
@@ -173,9 +172,7 @@ class MockCamera final : public Camera {
   Pose rendered_pose_;
   PixelRect dynamic_rect_;  // where work_ differs from background_
 
-  std::atomic<uint64_t> frames_delivered_{0};
-  std::atomic<uint64_t> timeouts_{0};
-  std::atomic<uint64_t> errors_{0};
+  CameraCounterSet counters_;
 };
 
 }  // namespace fovea::hal::mock

@@ -323,24 +323,16 @@ Status TumCamera::start() {
 
 void TumCamera::stop() { started_ = false; }
 
-CameraCounters TumCamera::counters() const {
-  CameraCounters c;
-  c.frames_delivered = frames_delivered_.load(std::memory_order_relaxed);
-  c.timeouts = timeouts_.load(std::memory_order_relaxed);
-  c.errors = errors_.load(std::memory_order_relaxed);
-  return c;
-}
-
 // Error messages stay within std::string's small-buffer capacity (15
 // characters in libstdc++), so even the error paths do not allocate.
 Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   if (!started_) {
-    errors_.fetch_add(1, std::memory_order_relaxed);
+    counters_.error();
     return Status(ErrorCode::kUnavailable, "not started");
   }
   if (finished_) return Status(ErrorCode::kUnavailable, "end of record");
   if (!slot.setSize(kWidth, kHeight)) {
-    errors_.fetch_add(1, std::memory_order_relaxed);
+    counters_.error();
     return Status(ErrorCode::kCapacityExceeded, "slot too small");
   }
   const Frame& frame = frames_[next_];
@@ -352,7 +344,7 @@ Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     if (due > now) {
       if (due - now > timeout) {
         std::this_thread::sleep_for(timeout);
-        timeouts_.fetch_add(1, std::memory_order_relaxed);
+        counters_.timeout();
         return Status(ErrorCode::kUnavailable, "timeout");
       }
       std::this_thread::sleep_until(due);
@@ -371,7 +363,7 @@ Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     ++loops_;
     if (!options_.loop) finished_ = true;
   }
-  frames_delivered_.fetch_add(1, std::memory_order_relaxed);
+  counters_.frameDelivered();
   return Status::ok();
 }
 

@@ -23,7 +23,6 @@
 //   ("end of recording") and finished() is true.
 #pragma once
 
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -90,7 +89,7 @@ class TumCamera final : public Camera {
   void stop() override;
 
   const CameraInfo& info() const override { return info_; }
-  CameraCounters counters() const override;
+  CameraCounters counters() const override { return counters_.snapshot(); }
 
   std::size_t frameCount() const { return frames_.size(); }
   std::size_t framesWithoutPose() const { return frames_without_pose_; }
@@ -123,9 +122,7 @@ class TumCamera final : public Camera {
   std::chrono::steady_clock::time_point start_time_;
   int64_t start_stamp_ns_ = 0;
 
-  std::atomic<uint64_t> frames_delivered_{0};
-  std::atomic<uint64_t> timeouts_{0};
-  std::atomic<uint64_t> errors_{0};
+  CameraCounterSet counters_;
 };
 
 }  // namespace fovea::hal::tum
