@@ -1,0 +1,65 @@
+#include "firmware/gaze_policy.h"
+
+#include <cmath>
+#include <string>
+
+namespace fovea::firmware {
+
+Status GazePolicyConfig::validate() const {
+  if (timeout_ns <= 0) return {ErrorCode::kInvalidArgument, "gaze timeout: must be positive"};
+  if (!(fallback_voxel_m >= 0.001 && fallback_voxel_m <= 1.0)) {
+    return {ErrorCode::kInvalidArgument, "fallback voxel: must be within 0.001 .. 1 m"};
+  }
+  return Status::ok();
+}
+
+std::string_view gazeSourceName(GazeSource source) {
+  switch (source) {
+    case GazeSource::kOperator: return "operator";
+    case GazeSource::kNoGazeYet: return "no gaze yet (fallback)";
+    case GazeSource::kStale: return "stale gaze (fallback)";
+  }
+  return "?";
+}
+
+pipeline::FoveationConfig uniformFoveationConfig(double voxel_m) {
+  pipeline::FoveationConfig config;
+  config.acuity.preset = pipeline::Preset::kCustom;
+  config.acuity.custom_bounds_deg = {0.001};
+  config.acuity.slope = pipeline::kDefaultSlope;
+  config.acuity.far_ecc_deg = pipeline::kDefaultFarEccDeg;
+  // Region 1 is the last: v_1 = d0 * tan(MAR0) * MAR(far_ecc) / MAR0 (Eq. 5-6).
+  const double scale = pipeline::marDeg(config.acuity.slope, config.acuity.far_ecc_deg) / pipeline::kMar0Deg;
+  config.fixation.mode = pipeline::FixationMode::kFixed;
+  config.fixation.fixed_m = voxel_m / (pipeline::foveaVoxelSizeM(1.0) * scale);
+  config.fixation.min_m = std::min(config.fixation.min_m, config.fixation.fixed_m);
+  return config;
+}
+
+GazePolicy::GazePolicy(const GazePolicyConfig& config, const pipeline::FoveationConfig& operator_config)
+    : config_(config), operator_config_(operator_config), fallback_config_(uniformFoveationConfig(config.fallback_voxel_m)) {}
+
+GazePolicy::Decision GazePolicy::decide(const pipeline::Gaze* newest, int64_t received_ns, int64_t now_ns,
+                                        const hal::Pose& camera) {
+  Decision d;
+  if (newest != nullptr) {
+    d.age_ns = now_ns - received_ns;
+    d.source = d.age_ns <= config_.timeout_ns ? GazeSource::kOperator : GazeSource::kStale;
+  } else {
+    d.source = GazeSource::kNoGazeYet;
+  }
+  if (d.source == GazeSource::kOperator) {
+    d.gaze = *newest;
+    d.foveation = &operator_config_;
+  } else {
+    d.gaze.origin_m = camera.t_world_cam;
+    d.gaze.direction = camera.R_world_cam.col(2);
+    d.foveation = &fallback_config_;
+  }
+  d.changed = first_ || d.source != last_;
+  first_ = false;
+  last_ = d.source;
+  return d;
+}
+
+}  // namespace fovea::firmware

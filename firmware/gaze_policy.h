@@ -1,0 +1,68 @@
+// Which gaze and which foveation a streamed frame uses (issue 4's robot side).
+//
+// The operator's newest valid gaze sample drives the foveation while it is
+// fresh. With none yet, or one older than the timeout (default 100 ms: a few
+// eye-tracker periods; a saccade lands in about 50 ms), the service cannot
+// know where the operator looks, so it falls back to a uniform lattice: every
+// point is sampled with voxels of fallback_voxel_m (default 2 cm) around the
+// camera's optical axis, which keeps the stream bounded and shows the whole
+// scene evenly rather than placing a sharp fovea where the operator may not be
+// looking. The fallback is FREF's "no foveation" at a safe voxel size.
+// docs/protocol.md ("Gaze fallback") documents it for operators.
+#pragma once
+
+#include <cstdint>
+#include <string_view>
+
+#include "hal/frame.h"
+#include "hal/result.h"
+#include "pipeline/foveator.h"
+
+namespace fovea::firmware {
+
+struct GazePolicyConfig {
+  int64_t timeout_ns = 100'000'000;
+  double fallback_voxel_m = 0.02;
+
+  Status validate() const;
+};
+
+enum class GazeSource { kOperator, kNoGazeYet, kStale };
+std::string_view gazeSourceName(GazeSource source);
+
+// The foveation configuration that samples every point on one uniform lattice
+// of voxel_m: a one-bound custom model whose inner region (within 0.001 deg of
+// the axis, at most a pixel) stays whole and whose outer region spans the rest,
+// with d0 fixed so that region's voxel (Eq. 5-6) is voxel_m.
+pipeline::FoveationConfig uniformFoveationConfig(double voxel_m);
+
+class GazePolicy {
+ public:
+  GazePolicy(const GazePolicyConfig& config, const pipeline::FoveationConfig& operator_config);
+
+  struct Decision {
+    GazeSource source = GazeSource::kNoGazeYet;
+    pipeline::Gaze gaze;
+    const pipeline::FoveationConfig* foveation = nullptr;
+    bool changed = false;  // source differs from the previous decision (log it once)
+    int64_t age_ns = -1;   // of the operator's sample; -1 when there is none
+  };
+
+  // newest: the operator's newest valid sample (nullptr: none yet), received at
+  // received_ns; camera: the frame's pose, for the fallback's gaze along the
+  // optical axis.
+  Decision decide(const pipeline::Gaze* newest, int64_t received_ns, int64_t now_ns, const hal::Pose& camera);
+
+  // A new operator-side configuration (SIGHUP, issue 5); the fallback stays.
+  void setOperatorConfig(const pipeline::FoveationConfig& config) { operator_config_ = config; }
+  const pipeline::FoveationConfig& fallbackConfig() const { return fallback_config_; }
+
+ private:
+  GazePolicyConfig config_;
+  pipeline::FoveationConfig operator_config_;
+  pipeline::FoveationConfig fallback_config_;
+  bool first_ = true;
+  GazeSource last_ = GazeSource::kNoGazeYet;
+};
+
+}  // namespace fovea::firmware

@@ -1,0 +1,93 @@
+// The streamed frame's gaze: the operator's while fresh, else the uniform fallback.
+#include "firmware/gaze_policy.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <tuple>
+
+#include "tests/support/clouds.h"
+
+namespace fovea::firmware {
+namespace {
+
+constexpr int64_t kMs = 1'000'000;
+
+TEST(GazePolicy, FreshOperatorGazeWinsStaleFallsBackAndChangesAreFlaggedOnce) {
+  GazePolicyConfig config;  // 100 ms
+  pipeline::FoveationConfig op;
+  op.acuity.preset = pipeline::Preset::kF2;
+  GazePolicy policy(config, op);
+  hal::Pose camera;
+  camera.t_world_cam = {1, 2, 3};
+  camera.R_world_cam << 0, 0, 1, 0, 1, 0, -1, 0, 0;  // optical axis (column 2) along +x
+
+  auto d = policy.decide(nullptr, 0, 0, camera);
+  EXPECT_EQ(d.source, GazeSource::kNoGazeYet);
+  EXPECT_TRUE(d.changed);
+  EXPECT_EQ(d.foveation, &policy.fallbackConfig());
+  EXPECT_EQ(d.gaze.origin_m, camera.t_world_cam);
+  EXPECT_EQ(d.gaze.direction, Eigen::Vector3d(1, 0, 0));
+  EXPECT_FALSE(policy.decide(nullptr, 0, 10 * kMs, camera).changed);
+
+  pipeline::Gaze g;
+  g.origin_m = {0, 0, 1.6};
+  g.direction = {0, 1, 0};
+  d = policy.decide(&g, 1000 * kMs, 1050 * kMs, camera);
+  EXPECT_EQ(d.source, GazeSource::kOperator);
+  EXPECT_TRUE(d.changed);
+  EXPECT_EQ(d.age_ns, 50 * kMs);
+  EXPECT_EQ(d.gaze.direction, g.direction);
+  EXPECT_EQ(d.foveation->acuity.preset, pipeline::Preset::kF2);
+  // Exactly at the timeout still counts as fresh; one nanosecond later it is stale.
+  EXPECT_EQ(policy.decide(&g, 1000 * kMs, 1100 * kMs, camera).source, GazeSource::kOperator);
+  d = policy.decide(&g, 1000 * kMs, 1100 * kMs + 1, camera);
+  EXPECT_EQ(d.source, GazeSource::kStale);
+  EXPECT_TRUE(d.changed);
+  EXPECT_EQ(d.foveation, &policy.fallbackConfig());
+}
+
+TEST(GazePolicy, ConfigValidation) {
+  GazePolicyConfig c;
+  EXPECT_TRUE(c.validate().isOk());
+  c.timeout_ns = 0;
+  EXPECT_FALSE(c.validate().isOk());
+  c = {};
+  c.fallback_voxel_m = 0.0;
+  EXPECT_FALSE(c.validate().isOk());
+  c.fallback_voxel_m = NAN;
+  EXPECT_FALSE(c.validate().isOk());
+}
+
+// The fallback samples the cloud on one lattice of the requested voxel size:
+// checked against a brute-force count of occupied voxels.
+TEST(UniformFoveationConfig, SamplesEveryPointOnOneLatticeOfTheRequestedSize) {
+  for (double voxel_m : {0.01, 0.02, 0.05}) {
+    const pipeline::FoveationConfig config = uniformFoveationConfig(voxel_m);
+    const pipeline::PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(0, 0, 0), 1.0f, 11);
+    auto foveator = pipeline::Foveator::create({cloud.size(), cloud.size()}, config);
+    ASSERT_TRUE(foveator.isOk()) << foveator.status().message();
+    pipeline::FoveatedCloud out(cloud.size());
+    pipeline::FoveationStats stats;
+    pipeline::Gaze gaze;
+    gaze.origin_m = {0, 0, -5};
+    gaze.direction = {0.3, 0.2, 1.0};
+    ASSERT_TRUE(foveator->foveate(cloud, gaze, out, stats).isOk());
+    ASSERT_EQ(stats.region_count, 2);
+    EXPECT_NEAR(stats.regions[1].voxel_size_m, voxel_m, voxel_m * 1e-12);
+    EXPECT_LE(stats.regions[0].points_in, 2u);  // 0.001 degrees around the axis
+    std::set<std::tuple<long, long, long>> voxels;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      if (foveator->lastRegions()[i] != 1) continue;
+      const Eigen::Vector3d w = cloud.world(i);
+      voxels.emplace(std::lround(std::floor(w.x() / stats.regions[1].voxel_size_m)),
+                     std::lround(std::floor(w.y() / stats.regions[1].voxel_size_m)),
+                     std::lround(std::floor(w.z() / stats.regions[1].voxel_size_m)));
+    }
+    EXPECT_EQ(stats.regions[1].points_out, voxels.size()) << voxel_m;
+  }
+}
+
+}  // namespace
+}  // namespace fovea::firmware
