@@ -1,0 +1,66 @@
+// What fovea-operator measures: frames per second, megabytes per second on the
+// wire, end-to-end latency from capture to decoded (p50, p99), datagrams lost
+// and points per region, once a second (live) and for the whole run (summary).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "pipeline/acuity.h"
+
+namespace fovea::tools {
+
+// Nearest-rank quantile of samples (q in [0, 1]); NaN when there are none.
+double quantile(std::vector<double> samples, double q);
+
+struct FrameObservation {
+  uint32_t frame_id = 0;
+  double latency_ms = 0.0;  // capture (robot) to decoded (operator)
+  std::array<uint32_t, pipeline::kMaxRegions> points_per_region{};
+  uint32_t chunks_received = 0;
+  uint32_t chunks_expected = 0;  // from the frame summary (0 when it was lost)
+};
+
+class OperatorStats {
+ public:
+  void datagram(std::size_t wire_bytes) {
+    window_.datagrams += 1;
+    window_.wire_bytes += wire_bytes;
+    total_.datagrams += 1;
+    total_.wire_bytes += wire_bytes;
+  }
+  void lost(uint64_t datagrams) {
+    window_.lost += datagrams;
+    total_.lost += datagrams;
+  }
+  void frame(const FrameObservation& f);
+
+  // One line for the last window of `seconds`, then a new window starts.
+  std::string liveLine(double seconds);
+  // The whole run as a JSON object; `extra` (already JSON members, may be empty)
+  // is added at the top level.
+  std::string summaryJson(double seconds, const std::string& extra) const;
+
+  uint64_t frames() const { return total_.frames; }
+  uint64_t datagrams() const { return total_.datagrams; }
+
+ private:
+  struct Tally {
+    uint64_t frames = 0;
+    uint64_t datagrams = 0;
+    uint64_t wire_bytes = 0;
+    uint64_t lost = 0;
+    uint64_t chunks_received = 0;
+    uint64_t chunks_expected = 0;
+    std::array<uint64_t, pipeline::kMaxRegions> points{};
+    std::vector<double> latency_ms;
+  };
+  static void add(Tally& t, const FrameObservation& f);
+  Tally window_;
+  Tally total_;
+};
+
+}  // namespace fovea::tools
