@@ -4,14 +4,14 @@
 #include <cmath>
 #include <numeric>
 
+#include "pipeline/quantile.h"
+
 namespace fovea::firmware {
 
 double Samples::quantile(double q) const {
   if (values_.empty()) return 0.0;
-  std::vector<double> sorted = values_;
-  std::sort(sorted.begin(), sorted.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(sorted.size())));
-  return sorted[std::clamp<std::size_t>(rank, 1, sorted.size()) - 1];
+  std::vector<double> scratch = values_;
+  return pipeline::nearestRankQuantile(scratch, q);
 }
 
 double Samples::max() const { return values_.empty() ? 0.0 : *std::max_element(values_.begin(), values_.end()); }

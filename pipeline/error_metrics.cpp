@@ -1,5 +1,7 @@
 #include "pipeline/error_metrics.h"
 
+#include "pipeline/quantile.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -24,11 +26,7 @@ double displacementAngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& d) 
 
 // Nearest-rank quantile of values[0..n) (reordered); 0 when n is 0.
 double quantile(double* values, std::size_t n, double q) {
-  if (n == 0) return 0.0;
-  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(n)));
-  const std::size_t k = std::clamp<std::size_t>(rank, 1, n) - 1;
-  std::nth_element(values, values + k, values + n);
-  return values[k];
+  return n == 0 ? 0.0 : nearestRankQuantile(std::span<double>(values, n), q);
 }
 
 }  // namespace

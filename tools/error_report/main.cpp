@@ -21,6 +21,7 @@
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/error_metrics.h"
+#include "pipeline/quantile.h"
 #include "pipeline/foveator.h"
 #include "tools/error_report/report.h"
 
@@ -148,13 +149,10 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
   return options;
 }
 
-// Sorted-copy nearest-rank quantile, as fovead's report does; NaN when empty.
+// Nearest-rank quantile of the values that are numbers; NaN when none is.
 double quantileOf(std::vector<double> values, double q) {
   values.erase(std::remove_if(values.begin(), values.end(), [](double v) { return std::isnan(v); }), values.end());
-  if (values.empty()) return kNaN;
-  std::sort(values.begin(), values.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(values.size())));
-  return values[std::clamp<std::size_t>(rank, 1, values.size()) - 1];
+  return values.empty() ? kNaN : pipeline::nearestRankQuantile(values, q);
 }
 
 // One region's (or all regions') measurements over the frames.

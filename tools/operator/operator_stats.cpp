@@ -5,15 +5,12 @@
 #include <cstdio>
 #include <limits>
 
+#include "pipeline/quantile.h"
+
 namespace fovea::tools {
 
 double quantile(std::vector<double> samples, double q) {
-  if (samples.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(samples.begin(), samples.end());
-  // Nearest rank: the smallest sample with at least q of them at or below it.
-  const double rank = std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(samples.size()));
-  const std::size_t index = rank < 1.0 ? 0 : static_cast<std::size_t>(rank) - 1;
-  return samples[std::min(index, samples.size() - 1)];
+  return samples.empty() ? std::numeric_limits<double>::quiet_NaN() : pipeline::nearestRankQuantile(samples, q);
 }
 
 void OperatorStats::add(Tally& t, const FrameObservation& f) {
