@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include "hal/gpio/mock/mock_gpio.h"
@@ -233,6 +236,73 @@ TEST(StatusLines, ALineTakenByAnotherConsumerFailsStartAndReleasesTheRest) {
   EXPECT_FALSE(s.isOk());
   EXPECT_NE(s.message().find("line 2"), std::string::npos) << s.message();
   EXPECT_FALSE(gpio.isRequested(kHeartbeat));
+}
+
+// The heartbeat and fault sequence with each level read back from the chip
+// after each update: on the mock here, and on real lines below.
+void heartbeatAndFaultSequenceReadBack(hal::Gpio& gpio) {
+  StatusLinesConfig config;
+  config.heartbeat_line = 0;
+  config.streaming_line = 1;
+  config.fault_line = 2;
+  config.heartbeat_period_ns = 500 * kMs;
+  StatusLines lines(gpio, config);
+  Status started = lines.start();
+  ASSERT_TRUE(started.isOk()) << started.toString() << " on " << gpio.name();
+
+  auto expectLines = [&](bool heartbeat, bool streaming, bool fault, int64_t t_ms) {
+    bool level = false;
+    ASSERT_TRUE(gpio.get(0, level));
+    EXPECT_EQ(level, heartbeat) << "heartbeat at " << t_ms << " ms";
+    ASSERT_TRUE(gpio.get(1, level));
+    EXPECT_EQ(level, streaming) << "streaming at " << t_ms << " ms";
+    ASSERT_TRUE(gpio.get(2, level));
+    EXPECT_EQ(level, fault) << "fault at " << t_ms << " ms";
+  };
+  expectLines(false, false, false, -1);
+  StatusInputs in;
+  bool heartbeat = false;
+  for (int64_t t_ms = 0; t_ms <= 3000; t_ms += 250) {
+    in.fault = t_ms >= 1000 && t_ms < 2000;                // a fault stands from 1 s to 2 s
+    in.healthy = !(t_ms >= 1000 && t_ms < 1500);           // and stalls the pipeline for 0.5 s
+    in.operator_connected = in.gaze_fresh = t_ms >= 2500;  // an operator arrives at 2.5 s
+    lines.update(in, t_ms * kMs);
+    // Toggles at 0, 500, 1500 (healthy again: at once), 2000, 2500, 3000.
+    if (t_ms == 0 || t_ms == 500 || t_ms == 1500 || t_ms == 2000 || t_ms == 2500 || t_ms == 3000) {
+      heartbeat = !heartbeat;
+    }
+    expectLines(heartbeat, in.operator_connected, in.fault, t_ms);
+  }
+  EXPECT_EQ(lines.counters().write_errors, 0u);
+  EXPECT_EQ(lines.counters().heartbeat_toggles, 6u);
+  lines.stop();
+  EXPECT_EQ(gpio.counters().write_errors, 0u);
+}
+
+TEST(StatusLines, HeartbeatAndFaultSequenceReadBackOnTheMock) {
+  MockGpio gpio(8);
+  heartbeatAndFaultSequenceReadBack(gpio);
+}
+
+bool anyGpioChip() {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator("/dev", ec)) {
+    if (entry.path().filename().string().rfind("gpiochip", 0) == 0) return true;
+  }
+  return false;
+}
+
+// Real lines: run by tests/vm/run-gpio-vm on the arm64 VM's PL061 (lines 0, 1, 2
+// of gpiochip0; FOVEA_TEST_GPIO_CHIP names another chip), skipped without one.
+TEST(StatusLinesOnRealGpio, HeartbeatAndFaultSequenceReadBack) {
+#ifndef FOVEA_HAVE_GPIOD
+  GTEST_SKIP() << "built without libgpiod";
+#endif
+  if (!anyGpioChip()) GTEST_SKIP() << "no /dev/gpiochip* on this machine";
+  const char* chip_env = std::getenv("FOVEA_TEST_GPIO_CHIP");
+  auto created = hal::createGpio(std::string("gpiod:") + (chip_env ? chip_env : "gpiochip0"));
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  heartbeatAndFaultSequenceReadBack(**created);
 }
 
 }  // namespace
