@@ -1,10 +1,9 @@
 // Logging: levels, the line format of each sink style, rate limiting on a fake
-// clock, journal detection, and no heap allocation when logging.
+// clock, journal detection (no heap allocation: test_log_alloc.cpp).
 #include "firmware/log.h"
 
 #include <gtest/gtest.h>
 
-#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -14,8 +13,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include "tests/support/alloc_counter.h"
 
 namespace fovea::firmware {
 namespace {
@@ -207,41 +204,6 @@ TEST(Log, JournalStreamIsDetectedFromDeviceAndInode) {
   EXPECT_FALSE(isJournalStream(nullptr, fd));
   EXPECT_FALSE(isJournalStream("garbage", fd));
   std::fclose(file);
-}
-
-TEST(Log, LoggingDoesNotAllocate) {
-  {
-    test::AllocationScope check;  // the counter works
-    void* volatile raw = std::malloc(10);
-    std::free(raw);
-    ASSERT_GE(check.allocations(), 1u);
-  }
-  LastLineSink sink;
-  FakeClock clock;
-  Logger log(sink, clock.clock(), LogLevel::kDebug);
-  LogRateLimit site;
-  const int null_fd = ::open("/dev/null", O_WRONLY);
-  ASSERT_GE(null_fd, 0);
-  FdLogSink devnull(null_fd, FdLogSink::Style::kPlain);
-  Logger to_fd(devnull, clock.clock());
-  log.log(LogLevel::kInfo, "warm-up %d", 1);  // first use of anything lazily set up
-
-  uint64_t allocations = 0;
-  {
-    test::AllocationScope scope;
-    for (int64_t t_ms = 0; t_ms < 5000; ++t_ms) {
-      clock.now_ns = t_ms * kMs;
-      (void)log.logLimited(site, LogLevel::kWarning, "camera %s: %d bad frames, %.1f%%", "mock", 12, 3.5);
-      if (t_ms % 500 == 0) {
-        log.log(LogLevel::kInfo, "status: %d fps", 30);
-        to_fd.log(LogLevel::kInfo, "status: %d fps", 30);
-      }
-    }
-    allocations = scope.allocations();
-  }
-  ::close(null_fd);
-  EXPECT_EQ(allocations, 0u);
-  EXPECT_EQ(sink.count, 1u + 5u + 10u);
 }
 
 }  // namespace
