@@ -6,6 +6,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 
@@ -157,6 +158,24 @@ TEST(GpiodGpio, RealLineRequestSetAndReadBack) {
   EXPECT_THAT(missing.message(), HasSubstr("no such line"));
   gpio.releaseAll();
   EXPECT_EQ(gpio.counters().write_errors, 0u);
+}
+
+// FOVEA_TEST_GPIO_BUSY_LINE: a line another driver holds (in the VM, line 3,
+// which gpio-keys takes for the power button): the error says who has it.
+TEST(GpiodGpio, ABusyLineSaysWhoHoldsIt) {
+  const char* busy_env = std::getenv("FOVEA_TEST_GPIO_BUSY_LINE");
+  if (gpiod::listGpioChips().empty() || busy_env == nullptr) {
+    GTEST_SKIP() << "needs a chip and FOVEA_TEST_GPIO_BUSY_LINE";
+  }
+  const char* chip_env = std::getenv("FOVEA_TEST_GPIO_CHIP");
+  auto created = createGpio(std::string("gpiod:") + (chip_env ? chip_env : "gpiochip0"));
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  const unsigned line = static_cast<unsigned>(std::atoi(busy_env));
+  Status busy = (*created)->requestOutput(line, "fovea-test", false);
+  EXPECT_EQ(busy.code(), ErrorCode::kUnavailable) << busy.toString();
+  EXPECT_THAT(busy.message(), HasSubstr("gpio: line " + std::to_string(line) + " of gpiod:"));
+  EXPECT_THAT(busy.message(), HasSubstr(": busy, already used by '"));
+  std::printf("busy line: %s\n", busy.message().c_str());
 }
 
 #endif  // FOVEA_HAVE_GPIOD
