@@ -469,3 +469,64 @@ TEST(Links, GarbageFloodDoesNotStopGazeOrChunks) {
 
 }  // namespace
 }  // namespace fovea::net
+
+namespace fovea::net {
+namespace {
+
+// A key holder's hand-made Hello: the refusal names the reason and echoes the nonce.
+RefuseMsg refusalOf(RobotLink& robot, const Key& key, const HelloMsg& hello) {
+  RefuseMsg refuse;
+  auto raw = UdpSocket::bind(Endpoint::parse("127.0.0.1:0").value());
+  if (!raw) {
+    ADD_FAILURE() << raw.status().toString();
+    return refuse;
+  }
+  const DirectionKeys hs = handshakeKeys(key, Role::kOperator);
+  SessionChannel channel(hs, randomU64(), 0);
+  MessageEncoder encoder;
+  std::array<uint8_t, kMaxMtu> out{};
+  std::array<uint8_t, kMaxMtu + 1> in{};
+  std::array<uint8_t, kMaxMtu> plain{};
+  EXPECT_TRUE(raw->sendTo(channel.seal(MessageType::kHello, encoder.encode(hello), out), robot.localEndpoint()));
+  const uint64_t refusals = robot.counters().refusals;
+  for (int i = 0; i < 200 && robot.counters().refusals == refusals; ++i) robot.poll(5);
+  EXPECT_TRUE(raw->waitReadable(500));
+  Endpoint from;
+  const long n = raw->receive(in, from);
+  EXPECT_GT(n, 0);
+  if (n <= 0) return refuse;
+  const std::span<const uint8_t> d(in.data(), static_cast<std::size_t>(n));
+  Header header;
+  EXPECT_EQ(parseHeader(d, header), std::nullopt);
+  EXPECT_EQ(header.type, MessageType::kRefuse);
+  auto payload = openSealed(hs.rx, d, plain);
+  EXPECT_TRUE(payload.has_value());
+  if (payload) {
+    EXPECT_EQ(decode(*payload, refuse), std::nullopt);
+  }
+  EXPECT_EQ(refuse.client_nonce, hello.client_nonce);
+  return refuse;
+}
+
+TEST(Links, OtherVersionOrTinyMtuRefusedWithReason) {
+  const Key key = generateKey();
+  auto robot = makeRobot(key);
+  ASSERT_TRUE(robot);
+  HelloMsg hello;
+  hello.operator_name.assign("future");
+  hello.protocol_version = kProtocolVersion + 1;
+  hello.client_nonce = randomNonce128();
+  RefuseMsg r = refusalOf(*robot, key, hello);
+  EXPECT_EQ(r.reason, RefuseReason::kVersion);
+  EXPECT_NE(r.text.view().find("version"), std::string_view::npos) << r.text.view();
+  hello.protocol_version = kProtocolVersion;
+  hello.mtu_bytes = 100;
+  hello.client_nonce = randomNonce128();
+  r = refusalOf(*robot, key, hello);
+  EXPECT_EQ(r.reason, RefuseReason::kBadRequest);
+  EXPECT_NE(r.text.view().find("MTU 100"), std::string_view::npos) << r.text.view();
+  EXPECT_FALSE(robot->hasSession());
+}
+
+}  // namespace
+}  // namespace fovea::net
