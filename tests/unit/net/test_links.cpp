@@ -391,7 +391,7 @@ TEST(Links, ReflectedDatagramsAreWrongDirection) {
 
 TEST(Links, SessionEndsOnByeOrTimeoutThenNewOperatorAccepted) {
   const Key key = generateKey();
-  auto robot = makeRobot(key, "127.0.0.1:0", 200'000'000);
+  auto robot = makeRobot(key, "127.0.0.1:0", 400'000'000);
   ASSERT_TRUE(robot);
   const std::string address = robot->localEndpoint().toString();
   {
@@ -403,14 +403,16 @@ TEST(Links, SessionEndsOnByeOrTimeoutThenNewOperatorAccepted) {
   }
   auto bob = connectWhilePolling(*robot, address, operatorConfig(key, "bob"));
   ASSERT_TRUE(bob) << bob.status().toString();
+  ASSERT_TRUE(robot->hasSession());
   EXPECT_EQ(robot->session()->operator_name.view(), "bob");
-  // Bob goes silent: after 200 ms the robot ends the session and says Bye.
+  // Bob goes silent: after 400 ms the robot ends the session and says Bye.
   ASSERT_TRUE(pollUntil(*robot, [&] { return !robot->hasSession(); }, 1000));
   EXPECT_EQ(robot->counters().sessions_timed_out, 1u);
   EXPECT_TRUE(receiveType(**bob, MessageType::kBye));
   EXPECT_FALSE((*bob)->sessionActive());
   auto carol = connectWhilePolling(*robot, address, operatorConfig(key, "carol"));
   ASSERT_TRUE(carol) << carol.status().toString();
+  ASSERT_TRUE(robot->hasSession());
   EXPECT_EQ(robot->session()->operator_name.view(), "carol");
   EXPECT_EQ(robot->counters().sessions_accepted, 3u);
 }
