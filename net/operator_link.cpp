@@ -207,7 +207,7 @@ std::optional<Received> OperatorLink::handle(std::span<const uint8_t> datagram, 
   trackSequence(header.seq);
   if (handshake) {
     // A second Accept (the robot answered a retransmitted Hello): nothing new.
-    counters_.dropped.add(DropReason::kUnexpected);
+    ++counters_.accepts_repeated;
     return std::nullopt;
   }
   if (header.type == MessageType::kStatus) {

@@ -35,6 +35,7 @@ struct OperatorLinkCounters {
   DropCounters dropped;
   uint64_t datagrams_lost = 0;      // gaps in the robot's sequence numbers (reordered arrivals fill them)
   uint64_t hellos_sent = 0;
+  uint64_t accepts_repeated = 0;    // Accepts after the first (answers to retransmitted Hellos)
   uint64_t gaze_sent = 0;
   uint64_t send_failures = 0;
 };

@@ -116,7 +116,6 @@ const char* dropReasonName(DropReason reason) {
     case DropReason::kAuth: return "auth";
     case DropReason::kVerify: return "verify";
     case DropReason::kSemantic: return "semantic";
-    case DropReason::kUnexpected: return "unexpected";
   }
   return "unknown";
 }

@@ -54,9 +54,8 @@ enum class DropReason : uint8_t {
   kAuth,            // authentication failed: wrong key, tampered, truncated
   kVerify,          // FlatBuffers verification failed
   kSemantic,        // well-formed but meaningless (NaN, non-unit direction, echo mismatch...)
-  kUnexpected,      // authentic but not expected now (an Accept with no connect pending)
 };
-inline constexpr std::size_t kDropReasonCount = 13;
+inline constexpr std::size_t kDropReasonCount = 12;
 const char* dropReasonName(DropReason reason);
 
 struct DropCounters {
