@@ -8,6 +8,7 @@
 #include <chrono>
 #include <functional>
 #include <future>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -321,6 +322,25 @@ TEST(Links, GazeNewestWins) {
   EXPECT_EQ(latest.sample.feedback.last_frame_id, 104u);
   EXPECT_NEAR(latest.sample.gaze_direction.x, 4 / std::sqrt(17.0), 1e-12);
   EXPECT_GT(latest.received_ns, 0);
+}
+
+TEST(Links, InvalidGazeFromTheOperatorDroppedAsSemantic) {
+  const Key key = generateKey();
+  auto robot = makeRobot(key);
+  ASSERT_TRUE(robot);
+  auto op = connectWhilePolling(*robot, robot->localEndpoint().toString(), operatorConfig(key, "alice"));
+  ASSERT_TRUE(op) << op.status().toString();
+  ASSERT_TRUE((*op)->sendGaze(gazeTowards(0, 0, 1)));
+  GazeSample bad = gazeTowards(0, 0, 1);
+  bad.gaze_direction.x = std::numeric_limits<double>::quiet_NaN();
+  ASSERT_TRUE((*op)->sendGaze(bad));
+  bad = gazeTowards(0, 0, 1);
+  bad.gaze_direction = {0, 0, 2};
+  ASSERT_TRUE((*op)->sendGaze(bad));
+  ASSERT_TRUE(pollUntil(*robot, [&] { return robot->counters().dropped[DropReason::kSemantic] == 2; }));
+  ASSERT_TRUE(robot->latestGaze());
+  EXPECT_EQ(robot->latestGaze()->sample.sequence, 1u);
+  EXPECT_EQ(robot->counters().gaze_accepted, 1u);
 }
 
 TEST(Links, StatusEchoGivesRoundTrip) {
