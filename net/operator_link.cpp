@@ -62,8 +62,8 @@ Result<std::unique_ptr<OperatorLink>> OperatorLink::connect(std::string_view add
       const int64_t wait_ns = retry_at_ns - monotonicNs();
       if (wait_ns <= 0 || !l.socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) break;
       Endpoint from;
-      long n;
-      while ((n = l.socket_.receive(l.rx_buf_, from)) >= 0) {
+      long n = -1;
+      while (monotonicNs() < retry_at_ns && (n = l.socket_.receive(l.rx_buf_, from)) >= 0) {
         ++l.counters_.datagrams_received;
         if (static_cast<std::size_t>(n) > kMaxMtu) {
           l.counters_.dropped.add(DropReason::kTooLong);
@@ -169,14 +169,16 @@ std::optional<Received> OperatorLink::receive(int timeout_ms) {
   const int64_t deadline_ns = monotonicNs() + int64_t{std::max(timeout_ms, 0)} * 1'000'000;
   for (;;) {
     Endpoint from;
-    long n;
+    long n = -1;
     while ((n = socket_.receive(rx_buf_, from)) >= 0) {
       ++counters_.datagrams_received;
       if (static_cast<std::size_t>(n) > kMaxMtu) {
         counters_.dropped.add(DropReason::kTooLong);
         continue;
       }
-      if (auto r = handle({rx_buf_.data(), static_cast<std::size_t>(n)}, monotonicNs())) return r;
+      const int64_t now_ns = monotonicNs();
+      if (auto r = handle({rx_buf_.data(), static_cast<std::size_t>(n)}, now_ns)) return r;
+      if (now_ns >= deadline_ns) return std::nullopt;  // a flood does not hold the caller past its timeout
     }
     const int64_t wait_ns = deadline_ns - monotonicNs();
     if (wait_ns <= 0 || !socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) return std::nullopt;

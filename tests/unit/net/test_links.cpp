@@ -7,7 +7,9 @@
 
 #include <chrono>
 #include <functional>
+#include <atomic>
 #include <future>
+#include <thread>
 #include <limits>
 #include <random>
 #include <vector>
@@ -548,6 +550,36 @@ TEST(Links, OtherVersionOrTinyMtuRefusedWithReason) {
   EXPECT_EQ(r.reason, RefuseReason::kBadRequest);
   EXPECT_NE(r.text.view().find("MTU 100"), std::string_view::npos) << r.text.view();
   EXPECT_FALSE(robot->hasSession());
+}
+
+}  // namespace
+}  // namespace fovea::net
+
+namespace fovea::net {
+namespace {
+
+TEST(Links, OperatorReceiveReturnsOnTimeDuringAFlood) {
+  const Key key = generateKey();
+  auto robot = makeRobot(key);
+  ASSERT_TRUE(robot);
+  auto op = connectWhilePolling(*robot, robot->localEndpoint().toString(), operatorConfig(key, "alice"));
+  ASSERT_TRUE(op) << op.status().toString();
+  const Endpoint op_endpoint = Endpoint::parse("127.0.0.1:" + std::to_string((*op)->localPort())).value();
+  std::atomic<bool> stop{false};
+  std::thread flood([&] {
+    auto attacker = UdpSocket::bind(Endpoint::parse("127.0.0.1:0").value());
+    std::array<uint8_t, 64> junk{};
+    const auto end = std::chrono::steady_clock::now() + 3s;  // bounded even if the test fails
+    while (!stop && std::chrono::steady_clock::now() < end) (void)attacker->sendTo(junk, op_endpoint);
+  });
+  for (int i = 0; i < 300 && (*op)->counters().datagrams_received < 100; ++i) (void)(*op)->receive(10);
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_FALSE((*op)->receive(50));
+  const auto elapsed = std::chrono::steady_clock::now() - start;
+  stop = true;
+  flood.join();
+  EXPECT_LT(elapsed, 1s);
+  EXPECT_GT((*op)->counters().dropped[DropReason::kBadMagic], 100u);
 }
 
 }  // namespace
