@@ -1,0 +1,203 @@
+#include "net/messages.h"
+
+#include <cmath>
+#include <cstring>
+
+#include "net/schema/control_generated.h"
+
+namespace fovea::net {
+namespace {
+
+namespace fb = flatbuffers;
+
+wire::Nonce128 toWire(const Nonce128& n) { return wire::Nonce128(n.lo, n.hi); }
+Nonce128 fromWire(const wire::Nonce128* n) { return n ? Nonce128{n->lo(), n->hi()} : Nonce128{}; }
+wire::Vec3d toWire(const Vec3& v) { return wire::Vec3d(v.x, v.y, v.z); }
+
+bool finite(double v) { return std::isfinite(v); }
+bool finite(const Vec3& v) { return finite(v.x) && finite(v.y) && finite(v.z); }
+bool finite(const Quat& q) { return finite(q.w) && finite(q.x) && finite(q.y) && finite(q.z); }
+bool unit(const Vec3& v) { return std::fabs(std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z) - 1.0) <= kUnitTolerance; }
+bool unit(const Quat& q) {
+  return std::fabs(std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z) - 1.0) <= kUnitTolerance;
+}
+
+template <typename T>
+const T* verified(std::span<const uint8_t> payload) {
+  if (payload.empty()) return nullptr;
+  fb::Verifier verifier(payload.data(), payload.size(), /*max_depth=*/8, /*max_tables=*/16);
+  if (!verifier.VerifyBuffer<T>(nullptr)) return nullptr;
+  return fb::GetRoot<T>(payload.data());
+}
+
+// Strings must fit the text; otherwise the message is semantically wrong.
+bool readText(const fb::String* s, std::size_t max_bytes, ShortText& out) {
+  if (s == nullptr) {
+    out.assign({});
+    return true;
+  }
+  if (s->size() > max_bytes) return false;
+  out.assign(s->string_view());
+  return true;
+}
+
+}  // namespace
+
+void ShortText::assign(std::string_view s) {
+  size = s.size() < kCapacity ? s.size() : kCapacity;
+  std::memcpy(chars.data(), s.data(), size);
+  chars[size] = '\0';
+}
+
+const char* refuseReasonName(RefuseReason reason) {
+  switch (reason) {
+    case RefuseReason::kBusy: return "busy";
+    case RefuseReason::kVersion: return "version";
+    case RefuseReason::kBadRequest: return "bad-request";
+  }
+  return "unknown";
+}
+
+MessageEncoder::MessageEncoder() : builder_(kMaxPayloadBytes) {}
+
+std::span<const uint8_t> MessageEncoder::finish() {
+  return {builder_.GetBufferPointer(), builder_.GetSize()};
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const HelloMsg& m) {
+  builder_.Clear();
+  const auto name = builder_.CreateString(m.operator_name.view());
+  const wire::Nonce128 nonce = toWire(m.client_nonce);
+  builder_.Finish(wire::CreateHello(builder_, m.protocol_version, name, m.budget_bytes_per_s, m.mtu_bytes, &nonce));
+  return finish();
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const AcceptMsg& m) {
+  builder_.Clear();
+  const wire::Nonce128 client = toWire(m.client_nonce);
+  const wire::Nonce128 robot = toWire(m.robot_nonce);
+  builder_.Finish(
+      wire::CreateAccept(builder_, &client, &robot, m.mtu_bytes, m.budget_bytes_per_s, m.robot_stamp_ns));
+  return finish();
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const RefuseMsg& m) {
+  builder_.Clear();
+  const auto text = builder_.CreateString(m.text.view());
+  const wire::Nonce128 client = toWire(m.client_nonce);
+  builder_.Finish(wire::CreateRefuse(builder_, &client, static_cast<wire::RefuseReason>(m.reason), text));
+  return finish();
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const ByeMsg& m) {
+  builder_.Clear();
+  const auto reason = builder_.CreateString(m.reason.view());
+  builder_.Finish(wire::CreateBye(builder_, reason));
+  return finish();
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const GazeSample& m) {
+  builder_.Clear();
+  const wire::Vec3d origin = toWire(m.gaze_origin_m);
+  const wire::Vec3d direction = toWire(m.gaze_direction);
+  const wire::Vec3d hmd = toWire(m.hmd_position_m);
+  const wire::Quatd q(m.hmd_orientation.w, m.hmd_orientation.x, m.hmd_orientation.y, m.hmd_orientation.z);
+  const GazeFeedback& f = m.feedback;
+  builder_.Finish(wire::CreateGaze(builder_, m.sequence, m.operator_stamp_ns, &origin, &direction, &hmd, &q,
+                                   m.confidence, f.last_frame_id, f.datagrams_lost, f.bytes_received,
+                                   f.echo_robot_stamp_ns, f.echo_delay_ns));
+  return finish();
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const StatusReport& m) {
+  builder_.Clear();
+  builder_.Finish(wire::CreateStatus(builder_, m.robot_stamp_ns, m.frames_captured, m.frames_sent,
+                                     m.frames_dropped, m.chunks_cut, m.datagrams_sent, m.bytes_sent,
+                                     m.datagrams_received, m.datagrams_dropped, m.gaze_age_ns, m.rtt_ns,
+                                     m.latency_p50_ns, m.latency_p99_ns));
+  return finish();
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, HelloMsg& out) {
+  const auto* m = verified<wire::Hello>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  if (m->client_nonce() == nullptr) return DropReason::kSemantic;
+  if (!readText(m->operator_name(), kMaxOperatorNameBytes, out.operator_name)) return DropReason::kSemantic;
+  out.protocol_version = m->protocol_version();
+  out.budget_bytes_per_s = m->budget_bytes_per_s();
+  out.mtu_bytes = m->mtu_bytes();
+  out.client_nonce = fromWire(m->client_nonce());
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, AcceptMsg& out) {
+  const auto* m = verified<wire::Accept>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  if (m->client_nonce() == nullptr || m->robot_nonce() == nullptr) return DropReason::kSemantic;
+  if (m->mtu_bytes() < kMinMtu || m->mtu_bytes() > kMaxMtu) return DropReason::kSemantic;
+  out.client_nonce = fromWire(m->client_nonce());
+  out.robot_nonce = fromWire(m->robot_nonce());
+  out.mtu_bytes = m->mtu_bytes();
+  out.budget_bytes_per_s = m->budget_bytes_per_s();
+  out.robot_stamp_ns = m->robot_stamp_ns();
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, RefuseMsg& out) {
+  const auto* m = verified<wire::Refuse>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  if (m->client_nonce() == nullptr) return DropReason::kSemantic;
+  if (static_cast<uint8_t>(m->reason()) > static_cast<uint8_t>(RefuseReason::kBadRequest)) {
+    return DropReason::kSemantic;
+  }
+  if (!readText(m->text(), ShortText::kCapacity, out.text)) return DropReason::kSemantic;
+  out.client_nonce = fromWire(m->client_nonce());
+  out.reason = static_cast<RefuseReason>(m->reason());
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, ByeMsg& out) {
+  const auto* m = verified<wire::Bye>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  if (!readText(m->reason(), ShortText::kCapacity, out.reason)) return DropReason::kSemantic;
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, GazeSample& out) {
+  const auto* m = verified<wire::Gaze>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  if (!m->gaze_origin_m() || !m->gaze_direction() || !m->hmd_position_m() || !m->hmd_orientation()) {
+    return DropReason::kSemantic;
+  }
+  GazeSample g;
+  g.sequence = m->sequence();
+  g.operator_stamp_ns = m->operator_stamp_ns();
+  const auto vec = [](const wire::Vec3d* v) { return Vec3{v->x(), v->y(), v->z()}; };
+  g.gaze_origin_m = vec(m->gaze_origin_m());
+  g.gaze_direction = vec(m->gaze_direction());
+  g.hmd_position_m = vec(m->hmd_position_m());
+  const wire::Quatd* q = m->hmd_orientation();
+  g.hmd_orientation = Quat{q->w(), q->x(), q->y(), q->z()};
+  g.confidence = m->confidence();
+  g.feedback = GazeFeedback{m->last_frame_id(), m->datagrams_lost(), m->bytes_received(),
+                            m->echo_robot_stamp_ns(), m->echo_delay_ns()};
+  if (g.sequence == 0 || !finite(g.gaze_origin_m) || !finite(g.gaze_direction) || !finite(g.hmd_position_m) ||
+      !finite(g.hmd_orientation) || !unit(g.gaze_direction) || !unit(g.hmd_orientation) ||
+      !(g.confidence >= 0.0f && g.confidence <= 1.0f) || g.feedback.echo_delay_ns < 0) {
+    return DropReason::kSemantic;
+  }
+  out = g;
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, StatusReport& out) {
+  const auto* m = verified<wire::Status>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  out = StatusReport{m->robot_stamp_ns(),     m->frames_captured(),   m->frames_sent(),   m->frames_dropped(),
+                     m->chunks_cut(),         m->datagrams_sent(),    m->bytes_sent(),    m->datagrams_received(),
+                     m->datagrams_dropped(),  m->gaze_age_ns(),       m->rtt_ns(),        m->latency_p50_ns(),
+                     m->latency_p99_ns()};
+  return std::nullopt;
+}
+
+}  // namespace fovea::net

@@ -1,0 +1,243 @@
+#include "net/operator_link.h"
+
+#include <algorithm>
+
+namespace fovea::net {
+
+Result<std::unique_ptr<OperatorLink>> OperatorLink::connect(std::string_view address,
+                                                            const OperatorLinkConfig& config) {
+  using R = Result<std::unique_ptr<OperatorLink>>;
+  initCrypto();
+  std::unique_ptr<OperatorLink> link(new OperatorLink());
+  if (config.key) {
+    link->psk_ = *config.key;
+  } else if (config.insecure) {
+    link->psk_ = insecureKey();
+    link->notice_ = kInsecureWarning;
+  } else {
+    return R(ErrorCode::kInvalidArgument,
+             "operator link: no key configured: give a key file (--key-file FILE), or --insecure for a demo on a "
+             "trusted host");
+  }
+  if (config.name.size() > kMaxOperatorNameBytes) {
+    return R(ErrorCode::kInvalidArgument, "operator link: name '" + config.name + "' is longer than " +
+                                              std::to_string(kMaxOperatorNameBytes) + " bytes");
+  }
+  if (config.mtu_bytes < kMinMtu || config.mtu_bytes > kMaxMtu) {
+    return R(ErrorCode::kInvalidArgument, "operator link: MTU " + std::to_string(config.mtu_bytes) +
+                                              " bytes is outside " + std::to_string(kMinMtu) + ".." +
+                                              std::to_string(kMaxMtu));
+  }
+  Result<Endpoint> robot = Endpoint::parse(address);
+  if (!robot) return R(robot.status().code(), "operator link: connect " + robot.status().message());
+  Result<UdpSocket> socket = UdpSocket::forPeer(robot.value());
+  if (!socket) return R(socket.status());
+  link->robot_ = robot.value();
+  link->socket_ = std::move(socket).value();
+  link->handshake_ = handshakeKeys(link->psk_, Role::kOperator);
+  link->channel_ = SessionChannel(link->handshake_, randomU64(), 0);
+
+  HelloMsg hello;
+  hello.operator_name.assign(config.name);
+  hello.budget_bytes_per_s = config.budget_bytes_per_s;
+  hello.mtu_bytes = config.mtu_bytes;
+  hello.client_nonce = randomNonce128();
+
+  const int64_t start_ns = monotonicNs();
+  const int64_t deadline_ns = start_ns + int64_t{config.connect_timeout_ms} * 1'000'000;
+  int64_t retry_ns = int64_t{std::max(config.first_retry_ms, 1)} * 1'000'000;
+  OperatorLink& l = *link;
+  for (;;) {
+    const int64_t now_ns = monotonicNs();
+    if (now_ns >= deadline_ns) break;
+    const auto d = l.channel_.seal(MessageType::kHello, l.encoder_.encode(hello), l.tx_buf_);
+    if (l.socket_.sendTo(d, l.robot_)) {
+      ++l.counters_.hellos_sent;
+    } else {
+      ++l.counters_.send_failures;
+    }
+    const int64_t retry_at_ns = std::min(now_ns + retry_ns, deadline_ns);
+    retry_ns = std::min<int64_t>(retry_ns * 2, 1'000'000'000);
+    for (;;) {
+      const int64_t wait_ns = retry_at_ns - monotonicNs();
+      if (wait_ns <= 0 || !l.socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) break;
+      Endpoint from;
+      long n = -1;
+      while (monotonicNs() < retry_at_ns && (n = l.socket_.receive(l.rx_buf_, from)) >= 0) {
+        ++l.counters_.datagrams_received;
+        if (static_cast<std::size_t>(n) > kMaxMtu) {
+          l.counters_.dropped.add(DropReason::kTooLong);
+          continue;
+        }
+        const std::span<const uint8_t> datagram(l.rx_buf_.data(), static_cast<std::size_t>(n));
+        Header header;
+        if (auto drop = parseHeader(datagram, header)) {
+          l.counters_.dropped.add(*drop);
+          continue;
+        }
+        if (!isSentBy(header.type, Role::kRobot)) {
+          l.counters_.dropped.add(DropReason::kWrongDirection);
+          continue;
+        }
+        if (header.type != MessageType::kAccept && header.type != MessageType::kRefuse) {
+          l.counters_.dropped.add(DropReason::kNoSession);
+          continue;
+        }
+        auto payload = openSealed(l.handshake_.rx, datagram, l.plain_buf_);
+        if (!payload) {
+          l.counters_.dropped.add(DropReason::kAuth);
+          continue;
+        }
+        if (header.type == MessageType::kRefuse) {
+          RefuseMsg refuse;
+          if (auto drop = decode(*payload, refuse)) {
+            l.counters_.dropped.add(*drop);
+            continue;
+          }
+          if (!(refuse.client_nonce == hello.client_nonce)) {
+            l.counters_.dropped.add(DropReason::kSemantic);  // an old refusal, not ours
+            continue;
+          }
+          return R(ErrorCode::kUnavailable, "robot at " + l.robot_.toString() + " refused (" +
+                                                refuseReasonName(refuse.reason) + "): " +
+                                                std::string(refuse.text.view()));
+        }
+        AcceptMsg accept;
+        if (auto drop = decode(*payload, accept)) {
+          l.counters_.dropped.add(*drop);
+          continue;
+        }
+        if (!(accept.client_nonce == hello.client_nonce)) {
+          l.counters_.dropped.add(DropReason::kSemantic);  // an old Accept, not ours
+          continue;
+        }
+        l.counters_.bytes_received += datagram.size();
+        l.channel_.rekey(sessionKeys(l.psk_, Role::kOperator, hello.client_nonce, accept.robot_nonce), header.epoch);
+        l.channel_.window().commit(header.seq);
+        l.highest_robot_seq_ = header.seq;
+        l.mtu_bytes_ = accept.mtu_bytes;
+        l.budget_bytes_per_s_ = accept.budget_bytes_per_s;
+        l.noteRobotStamp(accept.robot_stamp_ns, monotonicNs());
+        l.active_ = true;
+        return link;
+      }
+    }
+  }
+  return R(ErrorCode::kUnavailable,
+           "no answer from a robot at " + link->robot_.toString() + " within " +
+               std::to_string(config.connect_timeout_ms) +
+               " ms (is fovead listening there, with the same key?)");
+}
+
+OperatorLink::~OperatorLink() {
+  if (active_) bye("operator leaving");
+}
+
+bool OperatorLink::sendGaze(GazeSample sample) {
+  if (!active_) return false;
+  const int64_t now_ns = monotonicNs();
+  sample.sequence = ++gaze_seq_;
+  if (sample.operator_stamp_ns == 0) sample.operator_stamp_ns = now_ns;
+  sample.feedback.datagrams_lost = counters_.datagrams_lost;
+  sample.feedback.bytes_received = counters_.bytes_received;
+  sample.feedback.echo_robot_stamp_ns = echo_robot_stamp_ns_;
+  sample.feedback.echo_delay_ns = echo_robot_stamp_ns_ != 0 ? now_ns - echo_received_ns_ : 0;
+  const auto d = channel_.seal(MessageType::kGaze, encoder_.encode(sample), tx_buf_);
+  if (d.empty() || !socket_.sendTo(d, robot_)) {
+    ++counters_.send_failures;
+    return false;
+  }
+  ++counters_.gaze_sent;
+  return true;
+}
+
+void OperatorLink::noteRobotStamp(int64_t robot_stamp_ns, int64_t received_ns) {
+  echo_robot_stamp_ns_ = robot_stamp_ns;
+  echo_received_ns_ = received_ns;
+}
+
+void OperatorLink::bye(std::string_view reason) {
+  if (!active_) return;
+  ByeMsg msg;
+  msg.reason.assign(reason);
+  const auto d = channel_.seal(MessageType::kBye, encoder_.encode(msg), tx_buf_);
+  if (d.empty() || !socket_.sendTo(d, robot_)) ++counters_.send_failures;
+  active_ = false;
+}
+
+std::optional<Received> OperatorLink::receive(int timeout_ms) {
+  const int64_t deadline_ns = monotonicNs() + int64_t{std::max(timeout_ms, 0)} * 1'000'000;
+  for (;;) {
+    Endpoint from;
+    long n = -1;
+    while ((n = socket_.receive(rx_buf_, from)) >= 0) {
+      ++counters_.datagrams_received;
+      if (static_cast<std::size_t>(n) > kMaxMtu) {
+        counters_.dropped.add(DropReason::kTooLong);
+        continue;
+      }
+      const int64_t now_ns = monotonicNs();
+      if (auto r = handle({rx_buf_.data(), static_cast<std::size_t>(n)}, now_ns)) return r;
+      if (now_ns >= deadline_ns) return std::nullopt;  // a flood does not hold the caller past its timeout
+    }
+    const int64_t wait_ns = deadline_ns - monotonicNs();
+    if (wait_ns <= 0 || !socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) return std::nullopt;
+  }
+}
+
+std::optional<Received> OperatorLink::handle(std::span<const uint8_t> datagram, int64_t now_ns) {
+  Header header;
+  if (auto drop = parseHeader(datagram, header)) {
+    counters_.dropped.add(*drop);
+    return std::nullopt;
+  }
+  if (!isSentBy(header.type, Role::kRobot)) {
+    counters_.dropped.add(DropReason::kWrongDirection);
+    return std::nullopt;
+  }
+  if (!active_) {
+    counters_.dropped.add(DropReason::kNoSession);
+    return std::nullopt;
+  }
+  const bool handshake = usesHandshakeKey(header.type);
+  std::span<const uint8_t> payload;
+  if (auto drop = channel_.open(header, datagram, plain_buf_, payload, handshake ? &handshake_.rx : nullptr)) {
+    counters_.dropped.add(*drop);
+    return std::nullopt;
+  }
+  counters_.bytes_received += datagram.size();
+  trackSequence(header.seq);
+  if (handshake) {
+    // A second Accept (the robot answered a retransmitted Hello): nothing new.
+    ++counters_.accepts_repeated;
+    return std::nullopt;
+  }
+  if (header.type == MessageType::kStatus) {
+    StatusReport status;
+    if (auto drop = decode(payload, status)) {
+      counters_.dropped.add(*drop);
+      return std::nullopt;
+    }
+    last_status_ = status;
+    noteRobotStamp(status.robot_stamp_ns, now_ns);
+  } else if (header.type == MessageType::kBye) {
+    ByeMsg bye;
+    if (auto drop = decode(payload, bye)) {
+      counters_.dropped.add(*drop);
+      return std::nullopt;
+    }
+    active_ = false;
+  }
+  return Received{header.type, payload, header.seq, now_ns};
+}
+
+void OperatorLink::trackSequence(uint64_t seq) {
+  if (seq > highest_robot_seq_) {
+    counters_.datagrams_lost += seq - highest_robot_seq_ - 1;
+    highest_robot_seq_ = seq;
+  } else if (counters_.datagrams_lost > 0) {
+    --counters_.datagrams_lost;  // a reordered datagram fills a gap counted as lost
+  }
+}
+
+}  // namespace fovea::net

@@ -1,0 +1,111 @@
+// The operator's end of the link (docs/protocol.md): says Hello, waits for Accept
+// (retrying with backoff), then sends gaze samples with receiver feedback and
+// receives the robot's authenticated payloads. Single-threaded; no heap
+// allocation per datagram.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "hal/result.h"
+#include "net/messages.h"
+#include "net/secure_channel.h"
+#include "net/udp_socket.h"
+
+namespace fovea::net {
+
+struct OperatorLinkConfig {
+  std::optional<Key> key;  // the pre-shared key; without one, insecure must be set (all-zero key)
+  bool insecure = false;
+  std::string name = "operator";          // at most kMaxOperatorNameBytes
+  uint64_t budget_bytes_per_s = 0;        // 0: whatever the robot allows
+  uint32_t mtu_bytes = kDefaultMtu;       // kMinMtu..kMaxMtu
+  int connect_timeout_ms = 3000;          // give up after this long
+  int first_retry_ms = 100;               // Hello again after this, doubling up to 1 s
+};
+
+struct OperatorLinkCounters {
+  uint64_t datagrams_received = 0;  // all, valid or not
+  uint64_t bytes_received = 0;      // authentic datagrams' bytes (reported back as feedback)
+  DropCounters dropped;
+  uint64_t datagrams_lost = 0;      // gaps in the robot's sequence numbers (reordered arrivals fill them)
+  uint64_t hellos_sent = 0;
+  uint64_t accepts_repeated = 0;    // Accepts after the first (answers to retransmitted Hellos)
+  uint64_t gaze_sent = 0;
+  uint64_t send_failures = 0;
+};
+
+// One authentic datagram from the robot. payload stays valid until the next receive().
+struct Received {
+  MessageType type = MessageType::kChunk;
+  std::span<const uint8_t> payload;
+  uint64_t seq = 0;
+  int64_t received_ns = 0;
+};
+
+class OperatorLink {
+ public:
+  // Says Hello to the robot at address ("HOST:PORT", "[V6]:PORT") and waits for
+  // Accept. Errors: a refusal (with the robot's reason), a timeout, a bad address.
+  static Result<std::unique_ptr<OperatorLink>> connect(std::string_view address, const OperatorLinkConfig& config);
+  ~OperatorLink();  // says Bye while the session is up
+
+  // Non-empty in insecure mode: the caller logs it loudly.
+  const std::string& notice() const { return notice_; }
+
+  // The session the robot granted.
+  uint32_t mtuBytes() const { return mtu_bytes_; }
+  uint64_t budgetBytesPerS() const { return budget_bytes_per_s_; }
+  // False after a Bye (either way).
+  bool sessionActive() const { return active_; }
+  const Endpoint& robot() const { return robot_; }
+
+  // Sends a gaze sample. The link numbers it (sequence), stamps it if
+  // operator_stamp_ns is 0, and fills the feedback except last_frame_id
+  // (datagrams lost, bytes received, the robot-timestamp echo).
+  [[nodiscard]] bool sendGaze(GazeSample sample);
+  // The next authentic payload (chunk, frame summary, status, bye), waiting up to
+  // timeout_ms; nullopt on timeout. Invalid datagrams are dropped and counted.
+  std::optional<Received> receive(int timeout_ms);
+  // A robot timestamp to echo in the next gaze (Accept and Status are noted already).
+  void noteRobotStamp(int64_t robot_stamp_ns, int64_t received_ns);
+  // Ends the session.
+  void bye(std::string_view reason);
+
+  // The newest Status received, if any.
+  const std::optional<StatusReport>& lastStatus() const { return last_status_; }
+  const OperatorLinkCounters& counters() const { return counters_; }
+  int localPort() const { return socket_.localEndpoint().port(); }
+
+ private:
+  OperatorLink() = default;
+  std::optional<Received> handle(std::span<const uint8_t> datagram, int64_t now_ns);
+  void trackSequence(uint64_t seq);
+
+  Key psk_;
+  DirectionKeys handshake_;
+  UdpSocket socket_;
+  Endpoint robot_;
+  std::string notice_;
+  SessionChannel channel_;
+  bool active_ = false;
+  uint32_t mtu_bytes_ = kDefaultMtu;
+  uint64_t budget_bytes_per_s_ = 0;
+  uint64_t gaze_seq_ = 0;
+  uint64_t highest_robot_seq_ = 0;
+  int64_t echo_robot_stamp_ns_ = 0;
+  int64_t echo_received_ns_ = 0;
+  std::optional<StatusReport> last_status_;
+  MessageEncoder encoder_;
+  OperatorLinkCounters counters_;
+  std::array<uint8_t, kMaxMtu + 1> rx_buf_{};
+  std::array<uint8_t, kMaxMtu> plain_buf_{};
+  std::array<uint8_t, kMaxMtu> tx_buf_{};
+};
+
+}  // namespace fovea::net
