@@ -1,3 +1,786 @@
-// The chunk codec (net/codec.h) arrives with issue 4.
-#include "net/wire.h"
+// The point-chunk codec (net/codec.h, docs/protocol-chunks.md).
+#include "net/codec.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#define ZSTD_STATIC_LINKING_ONLY  // ZSTD_initStaticCCtx/DCtx: contexts that never allocate
+#include <zstd.h>
+
 #include "net/schema/chunk_generated.h"
+
+namespace fovea::net {
+namespace {
+
+constexpr std::size_t kMinPayload = kMinMtu - kDatagramOverhead;
+constexpr std::size_t kMaxPayload = kMaxMtu - kDatagramOverhead;
+constexpr int kRadixBits = 11;
+constexpr uint8_t kKnownFlags = kChunkFlagZstd | kChunkFlagHalfChroma;
+// Lattice coordinates beyond 2^52 steps lose the integer grid in double.
+constexpr double kMaxLatticeCoord = 4503599627370496.0;
+
+// ---- Morton codes (21 bits per axis, x in the lowest bit) ----
+inline uint64_t spread3(uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | (v << 32)) & 0x1f00000000ffffULL;
+  v = (v | (v << 16)) & 0x1f0000ff0000ffULL;
+  v = (v | (v << 8)) & 0x100f00f00f00f00fULL;
+  v = (v | (v << 4)) & 0x10c30c30c30c30c3ULL;
+  v = (v | (v << 2)) & 0x1249249249249249ULL;
+  return v;
+}
+inline uint32_t compact3(uint64_t v) {
+  v &= 0x1249249249249249ULL;
+  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ULL;
+  v = (v ^ (v >> 4)) & 0x100f00f00f00f00fULL;
+  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffULL;
+  v = (v ^ (v >> 16)) & 0x1f00000000ffffULL;
+  v = (v ^ (v >> 32)) & 0x1fffff;
+  return static_cast<uint32_t>(v);
+}
+inline uint64_t morton(uint64_t x, uint64_t y, uint64_t z) { return spread3(x) | (spread3(y) << 1) | (spread3(z) << 2); }
+
+// ---- varints (LEB128, 7 bits per byte) ----
+inline std::size_t varintLength(uint64_t v) { return v < 128 ? 1 : (static_cast<std::size_t>(std::bit_width(v)) + 6) / 7; }
+inline std::size_t putVarint(uint8_t* out, uint64_t v) {
+  std::size_t n = 0;
+  while (v >= 128) {
+    out[n++] = static_cast<uint8_t>(v | 0x80);
+    v >>= 7;
+  }
+  out[n++] = static_cast<uint8_t>(v);
+  return n;
+}
+// False on truncation or more than 9 bytes (63 bits).
+inline bool getVarint(const uint8_t*& p, const uint8_t* end, uint64_t& v) {
+  v = 0;
+  for (int i = 0; i < 9; ++i) {
+    if (p == end) return false;
+    const uint8_t b = *p++;
+    v |= uint64_t{b & 0x7fu} << (7 * i);
+    if ((b & 0x80) == 0) return true;
+  }
+  return false;
+}
+
+// ---- colour ----
+// Bytes of colour data for n points.
+inline std::size_t colourBytes(std::size_t n, bool half_chroma) { return half_chroma ? n + 2 * ((n + 1) / 2) : 3 * n; }
+inline int luma(uint32_t c) {
+  return (pipeline::rgbRed(c) + 2 * pipeline::rgbGreen(c) + pipeline::rgbBlue(c) + 2) >> 2;
+}
+inline uint8_t clampByte(int v) { return static_cast<uint8_t>(std::clamp(v, 0, 255)); }
+
+}  // namespace
+
+// ---- configuration ----
+
+Status validate(const CodecConfig& c) {
+  if (c.max_payload < kMinPayload || c.max_payload > kMaxPayload) {
+    return {ErrorCode::kInvalidArgument, "codec.max_payload: " + std::to_string(c.max_payload) + " is outside [" +
+                                             std::to_string(kMinPayload) + ", " + std::to_string(kMaxPayload) +
+                                             "] (MTU minus " + std::to_string(kDatagramOverhead) + " bytes)"};
+  }
+  if (!std::isfinite(c.fovea_step_m) || c.fovea_step_m < 1e-6 || c.fovea_step_m > 1.0) {
+    return {ErrorCode::kInvalidArgument,
+            "codec.fovea_step_m: " + std::to_string(c.fovea_step_m) + " is outside [1e-6, 1] m"};
+  }
+  if (!std::isfinite(c.periphery_step_ratio) || c.periphery_step_ratio < 1.0 / 1024 || c.periphery_step_ratio > 1.0) {
+    return {ErrorCode::kInvalidArgument, "codec.periphery_step_ratio: " + std::to_string(c.periphery_step_ratio) +
+                                             " is outside [1/1024, 1] (a fraction of the voxel size)"};
+  }
+  if (c.zstd_level < -7 || c.zstd_level > 9) {
+    return {ErrorCode::kInvalidArgument, "codec.zstd_level: " + std::to_string(c.zstd_level) + " is outside [-7, 9]"};
+  }
+  return Status::ok();
+}
+
+// ---- encoder ----
+
+struct ChunkEncoder::State {
+  CodecConfig config;
+  std::size_t max_points = 0;
+  std::size_t data_budget = 0;  // bytes of `data` that always fit max_payload
+  std::size_t raw_capacity = 0;
+  std::size_t max_chunks = 0;
+
+  // Per point of the frame, grouped by region.
+  std::vector<int64_t> qx, qy, qz;  // lattice coordinates, by input index
+  std::vector<uint64_t> keys, keys_tmp;
+  std::vector<uint32_t> order, order_tmp;
+  std::vector<uint32_t> histogram;  // 1 << kRadixBits
+
+  // One chunk in the making.
+  std::vector<uint8_t> positions;     // varints
+  std::vector<uint32_t> pos_offset;   // positions bytes before point k
+  std::vector<uint8_t> raw;           // positions + colour
+  std::vector<uint8_t> packed;        // zstd output
+  std::vector<uint8_t> zstd_workspace;
+  ZSTD_CCtx* cctx = nullptr;
+  double zstd_ratio = 1.0;  // raw / compressed of the last chunk that compressed
+
+  flatbuffers::FlatBufferBuilder fbb;
+  flatbuffers::FlatBufferBuilder summary_fbb;
+
+  std::vector<uint8_t> arena;  // max_chunks * max_payload
+  struct ChunkRef {
+    uint32_t offset, size, points;
+    uint8_t region;
+  };
+  std::vector<ChunkRef> chunks;
+  std::size_t chunk_count = 0;
+  std::array<double, pipeline::kMaxRegions> step{};
+
+  State() : fbb(1), summary_fbb(1) {}
+  ~State() = default;
+
+  // Builds one PointChunk into fbb.
+  void buildChunk(uint32_t frame_id, uint16_t index, uint8_t region, uint64_t capture_ns,
+                  const wire::Vec3d& origin, double step_m, uint32_t points, uint8_t flags, uint32_t raw_size,
+                  const uint8_t* data, std::size_t data_size) {
+    fbb.Clear();
+    fbb.ForceDefaults(true);  // every field present: chunk_count is patched in place
+    const auto vec = fbb.CreateVector(data, data_size);
+    wire::PointChunkBuilder b(fbb);
+    b.add_frame_id(frame_id);
+    b.add_chunk_index(index);
+    b.add_chunk_count(0);
+    b.add_region(region);
+    b.add_capture_time_ns(capture_ns);
+    b.add_origin_m(&origin);
+    b.add_step_m(step_m);
+    b.add_point_count(points);
+    b.add_flags(flags);
+    b.add_raw_size(raw_size);
+    b.add_data(vec);
+    fbb.Finish(b.Finish());
+  }
+
+  // Positions of the first n points of the chunk plus their colours, into raw.
+  std::size_t assembleRaw(const pipeline::FoveatedCloud& cloud, const uint32_t* idx, std::size_t n, bool half) {
+    const std::size_t pos = pos_offset[n];
+    std::memcpy(raw.data(), positions.data(), pos);
+    uint8_t* out = raw.data() + pos;
+    const uint32_t* rgb = cloud.points.rgb();
+    if (!half) {
+      // Planes of G, R-G, B-G, each delta-coded along the Morton order (mod 256).
+      uint8_t pg = 0, prg = 0, pbg = 0;
+      for (std::size_t k = 0; k < n; ++k) {
+        const uint32_t c = rgb[idx[k]];
+        const uint8_t g = pipeline::rgbGreen(c);
+        const uint8_t rg = static_cast<uint8_t>(pipeline::rgbRed(c) - g);
+        const uint8_t bg = static_cast<uint8_t>(pipeline::rgbBlue(c) - g);
+        out[k] = static_cast<uint8_t>(g - pg);
+        out[n + k] = static_cast<uint8_t>(rg - prg);
+        out[2 * n + k] = static_cast<uint8_t>(bg - pbg);
+        pg = g, prg = rg, pbg = bg;
+      }
+      return pos + 3 * n;
+    }
+    // Y per point; Co = (R - B) / 2 and Cg = (2G - R - B) / 4 per pair; deltas mod 256.
+    const std::size_t pairs = (n + 1) / 2;
+    uint8_t py = 0, pco = 0, pcg = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const uint8_t y = static_cast<uint8_t>(luma(rgb[idx[k]]));
+      out[k] = static_cast<uint8_t>(y - py);
+      py = y;
+    }
+    for (std::size_t p = 0; p < pairs; ++p) {
+      const uint32_t c0 = rgb[idx[2 * p]];
+      const uint32_t c1 = 2 * p + 1 < n ? rgb[idx[2 * p + 1]] : c0;
+      const int co_sum = (pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) + (pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
+      const int cg_sum = (2 * pipeline::rgbGreen(c0) - pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) +
+                         (2 * pipeline::rgbGreen(c1) - pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
+      const uint8_t co = static_cast<uint8_t>(std::clamp((co_sum + 2) >> 2, -128, 127) + 128);
+      const uint8_t cg = static_cast<uint8_t>(std::clamp((cg_sum + 4) >> 3, -128, 127) + 128);
+      out[n + p] = static_cast<uint8_t>(co - pco);
+      out[n + pairs + p] = static_cast<uint8_t>(cg - pcg);
+      pco = co, pcg = cg;
+    }
+    return pos + n + 2 * pairs;
+  }
+
+  // zstd of raw[0, size) into packed; 0 when it does not pay or fails.
+  std::size_t compress(std::size_t size) {
+    const std::size_t c = ZSTD_compressCCtx(cctx, packed.data(), packed.size(), raw.data(), size, config.zstd_level);
+    if (ZSTD_isError(c) || c >= size) return 0;
+    return c;
+  }
+};
+
+ChunkEncoder::ChunkEncoder(std::unique_ptr<State> state) : s_(std::move(state)) {}
+ChunkEncoder::ChunkEncoder(ChunkEncoder&&) noexcept = default;
+ChunkEncoder& ChunkEncoder::operator=(ChunkEncoder&&) noexcept = default;
+ChunkEncoder::~ChunkEncoder() = default;
+
+Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t max_points) {
+  if (Status st = validate(config); !st) return st;
+  if (max_points == 0 || max_points > (std::size_t{1} << 26)) {
+    return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
+                                "codec: max_points " + std::to_string(max_points) + " is outside [1, 2^26]");
+  }
+  auto s = std::make_unique<State>();
+  s->config = config;
+  s->max_points = max_points;
+
+  // The payload of a chunk with no data: everything but the bytes of `data`.
+  s->fbb = flatbuffers::FlatBufferBuilder(2 * kMaxChunkRawBytes + 1024);
+  const wire::Vec3d zero(0, 0, 0);
+  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, 0, nullptr, 0);
+  const std::size_t empty = s->fbb.GetSize();
+  // + up to 7 bytes of alignment padding around the vector.
+  if (empty + 8 + 32 > config.max_payload) {
+    return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
+                                "codec.max_payload: " + std::to_string(config.max_payload) + " leaves no room for points");
+  }
+  s->data_budget = config.max_payload - empty - 8;
+  s->raw_capacity = config.entropy_coding ? std::min(kMaxChunkRawBytes, 4 * s->data_budget) : s->data_budget;
+
+  // Every chunk but a region's last holds more than data_budget - 12 bytes of at
+  // most 12 bytes per point (9-byte varint + 3 colour bytes).
+  const std::size_t per_chunk = s->data_budget - 12;
+  s->max_chunks = (12 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
+  s->arena.resize(s->max_chunks * config.max_payload);
+  s->chunks.resize(s->max_chunks);
+
+  s->qx.resize(max_points);
+  s->qy.resize(max_points);
+  s->qz.resize(max_points);
+  s->keys.resize(max_points);
+  s->keys_tmp.resize(max_points);
+  s->order.resize(max_points);
+  s->order_tmp.resize(max_points);
+  s->histogram.resize(std::size_t{1} << kRadixBits);
+  s->positions.resize(s->raw_capacity + 16);
+  s->pos_offset.resize(s->raw_capacity + 2);
+  s->raw.resize(s->raw_capacity + 16);
+  s->packed.resize(ZSTD_compressBound(s->raw_capacity + 16));
+  if (config.entropy_coding) {
+    s->zstd_workspace.resize(ZSTD_estimateCCtxSize(config.zstd_level));
+    s->cctx = ZSTD_initStaticCCtx(s->zstd_workspace.data(), s->zstd_workspace.size());
+    if (s->cctx == nullptr) return Result<ChunkEncoder>(ErrorCode::kInvalidArgument, "codec: zstd context failed");
+  }
+  s->summary_fbb = flatbuffers::FlatBufferBuilder(1024);
+  // Warm up the summary builder (its first use allocates).
+  const std::array<uint16_t, pipeline::kMaxRegions> zeros{};
+  ChunkEncoder enc(std::move(s));
+  (void)enc.encodeSummary(0, zeros, zeros);
+  return enc;
+}
+
+const CodecConfig& ChunkEncoder::config() const { return s_->config; }
+std::size_t ChunkEncoder::chunkCount() const { return s_->chunk_count; }
+std::span<const uint8_t> ChunkEncoder::chunk(std::size_t i) const {
+  const State::ChunkRef& c = s_->chunks[i];
+  return {s_->arena.data() + c.offset, c.size};
+}
+uint8_t ChunkEncoder::chunkRegion(std::size_t i) const { return s_->chunks[i].region; }
+uint32_t ChunkEncoder::chunkPoints(std::size_t i) const { return s_->chunks[i].points; }
+double ChunkEncoder::regionStep(int region) const { return s_->step[static_cast<std::size_t>(region)]; }
+
+Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
+                            uint32_t frame_id, uint64_t capture_time_ns) {
+  State& s = *s_;
+  s.chunk_count = 0;
+  const std::size_t n = cloud.size();
+  if (n > s.max_points) {
+    return {ErrorCode::kCapacityExceeded, "codec: frame has " + std::to_string(n) + " points, max_points is " +
+                                              std::to_string(s.max_points)};
+  }
+  // Points per region, and the step of each region present.
+  std::array<uint32_t, pipeline::kMaxRegions + 1> start{};
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = cloud.region[i];
+    if (r >= pipeline::kMaxRegions || r >= region_voxel_size_m.size()) {
+      return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " has region " + std::to_string(r) +
+                                            " without a voxel size"};
+    }
+    ++start[r + 1u];
+  }
+  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
+    start[static_cast<std::size_t>(r) + 1] += start[static_cast<std::size_t>(r)];
+    const double voxel = r < static_cast<int>(region_voxel_size_m.size()) ? region_voxel_size_m[static_cast<std::size_t>(r)] : 0.0;
+    if (!std::isfinite(voxel) || voxel < 0.0) {
+      return {ErrorCode::kInvalidInput, "codec: region " + std::to_string(r) + " voxel size is not finite and >= 0"};
+    }
+    s.step[static_cast<std::size_t>(r)] = (r == 0 || voxel == 0.0) ? s.config.fovea_step_m : voxel * s.config.periphery_step_ratio;
+  }
+
+  // Lattice coordinates, and the points grouped by region.
+  std::array<uint32_t, pipeline::kMaxRegions> fill{};
+  std::array<std::array<int64_t, 3>, pipeline::kMaxRegions> qmin, qmax;
+  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
+    qmin[static_cast<std::size_t>(r)].fill(INT64_MAX);
+    qmax[static_cast<std::size_t>(r)].fill(INT64_MIN);
+  }
+  const Eigen::Vector3d& o = cloud.points.origin_m;
+  const float* px = cloud.points.x();
+  const float* py = cloud.points.y();
+  const float* pz = cloud.points.z();
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = cloud.region[i];
+    const double inv = 1.0 / s.step[r];
+    const double w[3] = {(o.x() + double{px[i]}) * inv, (o.y() + double{py[i]}) * inv, (o.z() + double{pz[i]}) * inv};
+    int64_t q[3];
+    for (int a = 0; a < 3; ++a) {
+      if (!(std::fabs(w[a]) < kMaxLatticeCoord)) {  // also NaN
+        if (!std::isfinite(w[a])) {
+          return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
+        }
+        return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^52 steps of " +
+                                               std::to_string(s.step[r]) + " m from the world origin"};
+      }
+      q[a] = static_cast<int64_t>(std::nearbyint(w[a]));
+      qmin[r][static_cast<std::size_t>(a)] = std::min(qmin[r][static_cast<std::size_t>(a)], q[a]);
+      qmax[r][static_cast<std::size_t>(a)] = std::max(qmax[r][static_cast<std::size_t>(a)], q[a]);
+    }
+    s.qx[i] = q[0], s.qy[i] = q[1], s.qz[i] = q[2];
+    s.order[start[r] + fill[r]++] = static_cast<uint32_t>(i);
+  }
+
+  std::size_t arena_used = 0;
+  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
+    const std::size_t ru = static_cast<std::size_t>(r);
+    const std::size_t begin = start[ru], end = start[ru + 1];
+    if (begin == end) continue;
+    int64_t span = 0;
+    for (int a = 0; a < 3; ++a) span = std::max(span, qmax[ru][static_cast<std::size_t>(a)] - qmin[ru][static_cast<std::size_t>(a)]);
+    if (span > kMaxLatticeSpan) {
+      s.chunk_count = 0;
+      return {ErrorCode::kRangeExceeded, "codec: region " + std::to_string(r) + " spans " + std::to_string(span) +
+                                             " steps of " + std::to_string(s.step[ru]) + " m, more than " +
+                                             std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
+    }
+    // Morton keys relative to the region's lattice origin, radix-sorted (stable).
+    for (std::size_t k = begin; k < end; ++k) {
+      const uint32_t i = s.order[k];
+      s.keys[k] = morton(static_cast<uint64_t>(s.qx[i] - qmin[ru][0]), static_cast<uint64_t>(s.qy[i] - qmin[ru][1]),
+                         static_cast<uint64_t>(s.qz[i] - qmin[ru][2]));
+    }
+    const int key_bits = 3 * std::bit_width(static_cast<uint64_t>(span));
+    uint64_t* k_in = s.keys.data() + begin;
+    uint64_t* k_out = s.keys_tmp.data() + begin;
+    uint32_t* o_in = s.order.data() + begin;
+    uint32_t* o_out = s.order_tmp.data() + begin;
+    const std::size_t m = end - begin;
+    for (int shift = 0; shift < key_bits; shift += kRadixBits) {
+      std::fill(s.histogram.begin(), s.histogram.end(), 0u);
+      const uint64_t mask = (uint64_t{1} << kRadixBits) - 1;
+      for (std::size_t k = 0; k < m; ++k) ++s.histogram[(k_in[k] >> shift) & mask];
+      uint32_t sum = 0;
+      for (uint32_t& h : s.histogram) {
+        const uint32_t c = h;
+        h = sum;
+        sum += c;
+      }
+      for (std::size_t k = 0; k < m; ++k) {
+        const uint32_t dst = s.histogram[(k_in[k] >> shift) & mask]++;
+        k_out[dst] = k_in[k];
+        o_out[dst] = o_in[k];
+      }
+      std::swap(k_in, k_out);
+      std::swap(o_in, o_out);
+    }
+
+    // Chunks: greedy along the Morton order.
+    const bool half = r > 0 && s.config.halve_peripheral_chroma;
+    const uint8_t base_flags = half ? kChunkFlagHalfChroma : 0;
+    const wire::Vec3d origin(static_cast<double>(qmin[ru][0]) * s.step[ru], static_cast<double>(qmin[ru][1]) * s.step[ru],
+                             static_cast<double>(qmin[ru][2]) * s.step[ru]);
+    std::size_t k = 0;
+    while (k < m) {
+      const double ratio = s.config.entropy_coding ? std::max(1.0, s.zstd_ratio * 0.97) : 1.0;
+      const std::size_t target = std::min(s.raw_capacity, static_cast<std::size_t>(static_cast<double>(s.data_budget) * ratio));
+      std::size_t pos = 0, count = 0;
+      s.pos_offset[0] = 0;
+      for (std::size_t j = k; j < m; ++j) {
+        const uint64_t code = count == 0 ? k_in[j] : k_in[j] - k_in[j - 1];
+        if (pos + varintLength(code) + colourBytes(count + 1, half) > target) break;
+        pos += putVarint(s.positions.data() + pos, code);
+        s.pos_offset[++count] = static_cast<uint32_t>(pos);
+      }
+      if (count == 0) {
+        return {ErrorCode::kCapacityExceeded, "codec: a point does not fit a chunk (bug: budget " +
+                                                  std::to_string(s.data_budget) + ")"};
+      }
+      // The largest prefix that fits the budget uncompressed.
+      std::size_t fit = count;
+      while (fit > 1 && s.pos_offset[fit] + colourBytes(fit, half) > s.data_budget) --fit;
+
+      const uint8_t* data = s.raw.data();
+      std::size_t data_size = 0, raw_size = 0, points = 0;
+      uint8_t flags = base_flags;
+      if (s.config.entropy_coding) {
+        // The whole candidate; if it does not fit compressed, a proportionally
+        // smaller one; then the prefix that fits uncompressed.
+        raw_size = s.assembleRaw(cloud, o_in + k, count, half);
+        std::size_t z = s.compress(raw_size);
+        s.zstd_ratio = z != 0 ? static_cast<double>(raw_size) / static_cast<double>(z) : 1.0;
+        if (z != 0 && z <= s.data_budget) {
+          points = count;
+        } else if (count > fit && z != 0) {
+          const std::size_t smaller = std::min(
+              count - 1, static_cast<std::size_t>(static_cast<double>(count) * static_cast<double>(s.data_budget) /
+                                                  static_cast<double>(z) * 0.97));
+          if (smaller > fit) {
+            raw_size = s.assembleRaw(cloud, o_in + k, smaller, half);
+            z = s.compress(raw_size);
+            if (z != 0 && z <= s.data_budget) points = smaller;
+          }
+        }
+        if (points == 0) {
+          points = fit;
+          raw_size = s.assembleRaw(cloud, o_in + k, fit, half);
+          z = s.compress(raw_size);
+        }
+        if (z != 0 && z <= s.data_budget) {
+          data = s.packed.data(), data_size = z, flags |= kChunkFlagZstd;
+        } else {
+          data_size = raw_size;
+        }
+      } else {
+        raw_size = s.assembleRaw(cloud, o_in + k, fit, half);
+        data_size = raw_size, points = fit;
+      }
+
+      if (s.chunk_count == s.max_chunks || s.chunk_count == 0xffff) {
+        s.chunk_count = 0;
+        return {ErrorCode::kCapacityExceeded, "codec: frame needs more than " +
+                                                  std::to_string(std::min<std::size_t>(s.max_chunks, 0xffff)) + " chunks"};
+      }
+      s.buildChunk(frame_id, static_cast<uint16_t>(s.chunk_count), static_cast<uint8_t>(r), capture_time_ns, origin,
+                   s.step[ru], static_cast<uint32_t>(points), flags, static_cast<uint32_t>(raw_size), data, data_size);
+      const std::size_t size = s.fbb.GetSize();
+      if (size > s.config.max_payload) {
+        s.chunk_count = 0;
+        return {ErrorCode::kCapacityExceeded, "codec: chunk of " + std::to_string(size) + " bytes over max_payload (bug)"};
+      }
+      std::memcpy(s.arena.data() + arena_used, s.fbb.GetBufferPointer(), size);
+      s.chunks[s.chunk_count++] = {static_cast<uint32_t>(arena_used), static_cast<uint32_t>(size),
+                                   static_cast<uint32_t>(points), static_cast<uint8_t>(r)};
+      arena_used += size;
+      k += points;
+    }
+  }
+
+  // Every chunk now learns the frame's chunk count (the field is present: ForceDefaults).
+  for (std::size_t c = 0; c < s.chunk_count; ++c) {
+    uint8_t* buf = s.arena.data() + s.chunks[c].offset;
+    auto* table = reinterpret_cast<flatbuffers::Table*>(flatbuffers::GetMutableRoot<wire::PointChunk>(buf));
+    if (!table->SetField<uint16_t>(wire::PointChunk::VT_CHUNK_COUNT, static_cast<uint16_t>(s.chunk_count), 0)) {
+      s.chunk_count = 0;
+      return {ErrorCode::kCapacityExceeded, "codec: chunk_count not patchable (bug)"};
+    }
+  }
+  return Status::ok();
+}
+
+std::span<const uint8_t> ChunkEncoder::encodeSummary(uint32_t frame_id, std::span<const uint16_t> chunks_sent_per_region,
+                                                     std::span<const uint16_t> chunks_cut_per_region) {
+  State& s = *s_;
+  const std::size_t regions = std::min<std::size_t>(
+      pipeline::kMaxRegions, std::max(chunks_sent_per_region.size(), chunks_cut_per_region.size()));
+  std::array<uint16_t, pipeline::kMaxRegions> sent{}, cut{};
+  std::copy_n(chunks_sent_per_region.begin(), std::min(regions, chunks_sent_per_region.size()), sent.begin());
+  std::copy_n(chunks_cut_per_region.begin(), std::min(regions, chunks_cut_per_region.size()), cut.begin());
+  s.summary_fbb.Clear();
+  const auto sent_v = s.summary_fbb.CreateVector(sent.data(), regions);
+  const auto cut_v = s.summary_fbb.CreateVector(cut.data(), regions);
+  wire::FrameSummaryBuilder b(s.summary_fbb);
+  b.add_frame_id(frame_id);
+  b.add_chunk_count(static_cast<uint16_t>(s.chunk_count));
+  b.add_chunks_sent(sent_v);
+  b.add_chunks_cut(cut_v);
+  s.summary_fbb.Finish(b.Finish());
+  return {s.summary_fbb.GetBufferPointer(), s.summary_fbb.GetSize()};
+}
+
+// ---- decoder ----
+
+namespace {
+
+Status parseError(const char* what) { return {ErrorCode::kParseError, std::string("chunk: ") + what}; }
+
+// Per-thread decompression context and buffer, allocated on first use.
+struct ThreadDecoder {
+  std::vector<uint8_t> workspace;
+  std::vector<uint8_t> buffer;
+  ZSTD_DCtx* dctx = nullptr;
+  ThreadDecoder() : workspace(ZSTD_estimateDCtxSize()), buffer(kMaxChunkRawBytes) {
+    dctx = ZSTD_initStaticDCtx(workspace.data(), workspace.size());
+  }
+};
+ThreadDecoder& threadDecoder() {
+  thread_local ThreadDecoder decoder;
+  return decoder;
+}
+
+}  // namespace
+
+Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::FoveatedCloud& out) {
+  if (payload.size() < 8 || payload.size() > kMaxPayload) return parseError("payload size out of range");
+  flatbuffers::Verifier verifier(payload.data(), payload.size(), /*max_depth=*/8, /*max_tables=*/16);
+  if (!wire::VerifyPointChunkBuffer(verifier)) return parseError("FlatBuffers verification failed");
+  const wire::PointChunk* c = wire::GetPointChunk(payload.data());
+
+  DecodedChunk info;
+  info.frame_id = c->frame_id();
+  info.chunk_index = c->chunk_index();
+  info.chunk_count = c->chunk_count();
+  info.region = c->region();
+  info.capture_time_ns = c->capture_time_ns();
+  info.step_m = c->step_m();
+  const uint32_t n = c->point_count();
+  const uint8_t flags = c->flags();
+  if (info.chunk_count == 0 || info.chunk_index >= info.chunk_count) return parseError("chunk index out of range");
+  if (info.region >= pipeline::kMaxRegions) return parseError("region out of range");
+  if (!std::isfinite(info.step_m) || !(info.step_m > 0.0)) return parseError("step is not finite and > 0");
+  if ((flags & ~kKnownFlags) != 0) return parseError("unknown flags");
+  const wire::Vec3d* origin = c->origin_m();
+  if (origin == nullptr || !std::isfinite(origin->x()) || !std::isfinite(origin->y()) || !std::isfinite(origin->z())) {
+    return parseError("origin missing or not finite");
+  }
+  const flatbuffers::Vector<uint8_t>* data_v = c->data();
+  if (data_v == nullptr) return parseError("no data");
+  const uint32_t raw_size = c->raw_size();
+  if (raw_size > kMaxChunkRawBytes) return parseError("raw size too large");
+  const bool half = (flags & kChunkFlagHalfChroma) != 0;
+  if (n > raw_size || colourBytes(n, half) + n > raw_size) return parseError("point count does not fit the data");
+
+  const uint8_t* data = data_v->data();
+  std::size_t size = data_v->size();
+  if ((flags & kChunkFlagZstd) != 0) {
+    ThreadDecoder& td = threadDecoder();
+    if (td.dctx == nullptr) return parseError("zstd context unavailable");
+    const std::size_t got = ZSTD_decompressDCtx(td.dctx, td.buffer.data(), raw_size, data, size);
+    if (ZSTD_isError(got) || got != raw_size) return parseError("zstd data corrupt or of the wrong size");
+    data = td.buffer.data();
+    size = got;
+  } else if (size != raw_size) {
+    return parseError("raw size differs from the data size");
+  }
+
+  pipeline::PointCloud& pts = out.points;
+  if (pts.capacity() - pts.size() < n || out.region.size() < pts.size() + n || out.weight.size() < pts.size() + n) {
+    return Result<DecodedChunk>(ErrorCode::kCapacityExceeded, "chunk: output cloud is full");
+  }
+  const Eigen::Vector3d o(origin->x(), origin->y(), origin->z());
+  const std::size_t first = pts.size();
+  const Eigen::Vector3d base = first == 0 ? o : pts.origin_m;
+
+  // Positions: a varint Morton code, then deltas.
+  const uint8_t* p = data;
+  const uint8_t* const colour = data + (size - colourBytes(n, half));
+  uint64_t code = 0;
+  float* x = pts.x() + first;
+  float* y = pts.y() + first;
+  float* z = pts.z() + first;
+  const Eigen::Vector3d shift = o - base;
+  for (uint32_t k = 0; k < n; ++k) {
+    uint64_t v;
+    if (!getVarint(p, colour, v)) return parseError("position data truncated or malformed");
+    if (k > 0 && v > (uint64_t{1} << 63) - 1 - code) return parseError("Morton code overflow");
+    code = k == 0 ? v : code + v;
+    const double wx = shift.x() + compact3(code) * info.step_m;
+    const double wy = shift.y() + compact3(code >> 1) * info.step_m;
+    const double wz = shift.z() + compact3(code >> 2) * info.step_m;
+    constexpr double kFloatMax = 3.0e38;
+    if (!(std::fabs(wx) < kFloatMax && std::fabs(wy) < kFloatMax && std::fabs(wz) < kFloatMax)) {
+      return Result<DecodedChunk>(ErrorCode::kRangeExceeded, "chunk: point too far from the output cloud's origin");
+    }
+    x[k] = static_cast<float>(wx), y[k] = static_cast<float>(wy), z[k] = static_cast<float>(wz);
+  }
+  if (p != colour) return parseError("position data length mismatch");
+
+  uint32_t* rgb = pts.rgb() + first;
+  if (!half) {
+    uint8_t g = 0, rg = 0, bg = 0;
+    for (uint32_t k = 0; k < n; ++k) {
+      g = static_cast<uint8_t>(g + colour[k]);
+      rg = static_cast<uint8_t>(rg + colour[n + k]);
+      bg = static_cast<uint8_t>(bg + colour[2 * n + k]);
+      rgb[k] = pipeline::packRgb(static_cast<uint8_t>(rg + g), g, static_cast<uint8_t>(bg + g));
+    }
+  } else {
+    const uint32_t pairs = (n + 1) / 2;
+    uint8_t yv = 0, co = 0, cg = 0;
+    for (uint32_t k = 0; k < n; ++k) {
+      yv = static_cast<uint8_t>(yv + colour[k]);
+      if (k % 2 == 0) {
+        co = static_cast<uint8_t>(co + colour[n + k / 2]);
+        cg = static_cast<uint8_t>(cg + colour[n + pairs + k / 2]);
+      }
+      const int Y = yv, Co = int{co} - 128, Cg = int{cg} - 128;
+      rgb[k] = pipeline::packRgb(clampByte(Y + Co - Cg), clampByte(Y + Cg), clampByte(Y - Co - Cg));
+    }
+  }
+  if (first == 0) pts.origin_m = base;
+  for (uint32_t k = 0; k < n; ++k) {
+    out.region[first + k] = info.region;
+    out.weight[first + k] = 1;
+  }
+  (void)pts.resize(first + n);
+  info.points = n;
+  return info;
+}
+
+Result<FrameSummaryInfo> decodeSummary(std::span<const uint8_t> payload) {
+  if (payload.size() < 8 || payload.size() > kMaxPayload) {
+    return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: payload size out of range");
+  }
+  flatbuffers::Verifier verifier(payload.data(), payload.size(), 8, 16);
+  if (!verifier.VerifyBuffer<wire::FrameSummary>(nullptr)) {
+    return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: FlatBuffers verification failed");
+  }
+  const wire::FrameSummary* s = flatbuffers::GetRoot<wire::FrameSummary>(payload.data());
+  FrameSummaryInfo info;
+  info.frame_id = s->frame_id();
+  info.chunk_count = s->chunk_count();
+  const auto* sent = s->chunks_sent();
+  const auto* cut = s->chunks_cut();
+  if (sent == nullptr || cut == nullptr || sent->size() != cut->size() || sent->size() > pipeline::kMaxRegions) {
+    return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: per-region counts missing or of different sizes");
+  }
+  info.region_count = static_cast<int>(sent->size());
+  uint32_t total = 0;
+  for (flatbuffers::uoffset_t r = 0; r < sent->size(); ++r) {
+    info.chunks_sent[r] = sent->Get(r);
+    info.chunks_cut[r] = cut->Get(r);
+    total += uint32_t{info.chunks_sent[r]} + info.chunks_cut[r];
+  }
+  if (total > info.chunk_count) {
+    return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: more chunks sent and cut than encoded");
+  }
+  return info;
+}
+
+// ---- frame assembly ----
+
+FrameAssembler::FrameAssembler(std::size_t max_points) : seen_(65536, 0) {
+  for (pipeline::FoveatedCloud& c : clouds_) c = pipeline::FoveatedCloud(max_points);
+}
+
+Result<FrameAssembler> FrameAssembler::create(std::size_t max_points) {
+  if (max_points == 0 || max_points > (std::size_t{1} << 26)) {
+    return Result<FrameAssembler>(ErrorCode::kInvalidArgument,
+                                  "assembler: max_points " + std::to_string(max_points) + " is outside [1, 2^26]");
+  }
+  // Warm the per-thread decompression context of the calling thread.
+  (void)threadDecoder();
+  return FrameAssembler(max_points);
+}
+
+namespace {
+// Serial-number order (RFC 1982 style) so frame ids may wrap.
+bool newer(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b) > 0; }
+}  // namespace
+
+void FrameAssembler::startFrame(uint32_t frame_id) {
+  current_ = AssembledFrame{};
+  current_.frame_id = frame_id;
+  // A cloud no ready frame uses.
+  for (std::size_t i = 0; i < clouds_.size(); ++i) {
+    bool used = false;
+    for (std::size_t j = 0; j < ready_count_; ++j) used = used || ready_[j].cloud == &clouds_[i];
+    if (!used) {
+      current_cloud_ = i;
+      break;
+    }
+  }
+  clouds_[current_cloud_].clear();
+  current_.cloud = &clouds_[current_cloud_];
+  std::fill(seen_.begin(), seen_.end(), uint8_t{0});
+  has_current_ = true;
+}
+
+void FrameAssembler::completeCurrent(bool summary_received) {
+  if (!has_current_) return;
+  current_.summary_received = summary_received;
+  ready_[ready_count_++] = current_;
+  last_completed_id_ = current_.frame_id;
+  has_last_completed_ = true;
+  has_current_ = false;
+  ++counters_.frames;
+}
+
+void FrameAssembler::flush() {
+  ready_count_ = 0;
+  completeCurrent(false);
+}
+
+Status FrameAssembler::addChunk(std::span<const uint8_t> payload) {
+  ready_count_ = 0;
+  // Peek at the frame id through a verified decode into the current cloud; a
+  // chunk of a newer frame first completes the current one.
+  if (payload.size() < 8 || payload.size() > kMaxPayload) {
+    ++counters_.bad_chunks;
+    return {ErrorCode::kParseError, "chunk: payload size out of range"};
+  }
+  flatbuffers::Verifier verifier(payload.data(), payload.size(), 8, 16);
+  if (!wire::VerifyPointChunkBuffer(verifier)) {
+    ++counters_.bad_chunks;
+    return {ErrorCode::kParseError, "chunk: FlatBuffers verification failed"};
+  }
+  const uint32_t id = wire::GetPointChunk(payload.data())->frame_id();
+  if (has_current_ && id != current_.frame_id) {
+    if (!newer(id, current_.frame_id)) {
+      ++counters_.late_chunks;
+      return Status::ok();
+    }
+    completeCurrent(false);
+  } else if (!has_current_ && has_last_completed_ && !newer(id, last_completed_id_)) {
+    ++counters_.late_chunks;
+    return Status::ok();
+  }
+  if (!has_current_) startFrame(id);
+  const uint16_t index = wire::GetPointChunk(payload.data())->chunk_index();
+  if (seen_[index] != 0) {
+    ++counters_.duplicate_chunks;
+    return Status::ok();
+  }
+  Result<DecodedChunk> d = decodeChunk(payload, clouds_[current_cloud_]);
+  if (!d) {
+    ++counters_.bad_chunks;
+    return d.status();
+  }
+  seen_[index] = 1;
+  ++counters_.chunks;
+  current_.capture_time_ns = d->capture_time_ns;
+  current_.chunk_count = d->chunk_count;
+  current_.points[d->region] += static_cast<uint32_t>(d->points);
+  ++current_.chunks_received[d->region];
+  return Status::ok();
+}
+
+Status FrameAssembler::addSummary(std::span<const uint8_t> payload) {
+  ready_count_ = 0;
+  Result<FrameSummaryInfo> s = decodeSummary(payload);
+  if (!s) {
+    ++counters_.bad_summaries;
+    return s.status();
+  }
+  const uint32_t id = s->frame_id;
+  if (has_current_ && id != current_.frame_id) {
+    if (!newer(id, current_.frame_id)) {
+      ++counters_.late_summaries;
+      return Status::ok();
+    }
+    completeCurrent(false);
+  } else if (!has_current_ && has_last_completed_ && !newer(id, last_completed_id_)) {
+    ++counters_.late_summaries;
+    return Status::ok();
+  }
+  if (!has_current_) startFrame(id);  // every chunk of this frame was lost
+  current_.chunk_count = s->chunk_count;
+  for (int r = 0; r < s->region_count; ++r) {
+    current_.chunks_expected[static_cast<std::size_t>(r)] = s->chunks_sent[static_cast<std::size_t>(r)];
+    current_.chunks_cut[static_cast<std::size_t>(r)] = s->chunks_cut[static_cast<std::size_t>(r)];
+  }
+  completeCurrent(true);
+  return Status::ok();
+}
+
+}  // namespace fovea::net
