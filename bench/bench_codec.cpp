@@ -140,13 +140,13 @@ int run(int argc, char** argv) {
     rows.push_back(row);
   };
   net::CodecConfig def;
-  fovea("fovea default", def, voxel, "fovea 1 mm, periphery voxel/8, zstd, MTU 1200");
+  fovea("fovea default", def, voxel, "fovea 1 mm, periphery voxel/8, Exp-Golomb, MTU 1200");
   net::CodecConfig half = def;
   half.halve_peripheral_chroma = true;
   fovea("fovea half chroma", half, voxel, "as default, chroma per pair outside the fovea");
-  net::CodecConfig raw = def;
-  raw.entropy_coding = false;
-  fovea("fovea no zstd", raw, voxel, "as default without zstd");
+  net::CodecConfig zstd = def;
+  zstd.entropy_coding = true;
+  fovea("fovea + zstd", zstd, voxel, "as default, zstd level 1 per chunk where it pays");
   net::CodecConfig jumbo = def;
   jumbo.max_payload = net::kMaxMtu - net::kDatagramOverhead;
   fovea("fovea jumbo", jumbo, voxel, "as default, MTU 8952");
@@ -155,7 +155,7 @@ int run(int argc, char** argv) {
   matched.fovea_step_m = draco11;
   matched.periphery_step_ratio = 1.0;
   const std::vector<double> grid(voxel.size(), draco11);
-  fovea("fovea @ draco-11 grid", matched, grid, "every region at Draco 11-bit's step, zstd, MTU 1200");
+  fovea("fovea @ draco-11 grid", matched, grid, "every region at Draco 11-bit's step, MTU 1200");
   net::CodecConfig matched_half = matched;
   matched_half.halve_peripheral_chroma = true;
   fovea("fovea @ draco-11, half chroma", matched_half, grid, "as above, chroma per pair outside the fovea");

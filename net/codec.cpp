@@ -19,8 +19,9 @@ constexpr std::size_t kMinPayload = kMinMtu - kDatagramOverhead;
 constexpr std::size_t kMaxPayload = kMaxMtu - kDatagramOverhead;
 constexpr int kRadixBits = 11;
 constexpr uint8_t kKnownFlags = kChunkFlagZstd | kChunkFlagHalfChroma;
-// Lattice coordinates beyond 2^52 steps lose the integer grid in double.
-constexpr double kMaxLatticeCoord = 4503599627370496.0;
+// Lattice coordinates up to 2^50 steps: w + 0.5 stays exact enough in double
+// that rounding by truncation keeps |w - q| <= 1/2.
+constexpr double kMaxLatticeCoord = 1125899906842624.0;
 
 // ---- Morton codes (21 bits per axis, x in the lowest bit) ----
 inline uint64_t spread3(uint64_t v) {
@@ -43,36 +44,177 @@ inline uint32_t compact3(uint64_t v) {
 }
 inline uint64_t morton(uint64_t x, uint64_t y, uint64_t z) { return spread3(x) | (spread3(y) << 1) | (spread3(z) << 2); }
 
-// ---- varints (LEB128, 7 bits per byte) ----
-inline std::size_t varintLength(uint64_t v) { return v < 128 ? 1 : (static_cast<std::size_t>(std::bit_width(v)) + 6) / 7; }
-inline std::size_t putVarint(uint8_t* out, uint64_t v) {
-  std::size_t n = 0;
-  while (v >= 128) {
-    out[n++] = static_cast<uint8_t>(v | 0x80);
-    v >>= 7;
-  }
-  out[n++] = static_cast<uint8_t>(v);
-  return n;
+// ---- bit coding (docs/protocol-chunks.md) ----
+// Bits are written LSB first into zeroed bytes. Values are Exp-Golomb codes of
+// order k: w = (v >> k) + 1 with n = bit_width(w) - 1; n zero bits, a one bit,
+// the n low bits of w, the k low bits of v: 2n + 1 + k bits.
+inline std::size_t egBits(uint64_t v, int k) {
+  return 2 * static_cast<std::size_t>(std::bit_width((v >> k) + 1) - 1) + 1 + static_cast<std::size_t>(k);
 }
-// False on truncation or more than 9 bytes (63 bits).
-inline bool getVarint(const uint8_t*& p, const uint8_t* end, uint64_t& v) {
-  v = 0;
-  for (int i = 0; i < 9; ++i) {
-    if (p == end) return false;
-    const uint8_t b = *p++;
-    v |= uint64_t{b & 0x7fu} << (7 * i);
-    if ((b & 0x80) == 0) return true;
+inline uint32_t zigzag8(uint8_t delta) {  // a byte difference (mod 256) as a small unsigned
+  const int d = static_cast<int8_t>(delta);
+  return d >= 0 ? static_cast<uint32_t>(2 * d) : static_cast<uint32_t>(-2 * d - 1);
+}
+inline uint8_t unzigzag8(uint32_t z) { return static_cast<uint8_t>((z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2)); }
+
+class BitWriter {
+ public:
+  explicit BitWriter(uint8_t* zeroed) : out_(zeroed) {}
+  std::size_t bits() const { return pos_; }
+  // Up to 57 bits; the buffer has 8 bytes of slack past any position written.
+  [[gnu::always_inline]] void put(uint64_t v, int len) {
+    uint8_t* p = out_ + pos_ / 8;
+    uint64_t word;
+    std::memcpy(&word, p, 8);
+    word |= v << (pos_ % 8);
+    std::memcpy(p, &word, 8);
+    pos_ += static_cast<std::size_t>(len);
   }
-  return false;
+  [[gnu::always_inline]] void putEg(uint64_t v, int k) {
+    const uint64_t w = (v >> k) + 1;
+    const int n = std::bit_width(w) - 1;
+    if (2 * n + 1 + k <= 57) {  // one write: n zeros, 1, the n low bits of w, the k low bits of v
+      const uint64_t low = w ^ (uint64_t{1} << n);
+      const uint64_t r = v & ((uint64_t{1} << k) - 1);
+      put((((low << 1) | 1) << n) | (r << (2 * n + 1)), 2 * n + 1 + k);
+      return;
+    }
+    pos_ += static_cast<std::size_t>(n);  // n zero bits
+    const uint64_t low = n == 0 ? 0 : (w & ((uint64_t{1} << n) - 1));
+    if (n < 56) {
+      put((low << 1) | 1, n + 1);
+    } else {
+      put(1, 1);
+      put(low & 0xffffffffu, 32);
+      put(low >> 32, n - 32);
+    }
+    if (k > 0) put(v & ((uint64_t{1} << k) - 1), k);
+  }
+  // Forgets everything after bit `pos` (and zeroes it for the next writes).
+  void rewind(std::size_t pos) {
+    const std::size_t end = (pos_ + 7) / 8 + 8;
+    out_[pos / 8] &= static_cast<uint8_t>((1u << (pos % 8)) - 1);
+    std::memset(out_ + pos / 8 + 1, 0, end - (pos / 8 + 1));
+    pos_ = pos;
+  }
+
+ private:
+  uint8_t* out_;
+  std::size_t pos_ = 0;
+};
+
+class BitReader {
+ public:
+  BitReader(const uint8_t* data, std::size_t bytes) : data_(data), bytes_(bytes), total_(8 * bytes) {}
+  std::size_t bits() const { return pos_; }
+  // Up to 57 bits; false past the end.
+  [[gnu::always_inline]] bool get(int len, uint64_t& v) {
+    if (len == 0) {
+      v = 0;
+      return true;
+    }
+    if (total_ - pos_ < static_cast<std::size_t>(len)) return false;
+    v = peek() & ((uint64_t{1} << len) - 1);
+    pos_ += static_cast<std::size_t>(len);
+    return true;
+  }
+  [[gnu::always_inline]] bool getEg(int k, uint64_t& v) {
+    {  // the common short code in one read
+      const uint64_t p = peek();
+      if (p != 0) {
+        const int n = std::countr_zero(p);
+        const int len = 2 * n + 1 + k;
+        if (len <= 56 && static_cast<std::size_t>(len) <= total_ - pos_) {
+          const uint64_t low = (p >> (n + 1)) & ((uint64_t{1} << n) - 1);
+          v = (((uint64_t{1} << n) | low) - 1) << k | ((p >> (2 * n + 1)) & ((uint64_t{1} << k) - 1));
+          pos_ += static_cast<std::size_t>(len);
+          return true;
+        }
+      }
+    }
+    int n = 0;
+    for (;;) {  // the zero run, then its one bit
+      if (pos_ == total_) return false;
+      const std::size_t avail = std::min<std::size_t>(32, total_ - pos_);
+      const uint64_t p = peek() & ((uint64_t{1} << avail) - 1);
+      if (p == 0) {
+        n += static_cast<int>(avail);
+        pos_ += avail;
+        if (n > 63) return false;
+        continue;
+      }
+      const int tz = std::countr_zero(p);
+      n += tz;
+      pos_ += static_cast<std::size_t>(tz) + 1;
+      break;
+    }
+    if (n > 63) return false;
+    uint64_t low = 0, hi = 0;
+    if (n <= 32) {
+      if (!get(n, low)) return false;
+    } else {
+      if (!get(32, low) || !get(n - 32, hi)) return false;
+      low |= hi << 32;
+    }
+    const uint64_t q = (n == 63 ? (uint64_t{1} << 63) : (uint64_t{1} << n)) - 1 + low;  // w - 1
+    if (std::bit_width(q) + k > 63) return false;  // the value would pass 63 bits
+    uint64_t r = 0;
+    if (!get(k, r)) return false;
+    v = (q << k) | r;
+    return true;
+  }
+
+ private:
+  [[gnu::always_inline]] uint64_t peek() const {
+    const std::size_t byte = pos_ / 8;
+    uint64_t word = 0;
+    if (byte + 8 <= bytes_) {
+      std::memcpy(&word, data_ + byte, 8);
+    } else {
+      for (std::size_t i = byte; i < bytes_; ++i) word |= uint64_t{data_[i]} << (8 * (i - byte));
+    }
+    return word >> (pos_ % 8);
+  }
+  const uint8_t* data_;
+  std::size_t bytes_, total_;
+  std::size_t pos_ = 0;
+};
+
+// The order k in [lo, hi] that codes `values` in the fewest bits.
+inline int bestOrder(const uint64_t* values, std::size_t n, int lo, int hi) {
+  if (n == 0) return lo;
+  uint64_t sum = 0;
+  for (std::size_t i = 0; i < n; ++i) sum += std::min<uint64_t>(values[i], uint64_t{1} << 56);
+  const int guess = std::bit_width(sum / n);
+  int best = lo;
+  std::size_t best_bits = SIZE_MAX;
+  for (int k = std::max(lo, guess - 3); k <= std::min(hi, guess + 1); ++k) {
+    std::size_t bits = 0;
+    for (std::size_t i = 0; i < n; ++i) bits += egBits(values[i], k);
+    if (bits < best_bits) best_bits = bits, best = k;
+  }
+  return best;
 }
 
 // ---- colour ----
-// Bytes of colour data for n points.
-inline std::size_t colourBytes(std::size_t n, bool half_chroma) { return half_chroma ? n + 2 * ((n + 1) / 2) : 3 * n; }
 inline int luma(uint32_t c) {
   return (pipeline::rgbRed(c) + 2 * pipeline::rgbGreen(c) + pipeline::rgbBlue(c) + 2) >> 2;
 }
 inline uint8_t clampByte(int v) { return static_cast<uint8_t>(std::clamp(v, 0, 255)); }
+// Co = (R - B) / 2 and Cg = (2G - R - B) / 4 of a pair, offset by 128.
+inline uint8_t pairCo(uint32_t c0, uint32_t c1) {
+  const int sum = (pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) + (pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
+  return static_cast<uint8_t>(std::clamp((sum + 2) >> 2, -128, 127) + 128);
+}
+inline uint8_t pairCg(uint32_t c0, uint32_t c1) {
+  const int sum = (2 * pipeline::rgbGreen(c0) - pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) +
+                  (2 * pipeline::rgbGreen(c1) - pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
+  return static_cast<uint8_t>(std::clamp((sum + 4) >> 3, -128, 127) + 128);
+}
+// Bytes of a chunk's data before the bitstream: the four Exp-Golomb orders.
+constexpr std::size_t kDataHeader = 4;
+// Bits of the first Morton code: a 6-bit length, then that many bits.
+inline std::size_t firstCodeBits(uint64_t code) { return 6 + static_cast<std::size_t>(std::bit_width(code)); }
 
 }  // namespace
 
@@ -113,14 +255,12 @@ struct ChunkEncoder::State {
   std::vector<uint32_t> order, order_tmp;
   std::vector<uint32_t> histogram;  // 1 << kRadixBits
 
-  // One chunk in the making.
-  std::vector<uint8_t> positions;     // varints
-  std::vector<uint32_t> pos_offset;   // positions bytes before point k
-  std::vector<uint8_t> raw;           // positions + colour
-  std::vector<uint8_t> packed;        // zstd output
+  // One chunk in the making: 4 order bytes, then the bitstream (+ slack for rollback).
+  std::vector<uint8_t> raw;
+  std::vector<uint8_t> packed;  // zstd output
   std::vector<uint8_t> zstd_workspace;
   ZSTD_CCtx* cctx = nullptr;
-  double zstd_ratio = 1.0;  // raw / compressed of the last chunk that compressed
+  std::array<uint64_t, 4 * 64> sample{};  // values that choose a chunk's orders
 
   flatbuffers::FlatBufferBuilder fbb;
   flatbuffers::FlatBufferBuilder summary_fbb;
@@ -159,50 +299,6 @@ struct ChunkEncoder::State {
     fbb.Finish(b.Finish());
   }
 
-  // Positions of the first n points of the chunk plus their colours, into raw.
-  std::size_t assembleRaw(const pipeline::FoveatedCloud& cloud, const uint32_t* idx, std::size_t n, bool half) {
-    const std::size_t pos = pos_offset[n];
-    std::memcpy(raw.data(), positions.data(), pos);
-    uint8_t* out = raw.data() + pos;
-    const uint32_t* rgb = cloud.points.rgb();
-    if (!half) {
-      // Planes of G, R-G, B-G, each delta-coded along the Morton order (mod 256).
-      uint8_t pg = 0, prg = 0, pbg = 0;
-      for (std::size_t k = 0; k < n; ++k) {
-        const uint32_t c = rgb[idx[k]];
-        const uint8_t g = pipeline::rgbGreen(c);
-        const uint8_t rg = static_cast<uint8_t>(pipeline::rgbRed(c) - g);
-        const uint8_t bg = static_cast<uint8_t>(pipeline::rgbBlue(c) - g);
-        out[k] = static_cast<uint8_t>(g - pg);
-        out[n + k] = static_cast<uint8_t>(rg - prg);
-        out[2 * n + k] = static_cast<uint8_t>(bg - pbg);
-        pg = g, prg = rg, pbg = bg;
-      }
-      return pos + 3 * n;
-    }
-    // Y per point; Co = (R - B) / 2 and Cg = (2G - R - B) / 4 per pair; deltas mod 256.
-    const std::size_t pairs = (n + 1) / 2;
-    uint8_t py = 0, pco = 0, pcg = 0;
-    for (std::size_t k = 0; k < n; ++k) {
-      const uint8_t y = static_cast<uint8_t>(luma(rgb[idx[k]]));
-      out[k] = static_cast<uint8_t>(y - py);
-      py = y;
-    }
-    for (std::size_t p = 0; p < pairs; ++p) {
-      const uint32_t c0 = rgb[idx[2 * p]];
-      const uint32_t c1 = 2 * p + 1 < n ? rgb[idx[2 * p + 1]] : c0;
-      const int co_sum = (pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) + (pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
-      const int cg_sum = (2 * pipeline::rgbGreen(c0) - pipeline::rgbRed(c0) - pipeline::rgbBlue(c0)) +
-                         (2 * pipeline::rgbGreen(c1) - pipeline::rgbRed(c1) - pipeline::rgbBlue(c1));
-      const uint8_t co = static_cast<uint8_t>(std::clamp((co_sum + 2) >> 2, -128, 127) + 128);
-      const uint8_t cg = static_cast<uint8_t>(std::clamp((cg_sum + 4) >> 3, -128, 127) + 128);
-      out[n + p] = static_cast<uint8_t>(co - pco);
-      out[n + pairs + p] = static_cast<uint8_t>(cg - pcg);
-      pco = co, pcg = cg;
-    }
-    return pos + n + 2 * pairs;
-  }
-
   // zstd of raw[0, size) into packed; 0 when it does not pay or fails.
   std::size_t compress(std::size_t size) {
     const std::size_t c = ZSTD_compressCCtx(cctx, packed.data(), packed.size(), raw.data(), size, config.zstd_level);
@@ -232,17 +328,16 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, 0, nullptr, 0);
   const std::size_t empty = s->fbb.GetSize();
   // + up to 7 bytes of alignment padding around the vector.
-  if (empty + 8 + 32 > config.max_payload) {
+  if (empty + 8 + 64 > config.max_payload) {
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
                                 "codec.max_payload: " + std::to_string(config.max_payload) + " leaves no room for points");
   }
   s->data_budget = config.max_payload - empty - 8;
-  s->raw_capacity = config.entropy_coding ? std::min(kMaxChunkRawBytes, 4 * s->data_budget) : s->data_budget;
 
-  // Every chunk but a region's last holds more than data_budget - 12 bytes of at
-  // most 12 bytes per point (9-byte varint + 3 colour bytes).
-  const std::size_t per_chunk = s->data_budget - 12;
-  s->max_chunks = (12 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
+  // Every chunk but a region's last holds more than data_budget - 23 bytes of at
+  // most 23 bytes per point (a 127-bit position code and three 17-bit colour codes).
+  const std::size_t per_chunk = s->data_budget - 23;
+  s->max_chunks = (23 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
   s->arena.resize(s->max_chunks * config.max_payload);
   s->chunks.resize(s->max_chunks);
 
@@ -254,10 +349,8 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->order.resize(max_points);
   s->order_tmp.resize(max_points);
   s->histogram.resize(std::size_t{1} << kRadixBits);
-  s->positions.resize(s->raw_capacity + 16);
-  s->pos_offset.resize(s->raw_capacity + 2);
-  s->raw.resize(s->raw_capacity + 16);
-  s->packed.resize(ZSTD_compressBound(s->raw_capacity + 16));
+  s->raw.resize(s->data_budget + 64);
+  s->packed.resize(ZSTD_compressBound(s->data_budget));
   if (config.entropy_coding) {
     s->zstd_workspace.resize(ZSTD_estimateCCtxSize(config.zstd_level));
     s->cctx = ZSTD_initStaticCCtx(s->zstd_workspace.data(), s->zstd_workspace.size());
@@ -330,10 +423,10 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
         if (!std::isfinite(w[a])) {
           return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
         }
-        return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^52 steps of " +
+        return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^50 steps of " +
                                                std::to_string(s.step[r]) + " m from the world origin"};
       }
-      q[a] = static_cast<int64_t>(std::nearbyint(w[a]));
+      q[a] = static_cast<int64_t>(w[a] >= 0.0 ? w[a] + 0.5 : w[a] - 0.5);  // round half away from zero
       qmin[r][static_cast<std::size_t>(a)] = std::min(qmin[r][static_cast<std::size_t>(a)], q[a]);
       qmax[r][static_cast<std::size_t>(a)] = std::max(qmax[r][static_cast<std::size_t>(a)], q[a]);
     }
@@ -390,60 +483,102 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
     const uint8_t base_flags = half ? kChunkFlagHalfChroma : 0;
     const wire::Vec3d origin(static_cast<double>(qmin[ru][0]) * s.step[ru], static_cast<double>(qmin[ru][1]) * s.step[ru],
                              static_cast<double>(qmin[ru][2]) * s.step[ru]);
+    const uint32_t* rgb = cloud.points.rgb();
     std::size_t k = 0;
     while (k < m) {
-      const double ratio = s.config.entropy_coding ? std::max(1.0, s.zstd_ratio * 0.97) : 1.0;
-      const std::size_t target = std::min(s.raw_capacity, static_cast<std::size_t>(static_cast<double>(s.data_budget) * ratio));
-      std::size_t pos = 0, count = 0;
-      s.pos_offset[0] = 0;
+      // Exp-Golomb orders from the next (up to) 64 points.
+      const std::size_t probe = std::min<std::size_t>(64, m - k);
+      uint64_t* sp = s.sample.data();
+      for (std::size_t j = 1; j < probe; ++j) {
+        const uint32_t c0 = rgb[o_in[k + j - 1]], c1 = rgb[o_in[k + j]];
+        sp[j - 1] = k_in[k + j] - k_in[k + j - 1];
+        if (half) {
+          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(luma(c1) - luma(c0)));
+          sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
+          sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
+        } else {
+          const uint8_t g0 = pipeline::rgbGreen(c0), g1 = pipeline::rgbGreen(c1);
+          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(g1 - g0));
+          sp[128 + j - 1] = zigzag8(static_cast<uint8_t>((pipeline::rgbRed(c1) - g1) - (pipeline::rgbRed(c0) - g0)));
+          sp[192 + j - 1] = zigzag8(static_cast<uint8_t>((pipeline::rgbBlue(c1) - g1) - (pipeline::rgbBlue(c0) - g0)));
+        }
+      }
+      const int kp = bestOrder(sp, probe - 1, 0, 62);
+      const int kc[3] = {bestOrder(sp + 64, probe - 1, 0, 7), bestOrder(sp + 128, probe - 1, 0, 7),
+                         bestOrder(sp + 192, probe - 1, 0, 7)};
+      uint8_t* raw = s.raw.data();
+      std::memset(raw, 0, s.raw.size());
+      raw[0] = static_cast<uint8_t>(kp);
+      raw[1] = static_cast<uint8_t>(kc[0]), raw[2] = static_cast<uint8_t>(kc[1]), raw[3] = static_cast<uint8_t>(kc[2]);
+      BitWriter bw(raw + kDataHeader);
+      const std::size_t budget_bits = 8 * (s.data_budget - kDataHeader);
+
+      // Greedy along the Morton order: write a point, take it back if it does not fit.
+      std::size_t count = 0;
+      uint8_t p0 = 0, p1 = 0, p2 = 0;  // previous G, R-G, B-G (or Y, and the pair's Co, Cg)
+      uint8_t pco = 0, pcg = 0;
       for (std::size_t j = k; j < m; ++j) {
-        const uint64_t code = count == 0 ? k_in[j] : k_in[j] - k_in[j - 1];
-        if (pos + varintLength(code) + colourBytes(count + 1, half) > target) break;
-        pos += putVarint(s.positions.data() + pos, code);
-        s.pos_offset[++count] = static_cast<uint32_t>(pos);
+        const std::size_t before = bw.bits();
+        const uint32_t c = rgb[o_in[j]];
+        if (count == 0) {
+          const std::size_t len = firstCodeBits(k_in[j]) - 6;
+          bw.put(len, 6);
+          if (len > 32) {
+            bw.put(k_in[j] & 0xffffffffu, 32);
+            bw.put(k_in[j] >> 32, static_cast<int>(len - 32));
+          } else {
+            bw.put(k_in[j], static_cast<int>(len));
+          }
+        } else {
+          bw.putEg(k_in[j] - k_in[j - 1], kp);
+        }
+        std::size_t extra = 0;
+        uint8_t n0, n1 = p1, n2 = p2, nco = pco, ncg = pcg;
+        if (!half) {
+          const uint8_t g = pipeline::rgbGreen(c);
+          n0 = g;
+          n1 = static_cast<uint8_t>(pipeline::rgbRed(c) - g);
+          n2 = static_cast<uint8_t>(pipeline::rgbBlue(c) - g);
+          bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
+          bw.putEg(zigzag8(static_cast<uint8_t>(n1 - p1)), kc[1]);
+          bw.putEg(zigzag8(static_cast<uint8_t>(n2 - p2)), kc[2]);
+        } else {
+          n0 = static_cast<uint8_t>(luma(c));
+          bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
+          if (count % 2 == 1) {  // the pair's chroma, after its second point
+            const uint32_t c0 = rgb[o_in[j - 1]];
+            nco = pairCo(c0, c), ncg = pairCg(c0, c);
+            bw.putEg(zigzag8(static_cast<uint8_t>(nco - pco)), kc[1]);
+            bw.putEg(zigzag8(static_cast<uint8_t>(ncg - pcg)), kc[2]);
+          } else {
+            extra = egBits(zigzag8(static_cast<uint8_t>(pairCo(c, c) - pco)), kc[1]) +
+                    egBits(zigzag8(static_cast<uint8_t>(pairCg(c, c) - pcg)), kc[2]);
+          }
+        }
+        if (bw.bits() + extra > budget_bits) {
+          bw.rewind(before);
+          break;
+        }
+        p0 = n0, p1 = n1, p2 = n2, pco = nco, pcg = ncg;
+        ++count;
       }
       if (count == 0) {
         return {ErrorCode::kCapacityExceeded, "codec: a point does not fit a chunk (bug: budget " +
                                                   std::to_string(s.data_budget) + ")"};
       }
-      // The largest prefix that fits the budget uncompressed.
-      std::size_t fit = count;
-      while (fit > 1 && s.pos_offset[fit] + colourBytes(fit, half) > s.data_budget) --fit;
-
-      const uint8_t* data = s.raw.data();
-      std::size_t data_size = 0, raw_size = 0, points = 0;
+      if (half && count % 2 == 1) {  // a lone last point: its own chroma
+        const uint32_t c = rgb[o_in[k + count - 1]];
+        bw.putEg(zigzag8(static_cast<uint8_t>(pairCo(c, c) - pco)), kc[1]);
+        bw.putEg(zigzag8(static_cast<uint8_t>(pairCg(c, c) - pcg)), kc[2]);
+      }
+      const std::size_t raw_size = kDataHeader + (bw.bits() + 7) / 8;
+      const std::size_t points = count;
+      const uint8_t* data = raw;
+      std::size_t data_size = raw_size;
       uint8_t flags = base_flags;
       if (s.config.entropy_coding) {
-        // The whole candidate; if it does not fit compressed, a proportionally
-        // smaller one; then the prefix that fits uncompressed.
-        raw_size = s.assembleRaw(cloud, o_in + k, count, half);
-        std::size_t z = s.compress(raw_size);
-        s.zstd_ratio = z != 0 ? static_cast<double>(raw_size) / static_cast<double>(z) : 1.0;
-        if (z != 0 && z <= s.data_budget) {
-          points = count;
-        } else if (count > fit && z != 0) {
-          const std::size_t smaller = std::min(
-              count - 1, static_cast<std::size_t>(static_cast<double>(count) * static_cast<double>(s.data_budget) /
-                                                  static_cast<double>(z) * 0.97));
-          if (smaller > fit) {
-            raw_size = s.assembleRaw(cloud, o_in + k, smaller, half);
-            z = s.compress(raw_size);
-            if (z != 0 && z <= s.data_budget) points = smaller;
-          }
-        }
-        if (points == 0) {
-          points = fit;
-          raw_size = s.assembleRaw(cloud, o_in + k, fit, half);
-          z = s.compress(raw_size);
-        }
-        if (z != 0 && z <= s.data_budget) {
-          data = s.packed.data(), data_size = z, flags |= kChunkFlagZstd;
-        } else {
-          data_size = raw_size;
-        }
-      } else {
-        raw_size = s.assembleRaw(cloud, o_in + k, fit, half);
-        data_size = raw_size, points = fit;
+        const std::size_t z = s.compress(raw_size);
+        if (z != 0) data = s.packed.data(), data_size = z, flags |= kChunkFlagZstd;
       }
 
       if (s.chunk_count == s.max_chunks || s.chunk_count == 0xffff) {
@@ -548,7 +683,9 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   const uint32_t raw_size = c->raw_size();
   if (raw_size > kMaxChunkRawBytes) return parseError("raw size too large");
   const bool half = (flags & kChunkFlagHalfChroma) != 0;
-  if (n > raw_size || colourBytes(n, half) + n > raw_size) return parseError("point count does not fit the data");
+  if (raw_size < kDataHeader || n == 0 || n > 8 * (raw_size - kDataHeader)) {
+    return parseError("point count does not fit the data");
+  }
 
   const uint8_t* data = data_v->data();
   std::size_t size = data_v->size();
@@ -571,19 +708,49 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   const std::size_t first = pts.size();
   const Eigen::Vector3d base = first == 0 ? o : pts.origin_m;
 
-  // Positions: a varint Morton code, then deltas.
-  const uint8_t* p = data;
-  const uint8_t* const colour = data + (size - colourBytes(n, half));
-  uint64_t code = 0;
+  // The orders, then per point: position (first: 6-bit length + code; then
+  // Exp-Golomb deltas of the Morton code) and colour codes.
+  const int kp = data[0];
+  const int kc[3] = {data[1], data[2], data[3]};
+  if (kp > 62 || kc[0] > 7 || kc[1] > 7 || kc[2] > 7) return parseError("Exp-Golomb order out of range");
+  BitReader br(data + kDataHeader, size - kDataHeader);
   float* x = pts.x() + first;
   float* y = pts.y() + first;
   float* z = pts.z() + first;
+  uint32_t* rgb = pts.rgb() + first;
   const Eigen::Vector3d shift = o - base;
+  constexpr uint64_t kMaxCode = (uint64_t{1} << 63) - 1;
+  uint64_t code = 0;
+  uint8_t p0 = 0, p1 = 0, p2 = 0;
+  auto colourDelta = [&br](int k, uint8_t& value) __attribute__((always_inline)) {
+    uint64_t zz;
+    if (!br.getEg(k, zz) || zz > 255) return false;
+    value = static_cast<uint8_t>(value + unzigzag8(static_cast<uint32_t>(zz)));
+    return true;
+  };
+  auto chroma = [&](uint32_t from, uint32_t to) {  // points [from, to) share (p1, p2) = (Co, Cg)
+    for (uint32_t i = from; i < to; ++i) {
+      const int Y = static_cast<int>(rgb[i]), Co = int{p1} - 128, Cg = int{p2} - 128;
+      rgb[i] = pipeline::packRgb(clampByte(Y + Co - Cg), clampByte(Y + Cg), clampByte(Y - Co - Cg));
+    }
+  };
   for (uint32_t k = 0; k < n; ++k) {
     uint64_t v;
-    if (!getVarint(p, colour, v)) return parseError("position data truncated or malformed");
-    if (k > 0 && v > (uint64_t{1} << 63) - 1 - code) return parseError("Morton code overflow");
-    code = k == 0 ? v : code + v;
+    if (k == 0) {
+      uint64_t len, lo = 0, hi = 0;
+      if (!br.get(6, len)) return parseError("position data truncated");
+      if (len > 32) {
+        if (!br.get(32, lo) || !br.get(static_cast<int>(len - 32), hi)) return parseError("position data truncated");
+      } else if (!br.get(static_cast<int>(len), lo)) {
+        return parseError("position data truncated");
+      }
+      code = lo | (hi << 32);
+      if (code > kMaxCode) return parseError("Morton code overflow");
+    } else {
+      if (!br.getEg(kp, v)) return parseError("position data truncated or malformed");
+      if (v > kMaxCode - code) return parseError("Morton code overflow");
+      code += v;
+    }
     const double wx = shift.x() + compact3(code) * info.step_m;
     const double wy = shift.y() + compact3(code >> 1) * info.step_m;
     const double wz = shift.z() + compact3(code >> 2) * info.step_m;
@@ -592,31 +759,21 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
       return Result<DecodedChunk>(ErrorCode::kRangeExceeded, "chunk: point too far from the output cloud's origin");
     }
     x[k] = static_cast<float>(wx), y[k] = static_cast<float>(wy), z[k] = static_cast<float>(wz);
-  }
-  if (p != colour) return parseError("position data length mismatch");
-
-  uint32_t* rgb = pts.rgb() + first;
-  if (!half) {
-    uint8_t g = 0, rg = 0, bg = 0;
-    for (uint32_t k = 0; k < n; ++k) {
-      g = static_cast<uint8_t>(g + colour[k]);
-      rg = static_cast<uint8_t>(rg + colour[n + k]);
-      bg = static_cast<uint8_t>(bg + colour[2 * n + k]);
-      rgb[k] = pipeline::packRgb(static_cast<uint8_t>(rg + g), g, static_cast<uint8_t>(bg + g));
-    }
-  } else {
-    const uint32_t pairs = (n + 1) / 2;
-    uint8_t yv = 0, co = 0, cg = 0;
-    for (uint32_t k = 0; k < n; ++k) {
-      yv = static_cast<uint8_t>(yv + colour[k]);
-      if (k % 2 == 0) {
-        co = static_cast<uint8_t>(co + colour[n + k / 2]);
-        cg = static_cast<uint8_t>(cg + colour[n + pairs + k / 2]);
+    if (!half) {
+      if (!colourDelta(kc[0], p0) || !colourDelta(kc[1], p1) || !colourDelta(kc[2], p2)) {
+        return parseError("colour data truncated or malformed");
       }
-      const int Y = yv, Co = int{co} - 128, Cg = int{cg} - 128;
-      rgb[k] = pipeline::packRgb(clampByte(Y + Co - Cg), clampByte(Y + Cg), clampByte(Y - Co - Cg));
+      rgb[k] = pipeline::packRgb(static_cast<uint8_t>(p1 + p0), p0, static_cast<uint8_t>(p2 + p0));
+    } else {
+      if (!colourDelta(kc[0], p0)) return parseError("colour data truncated or malformed");
+      rgb[k] = p0;  // luma until the pair's chroma arrives
+      if (k % 2 == 1 || k + 1 == n) {
+        if (!colourDelta(kc[1], p1) || !colourDelta(kc[2], p2)) return parseError("chroma data truncated or malformed");
+        chroma(k - k % 2, k + 1);
+      }
     }
   }
+  if ((br.bits() + 7) / 8 != size - kDataHeader) return parseError("data length does not match its points");
   if (first == 0) pts.origin_m = base;
   for (uint32_t k = 0; k < n; ++k) {
     out.region[first + k] = info.region;

@@ -34,8 +34,10 @@ struct CodecConfig {
   // Regions >= 1: chroma (YCoCg) shared by pairs of points, 2 bytes per point
   // instead of 3. The fovea always keeps exact RGB.
   bool halve_peripheral_chroma = false;
-  // zstd per chunk, kept only where it makes the chunk smaller.
-  bool entropy_coding = true;
+  // zstd over each chunk's data, kept only where it makes the chunk smaller.
+  // Off by default: the data is already Exp-Golomb coded and zstd rarely finds
+  // more than a few bytes in it, at about twice the encoding time (bench/README.md).
+  bool entropy_coding = false;
   int zstd_level = 1;  // in [-7, 9]
 };
 
@@ -65,7 +67,7 @@ class ChunkEncoder {
   // must cover every region present. Errors: kCapacityExceeded (more than
   // max_points), kInvalidInput (non-finite point, region without a size),
   // kRangeExceeded (a region spans more than kMaxLatticeSpan steps on an axis,
-  // or coordinates beyond 2^52 steps): then no chunk is valid. Never allocates.
+  // or coordinates beyond 2^50 steps): then no chunk is valid. Never allocates.
   Status encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
                 uint32_t frame_id, uint64_t capture_time_ns);
 

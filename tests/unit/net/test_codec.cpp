@@ -329,7 +329,7 @@ TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
   const double voxel[] = {0.0};
   cloud.points.origin_m = Eigen::Vector3d(1e300, 0, 0);
   EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kRangeExceeded);
-  cloud.points.origin_m = Eigen::Vector3d(0, -1e13, 0);  // 1e16 steps > 2^52
+  cloud.points.origin_m = Eigen::Vector3d(0, -1e13, 0);  // 1e16 steps > 2^50
   EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kRangeExceeded);
   cloud.points.origin_m = Eigen::Vector3d::Zero();
   cloud.points.x()[0] = std::nanf("");
