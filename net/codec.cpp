@@ -413,9 +413,11 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
   const float* px = cloud.points.x();
   const float* py = cloud.points.y();
   const float* pz = cloud.points.z();
+  std::array<double, pipeline::kMaxRegions> inv_step;
+  for (std::size_t r = 0; r < inv_step.size(); ++r) inv_step[r] = 1.0 / s.step[r];
   for (std::size_t i = 0; i < n; ++i) {
     const uint8_t r = cloud.region[i];
-    const double inv = 1.0 / s.step[r];
+    const double inv = inv_step[r];
     const double w[3] = {(o.x() + double{px[i]}) * inv, (o.y() + double{py[i]}) * inv, (o.z() + double{pz[i]}) * inv};
     int64_t q[3];
     for (int a = 0; a < 3; ++a) {
