@@ -156,6 +156,9 @@ int run(int argc, char** argv) {
   matched.periphery_step_ratio = 1.0;
   const std::vector<double> grid(voxel.size(), draco11);
   fovea("fovea @ draco-11 grid", matched, grid, "every region at Draco 11-bit's step, MTU 1200");
+  net::CodecConfig matched_jumbo = matched;
+  matched_jumbo.max_payload = net::kMaxMtu - net::kDatagramOverhead;
+  fovea("fovea @ draco-11, jumbo", matched_jumbo, grid, "as above, MTU 8952");
   net::CodecConfig matched_half = matched;
   matched_half.halve_peripheral_chroma = true;
   fovea("fovea @ draco-11, half chroma", matched_half, grid, "as above, chroma per pair outside the fovea");

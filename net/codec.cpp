@@ -18,6 +18,7 @@ namespace {
 constexpr std::size_t kMinPayload = kMinMtu - kDatagramOverhead;
 constexpr std::size_t kMaxPayload = kMaxMtu - kDatagramOverhead;
 constexpr int kRadixBits = 11;
+constexpr uint16_t kChunkCountPlaceholder = 0xffff;
 constexpr uint8_t kKnownFlags = kChunkFlagZstd | kChunkFlagHalfChroma;
 // Lattice coordinates up to 2^50 steps: w + 0.5 stays exact enough in double
 // that rounding by truncation keeps |w - q| <= 1/2.
@@ -279,23 +280,17 @@ struct ChunkEncoder::State {
 
   // Builds one PointChunk into fbb.
   void buildChunk(uint32_t frame_id, uint16_t index, uint8_t region, uint64_t capture_ns,
-                  const wire::Vec3d& origin, double step_m, uint32_t points, uint8_t flags, uint32_t raw_size,
+                  const wire::Vec3d& origin, double step_m, uint32_t points, uint8_t flags,
                   const uint8_t* data, std::size_t data_size) {
     fbb.Clear();
-    fbb.ForceDefaults(true);  // every field present: chunk_count is patched in place
     const auto vec = fbb.CreateVector(data, data_size);
+    const wire::ChunkHeader header(origin, step_m, capture_ns, frame_id, points, index, region, flags);
     wire::PointChunkBuilder b(fbb);
-    b.add_frame_id(frame_id);
-    b.add_chunk_index(index);
-    b.add_chunk_count(0);
-    b.add_region(region);
-    b.add_capture_time_ns(capture_ns);
-    b.add_origin_m(&origin);
-    b.add_step_m(step_m);
-    b.add_point_count(points);
-    b.add_flags(flags);
-    b.add_raw_size(raw_size);
+    b.add_header(&header);
     b.add_data(vec);
+    // A placeholder that is not the default, so the field is stored and can be
+    // patched in place once the frame's chunk count is known.
+    b.add_chunk_count(kChunkCountPlaceholder);
     fbb.Finish(b.Finish());
   }
 
@@ -325,7 +320,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   // The payload of a chunk with no data: everything but the bytes of `data`.
   s->fbb = flatbuffers::FlatBufferBuilder(2 * kMaxChunkRawBytes + 1024);
   const wire::Vec3d zero(0, 0, 0);
-  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, 0, nullptr, 0);
+  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, nullptr, 0);
   const std::size_t empty = s->fbb.GetSize();
   // + up to 7 bytes of alignment padding around the vector.
   if (empty + 8 + 64 > config.max_payload) {
@@ -589,7 +584,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
                                                   std::to_string(std::min<std::size_t>(s.max_chunks, 0xffff)) + " chunks"};
       }
       s.buildChunk(frame_id, static_cast<uint16_t>(s.chunk_count), static_cast<uint8_t>(r), capture_time_ns, origin,
-                   s.step[ru], static_cast<uint32_t>(points), flags, static_cast<uint32_t>(raw_size), data, data_size);
+                   s.step[ru], static_cast<uint32_t>(points), flags, data, data_size);
       const std::size_t size = s.fbb.GetSize();
       if (size > s.config.max_payload) {
         s.chunk_count = 0;
@@ -603,7 +598,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
     }
   }
 
-  // Every chunk now learns the frame's chunk count (the field is present: ForceDefaults).
+  // Every chunk now learns the frame's chunk count (the field is stored: placeholder).
   for (std::size_t c = 0; c < s.chunk_count; ++c) {
     uint8_t* buf = s.arena.data() + s.chunks[c].offset;
     auto* table = reinterpret_cast<flatbuffers::Table*>(flatbuffers::GetMutableRoot<wire::PointChunk>(buf));
@@ -662,28 +657,36 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   flatbuffers::Verifier verifier(payload.data(), payload.size(), /*max_depth=*/8, /*max_tables=*/16);
   if (!wire::VerifyPointChunkBuffer(verifier)) return parseError("FlatBuffers verification failed");
   const wire::PointChunk* c = wire::GetPointChunk(payload.data());
+  const wire::ChunkHeader* h = c->header();  // required: the verifier checked it is there
 
   DecodedChunk info;
-  info.frame_id = c->frame_id();
-  info.chunk_index = c->chunk_index();
+  info.frame_id = h->frame_id();
+  info.chunk_index = h->chunk_index();
   info.chunk_count = c->chunk_count();
-  info.region = c->region();
-  info.capture_time_ns = c->capture_time_ns();
-  info.step_m = c->step_m();
-  const uint32_t n = c->point_count();
-  const uint8_t flags = c->flags();
+  info.region = h->region();
+  info.capture_time_ns = h->capture_time_ns();
+  info.step_m = h->step_m();
+  const uint32_t n = h->point_count();
+  const uint8_t flags = h->flags();
   if (info.chunk_count == 0 || info.chunk_index >= info.chunk_count) return parseError("chunk index out of range");
   if (info.region >= pipeline::kMaxRegions) return parseError("region out of range");
   if (!std::isfinite(info.step_m) || !(info.step_m > 0.0)) return parseError("step is not finite and > 0");
   if ((flags & ~kKnownFlags) != 0) return parseError("unknown flags");
-  const wire::Vec3d* origin = c->origin_m();
-  if (origin == nullptr || !std::isfinite(origin->x()) || !std::isfinite(origin->y()) || !std::isfinite(origin->z())) {
-    return parseError("origin missing or not finite");
+  const wire::Vec3d& origin = h->origin_m();
+  if (!std::isfinite(origin.x()) || !std::isfinite(origin.y()) || !std::isfinite(origin.z())) {
+    return parseError("origin not finite");
   }
   const flatbuffers::Vector<uint8_t>* data_v = c->data();
   if (data_v == nullptr) return parseError("no data");
-  const uint32_t raw_size = c->raw_size();
-  if (raw_size > kMaxChunkRawBytes) return parseError("raw size too large");
+  const bool compressed = (flags & kChunkFlagZstd) != 0;
+  std::size_t raw_size = data_v->size();
+  if (compressed) {  // zstd frames carry their content size
+    const unsigned long long content = ZSTD_getFrameContentSize(data_v->data(), data_v->size());
+    if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN || content > kMaxChunkRawBytes) {
+      return parseError("zstd frame without a valid content size");
+    }
+    raw_size = static_cast<std::size_t>(content);
+  }
   const bool half = (flags & kChunkFlagHalfChroma) != 0;
   if (raw_size < kDataHeader || n == 0 || n > 8 * (raw_size - kDataHeader)) {
     return parseError("point count does not fit the data");
@@ -691,22 +694,20 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
 
   const uint8_t* data = data_v->data();
   std::size_t size = data_v->size();
-  if ((flags & kChunkFlagZstd) != 0) {
+  if (compressed) {
     ThreadDecoder& td = threadDecoder();
     if (td.dctx == nullptr) return parseError("zstd context unavailable");
     const std::size_t got = ZSTD_decompressDCtx(td.dctx, td.buffer.data(), raw_size, data, size);
     if (ZSTD_isError(got) || got != raw_size) return parseError("zstd data corrupt or of the wrong size");
     data = td.buffer.data();
     size = got;
-  } else if (size != raw_size) {
-    return parseError("raw size differs from the data size");
   }
 
   pipeline::PointCloud& pts = out.points;
   if (pts.capacity() - pts.size() < n || out.region.size() < pts.size() + n || out.weight.size() < pts.size() + n) {
     return Result<DecodedChunk>(ErrorCode::kCapacityExceeded, "chunk: output cloud is full");
   }
-  const Eigen::Vector3d o(origin->x(), origin->y(), origin->z());
+  const Eigen::Vector3d o(origin.x(), origin.y(), origin.z());
   const std::size_t first = pts.size();
   const Eigen::Vector3d base = first == 0 ? o : pts.origin_m;
 
@@ -883,7 +884,7 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload) {
     ++counters_.bad_chunks;
     return {ErrorCode::kParseError, "chunk: FlatBuffers verification failed"};
   }
-  const uint32_t id = wire::GetPointChunk(payload.data())->frame_id();
+  const uint32_t id = wire::GetPointChunk(payload.data())->header()->frame_id();
   if (has_current_ && id != current_.frame_id) {
     if (!newer(id, current_.frame_id)) {
       ++counters_.late_chunks;
@@ -895,7 +896,7 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload) {
     return Status::ok();
   }
   if (!has_current_) startFrame(id);
-  const uint16_t index = wire::GetPointChunk(payload.data())->chunk_index();
+  const uint16_t index = wire::GetPointChunk(payload.data())->header()->chunk_index();
   if (seen_[index] != 0) {
     ++counters_.duplicate_chunks;
     return Status::ok();
