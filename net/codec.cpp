@@ -56,6 +56,23 @@ inline uint32_t zigzag8(uint8_t delta) {  // a byte difference (mod 256) as a sm
   const int d = static_cast<int8_t>(delta);
   return d >= 0 ? static_cast<uint32_t>(2 * d) : static_cast<uint32_t>(-2 * d - 1);
 }
+// A difference of two values in [-255, 255], taken mod 512 as a signed 9-bit
+// number, zigzagged to 0..511 (lossless YCoCg-R chroma).
+inline uint32_t zigzag9(int delta) {
+  int d = delta & 511;
+  if (d >= 256) d -= 512;
+  return d >= 0 ? static_cast<uint32_t>(2 * d) : static_cast<uint32_t>(-2 * d - 1);
+}
+inline int unzigzag9(uint32_t z) { return (z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2); }
+// Lossless YCoCg-R (Malvar and Sullivan): Y in 0..255, Co and Cg in -255..255.
+struct Ycocg {
+  int y, co, cg;
+};
+inline Ycocg toYcocg(uint32_t c) {
+  const int r = pipeline::rgbRed(c), g = pipeline::rgbGreen(c), b = pipeline::rgbBlue(c);
+  const int co = r - b, t = b + (co >> 1), cg = g - t;
+  return {t + (cg >> 1), co, cg};
+}
 inline uint8_t unzigzag8(uint32_t z) { return static_cast<uint8_t>((z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2)); }
 
 class BitWriter {
@@ -494,15 +511,15 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
           sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
           sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
         } else {
-          const uint8_t g0 = pipeline::rgbGreen(c0), g1 = pipeline::rgbGreen(c1);
-          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(g1 - g0));
-          sp[128 + j - 1] = zigzag8(static_cast<uint8_t>((pipeline::rgbRed(c1) - g1) - (pipeline::rgbRed(c0) - g0)));
-          sp[192 + j - 1] = zigzag8(static_cast<uint8_t>((pipeline::rgbBlue(c1) - g1) - (pipeline::rgbBlue(c0) - g0)));
+          const Ycocg a = toYcocg(c0), b = toYcocg(c1);
+          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(b.y - a.y));
+          sp[128 + j - 1] = zigzag9(b.co - a.co);
+          sp[192 + j - 1] = zigzag9(b.cg - a.cg);
         }
       }
       const int kp = bestOrder(sp, probe - 1, 0, 62);
-      const int kc[3] = {bestOrder(sp + 64, probe - 1, 0, 7), bestOrder(sp + 128, probe - 1, 0, 7),
-                         bestOrder(sp + 192, probe - 1, 0, 7)};
+      const int kc[3] = {bestOrder(sp + 64, probe - 1, 0, 7), bestOrder(sp + 128, probe - 1, 0, 8),
+                         bestOrder(sp + 192, probe - 1, 0, 8)};
       uint8_t* raw = s.raw.data();
       std::memset(raw, 0, s.raw.size());
       raw[0] = static_cast<uint8_t>(kp);
@@ -514,6 +531,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
       std::size_t count = 0;
       uint8_t p0 = 0, p1 = 0, p2 = 0;  // previous G, R-G, B-G (or Y, and the pair's Co, Cg)
       uint8_t pco = 0, pcg = 0;
+      int pfco = 0, pfcg = 0;  // full colour: previous Co, Cg
       for (std::size_t j = k; j < m; ++j) {
         const std::size_t before = bw.bits();
         const uint32_t c = rgb[o_in[j]];
@@ -531,14 +549,14 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
         }
         std::size_t extra = 0;
         uint8_t n0, n1 = p1, n2 = p2, nco = pco, ncg = pcg;
+        int nfco = pfco, nfcg = pfcg;
         if (!half) {
-          const uint8_t g = pipeline::rgbGreen(c);
-          n0 = g;
-          n1 = static_cast<uint8_t>(pipeline::rgbRed(c) - g);
-          n2 = static_cast<uint8_t>(pipeline::rgbBlue(c) - g);
+          const Ycocg v = toYcocg(c);
+          n0 = static_cast<uint8_t>(v.y);
+          nfco = v.co, nfcg = v.cg;
           bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
-          bw.putEg(zigzag8(static_cast<uint8_t>(n1 - p1)), kc[1]);
-          bw.putEg(zigzag8(static_cast<uint8_t>(n2 - p2)), kc[2]);
+          bw.putEg(zigzag9(nfco - pfco), kc[1]);
+          bw.putEg(zigzag9(nfcg - pfcg), kc[2]);
         } else {
           n0 = static_cast<uint8_t>(luma(c));
           bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
@@ -556,7 +574,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
           bw.rewind(before);
           break;
         }
-        p0 = n0, p1 = n1, p2 = n2, pco = nco, pcg = ncg;
+        p0 = n0, p1 = n1, p2 = n2, pco = nco, pcg = ncg, pfco = nfco, pfcg = nfcg;
         ++count;
       }
       if (count == 0) {
@@ -715,7 +733,7 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   // Exp-Golomb deltas of the Morton code) and colour codes.
   const int kp = data[0];
   const int kc[3] = {data[1], data[2], data[3]};
-  if (kp > 62 || kc[0] > 7 || kc[1] > 7 || kc[2] > 7) return parseError("Exp-Golomb order out of range");
+  if (kp > 62 || kc[0] > 7 || kc[1] > 8 || kc[2] > 8) return parseError("Exp-Golomb order out of range");
   BitReader br(data + kDataHeader, size - kDataHeader);
   float* x = pts.x() + first;
   float* y = pts.y() + first;
@@ -729,6 +747,13 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
     uint64_t zz;
     if (!br.getEg(k, zz) || zz > 255) return false;
     value = static_cast<uint8_t>(value + unzigzag8(static_cast<uint32_t>(zz)));
+    return true;
+  };
+  int fco = 0, fcg = 0;  // full colour: Co, Cg as 9-bit values
+  auto chromaDelta = [&br](int k, int& value) __attribute__((always_inline)) {
+    uint64_t zz;
+    if (!br.getEg(k, zz) || zz > 511) return false;
+    value = (value + unzigzag9(static_cast<uint32_t>(zz))) & 511;
     return true;
   };
   auto chroma = [&](uint32_t from, uint32_t to) {  // points [from, to) share (p1, p2) = (Co, Cg)
@@ -763,10 +788,13 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
     }
     x[k] = static_cast<float>(wx), y[k] = static_cast<float>(wy), z[k] = static_cast<float>(wz);
     if (!half) {
-      if (!colourDelta(kc[0], p0) || !colourDelta(kc[1], p1) || !colourDelta(kc[2], p2)) {
+      if (!colourDelta(kc[0], p0) || !chromaDelta(kc[1], fco) || !chromaDelta(kc[2], fcg)) {
         return parseError("colour data truncated or malformed");
       }
-      rgb[k] = pipeline::packRgb(static_cast<uint8_t>(p1 + p0), p0, static_cast<uint8_t>(p2 + p0));
+      const int co = fco >= 256 ? fco - 512 : fco, cg = fcg >= 256 ? fcg - 512 : fcg;
+      const int t = p0 - (cg >> 1), g = cg + t, b = t - (co >> 1), r = b + co;
+      if ((r | g | b) < 0 || r > 255 || g > 255 || b > 255) return parseError("colour out of range");
+      rgb[k] = pipeline::packRgb(static_cast<uint8_t>(r), static_cast<uint8_t>(g), static_cast<uint8_t>(b));
     } else {
       if (!colourDelta(kc[0], p0)) return parseError("colour data truncated or malformed");
       rgb[k] = p0;  // luma until the pair's chroma arrives
