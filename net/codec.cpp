@@ -77,48 +77,60 @@ inline uint8_t unzigzag8(uint32_t z) { return static_cast<uint8_t>((z & 1) ? -st
 
 class BitWriter {
  public:
-  explicit BitWriter(uint8_t* zeroed) : out_(zeroed) {}
-  std::size_t bits() const { return pos_; }
-  // Up to 57 bits; the buffer has 8 bytes of slack past any position written.
+  // out needs 8 bytes of slack past the last byte written.
+  explicit BitWriter(uint8_t* out) : out_(out) {}
+  std::size_t bits() const { return 8 * bytes_ + static_cast<std::size_t>(n_); }
+  // Up to 64 bits (v has no bits above len). Bits gather in a register and leave 32 at a time: no store
+  // is re-read (writing into memory directly stalls on store forwarding).
   [[gnu::always_inline]] void put(uint64_t v, int len) {
-    uint8_t* p = out_ + pos_ / 8;
-    uint64_t word;
-    std::memcpy(&word, p, 8);
-    word |= v << (pos_ % 8);
-    std::memcpy(p, &word, 8);
-    pos_ += static_cast<std::size_t>(len);
+    if (len > 32) {  // the register holds < 32 bits, so 32 more always fit
+      put(v & 0xffffffffu, 32);
+      v >>= 32;
+      len -= 32;
+    }
+    acc_ |= v << n_;
+    n_ += len;
+    if (n_ >= 32) {
+      const uint32_t word = static_cast<uint32_t>(acc_);
+      std::memcpy(out_ + bytes_, &word, 4);
+      bytes_ += 4;
+      acc_ >>= 32;
+      n_ -= 32;
+    }
   }
   [[gnu::always_inline]] void putEg(uint64_t v, int k) {
     const uint64_t w = (v >> k) + 1;
     const int n = std::bit_width(w) - 1;
+    const uint64_t low = w ^ (uint64_t{1} << n);
     if (2 * n + 1 + k <= 57) {  // one write: n zeros, 1, the n low bits of w, the k low bits of v
-      const uint64_t low = w ^ (uint64_t{1} << n);
       const uint64_t r = v & ((uint64_t{1} << k) - 1);
       put((((low << 1) | 1) << n) | (r << (2 * n + 1)), 2 * n + 1 + k);
       return;
     }
-    pos_ += static_cast<std::size_t>(n);  // n zero bits
-    const uint64_t low = n == 0 ? 0 : (w & ((uint64_t{1} << n) - 1));
-    if (n < 56) {
-      put((low << 1) | 1, n + 1);
-    } else {
-      put(1, 1);
-      put(low & 0xffffffffu, 32);
-      put(low >> 32, n - 32);
-    }
-    if (k > 0) put(v & ((uint64_t{1} << k) - 1), k);
+    put(0, n);  // long codes (n + k > 28): in pieces of at most 32 bits
+    put(1, 1);
+    put(low, n);
+    put(v & ((uint64_t{1} << k) - 1), k);
   }
-  // Forgets everything after bit `pos` (and zeroes it for the next writes).
-  void rewind(std::size_t pos) {
-    const std::size_t end = (pos_ + 7) / 8 + 8;
-    out_[pos / 8] &= static_cast<uint8_t>((1u << (pos % 8)) - 1);
-    std::memset(out_ + pos / 8 + 1, 0, end - (pos / 8 + 1));
-    pos_ = pos;
+  // Everything written so far, to go back to.
+  struct Mark {
+    std::size_t bytes;
+    uint64_t acc;
+    int n;
+  };
+  Mark mark() const { return {bytes_, acc_, n_}; }
+  void rewind(const Mark& m) { bytes_ = m.bytes, acc_ = m.acc, n_ = m.n; }
+  // Writes the bits still in the register (the last byte padded with zeros).
+  void finish() {
+    const uint64_t word = acc_;
+    std::memcpy(out_ + bytes_, &word, 8);
   }
 
  private:
   uint8_t* out_;
-  std::size_t pos_ = 0;
+  std::size_t bytes_ = 0;
+  uint64_t acc_ = 0;
+  int n_ = 0;
 };
 
 class BitReader {
@@ -533,7 +545,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
       uint8_t pco = 0, pcg = 0;
       int pfco = 0, pfcg = 0;  // full colour: previous Co, Cg
       for (std::size_t j = k; j < m; ++j) {
-        const std::size_t before = bw.bits();
+        const BitWriter::Mark before = bw.mark();
         const uint32_t c = rgb[o_in[j]];
         if (count == 0) {
           const std::size_t len = firstCodeBits(k_in[j]) - 6;
@@ -586,6 +598,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
         bw.putEg(zigzag8(static_cast<uint8_t>(pairCo(c, c) - pco)), kc[1]);
         bw.putEg(zigzag8(static_cast<uint8_t>(pairCg(c, c) - pcg)), kc[2]);
       }
+      bw.finish();
       const std::size_t raw_size = kDataHeader + (bw.bits() + 7) / 8;
       const std::size_t points = count;
       const uint8_t* data = raw;
