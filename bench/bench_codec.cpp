@@ -29,7 +29,7 @@ struct Row {
 // fovea's codec: encode the frame, then decode every chunk into one cloud.
 CodecRun runFovea(const pipeline::FoveatedCloud& cloud, std::span<const double> voxel, const net::CodecConfig& config,
                   int runs, std::size_t& chunks) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = ThreadCpuClock;
   CodecRun run;
   Result<net::ChunkEncoder> created = net::ChunkEncoder::create(config, cloud.size());
   if (!created) {
@@ -76,19 +76,22 @@ CodecRun runFovea(const pipeline::FoveatedCloud& cloud, std::span<const double> 
 
 int usage() {
   std::fprintf(stderr,
-               "usage: fovea-bench-codec [--runs N (>= 1, default 25)] [--preset F1|F2|F3|FREF]\n"
+               "usage: fovea-bench-codec [--runs N (>= 1, default 25)] [--preset F1|F2|F3|FREF] [--only NAME-PREFIX]\n"
                "bytes per point and encode/decode ns per point of fovea's chunk codec, Draco and PCL's octree codec\n");
   return 2;
 }
 
 int run(int argc, char** argv) {
   int runs = 25;
+  std::string only;  // run only the codecs whose name starts with this
   pipeline::FoveationConfig config;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--runs" && i + 1 < argc) {
       runs = std::atoi(argv[++i]);
       if (runs < 1) return usage();
+    } else if (arg == "--only" && i + 1 < argc) {
+      only = argv[++i];
     } else if (arg == "--preset" && i + 1 < argc) {
       Result<pipeline::Preset> p = pipeline::parsePreset(argv[++i]);
       if (!p) return usage();
@@ -130,11 +133,12 @@ int run(int argc, char** argv) {
     std::printf("%sregion %d: %u pts, voxel %.1f mm", r ? "; " : "", r, stats.regions[static_cast<std::size_t>(r)].points_out,
                 voxel[static_cast<std::size_t>(r)] * 1e3);
   }
-  std::printf("), %d runs, medians\n\n", runs);
+  std::printf("), %d runs, medians of thread CPU time\n\n", runs);
 
   const double draco11 = dracoStep(fov, 11);
   std::vector<Row> rows;
   auto fovea = [&](const std::string& name, const net::CodecConfig& c, std::span<const double> v, const std::string& note) {
+    if (name.rfind(only, 0) != 0) return;
     Row row{name, {}, 0, note};
     row.run = runFovea(fov, v, c, runs, row.datagrams);
     rows.push_back(row);
@@ -163,7 +167,7 @@ int run(int argc, char** argv) {
   matched_half.halve_peripheral_chroma = true;
   fovea("fovea @ draco-11, half chroma", matched_half, grid, "as above, chroma per pair outside the fovea");
 
-  const bool draco = haveDraco();
+  const bool draco = haveDraco() && std::string("draco").rfind(only, 0) == 0;
   if (draco) {
     rows.push_back({"draco 11-bit", runDraco(fov, 11, runs), 0, "kd-tree, speed 10, 8-bit colour"});
     // Draco at fovea's foveal precision: the fewest bits whose step is <= 1 mm.
@@ -171,15 +175,15 @@ int run(int argc, char** argv) {
     while (bits < 30 && dracoStep(fov, bits) > def.fovea_step_m) ++bits;
     rows.push_back({"draco " + std::to_string(bits) + "-bit", runDraco(fov, bits, runs), 0,
                     "as above, step <= fovea's 1 mm everywhere"});
-  } else {
+  } else if (!haveDraco()) {
     std::printf("draco: not built (libdraco-dev not found)\n");
   }
-  if (havePclOctree()) {
+  if (havePclOctree() && std::string("pcl").rfind(only, 0) == 0) {
     // Detail truncated to point_resolution: error < point_resolution, so half Draco's step.
     rows.push_back({"pcl octree @ draco-11", runPclOctree(fov, draco11 / 2, 32 * draco11 / 2, runs), 0,
                     "point res = Draco step / 2, octree 16 x Draco step"});
     rows.push_back({"pcl octree 1 mm", runPclOctree(fov, 0.001, 0.032, runs), 0, "point res 1 mm, octree 32 mm"});
-  } else {
+  } else if (!havePclOctree()) {
     std::printf("pcl octree codec: not built (PCL not found)\n");
   }
 

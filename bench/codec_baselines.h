@@ -2,13 +2,30 @@
 // headers stay out of the rest (Draco, PCL's octree codec). Start-up code.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
+#include <ctime>
 #include <string>
 #include <vector>
 
 #include "pipeline/point_cloud.h"
 
 namespace fovea::bench {
+
+// CPU time of the calling thread: on a shared machine, time the scheduler gives
+// to other processes does not count (every codec here runs on one thread).
+struct ThreadCpuClock {
+  using duration = std::chrono::nanoseconds;
+  using rep = duration::rep;
+  using period = duration::period;
+  using time_point = std::chrono::time_point<ThreadCpuClock>;
+  static constexpr bool is_steady = true;
+  static time_point now() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return time_point(duration(static_cast<rep>(ts.tv_sec) * 1000000000 + ts.tv_nsec));
+  }
+};
 
 // Medians over the runs. Encode and decode are timed on the codec's own data
 // structures: converting fovea's cloud to them (and back) is not timed.

@@ -38,7 +38,7 @@ double dracoStep(const pipeline::FoveatedCloud& cloud, int position_bits) {
 bool haveDraco() { return true; }
 
 CodecRun runDraco(const pipeline::FoveatedCloud& cloud, int position_bits, int runs) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = ThreadCpuClock;
   CodecRun run;
   run.max_error_m = dracoStep(cloud, position_bits) / 2;
   const std::size_t n = cloud.size();

@@ -16,7 +16,7 @@ bool havePclOctree() { return true; }
 
 CodecRun runPclOctree(const pipeline::FoveatedCloud& cloud, double point_resolution_m, double octree_resolution_m,
                       int runs) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = ThreadCpuClock;
   using Codec = pcl::io::OctreePointCloudCompression<pcl::PointXYZRGB>;
   CodecRun run;
   run.max_error_m = point_resolution_m;
