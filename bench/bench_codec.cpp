@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,8 @@ struct Row {
   CodecRun run;
   std::size_t datagrams = 0;  // fovea: chunks (0: one stream)
   std::string note;
+  std::function<CodecRun(std::size_t& datagrams)> runner;  // one warm-up and one timed run
+  std::vector<double> encode_ms, decode_ms;
 };
 
 // fovea's codec: encode the frame, then decode every chunk into one cloud.
@@ -133,15 +136,14 @@ int run(int argc, char** argv) {
     std::printf("%sregion %d: %u pts, voxel %.1f mm", r ? "; " : "", r, stats.regions[static_cast<std::size_t>(r)].points_out,
                 voxel[static_cast<std::size_t>(r)] * 1e3);
   }
-  std::printf("), %d runs, medians of thread CPU time\n\n", runs);
+  std::printf("), %d rounds (each codec once per round, after its own warm-up run), medians of thread CPU time\n\n", runs);
 
   const double draco11 = dracoStep(fov, 11);
   std::vector<Row> rows;
   auto fovea = [&](const std::string& name, const net::CodecConfig& c, std::span<const double> v, const std::string& note) {
     if (name.rfind(only, 0) != 0) return;
-    Row row{name, {}, 0, note};
-    row.run = runFovea(fov, v, c, runs, row.datagrams);
-    rows.push_back(row);
+    const std::vector<double> sizes(v.begin(), v.end());
+    rows.push_back({name, {}, 0, note, [&fov, c, sizes](std::size_t& d) { return runFovea(fov, sizes, c, 1, d); }, {}, {}});
   };
   net::CodecConfig def;
   fovea("fovea default", def, voxel, "fovea 1 mm, periphery voxel/8, Exp-Golomb, MTU 1200");
@@ -169,22 +171,38 @@ int run(int argc, char** argv) {
 
   const bool draco = haveDraco() && std::string("draco").rfind(only, 0) == 0;
   if (draco) {
-    rows.push_back({"draco 11-bit", runDraco(fov, 11, runs), 0, "kd-tree, speed 10, 8-bit colour"});
+    rows.push_back({"draco 11-bit", {}, 0, "kd-tree, speed 10, 8-bit colour",
+                    [&fov](std::size_t&) { return runDraco(fov, 11, 1); }, {}, {}});
     // Draco at fovea's foveal precision: the fewest bits whose step is <= 1 mm.
     int bits = 11;
     while (bits < 30 && dracoStep(fov, bits) > def.fovea_step_m) ++bits;
-    rows.push_back({"draco " + std::to_string(bits) + "-bit", runDraco(fov, bits, runs), 0,
-                    "as above, step <= fovea's 1 mm everywhere"});
+    rows.push_back({"draco " + std::to_string(bits) + "-bit", {}, 0, "as above, step <= fovea's 1 mm everywhere",
+                    [&fov, bits](std::size_t&) { return runDraco(fov, bits, 1); }, {}, {}});
   } else if (!haveDraco()) {
     std::printf("draco: not built (libdraco-dev not found)\n");
   }
   if (havePclOctree() && std::string("pcl").rfind(only, 0) == 0) {
     // Detail truncated to point_resolution: error < point_resolution, so half Draco's step.
-    rows.push_back({"pcl octree @ draco-11", runPclOctree(fov, draco11 / 2, 32 * draco11 / 2, runs), 0,
-                    "point res = Draco step / 2, octree 16 x Draco step"});
-    rows.push_back({"pcl octree 1 mm", runPclOctree(fov, 0.001, 0.032, runs), 0, "point res 1 mm, octree 32 mm"});
+    rows.push_back({"pcl octree @ draco-11", {}, 0, "point res = Draco step / 2, octree 16 x Draco step",
+                    [&fov, draco11](std::size_t&) { return runPclOctree(fov, draco11 / 2, 32 * draco11 / 2, 1); }, {}, {}});
+    rows.push_back({"pcl octree 1 mm", {}, 0, "point res 1 mm, octree 32 mm",
+                    [&fov](std::size_t&) { return runPclOctree(fov, 0.001, 0.032, 1); }, {}, {}});
   } else if (!havePclOctree()) {
     std::printf("pcl octree codec: not built (PCL not found)\n");
+  }
+
+  // Rounds: each codec once per round, so a change in machine load hits every codec alike.
+  for (int round = 0; round < runs; ++round) {
+    for (Row& row : rows) {
+      if (!row.run.error.empty()) continue;
+      row.run = row.runner(row.datagrams);
+      row.encode_ms.push_back(row.run.encode_ms);
+      row.decode_ms.push_back(row.run.decode_ms);
+    }
+  }
+  for (Row& row : rows) {
+    row.run.encode_ms = median(row.encode_ms);
+    row.run.decode_ms = median(row.decode_ms);
   }
 
   const CodecRun* draco_ref = nullptr;
