@@ -276,7 +276,6 @@ struct ChunkEncoder::State {
   CodecConfig config;
   std::size_t max_points = 0;
   std::size_t data_budget = 0;  // bytes of `data` that always fit max_payload
-  std::size_t raw_capacity = 0;
   std::size_t max_chunks = 0;
 
   // Per point of the frame, grouped by region.
@@ -359,7 +358,8 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->data_budget = config.max_payload - empty - 8;
 
   // Every chunk but a region's last holds more than data_budget - 23 bytes of at
-  // most 23 bytes per point (a 127-bit position code and three 17-bit colour codes).
+  // most 23 bytes per point (a 127-bit position code, a 17-bit luma code and two
+  // chroma codes of at most 19 bits).
   const std::size_t per_chunk = s->data_budget - 23;
   s->max_chunks = (23 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
   s->arena.resize(s->max_chunks * config.max_payload);
@@ -541,9 +541,9 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
 
       // Greedy along the Morton order: write a point, take it back if it does not fit.
       std::size_t count = 0;
-      uint8_t p0 = 0, p1 = 0, p2 = 0;  // previous G, R-G, B-G (or Y, and the pair's Co, Cg)
-      uint8_t pco = 0, pcg = 0;
-      int pfco = 0, pfcg = 0;  // full colour: previous Co, Cg
+      uint8_t p0 = 0;          // previous Y
+      int pfco = 0, pfcg = 0;  // full colour: previous Co, Cg (-255..255)
+      uint8_t pco = 0, pcg = 0;  // halved chroma: the previous pair's Co, Cg
       for (std::size_t j = k; j < m; ++j) {
         const BitWriter::Mark before = bw.mark();
         const uint32_t c = rgb[o_in[j]];
@@ -560,7 +560,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
           bw.putEg(k_in[j] - k_in[j - 1], kp);
         }
         std::size_t extra = 0;
-        uint8_t n0, n1 = p1, n2 = p2, nco = pco, ncg = pcg;
+        uint8_t n0, nco = pco, ncg = pcg;
         int nfco = pfco, nfcg = pfcg;
         if (!half) {
           const Ycocg v = toYcocg(c);
@@ -586,7 +586,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
           bw.rewind(before);
           break;
         }
-        p0 = n0, p1 = n1, p2 = n2, pco = nco, pcg = ncg, pfco = nfco, pfcg = nfcg;
+        p0 = n0, pco = nco, pcg = ncg, pfco = nfco, pfcg = nfcg;
         ++count;
       }
       if (count == 0) {
