@@ -54,14 +54,13 @@ inline std::size_t egBits(uint64_t v, int k) {
 }
 inline uint32_t zigzag8(uint8_t delta) {  // a byte difference (mod 256) as a small unsigned
   const int d = static_cast<int8_t>(delta);
-  return d >= 0 ? static_cast<uint32_t>(2 * d) : static_cast<uint32_t>(-2 * d - 1);
+  return static_cast<uint32_t>((d * 2) ^ (d >> 31));  // branch-free: 0, -1, 1, -2 -> 0, 1, 2, 3
 }
 // A difference of two values in [-255, 255], taken mod 512 as a signed 9-bit
 // number, zigzagged to 0..511 (lossless YCoCg-R chroma).
 inline uint32_t zigzag9(int delta) {
-  int d = delta & 511;
-  if (d >= 256) d -= 512;
-  return d >= 0 ? static_cast<uint32_t>(2 * d) : static_cast<uint32_t>(-2 * d - 1);
+  const int d = static_cast<int>(static_cast<uint32_t>(delta) << 23) >> 23;  // sign-extend the low 9 bits
+  return static_cast<uint32_t>((d * 2) ^ (d >> 31));
 }
 inline int unzigzag9(uint32_t z) { return (z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2); }
 // Lossless YCoCg-R (Malvar and Sullivan): Y in 0..255, Co and Cg in -255..255.
@@ -80,37 +79,37 @@ class BitWriter {
   // out needs 8 bytes of slack past the last byte written.
   explicit BitWriter(uint8_t* out) : out_(out) {}
   std::size_t bits() const { return 8 * bytes_ + static_cast<std::size_t>(n_); }
-  // Up to 64 bits (v has no bits above len). Bits gather in a register and leave 32 at a time: no store
-  // is re-read (writing into memory directly stalls on store forwarding).
+  // Up to 56 bits (v has no bits above len). Branch-free, as zstd's bit stream:
+  // add to a register, store all 8 bytes of it, advance by the whole bytes, keep
+  // the 0..7 bits left. Writing each code into memory and re-reading it instead
+  // stalls on store forwarding; flushing only when 32 bits are full mispredicts.
   [[gnu::always_inline]] void put(uint64_t v, int len) {
-    if (len > 32) {  // the register holds < 32 bits, so 32 more always fit
-      put(v & 0xffffffffu, 32);
-      v >>= 32;
-      len -= 32;
-    }
     acc_ |= v << n_;
     n_ += len;
-    if (n_ >= 32) {
-      const uint32_t word = static_cast<uint32_t>(acc_);
-      std::memcpy(out_ + bytes_, &word, 4);
-      bytes_ += 4;
-      acc_ >>= 32;
-      n_ -= 32;
-    }
+    std::memcpy(out_ + bytes_, &acc_, 8);
+    bytes_ += static_cast<std::size_t>(n_ >> 3);
+    acc_ = (acc_ >> (n_ & ~7)) & 0xff;  // n_ <= 63, so the shift is < 64
+    n_ &= 7;
+    acc_ &= (uint64_t{1} << n_) - 1;
   }
   [[gnu::always_inline]] void putEg(uint64_t v, int k) {
     const uint64_t w = (v >> k) + 1;
     const int n = std::bit_width(w) - 1;
     const uint64_t low = w ^ (uint64_t{1} << n);
-    if (2 * n + 1 + k <= 57) {  // one write: n zeros, 1, the n low bits of w, the k low bits of v
+    if (2 * n + 1 + k <= 56) {  // one write: n zeros, 1, the n low bits of w, the k low bits of v
       const uint64_t r = v & ((uint64_t{1} << k) - 1);
       put((((low << 1) | 1) << n) | (r << (2 * n + 1)), 2 * n + 1 + k);
       return;
     }
-    put(0, n);  // long codes (n + k > 28): in pieces of at most 32 bits
+    // Long codes (only for huge position jumps): in pieces of at most 32 bits.
+    put(0, std::min(n, 32));
+    if (n > 32) put(0, n - 32);
     put(1, 1);
-    put(low, n);
-    put(v & ((uint64_t{1} << k) - 1), k);
+    put(low & 0xffffffffu, std::min(n, 32));
+    if (n > 32) put(low >> 32, n - 32);
+    const uint64_t r = v & ((uint64_t{1} << k) - 1);
+    put(r & 0xffffffffu, std::min(k, 32));
+    if (k > 32) put(r >> 32, k - 32);
   }
   // Everything written so far, to go back to.
   struct Mark {
@@ -120,16 +119,13 @@ class BitWriter {
   };
   Mark mark() const { return {bytes_, acc_, n_}; }
   void rewind(const Mark& m) { bytes_ = m.bytes, acc_ = m.acc, n_ = m.n; }
-  // Writes the bits still in the register (the last byte padded with zeros).
-  void finish() {
-    const uint64_t word = acc_;
-    std::memcpy(out_ + bytes_, &word, 8);
-  }
+  // Writes the last partial byte (padded with zeros).
+  void finish() { std::memcpy(out_ + bytes_, &acc_, 8); }
 
  private:
   uint8_t* out_;
   std::size_t bytes_ = 0;
-  uint64_t acc_ = 0;
+  uint64_t acc_ = 0;  // the n_ (< 8) bits not yet in whole bytes
   int n_ = 0;
 };
 
