@@ -62,7 +62,7 @@ inline uint32_t zigzag9(int delta) {
   const int d = static_cast<int>(static_cast<uint32_t>(delta) << 23) >> 23;  // sign-extend the low 9 bits
   return static_cast<uint32_t>((d * 2) ^ (d >> 31));
 }
-inline int unzigzag9(uint32_t z) { return (z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2); }
+inline int unzigzag9(uint32_t z) { return static_cast<int>((z >> 1) ^ (0u - (z & 1))); }
 // Lossless YCoCg-R (Malvar and Sullivan): Y in 0..255, Co and Cg in -255..255.
 struct Ycocg {
   int y, co, cg;
@@ -72,7 +72,7 @@ inline Ycocg toYcocg(uint32_t c) {
   const int co = r - b, t = b + (co >> 1), cg = g - t;
   return {t + (cg >> 1), co, cg};
 }
-inline uint8_t unzigzag8(uint32_t z) { return static_cast<uint8_t>((z & 1) ? -static_cast<int>((z + 1) / 2) : static_cast<int>(z / 2)); }
+inline uint8_t unzigzag8(uint32_t z) { return static_cast<uint8_t>((z >> 1) ^ (0u - (z & 1))); }
 
 class BitWriter {
  public:
