@@ -206,7 +206,9 @@ class BitReader {
   std::size_t pos_ = 0;
 };
 
-// The order k in [lo, hi] that codes `values` in the fewest bits.
+// The order k in [lo, hi] that codes `values` in the fewest bits, among the four
+// below the bit width of their mean (on the mock frames the best order was always
+// 1 to 4 below it; a fifth candidate saves 0.1 %).
 inline int bestOrder(const uint64_t* values, std::size_t n, int lo, int hi) {
   if (n == 0) return lo;
   uint64_t sum = 0;
@@ -214,7 +216,7 @@ inline int bestOrder(const uint64_t* values, std::size_t n, int lo, int hi) {
   const int guess = std::bit_width(sum / n);
   int best = lo;
   std::size_t best_bits = SIZE_MAX;
-  for (int k = std::max(lo, guess - 3); k <= std::min(hi, guess + 1); ++k) {
+  for (int k = std::max(lo, guess - 4); k <= std::min(hi, guess - 1); ++k) {
     std::size_t bits = 0;
     for (std::size_t i = 0; i < n; ++i) bits += egBits(values[i], k);
     if (bits < best_bits) best_bits = bits, best = k;
