@@ -513,18 +513,24 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
       // Exp-Golomb orders from the next (up to) 64 points.
       const std::size_t probe = std::min<std::size_t>(64, m - k);
       uint64_t* sp = s.sample.data();
-      for (std::size_t j = 1; j < probe; ++j) {
-        const uint32_t c0 = rgb[o_in[k + j - 1]], c1 = rgb[o_in[k + j]];
-        sp[j - 1] = k_in[k + j] - k_in[k + j - 1];
-        if (half) {
+      for (std::size_t j = 1; j < probe; ++j) sp[j - 1] = k_in[k + j] - k_in[k + j - 1];
+      if (half) {
+        uint32_t c0 = rgb[o_in[k]];
+        for (std::size_t j = 1; j < probe; ++j) {
+          const uint32_t c1 = rgb[o_in[k + j]];
           sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(luma(c1) - luma(c0)));
           sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
           sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
-        } else {
-          const Ycocg a = toYcocg(c0), b = toYcocg(c1);
+          c0 = c1;
+        }
+      } else {
+        Ycocg a = toYcocg(rgb[o_in[k]]);
+        for (std::size_t j = 1; j < probe; ++j) {
+          const Ycocg b = toYcocg(rgb[o_in[k + j]]);
           sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(b.y - a.y));
           sp[128 + j - 1] = zigzag9(b.co - a.co);
           sp[192 + j - 1] = zigzag9(b.cg - a.cg);
+          a = b;
         }
       }
       const int kp = bestOrder(sp, probe - 1, 0, 62);
