@@ -31,17 +31,19 @@ struct CodecConfig {
   // puts the quantization error (<= voxel/16 per axis) well under the error the
   // voxel sampling already makes (the voxel itself); docs/protocol-chunks.md.
   double periphery_step_ratio = 0.125;
-  // Regions >= 1: chroma (YCoCg) shared by pairs of points, 2 bytes per point
-  // instead of 3. The fovea always keeps exact RGB.
+  // Regions >= 1: luma per point, chroma (Co, Cg) shared by pairs of points
+  // (about 0.7 bytes per point less on the mock room). The fovea always keeps
+  // exact RGB; otherwise colours are exact (lossless YCoCg-R).
   bool halve_peripheral_chroma = false;
   // zstd over each chunk's data, kept only where it makes the chunk smaller.
-  // Off by default: the data is already Exp-Golomb coded and zstd rarely finds
-  // more than a few bytes in it, at about twice the encoding time (bench/README.md).
+  // Off by default: the data is already Exp-Golomb coded; on the mock frames zstd
+  // makes no chunk smaller and costs 20-40 % more encoding time (bench/README.md).
   bool entropy_coding = false;
   int zstd_level = 1;  // in [-7, 9]
 };
 
-// kInvalidArgument naming the field, e.g. "codec.max_payload: 100 < 220".
+// kInvalidArgument naming the field, e.g. "codec.max_payload: 100 is outside
+// [220, 8916] (MTU minus 36 bytes)".
 Status validate(const CodecConfig& config);
 
 // Flags of PointChunk.flags.
