@@ -1,0 +1,512 @@
+// The chunk codec (net/codec.h): round trips within half a quantization step,
+// datagram sizes, loss of any chunk, range limits and hostile payloads.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+#include <tuple>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "net/codec.h"
+#include "tests/support/clouds.h"
+#include "tests/unit/net/mock_frame.h"
+
+namespace fovea::net {
+namespace {
+
+using Key = std::tuple<int, int64_t, int64_t, int64_t>;  // region, lattice x y z
+
+const test::MockFoveatedFrame& livingRoom() {
+  static const test::MockFoveatedFrame frame = test::mockFoveatedFrame();
+  return frame;
+}
+
+ChunkEncoder makeEncoder(const CodecConfig& config, std::size_t max_points) {
+  Result<ChunkEncoder> enc = ChunkEncoder::create(config, max_points);
+  EXPECT_TRUE(enc.isOk()) << enc.status().toString();
+  return std::move(enc).value();
+}
+
+// Decodes every chunk of the encoder into one cloud.
+pipeline::FoveatedCloud decodeAll(const ChunkEncoder& enc, std::size_t capacity) {
+  pipeline::FoveatedCloud out(capacity);
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+    Result<DecodedChunk> d = decodeChunk(enc.chunk(i), out);
+    EXPECT_TRUE(d.isOk()) << "chunk " << i << ": " << d.status().toString();
+  }
+  return out;
+}
+
+// Checks the decoded cloud against the source: the same multiset of lattice
+// points per region, every source point within half a step of its lattice point
+// (per axis), every decoded point on it; colours exact, or with halved chroma
+// exact in the fovea and close elsewhere (mean channel error returned).
+double expectRoundTrip(const pipeline::FoveatedCloud& src, const pipeline::FoveatedCloud& dec, const ChunkEncoder& enc,
+                       bool exact_colour) {
+  double error_sum = 0.0;
+  std::size_t error_count = 0;
+  EXPECT_EQ(src.size(), dec.size());
+  if (src.size() != dec.size()) return 1e9;
+  std::map<Key, std::vector<uint32_t>> source;  // lattice point -> colours
+  for (std::size_t i = 0; i < src.size(); ++i) {
+    const int r = src.region[i];
+    const double step = enc.regionStep(r);
+    const Eigen::Vector3d w = src.points.world(i);
+    Key key{r, std::llround(w.x() / step), std::llround(w.y() / step), std::llround(w.z() / step)};
+    // Float input far from the origin: allow the float's own rounding.
+    const double slack = 1e-9 + 1e-7 * w.norm();
+    EXPECT_LE(std::fabs(w.x() - std::get<1>(key) * step), step / 2 + slack);
+    EXPECT_LE(std::fabs(w.y() - std::get<2>(key) * step), step / 2 + slack);
+    EXPECT_LE(std::fabs(w.z() - std::get<3>(key) * step), step / 2 + slack);
+    source[key].push_back(src.points.rgb()[i]);
+  }
+  for (std::size_t i = 0; i < dec.size(); ++i) {
+    const int r = dec.region[i];
+    const double step = enc.regionStep(r);
+    const Eigen::Vector3d w = dec.points.world(i);
+    Key key{r, std::llround(w.x() / step), std::llround(w.y() / step), std::llround(w.z() / step)};
+    const double slack = 1e-9 + 2e-7 * (w - dec.points.origin_m).norm() + 1e-12 * w.norm();
+    const double off = (w - Eigen::Vector3d(std::get<1>(key), std::get<2>(key), std::get<3>(key)) * step).cwiseAbs().maxCoeff();
+    EXPECT_LE(off, slack) << "decoded point " << i << " is off its lattice point";
+    auto it = source.find(key);
+    EXPECT_NE(it, source.end()) << "decoded point " << i << " matches no source point";
+    if (it == source.end()) return 1e9;
+    std::vector<uint32_t>& colours = it->second;
+    EXPECT_FALSE(colours.empty()) << "decoded point " << i << ": more decoded points than source points there";
+    if (colours.empty()) return 1e9;
+    const uint32_t got = dec.points.rgb()[i];
+    if (exact_colour || r == 0) {
+      auto c = std::find(colours.begin(), colours.end(), got);
+      EXPECT_NE(c, colours.end()) << "decoded point " << i << " (region " << r << "): colour differs";
+      if (c == colours.end()) return 1e9;
+      colours.erase(c);
+    } else {
+      auto channelError = [got](uint32_t c) {
+        return std::abs(pipeline::rgbRed(c) - pipeline::rgbRed(got)) + std::abs(pipeline::rgbGreen(c) - pipeline::rgbGreen(got)) +
+               std::abs(pipeline::rgbBlue(c) - pipeline::rgbBlue(got));
+      };
+      auto c = std::min_element(colours.begin(), colours.end(),
+                                [&](uint32_t a, uint32_t b) { return channelError(a) < channelError(b); });
+      error_sum += channelError(*c) / 3.0;
+      ++error_count;
+      colours.erase(c);
+    }
+  }
+  return error_count ? error_sum / static_cast<double>(error_count) : 0.0;
+}
+
+TEST(CodecConfig, DefaultsAreValidAndErrorsNameTheField) {
+  EXPECT_TRUE(validate(CodecConfig{}).isOk());
+  CodecConfig c;
+  c.max_payload = 100;
+  EXPECT_NE(validate(c).message().find("codec.max_payload"), std::string::npos);
+  c = {};
+  c.fovea_step_m = std::nan("");
+  EXPECT_NE(validate(c).message().find("codec.fovea_step_m"), std::string::npos);
+  c = {};
+  c.periphery_step_ratio = 0.0;
+  EXPECT_NE(validate(c).message().find("codec.periphery_step_ratio"), std::string::npos);
+  c = {};
+  c.zstd_level = 30;
+  EXPECT_NE(validate(c).message().find("codec.zstd_level"), std::string::npos);
+  EXPECT_FALSE(ChunkEncoder::create(CodecConfig{}, 0).isOk());
+}
+
+struct Variant {
+  bool entropy;
+  bool half_chroma;
+};
+class CodecRoundTrip : public ::testing::TestWithParam<Variant> {};
+
+TEST_P(CodecRoundTrip, MockLivingRoomWithinHalfAStep) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ASSERT_GT(f.cloud.size(), 10000u);
+  CodecConfig config;
+  config.entropy_coding = GetParam().entropy;
+  config.halve_peripheral_chroma = GetParam().half_chroma;
+  ChunkEncoder enc = makeEncoder(config, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 7, f.capture_ns).isOk());
+  EXPECT_DOUBLE_EQ(enc.regionStep(0), 0.001);
+  for (std::size_t r = 1; r < f.voxel_size_m.size(); ++r) {
+    EXPECT_DOUBLE_EQ(enc.regionStep(static_cast<int>(r)), f.voxel_size_m[r] * 0.125);
+  }
+  const pipeline::FoveatedCloud dec = decodeAll(enc, f.cloud.size());
+  const double colour_error = expectRoundTrip(f.cloud, dec, enc, !GetParam().half_chroma);
+  // Halved chroma: a small mean error per channel outside the fovea (exact inside).
+  EXPECT_LT(colour_error, GetParam().half_chroma ? 6.0 : 1e-12);
+  // Chunks: fovea first then outward, indices in order, the count everywhere.
+  uint8_t last_region = 0;
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+    pipeline::FoveatedCloud one(f.cloud.size());
+    Result<DecodedChunk> d = decodeChunk(enc.chunk(i), one);
+    ASSERT_TRUE(d.isOk());
+    EXPECT_EQ(d->frame_id, 7u);
+    EXPECT_EQ(d->chunk_index, i);
+    EXPECT_EQ(d->chunk_count, enc.chunkCount());
+    EXPECT_EQ(d->capture_time_ns, f.capture_ns);
+    EXPECT_EQ(d->region, enc.chunkRegion(i));
+    EXPECT_EQ(d->points, enc.chunkPoints(i));
+    EXPECT_GE(d->region, last_region);
+    last_region = d->region;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Variants, CodecRoundTrip,
+                         ::testing::Values(Variant{false, false}, Variant{true, false}, Variant{false, true},
+                                           Variant{true, true}),
+                         [](const ::testing::TestParamInfo<Variant>& info) {
+                           return std::string(info.param.entropy ? "Zstd" : "Raw") +
+                                  (info.param.half_chroma ? "HalfChroma" : "FullChroma");
+                         });
+
+TEST(CodecColour, HalvedChromaOfAUniformColourIsWithinOneLevel) {
+  pipeline::FoveatedCloud cloud(1000);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  const uint32_t colours[] = {pipeline::packRgb(200, 100, 50), pipeline::packRgb(0, 255, 0),
+                              pipeline::packRgb(255, 255, 255), pipeline::packRgb(0, 0, 0), pipeline::packRgb(13, 7, 250)};
+  for (uint32_t colour : colours) {
+    cloud.clear();
+    for (int i = 0; i < 500; ++i) {
+      ASSERT_TRUE(cloud.points.push(u(rng), u(rng), u(rng), colour));
+      cloud.region[static_cast<std::size_t>(i)] = 1;
+    }
+    CodecConfig config;
+    config.halve_peripheral_chroma = true;
+    ChunkEncoder enc = makeEncoder(config, 1000);
+    const double voxel[] = {0.0, 0.02};
+    ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+    const pipeline::FoveatedCloud dec = decodeAll(enc, 1000);
+    ASSERT_EQ(dec.size(), 500u);
+    for (std::size_t i = 0; i < dec.size(); ++i) {
+      const uint32_t c = dec.points.rgb()[i];
+      EXPECT_LE(std::abs(pipeline::rgbRed(c) - pipeline::rgbRed(colour)), 1) << std::hex << colour;
+      EXPECT_LE(std::abs(pipeline::rgbGreen(c) - pipeline::rgbGreen(colour)), 1) << std::hex << colour;
+      EXPECT_LE(std::abs(pipeline::rgbBlue(c) - pipeline::rgbBlue(colour)), 1) << std::hex << colour;
+    }
+  }
+}
+
+class CodecMtu : public ::testing::TestWithParam<std::size_t> {};
+
+TEST_P(CodecMtu, EveryChunkFitsItsDatagramAndDecodesAlone) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  for (bool entropy : {false, true}) {
+    CodecConfig config;
+    config.max_payload = GetParam() - kDatagramOverhead;
+    config.entropy_coding = entropy;
+    config.halve_peripheral_chroma = entropy;
+    ChunkEncoder enc = makeEncoder(config, f.cloud.size());
+    ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 1, 0).isOk());
+    std::size_t points = 0;
+    for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+      ASSERT_LE(enc.chunk(i).size(), config.max_payload) << "chunk " << i;
+      pipeline::FoveatedCloud one(f.cloud.size());
+      Result<DecodedChunk> d = decodeChunk(enc.chunk(i), one);
+      ASSERT_TRUE(d.isOk()) << d.status().toString();
+      points += d->points;
+    }
+    EXPECT_EQ(points, f.cloud.size());
+    if (GetParam() == kMaxMtu) {
+      EXPECT_LT(enc.chunkCount(), 40u);  // jumbo datagrams: few chunks
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Mtus, CodecMtu, ::testing::Values(kMinMtu, kDefaultMtu, kMaxMtu));
+
+TEST(CodecLoss, DroppedChunksCostOnlyTheirOwnPoints) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 1, 0).isOk());
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 5; ++trial) {
+    pipeline::FoveatedCloud out(f.cloud.size());
+    std::size_t expected = 0, dropped = 0;
+    for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+      if (rng() % 10 == 0) {
+        ++dropped;
+        continue;
+      }
+      ASSERT_TRUE(decodeChunk(enc.chunk(i), out).isOk());
+      expected += enc.chunkPoints(i);
+    }
+    EXPECT_GT(dropped, 0u);
+    EXPECT_EQ(out.size(), expected);
+  }
+}
+
+TEST(CodecFrames, EmptyFrameHasNoChunksAndASummary) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 100);
+  pipeline::FoveatedCloud empty(100);
+  const double voxel[] = {0.0};
+  ASSERT_TRUE(enc.encode(empty, voxel, 5, 0).isOk());
+  EXPECT_EQ(enc.chunkCount(), 0u);
+  const uint16_t sent[] = {0, 0, 0, 0};
+  Result<FrameSummaryInfo> s = decodeSummary(enc.encodeSummary(5, sent, sent));
+  ASSERT_TRUE(s.isOk()) << s.status().toString();
+  EXPECT_EQ(s->frame_id, 5u);
+  EXPECT_EQ(s->chunk_count, 0u);
+  EXPECT_EQ(s->region_count, 4);
+}
+
+TEST(CodecFrames, SummaryRoundTrip) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 9, 0).isOk());
+  std::array<uint16_t, 4> sent{}, cut{};
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) ++sent[enc.chunkRegion(i)];
+  cut[3] = sent[3];
+  sent[3] = 0;
+  Result<FrameSummaryInfo> s = decodeSummary(enc.encodeSummary(9, sent, cut));
+  ASSERT_TRUE(s.isOk());
+  EXPECT_EQ(s->chunk_count, enc.chunkCount());
+  for (std::size_t r = 0; r < 4; ++r) {
+    EXPECT_EQ(s->chunks_sent[r], sent[r]);
+    EXPECT_EQ(s->chunks_cut[r], cut[r]);
+  }
+}
+
+TEST(CodecFrames, FrameLargerThanAnyBudget) {
+  // 300 000 random points in a 4 m cube, all in the fovea (1 mm steps), 256-byte datagrams.
+  const std::size_t n = 300000;
+  pipeline::FoveatedCloud cloud(n);
+  cloud.points = test::randomCloud(n, Eigen::Vector3d(1, 2, 3), 2.0f, 42);
+  std::fill(cloud.region.begin(), cloud.region.end(), uint8_t{0});
+  CodecConfig config;
+  config.max_payload = kMinMtu - kDatagramOverhead;
+  ChunkEncoder enc = makeEncoder(config, n);
+  const double voxel[] = {0.0};
+  ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+  EXPECT_GT(enc.chunkCount(), 1000u);
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) ASSERT_LE(enc.chunk(i).size(), config.max_payload);
+  expectRoundTrip(cloud, decodeAll(enc, n), enc, true);
+  // More points than the encoder was made for: a clear error.
+  ChunkEncoder small = makeEncoder(config, 1000);
+  Status st = small.encode(cloud, voxel, 1, 0);
+  EXPECT_EQ(st.code(), ErrorCode::kCapacityExceeded);
+  EXPECT_EQ(small.chunkCount(), 0u);
+}
+
+TEST(CodecRange, PointsFarFromTheWorldOrigin) {
+  for (const Eigen::Vector3d& origin : {Eigen::Vector3d(1e4, -2e4, 5e3), Eigen::Vector3d(-3e6, 4e6, 1e5)}) {
+    pipeline::FoveatedCloud cloud(5000);
+    cloud.points = test::randomCloud(5000, origin, 3.0f, 7);
+    for (std::size_t i = 0; i < 5000; ++i) cloud.region[i] = static_cast<uint8_t>(i % 3);
+    ChunkEncoder enc = makeEncoder(CodecConfig{}, 5000);
+    const double voxel[] = {0.0, 0.01, 0.05};
+    ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+    const pipeline::FoveatedCloud dec = decodeAll(enc, 5000);
+    EXPECT_LT((dec.points.origin_m - origin).norm(), 10.0);  // floats stay small
+    expectRoundTrip(cloud, dec, enc, true);
+  }
+}
+
+TEST(CodecRange, RegionWiderThanTheLatticeIsAnErrorNotAWrap) {
+  pipeline::FoveatedCloud cloud(10);
+  ASSERT_TRUE(cloud.points.push(0.f, 0.f, 0.f, 0));
+  ASSERT_TRUE(cloud.points.push(2100.f, 0.f, 0.f, 0));  // 2.1e6 steps of 1 mm > 2^21 - 1
+  cloud.region[0] = cloud.region[1] = 0;
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 10);
+  const double voxel[] = {0.0};
+  Status st = enc.encode(cloud, voxel, 1, 0);
+  EXPECT_EQ(st.code(), ErrorCode::kRangeExceeded);
+  EXPECT_NE(st.message().find("region 0 spans"), std::string::npos) << st.message();
+  EXPECT_EQ(enc.chunkCount(), 0u);
+  // 2000 m fits (2e6 steps), and round-trips.
+  cloud.points.x()[1] = 2000.f;
+  ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+  expectRoundTrip(cloud, decodeAll(enc, 10), enc, true);
+}
+
+TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
+  pipeline::FoveatedCloud cloud(10);
+  ASSERT_TRUE(cloud.points.push(0.f, 0.f, 0.f, 0));
+  cloud.region[0] = 0;
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 10);
+  const double voxel[] = {0.0};
+  cloud.points.origin_m = Eigen::Vector3d(1e300, 0, 0);
+  EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kRangeExceeded);
+  cloud.points.origin_m = Eigen::Vector3d(0, -1e13, 0);  // 1e16 steps > 2^50
+  EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kRangeExceeded);
+  cloud.points.origin_m = Eigen::Vector3d::Zero();
+  cloud.points.x()[0] = std::nanf("");
+  EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kInvalidInput);
+  cloud.points.x()[0] = 0.f;
+  cloud.region[0] = 2;  // no voxel size for region 2
+  EXPECT_EQ(enc.encode(cloud, voxel, 1, 0).code(), ErrorCode::kInvalidInput);
+  const double bad_voxel[] = {0.0, 0.0, -1.0};
+  EXPECT_EQ(enc.encode(cloud, bad_voxel, 1, 0).code(), ErrorCode::kInvalidInput);
+  // The encoder still works after errors.
+  cloud.region[0] = 0;
+  ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+  EXPECT_EQ(enc.chunkCount(), 1u);
+}
+
+TEST(CodecDecode, FullOutputCloudIsAnErrorAndAppendsNothing) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 1, 0).isOk());
+  pipeline::FoveatedCloud out(10);
+  Result<DecodedChunk> d = decodeChunk(enc.chunk(0), out);
+  EXPECT_EQ(d.status().code(), ErrorCode::kCapacityExceeded);
+  EXPECT_EQ(out.size(), 0u);
+}
+
+// Decoding must return (ok or an error), never crash; what it appends is finite.
+void expectSafeDecode(std::span<const uint8_t> bytes, pipeline::FoveatedCloud& out) {
+  out.clear();
+  Result<DecodedChunk> d = decodeChunk(bytes, out);
+  if (d.isOk()) {
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      ASSERT_TRUE(std::isfinite(out.points.x()[i]) && std::isfinite(out.points.y()[i]) &&
+                  std::isfinite(out.points.z()[i]));
+    }
+  } else {
+    EXPECT_FALSE(d.status().message().empty());
+  }
+  (void)decodeSummary(bytes);
+}
+
+TEST(CodecRobustness, RandomBytesTruncationsAndBitFlips) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  CodecConfig config;
+  config.halve_peripheral_chroma = true;
+  ChunkEncoder enc = makeEncoder(config, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 1, 0).isOk());
+  pipeline::FoveatedCloud out(f.cloud.size());
+  std::mt19937 rng(5);
+  std::vector<uint8_t> bytes;
+  // Random payloads of every size up to a jumbo datagram.
+  for (int t = 0; t < 3000; ++t) {
+    bytes.resize(rng() % (kMaxMtu + 16));
+    for (uint8_t& b : bytes) b = static_cast<uint8_t>(rng());
+    expectSafeDecode(bytes, out);
+  }
+  // Every truncation and every single-bit flip of some chunks (raw and zstd), and multi-byte garbage.
+  std::size_t zstd_chunks = 0, flips_ok = 0, flips = 0;
+  for (std::size_t i = 0; i < enc.chunkCount(); i += std::max<std::size_t>(1, enc.chunkCount() / 6)) {
+    const std::span<const uint8_t> chunk = enc.chunk(i);
+    zstd_chunks += (chunk.size() > 0);
+    for (std::size_t len = 0; len < chunk.size(); ++len) {
+      bytes.assign(chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(len));
+      out.clear();
+      // Only the alignment padding at the end may go (the data vector ends within 8 bytes).
+      Result<DecodedChunk> d = decodeChunk(bytes, out);
+      if (d.isOk()) {
+        EXPECT_GE(len + 8, chunk.size()) << "truncated to " << len;
+        EXPECT_EQ(d->points, enc.chunkPoints(i));
+      }
+    }
+    for (std::size_t bit = 0; bit < chunk.size() * 8; ++bit) {
+      bytes.assign(chunk.begin(), chunk.end());
+      bytes[bit / 8] ^= static_cast<uint8_t>(1u << (bit % 8));
+      expectSafeDecode(bytes, out);
+      ++flips;
+      flips_ok += out.size() > 0;
+    }
+    for (int t = 0; t < 500; ++t) {
+      bytes.assign(chunk.begin(), chunk.end());
+      for (int k = 0; k < 4; ++k) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
+      expectSafeDecode(bytes, out);
+    }
+  }
+  EXPECT_GT(flips, 0u);
+  EXPECT_LT(flips_ok, flips);  // some flips are caught...
+  // A summary's truncations too.
+  const uint16_t sent[] = {1, 2, 3, 4};
+  const std::span<const uint8_t> summary = enc.encodeSummary(1, sent, sent);
+  const std::vector<uint8_t> copy(summary.begin(), summary.end());
+  for (std::size_t len = 0; len < copy.size(); ++len) {
+    EXPECT_FALSE(decodeSummary(std::span<const uint8_t>(copy.data(), len)).isOk());
+  }
+}
+
+TEST(FrameAssembler, CollectsFramesAndCountsWhatWasLost) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  FrameAssembler asmb = FrameAssembler::create(f.cloud.size()).value();
+  std::array<uint32_t, 4> points_by_region{};
+  std::array<uint16_t, 4> sent{}, received{};
+
+  // Frame 10: every fifth chunk lost; then its summary.
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 10, 555).isOk());
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+    const uint8_t r = enc.chunkRegion(i);
+    ++sent[r];
+    if (i % 5 == 4) continue;
+    ++received[r];
+    points_by_region[r] += enc.chunkPoints(i);
+    ASSERT_TRUE(asmb.addChunk(enc.chunk(i)).isOk());
+    ASSERT_TRUE(asmb.addChunk(enc.chunk(i)).isOk());  // a duplicate
+    EXPECT_EQ(asmb.readyCount(), 0u);
+  }
+  const std::array<uint16_t, 4> cut{};
+  ASSERT_TRUE(asmb.addSummary(enc.encodeSummary(10, sent, cut)).isOk());
+  ASSERT_EQ(asmb.readyCount(), 1u);
+  const AssembledFrame& a = asmb.ready(0);
+  EXPECT_EQ(a.frame_id, 10u);
+  EXPECT_TRUE(a.summary_received);
+  EXPECT_EQ(a.capture_time_ns, 555u);
+  EXPECT_EQ(a.chunk_count, enc.chunkCount());
+  std::size_t total = 0;
+  for (std::size_t r = 0; r < 4; ++r) {
+    EXPECT_EQ(a.points[r], points_by_region[r]);
+    EXPECT_EQ(a.chunks_received[r], received[r]);
+    EXPECT_EQ(a.chunks_expected[r], sent[r]);
+    total += a.points[r];
+  }
+  EXPECT_EQ(a.cloud->size(), total);
+  EXPECT_EQ(asmb.counters().duplicate_chunks, enc.chunkCount() - enc.chunkCount() / 5);
+
+  // A late chunk of frame 10 is dropped and counted.
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(4)).isOk());
+  EXPECT_EQ(asmb.readyCount(), 0u);
+  EXPECT_EQ(asmb.counters().late_chunks, 1u);
+
+  // Frame 11 without its summary completes when frame 12 starts.
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 11, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(0)).isOk());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 12, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(1)).isOk());
+  ASSERT_EQ(asmb.readyCount(), 1u);
+  EXPECT_EQ(asmb.ready(0).frame_id, 11u);
+  EXPECT_FALSE(asmb.ready(0).summary_received);
+  EXPECT_EQ(asmb.ready(0).cloud->size(), enc.chunkPoints(0));
+  // A summary of frame 13 (every chunk lost) completes 12 and reports 13 empty.
+  sent = {1, 1, 1, 1};
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 13, 0).isOk());
+  ASSERT_TRUE(asmb.addSummary(enc.encodeSummary(13, sent, cut)).isOk());
+  ASSERT_EQ(asmb.readyCount(), 2u);
+  EXPECT_EQ(asmb.ready(0).frame_id, 12u);
+  EXPECT_EQ(asmb.ready(1).frame_id, 13u);
+  EXPECT_EQ(asmb.ready(1).cloud->size(), 0u);
+  EXPECT_EQ(asmb.ready(1).chunks_expected[0], 1u);
+  EXPECT_NE(asmb.ready(0).cloud, asmb.ready(1).cloud);
+  // Garbage is counted, not fatal.
+  const uint8_t junk[] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12};
+  EXPECT_FALSE(asmb.addChunk(junk).isOk());
+  EXPECT_FALSE(asmb.addSummary(junk).isOk());
+  EXPECT_EQ(asmb.counters().bad_chunks, 1u);
+  EXPECT_EQ(asmb.counters().bad_summaries, 1u);
+}
+
+TEST(FrameAssembler, FrameIdsMayWrap) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  FrameAssembler asmb = FrameAssembler::create(f.cloud.size()).value();
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 0xffffffffu, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(0)).isOk());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 0, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(0)).isOk());
+  ASSERT_EQ(asmb.readyCount(), 1u);
+  EXPECT_EQ(asmb.ready(0).frame_id, 0xffffffffu);
+  asmb.flush();
+  ASSERT_EQ(asmb.readyCount(), 1u);
+  EXPECT_EQ(asmb.ready(0).frame_id, 0u);
+}
+
+}  // namespace
+}  // namespace fovea::net

@@ -1,0 +1,34 @@
+// ChunkEncoder::encode allocates nothing after create(): the allocator of this
+// binary is replaced by a counting one (tests/support/alloc_counter.h).
+#include <gtest/gtest.h>
+
+#include "net/codec.h"
+#include "tests/support/alloc_counter.h"
+#include "tests/unit/net/mock_frame.h"
+
+namespace fovea::net {
+namespace {
+
+TEST(CodecZeroAllocation, EncodeAndSummaryAfterCreate) {
+  // Two different frames (orbit path) and F1/F3, so chunk counts vary.
+  const test::MockFoveatedFrame a = test::mockFoveatedFrame("mock:living-room,path=orbit", pipeline::Preset::kF1, 1);
+  const test::MockFoveatedFrame b = test::mockFoveatedFrame("mock:living-room,path=orbit", pipeline::Preset::kF3, 3);
+  for (bool entropy : {false, true}) {
+    CodecConfig config;
+    config.entropy_coding = entropy;
+    config.halve_peripheral_chroma = entropy;
+    ChunkEncoder enc = ChunkEncoder::create(config, 640 * 480).value();
+    const uint16_t sent[] = {1, 2, 3, 4};
+    test::AllocationScope scope;
+    for (uint32_t frame = 0; frame < 20; ++frame) {
+      const test::MockFoveatedFrame& f = frame % 2 ? a : b;
+      ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, frame, 0).isOk());
+      ASSERT_GT(enc.chunkCount(), 10u);
+      (void)enc.encodeSummary(frame, sent, sent);
+    }
+    EXPECT_EQ(scope.allocations(), 0u) << (entropy ? "zstd" : "raw");
+  }
+}
+
+}  // namespace
+}  // namespace fovea::net
