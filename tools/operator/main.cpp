@@ -31,7 +31,7 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) --gaze SCRIPT\n"
     "                      [--duration SECONDS] [--summary FILE.json] [--save-ply DIR]\n"
-    "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--quiet]\n"
+    "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N] [--quiet]\n"
     "\n"
     "Connects to fovead run --listen, sends gaze samples from a script, receives and\n"
     "decodes the foveated frames, and prints once a second: frames per second, MB/s\n"
@@ -50,6 +50,7 @@ const char* kHelp =
     "  --budget MBPS         the bandwidth to ask for, MB/s (default: what the robot allows)\n"
     "  --mtu BYTES           the largest UDP payload to ask for (default 1200)\n"
     "  --gaze-hz HZ          gaze samples per second (default 120, up to 200)\n"
+    "  --max-points N        the largest frame to decode, in points (default 307200 = 640x480)\n"
     "  --quiet               no live lines\n";
 
 volatile std::sig_atomic_t g_stop = 0;
@@ -74,6 +75,7 @@ struct Options {
   long mtu = static_cast<long>(net::kDefaultMtu);
   double gaze_hz = 120.0;
   bool quiet = false;
+  long max_points = 640 * 480;
 };
 
 Result<double> number(const std::string& flag, const char* text) {
@@ -105,6 +107,11 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.ply_dir = value;
     } else if (flag == "--name") {
       o.name = value;
+    } else if (flag == "--max-points") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      if (!(v.value() >= 1 && v.value() <= 1e8)) return Result<Options>(ErrorCode::kInvalidArgument, "--max-points: must be within 1 .. 1e8");
+      o.max_points = static_cast<long>(v.value());
     } else if (flag == "--duration" || flag == "--budget" || flag == "--mtu" || flag == "--gaze-hz") {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
@@ -197,9 +204,8 @@ int main(int argc, char** argv) {
               static_cast<double>(link.budgetBytesPerS()) / 1e6);
   std::fflush(stdout);
 
-  // Room for the largest frame a 640x480 camera can produce (every pixel kept),
-  // or more; the assembler refuses what does not fit, and counts it.
-  Result<net::FrameAssembler> assembler_created = net::FrameAssembler::create(1920 * 1080);
+  // Room for the largest frame: the assembler refuses what does not fit, and counts it.
+  Result<net::FrameAssembler> assembler_created = net::FrameAssembler::create(static_cast<std::size_t>(opt.max_points));
   if (!assembler_created) {
     std::fprintf(stderr, "fovea-operator: %s\n", assembler_created.status().message().c_str());
     return kExitFailure;
