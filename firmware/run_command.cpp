@@ -1,4 +1,6 @@
 // fovead run: camera -> back-projection -> foveation, with statistics.
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -43,7 +45,8 @@ const char* kRunHelp =
     "  --gaze-dir X,Y,Z         gaze direction in world coordinates (any length > 0)\n"
     "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
     "  --every N                print every Nth frame (default 1; 0: summary only)\n"
-    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point)\n"
+    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point);\n"
+    "                           with --listen, the last frame sent whole to the operator\n"
     "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
     "                           SIMD kernels only; the output does not depend on it)\n"
     "\n"
@@ -126,6 +129,21 @@ pipeline::Gaze gazeForFrame(const GazeChoice& choice, const hal::Pose& pose) {
 
 double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Copies the points of a foveated cloud (not its whole capacity).
+void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& to) {
+  const std::size_t n = from.size();
+  to.clear();
+  if (!to.points.resize(n)) return;
+  to.points.origin_m = from.points.origin_m;
+  to.points.has_color = from.points.has_color;
+  std::copy_n(from.points.x(), n, to.points.x());
+  std::copy_n(from.points.y(), n, to.points.y());
+  std::copy_n(from.points.z(), n, to.points.z());
+  std::copy_n(from.points.rgb(), n, to.points.rgb());
+  std::copy_n(from.region.begin(), n, to.region.begin());
+  std::copy_n(from.weight.begin(), n, to.weight.begin());
 }
 
 int64_t monotonicNs() {
@@ -343,6 +361,12 @@ int runCommand(int argc, char** argv) {
   int64_t next_status_ns = run_start_ns + 1'000'000'000;
   const pipeline::FoveationConfig* foveator_config = &config.value();
   uint64_t last_frame_id = 0;
+  // With --listen --save-ply: a copy of the last frame that went out whole.
+  const bool keep_streamed = streaming && args->has("--save-ply");
+  pipeline::FoveatedCloud last_streamed(keep_streamed ? max_points : 0);
+  uint64_t last_streamed_id = 0;
+  std::array<double, pipeline::kMaxRegions> last_streamed_voxel_m{};
+  int last_streamed_regions = 0;
   pipeline::Gaze last_gaze;
   GazeSource last_source = GazeSource::kOperator;
   for (std::size_t i = 0; n == 0 || i < n; ++i) {
@@ -406,6 +430,12 @@ int runCommand(int argc, char** argv) {
         send_ms.add(static_cast<double>(sent.send_ns) * 1e-6);
       }
       if (source != GazeSource::kOperator) ++fallback_frames;
+      if (keep_streamed && sent.completed) {
+        copyFoveated(out, last_streamed);
+        last_streamed_id = frame.sequence;
+        last_streamed_regions = stats.region_count;
+        for (int r = 0; r < stats.region_count; ++r) last_streamed_voxel_m[r] = stats.regions[r].voxel_size_m;
+      }
     }
     last_frame_id = frame.sequence;
     last_gaze = gaze;
@@ -480,7 +510,7 @@ int runCommand(int argc, char** argv) {
   row("voxel sampling", sample_ms);
   row("foveation total (no capture)", foveate_ms);
 
-  if (const std::string* path = args->get("--save-ply"); path && out.size() > 0) {
+  if (const std::string* path = args->get("--save-ply"); path && !keep_streamed && out.size() > 0) {
     pipeline::PlyWriteOptions options;
     options.double_coords = true;
     if (Status s = pipeline::writePly(*path, out.points, out.region.data(), options); !s) {
@@ -488,6 +518,18 @@ int runCommand(int argc, char** argv) {
       return kExitFailure;
     }
     std::printf("wrote the last foveated frame (%zu points) to %s\n", out.size(), path->c_str());
+  }
+  if (const std::string* path = args->get("--save-ply"); path && keep_streamed && last_streamed.size() > 0) {
+    pipeline::PlyWriteOptions options;
+    options.double_coords = true;
+    if (Status s = pipeline::writePly(*path, last_streamed.points, last_streamed.region.data(), options); !s) {
+      std::fprintf(stderr, "fovead run: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+    std::printf("wrote the last streamed frame %llu (%zu points) to %s; voxel sizes [m]:",
+                static_cast<unsigned long long>(last_streamed_id), last_streamed.size(), path->c_str());
+    for (int r = 0; r < last_streamed_regions; ++r) std::printf(" %.9g", last_streamed_voxel_m[r]);
+    std::printf("\n");
   }
   if (streamer) {
     const net::UplinkCounters& up = streamer->uplinkCounters();
