@@ -193,6 +193,18 @@ TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
   EXPECT_TRUE(std::regex_search(service.output(), std::regex("dropped \\S*auth\\S*\\s+[1-9]"))) << service.output();
 }
 
+TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
+  if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
+  const test::ProcessResult r = test::runCommand(std::string("FOVEA_DEMO_SECONDS=3 FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR +
+                                                 " " + FOVEA_SOURCE_DIR + "/toolchain/run-demo");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* expected : {"[robot]    streaming: listening on 127.0.0.1:", "[operator] connected to 127.0.0.1:",
+                               "[robot]    gaze: operator", "[operator] fps", "[operator] summary:",
+                               "[robot]    stream: "}) {
+    EXPECT_NE(r.output.find(expected), std::string::npos) << "missing '" << expected << "' in:\n" << r.output;
+  }
+}
+
 TEST_F(StreamLoopback, WithoutAKeyTheServiceRefusesToStartUnlessInsecure) {
   const test::ProcessResult r =
       test::runCommand(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --frames 1");
