@@ -1,5 +1,6 @@
-// fovead: the fovea service. For now its offline modes: run (a camera through
-// the foveation pipeline) and foveate (a recorded PLY cloud).
+// fovead: the fovea service: run (a camera through the foveation pipeline,
+// optionally streamed to an operator), foveate (a recorded PLY cloud) and
+// keygen (a pre-shared key for the stream).
 #include <cstdio>
 #include <cstring>
 
@@ -14,8 +15,10 @@ const char* kHelp =
     "looks, voxel sizes growing with eccentricity as the eye's acuity falls off.\n"
     "\n"
     "commands:\n"
-    "  run       run the pipeline on a camera (default: the mock living room) and report\n"
+    "  run       run the pipeline on a camera (default: the mock living room) and report;\n"
+    "            with --listen, stream it to an operator over UDP\n"
     "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
+    "  keygen    write a new pre-shared key file for the stream\n"
     "\n"
     "'fovead COMMAND --help' describes each command.\n";
 
@@ -34,6 +37,7 @@ int main(int argc, char** argv) {
   }
   if (std::strcmp(argv[1], "run") == 0) return runCommand(argc, argv);
   if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
+  if (std::strcmp(argv[1], "keygen") == 0) return keygenCommand(argc, argv);
   std::fprintf(stderr, "fovead: unknown command '%s' (see fovead --help)\n", argv[1]);
   return kExitUsage;
 }

@@ -1,12 +1,18 @@
 // fovead run: camera -> back-projection -> foveation, with statistics.
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <ctime>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "firmware/commands.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
+#include "firmware/streamer.h"
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
@@ -22,13 +28,16 @@ const char* kRunHelp =
     "usage: fovead run [--camera SPEC] [--frames N] [--gaze MODE | --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
     "                  [--preset F1|F2|F3|FREF] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
     "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
+    "                  [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "\n"
     "Runs the foveation pipeline on a camera and prints, per frame and for the run,\n"
     "the points per region in and out, the voxel size per region, d0, and the time\n"
-    "per stage.\n"
+    "per stage. With --listen it streams the foveated frames to the operator that\n"
+    "says hello (fovea-operator), foveated for the gaze the operator sends.\n"
     "\n"
     "  --camera SPEC            camera backend (default mock:living-room), see below\n"
-    "  --frames N               frames to process (default 30)\n"
+    "  --frames N               frames to process (default 30; with --listen 0: until SIGINT/SIGTERM)\n"
+    "  --duration S             stop after S seconds (default: no limit)\n"
     "  --gaze MODE              scene-centre: from the camera towards the scene's focus point (default\n"
     "                           when the camera has one); axis: along the optical axis;\n"
     "                           target:X,Y,Z: from the camera towards a world point\n"
@@ -36,9 +45,23 @@ const char* kRunHelp =
     "  --gaze-dir X,Y,Z         gaze direction in world coordinates (any length > 0)\n"
     "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
     "  --every N                print every Nth frame (default 1; 0: summary only)\n"
-    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point)\n"
+    "  --save-ply FILE          write the last foveated frame (world coordinates, region per point);\n"
+    "                           with --listen, the last frame sent whole to the operator\n"
     "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
     "                           SIMD kernels only; the output does not depend on it)\n"
+    "\n"
+    "\n"
+    "streaming (docs/protocol.md):\n"
+    "  --listen ADDR:PORT       serve one operator over UDP: 127.0.0.1:7000, [::1]:7000, 0.0.0.0:7000...\n"
+    "  --key-file FILE          the pre-shared key (64 hex characters; fovead keygen FILE makes one)\n"
+    "  --insecure               no key: the fixed all-zero key, anyone can read and forge (logged loudly)\n"
+    "  --budget MBPS            the most any operator may ask for, MB/s (default 12.5 = 100 Mbit/s)\n"
+    "  --max-mtu BYTES          the largest UDP payload granted (default 1200, 256 .. 8952)\n"
+    "  --gaze-timeout-ms MS     gaze older than this selects the fallback (default 100)\n"
+    "  --fallback-voxel M       the fallback's uniform voxel size (default 0.02 m)\n"
+    "  --fovea-step M           quantization step in the fovea (default 0.001 m)\n"
+    "  --chroma full|half       half: chroma shared by pairs of points outside the fovea (default full)\n"
+    "  --entropy on|off         zstd per chunk where it pays (default on)\n"
     "\n"
     "FOVEA_FORCE_KERNEL=ref runs the scalar reference kernels instead of the SIMD ones.\n";
 
@@ -108,13 +131,105 @@ double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// Copies the points of a foveated cloud (not its whole capacity).
+void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& to) {
+  const std::size_t n = from.size();
+  to.clear();
+  if (!to.points.resize(n)) return;
+  to.points.origin_m = from.points.origin_m;
+  to.points.has_color = from.points.has_color;
+  std::copy_n(from.points.x(), n, to.points.x());
+  std::copy_n(from.points.y(), n, to.points.y());
+  std::copy_n(from.points.z(), n, to.points.z());
+  std::copy_n(from.points.rgb(), n, to.points.rgb());
+  std::copy_n(from.region.begin(), n, to.region.begin());
+  std::copy_n(from.weight.begin(), n, to.weight.begin());
+}
+
+int64_t monotonicNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void onStopSignal(int) { g_stop = 1; }
+
+const std::vector<std::string> kStreamFlags = {"--listen", "--key-file", "--budget", "--max-mtu", "--gaze-timeout-ms",
+                                               "--fallback-voxel", "--fovea-step", "--chroma", "--entropy"};
+
+// The streaming options, or nullopt without --listen.
+Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args) {
+  using R = Result<std::optional<StreamConfig>>;
+  if (!args.has("--listen")) {
+    for (const std::string& flag : kStreamFlags) {
+      if (args.has(flag)) return R(ErrorCode::kInvalidArgument, flag + ": only with --listen");
+    }
+    if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: only with --listen");
+    return std::optional<StreamConfig>();
+  }
+  StreamConfig config;
+  config.link.listen = *args.get("--listen");
+  if (const std::string* path = args.get("--key-file")) {
+    if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: not together with --key-file");
+    Result<net::LoadedKey> key = net::loadKeyFile(*path);
+    if (!key) return R(key.status().code(), "--key-file: " + key.status().message());
+    if (!key->warning.empty()) std::fprintf(stderr, "fovead run: warning: %s\n", key->warning.c_str());
+    config.link.key = key->key;
+  } else if (args.has("--insecure")) {
+    config.link.insecure = true;
+  } else {
+    return R(ErrorCode::kInvalidArgument,
+             "--listen: needs --key-file FILE (fovead keygen FILE makes one), or --insecure for a trusted test host");
+  }
+  if (const std::string* v = args.get("--budget")) {
+    Result<double> mbps = parseDouble("--budget", *v);
+    if (!mbps) return mbps.status();
+    if (!(mbps.value() >= 0.01 && mbps.value() <= 10000.0)) {
+      return R(ErrorCode::kInvalidArgument, "--budget: must be within 0.01 .. 10000 MB/s");
+    }
+    config.link.max_budget_bytes_per_s = static_cast<uint64_t>(mbps.value() * 1e6);
+  }
+  if (const std::string* v = args.get("--max-mtu")) {
+    Result<long> mtu = parseInteger("--max-mtu", *v, static_cast<long>(net::kMinMtu), static_cast<long>(net::kMaxMtu));
+    if (!mtu) return mtu.status();
+    config.link.max_mtu_bytes = static_cast<uint32_t>(mtu.value());
+  }
+  if (const std::string* v = args.get("--gaze-timeout-ms")) {
+    Result<long> ms = parseInteger("--gaze-timeout-ms", *v, 1, 60000);
+    if (!ms) return ms.status();
+    config.gaze.timeout_ns = ms.value() * 1'000'000;
+  }
+  if (const std::string* v = args.get("--fallback-voxel")) {
+    Result<double> m = parseDouble("--fallback-voxel", *v);
+    if (!m) return m.status();
+    config.gaze.fallback_voxel_m = m.value();
+  }
+  if (const std::string* v = args.get("--fovea-step")) {
+    Result<double> m = parseDouble("--fovea-step", *v);
+    if (!m) return m.status();
+    config.codec.fovea_step_m = m.value();
+  }
+  const std::string chroma = args.getOr("--chroma", "full");
+  if (chroma != "full" && chroma != "half") return R(ErrorCode::kInvalidArgument, "--chroma: '" + chroma + "' is not full or half");
+  config.codec.halve_peripheral_chroma = chroma == "half";
+  const std::string entropy = args.getOr("--entropy", "on");
+  if (entropy != "on" && entropy != "off") return R(ErrorCode::kInvalidArgument, "--entropy: '" + entropy + "' is not on or off");
+  config.codec.entropy_coding = entropy == "on";
+  if (Status s = config.gaze.validate(); !s) return R(s.code(), "--gaze-timeout-ms/--fallback-voxel: " + s.message());
+  if (Status s = net::validate(config.codec); !s) return R(s.code(), "--fovea-step: " + s.message());
+  return std::optional<StreamConfig>(config);
+}
+
 }  // namespace
 
 int runCommand(int argc, char** argv) {
-  std::vector<std::string> flags = {"--camera", "--frames", "--gaze", "--gaze-origin", "--gaze-dir",
+  std::vector<std::string> flags = {"--camera", "--frames", "--duration", "--gaze", "--gaze-origin", "--gaze-dir",
                                     "--depth-min", "--depth-max", "--every", "--save-ply", "--threads"};
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
-  Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h"});
+  flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
+  Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h", "--insecure"});
   if (!args) {
     std::fprintf(stderr, "fovead run: %s\n", args.status().message().c_str());
     return kExitUsage;
@@ -129,8 +244,19 @@ int runCommand(int argc, char** argv) {
   };
   Result<pipeline::FoveationConfig> config = foveationConfigFromArgs(args.value());
   if (!config) return usage(config.status());
-  Result<long> frames = parseInteger("--frames", args->getOr("--frames", "30"), 1, 100000000);
+  Result<std::optional<StreamConfig>> stream_config = streamConfigFromArgs(args.value());
+  if (!stream_config) return usage(stream_config.status());
+  const bool streaming = stream_config->has_value();
+  Result<long> frames = parseInteger("--frames", args->getOr("--frames", streaming ? "0" : "30"), streaming ? 0 : 1,
+                                     100000000);
   if (!frames) return usage(frames.status());
+  double duration_s = 0.0;
+  if (const std::string* v = args->get("--duration")) {
+    Result<double> d = parseDouble("--duration", *v);
+    if (!d) return usage(d.status());
+    if (!(d.value() > 0.0)) return usage({ErrorCode::kInvalidArgument, "--duration: must be positive"});
+    duration_s = d.value();
+  }
   Result<long> every = parseInteger("--every", args->getOr("--every", "1"), 0, 100000000);
   if (!every) return usage(every.status());
   Result<long> threads = parseInteger("--threads", args->getOr("--threads", "1"), 1, 64);
@@ -156,6 +282,9 @@ int runCommand(int argc, char** argv) {
     return kExitFailure;
   }
   const hal::CameraInfo& info = camera.info();
+  if (streaming && (args->has("--gaze") || args->has("--gaze-origin") || args->has("--gaze-dir"))) {
+    return usage({ErrorCode::kInvalidArgument, "--gaze: not with --listen (the operator sends the gaze)"});
+  }
   Result<GazeChoice> gaze_choice = gazeFromArgs(args.value(), info);
   if (!gaze_choice) return usage(gaze_choice.status());
 
@@ -185,20 +314,64 @@ int runCommand(int argc, char** argv) {
   } else {
     std::printf("kernels: ref (scalar references, one thread)\n");
   }
-  const pipeline::RegionModel& model = foveator->model();
-  if (every.value() > 0) {
+  std::unique_ptr<Streamer> streamer;
+  if (streaming) {
+    Result<std::unique_ptr<Streamer>> created_streamer = Streamer::create(**stream_config, max_points, config.value());
+    if (!created_streamer) {
+      std::fprintf(stderr, "fovead run: %s\n", created_streamer.status().message().c_str());
+      return created_streamer.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
+    }
+    streamer = std::move(created_streamer.value());
+    if (!streamer->notice().empty()) std::fprintf(stderr, "fovead run: *** %s ***\n", streamer->notice().c_str());
+    const net::RobotLinkConfig& link = (*stream_config)->link;
+    std::printf("streaming: listening on %s (%s), budget up to %.2f MB/s, MTU up to %u, gaze timeout %lld ms, "
+                "fallback voxel %g m\n",
+                streamer->localEndpoint().toString().c_str(), link.insecure ? "INSECURE" : "authenticated",
+                static_cast<double>(link.max_budget_bytes_per_s) / 1e6, link.max_mtu_bytes,
+                static_cast<long long>((*stream_config)->gaze.timeout_ns / 1'000'000), (*stream_config)->gaze.fallback_voxel_m);
+    std::fflush(stdout);
+  }
+  std::signal(SIGINT, onStopSignal);
+  std::signal(SIGTERM, onStopSignal);
+
+  // The run's own region model (the stream's fallback swaps the foveator's).
+  const pipeline::RegionModel model = foveator->model();
+  if (every.value() > 0 && streaming) {
+    std::printf("%5s %-22s %8s %6s %6s %5s %8s | ms: %7s %8s %7s %7s\n", "frame", "gaze", "out", "chunks", "sent",
+                "cut", "kB", "capture", "foveate", "encode", "send");
+  } else if (every.value() > 0) {
     std::printf("%5s %7s %7s %-8s", "frame", "valid", "d0[m]", "d0 from");
     for (int r = 0; r < model.regionCount(); ++r) std::printf(" %15.15s", model.regionName(r));
     std::printf(" %8s %6s | ms: %7s %8s %8s %8s %7s\n", "out", "kept", "capture", "backproj", "partition", "fixation",
                 "sample");
   }
 
-  const auto n = static_cast<std::size_t>(frames.value());
-  Samples capture_ms(n), backproject_ms(n), partition_ms(n), fixation_ms(n), sample_ms(n), foveate_ms(n);
-  Samples points_in(n), points_out(n), d0_m(n);
+  const auto n = static_cast<std::size_t>(frames.value());  // 0: until stopped
+  // Statistics keep the first sample_capacity frames of an endless run.
+  const std::size_t sample_capacity = n > 0 ? n : 100000;
+  Samples capture_ms(sample_capacity), backproject_ms(sample_capacity), partition_ms(sample_capacity),
+      fixation_ms(sample_capacity), sample_ms(sample_capacity), foveate_ms(sample_capacity);
+  Samples points_in(sample_capacity), points_out(sample_capacity), d0_m(sample_capacity);
+  Samples encode_ms(sample_capacity), send_ms(sample_capacity);
   RegionTotals totals;
-  uint64_t failed_frames = 0;
-  for (std::size_t i = 0; i < n; ++i) {
+  uint64_t failed_frames = 0, attempted_frames = 0, fallback_frames = 0, frames_streamed = 0;
+  const int64_t period_ns = info.fps > 0 ? static_cast<int64_t>(1e9 / info.fps) : 33'333'333;
+  const int64_t run_start_ns = monotonicNs();
+  const int64_t run_end_ns = duration_s > 0 ? run_start_ns + static_cast<int64_t>(duration_s * 1e9) : INT64_MAX;
+  int64_t next_status_ns = run_start_ns + 1'000'000'000;
+  const pipeline::FoveationConfig* foveator_config = &config.value();
+  uint64_t last_frame_id = 0;
+  // With --listen --save-ply: a copy of the last frame that went out whole.
+  const bool keep_streamed = streaming && args->has("--save-ply");
+  pipeline::FoveatedCloud last_streamed(keep_streamed ? max_points : 0);
+  uint64_t last_streamed_id = 0;
+  std::array<double, pipeline::kMaxRegions> last_streamed_voxel_m{};
+  int last_streamed_regions = 0;
+  pipeline::Gaze last_gaze;
+  GazeSource last_source = GazeSource::kOperator;
+  for (std::size_t i = 0; n == 0 || i < n; ++i) {
+    if (g_stop != 0 || monotonicNs() >= run_end_ns) break;
+    ++attempted_frames;
     auto t0 = std::chrono::steady_clock::now();
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
       std::fprintf(stderr, "frame %zu: capture: %s\n", i, s.toString().c_str());
@@ -206,6 +379,7 @@ int runCommand(int argc, char** argv) {
       continue;
     }
     const double t_capture = msSince(t0);
+    const int64_t capture_ns = monotonicNs();
     t0 = std::chrono::steady_clock::now();
     pipeline::BackprojectCounts bc;
     if (Status s = backprojector.run(frame, range, cloud, bc); !s) {
@@ -214,12 +388,58 @@ int runCommand(int argc, char** argv) {
       continue;
     }
     const double t_backproject = msSince(t0);
+    pipeline::Gaze gaze = gazeForFrame(gaze_choice.value(), frame.T_world_cam);
+    GazeSource source = GazeSource::kOperator;
+    if (streamer) {
+      streamer->poll();
+      const GazePolicy::Decision decision = streamer->decide(frame.T_world_cam, capture_ns);
+      if (decision.changed) {
+        std::printf("gaze: %s\n", std::string(gazeSourceName(decision.source)).c_str());
+        std::fflush(stdout);
+      }
+      if (decision.foveation != foveator_config) {
+        if (Status s = foveator->setConfig(*decision.foveation); !s) {
+          std::fprintf(stderr, "fovead run: foveation config: %s\n", s.message().c_str());
+          return kExitFailure;
+        }
+        foveator_config = decision.foveation;
+      }
+      gaze = decision.gaze;
+      source = decision.source;
+    }
     pipeline::FoveationStats stats;
-    if (Status s = foveator->foveate(cloud, gazeForFrame(gaze_choice.value(), frame.T_world_cam), out, stats); !s) {
+    if (Status s = foveator->foveate(cloud, gaze, out, stats); !s) {
       std::fprintf(stderr, "frame %zu: foveate: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;
     }
+    FrameSendReport sent;
+    if (streamer) {
+      // A frame must be out before the next one is due; what is not goes unsent.
+      const int64_t deadline_ns = capture_ns + period_ns - std::min<int64_t>(period_ns / 10, 2'000'000);
+      Result<FrameSendReport> result =
+          streamer->sendFrame(out, stats, static_cast<uint32_t>(frame.sequence), capture_ns, deadline_ns, period_ns);
+      if (!result) {
+        std::fprintf(stderr, "frame %zu: send: %s\n", i, result.status().toString().c_str());
+      } else {
+        sent = result.value();
+      }
+      if (sent.had_session) {
+        ++frames_streamed;
+        encode_ms.add(static_cast<double>(sent.encode_ns) * 1e-6);
+        send_ms.add(static_cast<double>(sent.send_ns) * 1e-6);
+      }
+      if (source != GazeSource::kOperator) ++fallback_frames;
+      if (keep_streamed && sent.completed) {
+        copyFoveated(out, last_streamed);
+        last_streamed_id = frame.sequence;
+        last_streamed_regions = stats.region_count;
+        for (int r = 0; r < stats.region_count; ++r) last_streamed_voxel_m[r] = stats.regions[r].voxel_size_m;
+      }
+    }
+    last_frame_id = frame.sequence;
+    last_gaze = gaze;
+    last_source = source;
     capture_ms.add(t_capture);
     backproject_ms.add(t_backproject);
     partition_ms.add(static_cast<double>(stats.partition_ns) * 1e-6);
@@ -229,8 +449,16 @@ int runCommand(int argc, char** argv) {
     points_in.add(stats.points_in);
     points_out.add(stats.points_out);
     d0_m.add(stats.fixation.d0_m);
-    totals.add(stats);
-    if (every.value() > 0 && i % static_cast<std::size_t>(every.value()) == 0) {
+    if (source == GazeSource::kOperator) totals.add(stats);
+    if (streamer && every.value() > 0 && i % static_cast<std::size_t>(every.value()) == 0) {
+      std::printf("%5llu %-22s %8u %6u %6u %5u %8.1f | ms: %7.2f %8.2f %7.2f %7.2f\n",
+                  static_cast<unsigned long long>(frame.sequence),
+                  sent.had_session ? std::string(gazeSourceName(source)).c_str() : "(no operator)", stats.points_out,
+                  sent.chunks, sent.chunks_sent, sent.chunks_cut, static_cast<double>(sent.bytes_sent) / 1e3, t_capture,
+                  t_backproject + static_cast<double>(stats.partition_ns + stats.fixation_ns + stats.sample_ns) * 1e-6,
+                  static_cast<double>(sent.encode_ns) * 1e-6, static_cast<double>(sent.send_ns) * 1e-6);
+      std::fflush(stdout);
+    } else if (every.value() > 0 && i % static_cast<std::size_t>(every.value()) == 0) {
       std::printf("%5llu %7u %7.3f %-8s", static_cast<unsigned long long>(frame.sequence), stats.points_in,
                   stats.fixation.d0_m, std::string(pipeline::fixationSourceName(stats.fixation.source)).c_str());
       for (int r = 0; r < model.regionCount(); ++r) {
@@ -240,8 +468,30 @@ int runCommand(int argc, char** argv) {
                   stats.points_in ? 100.0 * stats.points_out / stats.points_in : 0.0, t_capture, t_backproject,
                   stats.partition_ns * 1e-6, stats.fixation_ns * 1e-6, stats.sample_ns * 1e-6);
     }
+    if (streamer) {
+      if (const int64_t now = monotonicNs(); now >= next_status_ns) {
+        const net::UplinkCounters& up = streamer->uplinkCounters();
+        const net::RobotLinkCounters& lc = streamer->link().counters();
+        net::StatusReport status;
+        status.frames_captured = attempted_frames;
+        status.frames_sent = frames_streamed;
+        status.frames_dropped = failed_frames + up.frames_superseded;
+        status.chunks_cut = up.chunks_cut;
+        status.datagrams_sent = lc.datagrams_sent;
+        status.bytes_sent = lc.bytes_sent;
+        status.datagrams_received = lc.datagrams_received;
+        status.datagrams_dropped = lc.dropped.total();
+        if (const auto& g = streamer->link().latestGaze()) status.gaze_age_ns = now - g->received_ns;
+        status.rtt_ns = streamer->link().lastRttNs();
+        streamer->sendStatus(status);
+        next_status_ns += 1'000'000'000 * ((now - next_status_ns) / 1'000'000'000 + 1);
+      }
+      // Gaze keeps coming in while the next frame is awaited; frames go out at the camera's rate.
+      streamer->idleUntil(std::min(capture_ns + period_ns, run_end_ns));
+    }
   }
   camera.stop();
+  if (g_stop != 0) std::printf("\nstopped by a signal after %llu frames\n", static_cast<unsigned long long>(attempted_frames));
 
   std::printf("\nsummary: %zu frames foveated, %llu failed; per frame on average:\n", points_in.count(),
               static_cast<unsigned long long>(failed_frames));
@@ -260,7 +510,7 @@ int runCommand(int argc, char** argv) {
   row("voxel sampling", sample_ms);
   row("foveation total (no capture)", foveate_ms);
 
-  if (const std::string* path = args->get("--save-ply"); path && out.size() > 0) {
+  if (const std::string* path = args->get("--save-ply"); path && !keep_streamed && out.size() > 0) {
     pipeline::PlyWriteOptions options;
     options.double_coords = true;
     if (Status s = pipeline::writePly(*path, out.points, out.region.data(), options); !s) {
@@ -269,7 +519,47 @@ int runCommand(int argc, char** argv) {
     }
     std::printf("wrote the last foveated frame (%zu points) to %s\n", out.size(), path->c_str());
   }
-  return failed_frames == n ? kExitFailure : kExitOk;
+  if (const std::string* path = args->get("--save-ply"); path && keep_streamed && last_streamed.size() > 0) {
+    pipeline::PlyWriteOptions options;
+    options.double_coords = true;
+    if (Status s = pipeline::writePly(*path, last_streamed.points, last_streamed.region.data(), options); !s) {
+      std::fprintf(stderr, "fovead run: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+    std::printf("wrote the last streamed frame %llu (%zu points) to %s; voxel sizes [m]:",
+                static_cast<unsigned long long>(last_streamed_id), last_streamed.size(), path->c_str());
+    for (int r = 0; r < last_streamed_regions; ++r) std::printf(" %.9g", last_streamed_voxel_m[r]);
+    std::printf("\n");
+  }
+  if (streamer) {
+    const net::UplinkCounters& up = streamer->uplinkCounters();
+    const net::RobotLinkCounters& lc = streamer->link().counters();
+    std::printf("stream: %llu frames streamed (%llu on the fallback gaze), %llu sessions\n",
+                static_cast<unsigned long long>(frames_streamed), static_cast<unsigned long long>(fallback_frames),
+                static_cast<unsigned long long>(lc.sessions_accepted));
+    std::printf("  uplink: %llu chunks sent, %llu cut for the budget, %llu superseded, %.2f MB sent\n",
+                static_cast<unsigned long long>(up.chunks_sent), static_cast<unsigned long long>(up.chunks_cut),
+                static_cast<unsigned long long>(up.chunks_superseded), static_cast<double>(up.bytes_sent) / 1e6);
+    std::printf("  link: %llu datagrams in, %llu dropped, %llu refusals, %llu gaze samples accepted\n",
+                static_cast<unsigned long long>(lc.datagrams_received),
+                static_cast<unsigned long long>(lc.dropped.total()), static_cast<unsigned long long>(lc.refusals),
+                static_cast<unsigned long long>(lc.gaze_accepted));
+    for (std::size_t r = 0; r < net::kDropReasonCount; ++r) {
+      if (lc.dropped.by_reason[r] > 0) {
+        std::printf("    dropped %-20s %llu\n", net::dropReasonName(static_cast<net::DropReason>(r)),
+                    static_cast<unsigned long long>(lc.dropped.by_reason[r]));
+      }
+    }
+    if (encode_ms.count() > 0) {
+      std::printf("  encode median %.2f ms, send median %.2f ms per frame\n", encode_ms.median(), send_ms.median());
+    }
+    // The last frame's gaze, for comparison with what the operator sent.
+    std::printf("last frame %llu: gaze %s origin %.6f,%.6f,%.6f direction %.6f,%.6f,%.6f\n",
+                static_cast<unsigned long long>(last_frame_id), std::string(gazeSourceName(last_source)).c_str(),
+                last_gaze.origin_m.x(), last_gaze.origin_m.y(), last_gaze.origin_m.z(), last_gaze.direction.x(),
+                last_gaze.direction.y(), last_gaze.direction.z());
+  }
+  return failed_frames == attempted_frames && attempted_frames > 0 ? kExitFailure : kExitOk;
 }
 
 }  // namespace fovea::firmware

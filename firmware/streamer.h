@@ -1,0 +1,98 @@
+// The robot side of a stream (fovead run --listen): the link to the operator,
+// the gaze policy, the chunk encoder and the uplink scheduler, driven once per
+// captured frame by the run loop. Single-threaded (issue 5 splits capture,
+// foveation and sending into threads). Everything is allocated by create()
+// and when a session starts (the encoder follows the session's MTU); a frame
+// allocates nothing.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "firmware/gaze_policy.h"
+#include "hal/frame.h"
+#include "hal/result.h"
+#include "net/codec.h"
+#include "net/key.h"
+#include "net/robot_link.h"
+#include "net/uplink_scheduler.h"
+#include "pipeline/foveator.h"
+
+namespace fovea::firmware {
+
+struct StreamConfig {
+  net::RobotLinkConfig link;  // listen address, key, MTU and budget limits
+  GazePolicyConfig gaze;
+  net::CodecConfig codec;     // max_payload follows each session's MTU
+  // Burst of the token bucket: this many milliseconds of the budget (at least
+  // four datagrams), so a frame's first chunks leave at once.
+  double burst_ms = 5.0;
+};
+
+// What happened to one frame on the way out.
+struct FrameSendReport {
+  bool had_session = false;
+  uint32_t chunks = 0;        // made by the encoder
+  uint32_t chunks_sent = 0;
+  uint32_t chunks_cut = 0;    // planned out for the budget
+  uint64_t bytes_sent = 0;    // datagram bytes, summary included
+  int64_t encode_ns = 0;
+  int64_t send_ns = 0;        // first datagram to last (or to the deadline)
+  bool completed = false;     // everything planned went out before the deadline
+};
+
+class Streamer {
+ public:
+  static Result<std::unique_ptr<Streamer>> create(const StreamConfig& config, std::size_t max_points,
+                                                  const pipeline::FoveationConfig& operator_foveation);
+
+  // Non-empty in insecure mode: log it loudly.
+  const std::string& notice() const { return link_->notice(); }
+  net::Endpoint localEndpoint() const { return link_->localEndpoint(); }
+  const net::RobotLink& link() const { return *link_; }
+
+  // Handles waiting datagrams (hello, gaze, bye) without blocking.
+  void poll() { link_->poll(0); }
+  // Handles datagrams until now >= until_ns (waits in poll, no busy loop).
+  void idleUntil(int64_t until_ns);
+
+  // The gaze and foveation for a frame captured at now_ns with this camera pose.
+  GazePolicy::Decision decide(const hal::Pose& camera, int64_t now_ns);
+
+  // Encodes a foveated frame and sends it, fovea first, paced to the session's
+  // budget, until everything planned is out or deadline_ns passes (what is left
+  // is dropped when the next frame begins, and counted). interval_ns: time until
+  // the next frame, for the budget. Without a session it only polls.
+  Result<FrameSendReport> sendFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
+                                    uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns);
+
+  // Sends a status report to the operator (about once a second).
+  void sendStatus(const net::StatusReport& report);
+
+  const net::UplinkCounters& uplinkCounters() const { return scheduler_.counters(); }
+  uint64_t sessionsStarted() const { return sessions_started_; }
+  uint64_t encodeFailures() const { return encode_failures_; }
+
+ private:
+  Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
+           std::size_t max_points, const pipeline::FoveationConfig& operator_foveation);
+  // Sets the encoder and the budget up for a new session.
+  Status beginSession(int64_t now_ns);
+
+  StreamConfig config_;
+  std::unique_ptr<net::RobotLink> link_;
+  net::UplinkScheduler scheduler_;
+  std::size_t max_points_;
+  GazePolicy policy_;
+  std::optional<net::ChunkEncoder> encoder_;
+  std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, max chunks
+  std::vector<uint8_t> chunk_regions_;
+  // The session the encoder and budget were set up for (its start time).
+  int64_t session_started_ns_ = -1;
+  uint64_t sessions_started_ = 0;
+  uint64_t encode_failures_ = 0;
+};
+
+}  // namespace fovea::firmware

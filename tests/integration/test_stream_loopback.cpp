@@ -1,0 +1,220 @@
+// The stream end to end, as a user runs it: fovead run --listen on the mock
+// living room and fovea-operator in separate processes over loopback. The
+// operator's decoded frame must equal the service's foveated frame within the
+// quantization, and the gaze the service used must be the gaze the operator sent.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "pipeline/io/ply.h"
+#include "tests/support/process.h"
+
+namespace fovea {
+namespace {
+
+std::string program(const char* path) {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(path) : emulator + " " + path;
+}
+
+// The mock living room's camera position and scene centre (hal/camera/mock/scene.cpp).
+constexpr const char* kGazeScript = "fixed:3,0.35,1.55>3,2.25,1.35";
+
+struct StreamRun {
+  int service_exit = -1;
+  int operator_exit = -1;
+  std::string service_output;
+  std::string operator_output;
+};
+
+// Starts the service on `listen` (port 0), runs the operator against the port
+// it reports for `seconds`, then stops the service with SIGTERM.
+StreamRun runStream(const test::TempDir& dir, const std::string& listen, const std::string& operator_flags,
+                    double seconds, const std::string& service_flags = "") {
+  StreamRun run;
+  test::BackgroundProcess service(program(FOVEAD_PATH) +
+                                  " run --camera mock:living-room,size=320x240,fps=15 --every 0 --listen " + listen +
+                                  " --key-file " + dir.file("key") + " --save-ply " + dir.file("robot.ply") + " " +
+                                  service_flags);
+  EXPECT_TRUE(service.started());
+  if (!service.waitFor("streaming: listening on ", 30) || !service.waitFor("\n", 5)) {
+    run.service_output = service.output();
+    ADD_FAILURE() << "the service did not start listening:\n" << run.service_output;
+    return run;
+  }
+  // Complete the "listening on ADDR:PORT (" line.
+  service.waitFor(" (", 5);
+  std::smatch m;
+  const std::string out = service.output();
+  EXPECT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
+  const std::string address = m.size() > 1 ? m[1].str() : "?";
+  const test::ProcessResult op = test::runCommand(
+      program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " + dir.file("key") + " --gaze " +
+      kGazeScript + " --duration " + std::to_string(seconds) + " --summary " + dir.file("summary.json") +
+      " --save-ply " + dir.file("frames") + " " + operator_flags);
+  run.operator_exit = op.exit_code;
+  run.operator_output = op.output;
+  run.service_exit = service.stop(SIGTERM, 10);
+  run.service_output = service.output();
+  return run;
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+class StreamLoopback : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const test::ProcessResult keygen = test::runCommand(program(FOVEAD_PATH) + " keygen " + dir_.file("key"));
+    ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
+  }
+  test::TempDir dir_;
+};
+
+TEST_F(StreamLoopback, OperatorDecodesTheServiceFramesForItsOwnGaze) {
+  const StreamRun run = runStream(dir_, "127.0.0.1:0", "", 3.0);
+  ASSERT_EQ(run.operator_exit, 0) << run.operator_output << "\n--- service:\n" << run.service_output;
+  ASSERT_EQ(run.service_exit, 0) << run.service_output;
+
+  // The gaze the service used for its last frame is the operator's.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(run.service_output, m,
+                                std::regex("last frame \\d+: gaze operator origin (\\S+),(\\S+),(\\S+) direction "
+                                           "(\\S+),(\\S+),(\\S+)")))
+      << run.service_output;
+  const Eigen::Vector3d eye(3, 0.35, 1.55);
+  const Eigen::Vector3d dir = (Eigen::Vector3d(3, 2.25, 1.35) - eye).normalized();
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(std::stod(m[1 + k].str()), eye[k], 1e-6);
+    EXPECT_NEAR(std::stod(m[4 + k].str()), dir[k], 1e-6);
+  }
+
+  // The operator's summary: frames, latency, nothing invalid.
+  const std::string summary = readFile(dir_.file("summary.json"));
+  ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"frames\": (\\d+)"))) << summary;
+  EXPECT_GE(std::stoi(m[1].str()), 10) << summary;  // 15 fps for ~3 s, after the hello
+  EXPECT_NE(summary.find("\"datagrams_invalid\": 0"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"chunks_bad\": 0"), std::string::npos) << summary;
+  ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"p50\": ([0-9.e+-]+)"))) << summary;
+  EXPECT_GT(std::stod(m[1].str()), 0.0);
+  EXPECT_LT(std::stod(m[1].str()), 1000.0);
+
+  // The last frame the service sent whole, and the operator's decoding of it.
+  ASSERT_TRUE(std::regex_search(run.service_output, m,
+                                std::regex("wrote the last streamed frame (\\d+) \\((\\d+) points\\) to \\S+; voxel "
+                                           "sizes \\[m\\]:([ 0-9.e+-]+)")))
+      << run.service_output;
+  const std::string frame_id = m[1].str();
+  std::vector<double> voxel_m;
+  {
+    std::stringstream sizes(m[3].str());
+    double v;
+    while (sizes >> v) voxel_m.push_back(v);
+  }
+  Result<pipeline::PlyCloud> robot = pipeline::readPly(dir_.file("robot.ply"));
+  ASSERT_TRUE(robot.isOk()) << robot.status().message();
+  Result<pipeline::PlyCloud> decoded = pipeline::readPly(dir_.file("frames/frame_" + frame_id + ".ply"));
+  ASSERT_TRUE(decoded.isOk()) << decoded.status().message() << "\n" << run.operator_output;
+  ASSERT_TRUE(robot->has_region && decoded->has_region);
+  ASSERT_EQ(robot->points.size(), decoded->points.size());
+
+  // Every service point has a decoded twin of the same region and colour within
+  // half a quantization step per axis: 1 mm in the fovea, voxel / 8 elsewhere
+  // (the codec's defaults), plus float rounding of the PLY coordinates.
+  std::map<std::tuple<int, long, long, long>, std::vector<std::size_t>> grid;  // 5 cm cells
+  auto cell = [](double v) { return static_cast<long>(std::floor(v / 0.05)); };
+  for (std::size_t i = 0; i < decoded->points.size(); ++i) {
+    const Eigen::Vector3d p = decoded->points.world(i);
+    grid[{decoded->region[i], cell(p.x()), cell(p.y()), cell(p.z())}].push_back(i);
+  }
+  std::size_t unmatched = 0;
+  for (std::size_t i = 0; i < robot->points.size(); ++i) {
+    const int region = robot->region[i];
+    ASSERT_LT(static_cast<std::size_t>(region), voxel_m.size());
+    const double half_step = 0.5 * (region == 0 ? 0.001 : voxel_m[region] / 8.0) + 1e-6;
+    const Eigen::Vector3d p = robot->points.world(i);
+    bool found = false;
+    for (long dx = -1; dx <= 1 && !found; ++dx)
+      for (long dy = -1; dy <= 1 && !found; ++dy)
+        for (long dz = -1; dz <= 1 && !found; ++dz) {
+          auto it = grid.find({region, cell(p.x()) + dx, cell(p.y()) + dy, cell(p.z()) + dz});
+          if (it == grid.end()) continue;
+          for (std::size_t j : it->second) {
+            const Eigen::Vector3d d = (decoded->points.world(j) - p).cwiseAbs();
+            if (d.maxCoeff() <= half_step && decoded->points.rgb()[j] == robot->points.rgb()[i]) {
+              found = true;
+              break;
+            }
+          }
+        }
+    if (!found) ++unmatched;
+  }
+  EXPECT_EQ(unmatched, 0u) << "of " << robot->points.size() << " points";
+}
+
+TEST_F(StreamLoopback, WorksOverIpv6) {
+  // Some containers have no IPv6 loopback: skip, saying so.
+  const test::ProcessResult probe = test::runCommand("test -e /proc/net/if_inet6 && grep -q '^0\\{31\\}1 ' /proc/net/if_inet6");
+  if (probe.exit_code != 0) GTEST_SKIP() << "no IPv6 loopback (::1) on this host";
+  const StreamRun run = runStream(dir_, "[::1]:0", "", 2.0);
+  ASSERT_EQ(run.operator_exit, 0) << run.operator_output << "\n--- service:\n" << run.service_output;
+  EXPECT_EQ(run.service_exit, 0) << run.service_output;
+  EXPECT_NE(run.operator_output.find("connected to [::1]:"), std::string::npos) << run.operator_output;
+}
+
+TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
+  const test::ProcessResult keygen = test::runCommand(program(FOVEAD_PATH) + " keygen " + dir_.file("other"));
+  ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
+  test::BackgroundProcess service(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --every 0 --listen 127.0.0.1:0 --key-file " +
+                                  dir_.file("key"));
+  ASSERT_TRUE(service.waitFor(" (", 30)) << service.output();
+  std::smatch m;
+  const std::string out = service.output();
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
+  const test::ProcessResult op = test::runCommand(program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
+                                                  " --key-file " + dir_.file("other") + " --gaze " + kGazeScript +
+                                                  " --duration 1");
+  EXPECT_EQ(op.exit_code, 1) << op.output;
+  EXPECT_EQ(service.stop(SIGTERM, 10), 0) << service.output();
+  EXPECT_NE(service.output().find("0 sessions"), std::string::npos) << service.output();
+  EXPECT_TRUE(std::regex_search(service.output(), std::regex("dropped \\S*auth\\S*\\s+[1-9]"))) << service.output();
+}
+
+TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
+  if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
+  const test::ProcessResult r = test::runCommand(std::string("FOVEA_DEMO_SECONDS=3 FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR +
+                                                 " " + FOVEA_SOURCE_DIR + "/toolchain/run-demo");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* expected : {"[robot]    streaming: listening on 127.0.0.1:", "[operator] connected to 127.0.0.1:",
+                               "[robot]    gaze: operator", "[operator] fps", "[operator] summary:",
+                               "[robot]    stream: "}) {
+    EXPECT_NE(r.output.find(expected), std::string::npos) << "missing '" << expected << "' in:\n" << r.output;
+  }
+}
+
+TEST_F(StreamLoopback, WithoutAKeyTheServiceRefusesToStartUnlessInsecure) {
+  const test::ProcessResult r =
+      test::runCommand(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --frames 1");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--key-file"), std::string::npos) << r.output;
+  const test::ProcessResult insecure = test::runCommand(
+      program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --insecure --frames 2 --every 0");
+  EXPECT_EQ(insecure.exit_code, 0) << insecure.output;
+  EXPECT_NE(insecure.output.find("INSECURE"), std::string::npos) << insecure.output;
+}
+
+}  // namespace
+}  // namespace fovea
