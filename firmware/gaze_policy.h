@@ -4,7 +4,7 @@
 // fresh. With none yet, or one older than the timeout (default 100 ms: a few
 // eye-tracker periods; a saccade lands in about 50 ms), the service cannot
 // know where the operator looks, so it falls back to a uniform lattice: every
-// point is sampled with voxels of fallback_voxel_m (default 2 cm) around the
+// point is sampled with voxels of fallback_voxel_m (default 5 cm) around the
 // camera's optical axis, which keeps the stream bounded and shows the whole
 // scene evenly rather than placing a sharp fovea where the operator may not be
 // looking. The fallback is FREF's "no foveation" at a safe voxel size.
@@ -22,7 +22,7 @@ namespace fovea::firmware {
 
 struct GazePolicyConfig {
   int64_t timeout_ns = 100'000'000;
-  double fallback_voxel_m = 0.02;
+  double fallback_voxel_m = 0.05;
 
   Status validate() const;
 };

@@ -58,7 +58,7 @@ const char* kRunHelp =
     "  --budget MBPS            the most any operator may ask for, MB/s (default 12.5 = 100 Mbit/s)\n"
     "  --max-mtu BYTES          the largest UDP payload granted (default 1200, 256 .. 8952)\n"
     "  --gaze-timeout-ms MS     gaze older than this selects the fallback (default 100)\n"
-    "  --fallback-voxel M       the fallback's uniform voxel size (default 0.02 m)\n"
+    "  --fallback-voxel M       the fallback's uniform voxel size (default 0.05 m)\n"
     "  --fovea-step M           quantization step in the fovea (default 0.001 m)\n"
     "  --chroma full|half       half: chroma shared by pairs of points outside the fovea (default full)\n"
     "  --entropy on|off         zstd per chunk where it pays (default on)\n"

@@ -27,7 +27,8 @@ std::string program(const char* path) {
 }
 
 // The mock living room's camera position and scene centre (hal/camera/mock/scene.cpp).
-constexpr const char* kGazeScript = "fixed:3,0.35,1.55>3,2.25,1.35";
+// Quoted for the shell (">" would redirect).
+constexpr const char* kGazeScript = "'fixed:3,0.35,1.55>3,2.25,1.35'";
 
 struct StreamRun {
   int service_exit = -1;
