@@ -370,7 +370,10 @@ int runCommand(int argc, char** argv) {
   pipeline::Gaze last_gaze;
   GazeSource last_source = GazeSource::kOperator;
   for (std::size_t i = 0; n == 0 || i < n; ++i) {
-    if (g_stop != 0 || monotonicNs() >= run_end_ns) break;
+    // The frame slot starts before acquire: a camera that paces itself (realtime)
+    // waits inside acquire, and the idle below must not push the next acquire late.
+    const int64_t slot_start_ns = monotonicNs();
+    if (g_stop != 0 || slot_start_ns >= run_end_ns) break;
     ++attempted_frames;
     auto t0 = std::chrono::steady_clock::now();
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
@@ -416,7 +419,7 @@ int runCommand(int argc, char** argv) {
     FrameSendReport sent;
     if (streamer) {
       // A frame must be out before the next one is due; what is not goes unsent.
-      const int64_t deadline_ns = capture_ns + period_ns - std::min<int64_t>(period_ns / 10, 2'000'000);
+      const int64_t deadline_ns = slot_start_ns + period_ns - std::min<int64_t>(period_ns / 10, 2'000'000);
       Result<FrameSendReport> result =
           streamer->sendFrame(out, stats, static_cast<uint32_t>(frame.sequence), capture_ns, deadline_ns, period_ns);
       if (!result) {
@@ -487,7 +490,7 @@ int runCommand(int argc, char** argv) {
         next_status_ns += 1'000'000'000 * ((now - next_status_ns) / 1'000'000'000 + 1);
       }
       // Gaze keeps coming in while the next frame is awaited; frames go out at the camera's rate.
-      streamer->idleUntil(std::min(capture_ns + period_ns, run_end_ns));
+      streamer->idleUntil(std::min(slot_start_ns + period_ns, run_end_ns));
     }
   }
   camera.stop();

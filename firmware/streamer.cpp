@@ -112,8 +112,12 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   now = monotonicNs();
   report.encode_ns = now - t0;
   report.chunks = static_cast<uint32_t>(chunks);
+  // A frame that comes late (the pipeline took longer than a frame period) still
+  // gets a quarter period: its fovea goes out, the periphery is cut to fit.
+  deadline_ns = std::max(deadline_ns, now + interval_ns / 4);
+  // The plan fits what the budget earns until the deadline, not a whole period.
   if (Status s = scheduler_.beginFrame(std::span<const uint32_t>(chunk_bytes_.data(), chunks),
-                                       std::span<const uint8_t>(chunk_regions_.data(), chunks), now, interval_ns);
+                                       std::span<const uint8_t>(chunk_regions_.data(), chunks), now, deadline_ns - now);
       !s) {
     return s;
   }

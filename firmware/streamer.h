@@ -63,8 +63,10 @@ class Streamer {
 
   // Encodes a foveated frame and sends it, fovea first, paced to the session's
   // budget, until everything planned is out or deadline_ns passes (what is left
-  // is dropped when the next frame begins, and counted). interval_ns: time until
-  // the next frame, for the budget. Without a session it only polls.
+  // is dropped when the next frame begins, and counted). The plan cuts the
+  // outermost regions to what the budget allows until the deadline; a late
+  // frame gets at least interval_ns / 4 (the frame period) so its fovea goes
+  // out. Without a session it only polls.
   Result<FrameSendReport> sendFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
                                     uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns);
 

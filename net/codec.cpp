@@ -916,7 +916,7 @@ void FrameAssembler::flush() {
   completeCurrent(false);
 }
 
-Status FrameAssembler::addChunk(std::span<const uint8_t> payload) {
+Status FrameAssembler::addChunk(std::span<const uint8_t> payload, int64_t received_ns) {
   ready_count_ = 0;
   // Peek at the frame id through a verified decode into the current cloud; a
   // chunk of a newer frame first completes the current one.
@@ -957,6 +957,7 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload) {
   current_.chunk_count = d->chunk_count;
   current_.points[d->region] += static_cast<uint32_t>(d->points);
   ++current_.chunks_received[d->region];
+  current_.last_chunk_received_ns = received_ns;
   return Status::ok();
 }
 

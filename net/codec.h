@@ -135,6 +135,9 @@ struct AssembledFrame {
   std::array<uint16_t, pipeline::kMaxRegions> chunks_expected{};
   std::array<uint16_t, pipeline::kMaxRegions> chunks_cut{};
   uint16_t chunk_count = 0;  // chunks the encoder made (from any chunk or the summary)
+  // The caller's arrival time of the frame's last decoded chunk (addChunk's
+  // received_ns): when the frame was decoded, whatever later event completed it.
+  int64_t last_chunk_received_ns = 0;
   const pipeline::FoveatedCloud* cloud = nullptr;  // the decoded points
 };
 
@@ -148,7 +151,9 @@ class FrameAssembler {
 
   // Each call first forgets the frames it last reported ready; after it,
   // readyCount() frames (0, 1 or 2, oldest first) are complete.
-  Status addChunk(std::span<const uint8_t> payload);
+  // received_ns: when the chunk arrived (any clock; kept as the frame's
+  // last_chunk_received_ns for latency figures).
+  Status addChunk(std::span<const uint8_t> payload, int64_t received_ns = 0);
   Status addSummary(std::span<const uint8_t> payload);
   // Completes the frame in progress, if any (end of stream).
   void flush();

@@ -225,12 +225,13 @@ int main(int argc, char** argv) {
   tools::GazePoint last_gaze;
   bool robot_said_bye = false;
 
-  auto handleReady = [&](int64_t now_ns) {
+  auto handleReady = [&]() {
     for (std::size_t i = 0; i < assembler.readyCount(); ++i) {
       const net::AssembledFrame& f = assembler.ready(i);
       tools::FrameObservation obs;
       obs.frame_id = f.frame_id;
-      obs.latency_ms = static_cast<double>(now_ns - static_cast<int64_t>(f.capture_time_ns)) * 1e-6;
+      // Capture to the arrival of the frame's last chunk (decoding it takes microseconds).
+      obs.latency_ms = static_cast<double>(f.last_chunk_received_ns - static_cast<int64_t>(f.capture_time_ns)) * 1e-6;
       for (std::size_t r = 0; r < obs.points_per_region.size(); ++r) {
         obs.points_per_region[r] = f.points[r];
         obs.chunks_received += f.chunks_received[r];
@@ -288,7 +289,7 @@ int main(int argc, char** argv) {
     stats.datagram(received->payload.size() + net::kDatagramOverhead);
     switch (received->type) {
       case net::MessageType::kChunk:
-        (void)assembler.addChunk(received->payload);  // failures are counted by the assembler
+        (void)assembler.addChunk(received->payload, received->received_ns);  // failures are counted by the assembler
         break;
       case net::MessageType::kFrameSummary:
         (void)assembler.addSummary(received->payload);
@@ -299,10 +300,10 @@ int main(int argc, char** argv) {
       default:
         break;  // status: the link notes its timestamp for the RTT echo
     }
-    handleReady(received->received_ns);
+    handleReady();
   }
   assembler.flush();
-  handleReady(monotonicNs());
+  handleReady();
   if (const uint64_t lost = link.counters().datagrams_lost; lost > lost_reported) stats.lost(lost - lost_reported);
   const double seconds = static_cast<double>(monotonicNs() - start_ns) * 1e-9;
   if (!robot_said_bye) link.bye("operator done");
