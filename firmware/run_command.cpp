@@ -19,6 +19,7 @@
 #include "pipeline/io/ply.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/quantile.h"
 
 namespace fovea::firmware {
 
@@ -359,6 +360,9 @@ int runCommand(int argc, char** argv) {
   const int64_t run_start_ns = monotonicNs();
   const int64_t run_end_ns = duration_s > 0 ? run_start_ns + static_cast<int64_t>(duration_s * 1e9) : INT64_MAX;
   int64_t next_status_ns = run_start_ns + 1'000'000'000;
+  // Capture-to-sent latency of the frames of the current status second (fixed room).
+  std::array<double, 256> status_latency_ms{};
+  std::size_t status_latency_count = 0;
   const pipeline::FoveationConfig* foveator_config = &config.value();
   uint64_t last_frame_id = 0;
   // With --listen --save-ply: a copy of the last frame that went out whole.
@@ -428,6 +432,9 @@ int runCommand(int argc, char** argv) {
         sent = result.value();
       }
       if (sent.had_session) {
+        if (status_latency_count < status_latency_ms.size()) {
+          status_latency_ms[status_latency_count++] = static_cast<double>(monotonicNs() - capture_ns) * 1e-6;
+        }
         ++frames_streamed;
         encode_ms.add(static_cast<double>(sent.encode_ns) * 1e-6);
         send_ms.add(static_cast<double>(sent.send_ns) * 1e-6);
@@ -486,6 +493,12 @@ int runCommand(int argc, char** argv) {
         status.datagrams_dropped = lc.dropped.total();
         if (const auto& g = streamer->link().latestGaze()) status.gaze_age_ns = now - g->received_ns;
         status.rtt_ns = streamer->link().lastRttNs();
+        if (status_latency_count > 0) {
+          const std::span<double> window(status_latency_ms.data(), status_latency_count);
+          status.latency_p50_ns = static_cast<int64_t>(pipeline::nearestRankQuantile(window, 0.5) * 1e6);
+          status.latency_p99_ns = static_cast<int64_t>(pipeline::nearestRankQuantile(window, 0.99) * 1e6);
+          status_latency_count = 0;
+        }
         streamer->sendStatus(status);
         next_status_ns += 1'000'000'000 * ((now - next_status_ns) / 1'000'000'000 + 1);
       }
