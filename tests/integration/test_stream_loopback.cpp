@@ -166,6 +166,25 @@ TEST_F(StreamLoopback, OperatorDecodesTheServiceFramesForItsOwnGaze) {
   EXPECT_EQ(unmatched, 0u) << "of " << robot->points.size() << " points";
 }
 
+TEST_F(StreamLoopback, AFrameLargerThanTheBudgetLosesItsPeripheryNotItsFovea) {
+  // 0.3 MB/s at 15 fps is 20 kB a frame: the fovea alone (~1700 points at
+  // 320x240) fits, the periphery does not.
+  const StreamRun run = runStream(dir_, "127.0.0.1:0", "--budget 0.3", 3.0);
+  ASSERT_EQ(run.operator_exit, 0) << run.operator_output << "\n--- service:\n" << run.service_output;
+  ASSERT_EQ(run.service_exit, 0) << run.service_output;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(run.service_output, m, std::regex("(\\d+) cut for the budget"))) << run.service_output;
+  EXPECT_GT(std::stoul(m[1].str()), 0u) << run.service_output;
+  const std::string summary = readFile(dir_.file("summary.json"));
+  ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"points_per_frame_by_region\": \\[([0-9.e+]+), ([0-9.e+]+), "
+                                                       "([0-9.e+]+), ([0-9.e+]+)")))
+      << summary;
+  EXPECT_GT(std::stod(m[1].str()), 500.0) << summary;              // the fovea arrives
+  EXPECT_LT(std::stod(m[4].str()), std::stod(m[1].str())) << summary;  // the outer region is cut
+  ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"wire_mb_per_s\": ([0-9.e+-]+)"))) << summary;
+  EXPECT_LT(std::stod(m[1].str()), 0.3 * 1.1) << summary;  // paced to the budget
+}
+
 TEST_F(StreamLoopback, WorksOverIpv6) {
   // Some containers have no IPv6 loopback: skip, saying so.
   const test::ProcessResult probe = test::runCommand("test -e /proc/net/if_inet6 && grep -q '^0\\{31\\}1 ' /proc/net/if_inet6");
