@@ -12,6 +12,7 @@
 #include <regex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -37,8 +38,11 @@ struct StreamRun {
   std::string operator_output;
 };
 
-// Starts the service on `listen` (port 0), runs the operator against the port
-// it reports for `seconds`, then stops the service with SIGTERM.
+// Starts the service on `listen` (port 0) and the operator against the port it
+// reports; after `seconds` stops the service with SIGTERM. The service says Bye
+// on the way out, so the operator, still running, decodes everything the service
+// sent before it and ends on the Bye: the service's last frame sent whole is
+// among the operator's frames.
 StreamRun runStream(const test::TempDir& dir, const std::string& listen, const std::string& operator_flags,
                     double seconds, const std::string& service_flags = "") {
   StreamRun run;
@@ -47,25 +51,26 @@ StreamRun runStream(const test::TempDir& dir, const std::string& listen, const s
                                   " --key-file " + dir.file("key") + " --save-ply " + dir.file("robot.ply") + " " +
                                   service_flags);
   EXPECT_TRUE(service.started());
-  if (!service.waitFor("streaming: listening on ", 30) || !service.waitFor("\n", 5)) {
+  // The whole "listening on ADDR:PORT (" line.
+  if (!service.waitFor("streaming: listening on ", 30) || !service.waitFor(" (", 5)) {
     run.service_output = service.output();
     ADD_FAILURE() << "the service did not start listening:\n" << run.service_output;
     return run;
   }
-  // Complete the "listening on ADDR:PORT (" line.
-  service.waitFor(" (", 5);
   std::smatch m;
   const std::string out = service.output();
   EXPECT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
   const std::string address = m.size() > 1 ? m[1].str() : "?";
-  const test::ProcessResult op = test::runCommand(
-      program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " + dir.file("key") + " --gaze " +
-      kGazeScript + " --duration " + std::to_string(seconds) + " --summary " + dir.file("summary.json") +
-      " --save-ply " + dir.file("frames") + " " + operator_flags);
-  run.operator_exit = op.exit_code;
-  run.operator_output = op.output;
-  run.service_exit = service.stop(SIGTERM, 10);
+  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " +
+                             dir.file("key") + " --gaze " + kGazeScript + " --duration " + std::to_string(seconds + 60) +
+                             " --summary " + dir.file("summary.json") + " --save-ply " + dir.file("frames") + " " +
+                             operator_flags);
+  EXPECT_TRUE(op.waitFor("connected to", 30)) << op.output();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  run.service_exit = service.stop(SIGTERM, 20);
   run.service_output = service.output();
+  run.operator_exit = op.stop(0, 20);  // signal 0: only waits for the exit the Bye causes
+  run.operator_output = op.output();
   return run;
 }
 
@@ -106,7 +111,7 @@ TEST_F(StreamLoopback, OperatorDecodesTheServiceFramesForItsOwnGaze) {
   // The operator's summary: frames, latency, nothing invalid.
   const std::string summary = readFile(dir_.file("summary.json"));
   ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"frames\": (\\d+)"))) << summary;
-  EXPECT_GE(std::stoi(m[1].str()), 10) << summary;  // 15 fps for ~3 s, after the hello
+  EXPECT_GE(std::stoi(m[1].str()), 5) << summary;  // 15 fps for ~3 s (fewer on a loaded machine)
   EXPECT_NE(summary.find("\"datagrams_invalid\": 0"), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"chunks_bad\": 0"), std::string::npos) << summary;
   ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"p50\": ([0-9.e+-]+)"))) << summary;
