@@ -1,6 +1,7 @@
 // Logging: levels, the line format of each sink style, rate limiting on a fake
 // clock, journal detection (no heap allocation: test_log_alloc.cpp).
 #include "firmware/log.h"
+#include "tests/unit/firmware/log_sinks.h"
 
 #include <gtest/gtest.h>
 
@@ -17,6 +18,9 @@
 namespace fovea::firmware {
 namespace {
 
+using fovea::test::FakeClock;
+using fovea::test::LastLineSink;
+
 constexpr int64_t kMs = 1'000'000;
 
 struct Line {
@@ -31,25 +35,6 @@ class CaptureSink final : public LogSink {
     lines.push_back({level, stamp_ns, std::string(line)});
   }
   std::vector<Line> lines;
-};
-
-// A sink that keeps only the last line, in a fixed buffer (allocation-free).
-class LastLineSink final : public LogSink {
- public:
-  void write(LogLevel, int64_t, std::string_view line) override {
-    size = line.copy(text, sizeof text);
-    ++count;
-  }
-  char text[kLogLineBytes] = {};
-  std::size_t size = 0;
-  uint64_t count = 0;
-};
-
-struct FakeClock {
-  int64_t now_ns = 0;
-  Logger::Clock clock() {
-    return [this] { return now_ns; };
-  }
 };
 
 TEST(Log, LevelsFilterAndNameTheSeverity) {

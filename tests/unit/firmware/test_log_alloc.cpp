@@ -9,31 +9,16 @@
 #include <string_view>
 
 #include "firmware/log.h"
+#include "tests/unit/firmware/log_sinks.h"
 #include "tests/support/alloc_counter.h"
 
 namespace fovea::firmware {
 namespace {
 
+using fovea::test::FakeClock;
+using fovea::test::LastLineSink;
+
 constexpr int64_t kMs = 1'000'000;
-
-// Keeps the last line in a fixed buffer.
-class LastLineSink final : public LogSink {
- public:
-  void write(LogLevel, int64_t, std::string_view line) override {
-    size = line.copy(text, sizeof text);
-    ++count;
-  }
-  char text[kLogLineBytes] = {};
-  std::size_t size = 0;
-  uint64_t count = 0;
-};
-
-struct FakeClock {
-  int64_t now_ns = 0;
-  Logger::Clock clock() {
-    return [this] { return now_ns; };
-  }
-};
 
 TEST(Log, LoggingDoesNotAllocate) {
   {

@@ -1,0 +1,53 @@
+// The explicit table of compiled-in backends that every HAL interface uses
+// (cameras, GPIO): one line per backend, no static self-registration (a static
+// library's linker would drop it), and one way to parse "backend:args" specs.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "hal/result.h"
+
+namespace fovea::hal {
+
+template <typename Interface>
+struct Backend {
+  std::string_view name;
+  // args: the spec after "name:" ("" when there is no ':').
+  Result<std::unique_ptr<Interface>> (*create)(std::string_view args);
+  std::string (*help)();
+};
+
+// Creates the backend a "name[:args]" spec names. Errors name the spec, the
+// accepted backends and `hint` (e.g. how to build a missing one).
+template <typename Interface>
+Result<std::unique_ptr<Interface>> createFromSpec(std::span<const Backend<Interface>> backends, std::string_view what,
+                                                  std::string_view spec, std::string_view hint = {}) {
+  const std::size_t colon = spec.find(':');
+  const std::string_view name = spec.substr(0, colon);
+  const std::string_view args = colon == std::string_view::npos ? std::string_view() : spec.substr(colon + 1);
+  std::string names;
+  for (const Backend<Interface>& backend : backends) {
+    if (backend.name == name) return backend.create(args);
+    if (!names.empty()) names += '|';
+    names += backend.name;
+  }
+  return Result<std::unique_ptr<Interface>>(ErrorCode::kInvalidArgument,
+                                            std::string(what) + ": unknown backend '" + std::string(name) + "' in '" +
+                                                std::string(spec) + "'; accepted: " + names + std::string(hint));
+}
+
+// Every backend's help, a line each.
+template <typename Interface>
+std::string backendsHelp(std::span<const Backend<Interface>> backends) {
+  std::string help;
+  for (const Backend<Interface>& backend : backends) {
+    help += backend.help();
+    help += '\n';
+  }
+  return help;
+}
+
+}  // namespace fovea::hal
