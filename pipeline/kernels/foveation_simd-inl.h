@@ -233,6 +233,107 @@ inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::siz
   }
 }
 
+// ---- packed voxel keys (hash sampler) -------------------------------------------
+
+// One vector of points; `valid` lanes are real (the rest is padding with region
+// kRegionInvalid). Returns false, leaving the state and key_out untouched, if a sampled
+// lane's index is not below 2^51 in magnitude (the caller then does these points with
+// the scalar code, which also tells a bad index from a merely large one).
+template <class DD>
+HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const float* z, const uint8_t* region,
+                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out) {
+  const hn::Rebind<float, DD> df;
+  const hn::RebindToUnsigned<DD> du;
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  HWY_ALIGN double inv[kMax];
+  HWY_ALIGN uint64_t reg[kMax];
+  HWY_ALIGN double regd[kMax];
+  const std::size_t lanes = hn::Lanes(dd);
+  const uint8_t r0 = region[0];
+  bool uniform = valid == lanes;
+  for (std::size_t k = 0; k < lanes; ++k) {
+    inv[k] = st.inv_voxel[region[k]];
+    reg[k] = region[k];
+    regd[k] = static_cast<double>(region[k]);
+    uniform &= region[k] == r0;
+  }
+  const auto vreg = hn::Load(du, reg);
+  const auto vregd = hn::Load(dd, regd);
+  const auto is_sampled = hn::And(hn::Ge(vregd, hn::Set(dd, 1.0)),
+                                  hn::Lt(vregd, hn::Set(dd, static_cast<double>(st.region_count))));
+  const auto vinv = hn::Load(dd, inv);
+  const float* coord[3] = {x, y, z};
+  decltype(hn::Zero(dd)) index[3];
+  auto bad = hn::Zero(dd);
+  const auto limit = hn::Set(dd, 2251799813685248.0);  // 2^51
+  for (int a = 0; a < 3; ++a) {
+    const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord[a]));
+    // Exactly VoxelIndexVector: floor((origin + double(p)) * inv_voxel), sign restored.
+    const auto scaled = hn::Mul(hn::Add(hn::Set(dd, st.origin[a]), p), vinv);
+    index[a] = hn::CopySign(hn::Floor(scaled), scaled);
+    bad = hn::Or(bad, hn::VecFromMask(dd, hn::Not(hn::Lt(hn::Abs(index[a]), limit))));
+  }
+  if (!hn::AllFalse(dd, hn::And(hn::MaskFromVec(bad), is_sampled))) return false;
+  // An integral double below 2^51 in magnitude plus 1.5 * 2^52 is exact, and its low
+  // mantissa bits are the index modulo 2^52: the low 20 are the wrapped index.
+  const auto magic = hn::Set(dd, 6755399441055744.0);
+  const auto axis_mask = hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1);
+  auto key = hn::ShiftLeft<3 * kVoxelAxisBits>(vreg);
+  for (int a = 0; a < 3; ++a) {
+    const auto wrapped = hn::And(hn::BitCast(du, hn::Add(index[a], magic)), axis_mask);
+    key = hn::Or(key, hn::ShiftLeftSame(wrapped, (2 - a) * kVoxelAxisBits));
+  }
+  key = hn::IfThenElse(hn::RebindMask(du, is_sampled), key, hn::Set(du, kNoVoxelKey));
+  hn::StoreU(key, du, key_out);
+  if (uniform) {  // the common case: one region across the vector
+    st.histogram[r0] += static_cast<uint32_t>(lanes);
+    if (r0 >= 1 && r0 < st.region_count) {
+      for (int a = 0; a < 3; ++a) {
+        st.lo[r0][a] = std::min(st.lo[r0][a], hn::GetLane(hn::MinOfLanes(dd, index[a])));
+        st.hi[r0][a] = std::max(st.hi[r0][a], hn::GetLane(hn::MaxOfLanes(dd, index[a])));
+      }
+    }
+  } else {
+    HWY_ALIGN double idx[3][kMax];
+    for (int a = 0; a < 3; ++a) hn::Store(index[a], dd, idx[a]);
+    for (std::size_t k = 0; k < valid; ++k) {
+      const uint8_t r = region[k];
+      ++st.histogram[r];
+      if (r < 1 || r >= st.region_count) continue;
+      for (int a = 0; a < 3; ++a) {
+        st.lo[r][a] = std::min(st.lo[r][a], idx[a][k]);
+        st.hi[r][a] = std::max(st.hi[r][a], idx[a][k]);
+      }
+    }
+  }
+  return true;
+}
+
+inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z, const uint8_t* region,
+                                  std::size_t n, VoxelKeyState& st, uint64_t* key_out) {
+  const hn::ScalableTag<double> dd;
+  const std::size_t lanes = hn::Lanes(dd);
+  std::size_t i = 0;
+  for (; i + lanes <= n; i += lanes) {
+    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i))) return i;
+  }
+  if (i < n) {
+    constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+    HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
+    HWY_ALIGN uint8_t tr[kMax];
+    HWY_ALIGN uint64_t tk[kMax];
+    std::fill(tr, tr + kMax, kRegionInvalid);
+    const std::size_t rest = n - i;
+    std::memcpy(tx, x + i, rest * sizeof(float));
+    std::memcpy(ty, y + i, rest * sizeof(float));
+    std::memcpy(tz, z + i, rest * sizeof(float));
+    std::memcpy(tr, region + i, rest);
+    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk)) return i;
+    std::memcpy(key_out + i, tk, rest * sizeof(uint64_t));
+  }
+  return n;
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace fovea::pipeline::kernels
 HWY_AFTER_NAMESPACE();

@@ -23,6 +23,7 @@ HWY_EXPORT(BackprojectCountRowsT);
 HWY_EXPORT(BackprojectRowsT);
 HWY_EXPORT(PartitionRangeT);
 HWY_EXPORT(VoxelIndexRangeT);
+HWY_EXPORT(VoxelKeyRangeT);
 
 namespace {
 void voxelIndexDispatch(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
@@ -82,6 +83,17 @@ PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, cons
 void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
                     uint8_t* region_out, uint32_t* histogram256) {
   HWY_DYNAMIC_DISPATCH(PartitionRangeT)(cloud.x(), cloud.y(), cloud.z(), params, begin, end, region_out, histogram256);
+}
+
+void VoxelKeyState::reset() {
+  for (auto& row : lo) std::fill(std::begin(row), std::end(row), HUGE_VAL);
+  for (auto& row : hi) std::fill(std::begin(row), std::end(row), -HUGE_VAL);
+  std::fill(std::begin(histogram), std::end(histogram), 0u);
+}
+
+std::size_t voxelKeyRange(const float* x, const float* y, const float* z, const uint8_t* region, std::size_t n,
+                          VoxelKeyState& state, uint64_t* key_out) {
+  return HWY_DYNAMIC_DISPATCH(VoxelKeyRangeT)(x, y, z, region, n, state, key_out);
 }
 
 }  // namespace kernels

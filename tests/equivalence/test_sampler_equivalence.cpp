@@ -175,6 +175,81 @@ TEST_P(SamplerTarget, ErrorsMatch) {
   expectSameSampling(cloud, ones, 2, {0, 1e-3}, 3000, "huge");
 }
 
+TEST_P(SamplerTarget, RunsAndAlternatingKeys) {
+  // The last-voxel cache: runs of every length, keys alternating point by point
+  // between two voxels, cycles through more voxels than the recent-voxel cache holds
+  // (1024 lines) and than the table's first prefix holds, fovea and skipped points
+  // inside runs, region changes inside a SIMD vector.
+  std::mt19937_64 rng(47);
+  for (std::size_t cycle : {std::size_t{1}, std::size_t{2}, std::size_t{3}, std::size_t{1100}, std::size_t{9000}}) {
+    PointCloud cloud(60000);
+    std::vector<uint8_t> region;
+    std::size_t run = 1;
+    for (std::size_t i = 0; cloud.size() < 60000; ++i) {
+      if (i % 997 == 0) run = 1 + rng() % 40;
+      const std::size_t v = (i / run) % cycle;
+      const float x = 0.1f * static_cast<float>(v % 97) + 0.01f * static_cast<float>(rng() % 8);
+      const float y = 0.1f * static_cast<float>(v / 97) - 0.01f * static_cast<float>(rng() % 8);
+      (void)cloud.push(x, y, 0.05f, static_cast<uint32_t>(rng()));
+      const uint64_t pick = rng() % 64;
+      region.push_back(pick == 0 ? 0 : (pick == 1 ? kRegionInvalid : (pick == 2 ? 2 : 1)));
+    }
+    expectSameSampling(cloud, region, 3, {0, 0.1, 0.3}, cloud.size(), "runs");
+    expectSameSampling(cloud, std::vector<uint8_t>(cloud.size(), 1), 2, {0, 0.1}, cloud.size(), "runs, one region");
+  }
+}
+
+TEST_P(SamplerTarget, LargeIndicesAndSpecialsOutsideTheSampledRegions) {
+  // Indices between 2^51 and 2^52 are valid but leave the SIMD key path; at 2^52 and
+  // beyond they are refused. NaN and infinities in the fovea or skipped points are ignored.
+  PointCloud cloud(5000);
+  std::mt19937_64 rng(48);
+  std::vector<uint8_t> region;
+  for (int i = 0; i < 5000; ++i) {
+    const float f = 0.001f * static_cast<float>(i % 300);
+    (void)cloud.push(f, -f, 0.5f * f, static_cast<uint32_t>(i));
+    region.push_back(static_cast<uint8_t>(1 + i % 2));
+  }
+  for (int i : {7, 8, 9, 100, 2047, 2048, 4999}) {
+    cloud.x()[i] = std::numeric_limits<float>::quiet_NaN();
+    cloud.y()[i] = std::numeric_limits<float>::infinity();
+    region[i] = (i % 2) ? 0 : kRegionInvalid;
+  }
+  expectSameSampling(cloud, region, 3, {0, 0.01, 0.02}, cloud.size(), "specials outside");
+  // Region 2's voxels of 1e-10 m at 3e5 m: indices near 3e15 (between 2^51 and 2^52).
+  std::vector<uint8_t> far_region = region;
+  for (int i = 3000; i < 3010; ++i) {
+    cloud.x()[i] = 3e5f + static_cast<float>(i % 3) * 0.03125f;
+    cloud.y()[i] = -3e5f;
+    cloud.z()[i] = 0.0f;
+    far_region[i] = 2;
+  }
+  for (std::size_t i = 0; i < far_region.size(); ++i) {
+    if (far_region[i] == 2 && (i < 3000 || i >= 3010)) far_region[i] = 1;
+  }
+  expectSameSampling(cloud, far_region, 3, {0, 0.01, 1e-10}, cloud.size(), "indices near 3e15");
+  cloud.x()[3005] = 5e5f;  // index 5e15 > 2^52: refused, same point and axis as the reference
+  expectSameSampling(cloud, far_region, 3, {0, 0.01, 1e-10}, cloud.size(), "index beyond 2^52");
+  cloud.x()[3005] = -std::numeric_limits<float>::infinity();
+  expectSameSampling(cloud, far_region, 3, {0, 0.01, 1e-10}, cloud.size(), "infinity sampled");
+}
+
+TEST_P(SamplerTarget, ErrorPrecedence) {
+  // A voxel overflow early in the cloud, a bad point late: the bad point wins (as in
+  // the reference, which checks every index before counting voxels); then spans.
+  PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d::Zero(), 2.0f, 49);
+  std::vector<uint8_t> ones(cloud.size(), 1);
+  cloud.z()[19999] = std::numeric_limits<float>::quiet_NaN();
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 10, "overflow then nan");
+  cloud.z()[19999] = 1e9f;  // a span beyond 2^20 voxels of 1 cm
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 10, "overflow then span");
+  cloud.z()[19999] = 0.0f + static_cast<float>(0.01 * 1048576.0 * 2);  // aliases a wrapped key
+  cloud.z()[19998] = 0.0f;
+  cloud.x()[19999] = cloud.x()[19998];
+  cloud.y()[19999] = cloud.y()[19998];
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, cloud.size(), "aliasing span");
+}
+
 std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
 std::vector<int64_t> targetsHere() {
   forceSimdTarget(0);
