@@ -235,75 +235,112 @@ inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::siz
 
 // ---- packed voxel keys (hash sampler) -------------------------------------------
 
+// Index ranges of the region of the last run of single-region vectors, kept in vectors
+// and folded into the state when the region changes (and at the end).
+template <class DD, class V>
+HWY_INLINE void FlushKeyRanges(DD dd, VoxelKeyState& st, int& run_region, const V* lo, const V* hi) {
+  if (run_region < 0) return;
+  for (int a = 0; a < 3; ++a) {
+    st.lo[run_region][a] = std::min(st.lo[run_region][a], hn::GetLane(hn::MinOfLanes(dd, lo[a])));
+    st.hi[run_region][a] = std::max(st.hi[run_region][a], hn::GetLane(hn::MaxOfLanes(dd, hi[a])));
+  }
+  run_region = -1;
+}
+
+// floor((origin + double(p)) * inv_voxel) along each axis: exactly VoxelIndexVector
+// (Highway's emulated Floor returns +0 for -0; floor(x) has x's sign, copied back).
+template <class DD, class V>
+HWY_INLINE void VoxelIndices3(DD dd, const float* x, const float* y, const float* z, const double* origin, V inv,
+                              V* index) {
+  const hn::Rebind<float, DD> df;
+  const float* coord[3] = {x, y, z};
+  for (int a = 0; a < 3; ++a) {
+    const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord[a]));
+    const auto scaled = hn::Mul(hn::Add(hn::Set(dd, origin[a]), p), inv);
+    index[a] = hn::CopySign(hn::Floor(scaled), scaled);
+  }
+}
+
+// The packed key from the region (already shifted) and the three indices. An integral
+// double below 2^51 in magnitude plus 1.5 * 2^52 is exact, and its low mantissa bits
+// are the index modulo 2^52: the low 20 are the wrapped index.
+template <class DD, class V, class VU>
+HWY_INLINE VU PackVoxelKey(DD dd, VU key, const V* index) {
+  const hn::RebindToUnsigned<DD> du;
+  const auto magic = hn::Set(dd, 6755399441055744.0);
+  const auto axis_mask = hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1);
+  key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(hn::And(hn::BitCast(du, hn::Add(index[0], magic)), axis_mask)));
+  key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(hn::And(hn::BitCast(du, hn::Add(index[1], magic)), axis_mask)));
+  return hn::Or(key, hn::And(hn::BitCast(du, hn::Add(index[2], magic)), axis_mask));
+}
+
 // One vector of points; `valid` lanes are real (the rest is padding with region
 // kRegionInvalid). Returns false, leaving the state and key_out untouched, if a sampled
 // lane's index is not below 2^51 in magnitude (the caller then does these points with
 // the scalar code, which also tells a bad index from a merely large one).
-template <class DD>
+template <class DD, class V>
 HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const float* z, const uint8_t* region,
-                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out) {
-  const hn::Rebind<float, DD> df;
+                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out, int& run_region, V* lo,
+                               V* hi) {
   const hn::RebindToUnsigned<DD> du;
   constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  const std::size_t lanes = hn::Lanes(dd);
+  const auto limit = hn::Set(dd, 2251799813685248.0);  // 2^51
+  const uint8_t r0 = region[0];
+  bool uniform = valid == lanes;
+  for (std::size_t k = 1; k < lanes; ++k) uniform &= region[k] == r0;
+  if (uniform) {  // the common case: one region across the vector
+    if (r0 < 1 || r0 >= st.region_count) {  // fovea or skipped: no index at all
+      hn::StoreU(hn::Set(du, kNoVoxelKey), du, key_out);
+      st.histogram[r0] += static_cast<uint32_t>(lanes);
+      return true;
+    }
+    V index[3];
+    VoxelIndices3(dd, x, y, z, st.origin, hn::Set(dd, st.inv_voxel[r0]), index);
+    const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(index[0]), limit), hn::Lt(hn::Abs(index[1]), limit)),
+                            hn::Lt(hn::Abs(index[2]), limit));
+    if (!hn::AllTrue(dd, ok)) return false;
+    hn::StoreU(PackVoxelKey(dd, hn::Set(du, uint64_t{r0} << (3 * kVoxelAxisBits)), index), du, key_out);
+    st.histogram[r0] += static_cast<uint32_t>(lanes);
+    if (run_region != r0) {
+      FlushKeyRanges(dd, st, run_region, lo, hi);
+      run_region = r0;
+      for (int a = 0; a < 3; ++a) lo[a] = hi[a] = index[a];
+    } else {
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = hn::Min(lo[a], index[a]);
+        hi[a] = hn::Max(hi[a], index[a]);
+      }
+    }
+    return true;
+  }
   HWY_ALIGN double inv[kMax];
   HWY_ALIGN uint64_t reg[kMax];
   HWY_ALIGN double regd[kMax];
-  const std::size_t lanes = hn::Lanes(dd);
-  const uint8_t r0 = region[0];
-  bool uniform = valid == lanes;
   for (std::size_t k = 0; k < lanes; ++k) {
     inv[k] = st.inv_voxel[region[k]];
     reg[k] = region[k];
     regd[k] = static_cast<double>(region[k]);
-    uniform &= region[k] == r0;
   }
-  const auto vreg = hn::Load(du, reg);
   const auto vregd = hn::Load(dd, regd);
   const auto is_sampled = hn::And(hn::Ge(vregd, hn::Set(dd, 1.0)),
                                   hn::Lt(vregd, hn::Set(dd, static_cast<double>(st.region_count))));
-  const auto vinv = hn::Load(dd, inv);
-  const float* coord[3] = {x, y, z};
-  decltype(hn::Zero(dd)) index[3];
-  auto bad = hn::Zero(dd);
-  const auto limit = hn::Set(dd, 2251799813685248.0);  // 2^51
-  for (int a = 0; a < 3; ++a) {
-    const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord[a]));
-    // Exactly VoxelIndexVector: floor((origin + double(p)) * inv_voxel), sign restored.
-    const auto scaled = hn::Mul(hn::Add(hn::Set(dd, st.origin[a]), p), vinv);
-    index[a] = hn::CopySign(hn::Floor(scaled), scaled);
-    bad = hn::Or(bad, hn::VecFromMask(dd, hn::Not(hn::Lt(hn::Abs(index[a]), limit))));
-  }
-  if (!hn::AllFalse(dd, hn::And(hn::MaskFromVec(bad), is_sampled))) return false;
-  // An integral double below 2^51 in magnitude plus 1.5 * 2^52 is exact, and its low
-  // mantissa bits are the index modulo 2^52: the low 20 are the wrapped index.
-  const auto magic = hn::Set(dd, 6755399441055744.0);
-  const auto axis_mask = hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1);
-  auto key = hn::ShiftLeft<3 * kVoxelAxisBits>(vreg);
-  for (int a = 0; a < 3; ++a) {
-    const auto wrapped = hn::And(hn::BitCast(du, hn::Add(index[a], magic)), axis_mask);
-    key = hn::Or(key, hn::ShiftLeftSame(wrapped, (2 - a) * kVoxelAxisBits));
-  }
-  key = hn::IfThenElse(hn::RebindMask(du, is_sampled), key, hn::Set(du, kNoVoxelKey));
-  hn::StoreU(key, du, key_out);
-  if (uniform) {  // the common case: one region across the vector
-    st.histogram[r0] += static_cast<uint32_t>(lanes);
-    if (r0 >= 1 && r0 < st.region_count) {
-      for (int a = 0; a < 3; ++a) {
-        st.lo[r0][a] = std::min(st.lo[r0][a], hn::GetLane(hn::MinOfLanes(dd, index[a])));
-        st.hi[r0][a] = std::max(st.hi[r0][a], hn::GetLane(hn::MaxOfLanes(dd, index[a])));
-      }
-    }
-  } else {
-    HWY_ALIGN double idx[3][kMax];
-    for (int a = 0; a < 3; ++a) hn::Store(index[a], dd, idx[a]);
-    for (std::size_t k = 0; k < valid; ++k) {
-      const uint8_t r = region[k];
-      ++st.histogram[r];
-      if (r < 1 || r >= st.region_count) continue;
-      for (int a = 0; a < 3; ++a) {
-        st.lo[r][a] = std::min(st.lo[r][a], idx[a][k]);
-        st.hi[r][a] = std::max(st.hi[r][a], idx[a][k]);
-      }
+  V index[3];
+  VoxelIndices3(dd, x, y, z, st.origin, hn::Load(dd, inv), index);
+  const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(index[0]), limit), hn::Lt(hn::Abs(index[1]), limit)),
+                          hn::Lt(hn::Abs(index[2]), limit));
+  if (!hn::AllFalse(dd, hn::AndNot(ok, is_sampled))) return false;
+  const auto key = PackVoxelKey(dd, hn::ShiftLeft<3 * kVoxelAxisBits>(hn::Load(du, reg)), index);
+  hn::StoreU(hn::IfThenElse(hn::RebindMask(du, is_sampled), key, hn::Set(du, kNoVoxelKey)), du, key_out);
+  HWY_ALIGN double idx[3][kMax];
+  for (int a = 0; a < 3; ++a) hn::Store(index[a], dd, idx[a]);
+  for (std::size_t k = 0; k < valid; ++k) {
+    const uint8_t r = region[k];
+    ++st.histogram[r];
+    if (r < 1 || r >= st.region_count) continue;
+    for (int a = 0; a < 3; ++a) {
+      st.lo[r][a] = std::min(st.lo[r][a], idx[a][k]);
+      st.hi[r][a] = std::max(st.hi[r][a], idx[a][k]);
     }
   }
   return true;
@@ -312,11 +349,20 @@ HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const floa
 inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z, const uint8_t* region,
                                   std::size_t n, VoxelKeyState& st, uint64_t* key_out) {
   const hn::ScalableTag<double> dd;
+  using V = decltype(hn::Zero(dd));
   const std::size_t lanes = hn::Lanes(dd);
+  int run_region = -1;
+  V lo[3] = {hn::Zero(dd), hn::Zero(dd), hn::Zero(dd)};
+  V hi[3] = {hn::Zero(dd), hn::Zero(dd), hn::Zero(dd)};
   std::size_t i = 0;
   for (; i + lanes <= n; i += lanes) {
-    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i))) return i;
+    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i, run_region, lo,
+                                     hi))) {
+      FlushKeyRanges(dd, st, run_region, lo, hi);
+      return i;
+    }
   }
+  FlushKeyRanges(dd, st, run_region, lo, hi);
   if (i < n) {
     constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
     HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
@@ -328,7 +374,7 @@ inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z
     std::memcpy(ty, y + i, rest * sizeof(float));
     std::memcpy(tz, z + i, rest * sizeof(float));
     std::memcpy(tr, region + i, rest);
-    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk)) return i;
+    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk, run_region, lo, hi)) return i;
     std::memcpy(key_out + i, tk, rest * sizeof(uint64_t));
   }
   return n;

@@ -109,11 +109,15 @@ bool HashVoxelSampler::computeKeys(const PointCloud& in, const uint8_t* region, 
   return true;
 }
 
-uint32_t HashVoxelSampler::findSlot(uint64_t key, bool& fresh) {
+inline uint32_t HashVoxelSampler::findSlot(uint64_t key, bool& fresh) {
   fresh = false;
   const uint64_t hash = hashKey(key);
   const std::size_t line = hash >> (64 - kRecentBits);
   if (recent_key_[line] == key) return recent_slot_[line];
+  return findSlotInTable(key, hash, line, fresh);
+}
+
+uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh) {
   std::size_t pos = hash >> shift_;
   while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask_;
   uint32_t slot;
@@ -337,7 +341,11 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   for (std::size_t q = 0; q < voxels; ++q) {
     const std::size_t o = fovea + q;
     const uint32_t slot = sort_slot_[q];
-    if (q + 8 < voxels) __builtin_prefetch(&acc_[sort_slot_[q + 8]]);
+    if (q + 16 < voxels) {
+      const Acc* ahead = &acc_[sort_slot_[q + 16]];
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(reinterpret_cast<const char*>(ahead) + sizeof(Acc) - 1);
+    }
     rank_[slot] = static_cast<uint32_t>(o);
     const Acc& a = acc_[slot];
     const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));

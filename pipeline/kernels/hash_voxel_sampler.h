@@ -97,6 +97,8 @@ class HashVoxelSampler {
   bool accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
   // The slot of `key`, inserting a fresh voxel; kNoSlot past max_voxels.
   uint32_t findSlot(uint64_t key, bool& fresh);
+  // findSlot() past the recent-voxel cache.
+  [[gnu::noinline]] uint32_t findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh);
   void clearTable(std::size_t voxels);
   // Doubles the table's active prefix and reinserts the voxels found so far.
   void growTable(std::size_t voxels);
