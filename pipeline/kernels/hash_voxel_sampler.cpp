@@ -144,9 +144,23 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
   const float* pz_in = in.z();
   const uint32_t* rgb_in = in.rgb();
   uint32_t* point_slot = point_slot_.data();
+  Acc* acc = acc_.data();
   uint64_t current = kEmpty;
   uint32_t slot = 0;
-  Acc a{};
+  // The current voxel's accumulator, in locals (registers) while the key repeats.
+  double sx = 0, sy = 0, sz = 0;
+  float fx = 0, fy = 0, fz = 0, lox = 0, loy = 0, loz = 0, hix = 0, hiy = 0, hiz = 0;
+  uint32_t count = 0;
+  uint64_t sr = 0, sg = 0, sb = 0;
+  const auto store = [&] {
+    Acc& a = acc[slot];
+    a.sx = sx, a.sy = sy, a.sz = sz;
+    a.fx = fx, a.fy = fy, a.fz = fz;
+    a.lo[0] = lox, a.lo[1] = loy, a.lo[2] = loz;
+    a.hi[0] = hix, a.hi[1] = hiy, a.hi[2] = hiz;
+    a.n = count;
+    a.sr = sr, a.sg = sg, a.sb = sb;
+  };
   for (std::size_t i = begin; i < end; ++i) {
     const uint64_t key = keys[i - begin];
     // The table entry a later point will probe: a miss in a table of megabytes
@@ -160,32 +174,43 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
     }
     const float px = px_in[i], py = py_in[i], pz = pz_in[i];
     if (key != current) {
-      if (current != kEmpty) acc_[slot] = a;
+      if (current != kEmpty) store();
       bool fresh;
       slot = findSlot(key, fresh);
       if (slot == kNoSlot) return false;
       if (fresh) {
-        a = Acc{0.0, 0.0, 0.0, px, py, pz, {px, py, pz}, {px, py, pz}, 0, 0, 0, 0};
+        sx = sy = sz = 0.0;
+        fx = lox = hix = px;
+        fy = loy = hiy = py;
+        fz = loz = hiz = pz;
+        count = 0;
+        sr = sg = sb = 0;
       } else {
-        a = acc_[slot];
+        const Acc& a = acc[slot];
+        sx = a.sx, sy = a.sy, sz = a.sz;
+        fx = a.fx, fy = a.fy, fz = a.fz;
+        lox = a.lo[0], loy = a.lo[1], loz = a.lo[2];
+        hix = a.hi[0], hiy = a.hi[1], hiz = a.hi[2];
+        count = a.n;
+        sr = a.sr, sg = a.sg, sb = a.sb;
       }
       current = key;
     }
     if constexpr (kRepresentative) point_slot[i] = slot;
     // reduceVoxel()'s loop body, point by point in input order.
-    a.sx += static_cast<double>(px) - a.fx;
-    a.sy += static_cast<double>(py) - a.fy;
-    a.sz += static_cast<double>(pz) - a.fz;
-    a.lo[0] = std::min(a.lo[0], px), a.hi[0] = std::max(a.hi[0], px);
-    a.lo[1] = std::min(a.lo[1], py), a.hi[1] = std::max(a.hi[1], py);
-    a.lo[2] = std::min(a.lo[2], pz), a.hi[2] = std::max(a.hi[2], pz);
+    sx += static_cast<double>(px) - fx;
+    sy += static_cast<double>(py) - fy;
+    sz += static_cast<double>(pz) - fz;
+    lox = std::min(lox, px), hix = std::max(hix, px);
+    loy = std::min(loy, py), hiy = std::max(hiy, py);
+    loz = std::min(loz, pz), hiz = std::max(hiz, pz);
     const uint32_t c = rgb_in[i];
-    a.sr += rgbRed(c);
-    a.sg += rgbGreen(c);
-    a.sb += rgbBlue(c);
-    ++a.n;
+    sr += rgbRed(c);
+    sg += rgbGreen(c);
+    sb += rgbBlue(c);
+    ++count;
   }
-  if (current != kEmpty) acc_[slot] = a;
+  if (current != kEmpty) store();
   return true;
 }
 
