@@ -236,42 +236,42 @@ inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::siz
 // ---- packed voxel keys (hash sampler) -------------------------------------------
 
 // Index ranges of the region of the last run of single-region vectors, kept in vectors
-// and folded into the state when the region changes (and at the end).
+// and folded into the state when the region changes (and at the end). Vectors are
+// separate variables, not arrays or struct members: SVE's vector types are sizeless.
+#define FOVEA_KEY_RUN_PARAMS int &run_region, V &run_lo0, V &run_lo1, V &run_lo2, V &run_hi0, V &run_hi1, V &run_hi2
+#define FOVEA_KEY_RUN_ARGS run_region, run_lo0, run_lo1, run_lo2, run_hi0, run_hi1, run_hi2
+
 template <class DD, class V>
-HWY_INLINE void FlushKeyRanges(DD dd, VoxelKeyState& st, int& run_region, const V* lo, const V* hi) {
+HWY_INLINE void FlushKeyRanges(DD dd, VoxelKeyState& st, FOVEA_KEY_RUN_PARAMS) {
   if (run_region < 0) return;
-  for (int a = 0; a < 3; ++a) {
-    st.lo[run_region][a] = std::min(st.lo[run_region][a], hn::GetLane(hn::MinOfLanes(dd, lo[a])));
-    st.hi[run_region][a] = std::max(st.hi[run_region][a], hn::GetLane(hn::MaxOfLanes(dd, hi[a])));
-  }
+  double* lo = st.lo[run_region];
+  double* hi = st.hi[run_region];
+  lo[0] = std::min(lo[0], hn::GetLane(hn::MinOfLanes(dd, run_lo0)));
+  lo[1] = std::min(lo[1], hn::GetLane(hn::MinOfLanes(dd, run_lo1)));
+  lo[2] = std::min(lo[2], hn::GetLane(hn::MinOfLanes(dd, run_lo2)));
+  hi[0] = std::max(hi[0], hn::GetLane(hn::MaxOfLanes(dd, run_hi0)));
+  hi[1] = std::max(hi[1], hn::GetLane(hn::MaxOfLanes(dd, run_hi1)));
+  hi[2] = std::max(hi[2], hn::GetLane(hn::MaxOfLanes(dd, run_hi2)));
   run_region = -1;
 }
 
-// floor((origin + double(p)) * inv_voxel) along each axis: exactly VoxelIndexVector
+// floor((origin + double(p)) * inv_voxel) along one axis: exactly VoxelIndexVector
 // (Highway's emulated Floor returns +0 for -0; floor(x) has x's sign, copied back).
 template <class DD, class V>
-HWY_INLINE void VoxelIndices3(DD dd, const float* x, const float* y, const float* z, const double* origin, V inv,
-                              V* index) {
+HWY_INLINE V VoxelIndex1(DD dd, const float* coord, double origin, V inv) {
   const hn::Rebind<float, DD> df;
-  const float* coord[3] = {x, y, z};
-  for (int a = 0; a < 3; ++a) {
-    const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord[a]));
-    const auto scaled = hn::Mul(hn::Add(hn::Set(dd, origin[a]), p), inv);
-    index[a] = hn::CopySign(hn::Floor(scaled), scaled);
-  }
+  const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord));
+  const auto scaled = hn::Mul(hn::Add(hn::Set(dd, origin), p), inv);
+  return hn::CopySign(hn::Floor(scaled), scaled);
 }
 
-// The packed key from the region (already shifted) and the three indices. An integral
-// double below 2^51 in magnitude plus 1.5 * 2^52 is exact, and its low mantissa bits
-// are the index modulo 2^52: the low 20 are the wrapped index.
-template <class DD, class V, class VU>
-HWY_INLINE VU PackVoxelKey(DD dd, VU key, const V* index) {
+// The low 20 bits of an integral index below 2^51 in magnitude: plus 1.5 * 2^52 it is
+// exact, and its low mantissa bits are the index modulo 2^52.
+template <class DD, class V>
+HWY_INLINE auto WrappedIndex(DD dd, V index) {
   const hn::RebindToUnsigned<DD> du;
-  const auto magic = hn::Set(dd, 6755399441055744.0);
-  const auto axis_mask = hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1);
-  key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(hn::And(hn::BitCast(du, hn::Add(index[0], magic)), axis_mask)));
-  key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(hn::And(hn::BitCast(du, hn::Add(index[1], magic)), axis_mask)));
-  return hn::Or(key, hn::And(hn::BitCast(du, hn::Add(index[2], magic)), axis_mask));
+  return hn::And(hn::BitCast(du, hn::Add(index, hn::Set(dd, 6755399441055744.0))),
+                 hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1));
 }
 
 // One vector of points; `valid` lanes are real (the rest is padding with region
@@ -280,8 +280,7 @@ HWY_INLINE VU PackVoxelKey(DD dd, VU key, const V* index) {
 // the scalar code, which also tells a bad index from a merely large one).
 template <class DD, class V>
 HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const float* z, const uint8_t* region,
-                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out, int& run_region, V* lo,
-                               V* hi) {
+                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out, FOVEA_KEY_RUN_PARAMS) {
   const hn::RebindToUnsigned<DD> du;
   constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
   const std::size_t lanes = hn::Lanes(dd);
@@ -295,22 +294,28 @@ HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const floa
       st.histogram[r0] += static_cast<uint32_t>(lanes);
       return true;
     }
-    V index[3];
-    VoxelIndices3(dd, x, y, z, st.origin, hn::Set(dd, st.inv_voxel[r0]), index);
-    const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(index[0]), limit), hn::Lt(hn::Abs(index[1]), limit)),
-                            hn::Lt(hn::Abs(index[2]), limit));
+    const auto inv = hn::Set(dd, st.inv_voxel[r0]);
+    const V i0 = VoxelIndex1(dd, x, st.origin[0], inv);
+    const V i1 = VoxelIndex1(dd, y, st.origin[1], inv);
+    const V i2 = VoxelIndex1(dd, z, st.origin[2], inv);
+    const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(i0), limit), hn::Lt(hn::Abs(i1), limit)), hn::Lt(hn::Abs(i2), limit));
     if (!hn::AllTrue(dd, ok)) return false;
-    hn::StoreU(PackVoxelKey(dd, hn::Set(du, uint64_t{r0} << (3 * kVoxelAxisBits)), index), du, key_out);
+    auto key = hn::Set(du, uint64_t{r0} << (3 * kVoxelAxisBits));
+    key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(WrappedIndex(dd, i0)));
+    key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(WrappedIndex(dd, i1)));
+    key = hn::Or(key, WrappedIndex(dd, i2));
+    hn::StoreU(key, du, key_out);
     st.histogram[r0] += static_cast<uint32_t>(lanes);
     if (run_region != r0) {
-      FlushKeyRanges(dd, st, run_region, lo, hi);
+      FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
       run_region = r0;
-      for (int a = 0; a < 3; ++a) lo[a] = hi[a] = index[a];
+      run_lo0 = run_hi0 = i0;
+      run_lo1 = run_hi1 = i1;
+      run_lo2 = run_hi2 = i2;
     } else {
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = hn::Min(lo[a], index[a]);
-        hi[a] = hn::Max(hi[a], index[a]);
-      }
+      run_lo0 = hn::Min(run_lo0, i0), run_hi0 = hn::Max(run_hi0, i0);
+      run_lo1 = hn::Min(run_lo1, i1), run_hi1 = hn::Max(run_hi1, i1);
+      run_lo2 = hn::Min(run_lo2, i2), run_hi2 = hn::Max(run_hi2, i2);
     }
     return true;
   }
@@ -325,15 +330,21 @@ HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const floa
   const auto vregd = hn::Load(dd, regd);
   const auto is_sampled = hn::And(hn::Ge(vregd, hn::Set(dd, 1.0)),
                                   hn::Lt(vregd, hn::Set(dd, static_cast<double>(st.region_count))));
-  V index[3];
-  VoxelIndices3(dd, x, y, z, st.origin, hn::Load(dd, inv), index);
-  const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(index[0]), limit), hn::Lt(hn::Abs(index[1]), limit)),
-                          hn::Lt(hn::Abs(index[2]), limit));
+  const auto vinv = hn::Load(dd, inv);
+  const V i0 = VoxelIndex1(dd, x, st.origin[0], vinv);
+  const V i1 = VoxelIndex1(dd, y, st.origin[1], vinv);
+  const V i2 = VoxelIndex1(dd, z, st.origin[2], vinv);
+  const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(i0), limit), hn::Lt(hn::Abs(i1), limit)), hn::Lt(hn::Abs(i2), limit));
   if (!hn::AllFalse(dd, hn::AndNot(ok, is_sampled))) return false;
-  const auto key = PackVoxelKey(dd, hn::ShiftLeft<3 * kVoxelAxisBits>(hn::Load(du, reg)), index);
+  auto key = hn::ShiftLeft<3 * kVoxelAxisBits>(hn::Load(du, reg));
+  key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(WrappedIndex(dd, i0)));
+  key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(WrappedIndex(dd, i1)));
+  key = hn::Or(key, WrappedIndex(dd, i2));
   hn::StoreU(hn::IfThenElse(hn::RebindMask(du, is_sampled), key, hn::Set(du, kNoVoxelKey)), du, key_out);
   HWY_ALIGN double idx[3][kMax];
-  for (int a = 0; a < 3; ++a) hn::Store(index[a], dd, idx[a]);
+  hn::Store(i0, dd, idx[0]);
+  hn::Store(i1, dd, idx[1]);
+  hn::Store(i2, dd, idx[2]);
   for (std::size_t k = 0; k < valid; ++k) {
     const uint8_t r = region[k];
     ++st.histogram[r];
@@ -352,17 +363,16 @@ inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z
   using V = decltype(hn::Zero(dd));
   const std::size_t lanes = hn::Lanes(dd);
   int run_region = -1;
-  V lo[3] = {hn::Zero(dd), hn::Zero(dd), hn::Zero(dd)};
-  V hi[3] = {hn::Zero(dd), hn::Zero(dd), hn::Zero(dd)};
+  V run_lo0 = hn::Zero(dd), run_lo1 = hn::Zero(dd), run_lo2 = hn::Zero(dd);
+  V run_hi0 = hn::Zero(dd), run_hi1 = hn::Zero(dd), run_hi2 = hn::Zero(dd);
   std::size_t i = 0;
   for (; i + lanes <= n; i += lanes) {
-    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i, run_region, lo,
-                                     hi))) {
-      FlushKeyRanges(dd, st, run_region, lo, hi);
+    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i, FOVEA_KEY_RUN_ARGS))) {
+      FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
       return i;
     }
   }
-  FlushKeyRanges(dd, st, run_region, lo, hi);
+  FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
   if (i < n) {
     constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
     HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
@@ -374,11 +384,14 @@ inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z
     std::memcpy(ty, y + i, rest * sizeof(float));
     std::memcpy(tz, z + i, rest * sizeof(float));
     std::memcpy(tr, region + i, rest);
-    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk, run_region, lo, hi)) return i;
+    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk, FOVEA_KEY_RUN_ARGS)) return i;
     std::memcpy(key_out + i, tk, rest * sizeof(uint64_t));
   }
   return n;
 }
+
+#undef FOVEA_KEY_RUN_PARAMS
+#undef FOVEA_KEY_RUN_ARGS
 
 }  // namespace HWY_NAMESPACE
 }  // namespace fovea::pipeline::kernels
