@@ -233,6 +233,58 @@ inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::siz
   }
 }
 
+// ---- fixation: the hit cone --------------------------------------------------
+
+// t of the fovea's points inside the hit cone (t > 0 and d <= tan_cone t, with
+// axialRadial()'s expressions), appended in input order; returns how many.
+inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z, const uint8_t* region,
+                                 std::size_t n, const double* origin_minus_eye, const double* l, double tan_cone,
+                                 double* t_out) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  const std::size_t lanes = hn::Lanes(dd);
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  HWY_ALIGN double reg[kMax];
+  HWY_ALIGN float tx[kMax], ty[kMax], tz[kMax];
+  const auto lx = hn::Set(dd, l[0]);
+  const auto ly = hn::Set(dd, l[1]);
+  const auto lz = hn::Set(dd, l[2]);
+  const auto zero = hn::Zero(dd);
+  std::size_t m = 0;
+  for (std::size_t i = 0; i < n; i += lanes) {
+    const std::size_t valid = std::min(lanes, n - i);
+    bool any = false;
+    for (std::size_t k = 0; k < lanes; ++k) {
+      const bool fovea = k < valid && region[i + k] == 0;
+      reg[k] = fovea ? 1.0 : 0.0;
+      any |= fovea;
+    }
+    if (!any) continue;  // outside the fovea (most vectors, except with FREF)
+    const float* xs = x + i;
+    const float* ys = y + i;
+    const float* zs = z + i;
+    if (valid < lanes) {  // the tail, zero-padded (padding is not in the fovea)
+      std::fill(tx, tx + kMax, 0.0f), std::fill(ty, ty + kMax, 0.0f), std::fill(tz, tz + kMax, 0.0f);
+      std::memcpy(tx, xs, valid * sizeof(float));
+      std::memcpy(ty, ys, valid * sizeof(float));
+      std::memcpy(tz, zs, valid * sizeof(float));
+      xs = tx, ys = ty, zs = tz;
+    }
+    const auto vx = hn::Add(hn::Set(dd, origin_minus_eye[0]), hn::PromoteTo(dd, hn::LoadU(df, xs)));
+    const auto vy = hn::Add(hn::Set(dd, origin_minus_eye[1]), hn::PromoteTo(dd, hn::LoadU(df, ys)));
+    const auto vz = hn::Add(hn::Set(dd, origin_minus_eye[2]), hn::PromoteTo(dd, hn::LoadU(df, zs)));
+    const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
+    const auto rx = hn::Sub(vx, hn::Mul(t, lx));
+    const auto ry = hn::Sub(vy, hn::Mul(t, ly));
+    const auto rz = hn::Sub(vz, hn::Mul(t, lz));
+    const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+    const auto inside = hn::And(hn::And(hn::Gt(hn::Load(dd, reg), zero), hn::Gt(t, zero)),
+                                hn::Le(d, hn::Mul(hn::Set(dd, tan_cone), t)));
+    m += hn::CompressBlendedStore(t, inside, dd, t_out + m);
+  }
+  return m;
+}
+
 // ---- packed voxel keys (hash sampler) -------------------------------------------
 
 // Index ranges of the region of the last run of single-region vectors, kept in vectors

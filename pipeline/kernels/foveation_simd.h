@@ -18,6 +18,7 @@
 #include "hal/frame.h"
 #include "hal/result.h"
 #include "pipeline/backproject.h"
+#include "pipeline/fixation.h"
 #include "pipeline/kernels/kernel_set.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
@@ -42,6 +43,12 @@ void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& 
 // inv_voxel_by_region has 256 entries (any region byte, kRegionInvalid included).
 void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
                     const double* inv_voxel_by_region, double* index_out);
+
+// Same contract and result as computeFixation (bit for bit: the hit mode's t values are
+// computed with axialRadial()'s expressions in SIMD and the same percentile is taken; the
+// other modes and the fallbacks are computeFixation's own code).
+Fixation computeFixationSimd(const PointCloud& cloud, const uint8_t* region, const Gaze& gaze,
+                             const FixationConfig& config, double* t_scratch);
 
 // ---- Highway targets ------------------------------------------------------
 

@@ -340,11 +340,22 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
                             : accumulate<false>(in, 0, n, point_key_.data());
     }
   } else {
+    const uint32_t* histogram = part_state_[0].histogram;
+    const auto sampledSoFar = [&] {
+      uint64_t total = 0;
+      for (int r = 1; r < region_count; ++r) total += histogram[r];
+      return total;
+    };
     for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
       const std::size_t c1 = std::min(n, c0 + kChunk);
+      const uint64_t sampled_before = sampledSoFar();
       if (!computeKeys(in, region, c0, c1, part_state_[0], chunk_key_.data(), part_bad_[0])) {
         bad = &part_bad_[0];
         break;
+      }
+      if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
+        if (representative) std::fill(point_slot_.begin() + c0, point_slot_.begin() + c1, kNoSlot);
+        continue;
       }
       if (fits) {
         fits = representative ? accumulate<true>(in, c0, c1, chunk_key_.data())

@@ -255,6 +255,45 @@ TEST_P(SamplerTarget, ErrorPrecedence) {
   expectSameSampling(cloud, ones, 2, {0, 0.01}, cloud.size(), "aliasing span");
 }
 
+TEST_P(SamplerTarget, FixationMatchesTheReference) {
+  // computeFixationSimd against computeFixation: every mode, cone angles, percentiles,
+  // all-fovea clouds (FREF), fovea-less ones (fallbacks), specials, points behind the eye,
+  // far origins, min_m clamping; d0 compared bit for bit.
+  std::mt19937_64 rng(50);
+  for (std::size_t n : {0, 1, 3, 17, 1000, 30001}) {
+    for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 3)}) {
+      PointCloud cloud = test::randomCloud(n, origin, 3.0f, rng());
+      for (std::size_t i = 0; i < n; i += 97) cloud.z()[i] = std::numeric_limits<float>::quiet_NaN();
+      for (int fovea_share : {0, 1, 2, 100}) {
+        std::vector<uint8_t> region(n);
+        for (auto& r : region) r = (static_cast<int>(rng() % 100) < fovea_share) ? 0 : static_cast<uint8_t>(1 + rng() % 3);
+        if (fovea_share == 100) std::fill(region.begin(), region.end(), uint8_t{0});
+        for (const Eigen::Vector3d& dir : {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(1, -0.3, 0.2)}) {
+          Gaze gaze;
+          gaze.origin_m = origin + Eigen::Vector3d(0.1, -0.2, -2.0);
+          gaze.direction = dir.normalized();
+          for (FixationMode mode : {FixationMode::kHit, FixationMode::kCentroid, FixationMode::kFixed}) {
+            for (double cone : {0.5, 1.0, 20.0, 89.0}) {
+              FixationConfig config;
+              config.mode = mode;
+              config.hit_cone_deg = cone;
+              config.hit_percentile = cone < 1.0 ? 0.0 : (cone > 30.0 ? 1.0 : 0.05);
+              config.min_m = cone > 30.0 ? 1e3 : 0.05;
+              std::vector<double> t_ref(n + 1), t_simd(n + 1);
+              const Fixation a = computeFixation(cloud, region.data(), gaze, config, t_ref.data());
+              const Fixation b = computeFixationSimd(cloud, region.data(), gaze, config, t_simd.data());
+              EXPECT_EQ(std::bit_cast<uint64_t>(a.d0_m), std::bit_cast<uint64_t>(b.d0_m)) << n << " " << cone;
+              EXPECT_EQ(a.source, b.source);
+              EXPECT_EQ(a.support, b.support);
+              EXPECT_EQ(a.clamped, b.clamped);
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
 std::vector<int64_t> targetsHere() {
   forceSimdTarget(0);
