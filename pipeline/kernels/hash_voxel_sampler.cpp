@@ -85,7 +85,7 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
     : max_voxels_(max_voxels),
       voxel_key_(max_voxels),
       voxel_table_pos_(max_voxels),
-      acc_(max_voxels),
+      acc_(new Acc[max_voxels]),
       rank_(max_voxels),
       sort_keys_(max_voxels),
       sort_keys_scratch_(max_voxels),
@@ -189,7 +189,7 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
   const float* pz_in = in.z();
   const uint32_t* rgb_in = in.rgb();
   uint32_t* point_slot = point_slot_.data();
-  Acc* acc = acc_.data();
+  Acc* acc = acc_.get();
   uint64_t current = kEmpty;
   uint32_t slot = 0;
   // The current voxel's accumulator, in locals (registers) while the key repeats.
@@ -199,8 +199,7 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
   uint64_t sr = 0, sg = 0, sb = 0;
   const auto store = [&] {
     Acc& a = acc[slot];
-    a.sx = sx, a.sy = sy, a.sz = sz;
-    a.fx = fx, a.fy = fy, a.fz = fz;
+    a.sx = sx, a.sy = sy, a.sz = sz;  // (the first point is stored once, when the voxel starts)
     a.lo[0] = lox, a.lo[1] = loy, a.lo[2] = loz;
     a.hi[0] = hix, a.hi[1] = hiy, a.hi[2] = hiz;
     a.n = count;
@@ -228,6 +227,7 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
         fx = lox = hix = px;
         fy = loy = hiy = py;
         fz = loz = hiz = pz;
+        acc[slot].fx = px, acc[slot].fy = py, acc[slot].fz = pz;
         count = 0;
         sr = sg = sb = 0;
       } else {

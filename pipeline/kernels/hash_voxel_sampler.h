@@ -31,6 +31,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hal/result.h"
@@ -113,7 +114,9 @@ class HashVoxelSampler {
   // Per voxel slot (max_voxels).
   std::vector<uint64_t> voxel_key_;        // the hash key
   std::vector<uint32_t> voxel_table_pos_;  // where it sits in table_
-  std::vector<Acc> acc_;
+  // Default-initialised (not zeroed): the pages of slots a frame never reaches are not
+  // touched, so the resident size follows the voxels actually used, not max_voxels.
+  std::unique_ptr<Acc[]> acc_;
   std::vector<uint32_t> rank_;             // place in the output order
   std::vector<uint64_t> sort_keys_, sort_keys_scratch_;
   std::vector<uint32_t> sort_slot_, sort_slot_scratch_;
