@@ -95,7 +95,8 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       chunk_key_(kChunk),
       part_state_(1),
       part_bad_(1) {
-  table_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), Entry{kEmpty, 0});
+  table_key_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), kEmpty);
+  table_slot_.assign(table_key_.size(), 0);
 }
 
 void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
@@ -107,7 +108,7 @@ void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
 }
 
 void HashVoxelSampler::clearTable(std::size_t voxels) {
-  for (std::size_t s = 0; s < voxels; ++s) table_[voxel_table_pos_[s]].key = kEmpty;
+  for (std::size_t s = 0; s < voxels; ++s) table_key_[voxel_table_pos_[s]] = kEmpty;
 }
 
 void HashVoxelSampler::growTable(std::size_t voxels) {
@@ -117,8 +118,9 @@ void HashVoxelSampler::growTable(std::size_t voxels) {
   table_mask_ = active_ - 1;
   for (std::size_t s = 0; s < voxels; ++s) {
     std::size_t pos = hashKey(voxel_key_[s]) >> shift_;
-    while (table_[pos].key != kEmpty) pos = (pos + 1) & table_mask_;
-    table_[pos] = Entry{voxel_key_[s], static_cast<uint32_t>(s)};
+    while (table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
+    table_key_[pos] = voxel_key_[s];
+    table_slot_[pos] = static_cast<uint32_t>(s);
     voxel_table_pos_[s] = static_cast<uint32_t>(pos);
   }
 }
@@ -164,18 +166,19 @@ inline uint32_t HashVoxelSampler::findSlot(uint64_t key, bool& fresh) {
 
 uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh) {
   std::size_t pos = hash >> shift_;
-  while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask_;
+  while (table_key_[pos] != key && table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
   uint32_t slot;
-  if (table_[pos].key == key) {
-    slot = table_[pos].slot;
+  if (table_key_[pos] == key) {
+    slot = table_slot_[pos];
   } else {
     if (voxels_ == max_voxels_) return kNoSlot;
     fresh = true;
     slot = static_cast<uint32_t>(voxels_++);
-    table_[pos] = Entry{key, slot};
+    table_key_[pos] = key;
+    table_slot_[pos] = slot;
     voxel_key_[slot] = key;
     voxel_table_pos_[slot] = static_cast<uint32_t>(pos);
-    if (2 * voxels_ > active_ && active_ < table_.size()) growTable(voxels_);  // load factor <= 1/2
+    if (2 * voxels_ > active_ && active_ < table_key_.size()) growTable(voxels_);  // load factor <= 1/2
   }
   recent_key_[line] = key;
   recent_slot_[line] = slot;
@@ -210,7 +213,7 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
     // The table entry a later point will probe: a miss in a table of megabytes
     // costs more than everything else done for a point, and keys are known ahead.
     if (i + kPrefetchAhead < end) {
-      __builtin_prefetch(&table_[hashKey(keys[i + kPrefetchAhead - begin]) >> shift_]);
+      __builtin_prefetch(&table_key_[hashKey(keys[i + kPrefetchAhead - begin]) >> shift_]);
     }
     if (key == kEmpty) {  // fovea or skipped
       if constexpr (kRepresentative) point_slot[i] = kNoSlot;
@@ -287,7 +290,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
 
   // Start where the previous frame ended (consecutive frames have similar voxel
   // counts), so the steady state does not rehash; the output does not depend on it.
-  active_ = std::min(table_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
+  active_ = std::min(table_key_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
   shift_ = 64 - std::countr_zero(active_);
   table_mask_ = active_ - 1;
   recent_key_.fill(kEmpty);

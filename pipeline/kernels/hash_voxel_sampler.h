@@ -59,15 +59,11 @@ class HashVoxelSampler {
 
   std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
-  std::size_t tableSize() const { return table_.size(); }
+  std::size_t tableSize() const { return table_key_.size(); }
 
   static constexpr std::size_t kChunk = 2048;  // points per key batch
 
  private:
-  struct Entry {
-    uint64_t key;
-    uint32_t slot;
-  };
   // What reduceVoxel() accumulates for one voxel.
   struct Acc {
     double sx, sy, sz;  // sums of (double(p) - first), input order
@@ -105,15 +101,18 @@ class HashVoxelSampler {
   void growTable(std::size_t voxels);
 
   std::size_t max_voxels_ = 0;
-  std::size_t active_ = 0;  // entries of table_ in use this frame (a power of two)
+  std::size_t active_ = 0;  // entries of the table in use this frame (a power of two)
   std::size_t table_mask_ = 0;
   std::size_t last_voxels_ = 0;
   std::size_t voxels_ = 0;  // occupied this frame
   int shift_ = 64;
-  std::vector<Entry> table_;
+  // The table: keys (probed; 8 bytes an entry keeps it dense in cache) and, beside
+  // them, the slots (read on a match only).
+  std::vector<uint64_t> table_key_;
+  std::vector<uint32_t> table_slot_;
   // Per voxel slot (max_voxels).
   std::vector<uint64_t> voxel_key_;        // the hash key
-  std::vector<uint32_t> voxel_table_pos_;  // where it sits in table_
+  std::vector<uint32_t> voxel_table_pos_;  // where it sits in the table
   // Default-initialised (not zeroed): the pages of slots a frame never reaches are not
   // touched, so the resident size follows the voxels actually used, not max_voxels.
   std::unique_ptr<Acc[]> acc_;
