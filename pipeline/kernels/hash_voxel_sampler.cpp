@@ -15,7 +15,7 @@ namespace {
 
 // As the reference: |index| below 2^52 converts to int64 exactly.
 constexpr double kMaxAbsIndex = 4503599627370496.0;
-constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 256 KiB
+constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 128 KiB of keys
 constexpr uint32_t kNoSlot = UINT32_MAX;
 constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
 // Points done by the scalar code after the SIMD kernel stops (any vector width divides it).
