@@ -115,7 +115,9 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
     partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
   }
   const int64_t t1 = nowNs();
-  stats.fixation = computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+  stats.fixation = capacity_.kernels == KernelSet::kSimd
+                       ? computeFixationSimd(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data())
+                       : computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();

@@ -233,6 +233,232 @@ inline void VoxelIndexRangeT(const float* coord, const uint8_t* region, std::siz
   }
 }
 
+// ---- fixation: the hit cone --------------------------------------------------
+
+// t of the fovea's points inside the hit cone (t > 0 and d <= tan_cone t, with
+// axialRadial()'s expressions), appended in input order; returns how many.
+inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z, const uint8_t* region,
+                                 std::size_t n, const double* origin_minus_eye, const double* l, double tan_cone,
+                                 double* t_out) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  const std::size_t lanes = hn::Lanes(dd);
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  constexpr std::size_t kBlock = 64;  // a multiple of any vector's lane count
+  constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
+  HWY_ALIGN double reg[kMax];
+  HWY_ALIGN float tx[kMax], ty[kMax], tz[kMax];
+  const auto lx = hn::Set(dd, l[0]);
+  const auto ly = hn::Set(dd, l[1]);
+  const auto lz = hn::Set(dd, l[2]);
+  const auto zero = hn::Zero(dd);
+  std::size_t m = 0;
+  for (std::size_t b = 0; b < n; b += kBlock) {
+    const std::size_t block_end = std::min(n, b + kBlock);
+    if (block_end - b == kBlock) {  // 64 points without a fovea byte: skipped (most, except with FREF)
+      uint64_t zero_bytes = 0;
+      for (std::size_t w = 0; w < kBlock; w += 8) {
+        uint64_t word;
+        std::memcpy(&word, region + b + w, sizeof word);
+        zero_bytes |= (word - kOnes) & ~word & kHighs;
+      }
+      if (zero_bytes == 0) continue;
+    }
+    for (std::size_t i = b; i < block_end; i += lanes) {
+      const std::size_t valid = std::min(lanes, block_end - i);
+      bool any = false;
+      for (std::size_t k = 0; k < lanes; ++k) {
+        const bool fovea = k < valid && region[i + k] == 0;
+        reg[k] = fovea ? 1.0 : 0.0;
+        any |= fovea;
+      }
+      if (!any) continue;
+      const float* xs = x + i;
+      const float* ys = y + i;
+      const float* zs = z + i;
+      if (valid < lanes) {  // the cloud's tail, zero-padded (padding is not in the fovea)
+        std::fill(tx, tx + kMax, 0.0f), std::fill(ty, ty + kMax, 0.0f), std::fill(tz, tz + kMax, 0.0f);
+        std::memcpy(tx, xs, valid * sizeof(float));
+        std::memcpy(ty, ys, valid * sizeof(float));
+        std::memcpy(tz, zs, valid * sizeof(float));
+        xs = tx, ys = ty, zs = tz;
+      }
+      const auto vx = hn::Add(hn::Set(dd, origin_minus_eye[0]), hn::PromoteTo(dd, hn::LoadU(df, xs)));
+      const auto vy = hn::Add(hn::Set(dd, origin_minus_eye[1]), hn::PromoteTo(dd, hn::LoadU(df, ys)));
+      const auto vz = hn::Add(hn::Set(dd, origin_minus_eye[2]), hn::PromoteTo(dd, hn::LoadU(df, zs)));
+      const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
+      const auto rx = hn::Sub(vx, hn::Mul(t, lx));
+      const auto ry = hn::Sub(vy, hn::Mul(t, ly));
+      const auto rz = hn::Sub(vz, hn::Mul(t, lz));
+      const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+      const auto inside = hn::And(hn::And(hn::Gt(hn::Load(dd, reg), zero), hn::Gt(t, zero)),
+                                  hn::Le(d, hn::Mul(hn::Set(dd, tan_cone), t)));
+      m += hn::CompressBlendedStore(t, inside, dd, t_out + m);
+    }
+  }
+  return m;
+}
+
+// ---- packed voxel keys (hash sampler) -------------------------------------------
+
+// Index ranges of the region of the last run of single-region vectors, kept in vectors
+// and folded into the state when the region changes (and at the end). Vectors are
+// separate variables, not arrays or struct members: SVE's vector types are sizeless.
+#define FOVEA_KEY_RUN_PARAMS int &run_region, V &run_lo0, V &run_lo1, V &run_lo2, V &run_hi0, V &run_hi1, V &run_hi2
+#define FOVEA_KEY_RUN_ARGS run_region, run_lo0, run_lo1, run_lo2, run_hi0, run_hi1, run_hi2
+
+template <class DD, class V>
+HWY_INLINE void FlushKeyRanges(DD dd, VoxelKeyState& st, FOVEA_KEY_RUN_PARAMS) {
+  if (run_region < 0) return;
+  double* lo = st.lo[run_region];
+  double* hi = st.hi[run_region];
+  lo[0] = std::min(lo[0], hn::GetLane(hn::MinOfLanes(dd, run_lo0)));
+  lo[1] = std::min(lo[1], hn::GetLane(hn::MinOfLanes(dd, run_lo1)));
+  lo[2] = std::min(lo[2], hn::GetLane(hn::MinOfLanes(dd, run_lo2)));
+  hi[0] = std::max(hi[0], hn::GetLane(hn::MaxOfLanes(dd, run_hi0)));
+  hi[1] = std::max(hi[1], hn::GetLane(hn::MaxOfLanes(dd, run_hi1)));
+  hi[2] = std::max(hi[2], hn::GetLane(hn::MaxOfLanes(dd, run_hi2)));
+  run_region = -1;
+}
+
+// floor((origin + double(p)) * inv_voxel) along one axis: exactly VoxelIndexVector
+// (Highway's emulated Floor returns +0 for -0; floor(x) has x's sign, copied back).
+template <class DD, class V>
+HWY_INLINE V VoxelIndex1(DD dd, const float* coord, double origin, V inv) {
+  const hn::Rebind<float, DD> df;
+  const auto p = hn::PromoteTo(dd, hn::LoadU(df, coord));
+  const auto scaled = hn::Mul(hn::Add(hn::Set(dd, origin), p), inv);
+  return hn::CopySign(hn::Floor(scaled), scaled);
+}
+
+// The low 20 bits of an integral index below 2^51 in magnitude: plus 1.5 * 2^52 it is
+// exact, and its low mantissa bits are the index modulo 2^52.
+template <class DD, class V>
+HWY_INLINE auto WrappedIndex(DD dd, V index) {
+  const hn::RebindToUnsigned<DD> du;
+  return hn::And(hn::BitCast(du, hn::Add(index, hn::Set(dd, 6755399441055744.0))),
+                 hn::Set(du, (uint64_t{1} << kVoxelAxisBits) - 1));
+}
+
+// One vector of points; `valid` lanes are real (the rest is padding with region
+// kRegionInvalid). Returns false, leaving the state and key_out untouched, if a sampled
+// lane's index is not below 2^51 in magnitude (the caller then does these points with
+// the scalar code, which also tells a bad index from a merely large one).
+template <class DD, class V>
+HWY_INLINE bool VoxelKeyVector(DD dd, const float* x, const float* y, const float* z, const uint8_t* region,
+                               std::size_t valid, VoxelKeyState& st, uint64_t* key_out, FOVEA_KEY_RUN_PARAMS) {
+  const hn::RebindToUnsigned<DD> du;
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  const std::size_t lanes = hn::Lanes(dd);
+  const auto limit = hn::Set(dd, 2251799813685248.0);  // 2^51
+  const uint8_t r0 = region[0];
+  bool uniform = valid == lanes;
+  for (std::size_t k = 1; k < lanes; ++k) uniform &= region[k] == r0;
+  if (uniform) {  // the common case: one region across the vector
+    if (r0 < 1 || r0 >= st.region_count) {  // fovea or skipped: no index at all
+      hn::StoreU(hn::Set(du, kNoVoxelKey), du, key_out);
+      st.histogram[r0] += static_cast<uint32_t>(lanes);
+      return true;
+    }
+    const auto inv = hn::Set(dd, st.inv_voxel[r0]);
+    const V i0 = VoxelIndex1(dd, x, st.origin[0], inv);
+    const V i1 = VoxelIndex1(dd, y, st.origin[1], inv);
+    const V i2 = VoxelIndex1(dd, z, st.origin[2], inv);
+    const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(i0), limit), hn::Lt(hn::Abs(i1), limit)), hn::Lt(hn::Abs(i2), limit));
+    if (!hn::AllTrue(dd, ok)) return false;
+    auto key = hn::Set(du, uint64_t{r0} << (3 * kVoxelAxisBits));
+    key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(WrappedIndex(dd, i0)));
+    key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(WrappedIndex(dd, i1)));
+    key = hn::Or(key, WrappedIndex(dd, i2));
+    hn::StoreU(key, du, key_out);
+    st.histogram[r0] += static_cast<uint32_t>(lanes);
+    if (run_region != r0) {
+      FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
+      run_region = r0;
+      run_lo0 = run_hi0 = i0;
+      run_lo1 = run_hi1 = i1;
+      run_lo2 = run_hi2 = i2;
+    } else {
+      run_lo0 = hn::Min(run_lo0, i0), run_hi0 = hn::Max(run_hi0, i0);
+      run_lo1 = hn::Min(run_lo1, i1), run_hi1 = hn::Max(run_hi1, i1);
+      run_lo2 = hn::Min(run_lo2, i2), run_hi2 = hn::Max(run_hi2, i2);
+    }
+    return true;
+  }
+  HWY_ALIGN double inv[kMax];
+  HWY_ALIGN uint64_t reg[kMax];
+  HWY_ALIGN double regd[kMax];
+  for (std::size_t k = 0; k < lanes; ++k) {
+    inv[k] = st.inv_voxel[region[k]];
+    reg[k] = region[k];
+    regd[k] = static_cast<double>(region[k]);
+  }
+  const auto vregd = hn::Load(dd, regd);
+  const auto is_sampled = hn::And(hn::Ge(vregd, hn::Set(dd, 1.0)),
+                                  hn::Lt(vregd, hn::Set(dd, static_cast<double>(st.region_count))));
+  const auto vinv = hn::Load(dd, inv);
+  const V i0 = VoxelIndex1(dd, x, st.origin[0], vinv);
+  const V i1 = VoxelIndex1(dd, y, st.origin[1], vinv);
+  const V i2 = VoxelIndex1(dd, z, st.origin[2], vinv);
+  const auto ok = hn::And(hn::And(hn::Lt(hn::Abs(i0), limit), hn::Lt(hn::Abs(i1), limit)), hn::Lt(hn::Abs(i2), limit));
+  if (!hn::AllFalse(dd, hn::AndNot(ok, is_sampled))) return false;
+  auto key = hn::ShiftLeft<3 * kVoxelAxisBits>(hn::Load(du, reg));
+  key = hn::Or(key, hn::ShiftLeft<2 * kVoxelAxisBits>(WrappedIndex(dd, i0)));
+  key = hn::Or(key, hn::ShiftLeft<kVoxelAxisBits>(WrappedIndex(dd, i1)));
+  key = hn::Or(key, WrappedIndex(dd, i2));
+  hn::StoreU(hn::IfThenElse(hn::RebindMask(du, is_sampled), key, hn::Set(du, kNoVoxelKey)), du, key_out);
+  HWY_ALIGN double idx[3][kMax];
+  hn::Store(i0, dd, idx[0]);
+  hn::Store(i1, dd, idx[1]);
+  hn::Store(i2, dd, idx[2]);
+  for (std::size_t k = 0; k < valid; ++k) {
+    const uint8_t r = region[k];
+    ++st.histogram[r];
+    if (r < 1 || r >= st.region_count) continue;
+    for (int a = 0; a < 3; ++a) {
+      st.lo[r][a] = std::min(st.lo[r][a], idx[a][k]);
+      st.hi[r][a] = std::max(st.hi[r][a], idx[a][k]);
+    }
+  }
+  return true;
+}
+
+inline std::size_t VoxelKeyRangeT(const float* x, const float* y, const float* z, const uint8_t* region,
+                                  std::size_t n, VoxelKeyState& st, uint64_t* key_out) {
+  const hn::ScalableTag<double> dd;
+  using V = decltype(hn::Zero(dd));
+  const std::size_t lanes = hn::Lanes(dd);
+  int run_region = -1;
+  V run_lo0 = hn::Zero(dd), run_lo1 = hn::Zero(dd), run_lo2 = hn::Zero(dd);
+  V run_hi0 = hn::Zero(dd), run_hi1 = hn::Zero(dd), run_hi2 = hn::Zero(dd);
+  std::size_t i = 0;
+  for (; i + lanes <= n; i += lanes) {
+    if (HWY_UNLIKELY(!VoxelKeyVector(dd, x + i, y + i, z + i, region + i, lanes, st, key_out + i, FOVEA_KEY_RUN_ARGS))) {
+      FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
+      return i;
+    }
+  }
+  FlushKeyRanges(dd, st, FOVEA_KEY_RUN_ARGS);
+  if (i < n) {
+    constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+    HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
+    HWY_ALIGN uint8_t tr[kMax];
+    HWY_ALIGN uint64_t tk[kMax];
+    std::fill(tr, tr + kMax, kRegionInvalid);
+    const std::size_t rest = n - i;
+    std::memcpy(tx, x + i, rest * sizeof(float));
+    std::memcpy(ty, y + i, rest * sizeof(float));
+    std::memcpy(tz, z + i, rest * sizeof(float));
+    std::memcpy(tr, region + i, rest);
+    if (!VoxelKeyVector(dd, tx, ty, tz, tr, rest, st, tk, FOVEA_KEY_RUN_ARGS)) return i;
+    std::memcpy(key_out + i, tk, rest * sizeof(uint64_t));
+  }
+  return n;
+}
+
+#undef FOVEA_KEY_RUN_PARAMS
+#undef FOVEA_KEY_RUN_ARGS
+
 }  // namespace HWY_NAMESPACE
 }  // namespace fovea::pipeline::kernels
 HWY_AFTER_NAMESPACE();

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <string>
 
 #include "hwy/targets.h"
@@ -23,6 +24,8 @@ HWY_EXPORT(BackprojectCountRowsT);
 HWY_EXPORT(BackprojectRowsT);
 HWY_EXPORT(PartitionRangeT);
 HWY_EXPORT(VoxelIndexRangeT);
+HWY_EXPORT(VoxelKeyRangeT);
+HWY_EXPORT(HitConeRangeT);
 
 namespace {
 void voxelIndexDispatch(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
@@ -84,7 +87,48 @@ void partitionRange(const PointCloud& cloud, const PartitionParams& params, std:
   HWY_DYNAMIC_DISPATCH(PartitionRangeT)(cloud.x(), cloud.y(), cloud.z(), params, begin, end, region_out, histogram256);
 }
 
+void VoxelKeyState::reset() {
+  for (auto& row : lo) std::fill(std::begin(row), std::end(row), HUGE_VAL);
+  for (auto& row : hi) std::fill(std::begin(row), std::end(row), -HUGE_VAL);
+  std::fill(std::begin(histogram), std::end(histogram), 0u);
+}
+
+std::size_t voxelKeyRange(const float* x, const float* y, const float* z, const uint8_t* region, std::size_t n,
+                          VoxelKeyState& state, uint64_t* key_out) {
+  return HWY_DYNAMIC_DISPATCH(VoxelKeyRangeT)(x, y, z, region, n, state, key_out);
+}
+
+std::size_t hitConeRange(const PointCloud& cloud, const uint8_t* region, const double* origin_minus_eye,
+                         const double* l, double tan_cone, double* t_out) {
+  return HWY_DYNAMIC_DISPATCH(HitConeRangeT)(cloud.x(), cloud.y(), cloud.z(), region, cloud.size(), origin_minus_eye,
+                                             l, tan_cone, t_out);
+}
+
 }  // namespace kernels
+
+Fixation computeFixationSimd(const PointCloud& cloud, const uint8_t* region, const Gaze& gaze,
+                             const FixationConfig& config, double* t_scratch) {
+  if (config.mode != FixationMode::kHit) return computeFixation(cloud, region, gaze, config, t_scratch);
+  // As hitFixation(): the same tan, the same origin difference, the same t values.
+  const double tan_cone = std::tan(config.hit_cone_deg * std::numbers::pi / 180.0);
+  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;
+  const double ome[3] = {origin_minus_eye.x(), origin_minus_eye.y(), origin_minus_eye.z()};
+  const double l[3] = {gaze.direction.x(), gaze.direction.y(), gaze.direction.z()};
+  const std::size_t n = kernels::hitConeRange(cloud, region, ome, l, tan_cone, t_scratch);
+  // No point in the cone: the reference's own fallbacks (centroid, then fallback_m).
+  if (n == 0) return computeFixation(cloud, region, gaze, config, t_scratch);
+  Fixation f;
+  const auto k = static_cast<std::size_t>(config.hit_percentile * static_cast<double>(n - 1));
+  std::nth_element(t_scratch, t_scratch + k, t_scratch + n);
+  f.d0_m = t_scratch[k];
+  f.source = FixationSource::kHit;
+  f.support = static_cast<uint32_t>(n);
+  if (!(f.d0_m >= config.min_m)) {
+    f.d0_m = config.min_m;
+    f.clamped = true;
+  }
+  return f;
+}
 
 Status backprojectSimd(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
                        BackprojectCounts& counts) {

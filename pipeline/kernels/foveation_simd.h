@@ -18,9 +18,11 @@
 #include "hal/frame.h"
 #include "hal/result.h"
 #include "pipeline/backproject.h"
+#include "pipeline/fixation.h"
 #include "pipeline/kernels/kernel_set.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
+#include "pipeline/voxel_sampler.h"
 
 namespace fovea::pipeline {
 
@@ -41,6 +43,12 @@ void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& 
 // inv_voxel_by_region has 256 entries (any region byte, kRegionInvalid included).
 void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
                     const double* inv_voxel_by_region, double* index_out);
+
+// Same contract and result as computeFixation (bit for bit: the hit mode's t values are
+// computed with axialRadial()'s expressions in SIMD and the same percentile is taken; the
+// other modes and the fallbacks are computeFixation's own code).
+Fixation computeFixationSimd(const PointCloud& cloud, const uint8_t* region, const Gaze& gaze,
+                             const FixationConfig& config, double* t_scratch);
 
 // ---- Highway targets ------------------------------------------------------
 
@@ -92,6 +100,28 @@ PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, cons
 // Regions of points [begin, end); histogram[r] += points of region r (r = kRegionInvalid too).
 void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
                     uint8_t* region_out, uint32_t* histogram256);
+
+// Packed voxel keys for the hash sampler, with the reference's checks' inputs.
+// key_out[i] = (region << 60) | (i & M) << 40 | (j & M) << 20 | (k & M), M = 2^20 - 1,
+// with (i, j, k) = voxelIndex() of the point along x, y, z, for points whose region r
+// is in [1, region_count); kNoVoxelKey for the others (fovea, skipped). histogram[r]
+// counts every point's region byte; lo/hi[r][a] are the smallest and largest index of
+// region r's points along axis a (+/-inf while the region has none).
+inline constexpr uint64_t kNoVoxelKey = UINT64_MAX;
+struct VoxelKeyState {
+  const double* inv_voxel = nullptr;  // 256 entries, by region byte
+  double origin[3] = {};
+  int region_count = 1;
+  double lo[kMaxRegions][3];
+  double hi[kMaxRegions][3];
+  uint32_t histogram[256];
+  void reset();  // ranges empty, histogram zero
+};
+// Points [0, n). Returns n, or (when a sampled point's index is not below 2^52 in
+// magnitude: NaN, infinite or absurd) a position at or before the first such point, from
+// which the caller rescans with voxelIndex(); the state is then incomplete.
+std::size_t voxelKeyRange(const float* x, const float* y, const float* z, const uint8_t* region, std::size_t n,
+                          VoxelKeyState& state, uint64_t* key_out);
 
 }  // namespace kernels
 }  // namespace fovea::pipeline

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "pipeline/kernels/foveation_simd.h"
@@ -14,139 +15,251 @@ namespace {
 
 // As the reference: |index| below 2^52 converts to int64 exactly.
 constexpr double kMaxAbsIndex = 4503599627370496.0;
-constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 256 KiB
+constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 128 KiB of keys
 constexpr uint32_t kNoSlot = UINT32_MAX;
+constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
+// Points done by the scalar code after the SIMD kernel stops (any vector width divides it).
+constexpr std::size_t kScalarRun = 64;
+// How many points ahead accumulate() prefetches table entries.
+constexpr std::size_t kPrefetchAhead = 32;
 
 const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
 uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
+// copyFovea() with its pointers in locals, skipping 8 points at a time where none is
+// in the fovea (the usual case outside it). Same output, same representatives.
+void copyFoveaFast(const PointCloud& in, const uint8_t* region, FoveatedCloud& out, uint32_t* representative) {
+  if (representative != nullptr) {
+    copyFovea(in, region, out, representative);
+    return;
+  }
+  const std::size_t n = in.size();
+  const float* x = in.x();
+  const float* y = in.y();
+  const float* z = in.z();
+  const uint32_t* rgb = in.rgb();
+  float* ox = out.points.x();
+  float* oy = out.points.y();
+  float* oz = out.points.z();
+  uint32_t* orgb = out.points.rgb();
+  uint8_t* oregion = out.region.data();
+  uint32_t* oweight = out.weight.data();
+  std::size_t o = 0;
+  std::size_t i = 0;
+  constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
+  while (i < n) {
+    if (i + 8 <= n) {
+      uint64_t block;
+      std::memcpy(&block, region + i, sizeof block);
+      if (((block - kOnes) & ~block & kHighs) == 0) {  // no zero byte: no fovea point
+        i += 8;
+        continue;
+      }
+    }
+    const std::size_t stop = std::min(n, i + 8);
+    for (; i < stop; ++i) {
+      if (region[i] != 0) continue;
+      ox[o] = x[i];
+      oy[o] = y[i];
+      oz[o] = z[i];
+      orgb[o] = rgb[i];
+      oregion[o] = 0;
+      oweight[o] = 1;
+      ++o;
+    }
+  }
+}
+
 }  // namespace
 
 struct HashVoxelSampler::KeyJob {
-  HashVoxelSampler* self;
+  const HashVoxelSampler* self;
   const PointCloud* in;
   const uint8_t* region;
-  int region_count;
-  const double* inv_voxel;
+  uint64_t* keys;
+  std::vector<kernels::VoxelKeyState>* state;
+  std::vector<BadPoint>* bad;
 };
-
-struct HashVoxelSampler::ReduceJob {
-  HashVoxelSampler* self;
-  const PointCloud* in;
-  FoveatedCloud* out;
-  std::size_t voxels;
-  std::size_t fovea;
-  uint32_t* representative;
-};
-
-namespace {
-
-}  // namespace
 
 HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxels)
     : max_voxels_(max_voxels),
       voxel_key_(max_voxels),
       voxel_table_pos_(max_voxels),
-      voxel_start_(max_voxels + 1),
-      voxel_cursor_(max_voxels),
+      acc_(new Acc[max_voxels]),
+      rank_(max_voxels),
       sort_keys_(max_voxels),
       sort_keys_scratch_(max_voxels),
       sort_slot_(max_voxels),
       sort_slot_scratch_(max_voxels),
       point_slot_(max_points),
-      point_key_(max_points),
-      order_(max_points),
-      chunk_index_(3 * kChunk),
-      part_keys_(1) {
-  table_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), Entry{kEmpty, 0});
+      chunk_key_(kChunk),
+      part_state_(1),
+      part_bad_(1) {
+  table_key_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), kEmpty);
+  table_slot_.assign(table_key_.size(), 0);
 }
 
 void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
   pool_ = pool;
   const std::size_t parts = pool ? static_cast<std::size_t>(pool->parts()) : 1;
-  part_counts_.assign(kMaxRegions * parts, 0);
-  part_keys_.assign(parts, PartKeys{});
-  chunk_index_.assign(3 * kChunk * parts, 0.0);
+  part_state_.assign(parts, kernels::VoxelKeyState{});
+  part_bad_.assign(parts, BadPoint{});
+  point_key_.assign(parts > 1 ? point_slot_.size() : 0, kEmpty);
 }
 
 void HashVoxelSampler::clearTable(std::size_t voxels) {
-  for (std::size_t s = 0; s < voxels; ++s) table_[voxel_table_pos_[s]].key = kEmpty;
+  for (std::size_t s = 0; s < voxels; ++s) table_key_[voxel_table_pos_[s]] = kEmpty;
 }
 
 void HashVoxelSampler::growTable(std::size_t voxels) {
   clearTable(voxels);
   active_ *= 2;
   --shift_;
-  const std::size_t mask = active_ - 1;
+  table_mask_ = active_ - 1;
   for (std::size_t s = 0; s < voxels; ++s) {
     std::size_t pos = hashKey(voxel_key_[s]) >> shift_;
-    while (table_[pos].key != kEmpty) pos = (pos + 1) & mask;
-    table_[pos] = Entry{voxel_key_[s], static_cast<uint32_t>(s)};
+    while (table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
+    table_key_[pos] = voxel_key_[s];
+    table_slot_[pos] = static_cast<uint32_t>(s);
     voxel_table_pos_[s] = static_cast<uint32_t>(pos);
   }
 }
 
-void HashVoxelSampler::reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end,
-                                    std::size_t fovea, uint32_t* representative, uint32_t* region_counts) const {
-  for (std::size_t q = q_begin; q < q_end; ++q) {
-    const std::size_t o = fovea + q;
-    const uint32_t slot = sort_slot_[q];
-    const std::size_t s = voxel_start_[slot];
-    const std::size_t e = voxel_start_[slot + 1];
-    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (3 * kVoxelAxisBits));
-    reduceVoxel(in, order_.data() + s, e - s, r, o, out, representative);
-    ++region_counts[r];
+bool HashVoxelSampler::computeKeys(const PointCloud& in, const uint8_t* region, std::size_t begin, std::size_t end,
+                                   kernels::VoxelKeyState& st, uint64_t* keys, BadPoint& bad) const {
+  const float* coord[3] = {in.x(), in.y(), in.z()};
+  std::size_t pos = begin;
+  while (pos < end) {
+    pos += kernels::voxelKeyRange(coord[0] + pos, coord[1] + pos, coord[2] + pos, region + pos, end - pos, st,
+                                  keys + (pos - begin));
+    const std::size_t stop = std::min(end, pos + kScalarRun);
+    // The points the kernel left: the reference's scalar code, checks included.
+    for (; pos < stop; ++pos) {
+      const uint8_t r = region[pos];
+      ++st.histogram[r];
+      keys[pos - begin] = kEmpty;
+      if (r < 1 || r >= st.region_count) continue;
+      uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+      for (int a = 0; a < 3; ++a) {
+        const double d = voxelIndex(st.origin[a], coord[a][pos], st.inv_voxel[r]);
+        if (!(std::fabs(d) < kMaxAbsIndex)) {
+          bad = BadPoint{true, pos, a, d, r};
+          return false;
+        }
+        st.lo[r][a] = std::min(st.lo[r][a], d);
+        st.hi[r][a] = std::max(st.hi[r][a], d);
+        key |= (static_cast<uint64_t>(static_cast<int64_t>(d)) & kAxisMask) << ((2 - a) * kVoxelAxisBits);
+      }
+      keys[pos - begin] = key;
+    }
   }
+  return true;
 }
 
-void HashVoxelSampler::computeKeys(const KeyJob& job, int part, int parts) {
-  const PointCloud& in = *job.in;
-  const std::size_t n = in.size();
-  const std::size_t begin = WorkerPool::rangeBegin(n, part, parts);
-  const std::size_t end = WorkerPool::rangeBegin(n, part + 1, parts);
-  PartKeys& pk = part_keys_[static_cast<std::size_t>(part)];
-  pk = PartKeys{};
-  for (auto& row : pk.lo) std::fill(std::begin(row), std::end(row), INT64_MAX);
-  for (auto& row : pk.hi) std::fill(std::begin(row), std::end(row), INT64_MIN);
-  const float* coord[3] = {in.x(), in.y(), in.z()};
-  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
-  double* chunk = chunk_index_.data() + 3 * kChunk * static_cast<std::size_t>(part);
-  double* index[3] = {chunk, chunk + kChunk, chunk + 2 * kChunk};
-  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
-  uint64_t* point_key = point_key_.data();
-  for (std::size_t c0 = begin; c0 < end; c0 += kChunk) {
-    const std::size_t len = std::min(kChunk, end - c0);
-    for (int a = 0; a < 3; ++a) {
-      voxelIndexSimd(coord[a] + c0, job.region + c0, len, origin[a], job.inv_voxel, index[a]);
-    }
-    for (std::size_t q = 0; q < len; ++q) {
-      const std::size_t i = c0 + q;
-      const uint8_t r = job.region[i];
-      point_key[i] = kEmpty;
-      if (r >= job.region_count) continue;  // kRegionInvalid: already counted by the partition
-      ++pk.in[r];
-      if (r == 0) continue;
-      int64_t k[3];
-      for (int a = 0; a < 3; ++a) {
-        const double d = index[a][q];
-        if (!(std::fabs(d) < kMaxAbsIndex)) {
-          pk.bad = true;
-          pk.bad_point = i;
-          pk.bad_axis = a;
-          pk.bad_value = d;
-          pk.bad_region = r;
-          return;
-        }
-        k[a] = static_cast<int64_t>(d);
-        pk.lo[r][a] = std::min(pk.lo[r][a], k[a]);
-        pk.hi[r][a] = std::max(pk.hi[r][a], k[a]);
-      }
-      point_key[i] = (uint64_t{r} << (3 * kVoxelAxisBits)) |
-                     ((static_cast<uint64_t>(k[0]) & kAxisMask) << (2 * kVoxelAxisBits)) |
-                     ((static_cast<uint64_t>(k[1]) & kAxisMask) << kVoxelAxisBits) |
-                     (static_cast<uint64_t>(k[2]) & kAxisMask);
-    }
+inline uint32_t HashVoxelSampler::findSlot(uint64_t key, bool& fresh) {
+  fresh = false;
+  const uint64_t hash = hashKey(key);
+  const std::size_t line = hash >> (64 - kRecentBits);
+  if (recent_key_[line] == key) return recent_slot_[line];
+  return findSlotInTable(key, hash, line, fresh);
+}
+
+uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh) {
+  std::size_t pos = hash >> shift_;
+  while (table_key_[pos] != key && table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
+  uint32_t slot;
+  if (table_key_[pos] == key) {
+    slot = table_slot_[pos];
+  } else {
+    if (voxels_ == max_voxels_) return kNoSlot;
+    fresh = true;
+    slot = static_cast<uint32_t>(voxels_++);
+    table_key_[pos] = key;
+    table_slot_[pos] = slot;
+    voxel_key_[slot] = key;
+    voxel_table_pos_[slot] = static_cast<uint32_t>(pos);
+    if (2 * voxels_ > active_ && active_ < table_key_.size()) growTable(voxels_);  // load factor <= 1/2
   }
+  recent_key_[line] = key;
+  recent_slot_[line] = slot;
+  return slot;
+}
+
+template <bool kRepresentative>
+bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys) {
+  const float* px_in = in.x();
+  const float* py_in = in.y();
+  const float* pz_in = in.z();
+  const uint32_t* rgb_in = in.rgb();
+  uint32_t* point_slot = point_slot_.data();
+  Acc* acc = acc_.get();
+  uint64_t current = kEmpty;
+  uint32_t slot = 0;
+  // The current voxel's accumulator, in locals (registers) while the key repeats.
+  double sx = 0, sy = 0, sz = 0;
+  float fx = 0, fy = 0, fz = 0, lox = 0, loy = 0, loz = 0, hix = 0, hiy = 0, hiz = 0;
+  uint32_t count = 0;
+  uint64_t sr = 0, sg = 0, sb = 0;
+  const auto store = [&] {
+    Acc& a = acc[slot];
+    a.sx = sx, a.sy = sy, a.sz = sz;  // (the first point is stored once, when the voxel starts)
+    a.lo[0] = lox, a.lo[1] = loy, a.lo[2] = loz;
+    a.hi[0] = hix, a.hi[1] = hiy, a.hi[2] = hiz;
+    a.n = count;
+    a.sr = sr, a.sg = sg, a.sb = sb;
+  };
+  for (std::size_t i = begin; i < end; ++i) {
+    const uint64_t key = keys[i - begin];
+    // The table entry a later point will probe: a miss in a table of megabytes
+    // costs more than everything else done for a point, and keys are known ahead.
+    if (i + kPrefetchAhead < end) {
+      __builtin_prefetch(&table_key_[hashKey(keys[i + kPrefetchAhead - begin]) >> shift_]);
+    }
+    if (key == kEmpty) {  // fovea or skipped
+      if constexpr (kRepresentative) point_slot[i] = kNoSlot;
+      continue;
+    }
+    const float px = px_in[i], py = py_in[i], pz = pz_in[i];
+    if (key != current) {
+      if (current != kEmpty) store();
+      bool fresh;
+      slot = findSlot(key, fresh);
+      if (slot == kNoSlot) return false;
+      if (fresh) {
+        sx = sy = sz = 0.0;
+        fx = lox = hix = px;
+        fy = loy = hiy = py;
+        fz = loz = hiz = pz;
+        acc[slot].fx = px, acc[slot].fy = py, acc[slot].fz = pz;
+        count = 0;
+        sr = sg = sb = 0;
+      } else {
+        const Acc& a = acc[slot];
+        sx = a.sx, sy = a.sy, sz = a.sz;
+        fx = a.fx, fy = a.fy, fz = a.fz;
+        lox = a.lo[0], loy = a.lo[1], loz = a.lo[2];
+        hix = a.hi[0], hiy = a.hi[1], hiz = a.hi[2];
+        count = a.n;
+        sr = a.sr, sg = a.sg, sb = a.sb;
+      }
+      current = key;
+    }
+    if constexpr (kRepresentative) point_slot[i] = slot;
+    // reduceVoxel()'s loop body, point by point in input order.
+    sx += static_cast<double>(px) - fx;
+    sy += static_cast<double>(py) - fy;
+    sz += static_cast<double>(pz) - fz;
+    lox = std::min(lox, px), hix = std::max(hix, px);
+    loy = std::min(loy, py), hiy = std::max(hiy, py);
+    loz = std::min(loz, pz), hiz = std::max(hiz, pz);
+    const uint32_t c = rgb_in[i];
+    sr += rgbRed(c);
+    sg += rgbGreen(c);
+    sb += rgbBlue(c);
+    ++count;
+  }
+  if (current != kEmpty) store();
+  return true;
 }
 
 Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
@@ -175,42 +288,101 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     inv_voxel[r] = 1.0 / v;
   }
 
-  // 1a. Each point's voxel indices (voxelIndexSimd), the index check, the ranges
-  //     and the hash key: the region and the indices wrapped to 20 bits. Contiguous
-  //     ranges of points on the pool's threads, each with its own ranges and first
-  //     bad point; merged in point order, so the outcome is the single-threaded one.
-  KeyJob job{this, &in, region, region_count, inv_voxel.data()};
-  const int parts = (pool_ != nullptr && n >= 4 * kChunk) ? pool_->parts() : 1;
-  if (parts > 1) {
-    pool_->run([](void* ctx, int part, int count) { static_cast<KeyJob*>(ctx)->self->computeKeys(
-                                                        *static_cast<KeyJob*>(ctx), part, count); },
-               &job);
-  } else {
-    computeKeys(job, 0, 1);
+  // Start where the previous frame ended (consecutive frames have similar voxel
+  // counts), so the steady state does not rehash; the output does not depend on it.
+  active_ = std::min(table_key_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
+  shift_ = 64 - std::countr_zero(active_);
+  table_mask_ = active_ - 1;
+  recent_key_.fill(kEmpty);
+  voxels_ = 0;
+
+  for (kernels::VoxelKeyState& st : part_state_) {
+    st.reset();
+    st.inv_voxel = inv_voxel.data();
+    st.origin[0] = in.origin_m.x();
+    st.origin[1] = in.origin_m.y();
+    st.origin[2] = in.origin_m.z();
+    st.region_count = region_count;
   }
-  int64_t lo_index[kMaxRegions][3], hi_index[kMaxRegions][3];
-  for (auto& row : lo_index) std::fill(std::begin(row), std::end(row), INT64_MAX);
-  for (auto& row : hi_index) std::fill(std::begin(row), std::end(row), INT64_MIN);
-  for (int part = 0; part < parts; ++part) {
-    const PartKeys& pk = part_keys_[static_cast<std::size_t>(part)];
-    if (pk.bad) {  // the first part with a bad index holds the first bad point
-      return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(pk.bad_region) + " point " +
-                                             std::to_string(pk.bad_point) + " has voxel index " +
-                                             std::to_string(pk.bad_value) + " along " + axisName(pk.bad_axis) +
-                                             " (not a finite coordinate within range)"};
+  for (BadPoint& b : part_bad_) b = BadPoint{};
+
+  // 1-2. Keys and checks, then accumulation in place. The first bad point in point
+  //      order wins over everything, then spans, then the voxel count (as the
+  //      reference), so a voxel overflow only stops the accumulation.
+  const int parts = (pool_ != nullptr && pool_->parts() > 1 && n >= 4 * kChunk) ? pool_->parts() : 1;
+  bool fits = true;
+  const BadPoint* bad = nullptr;
+  if (parts > 1) {
+    KeyJob job{this, &in, region, point_key_.data(), &part_state_, &part_bad_};
+    pool_->run(
+        [](void* ctx, int part, int count) {
+          auto* j = static_cast<KeyJob*>(ctx);
+          const std::size_t n_points = j->in->size();
+          const std::size_t b = WorkerPool::rangeBegin(n_points, part, count);
+          const std::size_t e = WorkerPool::rangeBegin(n_points, part + 1, count);
+          const auto p = static_cast<std::size_t>(part);
+          j->self->computeKeys(*j->in, j->region, b, e, (*j->state)[p], j->keys + b, (*j->bad)[p]);
+        },
+        &job);
+    for (int part = 0; part < parts && bad == nullptr; ++part) {
+      if (part_bad_[static_cast<std::size_t>(part)].bad) bad = &part_bad_[static_cast<std::size_t>(part)];
     }
-    for (int r = 0; r < kMaxRegions; ++r) {
-      counts.in[r] += pk.in[r];
-      for (int a = 0; a < 3; ++a) {
-        lo_index[r][a] = std::min(lo_index[r][a], pk.lo[r][a]);
-        hi_index[r][a] = std::max(hi_index[r][a], pk.hi[r][a]);
+    if (bad == nullptr) {
+      kernels::VoxelKeyState& st = part_state_[0];
+      for (int part = 1; part < parts; ++part) {
+        const kernels::VoxelKeyState& other = part_state_[static_cast<std::size_t>(part)];
+        for (int r = 0; r < 256; ++r) st.histogram[r] += other.histogram[r];
+        for (int r = 0; r < kMaxRegions; ++r) {
+          for (int a = 0; a < 3; ++a) {
+            st.lo[r][a] = std::min(st.lo[r][a], other.lo[r][a]);
+            st.hi[r][a] = std::max(st.hi[r][a], other.hi[r][a]);
+          }
+        }
+      }
+      fits = representative ? accumulate<true>(in, 0, n, point_key_.data())
+                            : accumulate<false>(in, 0, n, point_key_.data());
+    }
+  } else {
+    const uint32_t* histogram = part_state_[0].histogram;
+    const auto sampledSoFar = [&] {
+      uint64_t total = 0;
+      for (int r = 1; r < region_count; ++r) total += histogram[r];
+      return total;
+    };
+    for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
+      const std::size_t c1 = std::min(n, c0 + kChunk);
+      const uint64_t sampled_before = sampledSoFar();
+      if (!computeKeys(in, region, c0, c1, part_state_[0], chunk_key_.data(), part_bad_[0])) {
+        bad = &part_bad_[0];
+        break;
+      }
+      if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
+        if (representative) std::fill(point_slot_.begin() + c0, point_slot_.begin() + c1, kNoSlot);
+        continue;
+      }
+      if (fits) {
+        fits = representative ? accumulate<true>(in, c0, c1, chunk_key_.data())
+                              : accumulate<false>(in, c0, c1, chunk_key_.data());
       }
     }
   }
+  const std::size_t voxels = voxels_;
+  clearTable(voxels);  // the table is empty again for the next frame
+  last_voxels_ = voxels;
+  if (bad != nullptr) {
+    return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(bad->region) + " point " +
+                                           std::to_string(bad->point) + " has voxel index " +
+                                           std::to_string(bad->value) + " along " + axisName(bad->axis) +
+                                           " (not a finite coordinate within range)"};
+  }
+  const kernels::VoxelKeyState& st = part_state_[0];
+  int64_t lo_index[kMaxRegions][3] = {};
+  for (int r = 0; r < region_count; ++r) counts.in[r] = st.histogram[r];
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
     for (int a = 0; a < 3; ++a) {
-      const int64_t span = hi_index[r][a] - lo_index[r][a] + 1;
+      lo_index[r][a] = static_cast<int64_t>(st.lo[r][a]);
+      const int64_t span = static_cast<int64_t>(st.hi[r][a]) - lo_index[r][a] + 1;
       if (span > kMaxVoxelSpan) {
         return {ErrorCode::kRangeExceeded,
                 "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) + " voxels of " +
@@ -219,94 +391,38 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
       }
     }
   }
-
-  // 1b. Each point's voxel slot, through the previous point's voxel, the recent
-  //     cache and the table (wrapped keys are unique now that the spans fit).
-  constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
-  std::size_t voxels = 0;
-  uint64_t last_key = kEmpty;
-  uint32_t last_slot = 0;
-  // Start where the previous frame ended (consecutive frames have similar voxel
-  // counts), so the steady state does not rehash; the output does not depend on it.
-  active_ = std::min(table_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
-  shift_ = 64 - std::countr_zero(active_);
-  std::size_t table_mask = active_ - 1;
-  recent_key_.fill(kEmpty);
-  uint32_t* point_slot = point_slot_.data();
-  const uint64_t* point_key = point_key_.data();
-  for (std::size_t i = 0; i < n; ++i) {
-    const uint64_t key = point_key[i];
-    if (key == kEmpty) {  // fovea or skipped
-      point_slot[i] = kNoSlot;
-      continue;
-    }
-    if (key != last_key) {
-      const uint64_t hash = hashKey(key);
-      const std::size_t line = hash >> (64 - kRecentBits);
-      if (recent_key_[line] == key) {
-        last_slot = recent_slot_[line];
-      } else {
-        std::size_t pos = hash >> shift_;
-        while (table_[pos].key != key && table_[pos].key != kEmpty) pos = (pos + 1) & table_mask;
-        if (table_[pos].key == key) {
-          last_slot = table_[pos].slot;
-        } else {
-          if (voxels == max_voxels_) {
-            clearTable(voxels);
-            last_voxels_ = voxels;
-            return {ErrorCode::kCapacityExceeded, "voxel sampler: more than " + std::to_string(max_voxels_) +
-                                                      " occupied voxels: raise pipeline.max_voxels"};
-          }
-          last_slot = static_cast<uint32_t>(voxels++);
-          table_[pos] = Entry{key, last_slot};
-          voxel_key_[last_slot] = key;
-          voxel_table_pos_[last_slot] = static_cast<uint32_t>(pos);
-          voxel_start_[last_slot] = 0;
-          if (2 * voxels > active_ && active_ < table_.size()) {  // keep the load factor <= 1/2
-            growTable(voxels);
-            table_mask = active_ - 1;
-          }
-        }
-        recent_key_[line] = key;
-        recent_slot_[line] = last_slot;
-      }
-      last_key = key;
-    }
-    point_slot[i] = last_slot;
-    ++voxel_start_[last_slot];
+  if (!fits) {
+    return {ErrorCode::kCapacityExceeded,
+            "voxel sampler: more than " + std::to_string(max_voxels_) + " occupied voxels: raise pipeline.max_voxels"};
   }
-  clearTable(voxels);  // the table is empty again for the next frame
-  last_voxels_ = voxels;
   const std::size_t fovea = counts.in[0];
   if (fovea + voxels > out.points.capacity()) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
                                               " points, capacity is " + std::to_string(out.points.capacity())};
   }
 
-  // 2. Group the points by voxel (counting sort; input order within a voxel).
-  uint32_t start = 0;
-  for (std::size_t s = 0; s < voxels; ++s) {
-    const uint32_t count = voxel_start_[s];
-    voxel_start_[s] = start;
-    voxel_cursor_[s] = start;
-    start += count;
-  }
-  voxel_start_[voxels] = start;
-  for (std::size_t i = 0; i < n; ++i) {
-    const uint32_t s = point_slot[i];
-    if (s != kNoSlot) order_[voxel_cursor_[s]++] = static_cast<uint32_t>(i);
-  }
-
   // 3. The occupied voxels in the reference's key order (keys are unique: no ties).
   //    Within the span, k - lo is (wrapped k - wrapped lo) mod 2^20: no index is recomputed.
+  //    The sort key packs (region, i - lo, j - lo, k - lo) with as many bits per axis as
+  //    the widest region needs, which orders like the reference's 20-bit fields and
+  //    leaves the radix sort fewer bytes that vary.
+  int width[3] = {0, 0, 0};
+  for (int r = 1; r < region_count; ++r) {
+    if (counts.in[r] == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const auto extent = static_cast<uint64_t>(static_cast<int64_t>(st.hi[r][a]) - lo_index[r][a]);
+      width[a] = std::max(width[a], static_cast<int>(std::bit_width(extent)));
+    }
+  }
+  const int shift[3] = {width[1] + width[2], width[2], 0};
+  const int region_shift = width[0] + width[1] + width[2];
   for (std::size_t s = 0; s < voxels; ++s) {
     const uint64_t hash_key = voxel_key_[s];
     const auto r = static_cast<uint8_t>(hash_key >> (3 * kVoxelAxisBits));
-    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+    uint64_t key = uint64_t{r} << region_shift;
     for (int a = 0; a < 3; ++a) {
-      const int shift = (2 - a) * kVoxelAxisBits;
-      const uint64_t wrapped = (hash_key >> shift) & kAxisMask;
-      key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift;
+      const uint64_t wrapped = (hash_key >> ((2 - a) * kVoxelAxisBits)) & kAxisMask;
+      key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift[a];
     }
     sort_keys_[s] = key;
     sort_slot_[s] = static_cast<uint32_t>(s);
@@ -314,32 +430,40 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
 
   // The fovea, untouched and in input order.
-  std::size_t o = copyFovea(in, region, out, representative);
+  copyFoveaFast(in, region, out, representative);
   counts.out[0] = static_cast<uint32_t>(fovea);
 
-  // 4. One centroid per voxel: the reference's reduction over the same points in
-  //    the same order. Voxels are independent and their output places fixed
-  //    (fovea + rank), so threads can share them without changing a bit.
-  if (pool_ != nullptr && pool_->parts() > 1 && voxels >= 1024) {
-    ReduceJob job{this, &in, &out, voxels, fovea, representative};
-    pool_->run(
-        [](void* ctx, int part, int parts) {
-          auto* j = static_cast<ReduceJob*>(ctx);
-          uint32_t* region_counts = j->self->part_counts_.data() + kMaxRegions * static_cast<std::size_t>(part);
-          std::fill(region_counts, region_counts + kMaxRegions, 0u);
-          j->self->reduceVoxels(*j->in, *j->out, WorkerPool::rangeBegin(j->voxels, part, parts),
-                                WorkerPool::rangeBegin(j->voxels, part + 1, parts), j->fovea, j->representative,
-                                region_counts);
-        },
-        &job);
-    for (int part = 0; part < pool_->parts(); ++part) {
-      for (int r = 1; r < kMaxRegions; ++r) counts.out[r] += part_counts_[kMaxRegions * static_cast<std::size_t>(part) + r];
+  // One point per voxel, with reduceVoxel()'s final expressions.
+  for (std::size_t q = 0; q < voxels; ++q) {
+    const std::size_t o = fovea + q;
+    const uint32_t slot = sort_slot_[q];
+    if (q + 16 < voxels) {
+      const Acc* ahead = &acc_[sort_slot_[q + 16]];
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(reinterpret_cast<const char*>(ahead) + sizeof(Acc) - 1);
     }
-  } else {
-    reduceVoxels(in, out, 0, voxels, fovea, representative, counts.out.data());
+    rank_[slot] = static_cast<uint32_t>(o);
+    const Acc& a = acc_[slot];
+    const auto r = static_cast<uint8_t>(sort_keys_[q] >> region_shift);
+    const auto cnt = static_cast<uint64_t>(a.n);
+    const double inv_n = 1.0 / static_cast<double>(cnt);
+    out.points.x()[o] = std::clamp(static_cast<float>(a.fx + a.sx * inv_n), a.lo[0], a.hi[0]);
+    out.points.y()[o] = std::clamp(static_cast<float>(a.fy + a.sy * inv_n), a.lo[1], a.hi[1]);
+    out.points.z()[o] = std::clamp(static_cast<float>(a.fz + a.sz * inv_n), a.lo[2], a.hi[2]);
+    out.points.rgb()[o] = packRgb(static_cast<uint8_t>((a.sr + cnt / 2) / cnt),
+                                  static_cast<uint8_t>((a.sg + cnt / 2) / cnt),
+                                  static_cast<uint8_t>((a.sb + cnt / 2) / cnt));
+    out.region[o] = r;
+    out.weight[o] = a.n;
+    ++counts.out[r];
   }
-  o += voxels;
-  (void)out.points.resize(o);
+  if (representative != nullptr) {
+    const uint32_t* point_slot = point_slot_.data();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (point_slot[i] != kNoSlot) representative[i] = rank_[point_slot[i]];
+    }
+  }
+  (void)out.points.resize(fovea + voxels);
   return Status::ok();
 }
 

@@ -1,24 +1,28 @@
 // The fast voxel sampler: same contract and the same output as VoxelSampler (the
-// reference), without radix-sorting the points.
+// reference), in one pass over the points that accumulates every voxel in place.
 //
-// 1. A pass over the points (split across the worker pool's threads, if any)
-//    computes their voxel indices (voxelIndexSimd, 2048 points at a time, bit-exact
-//    with voxelIndex()), makes the reference's checks and a hash key per point: the
-//    region and the indices wrapped to 20 bits, unique within the span the reference
-//    allows (a wider region is refused anyway). A second, sequential pass gives each
-//    sampled point the slot of its voxel, found through the previous point's voxel
-//    (image coherence), a small direct-mapped cache of recent voxels, then a
-//    preallocated open-addressing hash table (power of two >= 2 max_voxels, linear
-//    probing; a frame starts on a prefix sized from the previous frame's voxel
-//    count, at least 16 Ki entries, and doubles it when half full).
-// 2. A counting sort groups the points by slot, keeping input order within a voxel.
-// 3. Only the occupied voxels (far fewer than points) are radix-sorted, by the
-//    reference's packed key (region, i, j, k relative to the region's smallest index).
-// 4. Each voxel's points are reduced with the reference's code in the reference's
-//    order, so centroids, colours and weights are bit-identical (split across a
-//    WorkerPool's threads when one is set: every voxel's output place is fixed).
-// Per point it keeps 16 bytes (key, slot, grouped index) where the reference keeps 24.
-// All memory is allocated by the constructor; sample() never allocates.
+// 1. Points are taken 2048 at a time. voxelKeyRange (Highway) computes each point's
+//    voxel indices (bit-exact with voxelIndex()), the per-region index ranges, the
+//    region histogram and a packed key: the region and the indices wrapped to 20 bits,
+//    unique within the span the reference allows (a wider region is refused anyway).
+//    Points it does not take (an index of 2^51 or more in magnitude, or a bad one) are
+//    done by the scalar code, which also finds the reference's first bad point.
+// 2. A scalar loop over the chunk keeps the current voxel's accumulator in registers
+//    while the key does not change (image coherence: consecutive pixels mostly share a
+//    voxel). On a change it stores it back to the voxel's slot and loads (or starts)
+//    the new voxel's, found through a 1024-entry direct-mapped cache of recent voxels,
+//    then a preallocated open-addressing table (power of two >= 2 max_voxels, linear
+//    probing, multiplicative hash; a frame starts on a prefix sized from the previous
+//    frame's voxel count, at least 16 Ki entries, and doubles it when half full).
+//    The accumulator holds exactly what reduceVoxel() computes (first point, double
+//    sums relative to it, float min/max, integer colour sums, count), updated with the
+//    same expressions in input order, so centroids are bit-identical.
+// 3. Only the occupied voxels are radix-sorted, by the reference's packed key
+//    (region, i, j, k relative to the region's smallest index), and written out in
+//    that order with reduceVoxel()'s final expressions.
+// With a worker pool, step 1 runs on its threads over contiguous ranges (keys kept for
+// every point, ranges and first bad point merged in point order); steps 2-3 are
+// sequential. All memory is allocated by the constructor; sample() never allocates.
 //
 // A difference by design: with more than max_voxels occupied voxels it stops
 // counting at the first voxel too many (the error says "more than").
@@ -27,10 +31,12 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hal/result.h"
 #include "pipeline/acuity.h"
+#include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/worker_pool.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"
@@ -47,66 +53,81 @@ class HashVoxelSampler {
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out, SampleCounts& counts,
                 uint32_t* representative = nullptr);
 
-  // Lets step 4 (one centroid per voxel) share the pool's threads; the output is
+  // Lets step 1 (voxel keys and checks) share the pool's threads; the output is
   // the same. The pool must outlive the sampler's use of it; null: one thread.
   void setWorkerPool(WorkerPool* pool);
 
   std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
-  std::size_t tableSize() const { return table_.size(); }
+  std::size_t tableSize() const { return table_key_.size(); }
 
-  static constexpr std::size_t kChunk = 2048;  // points per voxel-index batch
+  static constexpr std::size_t kChunk = 2048;  // points per key batch
 
  private:
-  struct Entry {
-    uint64_t key;
-    uint32_t slot;
+  // What reduceVoxel() accumulates for one voxel.
+  struct Acc {
+    double sx, sy, sz;  // sums of (double(p) - first), input order
+    float fx, fy, fz;   // the first point
+    float lo[3], hi[3];
+    uint32_t n;
+    uint64_t sr, sg, sb;
   };
-  static constexpr uint64_t kEmpty = UINT64_MAX;  // keys never set bit 63
+  // The first point with a bad voxel index (as the reference reports it).
+  struct BadPoint {
+    bool bad = false;
+    std::size_t point = 0;
+    int axis = 0;
+    double value = 0.0;
+    uint8_t region = 0;
+  };
+  static constexpr uint64_t kEmpty = kernels::kNoVoxelKey;  // keys never set bit 63
   static constexpr int kRecentBits = 10;
 
-  struct ReduceJob;
   struct KeyJob;
-  // Per pool part: what step 1a found in its range of points.
-  struct PartKeys {
-    std::array<uint32_t, kMaxRegions> in{};
-    int64_t lo[kMaxRegions][3];
-    int64_t hi[kMaxRegions][3];
-    bool bad = false;  // a voxel index out of range: the first such point of the part
-    std::size_t bad_point = 0;
-    int bad_axis = 0;
-    double bad_value = 0.0;
-    uint8_t bad_region = 0;
-  };
-  void computeKeys(const KeyJob& job, int part, int parts);
-  void reduceVoxels(const PointCloud& in, FoveatedCloud& out, std::size_t q_begin, std::size_t q_end, std::size_t fovea,
-                    uint32_t* representative, uint32_t* region_counts) const;
+  // Keys of points [begin, end) into keys[0, end - begin), with the scalar code for
+  // the points the SIMD kernel leaves. False at the first bad point (in `bad`).
+  bool computeKeys(const PointCloud& in, const uint8_t* region, std::size_t begin, std::size_t end,
+                   kernels::VoxelKeyState& state, uint64_t* keys, BadPoint& bad) const;
+  // Accumulates points [begin, end) (keys[i - begin]) into their voxels. Returns
+  // false when a voxel beyond max_voxels appears (nothing more is accumulated).
+  template <bool kRepresentative>
+  bool accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
+  // The slot of `key`, inserting a fresh voxel; kNoSlot past max_voxels.
+  uint32_t findSlot(uint64_t key, bool& fresh);
+  // findSlot() past the recent-voxel cache.
+  [[gnu::noinline]] uint32_t findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh);
   void clearTable(std::size_t voxels);
   // Doubles the table's active prefix and reinserts the voxels found so far.
   void growTable(std::size_t voxels);
 
   std::size_t max_voxels_ = 0;
-  std::size_t active_ = 0;  // entries of table_ in use this frame (a power of two)
+  std::size_t active_ = 0;  // entries of the table in use this frame (a power of two)
+  std::size_t table_mask_ = 0;
   std::size_t last_voxels_ = 0;
+  std::size_t voxels_ = 0;  // occupied this frame
   int shift_ = 64;
-  std::vector<Entry> table_;
+  // The table: keys (probed; 8 bytes an entry keeps it dense in cache) and, beside
+  // them, the slots (read on a match only).
+  std::vector<uint64_t> table_key_;
+  std::vector<uint32_t> table_slot_;
   // Per voxel slot (max_voxels).
-  std::vector<uint64_t> voxel_key_;         // the hash key
-  std::vector<uint32_t> voxel_table_pos_;   // where it sits in table_
-  std::vector<uint32_t> voxel_start_;       // count, then start of its points in order_ (max_voxels + 1)
-  std::vector<uint32_t> voxel_cursor_;
+  std::vector<uint64_t> voxel_key_;        // the hash key
+  std::vector<uint32_t> voxel_table_pos_;  // where it sits in the table
+  // Default-initialised (not zeroed): the pages of slots a frame never reaches are not
+  // touched, so the resident size follows the voxels actually used, not max_voxels.
+  std::unique_ptr<Acc[]> acc_;
+  std::vector<uint32_t> rank_;             // place in the output order
   std::vector<uint64_t> sort_keys_, sort_keys_scratch_;
   std::vector<uint32_t> sort_slot_, sort_slot_scratch_;
   // Per point (max_points).
-  std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot
-  std::vector<uint64_t> point_key_;   // hash key, or kEmpty (fovea, skipped)
-  std::vector<uint32_t> order_;       // point indices grouped by slot, input order within
-  std::vector<double> chunk_index_;   // 3 * kChunk voxel indices per pool part
-  std::vector<PartKeys> part_keys_;
+  std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot (only with representatives)
+  std::vector<uint64_t> point_key_;   // keys of the whole cloud (threaded key pass only)
+  std::vector<uint64_t> chunk_key_;   // kChunk keys (single-threaded)
+  std::vector<kernels::VoxelKeyState> part_state_;
+  std::vector<BadPoint> part_bad_;
   std::array<uint64_t, std::size_t{1} << kRecentBits> recent_key_{};
   std::array<uint32_t, std::size_t{1} << kRecentBits> recent_slot_{};
   WorkerPool* pool_ = nullptr;
-  std::vector<uint32_t> part_counts_;  // kMaxRegions per pool part
 };
 
 }  // namespace fovea::pipeline

@@ -175,6 +175,125 @@ TEST_P(SamplerTarget, ErrorsMatch) {
   expectSameSampling(cloud, ones, 2, {0, 1e-3}, 3000, "huge");
 }
 
+TEST_P(SamplerTarget, RunsAndAlternatingKeys) {
+  // The last-voxel cache: runs of every length, keys alternating point by point
+  // between two voxels, cycles through more voxels than the recent-voxel cache holds
+  // (1024 lines) and than the table's first prefix holds, fovea and skipped points
+  // inside runs, region changes inside a SIMD vector.
+  std::mt19937_64 rng(47);
+  for (std::size_t cycle : {std::size_t{1}, std::size_t{2}, std::size_t{3}, std::size_t{1100}, std::size_t{9000}}) {
+    PointCloud cloud(60000);
+    std::vector<uint8_t> region;
+    std::size_t run = 1;
+    for (std::size_t i = 0; cloud.size() < 60000; ++i) {
+      if (i % 997 == 0) run = 1 + rng() % 40;
+      const std::size_t v = (i / run) % cycle;
+      const float x = 0.1f * static_cast<float>(v % 97) + 0.01f * static_cast<float>(rng() % 8);
+      const float y = 0.1f * static_cast<float>(v / 97) - 0.01f * static_cast<float>(rng() % 8);
+      (void)cloud.push(x, y, 0.05f, static_cast<uint32_t>(rng()));
+      const uint64_t pick = rng() % 64;
+      region.push_back(pick == 0 ? 0 : (pick == 1 ? kRegionInvalid : (pick == 2 ? 2 : 1)));
+    }
+    expectSameSampling(cloud, region, 3, {0, 0.1, 0.3}, cloud.size(), "runs");
+    expectSameSampling(cloud, std::vector<uint8_t>(cloud.size(), 1), 2, {0, 0.1}, cloud.size(), "runs, one region");
+  }
+}
+
+TEST_P(SamplerTarget, LargeIndicesAndSpecialsOutsideTheSampledRegions) {
+  // Indices between 2^51 and 2^52 are valid but leave the SIMD key path; at 2^52 and
+  // beyond they are refused. NaN and infinities in the fovea or skipped points are ignored.
+  PointCloud cloud(5000);
+  std::mt19937_64 rng(48);
+  std::vector<uint8_t> region;
+  for (int i = 0; i < 5000; ++i) {
+    const float f = 0.001f * static_cast<float>(i % 300);
+    (void)cloud.push(f, -f, 0.5f * f, static_cast<uint32_t>(i));
+    region.push_back(static_cast<uint8_t>(1 + i % 2));
+  }
+  for (int i : {7, 8, 9, 100, 2047, 2048, 4999}) {
+    cloud.x()[i] = std::numeric_limits<float>::quiet_NaN();
+    cloud.y()[i] = std::numeric_limits<float>::infinity();
+    region[i] = (i % 2) ? 0 : kRegionInvalid;
+  }
+  expectSameSampling(cloud, region, 3, {0, 0.01, 0.02}, cloud.size(), "specials outside");
+  // 0.1 nm voxels 300 km from the origin: indices near 3e15, between 2^51 and 2^52, valid
+  // (spans of about 1e5 voxels) but outside the SIMD key path; then beyond 2^52.
+  for (const double far : {3e5, -3.5e5, 5e5}) {
+    PointCloud cloud_far(3000);
+    cloud_far.origin_m = Eigen::Vector3d(far, -far, 0.25);
+    std::vector<uint8_t> region_far;
+    for (int i = 0; i < 3000; ++i) {
+      const float f = 1e-9f * static_cast<float>(rng() % 10000);
+      (void)cloud_far.push(f, -f, 1e-9f * static_cast<float>(i % 7), static_cast<uint32_t>(rng()));
+      region_far.push_back(static_cast<uint8_t>(i % 13 == 0 ? 1 : 2));
+    }
+    VoxelSampler ref(cloud_far.size(), cloud_far.size());
+    FoveatedCloud out_ref(cloud_far.size());
+    SampleCounts counts;
+    const Status s = ref.sample(cloud_far, region_far.data(), 3, {0, 0.01, 1e-10}, out_ref, counts);
+    EXPECT_EQ(s.isOk(), std::fabs(far) < 4e5) << s.toString();  // 5e15 > 2^52: refused
+    expectSameSampling(cloud_far, region_far, 3, {0, 0.01, 1e-10}, cloud_far.size(), "indices near 2^52");
+  }
+  cloud.x()[3005] = -std::numeric_limits<float>::infinity();
+  region[3005] = 1;
+  expectSameSampling(cloud, region, 3, {0, 0.01, 0.02}, cloud.size(), "infinity sampled");
+}
+
+TEST_P(SamplerTarget, ErrorPrecedence) {
+  // A voxel overflow early in the cloud, a bad point late: the bad point wins (as in
+  // the reference, which checks every index before counting voxels); then spans.
+  PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d::Zero(), 2.0f, 49);
+  std::vector<uint8_t> ones(cloud.size(), 1);
+  cloud.z()[19999] = std::numeric_limits<float>::quiet_NaN();
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 10, "overflow then nan");
+  cloud.z()[19999] = 1e9f;  // a span beyond 2^20 voxels of 1 cm
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, 10, "overflow then span");
+  cloud.z()[19999] = 0.0f + static_cast<float>(0.01 * 1048576.0 * 2);  // aliases a wrapped key
+  cloud.z()[19998] = 0.0f;
+  cloud.x()[19999] = cloud.x()[19998];
+  cloud.y()[19999] = cloud.y()[19998];
+  expectSameSampling(cloud, ones, 2, {0, 0.01}, cloud.size(), "aliasing span");
+}
+
+TEST_P(SamplerTarget, FixationMatchesTheReference) {
+  // computeFixationSimd against computeFixation: every mode, cone angles, percentiles,
+  // all-fovea clouds (FREF), fovea-less ones (fallbacks), specials, points behind the eye,
+  // far origins, min_m clamping; d0 compared bit for bit.
+  std::mt19937_64 rng(50);
+  for (std::size_t n : {0, 1, 3, 17, 1000, 30001}) {
+    for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 3)}) {
+      PointCloud cloud = test::randomCloud(n, origin, 3.0f, rng());
+      for (std::size_t i = 0; i < n; i += 97) cloud.z()[i] = std::numeric_limits<float>::quiet_NaN();
+      for (int fovea_share : {0, 1, 2, 100}) {
+        std::vector<uint8_t> region(n);
+        for (auto& r : region) r = (static_cast<int>(rng() % 100) < fovea_share) ? 0 : static_cast<uint8_t>(1 + rng() % 3);
+        if (fovea_share == 100) std::fill(region.begin(), region.end(), uint8_t{0});
+        for (const Eigen::Vector3d& dir : {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(1, -0.3, 0.2)}) {
+          Gaze gaze;
+          gaze.origin_m = origin + Eigen::Vector3d(0.1, -0.2, -2.0);
+          gaze.direction = dir.normalized();
+          for (FixationMode mode : {FixationMode::kHit, FixationMode::kCentroid, FixationMode::kFixed}) {
+            for (double cone : {0.5, 1.0, 20.0, 89.0}) {
+              FixationConfig config;
+              config.mode = mode;
+              config.hit_cone_deg = cone;
+              config.hit_percentile = cone < 1.0 ? 0.0 : (cone > 30.0 ? 1.0 : 0.05);
+              config.min_m = cone > 30.0 ? 1e3 : 0.05;
+              std::vector<double> t_ref(n + 1), t_simd(n + 1);
+              const Fixation a = computeFixation(cloud, region.data(), gaze, config, t_ref.data());
+              const Fixation b = computeFixationSimd(cloud, region.data(), gaze, config, t_simd.data());
+              EXPECT_EQ(std::bit_cast<uint64_t>(a.d0_m), std::bit_cast<uint64_t>(b.d0_m)) << n << " " << cone;
+              EXPECT_EQ(a.source, b.source);
+              EXPECT_EQ(a.support, b.support);
+              EXPECT_EQ(a.clamped, b.clamped);
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
 std::vector<int64_t> targetsHere() {
   forceSimdTarget(0);
