@@ -22,6 +22,11 @@
 namespace fovea {
 namespace {
 
+// Under an emulator (qemu for a cross build) everything runs about 20 times
+// slower: the streams run longer and fewer frames are expected.
+const bool kEmulated = std::string(FOVEA_EMULATOR) != "";
+double streamSeconds(double seconds) { return kEmulated ? 4 * seconds : seconds; }
+
 std::string program(const char* path) {
   const std::string emulator = FOVEA_EMULATOR;
   return emulator.empty() ? std::string(path) : emulator + " " + path;
@@ -66,7 +71,7 @@ StreamRun runStream(const test::TempDir& dir, const std::string& listen, const s
                              " --summary " + dir.file("summary.json") + " --save-ply " + dir.file("frames") + " " +
                              operator_flags);
   EXPECT_TRUE(op.waitFor("connected to", 30)) << op.output();
-  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  std::this_thread::sleep_for(std::chrono::duration<double>(streamSeconds(seconds)));
   run.service_exit = service.stop(SIGTERM, 20);
   run.service_output = service.output();
   run.operator_exit = op.stop(0, 20);  // signal 0: only waits for the exit the Bye causes
@@ -111,7 +116,7 @@ TEST_F(StreamLoopback, OperatorDecodesTheServiceFramesForItsOwnGaze) {
   // The operator's summary: frames, latency, nothing invalid.
   const std::string summary = readFile(dir_.file("summary.json"));
   ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"frames\": (\\d+)"))) << summary;
-  EXPECT_GE(std::stoi(m[1].str()), 5) << summary;  // 15 fps for ~3 s (fewer on a loaded machine)
+  EXPECT_GE(std::stoi(m[1].str()), kEmulated ? 1 : 5) << summary;  // 15 fps for ~3 s (fewer on a loaded machine)
   EXPECT_NE(summary.find("\"datagrams_invalid\": 0"), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"chunks_bad\": 0"), std::string::npos) << summary;
   ASSERT_TRUE(std::regex_search(summary, m, std::regex("\"p50\": ([0-9.e+-]+)"))) << summary;
