@@ -1,0 +1,68 @@
+// Every setting of the fovead service (issue 5), in one struct: what the
+// configuration file (TOML, firmware/config.h) and the board profiles (board/)
+// fill, what the command line overrides, what `fovead --print-config` shows,
+// and what the service runtime (firmware/service.h) is built from. Each field
+// is an existing component's own configuration where one exists, so a setting
+// lives in one place.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "firmware/gaze_policy.h"
+#include "firmware/log.h"
+#include "firmware/status_lines.h"
+#include "firmware/streamer.h"
+#include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
+
+namespace fovea::firmware {
+
+// Where a stage's thread runs. core -1: anywhere; realtime_priority 0: the
+// normal scheduler, 1..99: SCHED_FIFO at that priority. When the system refuses
+// (no CAP_SYS_NICE, a core that does not exist) the service logs it and runs on.
+struct ThreadPlacement {
+  int core = -1;
+  int realtime_priority = 0;
+};
+
+struct CameraSettings {
+  std::string spec = "mock:living-room,realtime=on";  // hal::createCamera
+  pipeline::DepthRange depth;
+  // Capture retries after a failure or a disconnect: from retry_initial_ms,
+  // doubling up to retry_max_ms, for ever (the camera may come back).
+  int64_t retry_initial_ms = 100;
+  int64_t retry_max_ms = 5000;
+  // No frame for this long is a stall (a fault); 0: three frame periods.
+  int64_t stall_timeout_ms = 0;
+};
+
+struct GpioSettings {
+  std::string spec = "mock";  // hal::createGpio: "mock", "gpiod:gpiochip0"
+  StatusLinesConfig lines;
+};
+
+struct RuntimeSettings {
+  // Frame slots per ring between stages (capture -> foveation -> send); latest wins.
+  int ring_depth = 2;
+  ThreadPlacement capture_thread;
+  ThreadPlacement foveation_thread;
+  ThreadPlacement send_thread;
+  bool memory_lock = false;         // mlockall(MCL_CURRENT | MCL_FUTURE) after start-up
+  LogLevel log_level = LogLevel::kInfo;
+  int64_t status_interval_ms = 5000;  // the status log line
+  bool systemd_notify = true;         // READY, STATUS, WATCHDOG when NOTIFY_SOCKET is set
+};
+
+struct ServiceConfig {
+  std::string board = "host-mock";  // the profile these settings started from
+  CameraSettings camera;
+  pipeline::PipelineCapacity pipeline;  // max points and voxels, kernels, threads per frame
+  pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
+  StreamConfig stream;                  // listen, key, budget, MTU, gaze timeout, fallback, codec
+  std::string key_file;                 // read into stream.link.key at start-up
+  GpioSettings gpio;
+  RuntimeSettings runtime;
+};
+
+}  // namespace fovea::firmware
