@@ -7,7 +7,7 @@ set key top right box opaque
 set offsets graph 0.05, graph 0.05, graph 0.05, graph 0.05
 set logscale x
 set yrange [-2:*]
-set xlabel 'bytes per frame [MB] (raw, 15 B per point: x,y,z float + r,g,b uchar; log scale)'
+set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams; log scale)'
 set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'
 set title 'perceptual error against size'
 plot 'report_plot.dat' index 0 using 3:6 with linespoints lw 1.5 pt 5 ps 1.6 lc 1 title 'm = 0.022', \

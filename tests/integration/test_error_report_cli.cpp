@@ -63,7 +63,7 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
   const std::vector<std::string> header = splitCsvLine(line);
   std::map<std::string, std::size_t> column;
   for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
-  for (const char* name : {"preset", "m", "region", "region_name", "points_out", "bytes_per_frame", "time_ms_median",
+  for (const char* name : {"preset", "m", "region", "region_name", "points_out", "bytes_per_frame", "raw_bytes_per_frame", "time_ms_median",
                            "rms_mm", "max_mm", "rms_over_voxel", "share_above_mar", "ratio_median"}) {
     ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
   }
@@ -71,16 +71,30 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
   const std::map<std::string, int> regions = {{"F1", 4}, {"F2", 5}, {"F3", 6}, {"FREF", 1}};
   std::set<std::string> seen;
   std::map<std::string, double> fref_rms, f1_points, fref_points;
+  std::map<std::string, double> all_bytes, region_bytes_sum;  // per preset/m
   while (std::getline(csv, line)) {
     const std::vector<std::string> f = splitCsvLine(line);
     ASSERT_EQ(f.size(), header.size()) << line;
     const std::string key = f[column["preset"]] + "/" + f[column["m"]] + "/" + f[column["region"]];
     EXPECT_TRUE(seen.insert(key).second) << "duplicate row " << key;
     ASSERT_TRUE(regions.count(f[column["preset"]])) << line;
+    const std::string config = f[column["preset"]] + "/" + f[column["m"]];
+    const double bytes = std::stod(f[column["bytes_per_frame"]]);
+    const double points_out = std::stod(f[column["points_out"]]);
+    EXPECT_DOUBLE_EQ(std::stod(f[column["raw_bytes_per_frame"]]), 15.0 * points_out) << line;
+    // On the wire: the codec's few bytes a point plus 36 bytes of framing per 1200-byte datagram.
+    if (points_out > 0) {
+      EXPECT_GT(bytes, 1.0 * points_out) << line;
+      EXPECT_LT(bytes, 15.0 * points_out) << line;
+    }
+    if (f[column["region"]] == "all") {
+      all_bytes[config] = bytes;
+    } else {
+      region_bytes_sum[config] += bytes;
+    }
     if (f[column["region"]] == "all") {
       EXPECT_FALSE(f[column["time_ms_median"]].empty()) << line;
-      const double points = std::stod(f[column["points_out"]]);
-      EXPECT_DOUBLE_EQ(std::stod(f[column["bytes_per_frame"]]), 15.0 * points) << line;
+      const double points = points_out;
       if (f[column["preset"]] == "FREF") {
         fref_rms[f[column["m"]]] = std::stod(f[column["rms_mm"]]);
         fref_points[f[column["m"]]] = points;
@@ -91,6 +105,8 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
       EXPECT_LT(std::stoi(f[column["region"]]), regions.at(f[column["preset"]])) << line;
     }
   }
+  // A frame's bytes are its regions' bytes.
+  for (const auto& [config, bytes] : all_bytes) EXPECT_NEAR(region_bytes_sum[config], bytes, 1e-6 * bytes) << config;
   std::size_t expected_rows = 0;
   for (const auto& [preset, count] : regions) expected_rows += 3 * static_cast<std::size_t>(count + 1);
   EXPECT_EQ(seen.size(), expected_rows);
@@ -104,7 +120,7 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
     EXPECT_LT(f1_points[m], fref_points[m]);
   }
   const std::string md = readAll(dir.file("report.md"));
-  for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "15 bytes per output point",
+  for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "fovea's chunk codec", "15 bytes per output point",
                                "Steps at region borders", "--frames 1"}) {
     EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
   }

@@ -20,6 +20,7 @@
 
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
+#include "net/codec.h"
 #include "pipeline/error_metrics.h"
 #include "pipeline/quantile.h"
 #include "pipeline/foveator.h"
@@ -42,7 +43,7 @@ const char* kHelp =
     "                          [--reference-m M] [--no-plot]\n"
     "\n"
     "Foveates the same camera frames with every preset and slope m, side by side, and reports per\n"
-    "configuration the output points, bytes (15 per point), median time per frame (back-projection\n"
+    "configuration the output points, bytes on the wire (fovea's chunk codec), median time per frame (back-projection\n"
     "through sampled output, scalar reference kernels) and the error against the full cloud: the\n"
     "distance from each input point to its representative (RMS, max, per region, / voxel size) and the\n"
     "share of points displaced, seen from the eye, by more than the MAR at their eccentricity (Eq. 1).\n"
@@ -157,15 +158,16 @@ double quantileOf(std::vector<double> values, double q) {
 
 // One region's (or all regions') measurements over the frames.
 struct RegionAccumulator {
-  uint64_t points_in = 0, points_out = 0;
+  uint64_t points_in = 0, points_out = 0, wire_bytes = 0;
   double voxel_sum_m = 0.0;
   uint64_t points = 0, seen = 0, above = 0, above_reference = 0;
   double sum_sq_m2 = 0.0, max_m = 0.0, ratio_max = 0.0;
   std::vector<double> ratio_median, ratio_p95, ratio_first, ratio_last;  // one per frame
 
-  void add(const pipeline::RegionError& e, uint32_t in, uint32_t out, double voxel_m) {
+  void add(const pipeline::RegionError& e, uint32_t in, uint32_t out, double voxel_m, uint64_t bytes) {
     points_in += in;
     points_out += out;
+    wire_bytes += bytes;
     voxel_sum_m += voxel_m;
     points += e.points;
     seen += e.seen;
@@ -188,6 +190,7 @@ struct RegionAccumulator {
     s.voxel_mm = 1e3 * voxel_sum_m / n;
     s.points_in = static_cast<double>(points_in) / n;
     s.points_out = static_cast<double>(points_out) / n;
+    s.wire_bytes = static_cast<double>(wire_bytes) / n;
     s.rms_mm = points ? 1e3 * std::sqrt(sum_sq_m2 / static_cast<double>(points)) : 0.0;
     s.max_mm = 1e3 * max_m;
     s.rms_over_voxel = s.voxel_mm > 0.0 ? s.rms_mm / s.voxel_mm : kNaN;
@@ -322,6 +325,12 @@ int run(int argc, char** argv) {
   pipeline::FoveatedCloud out(max_points);
   std::vector<uint32_t> representative(max_points);
   const pipeline::DepthRange range;  // the same as fovead's defaults
+  // The stream's codec at its defaults (1200-byte datagrams), for the bytes columns.
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
+  if (!encoder) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", encoder.status().message().c_str());
+    return kExitFailure;
+  }
 
   const bool have_focus = info.focus_point_m.has_value();
   char gaze_text[160];
@@ -374,6 +383,18 @@ int run(int argc, char** argv) {
         s = evaluator->evaluate(cloud, foveator->lastRegions(), representative.data(), out.points, gaze, error_model,
                                 metrics);
       }
+      // Untimed: the bytes the stream would send for this frame, per region.
+      std::array<uint64_t, pipeline::kMaxRegions> wire_bytes{};
+      uint64_t wire_total = 0;
+      if (s) {
+        std::array<double, pipeline::kMaxRegions> voxel_m{};
+        for (int reg = 0; reg < stats.region_count; ++reg) voxel_m[reg] = stats.regions[reg].voxel_size_m;
+        s = encoder->encode(out, std::span<const double>(voxel_m.data(), stats.region_count), 0, 0);
+        for (std::size_t i = 0; s && i < encoder->chunkCount(); ++i) {
+          wire_bytes[encoder->chunkRegion(i)] += encoder->chunk(i).size() + net::kDatagramOverhead;
+          wire_total += encoder->chunk(i).size() + net::kDatagramOverhead;
+        }
+      }
       if (!s) {
         std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f,
                      std::string(pipeline::presetName(r.config.acuity.preset)).c_str(), r.config.acuity.slope,
@@ -385,9 +406,9 @@ int run(int argc, char** argv) {
       r.d0_m.push_back(stats.fixation.d0_m);
       for (int reg = 0; reg < stats.region_count; ++reg) {
         r.regions[reg].add(metrics.regions[reg], stats.regions[reg].points_in, stats.regions[reg].points_out,
-                           stats.regions[reg].voxel_size_m);
+                           stats.regions[reg].voxel_size_m, wire_bytes[reg]);
       }
-      r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0);
+      r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0, wire_total);
       r.at_eye += metrics.at_eye;
       r.no_representative += metrics.no_representative;
       ++r.frames;

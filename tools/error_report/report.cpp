@@ -58,7 +58,7 @@ Status writeFile(const std::string& path, const std::string& text) {
 
 Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& configs) {
   std::ostringstream out;
-  out << "preset,m,region,region_name,ecc_min_deg,ecc_max_deg,frames,voxel_mm,points_in,points_out,bytes_per_frame,"
+  out << "preset,m,region,region_name,ecc_min_deg,ecc_max_deg,frames,voxel_mm,points_in,points_out,bytes_per_frame,raw_bytes_per_frame,"
          "time_ms_median,time_ms_p90,wall_ms_median,rms_mm,max_mm,rms_over_voxel,max_over_voxel,points_seen,share_above_mar,share_above_reference_mar,"
          "ratio_median,ratio_p95,ratio_max,ratio_median_first_deg,ratio_median_last_deg\n";
   for (const ConfigSummary& c : configs) {
@@ -67,7 +67,7 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
       out << c.preset << ',' << csvNumber(c.slope) << ',' << (all ? std::string("all") : std::to_string(r.index))
           << ',' << r.name << ',' << csvNumber(r.ecc_min_deg) << ',' << csvNumber(r.ecc_max_deg) << ',' << c.frames
           << ',' << csvNumber(r.voxel_mm) << ',' << csvNumber(r.points_in) << ',' << csvNumber(r.points_out) << ','
-          << csvNumber(r.points_out * kBytesPerPoint) << ',' << (all ? csvNumber(c.time_ms_median) : "") << ','
+          << csvNumber(r.wire_bytes) << ',' << csvNumber(r.points_out * kRawBytesPerPoint) << ',' << (all ? csvNumber(c.time_ms_median) : "") << ','
           << (all ? csvNumber(c.time_ms_p90) : "") << ',' << (all ? csvNumber(c.wall_ms_median) : "") << ','
           << csvNumber(r.rms_mm) << ',' << csvNumber(r.max_mm) << ','
           << csvNumber(r.rms_over_voxel) << ',' << csvNumber(r.max_over_voxel) << ',' << r.seen << ','
@@ -93,8 +93,10 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
      << "- host: " << context.host << "\n"
      << "- the camera's pixel pitch at the image centre: " << fixed(context.pixel_pitch_arcmin, 1)
      << " arcmin (the eye sits at the camera), against MAR0 = 1 arcmin\n"
-     << "- **bytes**: raw payload, " << fixed(kBytesPerPoint, 0)
-     << " bytes per output point (x, y, z float + r, g, b uchar); the network codec comes later (issue 4)\n"
+     << "- **bytes**: what the frame costs on the wire with fovea's chunk codec (net/codec.h at its defaults: 1 mm "
+        "steps in the fovea, 1/8 of the voxel elsewhere, exact colour, 1200-byte datagrams, framing and "
+        "authentication tag included; docs/protocol-chunks.md). The CSV also gives the raw payload, "
+     << fixed(kRawBytesPerPoint, 0) << " bytes per output point (x, y, z float + r, g, b uchar)\n"
      << "- **time**: per frame, back-projection + partition + fixation + voxel sampling with the **scalar reference** "
         "kernels (no SIMD yet), one thread; capture and the error computation are not included. *CPU time* is the "
         "thread's CPU time (median and p90 over the frames): other processes on a shared host do not inflate it. "
@@ -231,7 +233,7 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
      << "set offsets graph 0.05, graph 0.05, graph 0.05, graph 0.05\n"
      << "set logscale x\n"
      << "set yrange [-2:*]\n"
-     << "set xlabel 'bytes per frame [MB] (raw, 15 B per point: x,y,z float + r,g,b uchar; log scale)'\n"
+     << "set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams; log scale)'\n"
      << "set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'\n"
      << "set title 'perceptual error against size'\n"
      << "plot ";

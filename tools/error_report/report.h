@@ -10,9 +10,9 @@
 
 namespace fovea::tools {
 
-// What the report counts as "bytes": the raw payload of a point, x, y, z as float
-// and r, g, b as uchar. The network codec (issue 4) will change this.
-inline constexpr double kBytesPerPoint = 15.0;
+// The raw payload of a point, x, y, z as float and r, g, b as uchar: what a
+// stream without fovea's codec would send (the report's "raw bytes").
+inline constexpr double kRawBytesPerPoint = 15.0;
 
 // One region (or all regions pooled) of one configuration, over the frames.
 struct RegionSummary {
@@ -23,6 +23,7 @@ struct RegionSummary {
   double voxel_mm = 0.0;     // mean over frames; 0: no voxel (fovea, all)
   double points_in = 0.0;    // mean per frame
   double points_out = 0.0;   // mean per frame
+  double wire_bytes = 0.0;   // mean per frame: the region's chunks as datagrams (net/codec.h, MTU 1200)
   double rms_mm = 0.0;       // pooled over every point of every frame
   double max_mm = 0.0;       // over every frame
   double rms_over_voxel = 0.0;  // NaN without a voxel
@@ -54,7 +55,10 @@ struct ConfigSummary {
   uint64_t no_representative = 0;
   std::vector<RegionSummary> regions;
   RegionSummary all;
-  double bytesPerFrame() const { return all.points_out * kBytesPerPoint; }
+  // What the frame costs on the wire: fovea's chunk codec (default settings,
+  // 1200-byte datagrams, framing and authentication tag included).
+  double bytesPerFrame() const { return all.wire_bytes; }
+  double rawBytesPerFrame() const { return all.points_out * kRawBytesPerPoint; }
 };
 
 struct ReportContext {
