@@ -225,6 +225,23 @@ TEST(MockFaults, GarbageIsValidSizedRandomDepthAndColour) {
   EXPECT_EQ(std::memcmp(first_garbage.data(), twin_slot.depth(), first_garbage.size() * 2), 0);
 }
 
+// Without a test clock the stall runs on the steady clock and really blocks
+// (only a lower bound is checked: timing is never asserted upwards in tests).
+TEST(MockFaults, StallOnTheSteadyClockBlocks) {
+  auto camera = makeStarted("living-room,size=64x48,fault=stall:60ms@0", nullptr);
+  RgbdFrame slot = makeSlot(*camera);
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(camera->acquire(slot, milliseconds(20)).code(), ErrorCode::kUnavailable);
+  EXPECT_GE(std::chrono::steady_clock::now() - start, milliseconds(20));
+  int timeouts = 1;
+  Status s;
+  while (!(s = camera->acquire(slot, milliseconds(20))).isOk() && timeouts < 100) ++timeouts;
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  EXPECT_GE(std::chrono::steady_clock::now() - start, milliseconds(60));
+  EXPECT_EQ(camera->counters().timeouts, static_cast<uint64_t>(timeouts));
+  EXPECT_EQ(slot.sequence, 0u);
+}
+
 TEST(MockFaults, NoneChangesNothing) {
   ManualClock clock;
   auto plain = makeStarted("living-room,size=64x48", &clock);
