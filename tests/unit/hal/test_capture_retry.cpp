@@ -336,6 +336,37 @@ TEST(CaptureRetry, RepeatedDisconnectsAllocateNothingAfterTheFirst) {
   EXPECT_EQ(rig.camera->counters().disconnects, static_cast<uint64_t>(kCycles - 1));
 }
 
+// The example, every fault in one run with the default policy: three
+// failing/recovered pairs (the garbage is delivered, so no fault), one frame lost.
+TEST(CaptureRetry, EveryFaultInOneRun) {
+  Rig rig("living-room,size=64x48,fault=stall:2s@30;disconnect:1.5s@60;wrong-size@90;garbage@120:3",
+          {});
+  rig.run(149);
+  std::vector<uint64_t> expected = iota(0, 90);
+  for (uint64_t s = 91; s < 150; ++s) expected.push_back(s);
+  EXPECT_EQ(rig.sequences(), expected);
+  std::vector<CaptureEvent> events;
+  std::vector<ErrorCode> causes;
+  for (const auto& r : rig.log) {
+    if (r.step.event != CaptureEvent::kNone) events.push_back(r.step.event);
+    if (r.step.event == CaptureEvent::kFailing) causes.push_back(r.step.error);
+  }
+  const std::vector<CaptureEvent> pairs = {CaptureEvent::kFailing, CaptureEvent::kRecovered,
+                                           CaptureEvent::kFailing, CaptureEvent::kRecovered,
+                                           CaptureEvent::kFailing, CaptureEvent::kRecovered};
+  EXPECT_EQ(events, pairs);
+  EXPECT_EQ(causes, (std::vector<ErrorCode>{ErrorCode::kUnavailable, ErrorCode::kNotFound,
+                                            ErrorCode::kInvalidInput}));
+  EXPECT_FALSE(rig.retry->faulted());
+  const CameraCounters c = rig.camera->counters();
+  EXPECT_EQ(c.stalls, 1u);
+  EXPECT_EQ(c.disconnects, 1u);
+  EXPECT_EQ(c.bad_frames, 1u);
+  EXPECT_EQ(c.injected_garbage, 3u);
+  EXPECT_EQ(c.frames_delivered, 149u);
+  EXPECT_EQ(rig.retry->stats().recoveries, 3u);
+}
+
 TEST(CaptureRetry, ActionAndEventNames) {
   EXPECT_STREQ(captureActionName(CaptureAction::kReopenFailed), "reopen-failed");
   EXPECT_STREQ(captureEventName(CaptureEvent::kRecovered), "recovered");
