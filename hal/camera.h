@@ -29,7 +29,11 @@ struct CameraInfo {
 struct CameraCounters {
   uint64_t frames_delivered = 0;
   uint64_t timeouts = 0;
-  uint64_t errors = 0;
+  uint64_t errors = 0;            // failed acquire() calls other than timeouts
+  uint64_t stalls = 0;            // episodes of no frames (each also counts its timeouts)
+  uint64_t disconnects = 0;       // the device went away (acquire() -> kNotFound)
+  uint64_t bad_frames = 0;        // frames rejected as malformed (wrong size), not delivered
+  uint64_t injected_garbage = 0;  // mock only: delivered frames of deliberate garbage
 };
 
 // What a backend counts as it runs: bumped on the thread that calls acquire(),
@@ -39,11 +43,19 @@ class CameraCounterSet {
   void frameDelivered() { frames_delivered_.fetch_add(1, std::memory_order_relaxed); }
   void timeout() { timeouts_.fetch_add(1, std::memory_order_relaxed); }
   void error() { errors_.fetch_add(1, std::memory_order_relaxed); }
+  void stall() { stalls_.fetch_add(1, std::memory_order_relaxed); }
+  void disconnect() { disconnects_.fetch_add(1, std::memory_order_relaxed); }
+  void badFrame() { bad_frames_.fetch_add(1, std::memory_order_relaxed); }
+  void injectedGarbage() { injected_garbage_.fetch_add(1, std::memory_order_relaxed); }
   CameraCounters snapshot() const {
     CameraCounters c;
     c.frames_delivered = frames_delivered_.load(std::memory_order_relaxed);
     c.timeouts = timeouts_.load(std::memory_order_relaxed);
     c.errors = errors_.load(std::memory_order_relaxed);
+    c.stalls = stalls_.load(std::memory_order_relaxed);
+    c.disconnects = disconnects_.load(std::memory_order_relaxed);
+    c.bad_frames = bad_frames_.load(std::memory_order_relaxed);
+    c.injected_garbage = injected_garbage_.load(std::memory_order_relaxed);
     return c;
   }
 
@@ -51,6 +63,10 @@ class CameraCounterSet {
   std::atomic<uint64_t> frames_delivered_{0};
   std::atomic<uint64_t> timeouts_{0};
   std::atomic<uint64_t> errors_{0};
+  std::atomic<uint64_t> stalls_{0};
+  std::atomic<uint64_t> disconnects_{0};
+  std::atomic<uint64_t> bad_frames_{0};
+  std::atomic<uint64_t> injected_garbage_{0};
 };
 
 class Camera {
@@ -62,7 +78,10 @@ class Camera {
   virtual Status start() = 0;
   // Fills the caller's slot with the next frame (size, intrinsics, pose, stamp).
   // kUnavailable on timeout or when not started; kCapacityExceeded when the slot
-  // is smaller than the frame. Never allocates.
+  // is smaller than the frame; kNotFound when the device has gone away (stop,
+  // open and start again to reconnect); kInvalidInput when the device handed over
+  // a malformed frame (nothing is written, the next frame may be fine). Never
+  // allocates.
   virtual Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) = 0;
   virtual void stop() = 0;
 

@@ -44,7 +44,8 @@ constexpr int kMinSide = 16;
 constexpr int kMaxSide = 4096;
 constexpr double kMaxFps = 1000.0;
 
-constexpr std::string_view kKeyList = "seed, size, fps, path, noise, temporal_noise, realtime";
+constexpr std::string_view kKeyList =
+    "seed, size, fps, path, noise, temporal_noise, realtime, fault";
 constexpr std::string_view kPathValues = "static|pan|orbit|dolly|keyframes:t,x,y,z,tx,ty,tz;...";
 
 Status invalid(std::string message) {
@@ -295,6 +296,13 @@ Result<MockCameraOptions> parseMockCameraOptions(std::string_view args) {
       status = parseOnOff(key, value, options.temporal_noise);
     } else if (key == "realtime") {
       status = parseOnOff(key, value, options.realtime);
+    } else if (key == "fault") {
+      Result<std::vector<FaultSpec>> faults = parseFaults(value);
+      if (faults.isOk()) {
+        options.faults = std::move(faults).value();
+      } else {
+        status = faults.status();
+      }
     } else {
       status = invalid("unknown key '" + key + "'; accepted keys: " + std::string(kKeyList));
     }
@@ -307,7 +315,8 @@ std::string mockCameraHelp() {
   return "mock:SCENE[,key=value...]  ray-cast Kinect-like RGB-D camera. SCENE: " + Scene::names() +
          ". Keys (default): seed=UINT (1), size=WxH (640x480), fps=F (30), path=" +
          std::string(kPathValues) +
-         " (static), noise=on|off (on), temporal_noise=on|off (on), realtime=on|off (off)";
+         " (static), noise=on|off (on), temporal_noise=on|off (on), realtime=on|off (off), " +
+         faultHelp();
 }
 
 void MockCamera::CleanImage::resize(std::size_t pixels) {
@@ -318,6 +327,7 @@ void MockCamera::CleanImage::resize(std::size_t pixels) {
 }
 
 MockCamera::MockCamera(MockCameraOptions options) : options_(std::move(options)) {
+  fault_fired_.assign(options_.faults.size(), false);
   Result<Scene> scene = Scene::create(options_.scene);
   if (scene.isOk()) scene_ = std::move(scene).value();
   info_.name = "mock:" + options_.scene;
@@ -339,7 +349,13 @@ Result<std::unique_ptr<Camera>> MockCamera::create(std::string_view args) {
   return std::unique_ptr<Camera>(std::make_unique<MockCamera>(std::move(options).value()));
 }
 
+// The device-gone messages fit std::string's small buffer: reconnect attempts
+// do not allocate.
 Status MockCamera::open() {
+  if (!connected_) {
+    if (clock_->nowNs() < gone_until_ns_) return Status(ErrorCode::kNotFound, "device gone");
+    connected_ = true;
+  }
   if (opened_) return Status::ok();
   const int w = options_.width;
   const int h = options_.height;
@@ -379,6 +395,7 @@ Status MockCamera::open() {
 
 Status MockCamera::start() {
   if (!opened_) return Status(ErrorCode::kUnavailable, "mock camera: call open() before start()");
+  if (!connected_) return Status(ErrorCode::kNotFound, "device gone");
   started_ = true;
   start_time_ = std::chrono::steady_clock::now();
   start_sequence_ = sequence_;
@@ -393,6 +410,10 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   if (!started_) {
     counters_.error();
     return Status(ErrorCode::kUnavailable, "not started");
+  }
+  if (!connected_) {
+    counters_.error();
+    return Status(ErrorCode::kNotFound, "disconnected");
   }
   if (!slot.setSize(options_.width, options_.height)) {
     counters_.error();
@@ -420,11 +441,48 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     }
   }
 
+  if (!options_.faults.empty()) {
+    if (Status s = fireFaults(); !s) return s;
+    if (stalling_) {
+      // Nothing comes until the stall ends: block for the timeout, or until the end.
+      const int64_t now_ns = clock_->nowNs();
+      if (now_ns < stall_until_ns_) {
+        if (stall_until_ns_ - now_ns > timeout.count()) {
+          clock_->sleepUntilNs(now_ns + std::max<int64_t>(timeout.count(), 0));
+          counters_.timeout();
+          return Status(ErrorCode::kUnavailable, "stalled");
+        }
+        clock_->sleepUntilNs(stall_until_ns_);
+      }
+      stalling_ = false;
+    }
+    if (wrong_size_pending_ > 0) {
+      // The device's frame header says a size the intrinsics do not: checked
+      // before anything is copied, so the slot is never written out of bounds
+      // (its pixels keep the previous frame's).
+      --wrong_size_pending_;
+      const int device_width = options_.width + 16;
+      const int device_height = options_.height + 8;
+      if (device_width != info_.intrinsics.width || device_height != info_.intrinsics.height) {
+        ++sequence_;  // the malformed frame is gone; the next one may be fine
+        counters_.badFrame();
+        counters_.error();
+        return Status(ErrorCode::kInvalidInput, "wrong size");
+      }
+    }
+  }
+
   const uint64_t sequence = sequence_;
   const double time_s = static_cast<double>(sequence) / options_.fps;
   const Pose pose = cameraPoseAt(options_.path, scene_.info(), time_s);
   renderClean(pose, time_s);
-  writeFrame(slot, sequence);
+  if (garbage_pending_ > 0) {
+    --garbage_pending_;
+    writeGarbage(slot, sequence);
+    counters_.injectedGarbage();
+  } else {
+    writeFrame(slot, sequence);
+  }
   slot.intrinsics = info_.intrinsics;
   slot.depth_scale_m = kDepthScaleM;
   slot.T_world_cam = pose;
@@ -435,6 +493,54 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   ++sequence_;
   counters_.frameDelivered();
   return Status::ok();
+}
+
+Status MockCamera::fireFaults() {
+  Status result;
+  for (std::size_t i = 0; i < options_.faults.size(); ++i) {
+    const FaultSpec& fault = options_.faults[i];
+    if (fault_fired_[i] || fault.at_frame > sequence_) continue;
+    fault_fired_[i] = true;
+    switch (fault.kind) {
+      case FaultKind::kStall:
+        stall_until_ns_ = std::max(stalling_ ? stall_until_ns_ : clock_->nowNs(),
+                                   clock_->nowNs() + fault.duration_ns);
+        stalling_ = true;
+        counters_.stall();
+        break;
+      case FaultKind::kDisconnect:
+        gone_until_ns_ = clock_->nowNs() + fault.duration_ns;
+        connected_ = false;
+        counters_.disconnect();
+        counters_.error();
+        result = Status(ErrorCode::kNotFound, "disconnected");
+        break;
+      case FaultKind::kWrongSize: wrong_size_pending_ += fault.count; break;
+      case FaultKind::kGarbage: garbage_pending_ += fault.count; break;
+    }
+  }
+  return result;
+}
+
+// Random depth with both extremes well represented, random colour; a pure
+// function of (seed, sequence, pixel) like the sensor noise.
+void MockCamera::writeGarbage(RgbdFrame& slot, uint64_t sequence) const {
+  const std::size_t pixels =
+      static_cast<std::size_t>(options_.width) * static_cast<std::size_t>(options_.height);
+  uint16_t* depth = slot.depth();
+  uint8_t* rgb = slot.rgb();
+  const uint64_t frame_key = hash2(hash2(options_.seed, 0x6761726261676521ull), sequence);
+  for (std::size_t i = 0; i < pixels; ++i) {
+    const uint64_t h = hash2(frame_key, i);
+    switch (h & 7u) {
+      case 0: depth[i] = 0; break;
+      case 1: depth[i] = 65535; break;
+      default: depth[i] = static_cast<uint16_t>(h >> 16); break;
+    }
+    rgb[3 * i] = static_cast<uint8_t>(h >> 32);
+    rgb[3 * i + 1] = static_cast<uint8_t>(h >> 40);
+    rgb[3 * i + 2] = static_cast<uint8_t>(h >> 48);
+  }
 }
 
 void MockCamera::renderClean(const Pose& pose, double time_s) {

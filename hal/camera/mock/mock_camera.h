@@ -38,6 +38,7 @@
 #include <Eigen/Core>
 
 #include "hal/camera.h"
+#include "hal/camera/mock/faults.h"
 #include "hal/camera/mock/scene.h"
 
 namespace fovea::hal::mock {
@@ -74,11 +75,13 @@ struct MockCameraOptions {
   bool noise = true;
   bool temporal_noise = true;
   bool realtime = false;
+  std::vector<FaultSpec> faults;  // fault=..., see hal/camera/mock/faults.h
 };
 
 // Parses "SCENE[,key=value...]" (the spec after "mock:"). Keys: seed=UINT,
 // size=WxH, fps=F, path=static|pan|orbit|dolly|keyframes:t,x,y,z,tx,ty,tz;...,
-// noise=on|off, temporal_noise=on|off, realtime=on|off. A comma-separated piece
+// noise=on|off, temporal_noise=on|off, realtime=on|off,
+// fault=none|KIND[:DURATION]@FRAME[:N];... (faults.h). A comma-separated piece
 // without '=' continues the previous value (the keyframe lists contain commas).
 // kInvalidArgument naming the key and its accepted values on any error.
 Result<MockCameraOptions> parseMockCameraOptions(std::string_view args);
@@ -103,6 +106,9 @@ class MockCamera final : public Camera {
   CameraCounters counters() const override { return counters_.snapshot(); }
 
   const MockCameraOptions& options() const { return options_; }
+  // The clock the injected faults' durations run on (not owned; nullptr: the
+  // steady clock). Tests pass a ManualClock so a 2 s stall takes no time.
+  void setClock(MockClock* clock) { clock_ = clock != nullptr ? clock : &steadyMockClock(); }
   // scene().info().focus_point_m (also in info().focus_point_m) is where the
   // service aims the gaze.
   const Scene& scene() const { return scene_; }
@@ -130,6 +136,9 @@ class MockCamera final : public Camera {
   PixelRect dynamicRect(const Pose& pose, double time_s) const;
   void updateDropouts(const PixelRect& rect);
   void writeFrame(RgbdFrame& slot, uint64_t sequence) const;
+  void writeGarbage(RgbdFrame& slot, uint64_t sequence) const;
+  // Fires the faults due at sequence_; kNotFound when a disconnect fired.
+  Status fireFaults();
   PixelRect fullRect() const { return {0, 0, options_.width, options_.height}; }
   PixelRect unite(const PixelRect& a, const PixelRect& b) const;
   PixelRect grow(const PixelRect& r, int pixels) const;
@@ -173,6 +182,16 @@ class MockCamera final : public Camera {
   PixelRect dynamic_rect_;  // where work_ differs from background_
 
   CameraCounterSet counters_;
+
+  // Fault injection (options_.faults): which have fired, and what stands.
+  MockClock* clock_ = &steadyMockClock();
+  std::vector<bool> fault_fired_;
+  bool connected_ = true;           // false from a disconnect until a successful open()
+  int64_t gone_until_ns_ = 0;       // open() fails before this (clock_ time)
+  bool stalling_ = false;
+  int64_t stall_until_ns_ = 0;      // while stalling_, acquire() delivers nothing before this
+  uint64_t wrong_size_pending_ = 0;
+  uint64_t garbage_pending_ = 0;
 };
 
 }  // namespace fovea::hal::mock
