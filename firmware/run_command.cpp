@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "firmware/commands.h"
 #include "firmware/options.h"
@@ -383,6 +384,14 @@ int runCommand(int argc, char** argv) {
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
       std::fprintf(stderr, "frame %zu: capture: %s\n", i, s.toString().c_str());
       ++failed_frames;
+      // A camera that fails at once (unplugged) must not spin the loop: wait out the
+      // frame slot (still serving the link). The service's runtime retries with backoff.
+      if (streamer) {
+        streamer->idleUntil(std::min(slot_start_ns + period_ns, run_end_ns));
+      } else {
+        std::this_thread::sleep_until(std::chrono::steady_clock::now() + std::chrono::nanoseconds(std::max<int64_t>(
+                                                                             0, slot_start_ns + period_ns - monotonicNs())));
+      }
       continue;
     }
     const double t_capture = msSince(t0);
