@@ -395,7 +395,10 @@ std::string suggestion(std::string_view name, bool section) {
   std::string best;
   std::size_t best_distance = std::max<std::size_t>(2, name.size() / 4) + 1;
   auto consider = [&](std::string_view candidate) {
-    const std::size_t distance = editDistance(name, candidate);
+    // A name without its unit or suffix ("stream.budget") is one edit away.
+    const bool prefix = candidate.size() > name.size() && candidate.substr(0, name.size()) == name &&
+                        candidate[name.size()] == '_';
+    const std::size_t distance = prefix ? 1 : editDistance(name, candidate);
     if (distance < best_distance) {
       best_distance = distance;
       best = candidate;
