@@ -25,10 +25,7 @@
 #define FOVEA_BOARD_DIR "board"
 #endif
 #ifndef FOVEA_INSTALLED_BOARD_DIR
-#define FOVEA_INSTALLED_BOARD_DIR "/usr/local/share/fovea/board"
-#endif
-#ifndef FOVEA_INSTALL_BINDIR
-#define FOVEA_INSTALL_BINDIR "/usr/local/bin"
+#define FOVEA_INSTALLED_BOARD_DIR "share/fovea/board"  // relative to the installation prefix
 #endif
 
 namespace fovea::firmware {
@@ -673,9 +670,15 @@ std::vector<std::string> missingBackends(const ServiceConfig& config) {
 
 std::string boardDirectory() {
   if (const char* env = std::getenv("FOVEA_BOARD_DIR"); env && *env) return env;
+  // Installed: PREFIX/bin/fovead beside PREFIX/share/fovea/board (wherever PREFIX is).
   std::error_code ec;
   const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-  if (!ec && exe.parent_path() == std::filesystem::path(FOVEA_INSTALL_BINDIR)) return FOVEA_INSTALLED_BOARD_DIR;
+  if (!ec) {
+    const std::filesystem::path installed = exe.parent_path().parent_path() / FOVEA_INSTALLED_BOARD_DIR;
+    if (std::filesystem::is_regular_file(installed / (std::string(kDefaultBoard) + ".toml"), ec)) {
+      return installed.lexically_normal().string();
+    }
+  }
   return FOVEA_BOARD_DIR;
 }
 

@@ -46,8 +46,9 @@ std::string formatServiceConfig(const ServiceConfig& config);
 // the service reports these when it opens the devices.
 std::vector<std::string> missingBackends(const ServiceConfig& config);
 
-// Where board profiles are: $FOVEA_BOARD_DIR, else the build's FOVEA_BOARD_DIR
-// (the installed share/fovea/board, or the source tree's board/ for a build tree).
+// Where board profiles are: $FOVEA_BOARD_DIR; else, for an installed fovead,
+// PREFIX/share/fovea/board beside its PREFIX/bin; else (a build tree) the source
+// tree's board/ (the compile definition FOVEA_BOARD_DIR).
 std::string boardDirectory();
 inline constexpr std::string_view kDefaultBoard = "host-mock";
 
