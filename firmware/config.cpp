@@ -280,8 +280,11 @@ std::string formatValue(const Value& value) {
 // What is wrong with a value of the right type ("" when nothing).
 std::string checkValue(const Field& field, const Value& value) {
   auto outside = [&field](double v) { return !(v >= field.min && v <= field.max); };
-  auto range = [&field](const std::string& got) {
-    return "must be within " + formatNumber(field.min) + " .. " + formatNumber(field.max) + " (got " + got + ")";
+  auto bound = [&field](double v) {
+    return field.kind == Kind::kInt ? std::to_string(static_cast<int64_t>(v)) : formatNumber(v);
+  };
+  auto range = [&](const std::string& got) {
+    return "must be within " + bound(field.min) + " .. " + bound(field.max) + " (got " + got + ")";
   };
   switch (field.kind) {
     case Kind::kBool: return "";

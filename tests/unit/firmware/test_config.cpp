@@ -111,6 +111,30 @@ TEST(Config, SyntaxErrorsGiveToml11sLine) {
   EXPECT_EQ(twice.rfind("fovea.toml:3: syntax error: ", 0), 0u) << twice;
 }
 
+TEST(Config, OddFilesGiveMessagesNotCrashes) {
+  EXPECT_EQ(loadError(""), "(loaded)");
+  EXPECT_EQ(loadError("# only a comment\n\n"), "(loaded)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = nan\n"), "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got nan)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = inf\n"), "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got inf)");
+  EXPECT_EQ(loadError("[camera]\nspec = 2024-01-01\n"), "fovea.toml:2: camera.spec: expected a string, got a date or time");
+  EXPECT_EQ(loadError("[[camera]]\nspec = \"mock\"\n"), "fovea.toml:1: camera: expected a table (a [camera] section), got an array");
+  EXPECT_EQ(loadError("[camera]\nspec = \"mock\"\n[camera.sub]\nx = 1\n"), "fovea.toml:3: unknown section 'camera.sub'");
+  // toml11 3.7 saturates an integer too large for 64 bits; the range still rejects it.
+  const std::string huge = loadError("[pipeline]\nmax_points = 99999999999999999999999\n");
+  EXPECT_EQ(huge.rfind("fovea.toml:2: pipeline.max_points: must be within 1 .. 50000000 (got ", 0), 0u) << huge;
+  const std::string binary = loadError(std::string("\0\x01\xff[camera", 10));
+  EXPECT_EQ(binary.rfind("fovea.toml:1: syntax error: ", 0), 0u) << binary;
+  // The first error by line wins, whatever the table order.
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = -1\n[camera]\nsepc = 1\n"),
+            "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got -1)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = 1\n[camra]\n[pipeline]\nthreads = 0\n"),
+            "fovea.toml:3: unknown section 'camra' (did you mean 'camera'?)");
+  TempDir dir;
+  Result<ServiceConfig> directory = loadServiceConfig(dir.path(), ServiceConfig{});
+  ASSERT_FALSE(directory.isOk());
+  EXPECT_EQ(directory.status().message(), "cannot read '" + dir.path() + "': Is a directory");
+}
+
 TEST(Config, RulesBetweenFields) {
   EXPECT_EQ(loadError("[pipeline]\nmax_points = 1000\nmax_voxels = 2000\n"),
             "fovea.toml:3: pipeline.max_voxels: must be at most pipeline.max_points (got 2000 > 1000)");
