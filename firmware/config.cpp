@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <type_traits>
@@ -18,8 +19,12 @@
 
 #include "hal/camera.h"
 #include "hal/gpio.h"
+#include "net/codec.h"
 #include "net/udp_socket.h"
 #include "net/wire.h"
+#include "pipeline/acuity.h"
+#include "pipeline/fixation.h"
+#include "pipeline/kernels/kernel_set.h"
 
 #ifndef FOVEA_BOARD_DIR
 #define FOVEA_BOARD_DIR "board"
@@ -730,6 +735,10 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
   }
   for (const std::string& assignment : overrides) {
     if (Status s = applyOverrideTracked(config, assignment, origins); !s) return s;
+  }
+  // FOVEA_FORCE_KERNEL beats any file, as everywhere (pipeline/kernels/kernel_set.h).
+  if (const char* force = std::getenv("FOVEA_FORCE_KERNEL"); force && *force) {
+    config.pipeline.kernels = pipeline::defaultKernelSet();
   }
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;

@@ -55,7 +55,8 @@ inline constexpr std::string_view kDefaultBoard = "host-mock";
 // The effective configuration of `fovead serve` and `fovead print-config`: the
 // board profile (board, else the config file's `board` key, else host-mock;
 // <boardDirectory()>/NAME.toml), then the config file, then each --set in
-// order, then validate(). An error names where the offending value came from.
+// order, then validate(). FOVEA_FORCE_KERNEL, when set, still picks the kernels.
+// An error names where the offending value came from.
 Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std::optional<std::string> config_file,
                                            std::span<const std::string> overrides);
 

@@ -478,6 +478,12 @@ TEST(PrintConfig, PrintsTheEffectiveConfigurationAsLoadableToml) {
   ASSERT_TRUE(expected.isOk()) << expected.status().message();
   expectSame(*loaded, *expected);
 
+  // FOVEA_FORCE_KERNEL beats the configuration, as it does everywhere.
+  const test::ProcessResult forced =
+      test::runCommand("FOVEA_FORCE_KERNEL=ref " + fovead() + " print-config --set pipeline.kernels=simd");
+  ASSERT_EQ(forced.exit_code, 0) << forced.output;
+  EXPECT_NE(forced.output.find("kernels = \"ref\""), std::string::npos) << forced.output;
+
   // The command form, and the default board.
   const test::ProcessResult host = test::runCommand(fovead() + " print-config");
   ASSERT_EQ(host.exit_code, 0) << host.output;
