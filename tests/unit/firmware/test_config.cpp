@@ -361,6 +361,12 @@ TEST(BoardProfiles, EveryProfileLoadsAndValidates) {
     Result<ServiceConfig> resolved = resolveServiceConfig(profile.stem().string(), std::nullopt, {});
     ASSERT_TRUE(resolved.isOk()) << resolved.status().message();
     expectSame(*resolved, *config);
+    // And what print-config shows for it loads back the same.
+    TempDir dir;
+    Result<ServiceConfig> printed =
+        loadServiceConfig(write(dir, "printed.toml", formatServiceConfig(*config)), ServiceConfig{});
+    ASSERT_TRUE(printed.isOk()) << printed.status().message();
+    expectSame(*printed, *config);
   }
   unsetenv("FOVEA_BOARD_DIR");
 }
