@@ -734,6 +734,8 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
     if (Status s = loadInto(*config_file, config, origins); !s) return s;
   }
   for (const std::string& assignment : overrides) {
+    // A profile is picked before anything else; renaming it afterwards would only mislabel the result.
+    if (assignment.rfind("board=", 0) == 0) return invalid("--set: board: pick a profile with --board NAME");
     if (Status s = applyOverrideTracked(config, assignment, origins); !s) return s;
   }
   // FOVEA_FORCE_KERNEL beats any file, as everywhere (pipeline/kernels/kernel_set.h).

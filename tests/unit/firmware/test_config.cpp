@@ -440,6 +440,11 @@ TEST(Resolve, BoardThenFileThenSet) {
   EXPECT_EQ(unkeyed.status().message().rfind("--set: stream.key_file: needed when stream.listen is set", 0), 0u)
       << unkeyed.status().message();
 
+  const std::vector<std::string> rename = {"board=rk3588"};
+  Result<ServiceConfig> renamed = resolveServiceConfig(std::nullopt, std::nullopt, rename);
+  ASSERT_FALSE(renamed.isOk());
+  EXPECT_EQ(renamed.status().message(), "--set: board: pick a profile with --board NAME");
+
   Result<ServiceConfig> unknown = resolveServiceConfig("nope", std::nullopt, {});
   ASSERT_FALSE(unknown.isOk());
   EXPECT_EQ(unknown.status().message(), "unknown board 'nope': no nope.toml in " + boardDir() +
