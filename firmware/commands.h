@@ -11,5 +11,6 @@ inline constexpr int kExitUsage = 2;
 int runCommand(int argc, char** argv);      // fovead run ...
 int foveateCommand(int argc, char** argv);  // fovead foveate ...
 int keygenCommand(int argc, char** argv);   // fovead keygen FILE
+int printConfigCommand(int argc, char** argv);  // fovead print-config ... (also --print-config)
 
 }  // namespace fovea::firmware

@@ -19,6 +19,8 @@ const char* kHelp =
     "            with --listen, stream it to an operator over UDP\n"
     "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
     "  keygen    write a new pre-shared key file for the stream\n"
+    "  print-config  print the effective configuration (board profile, --config FILE,\n"
+    "            --set SECTION.KEY=VALUE) as TOML; also 'fovead --print-config'\n"
     "\n"
     "'fovead COMMAND --help' describes each command.\n";
 
@@ -38,6 +40,9 @@ int main(int argc, char** argv) {
   if (std::strcmp(argv[1], "run") == 0) return runCommand(argc, argv);
   if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
   if (std::strcmp(argv[1], "keygen") == 0) return keygenCommand(argc, argv);
+  if (std::strcmp(argv[1], "print-config") == 0 || std::strcmp(argv[1], "--print-config") == 0) {
+    return printConfigCommand(argc, argv);
+  }
   std::fprintf(stderr, "fovead: unknown command '%s' (see fovead --help)\n", argv[1]);
   return kExitUsage;
 }

@@ -59,7 +59,13 @@ struct ServiceConfig {
   CameraSettings camera;
   pipeline::PipelineCapacity pipeline;  // max points and voxels, kernels, threads per frame
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
-  StreamConfig stream;                  // listen, key, budget, MTU, gaze timeout, fallback, codec
+  // listen, key, budget, MTU, gaze timeout, fallback, codec. stream.link.listen
+  // "" (the default here): the service does not stream (host-mock's default).
+  StreamConfig stream = [] {
+    StreamConfig offline;
+    offline.link.listen.clear();
+    return offline;
+  }();
   std::string key_file;                 // read into stream.link.key at start-up
   GpioSettings gpio;
   RuntimeSettings runtime;

@@ -7,6 +7,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "hal/result.h"
 
@@ -37,6 +38,14 @@ Result<std::unique_ptr<Interface>> createFromSpec(std::span<const Backend<Interf
   return Result<std::unique_ptr<Interface>>(ErrorCode::kInvalidArgument,
                                             std::string(what) + ": unknown backend '" + std::string(name) + "' in '" +
                                                 std::string(spec) + "'; accepted: " + names + std::string(hint));
+}
+
+// The names of the backends, in table order.
+template <typename Interface>
+std::vector<std::string_view> backendNames(std::span<const Backend<Interface>> backends) {
+  std::vector<std::string_view> names;
+  for (const Backend<Interface>& backend : backends) names.push_back(backend.name);
+  return names;
 }
 
 // Every backend's help, a line each.

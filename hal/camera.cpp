@@ -27,4 +27,6 @@ Result<std::unique_ptr<Camera>> createCamera(std::string_view spec) {
 
 std::string cameraSpecHelp() { return backendsHelp<Camera>(kBackends); }
 
+std::vector<std::string_view> cameraBackendNames() { return backendNames<Camera>(kBackends); }
+
 }  // namespace fovea::hal

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "hal/frame.h"
 #include "hal/result.h"
@@ -96,5 +97,8 @@ Result<std::unique_ptr<Camera>> createCamera(std::string_view spec);
 
 // One line per backend and its options, for --help.
 std::string cameraSpecHelp();
+
+// The names of the backends compiled in ("mock", "tum"...), in table order.
+std::vector<std::string_view> cameraBackendNames();
 
 }  // namespace fovea::hal

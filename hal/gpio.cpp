@@ -31,4 +31,6 @@ Result<std::unique_ptr<Gpio>> createGpio(std::string_view spec) {
 
 std::string gpioSpecHelp() { return backendsHelp<Gpio>(kBackends); }
 
+std::vector<std::string_view> gpioBackendNames() { return backendNames<Gpio>(kBackends); }
+
 }  // namespace fovea::hal

@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "hal/result.h"
 
@@ -76,5 +77,8 @@ Result<std::unique_ptr<Gpio>> createGpio(std::string_view spec);
 
 // One line per backend, for --help.
 std::string gpioSpecHelp();
+
+// The names of the backends compiled in ("mock", "gpiod"), in table order.
+std::vector<std::string_view> gpioBackendNames();
 
 }  // namespace fovea::hal

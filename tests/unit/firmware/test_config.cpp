@@ -1,0 +1,525 @@
+// The configuration file, --set, validation, printing and the board profiles
+// (firmware/config.h): the exact messages users see, and round trips.
+#include "firmware/config.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <set>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "hal/camera.h"
+#include "tests/support/process.h"
+
+namespace fovea::firmware {
+namespace {
+
+using test::TempDir;
+
+std::string write(const TempDir& dir, const std::string& name, const std::string& text) {
+  const std::string path = dir.file(name);
+  std::ofstream(path) << text;
+  return path;
+}
+
+// The error of loading `text` as a file (over the defaults), with the file's
+// path replaced by "fovea.toml".
+std::string loadError(const std::string& text) {
+  TempDir dir;
+  const std::string path = write(dir, "fovea.toml", text);
+  Result<ServiceConfig> config = loadServiceConfig(path, ServiceConfig{});
+  if (config) return "(loaded)";
+  std::string message = config.status().message();
+  if (const std::size_t at = message.find(path); at != std::string::npos) message.replace(at, path.size(), "fovea.toml");
+  return message;
+}
+
+std::string setError(const std::string& assignment) {
+  ServiceConfig config;
+  const Status s = applyOverride(config, assignment);
+  return s ? "(applied)" : s.message();
+}
+
+// Two configurations are the same when every key prints the same.
+void expectSame(const ServiceConfig& a, const ServiceConfig& b) {
+  EXPECT_EQ(formatServiceConfig(a), formatServiceConfig(b));
+}
+
+TEST(Config, DefaultConfigurationIsValid) {
+  const Status s = validate(ServiceConfig{});
+  EXPECT_TRUE(s.isOk()) << s.message();
+}
+
+TEST(Config, MissingFile) {
+  Result<ServiceConfig> config = loadServiceConfig("/nonexistent/x.toml", ServiceConfig{});
+  ASSERT_FALSE(config.isOk());
+  EXPECT_EQ(config.status().message(), "cannot open '/nonexistent/x.toml': No such file or directory");
+}
+
+TEST(Config, UnknownKeyWithSuggestion) {
+  EXPECT_EQ(loadError("board = \"host-mock\"\n\n[camera]\nsepc = \"mock:balloon\"\n"),
+            "fovea.toml:4: unknown key 'camera.sepc' (did you mean 'camera.spec'?)");
+  EXPECT_EQ(loadError("[stream]\nbudget = 3\n"), "fovea.toml:2: unknown key 'stream.budget' (did you mean 'stream.budget_mbps'?)");
+  EXPECT_EQ(loadError("[stream]\nfrobnicate = 3\n"), "fovea.toml:2: unknown key 'stream.frobnicate'");
+  EXPECT_EQ(loadError("bord = \"x\"\n"), "fovea.toml:1: unknown key 'bord' (did you mean 'board'?)");
+}
+
+TEST(Config, UnknownSection) {
+  EXPECT_EQ(loadError("[camra]\nspec = \"mock\"\n"), "fovea.toml:1: unknown section 'camra' (did you mean 'camera'?)");
+  EXPECT_EQ(loadError("[runtime.capture]\ncore = 1\n"),
+            "fovea.toml:1: unknown section 'runtime.capture' (did you mean 'runtime.capture_thread'?)");
+  EXPECT_EQ(loadError("camera = 3\n"), "fovea.toml:1: camera: expected a table (a [camera] section), got an integer");
+}
+
+TEST(Config, WrongType) {
+  EXPECT_EQ(loadError("[pipeline]\n\n\n\n\n\nmax_points = \"big\"\n"),
+            "fovea.toml:7: pipeline.max_points: expected an integer, got a string");
+  EXPECT_EQ(loadError("[pipeline]\nmax_points = 1.5\n"), "fovea.toml:2: pipeline.max_points: expected an integer, got a float");
+  EXPECT_EQ(loadError("[stream]\ninsecure = 1\n"), "fovea.toml:2: stream.insecure: expected a boolean, got an integer");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = \"fast\"\n"), "fovea.toml:2: stream.budget_mbps: expected a number, got a string");
+  EXPECT_EQ(loadError("[foveation]\ncustom_bounds_deg = [5, \"8\"]\n"),
+            "fovea.toml:2: foveation.custom_bounds_deg: expected an array of numbers, got an array holding a string");
+  EXPECT_EQ(loadError("[camera.spec]\nx = 1\n"), "fovea.toml:1: camera.spec: expected a string, got a table");
+}
+
+TEST(Config, OutOfRange) {
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = -3\n"), "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got -3)");
+  EXPECT_EQ(loadError("[pipeline]\nthreads = 0\n"), "fovea.toml:2: pipeline.threads: must be within 1 .. 64 (got 0)");
+  EXPECT_EQ(loadError("[stream]\nmax_mtu_bytes = 9000\n"),
+            "fovea.toml:2: stream.max_mtu_bytes: must be within 256 .. 8952 (got 9000)");
+  EXPECT_EQ(loadError("[foveation]\npreset = \"F9\"\n"),
+            "fovea.toml:2: foveation.preset: must be one of \"F1\", \"F2\", \"F3\", \"FREF\", \"custom\" (got \"F9\")");
+  EXPECT_EQ(loadError("[runtime]\nlog_level = \"loud\"\n"),
+            "fovea.toml:2: runtime.log_level: must be one of \"error\", \"warning\", \"notice\", \"info\", \"debug\" "
+            "(got \"loud\")");
+  EXPECT_EQ(loadError("[foveation]\ncustom_bounds_deg = [5, 200]\n"),
+            "fovea.toml:2: foveation.custom_bounds_deg: each must be within 0 .. 180 (got 200)");
+  EXPECT_EQ(loadError("[stream]\nlisten = \"nowhere\"\n").rfind("fovea.toml:2: stream.listen: ", 0), 0u);
+  EXPECT_EQ(loadError("[camera]\nspec = \"\"\n"), "fovea.toml:2: camera.spec: must name a backend, as backend[:args]");
+}
+
+TEST(Config, SyntaxErrorsGiveToml11sLine) {
+  const std::string unquoted = loadError("[camera]\nspec = mock\n");
+  EXPECT_EQ(unquoted.rfind("fovea.toml:2: syntax error: ", 0), 0u) << unquoted;
+  EXPECT_GT(unquoted.size(), std::string("fovea.toml:2: syntax error: ").size());
+  EXPECT_EQ(unquoted.find('\n'), std::string::npos) << "one line: " << unquoted;
+  const std::string twice = loadError("[camera]\nspec = \"a\"\nspec = \"b\"\n");
+  EXPECT_EQ(twice.rfind("fovea.toml:3: syntax error: ", 0), 0u) << twice;
+}
+
+TEST(Config, OddFilesGiveMessagesNotCrashes) {
+  EXPECT_EQ(loadError(""), "(loaded)");
+  EXPECT_EQ(loadError("# only a comment\n\n"), "(loaded)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = nan\n"), "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got nan)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = inf\n"), "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got inf)");
+  EXPECT_EQ(loadError("[camera]\nspec = 2024-01-01\n"), "fovea.toml:2: camera.spec: expected a string, got a date or time");
+  EXPECT_EQ(loadError("[[camera]]\nspec = \"mock\"\n"), "fovea.toml:1: camera: expected a table (a [camera] section), got an array");
+  EXPECT_EQ(loadError("[camera]\nspec = \"mock\"\n[camera.sub]\nx = 1\n"), "fovea.toml:3: unknown section 'camera.sub'");
+  // toml11 3.7 saturates an integer too large for 64 bits; the range still rejects it.
+  const std::string huge = loadError("[pipeline]\nmax_points = 99999999999999999999999\n");
+  EXPECT_EQ(huge.rfind("fovea.toml:2: pipeline.max_points: must be within 1 .. 50000000 (got ", 0), 0u) << huge;
+  const std::string binary = loadError(std::string("\0\x01\xff[camera", 10));
+  EXPECT_EQ(binary.rfind("fovea.toml:1: syntax error: ", 0), 0u) << binary;
+  // The first error by line wins, whatever the table order.
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = -1\n[camera]\nsepc = 1\n"),
+            "fovea.toml:2: stream.budget_mbps: must be within 0.01 .. 10000 (got -1)");
+  EXPECT_EQ(loadError("[stream]\nbudget_mbps = 1\n[camra]\n[pipeline]\nthreads = 0\n"),
+            "fovea.toml:3: unknown section 'camra' (did you mean 'camera'?)");
+  TempDir dir;
+  Result<ServiceConfig> directory = loadServiceConfig(dir.path(), ServiceConfig{});
+  ASSERT_FALSE(directory.isOk());
+  EXPECT_EQ(directory.status().message(), "cannot read '" + dir.path() + "': Is a directory");
+}
+
+TEST(Config, RulesBetweenFields) {
+  EXPECT_EQ(loadError("[pipeline]\nmax_points = 1000\nmax_voxels = 2000\n"),
+            "fovea.toml:3: pipeline.max_voxels: must be at most pipeline.max_points (got 2000 > 1000)");
+  // Only max_points in the file: the message points at it.
+  EXPECT_EQ(loadError("[pipeline]\nmax_points = 1000\n"),
+            "fovea.toml:2: pipeline.max_voxels: must be at most pipeline.max_points (got 307200 > 1000)");
+  EXPECT_EQ(loadError("[gpio]\nheartbeat_line = 4\nstreaming_line = 5\nfault_line = 4\n"),
+            "fovea.toml:4: gpio.fault_line: line 4 is already used by gpio.heartbeat_line");
+  EXPECT_EQ(loadError("[stream]\nlisten = \"0.0.0.0:7000\"\n"),
+            "fovea.toml:2: stream.key_file: needed when stream.listen is set (fovead keygen FILE makes one), or "
+            "stream.insecure = true on a trusted test host, or stream.listen = \"\" not to stream");
+  EXPECT_EQ(loadError("[stream]\nlisten = \"0.0.0.0:7000\"\nkey_file = \"k\"\ninsecure = true\n"),
+            "fovea.toml:4: stream.insecure: not together with stream.key_file (set stream.key_file = \"\")");
+  EXPECT_EQ(loadError("[camera]\ndepth_min_m = 3\ndepth_max_m = 2\n"),
+            "fovea.toml:3: camera.depth_max_m: must be more than camera.depth_min_m (got 2 <= 3)");
+  EXPECT_EQ(loadError("[camera]\nretry_initial_ms = 1000\nretry_max_ms = 10\n"),
+            "fovea.toml:3: camera.retry_max_ms: must be at least camera.retry_initial_ms (got 10 < 1000)");
+  EXPECT_EQ(loadError("[foveation]\ncustom_bounds_deg = [5, 8]\n"),
+            "fovea.toml:2: foveation.custom_bounds_deg: only with foveation.preset = \"custom\" (clear it, or set the "
+            "preset)");
+  const std::string decreasing = loadError("[foveation]\npreset = \"custom\"\ncustom_bounds_deg = [8, 5]\n");
+  EXPECT_EQ(decreasing.rfind("fovea.toml:3: foveation.custom_bounds_deg: ", 0), 0u) << decreasing;
+
+  // Without a file, the message starts with the field.
+  ServiceConfig config;
+  config.pipeline.max_voxels = config.pipeline.max_points + 1;
+  EXPECT_EQ(validate(config).message(), "pipeline.max_voxels: must be at most pipeline.max_points (got 307201 > 307200)");
+  config = ServiceConfig{};
+  config.stream.link.max_budget_bytes_per_s = 0;
+  EXPECT_EQ(validate(config).message(), "stream.budget_mbps: must be within 0.01 .. 10000 (got 0)");
+  config = ServiceConfig{};
+  config.gpio.lines.privacy_line = 7;
+  config.gpio.lines.heartbeat_line = 7;
+  EXPECT_EQ(validate(config).message(), "gpio.privacy_line: line 7 is already used by gpio.heartbeat_line");
+}
+
+TEST(Config, FileOverridesOnlyWhatItSays) {
+  TempDir dir;
+  ServiceConfig base;
+  base.camera.spec = "mock:balloon";
+  base.pipeline.threads = 3;
+  const std::string path = write(dir, "fovea.toml",
+                                 "# a comment\n[pipeline]\nthreads = 2\n[stream]\nbudget_mbps = 125\n"
+                                 "[runtime.send_thread]\ncore = 3\n");
+  Result<ServiceConfig> config = loadServiceConfig(path, base);
+  ASSERT_TRUE(config.isOk()) << config.status().message();
+  EXPECT_EQ(config->camera.spec, "mock:balloon");
+  EXPECT_EQ(config->pipeline.threads, 2);
+  EXPECT_EQ(config->stream.link.max_budget_bytes_per_s, 125'000'000u);
+  EXPECT_EQ(config->runtime.send_thread.core, 3);
+  EXPECT_EQ(config->runtime.capture_thread.core, -1);
+}
+
+// Every key with a value other than its default.
+const std::vector<std::string> kEveryKeyChanged = {
+    "board=lab-bench",
+    "camera.spec=mock:balloon,seed=3",
+    "camera.depth_min_m=0.3",
+    "camera.depth_max_m=7.25",
+    "camera.retry_initial_ms=50",
+    "camera.retry_max_ms=2000",
+    "camera.stall_timeout_ms=250",
+    "pipeline.max_points=100000",
+    "pipeline.max_voxels=90000",
+    "pipeline.kernels=ref",
+    "pipeline.threads=4",
+    "foveation.preset=custom",
+    "foveation.custom_bounds_deg=[2.5, 7, 19.125]",
+    "foveation.slope=0.031",
+    "foveation.far_ecc_deg=75.5",
+    "foveation.fixation.mode=fixed",
+    "foveation.fixation.fixed_m=1.75",
+    "foveation.fixation.hit_cone_deg=0.5",
+    "foveation.fixation.hit_percentile=0.1",
+    "foveation.fixation.fallback_m=3",
+    "foveation.fixation.min_m=0.1",
+    "stream.listen=[::1]:7001",
+    "stream.key_file=\"/etc/fovea/robot key\\\"quoted\\\".key\"",
+    "stream.insecure=false",
+    "stream.max_mtu_bytes=1400",
+    "stream.budget_mbps=33.333333",
+    "stream.session_timeout_ms=2500",
+    "stream.burst_ms=7.5",
+    "stream.gaze_timeout_ms=80",
+    "stream.fallback_voxel_m=0.04",
+    "stream.fovea_step_m=0.0005",
+    "stream.periphery_step_ratio=0.25",
+    "stream.chroma=half",
+    "stream.entropy=true",
+    "stream.zstd_level=3",
+    "gpio.spec=gpiod:gpiochip4",
+    "gpio.heartbeat_line=17",
+    "gpio.streaming_line=27",
+    "gpio.fault_line=22",
+    "gpio.privacy_line=23",
+    "gpio.privacy_active_low=true",
+    "gpio.heartbeat_period_ms=250",
+    "gpio.consumer=fovead-test",
+    "runtime.ring_depth=3",
+    "runtime.memory_lock=true",
+    "runtime.log_level=debug",
+    "runtime.status_interval_ms=2000",
+    "runtime.systemd_notify=false",
+    "runtime.capture_thread.core=1",
+    "runtime.capture_thread.realtime_priority=50",
+    "runtime.foveation_thread.core=2",
+    "runtime.foveation_thread.realtime_priority=40",
+    "runtime.send_thread.core=3",
+    "runtime.send_thread.realtime_priority=45",
+};
+
+TEST(Config, EveryKeyRoundTrips) {
+  ServiceConfig changed;
+  for (const std::string& assignment : kEveryKeyChanged) {
+    const Status s = applyOverride(changed, assignment);
+    ASSERT_TRUE(s.isOk()) << assignment << ": " << s.message();
+  }
+  ASSERT_TRUE(validate(changed).isOk()) << validate(changed).message();
+  // Every key was changed: each line of the printed config differs from the default's.
+  const std::string text = formatServiceConfig(changed);
+  const std::string defaults = formatServiceConfig(ServiceConfig{});
+  std::size_t keys = 0;
+  for (std::size_t a = 0, b = 0; a < text.size() && b < defaults.size(); ++keys) {
+    const std::size_t ea = text.find('\n', a), eb = defaults.find('\n', b);
+    const std::string la = text.substr(a, ea - a), lb = defaults.substr(b, eb - b);
+    // stream.insecure stays false beside a key file; kernels=ref is the default under FOVEA_FORCE_KERNEL=ref.
+    const bool may_stay = la.rfind("insecure = ", 0) == 0 || la.rfind("kernels = ", 0) == 0;
+    if (may_stay) {
+      // either
+    } else if (la.find(" = ") != std::string::npos) {
+      EXPECT_NE(la, lb) << "not changed by kEveryKeyChanged";
+    } else {
+      EXPECT_EQ(la, lb);
+    }
+    a = ea + 1;
+    b = eb + 1;
+  }
+  EXPECT_GT(keys, kEveryKeyChanged.size());
+
+  TempDir dir;
+  const std::string path = write(dir, "printed.toml", text);
+  Result<ServiceConfig> loaded = loadServiceConfig(path, ServiceConfig{});
+  ASSERT_TRUE(loaded.isOk()) << loaded.status().message() << "\n" << text;
+  expectSame(*loaded, changed);
+  EXPECT_EQ(loaded->key_file, "/etc/fovea/robot key\"quoted\".key");
+  EXPECT_EQ(loaded->stream.link.listen, "[::1]:7001");
+  EXPECT_EQ(loaded->stream.link.max_budget_bytes_per_s, 33'333'333u);
+  EXPECT_EQ(loaded->stream.gaze.timeout_ns, 80'000'000);
+  EXPECT_EQ(loaded->gpio.lines.heartbeat_period_ns, 250'000'000);
+  EXPECT_EQ(loaded->foveation.acuity.custom_bounds_deg, (std::vector<double>{2.5, 7.0, 19.125}));
+  EXPECT_EQ(loaded->foveation.acuity.preset, pipeline::Preset::kCustom);
+  EXPECT_EQ(loaded->pipeline.kernels, pipeline::KernelSet::kRef);
+  EXPECT_EQ(loaded->runtime.log_level, LogLevel::kDebug);
+  EXPECT_TRUE(loaded->stream.codec.halve_peripheral_chroma);
+  EXPECT_EQ(loaded->camera.depth.max_m, 7.25);
+  // And printing again gives the same text.
+  EXPECT_EQ(formatServiceConfig(*loaded), text);
+}
+
+TEST(Config, AwkwardNumbersRoundTripExactly) {
+  ServiceConfig config;
+  config.foveation.acuity.slope = 0.1 + 0.2;  // 0.30000000000000004
+  config.foveation.fixation.min_m = 1.0 / 3;
+  config.camera.depth.max_m = 100.0;          // prints as 100.0, a float
+  config.stream.link.max_budget_bytes_per_s = 123'456'789;
+  TempDir dir;
+  Result<ServiceConfig> loaded = loadServiceConfig(write(dir, "a.toml", formatServiceConfig(config)), ServiceConfig{});
+  ASSERT_TRUE(loaded.isOk()) << loaded.status().message();
+  EXPECT_EQ(loaded->foveation.acuity.slope, 0.1 + 0.2);
+  EXPECT_EQ(loaded->foveation.fixation.min_m, 1.0 / 3);
+  EXPECT_EQ(loaded->camera.depth.max_m, 100.0);
+  EXPECT_EQ(loaded->stream.link.max_budget_bytes_per_s, 123'456'789u);
+}
+
+TEST(Config, SetOverrides) {
+  ServiceConfig config;
+  ASSERT_TRUE(applyOverride(config, "camera.spec=mock:balloon,seed=7").isOk());  // bare text for a string
+  EXPECT_EQ(config.camera.spec, "mock:balloon,seed=7");
+  ASSERT_TRUE(applyOverride(config, "camera.spec=\"tum:/data/x\"").isOk());  // or TOML
+  EXPECT_EQ(config.camera.spec, "tum:/data/x");
+  ASSERT_TRUE(applyOverride(config, "stream.budget_mbps=25").isOk());  // an integer for a number
+  EXPECT_EQ(config.stream.link.max_budget_bytes_per_s, 25'000'000u);
+  ASSERT_TRUE(applyOverride(config, "foveation.preset=F3").isOk());
+  EXPECT_EQ(config.foveation.acuity.preset, pipeline::Preset::kF3);
+  ASSERT_TRUE(applyOverride(config, "stream.listen=").isOk());
+  EXPECT_EQ(config.stream.link.listen, "");
+  ASSERT_TRUE(applyOverride(config, "gpio.privacy_line=-1").isOk());
+
+  EXPECT_EQ(setError("camera.sepc=mock"), "--set: unknown key 'camera.sepc' (did you mean 'camera.spec'?)");
+  EXPECT_EQ(setError("stream.budget_mbps=-3"), "--set: stream.budget_mbps: must be within 0.01 .. 10000 (got -3)");
+  EXPECT_EQ(setError("stream.budget_mbps=fast"), "--set: stream.budget_mbps: 'fast' is not a TOML value");
+  EXPECT_EQ(setError("pipeline.threads=2.5"), "--set: pipeline.threads: expected an integer, got a float");
+  EXPECT_EQ(setError("stream.entropy=on"), "--set: stream.entropy: 'on' is not a TOML value");
+  EXPECT_EQ(setError("pipeline"), "--set: 'pipeline' is not section.key=value");
+  EXPECT_EQ(setError("runtime.capture_thread=1"), "--set: 'runtime.capture_thread' is a section; set one of its keys");
+}
+
+std::string boardDir() { return std::string(FOVEA_SOURCE_DIR) + "/board"; }
+
+std::vector<std::filesystem::path> boardProfiles() {
+  std::vector<std::filesystem::path> profiles;
+  for (const auto& entry : std::filesystem::directory_iterator(boardDir())) {
+    if (entry.path().extension() == ".toml") profiles.push_back(entry.path());
+  }
+  std::sort(profiles.begin(), profiles.end());
+  return profiles;
+}
+
+TEST(BoardProfiles, EveryProfileLoadsAndValidates) {
+  const std::vector<std::filesystem::path> profiles = boardProfiles();
+  ASSERT_GE(profiles.size(), 4u);
+  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  for (const std::filesystem::path& profile : profiles) {
+    SCOPED_TRACE(profile.string());
+    Result<ServiceConfig> config = loadServiceConfig(profile.string(), ServiceConfig{});
+    ASSERT_TRUE(config.isOk()) << config.status().message();
+    EXPECT_EQ(config->board, profile.stem().string()) << "a profile's board key is its file name";
+    // A profile says what it is and why its values, in a comment header.
+    std::ifstream in(profile);
+    std::string first_line;
+    std::getline(in, first_line);
+    EXPECT_EQ(first_line.rfind("# " + profile.stem().string() + ": ", 0), 0u) << first_line;
+    // By name, as fovead serve --board NAME loads it.
+    Result<ServiceConfig> resolved = resolveServiceConfig(profile.stem().string(), std::nullopt, {});
+    ASSERT_TRUE(resolved.isOk()) << resolved.status().message();
+    expectSame(*resolved, *config);
+    // And what print-config shows for it loads back the same.
+    TempDir dir;
+    Result<ServiceConfig> printed =
+        loadServiceConfig(write(dir, "printed.toml", formatServiceConfig(*config)), ServiceConfig{});
+    ASSERT_TRUE(printed.isOk()) << printed.status().message();
+    expectSame(*printed, *config);
+  }
+  unsetenv("FOVEA_BOARD_DIR");
+}
+
+TEST(BoardProfiles, DefaultIsHostMock) {
+  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  Result<ServiceConfig> config = resolveServiceConfig(std::nullopt, std::nullopt, {});
+  unsetenv("FOVEA_BOARD_DIR");
+  ASSERT_TRUE(config.isOk()) << config.status().message();
+  EXPECT_EQ(config->board, "host-mock");
+  EXPECT_EQ(config->camera.spec.rfind("mock:", 0), 0u);
+  EXPECT_EQ(config->gpio.spec, "mock");
+  EXPECT_TRUE(missingBackends(*config).empty());
+}
+
+TEST(BoardProfiles, MissingCameraBackendIsReportedButTheProfileValidates) {
+  TempDir dir;
+  ServiceConfig config;
+  config.camera.spec = "nosuch:/dev/video9";
+  EXPECT_TRUE(validate(config).isOk());
+  std::string built;
+  for (std::string_view name : hal::cameraBackendNames()) built += (built.empty() ? "" : ", ") + std::string(name);
+  const std::vector<std::string> missing = missingBackends(config);
+  ASSERT_EQ(missing.size(), 1u);
+  EXPECT_EQ(missing[0], "camera.spec: backend 'nosuch' is not in this build (built: " + built + ")");
+
+  // The Raspberry Pi 5 profile names the V4L2 backend of issue 6.
+  Result<ServiceConfig> rpi5 = loadServiceConfig(boardDir() + "/rpi5-usb-rgbd.toml", ServiceConfig{});
+  ASSERT_TRUE(rpi5.isOk()) << rpi5.status().message();
+  EXPECT_EQ(rpi5->camera.spec, "v4l2:/dev/video0");
+  const std::vector<std::string_view> names = hal::cameraBackendNames();
+  if (std::find(names.begin(), names.end(), "v4l2") != names.end()) GTEST_SKIP() << "this build has v4l2";
+  const std::vector<std::string> rpi5_missing = missingBackends(*rpi5);
+  ASSERT_FALSE(rpi5_missing.empty());
+  EXPECT_EQ(rpi5_missing[0], "camera.spec: backend 'v4l2' is not in this build (built: " + built + ")");
+}
+
+TEST(Resolve, BoardThenFileThenSet) {
+  TempDir dir;
+  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const std::string file = write(dir, "fovea.toml", "[pipeline]\nthreads = 1\n[stream]\nbudget_mbps = 50\n");
+  const std::vector<std::string> sets = {"stream.budget_mbps=25", "foveation.preset=F2"};
+  Result<ServiceConfig> config = resolveServiceConfig("rpi5-usb-rgbd", file, sets);
+  ASSERT_TRUE(config.isOk()) << config.status().message();
+  EXPECT_EQ(config->board, "rpi5-usb-rgbd");
+  EXPECT_EQ(config->gpio.spec, "gpiod:gpiochip4");              // the board
+  EXPECT_EQ(config->pipeline.threads, 1);                        // the file over the board
+  EXPECT_EQ(config->stream.link.max_budget_bytes_per_s, 25'000'000u);  // --set over the file
+  EXPECT_EQ(config->foveation.acuity.preset, pipeline::Preset::kF2);
+
+  // The file's board key picks the profile; --board must agree with it.
+  const std::string jetson = write(dir, "jetson.toml", "board = \"jetson-orin-nano\"\n[pipeline]\nthreads = 2\n");
+  Result<ServiceConfig> picked = resolveServiceConfig(std::nullopt, jetson, {});
+  ASSERT_TRUE(picked.isOk()) << picked.status().message();
+  EXPECT_EQ(picked->gpio.spec, "gpiod:gpiochip0");
+  EXPECT_EQ(picked->pipeline.threads, 2);
+  Result<ServiceConfig> clash = resolveServiceConfig("rk3588", jetson, {});
+  ASSERT_FALSE(clash.isOk());
+  EXPECT_EQ(clash.status().message(), jetson + ":1: board: the file is for 'jetson-orin-nano', --board says 'rk3588'");
+
+  // An error names where the value came from: here the board's max_voxels
+  // against --set's max_points.
+  const std::vector<std::string> small = {"pipeline.max_points=1000"};
+  Result<ServiceConfig> bad = resolveServiceConfig("host-mock", std::nullopt, small);
+  ASSERT_FALSE(bad.isOk());
+  EXPECT_EQ(bad.status().message(), boardDir() + "/host-mock.toml:19: pipeline.max_voxels: must be at most "
+                                                  "pipeline.max_points (got 307200 > 1000)");
+  const std::vector<std::string> listen = {"stream.listen=0.0.0.0:7000"};
+  Result<ServiceConfig> unkeyed = resolveServiceConfig("host-mock", std::nullopt, listen);
+  ASSERT_FALSE(unkeyed.isOk());
+  EXPECT_EQ(unkeyed.status().message().rfind("--set: stream.key_file: needed when stream.listen is set", 0), 0u)
+      << unkeyed.status().message();
+
+  const std::vector<std::string> rename = {"board=rk3588"};
+  Result<ServiceConfig> renamed = resolveServiceConfig(std::nullopt, std::nullopt, rename);
+  ASSERT_FALSE(renamed.isOk());
+  EXPECT_EQ(renamed.status().message(), "--set: board: pick a profile with --board NAME");
+
+  Result<ServiceConfig> unknown = resolveServiceConfig("nope", std::nullopt, {});
+  ASSERT_FALSE(unknown.isOk());
+  EXPECT_EQ(unknown.status().message(), "unknown board 'nope': no nope.toml in " + boardDir() +
+                                            " (boards: host-mock, jetson-orin-nano, rk3588, rpi5-usb-rgbd)");
+  unsetenv("FOVEA_BOARD_DIR");
+}
+
+TEST(Resolve, BoardDirectoryFromTheEnvironment) {
+  TempDir dir;
+  write(dir, "bench.toml", "# bench: a test bench\nboard = \"bench\"\n[pipeline]\nthreads = 5\n");
+  write(dir, "wrong.toml", "board = \"other\"\n");
+  setenv("FOVEA_BOARD_DIR", dir.path().c_str(), 1);
+  EXPECT_EQ(boardDirectory(), dir.path());
+  Result<ServiceConfig> config = resolveServiceConfig("bench", std::nullopt, {});
+  ASSERT_TRUE(config.isOk()) << config.status().message();
+  EXPECT_EQ(config->pipeline.threads, 5);
+  Result<ServiceConfig> wrong = resolveServiceConfig("wrong", std::nullopt, {});
+  ASSERT_FALSE(wrong.isOk());
+  EXPECT_EQ(wrong.status().message(), dir.file("wrong.toml") + ":1: board: 'other' in wrong.toml (they must match)");
+  unsetenv("FOVEA_BOARD_DIR");
+}
+
+std::string fovead() {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
+}
+
+TEST(PrintConfig, PrintsTheEffectiveConfigurationAsLoadableToml) {
+  TempDir dir;
+  const std::string printed = dir.file("printed.toml");
+  // stdout alone (the note about the missing v4l2 backend goes to stderr).
+  const test::ProcessResult r = test::runCommand("(FOVEA_BOARD_DIR=" + boardDir() + " " + fovead() +
+                                                 " --print-config --board rpi5-usb-rgbd --set stream.budget_mbps=25"
+                                                 " --set pipeline.threads=1 > " + printed + " 2>/dev/null)");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  Result<ServiceConfig> loaded = loadServiceConfig(printed, ServiceConfig{});
+  ASSERT_TRUE(loaded.isOk()) << loaded.status().message();
+  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const std::vector<std::string> sets = {"stream.budget_mbps=25", "pipeline.threads=1"};
+  Result<ServiceConfig> expected = resolveServiceConfig("rpi5-usb-rgbd", std::nullopt, sets);
+  unsetenv("FOVEA_BOARD_DIR");
+  ASSERT_TRUE(expected.isOk()) << expected.status().message();
+  expectSame(*loaded, *expected);
+
+  // FOVEA_FORCE_KERNEL beats the configuration, as it does everywhere.
+  const test::ProcessResult forced =
+      test::runCommand("FOVEA_FORCE_KERNEL=ref " + fovead() + " print-config --set pipeline.kernels=simd");
+  ASSERT_EQ(forced.exit_code, 0) << forced.output;
+  EXPECT_NE(forced.output.find("kernels = \"ref\""), std::string::npos) << forced.output;
+
+  // The command form, and the default board.
+  const test::ProcessResult host = test::runCommand(fovead() + " print-config");
+  ASSERT_EQ(host.exit_code, 0) << host.output;
+  EXPECT_NE(host.output.find("board = \"host-mock\""), std::string::npos) << host.output;
+  EXPECT_NE(host.output.find("[runtime.send_thread]"), std::string::npos) << host.output;
+}
+
+TEST(PrintConfig, ErrorsExitWithStatus2AndTheMessage) {
+  TempDir dir;
+  const std::string file = write(dir, "fovea.toml", "[camera]\nsepc = \"mock\"\n");
+  test::ProcessResult r = test::runCommand(fovead() + " --print-config --config " + file);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.output, "fovead print-config: " + file + ":2: unknown key 'camera.sepc' (did you mean 'camera.spec'?)\n");
+  r = test::runCommand(fovead() + " print-config --config " + dir.file("missing.toml"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.output, "fovead print-config: cannot open '" + dir.file("missing.toml") + "': No such file or directory\n");
+  r = test::runCommand(fovead() + " print-config --set stream.budget_mbps=-3");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.output, "fovead print-config: --set: stream.budget_mbps: must be within 0.01 .. 10000 (got -3)\n");
+  r = test::runCommand(fovead() + " print-config --frobnicate");
+  EXPECT_EQ(r.exit_code, 2);
+  // A board whose camera backend this build lacks still prints, with a note.
+  r = test::runCommand("FOVEA_BOARD_DIR=" + boardDir() + " " + fovead() + " print-config --board rpi5-usb-rgbd");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+}  // namespace
+}  // namespace fovea::firmware
