@@ -10,6 +10,7 @@
 #include <string>
 
 #include "firmware/commands.h"
+#include "firmware/frame_foveator.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
 #include "firmware/streamer.h"
@@ -145,12 +146,6 @@ void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& 
   std::copy_n(from.points.rgb(), n, to.points.rgb());
   std::copy_n(from.region.begin(), n, to.region.begin());
   std::copy_n(from.weight.begin(), n, to.weight.begin());
-}
-
-int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 // SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).
@@ -293,14 +288,12 @@ int runCommand(int argc, char** argv) {
   const int width = info.intrinsics.width, height = info.intrinsics.height;
   const std::size_t max_points = static_cast<std::size_t>(width) * height;
   hal::RgbdFrame frame(width, height);
-  pipeline::PointCloud cloud(max_points);
   pipeline::FoveatedCloud out(max_points);
   const pipeline::KernelSet kernels = pipeline::defaultKernelSet();
   const int thread_count = static_cast<int>(threads.value());
-  Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, kernels, thread_count}, config.value());
-  pipeline::Backprojector backprojector(thread_count, kernels);
-  if (!foveator) return usage(foveator.status());
+  Result<FrameFoveator> stage =
+      FrameFoveator::create({max_points, max_points, kernels, thread_count}, config.value(), range);
+  if (!stage) return usage(stage.status());
   if (Status s = camera.start(); !s) {
     std::fprintf(stderr, "fovead run: camera %s: %s\n", info.name.c_str(), s.message().c_str());
     return kExitFailure;
@@ -336,7 +329,7 @@ int runCommand(int argc, char** argv) {
   std::signal(SIGTERM, onStopSignal);
 
   // The run's own region model (the stream's fallback swaps the foveator's).
-  const pipeline::RegionModel model = foveator->model();
+  const pipeline::RegionModel model = stage->foveator().model();
   if (every.value() > 0 && streaming) {
     std::printf("%5s %-22s %8s %6s %6s %5s %8s | ms: %7s %8s %7s %7s\n", "frame", "gaze", "out", "chunks", "sent",
                 "cut", "kB", "capture", "foveate", "encode", "send");
@@ -363,7 +356,6 @@ int runCommand(int argc, char** argv) {
   // Capture-to-sent latency of the frames of the current status second (fixed room).
   std::array<double, 256> status_latency_ms{};
   std::size_t status_latency_count = 0;
-  const pipeline::FoveationConfig* foveator_config = &config.value();
   uint64_t last_frame_id = 0;
   // With --listen --save-ply: a copy of the last frame that went out whole.
   const bool keep_streamed = streaming && args->has("--save-ply");
@@ -389,7 +381,7 @@ int runCommand(int argc, char** argv) {
     const int64_t capture_ns = monotonicNs();
     t0 = std::chrono::steady_clock::now();
     pipeline::BackprojectCounts bc;
-    if (Status s = backprojector.run(frame, range, cloud, bc); !s) {
+    if (Status s = stage->backproject(frame, bc); !s) {
       std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;
@@ -404,18 +396,15 @@ int runCommand(int argc, char** argv) {
         std::printf("gaze: %s\n", std::string(gazeSourceName(decision.source)).c_str());
         std::fflush(stdout);
       }
-      if (decision.foveation != foveator_config) {
-        if (Status s = foveator->setConfig(*decision.foveation); !s) {
-          std::fprintf(stderr, "fovead run: foveation config: %s\n", s.message().c_str());
-          return kExitFailure;
-        }
-        foveator_config = decision.foveation;
+      if (Status s = stage->use(decision.foveation); !s) {
+        std::fprintf(stderr, "fovead run: foveation config: %s\n", s.message().c_str());
+        return kExitFailure;
       }
       gaze = decision.gaze;
       source = decision.source;
     }
     pipeline::FoveationStats stats;
-    if (Status s = foveator->foveate(cloud, gaze, out, stats); !s) {
+    if (Status s = stage->foveate(gaze, out, stats); !s) {
       std::fprintf(stderr, "frame %zu: foveate: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;

@@ -58,8 +58,16 @@ class Streamer {
   // Handles datagrams until now >= until_ns (waits in poll, no busy loop).
   void idleUntil(int64_t until_ns);
 
+  // The operator's newest valid gaze sample while a session stands (false
+  // otherwise), and when it arrived.
+  bool operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const;
   // The gaze and foveation for a frame captured at now_ns with this camera pose.
   GazePolicy::Decision decide(const hal::Pose& camera, int64_t now_ns);
+
+  // Caps the uplink below the budget sessions negotiate (a reloaded
+  // configuration): applies to the session in progress and the next ones.
+  // Never allocates.
+  Status setBudgetCap(uint64_t bytes_per_s, int64_t now_ns);
 
   // Encodes a foveated frame and sends it, fovea first, paced to the session's
   // budget, until everything planned is out or deadline_ns passes (what is left
@@ -82,6 +90,8 @@ class Streamer {
            std::size_t max_points, const pipeline::FoveationConfig& operator_foveation);
   // Sets the encoder and the budget up for a new session.
   Status beginSession(int64_t now_ns);
+  // Budget and burst for the current session, under the cap.
+  Status applyBudget(int64_t now_ns);
 
   StreamConfig config_;
   std::unique_ptr<net::RobotLink> link_;
@@ -93,6 +103,7 @@ class Streamer {
   std::vector<uint8_t> chunk_regions_;
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;
+  uint64_t budget_cap_bytes_per_s_ = UINT64_MAX;
   uint64_t sessions_started_ = 0;
   uint64_t encode_failures_ = 0;
 };
