@@ -180,6 +180,24 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   return report;
 }
 
+net::StatusReport Streamer::statusReport(uint64_t frames_captured, uint64_t frames_sent, uint64_t frames_dropped,
+                                         int64_t now_ns) const {
+  const net::UplinkCounters& up = scheduler_.counters();
+  const net::RobotLinkCounters& lc = link_->counters();
+  net::StatusReport status;
+  status.frames_captured = frames_captured;
+  status.frames_sent = frames_sent;
+  status.frames_dropped = frames_dropped + up.frames_superseded;
+  status.chunks_cut = up.chunks_cut;
+  status.datagrams_sent = lc.datagrams_sent;
+  status.bytes_sent = lc.bytes_sent;
+  status.datagrams_received = lc.datagrams_received;
+  status.datagrams_dropped = lc.dropped.total();
+  if (const auto& g = link_->latestGaze()) status.gaze_age_ns = now_ns - g->received_ns;
+  status.rtt_ns = link_->lastRttNs();
+  return status;
+}
+
 void Streamer::sendStatus(const net::StatusReport& report) {
   if (link_->hasSession()) link_->sendStatus(report);
 }

@@ -78,6 +78,11 @@ class Streamer {
   Result<FrameSendReport> sendFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
                                     uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns);
 
+  // A status report with the link's and the uplink's figures and the caller's
+  // frame counts (frames_dropped adds the frames the uplink superseded); the
+  // caller adds the latency quantiles it measures.
+  net::StatusReport statusReport(uint64_t frames_captured, uint64_t frames_sent, uint64_t frames_dropped,
+                                 int64_t now_ns) const;
   // Sends a status report to the operator (about once a second).
   void sendStatus(const net::StatusReport& report);
 
