@@ -19,7 +19,7 @@ namespace fovea::firmware {
 namespace {
 
 const char* kServeHelp =
-    "usage: fovead serve [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
+    "usage: fovead serve [--board host-mock] [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
     "                    [--preset F1|F2|F3|FREF] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
     "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--overrides-file FILE]\n"
@@ -29,6 +29,7 @@ const char* kServeHelp =
     "a status log line, systemd notifications (READY, STATUS, WATCHDOG) under systemd.\n"
     "SIGINT/SIGTERM stop it (exit 0); SIGHUP reloads the foveation parameters and the budget.\n"
     "\n"
+    "  --board NAME             board profile (built in: host-mock, the defaults)\n"
     "  --camera SPEC            camera backend (default mock:living-room,realtime=on)\n"
     "  --frames N               stop after N frames foveated (default 0: until a signal)\n"
     "  --duration S             stop after S seconds (default: until a signal)\n"
