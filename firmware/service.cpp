@@ -82,7 +82,7 @@ std::string MemoryBudget::breakdown() const {
   for (std::size_t i = 0; i < pool_count; ++i) {
     const MemoryPool& p = pools[i];
     char line[160];
-    std::snprintf(line, sizeof line, "  %-40s %3zu x %9.3f MiB = %9.3f MiB\n", p.name, p.count,
+    std::snprintf(line, sizeof line, "  %-42s %3zu x %8.3f MiB = %8.3f MiB\n", p.name, p.count,
                   p.count ? static_cast<double>(p.bytes) / static_cast<double>(p.count) / kMiB : 0.0,
                   static_cast<double>(p.bytes) / kMiB);
     out += line;

@@ -146,7 +146,7 @@ inline firmware::ServiceConfig smallServiceConfig(double fps = 60.0) {
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=" + std::to_string(fps);
   config.pipeline.max_points = 160 * 120;
   config.pipeline.max_voxels = 160 * 120;
-  config.camera.stall_timeout_ms = 150;
+  config.camera.stall_timeout_ms = 300;
   config.gpio.lines.heartbeat_line = 0;
   config.gpio.lines.streaming_line = 1;
   config.gpio.lines.fault_line = 2;

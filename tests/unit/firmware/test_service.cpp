@@ -8,7 +8,10 @@
 
 #include <chrono>
 #include <functional>
+#include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -49,6 +52,40 @@ void startService(RunningService& running, const ServiceConfig& config, Service:
   running.service = std::move(created.value());
   ASSERT_TRUE(running.service->start().isOk());
   running.supervisor = std::thread([&running] { running.service->run(); });
+}
+
+// Keeps every line (the test's own sink; allocation does not matter here).
+class RecordingSink final : public LogSink {
+ public:
+  void write(LogLevel, int64_t, std::string_view line) override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    lines_.emplace_back(line);
+  }
+  bool contains(const std::string& text) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const std::string& line : lines_) {
+      if (line.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::string> lines_;
+};
+
+TEST(Service, RefusedThreadPlacementIsLoggedAndTheServiceRunsOn) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.capture_thread.core = 4095;  // no such core
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 5; }, 5000ms));
+  EXPECT_TRUE(sink.contains("fovea-capture: pinning to core 4095 refused")) << "no warning logged";
+  EXPECT_TRUE(sink.contains("memory: "));
 }
 
 TEST(Service, MemoryBudgetCountsEveryPool) {
