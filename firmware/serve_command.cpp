@@ -31,7 +31,7 @@ const char* kServeHelp =
     "\n"
     "  --board NAME             board profile (built in: host-mock, the defaults)\n"
     "  --camera SPEC            camera backend (default mock:living-room,realtime=on)\n"
-    "  --frames N               stop after N frames foveated (default 0: until a signal)\n"
+    "  --frames N               stop after N frames captured and passed on (default 0: until a signal)\n"
     "  --duration S             stop after S seconds (default: until a signal)\n"
     "  --gpio SPEC              status lines chip: mock (default), gpiod:gpiochip0\n"
     "  --gpio-lines H,S,F[,P]   heartbeat, streaming, fault [and privacy input] line offsets (-1: none)\n"

@@ -236,6 +236,8 @@ Status Service::start() {
   next_status_ns_ = started_ns_ + config_.runtime.status_interval_ms * 1'000'000;
   next_watchdog_ns_ = started_ns_;
   window_.at_ns = started_ns_;
+  capture_alive_.store(true, std::memory_order_relaxed);
+  foveation_alive_.store(true, std::memory_order_relaxed);
   running_.store(true, std::memory_order_release);
   threads_.emplace_back([this] { captureLoop(); });
   threads_.emplace_back([this] { foveationLoop(); });
@@ -271,6 +273,8 @@ void Service::captureLoop() {
   int64_t backoff_ns = 0;
   pipeline::SlotRing& ring = frames_->ring();
   while (running_.load(std::memory_order_acquire)) {
+    const uint64_t limit = max_frames_.load(std::memory_order_relaxed);
+    if (limit > 0 && ring.counters().published >= limit) break;  // run()'s frame limit: drain and stop
     pipeline::SlotIndex slot;
     if (!ring.tryAcquire(slot)) {
       sleepNs(kIdleSleepNs);
@@ -298,6 +302,8 @@ void Service::captureLoop() {
     last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
     ring.publish(slot);
   }
+  // After the last publish: the foveation stage drains what is queued, then ends.
+  capture_alive_.store(false, std::memory_order_release);
 }
 
 void Service::foveationLoop() {
@@ -305,7 +311,10 @@ void Service::foveationLoop() {
   static LogRateLimit foveate_site;
   pipeline::SlotRing& in_ring = frames_->ring();
   pipeline::SlotRing& out_ring = foveated_->ring();
-  while (running_.load(std::memory_order_acquire)) {
+  for (;;) {
+    // Read before tryTake: once the capture stage is seen done, every frame it
+    // published is visible, so an empty ring means drained.
+    const bool capture_done = !capture_alive_.load(std::memory_order_acquire);
     if (reload_to_foveation_.update()) {
       // Copies the configuration (allocates only if custom bounds outgrow the old ones).
       policy_->setOperatorConfig(reload_to_foveation_.current().foveation);
@@ -315,6 +324,7 @@ void Service::foveationLoop() {
     (void)gaze_box_.update();
     pipeline::SlotIndex in;
     if (!in_ring.tryTake(in)) {
+      if (capture_done) break;
       sleepNs(kIdleSleepNs);
       continue;
     }
@@ -353,6 +363,7 @@ void Service::foveationLoop() {
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
     out_ring.publish(out);
   }
+  foveation_alive_.store(false, std::memory_order_release);
 }
 
 void Service::sendLoop() {
@@ -379,7 +390,8 @@ void Service::sendLoop() {
     operator_connected_.store(streamer_->link().hasSession(), std::memory_order_relaxed);
   };
   int64_t next_report_ns = monotonicNs() + 1'000'000'000;
-  while (running_.load(std::memory_order_acquire)) {
+  for (;;) {
+    const bool foveation_done = !foveation_alive_.load(std::memory_order_acquire);
     if (streamer_) {
       if (reload_to_send_.update()) {
         const uint64_t budget = reload_to_send_.current().budget_bytes_per_s;
@@ -392,6 +404,7 @@ void Service::sendLoop() {
     }
     pipeline::SlotIndex slot;
     if (!ring.tryTake(slot)) {
+      if (foveation_done) break;  // drained
       if (streamer_) {
         streamer_->idleUntil(monotonicNs() + kIdleSleepNs);
       } else {
@@ -437,10 +450,12 @@ void Service::sendLoop() {
 
 void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
   const int64_t end_ns = max_duration_ns > 0 ? monotonicNs() + max_duration_ns : INT64_MAX;
+  max_frames_.store(max_frames, std::memory_order_relaxed);
   while (!stop_requested_.load(std::memory_order_relaxed)) {
     const int64_t now = monotonicNs();
     if (now >= end_ns) break;
-    if (max_frames > 0 && frames_foveated_.load(std::memory_order_relaxed) >= max_frames) break;
+    // The capture stage ends itself after max_frames; stop() drains the rest.
+    if (max_frames > 0 && !capture_alive_.load(std::memory_order_acquire)) break;
     if (reload_requested_.exchange(false, std::memory_order_relaxed)) applyReload();
     supervise(now);
     sleepNs(kSuperviseEveryNs);

@@ -155,13 +155,16 @@ class Service {
   // Requests the status lines, locks memory if configured, starts the camera
   // and the three threads, tells systemd READY=1.
   Status start();
-  // Supervises until requestStop(), max_frames foveated or max_duration_ns
-  // passed (0: no limit), then stop()s. Returns when all is down.
+  // Supervises until requestStop(), max_frames captured (then drained through
+  // the stages) or max_duration_ns passed (0: no limit), then stop()s.
+  // Returns when all is down.
   void run(uint64_t max_frames = 0, int64_t max_duration_ns = 0);
   // Both async-signal-safe (lock-free atomic stores): for signal handlers.
   void requestStop() { stop_requested_.store(true, std::memory_order_relaxed); }
   void requestReload() { reload_requested_.store(true, std::memory_order_relaxed); }
-  // Stops the threads and the camera, drives the status lines low (idempotent).
+  // Stops capturing, lets the foveation and send stages drain the frames
+  // queued (sent if an operator is there), joins, stops the camera, says Bye,
+  // drives the status lines low (idempotent).
   void stop();
 
   const MemoryBudget& memory() const { return memory_; }
@@ -221,6 +224,11 @@ class Service {
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> reload_requested_{false};
   std::atomic<bool> running_{false};
+  // Shutdown drains front to back: capture stops on running_, foveation once the
+  // capture stage is done and its ring empty, send likewise after foveation.
+  std::atomic<bool> capture_alive_{false};
+  std::atomic<bool> foveation_alive_{false};
+  std::atomic<uint64_t> max_frames_{0};  // run()'s limit on frames captured (0: none)
   std::atomic<bool> stream_allowed_{true};
   std::atomic<bool> operator_connected_{false};
   std::atomic<int64_t> gaze_received_ns_{0};  // 0: none

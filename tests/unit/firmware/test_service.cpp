@@ -133,6 +133,12 @@ TEST(Service, FramesFlowThroughTheStagesAndTheHeartbeatToggles) {
   EXPECT_GT(stats.frames_unsent, 0u);  // not streaming: the send stage takes and returns them
   running.stop();
   EXPECT_FALSE(chip.value(0));  // stop() drives the lines low
+  // The stop drained the rings: every frame captured was foveated or dropped
+  // (counted), every frame foveated reached the send stage or was dropped.
+  const ServiceStats end = running.service->stats();
+  EXPECT_EQ(end.frames_foveated + end.capture_ring.dropped + end.foveate_errors, end.frames_captured);
+  EXPECT_EQ(end.frames_sent + end.frames_withheld + end.frames_unsent + end.foveation_ring.dropped,
+            end.frames_foveated);
 }
 
 TEST(Service, CameraStallRaisesTheFaultAndStopsTheHeartbeat) {
