@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <regex>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -73,6 +74,34 @@ TEST(FoveadServe, SighupAppliesANewPreset) {
   stopSeconds(serve, SIGTERM, exit_code);
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("1 reloads applied"), std::string::npos) << serve.output();
+}
+
+std::string foveaOperator() {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(FOVEA_OPERATOR_PATH) : emulator + " " + FOVEA_OPERATOR_PATH;
+}
+
+// The stream end to end through the service's threads: fovea-operator decodes
+// what fovead serve sends for its gaze.
+TEST(FoveadServe, StreamsToFoveaOperator) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
+                                " --listen 127.0.0.1:0 --insecure --status-interval-ms 500");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  std::smatch port;
+  const std::string out = serve.output();
+  ASSERT_TRUE(std::regex_search(out, port, std::regex("listening on 127\\.0\\.0\\.1:([0-9]+)"))) << out;
+  const test::ProcessResult op = test::runCommand(foveaOperator() + " --connect 127.0.0.1:" + port[1].str() +
+                                                  " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --duration 3");
+  EXPECT_EQ(op.exit_code, 0) << op.output;
+  std::smatch frames;
+  ASSERT_TRUE(std::regex_search(op.output, frames, std::regex("summary: ([0-9]+) frames"))) << op.output;
+  EXPECT_GE(std::stoi(frames[1].str()), 30) << op.output;  // 30 fps for 3 s, an emulator slower
+  EXPECT_NE(op.output.find(" 0 bad"), std::string::npos) << op.output;
+  ASSERT_TRUE(serve.waitFor("out ", 5.0));
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
 }
 
 TEST(FoveadServe, FrameLimitAndBadFlags) {
