@@ -257,6 +257,32 @@ TEST(Service, ReloadAppliesANewPresetBetweenFrames) {
   EXPECT_EQ(running.service->stats().foveate_errors, 0u);
 }
 
+TEST(Service, ReloadCapsTheBudgetOfTheSessionInProgress) {
+  Service::Environment environment;
+  environment.reloader = []() -> Result<ServiceConfig> {
+    ServiceConfig next = streamingConfig();
+    next.stream.link.max_budget_bytes_per_s = 100'000;  // 0.1 MB/s
+    return next;
+  };
+  RunningService running;
+  startService(running, streamingConfig(), std::move(environment));
+  TestOperator op;
+  ASSERT_TRUE(op.connect(running.service->localEndpoint()));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= 10; }, 5000ms));
+  auto bytesPerSecond = [&] {
+    const uint64_t b0 = running.service->stats().wire_bytes;
+    std::this_thread::sleep_for(600ms);
+    return static_cast<double>(running.service->stats().wire_bytes - b0) / 0.6;
+  };
+  const double before = bytesPerSecond();
+  ASSERT_GT(before, 300'000.0) << "the uncapped stream should carry more than the cap";
+  running.service->requestReload();
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().reloads_applied == 1; }, 2000ms));
+  std::this_thread::sleep_for(200ms);
+  const double after = bytesPerSecond();
+  EXPECT_LT(after, 150'000.0) << "before " << before;
+}
+
 TEST(Service, ReloadFailureKeepsTheRunningConfiguration) {
   Service::Environment environment;
   environment.reloader = []() -> Result<ServiceConfig> {
