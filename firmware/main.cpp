@@ -17,6 +17,8 @@ const char* kHelp =
     "commands:\n"
     "  run       run the pipeline on a camera (default: the mock living room) and report;\n"
     "            with --listen, stream it to an operator over UDP\n"
+    "  serve     run as a service: stage threads, fixed memory, status lines, systemd\n"
+    "            notifications; until SIGTERM (SIGHUP reloads the foveation parameters)\n"
     "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
     "  keygen    write a new pre-shared key file for the stream\n"
     "  print-config  print the effective configuration (board profile, --config FILE,\n"
@@ -38,6 +40,7 @@ int main(int argc, char** argv) {
     return kExitOk;
   }
   if (std::strcmp(argv[1], "run") == 0) return runCommand(argc, argv);
+  if (std::strcmp(argv[1], "serve") == 0) return serveCommand(argc, argv);
   if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
   if (std::strcmp(argv[1], "keygen") == 0) return keygenCommand(argc, argv);
   if (std::strcmp(argv[1], "print-config") == 0 || std::strcmp(argv[1], "--print-config") == 0) {

@@ -11,8 +11,10 @@
 #include <thread>
 
 #include "firmware/commands.h"
+#include "firmware/frame_foveator.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
+#include "firmware/stream_options.h"
 #include "firmware/streamer.h"
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
@@ -148,81 +150,10 @@ void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& 
   std::copy_n(from.weight.begin(), n, to.weight.begin());
 }
 
-int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 // SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void onStopSignal(int) { g_stop = 1; }
 
-const std::vector<std::string> kStreamFlags = {"--listen", "--key-file", "--budget", "--max-mtu", "--gaze-timeout-ms",
-                                               "--fallback-voxel", "--fovea-step", "--chroma", "--entropy"};
-
-// The streaming options, or nullopt without --listen.
-Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args) {
-  using R = Result<std::optional<StreamConfig>>;
-  if (!args.has("--listen")) {
-    for (const std::string& flag : kStreamFlags) {
-      if (args.has(flag)) return R(ErrorCode::kInvalidArgument, flag + ": only with --listen");
-    }
-    if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: only with --listen");
-    return std::optional<StreamConfig>();
-  }
-  StreamConfig config;
-  config.link.listen = *args.get("--listen");
-  if (const std::string* path = args.get("--key-file")) {
-    if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: not together with --key-file");
-    Result<net::LoadedKey> key = net::loadKeyFile(*path);
-    if (!key) return R(key.status().code(), "--key-file: " + key.status().message());
-    if (!key->warning.empty()) std::fprintf(stderr, "fovead run: warning: %s\n", key->warning.c_str());
-    config.link.key = key->key;
-  } else if (args.has("--insecure")) {
-    config.link.insecure = true;
-  } else {
-    return R(ErrorCode::kInvalidArgument,
-             "--listen: needs --key-file FILE (fovead keygen FILE makes one), or --insecure for a trusted test host");
-  }
-  if (const std::string* v = args.get("--budget")) {
-    Result<double> mbps = parseDouble("--budget", *v);
-    if (!mbps) return mbps.status();
-    if (!(mbps.value() >= 0.01 && mbps.value() <= 10000.0)) {
-      return R(ErrorCode::kInvalidArgument, "--budget: must be within 0.01 .. 10000 MB/s");
-    }
-    config.link.max_budget_bytes_per_s = static_cast<uint64_t>(mbps.value() * 1e6);
-  }
-  if (const std::string* v = args.get("--max-mtu")) {
-    Result<long> mtu = parseInteger("--max-mtu", *v, static_cast<long>(net::kMinMtu), static_cast<long>(net::kMaxMtu));
-    if (!mtu) return mtu.status();
-    config.link.max_mtu_bytes = static_cast<uint32_t>(mtu.value());
-  }
-  if (const std::string* v = args.get("--gaze-timeout-ms")) {
-    Result<long> ms = parseInteger("--gaze-timeout-ms", *v, 1, 60000);
-    if (!ms) return ms.status();
-    config.gaze.timeout_ns = ms.value() * 1'000'000;
-  }
-  if (const std::string* v = args.get("--fallback-voxel")) {
-    Result<double> m = parseDouble("--fallback-voxel", *v);
-    if (!m) return m.status();
-    config.gaze.fallback_voxel_m = m.value();
-  }
-  if (const std::string* v = args.get("--fovea-step")) {
-    Result<double> m = parseDouble("--fovea-step", *v);
-    if (!m) return m.status();
-    config.codec.fovea_step_m = m.value();
-  }
-  const std::string chroma = args.getOr("--chroma", "full");
-  if (chroma != "full" && chroma != "half") return R(ErrorCode::kInvalidArgument, "--chroma: '" + chroma + "' is not full or half");
-  config.codec.halve_peripheral_chroma = chroma == "half";
-  const std::string entropy = args.getOr("--entropy", "off");
-  if (entropy != "on" && entropy != "off") return R(ErrorCode::kInvalidArgument, "--entropy: '" + entropy + "' is not on or off");
-  config.codec.entropy_coding = entropy == "on";
-  if (Status s = config.gaze.validate(); !s) return R(s.code(), "--gaze-timeout-ms/--fallback-voxel: " + s.message());
-  if (Status s = net::validate(config.codec); !s) return R(s.code(), "--fovea-step: " + s.message());
-  return std::optional<StreamConfig>(config);
-}
 
 }  // namespace
 
@@ -294,14 +225,12 @@ int runCommand(int argc, char** argv) {
   const int width = info.intrinsics.width, height = info.intrinsics.height;
   const std::size_t max_points = static_cast<std::size_t>(width) * height;
   hal::RgbdFrame frame(width, height);
-  pipeline::PointCloud cloud(max_points);
   pipeline::FoveatedCloud out(max_points);
   const pipeline::KernelSet kernels = pipeline::defaultKernelSet();
   const int thread_count = static_cast<int>(threads.value());
-  Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, kernels, thread_count}, config.value());
-  pipeline::Backprojector backprojector(thread_count, kernels);
-  if (!foveator) return usage(foveator.status());
+  Result<FrameFoveator> stage =
+      FrameFoveator::create({max_points, max_points, kernels, thread_count}, config.value(), range);
+  if (!stage) return usage(stage.status());
   if (Status s = camera.start(); !s) {
     std::fprintf(stderr, "fovead run: camera %s: %s\n", info.name.c_str(), s.message().c_str());
     return kExitFailure;
@@ -337,7 +266,7 @@ int runCommand(int argc, char** argv) {
   std::signal(SIGTERM, onStopSignal);
 
   // The run's own region model (the stream's fallback swaps the foveator's).
-  const pipeline::RegionModel model = foveator->model();
+  const pipeline::RegionModel model = stage->foveator().model();
   if (every.value() > 0 && streaming) {
     std::printf("%5s %-22s %8s %6s %6s %5s %8s | ms: %7s %8s %7s %7s\n", "frame", "gaze", "out", "chunks", "sent",
                 "cut", "kB", "capture", "foveate", "encode", "send");
@@ -364,7 +293,6 @@ int runCommand(int argc, char** argv) {
   // Capture-to-sent latency of the frames of the current status second (fixed room).
   std::array<double, 256> status_latency_ms{};
   std::size_t status_latency_count = 0;
-  const pipeline::FoveationConfig* foveator_config = &config.value();
   uint64_t last_frame_id = 0;
   // With --listen --save-ply: a copy of the last frame that went out whole.
   const bool keep_streamed = streaming && args->has("--save-ply");
@@ -398,7 +326,7 @@ int runCommand(int argc, char** argv) {
     const int64_t capture_ns = monotonicNs();
     t0 = std::chrono::steady_clock::now();
     pipeline::BackprojectCounts bc;
-    if (Status s = backprojector.run(frame, range, cloud, bc); !s) {
+    if (Status s = stage->backproject(frame, bc); !s) {
       std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;
@@ -413,18 +341,15 @@ int runCommand(int argc, char** argv) {
         std::printf("gaze: %s\n", std::string(gazeSourceName(decision.source)).c_str());
         std::fflush(stdout);
       }
-      if (decision.foveation != foveator_config) {
-        if (Status s = foveator->setConfig(*decision.foveation); !s) {
-          std::fprintf(stderr, "fovead run: foveation config: %s\n", s.message().c_str());
-          return kExitFailure;
-        }
-        foveator_config = decision.foveation;
+      if (Status s = stage->use(decision.foveation); !s) {
+        std::fprintf(stderr, "fovead run: foveation config: %s\n", s.message().c_str());
+        return kExitFailure;
       }
       gaze = decision.gaze;
       source = decision.source;
     }
     pipeline::FoveationStats stats;
-    if (Status s = foveator->foveate(cloud, gaze, out, stats); !s) {
+    if (Status s = stage->foveate(gaze, out, stats); !s) {
       std::fprintf(stderr, "frame %zu: foveate: %s\n", i, s.toString().c_str());
       ++failed_frames;
       continue;
@@ -489,19 +414,7 @@ int runCommand(int argc, char** argv) {
     }
     if (streamer) {
       if (const int64_t now = monotonicNs(); now >= next_status_ns) {
-        const net::UplinkCounters& up = streamer->uplinkCounters();
-        const net::RobotLinkCounters& lc = streamer->link().counters();
-        net::StatusReport status;
-        status.frames_captured = attempted_frames;
-        status.frames_sent = frames_streamed;
-        status.frames_dropped = failed_frames + up.frames_superseded;
-        status.chunks_cut = up.chunks_cut;
-        status.datagrams_sent = lc.datagrams_sent;
-        status.bytes_sent = lc.bytes_sent;
-        status.datagrams_received = lc.datagrams_received;
-        status.datagrams_dropped = lc.dropped.total();
-        if (const auto& g = streamer->link().latestGaze()) status.gaze_age_ns = now - g->received_ns;
-        status.rtt_ns = streamer->link().lastRttNs();
+        net::StatusReport status = streamer->statusReport(attempted_frames, frames_streamed, failed_frames, now);
         if (status_latency_count > 0) {
           const std::span<double> window(status_latency_ms.data(), status_latency_count);
           status.latency_p50_ns = static_cast<int64_t>(pipeline::nearestRankQuantile(window, 0.5) * 1e6);

@@ -57,14 +57,37 @@ void Streamer::idleUntil(int64_t until_ns) {
   }
 }
 
-GazePolicy::Decision Streamer::decide(const hal::Pose& camera, int64_t now_ns) {
+bool Streamer::operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const {
   const auto& latest = link_->latestGaze();
-  if (!link_->hasSession() || !latest) return policy_.decide(nullptr, 0, now_ns, camera);
-  pipeline::Gaze gaze;
+  if (!link_->hasSession() || !latest) return false;
   const net::GazeSample& s = latest->sample;
   gaze.origin_m = {s.gaze_origin_m.x, s.gaze_origin_m.y, s.gaze_origin_m.z};
   gaze.direction = {s.gaze_direction.x, s.gaze_direction.y, s.gaze_direction.z};
-  return policy_.decide(&gaze, latest->received_ns, now_ns, camera);
+  received_ns = latest->received_ns;
+  return true;
+}
+
+GazePolicy::Decision Streamer::decide(const hal::Pose& camera, int64_t now_ns) {
+  pipeline::Gaze gaze;
+  int64_t received_ns = 0;
+  if (!operatorGaze(gaze, received_ns)) return policy_.decide(nullptr, 0, now_ns, camera);
+  return policy_.decide(&gaze, received_ns, now_ns, camera);
+}
+
+Status Streamer::setBudgetCap(uint64_t bytes_per_s, int64_t now_ns) {
+  if (bytes_per_s == 0) return {ErrorCode::kInvalidArgument, "stream budget cap: must be positive"};
+  budget_cap_bytes_per_s_ = bytes_per_s;
+  if (session_started_ns_ >= 0 && link_->hasSession() && link_->session()->started_ns == session_started_ns_) {
+    return applyBudget(now_ns);
+  }
+  return Status::ok();
+}
+
+Status Streamer::applyBudget(int64_t now_ns) {
+  const net::SessionInfo& session = *link_->session();
+  const double budget = static_cast<double>(std::min(session.budget_bytes_per_s, budget_cap_bytes_per_s_));
+  const double burst = std::max(budget * config_.burst_ms * 1e-3, 4.0 * session.mtu_bytes);
+  return scheduler_.setBudget(budget, burst, now_ns);
 }
 
 Status Streamer::beginSession(int64_t now_ns) {
@@ -75,9 +98,7 @@ Status Streamer::beginSession(int64_t now_ns) {
   Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_);
   if (!encoder) return encoder.status();
   encoder_.emplace(std::move(encoder.value()));
-  const double budget = static_cast<double>(session.budget_bytes_per_s);
-  const double burst = std::max(budget * config_.burst_ms * 1e-3, 4.0 * session.mtu_bytes);
-  if (Status s = scheduler_.setBudget(budget, burst, now_ns); !s) return s;
+  if (Status s = applyBudget(now_ns); !s) return s;
   session_started_ns_ = session.started_ns;
   ++sessions_started_;
   return Status::ok();
@@ -157,6 +178,24 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   report.send_ns = monotonicNs() - send_start;
   report.bytes_sent = scheduler_.counters().bytes_sent - bytes_before;
   return report;
+}
+
+net::StatusReport Streamer::statusReport(uint64_t frames_captured, uint64_t frames_sent, uint64_t frames_dropped,
+                                         int64_t now_ns) const {
+  const net::UplinkCounters& up = scheduler_.counters();
+  const net::RobotLinkCounters& lc = link_->counters();
+  net::StatusReport status;
+  status.frames_captured = frames_captured;
+  status.frames_sent = frames_sent;
+  status.frames_dropped = frames_dropped + up.frames_superseded;
+  status.chunks_cut = up.chunks_cut;
+  status.datagrams_sent = lc.datagrams_sent;
+  status.bytes_sent = lc.bytes_sent;
+  status.datagrams_received = lc.datagrams_received;
+  status.datagrams_dropped = lc.dropped.total();
+  if (const auto& g = link_->latestGaze()) status.gaze_age_ns = now_ns - g->received_ns;
+  status.rtt_ns = link_->lastRttNs();
+  return status;
 }
 
 void Streamer::sendStatus(const net::StatusReport& report) {

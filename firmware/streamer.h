@@ -58,8 +58,16 @@ class Streamer {
   // Handles datagrams until now >= until_ns (waits in poll, no busy loop).
   void idleUntil(int64_t until_ns);
 
+  // The operator's newest valid gaze sample while a session stands (false
+  // otherwise), and when it arrived.
+  bool operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const;
   // The gaze and foveation for a frame captured at now_ns with this camera pose.
   GazePolicy::Decision decide(const hal::Pose& camera, int64_t now_ns);
+
+  // Caps the uplink below the budget sessions negotiate (a reloaded
+  // configuration): applies to the session in progress and the next ones.
+  // Never allocates.
+  Status setBudgetCap(uint64_t bytes_per_s, int64_t now_ns);
 
   // Encodes a foveated frame and sends it, fovea first, paced to the session's
   // budget, until everything planned is out or deadline_ns passes (what is left
@@ -70,6 +78,11 @@ class Streamer {
   Result<FrameSendReport> sendFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
                                     uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns);
 
+  // A status report with the link's and the uplink's figures and the caller's
+  // frame counts (frames_dropped adds the frames the uplink superseded); the
+  // caller adds the latency quantiles it measures.
+  net::StatusReport statusReport(uint64_t frames_captured, uint64_t frames_sent, uint64_t frames_dropped,
+                                 int64_t now_ns) const;
   // Sends a status report to the operator (about once a second).
   void sendStatus(const net::StatusReport& report);
 
@@ -82,6 +95,8 @@ class Streamer {
            std::size_t max_points, const pipeline::FoveationConfig& operator_foveation);
   // Sets the encoder and the budget up for a new session.
   Status beginSession(int64_t now_ns);
+  // Budget and burst for the current session, under the cap.
+  Status applyBudget(int64_t now_ns);
 
   StreamConfig config_;
   std::unique_ptr<net::RobotLink> link_;
@@ -93,6 +108,7 @@ class Streamer {
   std::vector<uint8_t> chunk_regions_;
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;
+  uint64_t budget_cap_bytes_per_s_ = UINT64_MAX;
   uint64_t sessions_started_ = 0;
   uint64_t encode_failures_ = 0;
 };

@@ -76,6 +76,9 @@ class BackgroundProcess {
     return true;
   }
 
+  // Sends a signal without waiting (SIGHUP to a service).
+  bool signal(int signal_number) { return pid_ > 0 && !exited_ && kill(pid_, signal_number) == 0; }
+
   // Sends `signal`, waits up to timeout_s for the exit, collects the rest of the
   // output. Returns the exit code (-1: killed by a signal or did not exit in time).
   int stop(int signal_number, double timeout_s) {

@@ -1,0 +1,170 @@
+// fovead serve: the service (firmware/service.h) until SIGINT or SIGTERM.
+#include <signal.h>
+
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "firmware/commands.h"
+#include "firmware/options.h"
+#include "firmware/serve_options.h"
+#include "firmware/service.h"
+#include "hal/camera.h"
+
+namespace fovea::firmware {
+
+namespace {
+
+const char* kServeHelp =
+    "usage: fovead serve [--board host-mock] [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
+    "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
+    "                    [--preset F1|F2|F3|FREF] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
+    "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--overrides-file FILE]\n"
+    "\n"
+    "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"
+    "by latest-wins rings, all memory allocated at start-up (printed), status GPIO lines,\n"
+    "a status log line, systemd notifications (READY, STATUS, WATCHDOG) under systemd.\n"
+    "SIGINT/SIGTERM stop it (exit 0); SIGHUP reloads the foveation parameters and the budget.\n"
+    "\n"
+    "  --board NAME             board profile (built in: host-mock, the defaults)\n"
+    "  --camera SPEC            camera backend (default mock:living-room,realtime=on)\n"
+    "  --frames N               stop after N frames captured and passed on (default 0: until a signal)\n"
+    "  --duration S             stop after S seconds (default: until a signal)\n"
+    "  --gpio SPEC              status lines chip: mock (default), gpiod:gpiochip0\n"
+    "  --gpio-lines H,S,F[,P]   heartbeat, streaming, fault [and privacy input] line offsets (-1: none)\n"
+    "  --ring-depth N           frames queued between stages, latest wins (default 2)\n"
+    "  --status-interval-ms MS  the status log line's period (default 5000)\n"
+    "  --threads N              threads per frame for back-projection and partition (default 1)\n"
+    "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
+    "  --memory-lock            mlockall after start-up\n"
+    "  --log-level LEVEL        error, warning, notice, info (default), debug\n"
+    "  --overrides-file FILE    more of these flags, read at start and again on SIGHUP\n"
+    "                           (until the configuration file arrives)\n"
+    "  stream options as for fovead run: --budget, --max-mtu, --gaze-timeout-ms, --fallback-voxel,\n"
+    "                           --fovea-step, --chroma, --entropy\n";
+
+Service* g_service = nullptr;
+
+extern "C" void onServeSignal(int signal_number) {
+  Service* service = g_service;
+  if (service == nullptr) return;
+  if (signal_number == SIGHUP) {
+    service->requestReload();
+  } else {
+    service->requestStop();
+  }
+}
+
+Result<std::vector<std::string>> readOverrides(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return Result<std::vector<std::string>>(ErrorCode::kNotFound, "--overrides-file: cannot read " + path);
+  std::vector<std::string> tokens{std::istream_iterator<std::string>(in), std::istream_iterator<std::string>()};
+  return tokens;
+}
+
+// serve's defaults: the service's, but streaming only with --listen.
+ServiceConfig serveDefaults() {
+  ServiceConfig config;
+  config.stream.link.listen.clear();
+  return config;
+}
+
+// The command line, then the overrides file's flags (which win).
+Result<Args> parseServeArgs(const std::vector<std::string>& tokens) {
+  std::vector<std::string> all = tokens;
+  for (std::size_t i = 0; i < tokens.size(); ++i) {
+    if (tokens[i] == "--overrides-file" && i + 1 < tokens.size()) {
+      Result<std::vector<std::string>> more = readOverrides(tokens[i + 1]);
+      if (!more) return more.status();
+      all.insert(all.end(), more->begin(), more->end());
+    } else if (tokens[i].rfind("--overrides-file=", 0) == 0) {
+      Result<std::vector<std::string>> more = readOverrides(tokens[i].substr(17));
+      if (!more) return more.status();
+      all.insert(all.end(), more->begin(), more->end());
+    }
+  }
+  std::vector<char*> argv;
+  for (std::string& t : all) argv.push_back(t.data());
+  std::vector<std::string> flags = kServeFlags;
+  flags.push_back("--overrides-file");
+  return Args::parse(static_cast<int>(argv.size()), argv.data(), 0, flags, kServeSwitches);
+}
+
+}  // namespace
+
+int serveCommand(int argc, char** argv) {
+  const std::vector<std::string> tokens(argv + 2, argv + argc);
+  for (const std::string& t : tokens) {
+    if (t == "--help" || t == "-h") {
+      std::printf("%s%s\ncameras:\n%s\n", kServeHelp, foveationFlagsHelp().c_str(), hal::cameraSpecHelp().c_str());
+      return kExitOk;
+    }
+  }
+  auto usage = [](const Status& s) {
+    std::fprintf(stderr, "fovead serve: %s\n", s.message().c_str());
+    return kExitUsage;
+  };
+  Result<Args> args = parseServeArgs(tokens);
+  if (!args) return usage(args.status());
+  Result<ServiceConfig> config = serviceConfigFromArgs(args.value(), serveDefaults());
+  if (!config) return usage(config.status());
+  Result<long> frames = parseInteger("--frames", args->getOr("--frames", "0"), 0, 100000000);
+  if (!frames) return usage(frames.status());
+  double duration_s = 0.0;
+  if (const std::string* v = args->get("--duration")) {
+    Result<double> d = parseDouble("--duration", *v);
+    if (!d) return usage(d.status());
+    if (!(d.value() > 0.0)) return usage({ErrorCode::kInvalidArgument, "--duration: must be positive"});
+    duration_s = d.value();
+  }
+  logger().setLevel(config->runtime.log_level);
+
+  Service::Environment environment;
+  // SIGHUP: the same command line and the overrides file as it is now.
+  environment.reloader = [tokens]() -> Result<ServiceConfig> {
+    Result<Args> reloaded = parseServeArgs(tokens);
+    if (!reloaded) return reloaded.status();
+    return serviceConfigFromArgs(reloaded.value(), serveDefaults());
+  };
+  Result<std::unique_ptr<Service>> created = Service::create(config.value(), std::move(environment));
+  if (!created) {
+    std::fprintf(stderr, "fovead serve: %s\n", created.status().message().c_str());
+    return created.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
+  }
+  Service& service = *created.value();
+  std::printf("fovead serve: board %s, camera %s, foveation %s, ring depth %d\n", config->board.c_str(),
+              config->camera.spec.c_str(), describeFoveation(config->foveation).c_str(), config->runtime.ring_depth);
+  std::printf("%s\n%s", service.memory().summary().c_str(), service.memory().breakdown().c_str());
+  if (service.streaming()) {
+    std::printf("streaming: listening on %s (%s), budget up to %.2f MB/s\n", service.localEndpoint().toString().c_str(),
+                config->stream.link.insecure ? "INSECURE" : "authenticated",
+                static_cast<double>(config->stream.link.max_budget_bytes_per_s) / 1e6);
+  }
+  std::fflush(stdout);
+
+  g_service = &service;
+  struct sigaction action {};
+  action.sa_handler = onServeSignal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGHUP, &action, nullptr);
+  if (Status s = service.start(); !s) {
+    g_service = nullptr;
+    std::fprintf(stderr, "fovead serve: %s\n", s.message().c_str());
+    return kExitFailure;
+  }
+  std::printf("fovead serve: running (SIGTERM or SIGINT stops, SIGHUP reloads)\n");
+  std::fflush(stdout);
+  service.run(static_cast<uint64_t>(frames.value()), static_cast<int64_t>(duration_s * 1e9));
+  g_service = nullptr;
+  const ServiceStats stats = service.stats();
+  std::printf("fovead serve: stopped after %llu frames foveated, %llu sent\n",
+              static_cast<unsigned long long>(stats.frames_foveated), static_cast<unsigned long long>(stats.frames_sent));
+  return kExitOk;
+}
+
+}  // namespace fovea::firmware

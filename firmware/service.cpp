@@ -1,0 +1,638 @@
+#include "firmware/service.h"
+
+#include <malloc.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cinttypes>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <utility>
+
+#include "firmware/options.h"
+#include "net/codec.h"
+#include "net/key.h"
+
+namespace fovea::firmware {
+
+namespace {
+
+constexpr int64_t kIdleSleepNs = 500'000;        // a stage with nothing to do
+constexpr int64_t kSuperviseEveryNs = 5'000'000;  // status lines, watchdog, signals
+constexpr auto kAcquireTimeout = std::chrono::milliseconds(200);  // bounds how long a stop waits for the camera
+constexpr double kMiB = 1024.0 * 1024.0;
+
+void sleepNs(int64_t ns) {
+  const timespec pause{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
+  nanosleep(&pause, nullptr);
+}
+
+// Bytes the C heap has handed out: the start-up phase measures each pool as the
+// difference around its allocation (what the components really reserve,
+// including their own bookkeeping, without asking each for a size method).
+std::size_t heapInUse() {
+  const struct mallinfo2 m = mallinfo2();
+  return m.uordblks + m.hblkhd;
+}
+
+std::size_t delta(std::size_t before, std::size_t after) { return after > before ? after - before : 0; }
+
+// The nearest-rank quantile of the counts in [0, buckets), as the bucket's upper edge in ms; -1 when empty.
+double histogramQuantileMs(const uint64_t* counts, std::size_t buckets, double q) {
+  uint64_t total = 0;
+  for (std::size_t i = 0; i < buckets; ++i) total += counts[i];
+  if (total == 0) return -1.0;
+  const auto rank = static_cast<uint64_t>(std::max(1.0, std::ceil(q * static_cast<double>(total))));
+  uint64_t seen = 0;
+  for (std::size_t i = 0; i < buckets; ++i) {
+    seen += counts[i];
+    if (seen >= rank) return static_cast<double>((i + 1) * LatencyHistogram::kBucketNs) * 1e-6;
+  }
+  return static_cast<double>(buckets * LatencyHistogram::kBucketNs) * 1e-6;
+}
+
+}  // namespace
+
+// ---- MemoryBudget ----
+
+void MemoryBudget::add(const char* name, std::size_t count, std::size_t bytes) {
+  if (pool_count < kMaxPools) pools[pool_count++] = {name, count, bytes};
+}
+
+std::size_t MemoryBudget::totalBytes() const {
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < pool_count; ++i) total += pools[i].bytes;
+  return total;
+}
+
+std::string MemoryBudget::summary() const {
+  char line[96];
+  std::snprintf(line, sizeof line, "memory: %.1f MiB in %zu pools", static_cast<double>(totalBytes()) / kMiB,
+                pool_count);
+  return line;
+}
+
+std::string MemoryBudget::breakdown() const {
+  std::string out;
+  for (std::size_t i = 0; i < pool_count; ++i) {
+    const MemoryPool& p = pools[i];
+    char line[160];
+    std::snprintf(line, sizeof line, "  %-42s %3zu x %8.3f MiB = %8.3f MiB\n", p.name, p.count,
+                  p.count ? static_cast<double>(p.bytes) / static_cast<double>(p.count) / kMiB : 0.0,
+                  static_cast<double>(p.bytes) / kMiB);
+    out += line;
+  }
+  return out;
+}
+
+// ---- Service ----
+
+Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, Environment environment) {
+  using R = Result<std::unique_ptr<Service>>;
+  const RuntimeSettings& rt = config.runtime;
+  if (rt.ring_depth < 1 || rt.ring_depth > 64) {
+    return R(ErrorCode::kInvalidArgument, "runtime.ring_depth = " + std::to_string(rt.ring_depth) + ": must be within 1 .. 64");
+  }
+  if (rt.status_interval_ms < 10) {
+    return R(ErrorCode::kInvalidArgument, "runtime.status_interval_ms: must be at least 10");
+  }
+  for (const ThreadPlacement* p : {&rt.capture_thread, &rt.foveation_thread, &rt.send_thread}) {
+    if (p->realtime_priority < 0 || p->realtime_priority > 99) {
+      return R(ErrorCode::kInvalidArgument, "runtime.*_thread.realtime_priority: must be within 0 .. 99");
+    }
+  }
+  if (Status s = config.camera.depth.validate(); !s) return s;
+  const std::size_t heap_before_camera = heapInUse();
+  if (!environment.camera) {
+    Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(config.camera.spec);
+    if (!camera) return R(camera.status().code(), "camera.spec: " + camera.status().message());
+    environment.camera = std::move(camera.value());
+  }
+  if (Status s = environment.camera->open(); !s) {
+    return R(s.code(), "camera " + environment.camera->info().name + ": " + s.message());
+  }
+  const std::size_t camera_bytes = delta(heap_before_camera, heapInUse());
+  if (!environment.gpio) {
+    Result<std::unique_ptr<hal::Gpio>> gpio = hal::createGpio(config.gpio.spec);
+    if (!gpio) return R(gpio.status().code(), "gpio.spec: " + gpio.status().message());
+    environment.gpio = std::move(gpio.value());
+  }
+  const double fps = environment.camera->info().fps;
+  const int64_t period_ns = fps > 0 ? static_cast<int64_t>(1e9 / fps) : 33'333'333;
+  std::unique_ptr<Service> service(new Service(config, std::move(environment), period_ns));
+  service->memory_.add("camera backend", 1, camera_bytes);
+  if (Status s = service->allocate(); !s) return s;
+  service->log().log(LogLevel::kInfo, "%s", service->memory_.summary().c_str());
+  return service;
+}
+
+Service::Service(const ServiceConfig& config, Environment environment, int64_t period_ns)
+    : config_(config),
+      camera_(std::move(environment.camera)),
+      gpio_(std::move(environment.gpio)),
+      reloader_(std::move(environment.reloader)),
+      logger_(environment.logger ? environment.logger : &firmware::logger()),
+      period_ns_(period_ns),
+      stall_timeout_ns_(config.camera.stall_timeout_ms > 0 ? config.camera.stall_timeout_ms * 1'000'000
+                                                           : 3 * period_ns) {}
+
+Service::~Service() { stop(); }
+
+Status Service::allocate() {
+  const hal::CameraIntrinsics& k = camera_->info().intrinsics;
+  const auto depth = static_cast<std::size_t>(config_.runtime.ring_depth);
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * static_cast<std::size_t>(k.height);
+  pipeline::PipelineCapacity capacity = config_.pipeline;
+  if (capacity.max_points < pixels) {
+    return {ErrorCode::kInvalidArgument, "pipeline.max_points = " + std::to_string(capacity.max_points) + " is below the camera's " +
+                                             std::to_string(k.width) + "x" + std::to_string(k.height) + " = " +
+                                             std::to_string(pixels) + " pixels: raise pipeline.max_points"};
+  }
+  capacity.max_points = pixels;  // a frame has no more points than pixels
+  capacity.max_voxels = std::min(capacity.max_voxels, pixels);
+
+  std::size_t before = heapInUse();
+  {
+    CapturedFrame prototype{hal::RgbdFrame(k.width, k.height), 0};
+    frames_ = std::make_unique<pipeline::SlotPoolRing<CapturedFrame>>(depth, 1, prototype);
+  }
+  memory_.add("frame slots (RGB-D, capture -> foveation)", frames_->slotCount(), delta(before, heapInUse()));
+
+  before = heapInUse();
+  {
+    FoveatedFrame prototype;
+    prototype.cloud = pipeline::FoveatedCloud(pixels);
+    foveated_ = std::make_unique<pipeline::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
+  }
+  memory_.add("foveated cloud slots (foveation -> send)", foveated_->slotCount(), delta(before, heapInUse()));
+
+  before = heapInUse();
+  Result<FrameFoveator> stage = FrameFoveator::create(capacity, config_.foveation, config_.camera.depth);
+  if (!stage) return stage.status();
+  stage_ = std::make_unique<FrameFoveator>(std::move(stage.value()));
+  if (Status s = config_.stream.gaze.validate(); !s) return s;
+  policy_ = std::make_unique<GazePolicy>(config_.stream.gaze, config_.foveation);
+  const std::size_t cloud_bytes = pixels * (3 * sizeof(float) + sizeof(uint32_t));
+  const std::size_t stage_bytes = delta(before, heapInUse());
+  memory_.add("point cloud (back-projection)", 1, std::min(cloud_bytes, stage_bytes));
+  memory_.add("foveator (partition, sampler, workers)", 1, stage_bytes - std::min(cloud_bytes, stage_bytes));
+
+  if (!config_.stream.link.listen.empty()) {
+    StreamConfig stream = config_.stream;
+    if (!config_.key_file.empty()) {
+      Result<net::LoadedKey> key = net::loadKeyFile(config_.key_file);
+      if (!key) return {key.status().code(), "key_file: " + key.status().message()};
+      if (!key->warning.empty()) log().log(LogLevel::kWarning, "key_file: %s", key->warning.c_str());
+      stream.link.key = key->key;
+    }
+    before = heapInUse();
+    Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, pixels, config_.foveation);
+    if (!streamer) return streamer.status();
+    streamer_ = std::move(streamer.value());
+    memory_.add("streamer (link, datagram pool, scheduler)", 1, delta(before, heapInUse()));
+    // The chunk encoder follows each session's MTU, so it is made when a
+    // session starts; its size at the largest MTU is measured here with a probe.
+    net::CodecConfig codec = stream.codec;
+    codec.max_payload = stream.link.max_mtu_bytes - net::kDatagramOverhead;
+    before = heapInUse();
+    {
+      Result<net::ChunkEncoder> probe = net::ChunkEncoder::create(codec, pixels);
+      if (!probe) return probe.status();
+      memory_.add("chunk encoder (made at session start)", 1, delta(before, heapInUse()));
+    }
+  }
+
+  before = heapInUse();
+  status_lines_ = std::make_unique<StatusLines>(*gpio_, config_.gpio.lines);
+  histogram_scratch_.reset(new uint64_t[LatencyHistogram::kBuckets]);
+  for (auto& h : histogram_previous_) h.reset(new uint64_t[LatencyHistogram::kBuckets]());
+  threads_.reserve(3);
+  memory_.add("status, latency histograms", 1, delta(before, heapInUse()) + 3 * sizeof(LatencyHistogram));
+  return Status::ok();
+}
+
+net::Endpoint Service::localEndpoint() const { return streamer_ ? streamer_->localEndpoint() : net::Endpoint{}; }
+
+Status Service::start() {
+  if (Status s = status_lines_->start(); !s) return {s.code(), "gpio: " + s.message()};
+  if (config_.runtime.memory_lock) {
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+      log().log(LogLevel::kWarning, "memory: mlockall refused (%s): running unlocked", std::strerror(errno));
+    } else {
+      log().log(LogLevel::kInfo, "memory: locked (mlockall)");
+    }
+  }
+  if (Status s = camera_->start(); !s) {
+    status_lines_->stop();
+    return {s.code(), "camera " + camera_->info().name + ": " + s.message()};
+  }
+  started_ns_ = monotonicNs();
+  last_frame_ns_.store(started_ns_, std::memory_order_relaxed);  // start-up counts as fresh
+  next_status_ns_ = started_ns_ + config_.runtime.status_interval_ms * 1'000'000;
+  next_watchdog_ns_ = started_ns_;
+  window_.at_ns = started_ns_;
+  capture_alive_.store(true, std::memory_order_relaxed);
+  foveation_alive_.store(true, std::memory_order_relaxed);
+  running_.store(true, std::memory_order_release);
+  threads_.emplace_back([this] { captureLoop(); });
+  threads_.emplace_back([this] { foveationLoop(); });
+  threads_.emplace_back([this] { sendLoop(); });
+  if (config_.runtime.systemd_notify) notifier_.notify("READY=1");
+  return Status::ok();
+}
+
+void Service::placeThread(const char* name, const ThreadPlacement& placement) {
+  pthread_setname_np(pthread_self(), name);
+  if (placement.core >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(placement.core, &set);
+    if (const int e = pthread_setaffinity_np(pthread_self(), sizeof set, &set); e != 0) {
+      log().log(LogLevel::kWarning, "%s: pinning to core %d refused (%s): running on any core", name, placement.core,
+                std::strerror(e));
+    }
+  }
+  if (placement.realtime_priority > 0) {
+    sched_param param{};
+    param.sched_priority = placement.realtime_priority;
+    if (const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param); e != 0) {
+      log().log(LogLevel::kWarning, "%s: SCHED_FIFO priority %d refused (%s): running on the normal scheduler", name,
+                placement.realtime_priority, std::strerror(e));
+    }
+  }
+}
+
+void Service::captureLoop() {
+  placeThread("fovea-capture", config_.runtime.capture_thread);
+  static LogRateLimit capture_site;
+  int64_t backoff_ns = 0;
+  pipeline::SlotRing& ring = frames_->ring();
+  while (running_.load(std::memory_order_acquire)) {
+    const uint64_t limit = max_frames_.load(std::memory_order_relaxed);
+    if (limit > 0 && ring.counters().published >= limit) break;  // run()'s frame limit: drain and stop
+    pipeline::SlotIndex slot;
+    if (!ring.tryAcquire(slot)) {
+      sleepNs(kIdleSleepNs);
+      continue;
+    }
+    CapturedFrame& f = frames_->slot(slot);
+    const int64_t t0 = monotonicNs();
+    if (Status s = camera_->acquire(f.frame, kAcquireTimeout); !s) {
+      ring.cancel(slot);
+      capture_errors_.fetch_add(1, std::memory_order_relaxed);
+      (void)log().logLimited(capture_site, LogLevel::kWarning, "capture: %s", s.toString().c_str());
+      if (s.code() != ErrorCode::kUnavailable) {
+        // A device error: back off (doubling) before the next try, for ever.
+        backoff_ns = backoff_ns == 0 ? config_.camera.retry_initial_ms * 1'000'000
+                                     : std::min(2 * backoff_ns, config_.camera.retry_max_ms * 1'000'000);
+        for (int64_t slept = 0; slept < backoff_ns && running_.load(std::memory_order_relaxed); slept += 10'000'000) {
+          sleepNs(std::min<int64_t>(10'000'000, backoff_ns - slept));
+        }
+      }
+      continue;
+    }
+    backoff_ns = 0;
+    f.captured_ns = monotonicNs();
+    capture_latency_.add(f.captured_ns - t0);
+    last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
+    ring.publish(slot);
+  }
+  // After the last publish: the foveation stage drains what is queued, then ends.
+  capture_alive_.store(false, std::memory_order_release);
+}
+
+void Service::foveationLoop() {
+  placeThread("fovea-foveate", config_.runtime.foveation_thread);
+  static LogRateLimit foveate_site;
+  pipeline::SlotRing& in_ring = frames_->ring();
+  pipeline::SlotRing& out_ring = foveated_->ring();
+  for (;;) {
+    // Read before tryTake: once the capture stage is seen done, every frame it
+    // published is visible, so an empty ring means drained.
+    const bool capture_done = !capture_alive_.load(std::memory_order_acquire);
+    if (reload_to_foveation_.update()) {
+      // Copies the configuration (allocates only if custom bounds outgrow the old ones).
+      policy_->setOperatorConfig(reload_to_foveation_.current().foveation);
+      stage_->invalidate();
+      reloads_applied_.fetch_add(1, std::memory_order_relaxed);
+    }
+    (void)gaze_box_.update();
+    pipeline::SlotIndex in;
+    if (!in_ring.tryTake(in)) {
+      if (capture_done) break;
+      sleepNs(kIdleSleepNs);
+      continue;
+    }
+    pipeline::SlotIndex out;
+    if (!out_ring.tryAcquire(out)) {  // only if the send stage held more than it promised (a bug)
+      (void)in_ring.release(in);
+      foveate_errors_.fetch_add(1, std::memory_order_relaxed);
+      continue;
+    }
+    const CapturedFrame& f = frames_->slot(in);
+    FoveatedFrame& o = foveated_->slot(out);
+    const int64_t t0 = monotonicNs();
+    pipeline::BackprojectCounts counts;
+    Status s = stage_->backproject(f.frame, counts);
+    GazePolicy::Decision decision;
+    if (s) {
+      const OperatorGaze& g = gaze_box_.current();
+      decision = policy_->decide(g.valid ? &g.gaze : nullptr, g.received_ns, monotonicNs(), f.frame.T_world_cam);
+      s = stage_->use(decision.foveation);
+    }
+    if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
+    o.frame_id = static_cast<uint32_t>(f.frame.sequence);
+    o.captured_ns = f.captured_ns;
+    (void)in_ring.release(in);
+    if (!s) {
+      out_ring.cancel(out);
+      foveate_errors_.fetch_add(1, std::memory_order_relaxed);
+      (void)log().logLimited(foveate_site, LogLevel::kWarning, "foveation: %s", s.toString().c_str());
+      continue;
+    }
+    if (decision.changed) {
+      const std::string_view name = gazeSourceName(decision.source);
+      log().log(LogLevel::kInfo, "gaze: %.*s", static_cast<int>(name.size()), name.data());
+    }
+    foveate_latency_.add(monotonicNs() - t0);
+    frames_foveated_.fetch_add(1, std::memory_order_relaxed);
+    out_ring.publish(out);
+  }
+  foveation_alive_.store(false, std::memory_order_release);
+}
+
+void Service::sendLoop() {
+  placeThread("fovea-send", config_.runtime.send_thread);
+  static LogRateLimit send_site;
+  pipeline::SlotRing& ring = foveated_->ring();
+  bool gaze_valid = false;
+  int64_t gaze_received_ns = -1;
+  // Hands the operator's newest gaze to the foveation stage when it changes.
+  auto publishGaze = [&] {
+    pipeline::Gaze gaze;
+    int64_t received_ns = 0;
+    const bool valid = streamer_->operatorGaze(gaze, received_ns);
+    if (valid != gaze_valid || (valid && received_ns != gaze_received_ns)) {
+      OperatorGaze& w = gaze_box_.writeBuffer();
+      w.valid = valid;
+      w.gaze = gaze;
+      w.received_ns = received_ns;
+      gaze_box_.publish();
+      gaze_valid = valid;
+      gaze_received_ns = received_ns;
+      gaze_received_ns_.store(valid ? received_ns : 0, std::memory_order_relaxed);
+    }
+    operator_connected_.store(streamer_->link().hasSession(), std::memory_order_relaxed);
+  };
+  int64_t next_report_ns = monotonicNs() + 1'000'000'000;
+  for (;;) {
+    const bool foveation_done = !foveation_alive_.load(std::memory_order_acquire);
+    if (streamer_) {
+      if (reload_to_send_.update()) {
+        const uint64_t budget = reload_to_send_.current().budget_bytes_per_s;
+        if (Status s = streamer_->setBudgetCap(budget, monotonicNs()); !s) {
+          log().log(LogLevel::kError, "reload: budget: %s", s.message().c_str());
+        }
+      }
+      streamer_->poll();
+      publishGaze();
+    }
+    pipeline::SlotIndex slot;
+    if (!ring.tryTake(slot)) {
+      if (foveation_done) break;  // drained
+      if (streamer_) {
+        streamer_->idleUntil(monotonicNs() + kIdleSleepNs);
+      } else {
+        sleepNs(kIdleSleepNs);
+      }
+      continue;
+    }
+    const FoveatedFrame& f = foveated_->slot(slot);
+    if (!streamer_) {
+      frames_unsent_.fetch_add(1, std::memory_order_relaxed);
+    } else if (!stream_allowed_.load(std::memory_order_relaxed)) {
+      frames_withheld_.fetch_add(1, std::memory_order_relaxed);  // privacy: captured, never sent
+    } else {
+      const int64_t t0 = monotonicNs();
+      // A frame must be out before the next one is due; what is not goes unsent.
+      const int64_t deadline_ns = t0 + period_ns_ - std::min<int64_t>(period_ns_ / 10, 2'000'000);
+      Result<FrameSendReport> sent =
+          streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns, period_ns_);
+      if (!sent) {
+        (void)log().logLimited(send_site, LogLevel::kWarning, "send: %s", sent.status().toString().c_str());
+      } else if (sent->had_session) {
+        send_latency_.add(monotonicNs() - t0);
+        frames_sent_.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        frames_unsent_.fetch_add(1, std::memory_order_relaxed);
+      }
+      wire_bytes_.store(streamer_->link().counters().bytes_sent, std::memory_order_relaxed);
+    }
+    if (!ring.release(slot)) foveate_errors_.fetch_add(1, std::memory_order_relaxed);
+    if (streamer_) {
+      publishGaze();
+      if (const int64_t now = monotonicNs(); now >= next_report_ns) {
+        const uint64_t captured = frames_->ring().counters().published;
+        net::StatusReport report =
+            streamer_->statusReport(captured, frames_sent_.load(std::memory_order_relaxed),
+                                    frames_->ring().counters().dropped + foveated_->ring().counters().dropped, now);
+        streamer_->sendStatus(report);
+        next_report_ns += 1'000'000'000 * ((now - next_report_ns) / 1'000'000'000 + 1);
+      }
+    }
+  }
+}
+
+void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
+  const int64_t end_ns = max_duration_ns > 0 ? monotonicNs() + max_duration_ns : INT64_MAX;
+  max_frames_.store(max_frames, std::memory_order_relaxed);
+  while (!stop_requested_.load(std::memory_order_relaxed)) {
+    const int64_t now = monotonicNs();
+    if (now >= end_ns) break;
+    // The capture stage ends itself after max_frames; stop() drains the rest.
+    if (max_frames > 0 && !capture_alive_.load(std::memory_order_acquire)) break;
+    if (reload_requested_.exchange(false, std::memory_order_relaxed)) applyReload();
+    supervise(now);
+    sleepNs(kSuperviseEveryNs);
+  }
+  stop();
+}
+
+void Service::supervise(int64_t now_ns) {
+  const bool healthy = now_ns - last_frame_ns_.load(std::memory_order_relaxed) <= stall_timeout_ns_;
+  const int64_t gaze_ns = gaze_received_ns_.load(std::memory_order_relaxed);
+  StatusInputs inputs;
+  inputs.healthy = healthy;
+  inputs.operator_connected = operator_connected_.load(std::memory_order_relaxed);
+  inputs.gaze_fresh = gaze_ns != 0 && now_ns - gaze_ns <= config_.stream.gaze.timeout_ns;
+  inputs.fault = !healthy;
+  const bool was_privacy = status_lines_->state().privacy_active;
+  const bool was_fault = status_lines_->state().fault;
+  const StatusState& state = status_lines_->update(inputs, now_ns);
+  stream_allowed_.store(state.stream_allowed, std::memory_order_relaxed);
+  heartbeat_toggles_.store(status_lines_->counters().heartbeat_toggles, std::memory_order_relaxed);
+  streaming_line_.store(state.streaming, std::memory_order_relaxed);
+  fault_line_.store(state.fault, std::memory_order_relaxed);
+  privacy_active_.store(state.privacy_active, std::memory_order_relaxed);
+  if (state.privacy_active != was_privacy) {
+    log().log(LogLevel::kNotice, state.privacy_active ? "privacy input active: streaming paused (frames are captured, none sent)"
+                                                     : "privacy input released: streaming resumes");
+  }
+  if (state.fault != was_fault) {
+    if (state.fault) {
+      log().log(LogLevel::kWarning, "fault: no frame for %" PRId64 " ms (camera stalled); watchdog keep-alives stop",
+                (now_ns - last_frame_ns_.load(std::memory_order_relaxed)) / 1'000'000);
+    } else {
+      log().log(LogLevel::kNotice, "fault cleared: frames flow again");
+    }
+  }
+  if (config_.runtime.systemd_notify && healthy && notifier_.watchdogNs() > 0 && now_ns >= next_watchdog_ns_) {
+    if (notifier_.notify("WATCHDOG=1")) watchdog_keepalives_.fetch_add(1, std::memory_order_relaxed);
+    next_watchdog_ns_ = now_ns + notifier_.watchdogNs() / 2;
+  }
+  if (now_ns >= next_status_ns_) {
+    char line[kLogLineBytes];
+    std::memcpy(line, "STATUS=", 7);
+    const std::size_t n = formatStatusLine(line + 7, sizeof line - 7);
+    log().log(LogLevel::kInfo, "%s", line + 7);
+    status_lines_written_.fetch_add(1, std::memory_order_relaxed);
+    if (config_.runtime.systemd_notify) notifier_.notify(std::string_view(line, 7 + n));
+    const int64_t interval_ns = config_.runtime.status_interval_ms * 1'000'000;
+    next_status_ns_ += interval_ns * ((now_ns - next_status_ns_) / interval_ns + 1);
+  }
+}
+
+std::size_t Service::formatStatusLine(char* out, std::size_t size) {
+  const int64_t now = monotonicNs();
+  const double dt_s = std::max(1e-9, static_cast<double>(now - window_.at_ns) * 1e-9);
+  const pipeline::RingCounters capture_ring = frames_->ring().counters();
+  const pipeline::RingCounters foveation_ring = foveated_->ring().counters();
+  Window w;
+  w.at_ns = now;
+  w.captured = capture_ring.published;
+  w.foveated = frames_foveated_.load(std::memory_order_relaxed);
+  w.sent = frames_sent_.load(std::memory_order_relaxed);
+  w.wire_bytes = wire_bytes_.load(std::memory_order_relaxed);
+  w.capture_drops = capture_ring.dropped;
+  w.foveation_drops = foveation_ring.dropped;
+  double p50[3], p99[3];
+  const LatencyHistogram* histograms[3] = {&capture_latency_, &foveate_latency_, &send_latency_};
+  for (int i = 0; i < 3; ++i) {
+    histograms[i]->snapshot(histogram_scratch_.get());
+    uint64_t* previous = histogram_previous_[i].get();
+    for (std::size_t b = 0; b < LatencyHistogram::kBuckets; ++b) {
+      const uint64_t now_count = histogram_scratch_[b];
+      histogram_scratch_[b] = now_count - previous[b];
+      previous[b] = now_count;
+    }
+    p50[i] = histogramQuantileMs(histogram_scratch_.get(), LatencyHistogram::kBuckets, 0.5);
+    p99[i] = histogramQuantileMs(histogram_scratch_.get(), LatencyHistogram::kBuckets, 0.99);
+  }
+  char latency[3][24];
+  for (int i = 0; i < 3; ++i) {
+    if (p50[i] < 0) {
+      std::snprintf(latency[i], sizeof latency[i], "-");
+    } else {
+      std::snprintf(latency[i], sizeof latency[i], "%.1f/%.1f", p50[i], p99[i]);
+    }
+  }
+  const int64_t gaze_ns = gaze_received_ns_.load(std::memory_order_relaxed);
+  char gaze_age[32];
+  if (gaze_ns == 0) {
+    std::snprintf(gaze_age, sizeof gaze_age, "none");
+  } else {
+    std::snprintf(gaze_age, sizeof gaze_age, "%" PRId64 " ms", (now - gaze_ns) / 1'000'000);
+  }
+  const int n = std::snprintf(
+      out, size,
+      "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
+      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s | memory %.1f MiB",
+      static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
+      static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
+      w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
+      static_cast<double>(w.wire_bytes - window_.wire_bytes) / dt_s / 1e6, gaze_age,
+      status_lines_->state().privacy_active ? " | privacy pause" : "", static_cast<double>(memory_.totalBytes()) / kMiB);
+  window_ = w;
+  return n < 0 ? 0 : std::min(static_cast<std::size_t>(n), size - 1);
+}
+
+void Service::applyReload() {
+  reloads_requested_.fetch_add(1, std::memory_order_relaxed);
+  if (!reloader_) {
+    log().log(LogLevel::kWarning, "reload (SIGHUP): no configuration source to reload from; nothing changes");
+    return;
+  }
+  Result<ServiceConfig> loaded = reloader_();
+  if (!loaded) {
+    reload_failures_.fetch_add(1, std::memory_order_relaxed);
+    log().log(LogLevel::kError, "reload (SIGHUP): %s; the running configuration stays", loaded.status().message().c_str());
+    return;
+  }
+  if (Result<pipeline::RegionModel> model = pipeline::RegionModel::create(loaded->foveation.acuity); !model) {
+    reload_failures_.fetch_add(1, std::memory_order_relaxed);
+    log().log(LogLevel::kError, "reload (SIGHUP): foveation: %s; the running configuration stays",
+              model.status().message().c_str());
+    return;
+  }
+  for (pipeline::LatestValue<ReloadedParameters>* box : {&reload_to_foveation_, &reload_to_send_}) {
+    ReloadedParameters& p = box->writeBuffer();
+    p.foveation = loaded->foveation;
+    p.budget_bytes_per_s = loaded->stream.link.max_budget_bytes_per_s;
+    box->publish();
+  }
+  log().log(LogLevel::kNotice, "reload (SIGHUP): foveation %s, budget up to %.2f MB/s (from the next frame)",
+            describeFoveation(loaded->foveation).c_str(),
+            static_cast<double>(loaded->stream.link.max_budget_bytes_per_s) / 1e6);
+}
+
+void Service::stop() {
+  if (stopped_) return;
+  stopped_ = true;
+  const bool was_running = running_.exchange(false, std::memory_order_acq_rel);
+  if (was_running && config_.runtime.systemd_notify) notifier_.notify("STOPPING=1");
+  for (std::thread& t : threads_) t.join();
+  threads_.clear();
+  if (was_running) camera_->stop();
+  streamer_.reset();  // says Bye to the operator
+  if (status_lines_) status_lines_->stop();
+  if (was_running) {
+    const ServiceStats s = stats();
+    log().log(LogLevel::kInfo,
+              "stopped: %" PRIu64 " frames captured, %" PRIu64 " foveated, %" PRIu64 " sent, %" PRIu64
+              " withheld (privacy); drops capture %" PRIu64 " foveation %" PRIu64 "; %" PRIu64 " reloads applied",
+              s.frames_captured, s.frames_foveated, s.frames_sent, s.frames_withheld, s.capture_ring.dropped,
+              s.foveation_ring.dropped, s.reloads_applied);
+  }
+}
+
+ServiceStats Service::stats() const {
+  ServiceStats s;
+  s.capture_ring = frames_->ring().counters();
+  s.foveation_ring = foveated_->ring().counters();
+  s.frames_captured = s.capture_ring.published;
+  s.capture_errors = capture_errors_.load(std::memory_order_relaxed);
+  s.frames_foveated = frames_foveated_.load(std::memory_order_relaxed);
+  s.foveate_errors = foveate_errors_.load(std::memory_order_relaxed);
+  s.frames_sent = frames_sent_.load(std::memory_order_relaxed);
+  s.frames_withheld = frames_withheld_.load(std::memory_order_relaxed);
+  s.frames_unsent = frames_unsent_.load(std::memory_order_relaxed);
+  s.reloads_requested = reloads_requested_.load(std::memory_order_relaxed);
+  s.reloads_applied = reloads_applied_.load(std::memory_order_relaxed);
+  s.reload_failures = reload_failures_.load(std::memory_order_relaxed);
+  s.watchdog_keepalives = watchdog_keepalives_.load(std::memory_order_relaxed);
+  s.status_lines = status_lines_written_.load(std::memory_order_relaxed);
+  s.wire_bytes = wire_bytes_.load(std::memory_order_relaxed);
+  s.operator_connected = operator_connected_.load(std::memory_order_relaxed);
+  s.heartbeat_toggles = heartbeat_toggles_.load(std::memory_order_relaxed);
+  s.streaming_line = streaming_line_.load(std::memory_order_relaxed);
+  s.fault_line = fault_line_.load(std::memory_order_relaxed);
+  s.privacy_active = privacy_active_.load(std::memory_order_relaxed);
+  return s;
+}
+
+}  // namespace fovea::firmware

@@ -1,0 +1,258 @@
+// The fovead service runtime (issue 5): three stage threads joined by
+// latest-wins rings of preallocated slots, all memory allocated by create(),
+// supervised by the thread that calls run() (status GPIO lines, the status log
+// line, systemd notifications, reloads).
+//
+//   capture ──SlotPoolRing<CapturedFrame>──> foveation ──SlotPoolRing<FoveatedFrame>──> send
+//      ^                                        ^                                       |
+//      |                                        └──── LatestValue<OperatorGaze> ────────┘
+//   camera                                 backproject, gaze policy,               Streamer: encode,
+//                                          foveate                                 paced send, status
+//
+// Threads (one table, PX4 style: name, placement from RuntimeSettings):
+//   fovea-capture    camera acquire into a free frame slot, publish
+//   fovea-foveate    newest frame -> point cloud -> foveated cloud slot, publish
+//   fovea-send       newest foveated frame -> operator; polls the link; the
+//                    operator's gaze goes back to fovea-foveate through a mailbox
+//   (caller of run)  supervisor: every few ms the status lines, the watchdog,
+//                    the status line every status_interval_ms, SIGHUP reloads
+// The frame path takes no lock and, after start-up, allocates nothing: the
+// rings move slot indices, the mailboxes are triple buffers, the counters are
+// relaxed atomics. A stage with nothing to do sleeps 0.5 ms (no condition
+// variable: that would put a lock on the frame path).
+//
+// Exceptions to "allocated once", documented: the stream's chunk encoder is
+// made when an operator's session starts (it follows the session's MTU), and a
+// reload copies the new foveation configuration in the supervisor thread.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "firmware/frame_foveator.h"
+#include "firmware/gaze_policy.h"
+#include "firmware/log.h"
+#include "firmware/service_config.h"
+#include "firmware/status_lines.h"
+#include "firmware/streamer.h"
+#include "firmware/systemd_notify.h"
+#include "hal/camera.h"
+#include "hal/gpio.h"
+#include "hal/result.h"
+#include "pipeline/latest_value.h"
+#include "pipeline/ring.h"
+
+namespace fovea::firmware {
+
+// The memory the service allocated at start-up, pool by pool.
+struct MemoryPool {
+  const char* name = "";
+  std::size_t count = 0;  // items (slots, buffers)
+  std::size_t bytes = 0;  // all of them together
+};
+
+struct MemoryBudget {
+  static constexpr std::size_t kMaxPools = 12;
+  std::array<MemoryPool, kMaxPools> pools{};
+  std::size_t pool_count = 0;
+
+  void add(const char* name, std::size_t count, std::size_t bytes);
+  std::size_t totalBytes() const;
+  // "memory: 41.2 MiB in 7 pools"
+  std::string summary() const;
+  // One line per pool: "  frame slots      4 x   1.17 MiB =   4.69 MiB"
+  std::string breakdown() const;
+};
+
+// Latency of one stage as a histogram of 0.1 ms buckets (the last one: 200 ms
+// and more), written by the stage's thread with relaxed atomics, read by the
+// supervisor as the difference between two snapshots.
+class LatencyHistogram {
+ public:
+  static constexpr std::size_t kBuckets = 2001;
+  static constexpr int64_t kBucketNs = 100'000;
+  void add(int64_t ns) {
+    const std::size_t b = ns <= 0 ? 0 : std::min<std::size_t>(static_cast<std::size_t>(ns / kBucketNs), kBuckets - 1);
+    counts_[b].store(counts_[b].load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+  }
+  // Copies the counts into `into` (kBuckets entries).
+  void snapshot(uint64_t* into) const {
+    for (std::size_t i = 0; i < kBuckets; ++i) into[i] = counts_[i].load(std::memory_order_relaxed);
+  }
+
+ private:
+  std::array<std::atomic<uint64_t>, kBuckets> counts_{};
+};
+
+// The operator's newest gaze, from the send thread to the foveation thread.
+struct OperatorGaze {
+  bool valid = false;  // a session with a valid sample
+  pipeline::Gaze gaze;
+  int64_t received_ns = 0;
+};
+
+// The parameters SIGHUP reloads, from the supervisor to the stage threads.
+struct ReloadedParameters {
+  pipeline::FoveationConfig foveation;
+  uint64_t budget_bytes_per_s = 0;
+};
+
+// A consistent-enough snapshot of the counters (each is exact; together they
+// are read one after another while the stages run).
+struct ServiceStats {
+  uint64_t frames_captured = 0;
+  uint64_t capture_errors = 0;   // acquire failed (timeout, device error)
+  uint64_t frames_foveated = 0;
+  uint64_t foveate_errors = 0;
+  uint64_t frames_sent = 0;      // went out to an operator (a session stood)
+  uint64_t frames_withheld = 0;  // taken by the send stage while privacy paused streaming
+  uint64_t frames_unsent = 0;    // taken by the send stage with no operator (or not streaming)
+  pipeline::RingCounters capture_ring;    // capture -> foveation: dropped = frames the foveation stage never saw
+  pipeline::RingCounters foveation_ring;  // foveation -> send
+  uint64_t reloads_requested = 0;
+  uint64_t reloads_applied = 0;  // by the foveation stage
+  uint64_t reload_failures = 0;
+  uint64_t watchdog_keepalives = 0;
+  uint64_t status_lines = 0;
+  uint64_t wire_bytes = 0;
+  bool operator_connected = false;
+  // The status lines as the supervisor last drove them.
+  uint64_t heartbeat_toggles = 0;
+  bool streaming_line = false;
+  bool fault_line = false;
+  bool privacy_active = false;
+};
+
+class Service {
+ public:
+  using Reloader = std::function<Result<ServiceConfig>()>;
+
+  // What the command (or a test) supplies besides the configuration.
+  struct Environment {
+    std::unique_ptr<hal::Camera> camera;  // null: hal::createCamera(config.camera.spec)
+    std::unique_ptr<hal::Gpio> gpio;      // null: hal::createGpio(config.gpio.spec)
+    Reloader reloader;                    // SIGHUP; null: a reload request is logged and ignored
+    Logger* logger = nullptr;             // null: the process's logger()
+  };
+
+  // Streams when config.stream.link.listen is not empty (the key from
+  // config.key_file when set, else config.stream.link.key / insecure).
+  // Validates the configuration, opens the camera and the GPIO chip, creates
+  // the streamer (binds the socket) and allocates every buffer. Logs the
+  // memory line. Starts nothing.
+  static Result<std::unique_ptr<Service>> create(const ServiceConfig& config, Environment environment);
+  ~Service();  // stop()
+  Service(const Service&) = delete;
+  Service& operator=(const Service&) = delete;
+
+  // Requests the status lines, locks memory if configured, starts the camera
+  // and the three threads, tells systemd READY=1.
+  Status start();
+  // Supervises until requestStop(), max_frames captured (then drained through
+  // the stages) or max_duration_ns passed (0: no limit), then stop()s.
+  // Returns when all is down.
+  void run(uint64_t max_frames = 0, int64_t max_duration_ns = 0);
+  // Both async-signal-safe (lock-free atomic stores): for signal handlers.
+  void requestStop() { stop_requested_.store(true, std::memory_order_relaxed); }
+  void requestReload() { reload_requested_.store(true, std::memory_order_relaxed); }
+  // Stops capturing, lets the foveation and send stages drain the frames
+  // queued (sent if an operator is there), joins, stops the camera, says Bye,
+  // drives the status lines low (idempotent).
+  void stop();
+
+  const MemoryBudget& memory() const { return memory_; }
+  const ServiceConfig& config() const { return config_; }
+  ServiceStats stats() const;
+  // Where the stream listens (streaming only).
+  bool streaming() const { return streamer_ != nullptr; }
+  net::Endpoint localEndpoint() const;
+
+ private:
+  // The status line for the window since the previous one (supervisor only).
+  // Writes into `out` (no allocation); returns its length.
+  std::size_t formatStatusLine(char* out, std::size_t size);
+
+  struct CapturedFrame {
+    hal::RgbdFrame frame;
+    int64_t captured_ns = 0;  // when acquire returned (CLOCK_MONOTONIC)
+  };
+  struct FoveatedFrame {
+    pipeline::FoveatedCloud cloud{0};
+    pipeline::FoveationStats stats;
+    uint32_t frame_id = 0;
+    int64_t captured_ns = 0;
+  };
+
+  Service(const ServiceConfig& config, Environment environment, int64_t period_ns);
+  Status allocate();
+
+  void captureLoop();
+  void foveationLoop();
+  void sendLoop();
+  void supervise(int64_t now_ns);
+  void applyReload();
+  void placeThread(const char* name, const ThreadPlacement& placement);
+  Logger& log() { return *logger_; }
+
+  ServiceConfig config_;
+  std::unique_ptr<hal::Camera> camera_;
+  std::unique_ptr<hal::Gpio> gpio_;
+  Reloader reloader_;
+  Logger* logger_;
+  int64_t period_ns_;
+  int64_t stall_timeout_ns_;
+  MemoryBudget memory_;
+
+  std::unique_ptr<pipeline::SlotPoolRing<CapturedFrame>> frames_;
+  std::unique_ptr<pipeline::SlotPoolRing<FoveatedFrame>> foveated_;
+  std::unique_ptr<FrameFoveator> stage_;
+  std::unique_ptr<GazePolicy> policy_;  // the foveation thread's
+  std::unique_ptr<Streamer> streamer_;  // the send thread's only
+  std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
+  SystemdNotifier notifier_;
+  pipeline::LatestValue<OperatorGaze> gaze_box_;
+  pipeline::LatestValue<ReloadedParameters> reload_to_foveation_;
+  pipeline::LatestValue<ReloadedParameters> reload_to_send_;
+
+  std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> reload_requested_{false};
+  std::atomic<bool> running_{false};
+  // Shutdown drains front to back: capture stops on running_, foveation once the
+  // capture stage is done and its ring empty, send likewise after foveation.
+  std::atomic<bool> capture_alive_{false};
+  std::atomic<bool> foveation_alive_{false};
+  std::atomic<uint64_t> max_frames_{0};  // run()'s limit on frames captured (0: none)
+  std::atomic<bool> stream_allowed_{true};
+  std::atomic<bool> operator_connected_{false};
+  std::atomic<int64_t> gaze_received_ns_{0};  // 0: none
+  std::atomic<int64_t> last_frame_ns_{0};
+  std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},
+      frames_withheld_{0}, frames_unsent_{0}, reloads_applied_{0}, wire_bytes_{0};
+  // Written by the supervisor, read by stats() from any thread.
+  std::atomic<uint64_t> reloads_requested_{0}, reload_failures_{0}, watchdog_keepalives_{0}, status_lines_written_{0},
+      heartbeat_toggles_{0};
+  std::atomic<bool> streaming_line_{false}, fault_line_{false}, privacy_active_{false};
+  LatencyHistogram capture_latency_, foveate_latency_, send_latency_;
+  std::vector<std::thread> threads_;
+
+  // Supervisor state (one thread).
+  int64_t started_ns_ = 0;
+  int64_t next_status_ns_ = 0;
+  int64_t next_watchdog_ns_ = 0;
+  struct Window {
+    int64_t at_ns = 0;
+    uint64_t captured = 0, foveated = 0, sent = 0, wire_bytes = 0, capture_drops = 0, foveation_drops = 0;
+  } window_;
+  std::unique_ptr<uint64_t[]> histogram_scratch_;  // 2 x kBuckets, for the quantiles
+  std::array<std::unique_ptr<uint64_t[]>, 3> histogram_previous_;
+  bool stopped_ = false;
+};
+
+}  // namespace fovea::firmware

@@ -1,0 +1,21 @@
+// The streaming flags `fovead run` and `fovead serve` share (--listen,
+// --key-file, --insecure, --budget, ...), parsed into a StreamConfig.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "firmware/options.h"
+#include "firmware/streamer.h"
+#include "hal/result.h"
+
+namespace fovea::firmware {
+
+// Value flags (--insecure is a switch).
+extern const std::vector<std::string> kStreamFlags;
+
+// The streaming options, or nullopt without --listen; errors name the flag.
+Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args);
+
+}  // namespace fovea::firmware

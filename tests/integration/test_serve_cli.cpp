@@ -1,0 +1,122 @@
+// fovead serve as a process: the memory line and status lines, SIGTERM and
+// SIGINT stop it with exit 0 within a second, SIGHUP applies a new preset.
+#include <signal.h>
+
+#include <chrono>
+#include <fstream>
+#include <regex>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "tests/support/process.h"
+
+namespace fovea {
+namespace {
+
+std::string fovead() {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
+}
+
+const std::string kSmallCamera = " --camera mock:living-room,size=160x120,realtime=on,fps=30";
+
+void writeFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+}
+
+double stopSeconds(test::BackgroundProcess& process, int signal_number, int& exit_code) {
+  const auto t0 = std::chrono::steady_clock::now();
+  exit_code = process.stop(signal_number, 5.0);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+TEST(FoveadServe, PrintsMemoryAndStatusThenStopsOnSigtermWithinASecond) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera + " --status-interval-ms 200");
+  ASSERT_TRUE(serve.started());
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  ASSERT_TRUE(serve.waitFor("status: fps in ", 10.0)) << serve.output();
+  int exit_code = -1;
+  const double seconds = stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  EXPECT_LT(seconds, 1.0) << serve.output();
+  EXPECT_NE(serve.output().find("memory: "), std::string::npos);
+  EXPECT_NE(serve.output().find(" MiB in "), std::string::npos);
+  EXPECT_NE(serve.output().find("frame slots"), std::string::npos);
+  EXPECT_NE(serve.output().find("stopped after"), std::string::npos);
+}
+
+TEST(FoveadServe, SigintStopsItToo) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera);
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  int exit_code = -1;
+  const double seconds = stopSeconds(serve, SIGINT, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  EXPECT_LT(seconds, 1.0);
+}
+
+TEST(FoveadServe, SighupAppliesANewPreset) {
+  test::TempDir dir;
+  const std::string overrides = dir.file("overrides");
+  writeFile(overrides, "--preset F1\n");
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera + " --overrides-file " + overrides);
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  EXPECT_NE(serve.output().find("foveation F1"), std::string::npos);
+  writeFile(overrides, "--preset F3 --m 0.03\n");
+  ASSERT_TRUE(serve.signal(SIGHUP));
+  ASSERT_TRUE(serve.waitFor("reload (SIGHUP): foveation F3 (m 0.03", 5.0)) << serve.output();
+  // A broken file keeps the running configuration.
+  writeFile(overrides, "--preset F9\n");
+  ASSERT_TRUE(serve.signal(SIGHUP));
+  ASSERT_TRUE(serve.waitFor("the running configuration stays", 5.0)) << serve.output();
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  EXPECT_NE(serve.output().find("1 reloads applied"), std::string::npos) << serve.output();
+}
+
+std::string foveaOperator() {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(FOVEA_OPERATOR_PATH) : emulator + " " + FOVEA_OPERATOR_PATH;
+}
+
+// The stream end to end through the service's threads: fovea-operator decodes
+// what fovead serve sends for its gaze.
+TEST(FoveadServe, StreamsToFoveaOperator) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
+                                " --listen 127.0.0.1:0 --insecure --status-interval-ms 500");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  std::smatch port;
+  const std::string out = serve.output();
+  ASSERT_TRUE(std::regex_search(out, port, std::regex("listening on 127\\.0\\.0\\.1:([0-9]+)"))) << out;
+  const test::ProcessResult op = test::runCommand(foveaOperator() + " --connect 127.0.0.1:" + port[1].str() +
+                                                  " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --duration 3");
+  EXPECT_EQ(op.exit_code, 0) << op.output;
+  std::smatch frames;
+  ASSERT_TRUE(std::regex_search(op.output, frames, std::regex("summary: ([0-9]+) frames"))) << op.output;
+  EXPECT_GE(std::stoi(frames[1].str()), 30) << op.output;  // 30 fps for 3 s, an emulator slower
+  EXPECT_NE(op.output.find(" 0 bad"), std::string::npos) << op.output;
+  ASSERT_TRUE(serve.waitFor("out ", 5.0));
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
+}
+
+TEST(FoveadServe, FrameLimitAndBadFlags) {
+  const test::ProcessResult done = test::runCommand(fovead() + " serve" + kSmallCamera + " --frames 10");
+  EXPECT_EQ(done.exit_code, 0) << done.output;
+  // Ten frames captured, drained through the stages (a drop, if any, is counted).
+  EXPECT_NE(done.output.find("stopped: 10 frames captured"), std::string::npos) << done.output;
+  EXPECT_NE(done.output.find("fovead serve: stopped after "), std::string::npos) << done.output;
+  const test::ProcessResult bad = test::runCommand(fovead() + " serve --ring-depth 0");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("--ring-depth"), std::string::npos) << bad.output;
+  const test::ProcessResult no_key = test::runCommand(fovead() + " serve --listen 127.0.0.1:0");
+  EXPECT_EQ(no_key.exit_code, 2) << no_key.output;
+  EXPECT_EQ(test::runCommand(fovead() + " serve --help").exit_code, 0);
+}
+
+}  // namespace
+}  // namespace fovea

@@ -1,0 +1,350 @@
+// The service in-process: stage threads on the mock camera, status lines on a
+// mock GPIO chip (heartbeat, fault, streaming, privacy pause), an in-test
+// operator over loopback, reloads, and systemd notifications on a fake
+// NOTIFY_SOCKET (READY, WATCHDOG, and no WATCHDOG while the camera stalls).
+#include "firmware/service.h"
+
+#include <stdlib.h>
+
+#include <chrono>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "net/operator_link.h"
+#include "tests/support/process.h"
+#include "tests/support/service_doubles.h"
+
+namespace fovea::firmware {
+namespace {
+
+using namespace std::chrono_literals;
+
+bool waitUntil(const std::function<bool()>& pred, std::chrono::milliseconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (!pred()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    std::this_thread::sleep_for(5ms);
+  }
+  return true;
+}
+
+// A created and started service whose run() supervises in a thread.
+struct RunningService {
+  std::unique_ptr<Service> service;
+  std::thread supervisor;
+
+  ~RunningService() { stop(); }
+  void stop() {
+    if (!service) return;
+    service->requestStop();
+    if (supervisor.joinable()) supervisor.join();
+  }
+};
+
+void startService(RunningService& running, const ServiceConfig& config, Service::Environment environment) {
+  Result<std::unique_ptr<Service>> created = Service::create(config, std::move(environment));
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  running.service = std::move(created.value());
+  ASSERT_TRUE(running.service->start().isOk());
+  running.supervisor = std::thread([&running] { running.service->run(); });
+}
+
+// Keeps every line (the test's own sink; allocation does not matter here).
+class RecordingSink final : public LogSink {
+ public:
+  void write(LogLevel, int64_t, std::string_view line) override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    lines_.emplace_back(line);
+  }
+  bool contains(const std::string& text) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const std::string& line : lines_) {
+      if (line.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::string> lines_;
+};
+
+TEST(Service, RefusedThreadPlacementIsLoggedAndTheServiceRunsOn) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.capture_thread.core = 4095;  // no such core
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 5; }, 5000ms));
+  EXPECT_TRUE(sink.contains("fovea-capture: pinning to core 4095 refused")) << "no warning logged";
+  EXPECT_TRUE(sink.contains("memory: "));
+}
+
+TEST(Service, MemoryBudgetCountsEveryPool) {
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.ring_depth = 3;
+  Result<std::unique_ptr<Service>> created = Service::create(config, {});
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  const MemoryBudget& memory = created.value()->memory();
+  EXPECT_GE(memory.pool_count, 5u);
+  // ring_depth + 2 frame slots, each at least the RGB-D frame's pixels.
+  EXPECT_EQ(memory.pools[1].count, 5u);
+  EXPECT_GE(memory.pools[1].bytes, 5u * 160 * 120 * 5);
+  EXPECT_NE(memory.summary().find("memory: "), std::string::npos);
+  EXPECT_NE(memory.summary().find(" MiB in "), std::string::npos);
+  EXPECT_NE(memory.breakdown().find("frame slots"), std::string::npos);
+}
+
+TEST(Service, RejectsABadConfigurationNamingTheField) {
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.ring_depth = 0;
+  Result<std::unique_ptr<Service>> created = Service::create(config, {});
+  ASSERT_FALSE(created.isOk());
+  EXPECT_NE(created.status().message().find("runtime.ring_depth"), std::string::npos);
+  config = test::smallServiceConfig();
+  config.pipeline.max_points = 100;
+  created = Service::create(config, {});
+  ASSERT_FALSE(created.isOk());
+  EXPECT_NE(created.status().message().find("raise pipeline.max_points"), std::string::npos);
+}
+
+TEST(Service, FramesFlowThroughTheStagesAndTheHeartbeatToggles) {
+  auto gpio = std::make_unique<test::LockedGpio>();
+  test::LockedGpio& chip = *gpio;
+  Service::Environment environment;
+  environment.gpio = std::move(gpio);
+  RunningService running;
+  startService(running, test::smallServiceConfig(), std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 20; }, 5000ms));
+  ASSERT_TRUE(waitUntil([&] { return chip.changesOf(0) >= 6; }, 2000ms));  // heartbeat: a toggle every 50 ms
+  const ServiceStats stats = running.service->stats();
+  EXPECT_GE(stats.heartbeat_toggles, 5u);
+  EXPECT_FALSE(stats.fault_line);
+  EXPECT_FALSE(chip.value(2));  // fault line off
+  EXPECT_EQ(stats.frames_sent, 0u);
+  EXPECT_GT(stats.frames_unsent, 0u);  // not streaming: the send stage takes and returns them
+  running.stop();
+  EXPECT_FALSE(chip.value(0));  // stop() drives the lines low
+  // The stop drained the rings: every frame captured was foveated or dropped
+  // (counted), every frame foveated reached the send stage or was dropped.
+  const ServiceStats end = running.service->stats();
+  EXPECT_EQ(end.frames_foveated + end.capture_ring.dropped + end.foveate_errors, end.frames_captured);
+  EXPECT_EQ(end.frames_sent + end.frames_withheld + end.frames_unsent + end.foveation_ring.dropped,
+            end.frames_foveated);
+}
+
+TEST(Service, CameraStallRaisesTheFaultAndStopsTheHeartbeat) {
+  auto gpio = std::make_unique<test::LockedGpio>();
+  test::LockedGpio& chip = *gpio;
+  auto camera = std::make_unique<test::StallableCamera>(hal::createCamera("mock:living-room,size=160x120,realtime=on,fps=60").value());
+  test::StallableCamera& cam = *camera;
+  Service::Environment environment;
+  environment.gpio = std::move(gpio);
+  environment.camera = std::move(camera);
+  RunningService running;
+  startService(running, test::smallServiceConfig(), std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 10; }, 5000ms));
+  cam.stall(true);
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().fault_line; }, 2000ms));
+  EXPECT_TRUE(chip.value(2));
+  const std::size_t toggles = chip.changesOf(0);
+  std::this_thread::sleep_for(300ms);
+  EXPECT_EQ(chip.changesOf(0), toggles);  // the heartbeat holds while stalled
+  cam.stall(false);
+  ASSERT_TRUE(waitUntil([&] { return !running.service->stats().fault_line; }, 2000ms));
+  ASSERT_TRUE(waitUntil([&] { return chip.changesOf(0) > toggles + 2; }, 2000ms));
+  EXPECT_GT(running.service->stats().capture_errors, 0u);
+}
+
+// An operator on loopback that sends gaze at 100 Hz and drains what comes back.
+struct TestOperator {
+  std::unique_ptr<net::OperatorLink> link;
+  std::atomic<bool> stop{false};
+  std::atomic<uint64_t> datagrams{0};
+  std::thread thread;
+
+  bool connect(const net::Endpoint& robot) {
+    net::OperatorLinkConfig config;
+    config.insecure = true;
+    config.connect_timeout_ms = 3000;
+    Result<std::unique_ptr<net::OperatorLink>> connected = net::OperatorLink::connect(robot.toString(), config);
+    if (!connected) return false;
+    link = std::move(connected.value());
+    thread = std::thread([this] {
+      auto next = std::chrono::steady_clock::now();
+      while (!stop.load()) {
+        if (std::chrono::steady_clock::now() >= next) {
+          net::GazeSample g;
+          g.gaze_origin_m = {3.0, 0.35, 1.55};
+          g.gaze_direction = {0.6, 0.8, 0.0};  // unit length
+          (void)link->sendGaze(g);
+          next += 10ms;
+        }
+        if (link->receive(2)) datagrams.fetch_add(1);
+      }
+    });
+    return true;
+  }
+  ~TestOperator() {
+    stop.store(true);
+    if (thread.joinable()) thread.join();
+  }
+};
+
+ServiceConfig streamingConfig() {
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.stream.link.listen = "127.0.0.1:0";
+  config.stream.link.insecure = true;
+  return config;
+}
+
+TEST(Service, StreamsToAnOperatorAndThePrivacyInputPausesIt) {
+  auto gpio = std::make_unique<test::LockedGpio>();
+  test::LockedGpio& chip = *gpio;
+  Service::Environment environment;
+  environment.gpio = std::move(gpio);
+  RunningService running;
+  startService(running, streamingConfig(), std::move(environment));
+  TestOperator op;
+  ASSERT_TRUE(op.connect(running.service->localEndpoint()));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= 5; }, 5000ms));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().streaming_line; }, 2000ms));
+  EXPECT_TRUE(chip.value(1));
+
+  chip.setInput(3, true);  // privacy on
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().privacy_active; }, 1000ms));
+  std::this_thread::sleep_for(100ms);  // a frame in flight may still go out
+  const ServiceStats paused = running.service->stats();
+  std::this_thread::sleep_for(400ms);
+  const ServiceStats later = running.service->stats();
+  EXPECT_EQ(later.frames_sent, paused.frames_sent);             // nothing sent
+  EXPECT_GT(later.frames_captured, paused.frames_captured + 5);  // frames keep being captured
+  EXPECT_GT(later.frames_withheld, paused.frames_withheld);
+  EXPECT_FALSE(later.streaming_line);
+  EXPECT_FALSE(chip.value(1));
+
+  chip.setInput(3, false);
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent > later.frames_sent + 3; }, 3000ms));
+  EXPECT_GT(op.datagrams.load(), 0u);
+}
+
+TEST(Service, ReloadAppliesANewPresetBetweenFrames) {
+  ServiceConfig config = test::smallServiceConfig();
+  std::atomic<int> reloads{0};
+  Service::Environment environment;
+  environment.reloader = [&]() -> Result<ServiceConfig> {
+    ++reloads;
+    ServiceConfig next = test::smallServiceConfig();
+    next.foveation.acuity.preset = pipeline::Preset::kF3;
+    return next;
+  };
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 5; }, 5000ms));
+  running.service->requestReload();
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().reloads_applied == 1; }, 2000ms));
+  EXPECT_EQ(reloads.load(), 1);
+  const uint64_t foveated = running.service->stats().frames_foveated;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated > foveated + 5; }, 2000ms));
+  EXPECT_EQ(running.service->stats().foveate_errors, 0u);
+}
+
+TEST(Service, ReloadCapsTheBudgetOfTheSessionInProgress) {
+  Service::Environment environment;
+  environment.reloader = []() -> Result<ServiceConfig> {
+    ServiceConfig next = streamingConfig();
+    next.stream.link.max_budget_bytes_per_s = 100'000;  // 0.1 MB/s
+    return next;
+  };
+  RunningService running;
+  startService(running, streamingConfig(), std::move(environment));
+  TestOperator op;
+  ASSERT_TRUE(op.connect(running.service->localEndpoint()));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= 10; }, 5000ms));
+  auto bytesPerSecond = [&] {
+    const uint64_t b0 = running.service->stats().wire_bytes;
+    std::this_thread::sleep_for(600ms);
+    return static_cast<double>(running.service->stats().wire_bytes - b0) / 0.6;
+  };
+  const double before = bytesPerSecond();
+  ASSERT_GT(before, 300'000.0) << "the uncapped stream should carry more than the cap";
+  running.service->requestReload();
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().reloads_applied == 1; }, 2000ms));
+  std::this_thread::sleep_for(200ms);
+  const double after = bytesPerSecond();
+  EXPECT_LT(after, 150'000.0) << "before " << before;
+}
+
+TEST(Service, ReloadFailureKeepsTheRunningConfiguration) {
+  Service::Environment environment;
+  environment.reloader = []() -> Result<ServiceConfig> {
+    return Result<ServiceConfig>(ErrorCode::kInvalidArgument, "config.toml:3: foveation.m: must be positive");
+  };
+  RunningService running;
+  startService(running, test::smallServiceConfig(), std::move(environment));
+  running.service->requestReload();
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().reload_failures == 1; }, 2000ms));
+  EXPECT_EQ(running.service->stats().reloads_applied, 0u);
+}
+
+// systemd: READY=1 after start-up, WATCHDOG=1 at half of WATCHDOG_USEC while
+// frames flow, none while the camera stalls, again when it recovers.
+TEST(Service, SystemdNotifyReadyWatchdogAndStall) {
+  test::TempDir dir;
+  test::FakeNotifySocket systemd(dir.file("notify"));
+  ASSERT_TRUE(systemd.bound());
+  setenv("NOTIFY_SOCKET", systemd.path().c_str(), 1);
+  setenv("WATCHDOG_USEC", "200000", 1);  // keep-alives every 100 ms
+  unsetenv("WATCHDOG_PID");
+  auto camera = std::make_unique<test::StallableCamera>(hal::createCamera("mock:living-room,size=160x120,realtime=on,fps=60").value());
+  test::StallableCamera& cam = *camera;
+  Service::Environment environment;
+  environment.camera = std::move(camera);
+  RunningService running;
+  // libsystemd's sd_notify reads NOTIFY_SOCKET at each call: it stays set until the service stops.
+  startService(running, test::smallServiceConfig(), std::move(environment));
+
+  std::vector<std::string> messages = systemd.receive(600);
+  ASSERT_FALSE(messages.empty());
+  EXPECT_EQ(messages.front(), "READY=1");
+  std::size_t watchdogs = 0, statuses = 0;
+  for (const std::string& m : messages) {
+    watchdogs += m == "WATCHDOG=1";
+    statuses += m.rfind("STATUS=status: fps in ", 0) == 0;
+  }
+  EXPECT_GE(watchdogs, 3u);
+  EXPECT_GE(statuses, 1u);
+
+  cam.stall(true);
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().fault_line; }, 2000ms));
+  (void)systemd.receive(10);  // what was sent before the stall was seen
+  messages = systemd.receive(500);
+  watchdogs = 0;
+  for (const std::string& m : messages) watchdogs += m == "WATCHDOG=1";
+  EXPECT_EQ(watchdogs, 0u) << "keep-alives must stop while the pipeline stalls";
+
+  cam.stall(false);
+  messages = systemd.receive(600);
+  watchdogs = 0;
+  for (const std::string& m : messages) watchdogs += m == "WATCHDOG=1";
+  EXPECT_GE(watchdogs, 2u);
+
+  running.stop();
+  unsetenv("NOTIFY_SOCKET");
+  unsetenv("WATCHDOG_USEC");
+  messages = systemd.receive(50);
+  bool stopping = false;
+  for (const std::string& m : messages) stopping = stopping || m == "STOPPING=1";
+  EXPECT_TRUE(stopping);
+}
+
+}  // namespace
+}  // namespace fovea::firmware
