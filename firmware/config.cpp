@@ -746,4 +746,34 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
   return config;
 }
 
+Result<ConfigSources> takeConfigSources(std::vector<std::string>& tokens) {
+  ConfigSources sources;
+  std::vector<std::string> rest;
+  for (std::size_t i = 0; i < tokens.size(); ++i) {
+    std::string flag = tokens[i];
+    std::optional<std::string> value;
+    if (const std::size_t eq = flag.find('='); flag.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = flag.substr(eq + 1);
+      flag.resize(eq);
+    }
+    if (flag != "--board" && flag != "--config" && flag != "--set") {
+      rest.push_back(tokens[i]);
+      continue;
+    }
+    if (!value) {
+      if (i + 1 >= tokens.size()) return invalid(flag + " needs a value");
+      value = tokens[++i];
+    }
+    if (flag == "--set") {
+      sources.overrides.push_back(*value);
+    } else if (std::optional<std::string>& slot = flag == "--board" ? sources.board : sources.config_file; slot) {
+      return invalid(flag + " given twice");
+    } else {
+      slot = *value;
+    }
+  }
+  tokens = std::move(rest);
+  return sources;
+}
+
 }  // namespace fovea::firmware

@@ -60,4 +60,18 @@ inline constexpr std::string_view kDefaultBoard = "host-mock";
 Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std::optional<std::string> config_file,
                                            std::span<const std::string> overrides);
 
+// Where a command's configuration comes from: --board NAME, --config FILE and
+// any number of --set SECTION.KEY=VALUE (also written --flag=value).
+struct ConfigSources {
+  std::optional<std::string> board;
+  std::optional<std::string> config_file;
+  std::vector<std::string> overrides;
+};
+// Takes those flags out of `tokens` (a command's arguments), leaving the rest
+// in order. kInvalidArgument for a missing value or --board/--config given twice.
+Result<ConfigSources> takeConfigSources(std::vector<std::string>& tokens);
+inline Result<ServiceConfig> resolveServiceConfig(const ConfigSources& sources) {
+  return resolveServiceConfig(sources.board, sources.config_file, sources.overrides);
+}
+
 }  // namespace fovea::firmware

@@ -28,40 +28,22 @@ const char* kPrintConfigHelp =
 }  // namespace
 
 int printConfigCommand(int argc, char** argv) {
-  std::optional<std::string> board, config_file;
-  std::vector<std::string> overrides;
   auto usage = [](const std::string& message) {
     std::fprintf(stderr, "fovead print-config: %s\n", message.c_str());
     return kExitUsage;
   };
-  for (int i = 2; i < argc; ++i) {
-    std::string flag = argv[i];
-    if (flag == "--help" || flag == "-h") {
+  std::vector<std::string> tokens(argv + 2, argv + argc);
+  for (const std::string& t : tokens) {
+    if (t == "--help" || t == "-h") {
       std::fputs(kPrintConfigHelp, stdout);
       std::printf("\nboards in %s\n", boardDirectory().c_str());
       return kExitOk;
     }
-    std::optional<std::string> value;
-    if (const std::size_t eq = flag.find('='); flag.rfind("--", 0) == 0 && eq != std::string::npos) {
-      value = flag.substr(eq + 1);
-      flag.resize(eq);
-    }
-    if (flag != "--board" && flag != "--config" && flag != "--set") {
-      return usage("unknown argument '" + flag + "' (see --help)");
-    }
-    if (!value) {
-      if (i + 1 >= argc) return usage(flag + " needs a value");
-      value = argv[++i];
-    }
-    if (flag == "--set") {
-      overrides.push_back(*value);
-    } else if (std::optional<std::string>& slot = flag == "--board" ? board : config_file; slot) {
-      return usage(flag + " given twice");
-    } else {
-      slot = *value;
-    }
   }
-  Result<ServiceConfig> config = resolveServiceConfig(board, config_file, overrides);
+  Result<ConfigSources> sources = takeConfigSources(tokens);
+  if (!sources) return usage(sources.status().message());
+  if (!tokens.empty()) return usage("unknown argument '" + tokens.front() + "' (see --help)");
+  Result<ServiceConfig> config = resolveServiceConfig(sources.value());
   if (!config) return usage(config.status().message());
   std::fputs(formatServiceConfig(config.value()).c_str(), stdout);
   for (const std::string& note : missingBackends(config.value())) {

@@ -2,13 +2,11 @@
 #include <signal.h>
 
 #include <cstdio>
-#include <fstream>
-#include <iterator>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "firmware/commands.h"
+#include "firmware/config.h"
 #include "firmware/options.h"
 #include "firmware/serve_options.h"
 #include "firmware/service.h"
@@ -19,17 +17,23 @@ namespace fovea::firmware {
 namespace {
 
 const char* kServeHelp =
-    "usage: fovead serve [--board host-mock] [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
+    "usage: fovead serve [--board NAME] [--config FILE] [--set SECTION.KEY=VALUE ...]\n"
+    "                    [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
     "                    [--preset F1|F2|F3|FREF] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
-    "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--overrides-file FILE]\n"
+    "                    [--threads N] [--memory-lock] [--log-level LEVEL]\n"
     "\n"
     "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"
     "by latest-wins rings, all memory allocated at start-up (printed), status GPIO lines,\n"
     "a status log line, systemd notifications (READY, STATUS, WATCHDOG) under systemd.\n"
-    "SIGINT/SIGTERM stop it (exit 0); SIGHUP reloads the foveation parameters and the budget.\n"
+    "SIGINT/SIGTERM stop it (exit 0); SIGHUP reads the configuration again and applies the\n"
+    "foveation parameters and the budget.\n"
     "\n"
-    "  --board NAME             board profile (built in: host-mock, the defaults)\n"
+    "The configuration: the board profile, then the --config file, then each --set\n"
+    "(fovead print-config shows the result), then the flags below.\n"
+    "  --board NAME             board profile in the board directory (default host-mock, or the file's board key)\n"
+    "  --config FILE            a configuration file (TOML, board/README.md), read again on SIGHUP\n"
+    "  --set SECTION.KEY=VALUE  one setting (repeatable), e.g. --set stream.budget_mbps=25\n"
     "  --camera SPEC            camera backend (default mock:living-room,realtime=on)\n"
     "  --frames N               stop after N frames captured and passed on (default 0: until a signal)\n"
     "  --duration S             stop after S seconds (default: until a signal)\n"
@@ -41,8 +45,7 @@ const char* kServeHelp =
     "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
     "  --memory-lock            mlockall after start-up\n"
     "  --log-level LEVEL        error, warning, notice, info (default), debug\n"
-    "  --overrides-file FILE    more of these flags, read at start and again on SIGHUP\n"
-    "                           (until the configuration file arrives)\n"
+
     "  stream options as for fovead run: --budget, --max-mtu, --gaze-timeout-ms, --fallback-voxel,\n"
     "                           --fovea-step, --chroma, --entropy\n";
 
@@ -58,39 +61,25 @@ extern "C" void onServeSignal(int signal_number) {
   }
 }
 
-Result<std::vector<std::string>> readOverrides(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Result<std::vector<std::string>>(ErrorCode::kNotFound, "--overrides-file: cannot read " + path);
-  std::vector<std::string> tokens{std::istream_iterator<std::string>(in), std::istream_iterator<std::string>()};
-  return tokens;
-}
-
-// serve's defaults: the service's, but streaming only with --listen.
-ServiceConfig serveDefaults() {
-  ServiceConfig config;
-  config.stream.link.listen.clear();
-  return config;
-}
-
-// The command line, then the overrides file's flags (which win).
-Result<Args> parseServeArgs(const std::vector<std::string>& tokens) {
-  std::vector<std::string> all = tokens;
-  for (std::size_t i = 0; i < tokens.size(); ++i) {
-    if (tokens[i] == "--overrides-file" && i + 1 < tokens.size()) {
-      Result<std::vector<std::string>> more = readOverrides(tokens[i + 1]);
-      if (!more) return more.status();
-      all.insert(all.end(), more->begin(), more->end());
-    } else if (tokens[i].rfind("--overrides-file=", 0) == 0) {
-      Result<std::vector<std::string>> more = readOverrides(tokens[i].substr(17));
-      if (!more) return more.status();
-      all.insert(all.end(), more->begin(), more->end());
-    }
-  }
+// serve's own flags, once --board, --config and --set are taken out (into `sources`).
+Result<Args> parseServeFlags(std::vector<std::string> tokens, ConfigSources& sources) {
+  Result<ConfigSources> taken = takeConfigSources(tokens);
+  if (!taken) return taken.status();
+  sources = std::move(taken.value());
   std::vector<char*> argv;
-  for (std::string& t : all) argv.push_back(t.data());
-  std::vector<std::string> flags = kServeFlags;
-  flags.push_back("--overrides-file");
-  return Args::parse(static_cast<int>(argv.size()), argv.data(), 0, flags, kServeSwitches);
+  for (std::string& t : tokens) argv.push_back(t.data());
+  return Args::parse(static_cast<int>(argv.size()), argv.data(), 0, kServeFlags, kServeSwitches);
+}
+
+// The effective configuration: board, file and --set (firmware/config.h), then
+// serve's own flags over them. Run at start-up and again on SIGHUP.
+Result<ServiceConfig> resolveServeConfig(const std::vector<std::string>& tokens) {
+  ConfigSources sources;
+  Result<Args> args = parseServeFlags(tokens, sources);
+  if (!args) return args.status();
+  Result<ServiceConfig> base = resolveServiceConfig(sources);
+  if (!base) return base.status();
+  return serviceConfigFromArgs(args.value(), std::move(base.value()));
 }
 
 }  // namespace
@@ -107,9 +96,10 @@ int serveCommand(int argc, char** argv) {
     std::fprintf(stderr, "fovead serve: %s\n", s.message().c_str());
     return kExitUsage;
   };
-  Result<Args> args = parseServeArgs(tokens);
+  ConfigSources sources;
+  Result<Args> args = parseServeFlags(tokens, sources);  // --frames, --duration: this run's, not the config's
   if (!args) return usage(args.status());
-  Result<ServiceConfig> config = serviceConfigFromArgs(args.value(), serveDefaults());
+  Result<ServiceConfig> config = resolveServeConfig(tokens);
   if (!config) return usage(config.status());
   Result<long> frames = parseInteger("--frames", args->getOr("--frames", "0"), 0, 100000000);
   if (!frames) return usage(frames.status());
@@ -123,12 +113,8 @@ int serveCommand(int argc, char** argv) {
   logger().setLevel(config->runtime.log_level);
 
   Service::Environment environment;
-  // SIGHUP: the same command line and the overrides file as it is now.
-  environment.reloader = [tokens]() -> Result<ServiceConfig> {
-    Result<Args> reloaded = parseServeArgs(tokens);
-    if (!reloaded) return reloaded.status();
-    return serviceConfigFromArgs(reloaded.value(), serveDefaults());
-  };
+  // SIGHUP: the profile and the configuration file as they are now, and the same flags.
+  environment.reloader = [tokens]() -> Result<ServiceConfig> { return resolveServeConfig(tokens); };
   Result<std::unique_ptr<Service>> created = Service::create(config.value(), std::move(environment));
   if (!created) {
     std::fprintf(stderr, "fovead serve: %s\n", created.status().message().c_str());

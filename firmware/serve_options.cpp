@@ -9,7 +9,7 @@ namespace fovea::firmware {
 namespace {
 
 std::vector<std::string> serveFlags() {
-  std::vector<std::string> flags = {"--board", "--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
+  std::vector<std::string> flags = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
                                     "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
                                     "--depth-max",  "--log-level"};
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
@@ -25,13 +25,6 @@ const std::vector<std::string> kServeSwitches = {"--insecure", "--memory-lock"};
 Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base) {
   using R = Result<ServiceConfig>;
   ServiceConfig config = std::move(base);
-  if (const std::string* v = args.get("--board")) {
-    // Only the built-in host profile (the defaults) until the board profiles arrive.
-    if (*v != "host-mock") {
-      return R(ErrorCode::kInvalidArgument, "--board " + *v + ": unknown board (built in: host-mock)");
-    }
-    config.board = *v;
-  }
   if (const std::string* v = args.get("--camera")) config.camera.spec = *v;
   if (const std::string* v = args.get("--gpio")) config.gpio.spec = *v;
   if (const std::string* v = args.get("--gpio-lines")) {

@@ -56,24 +56,40 @@ TEST(FoveadServe, SigintStopsItToo) {
   EXPECT_LT(seconds, 1.0);
 }
 
-TEST(FoveadServe, SighupAppliesANewPreset) {
+TEST(FoveadServe, SighupReadsTheConfigurationFileAgain) {
   test::TempDir dir;
-  const std::string overrides = dir.file("overrides");
-  writeFile(overrides, "--preset F1\n");
-  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera + " --overrides-file " + overrides);
+  const std::string config = dir.file("fovea.toml");
+  writeFile(config, "[foveation]\npreset = \"F1\"\n");
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera + " --config " + config);
   ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
   EXPECT_NE(serve.output().find("foveation F1"), std::string::npos);
-  writeFile(overrides, "--preset F3 --m 0.03\n");
+  writeFile(config, "[foveation]\npreset = \"F3\"\nslope = 0.03\n");
   ASSERT_TRUE(serve.signal(SIGHUP));
   ASSERT_TRUE(serve.waitFor("reload (SIGHUP): foveation F3 (m 0.03", 5.0)) << serve.output();
-  // A broken file keeps the running configuration.
-  writeFile(overrides, "--preset F9\n");
+  // A broken file keeps the running configuration, and says where it is broken.
+  writeFile(config, "[foveation]\npreset = \"F9\"\n");
   ASSERT_TRUE(serve.signal(SIGHUP));
   ASSERT_TRUE(serve.waitFor("the running configuration stays", 5.0)) << serve.output();
+  EXPECT_NE(serve.output().find("fovea.toml:2: foveation.preset"), std::string::npos) << serve.output();
   int exit_code = -1;
   stopSeconds(serve, SIGTERM, exit_code);
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("1 reloads applied"), std::string::npos) << serve.output();
+}
+
+TEST(FoveadServe, BoardProfileAndSetApply) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
+                                " --board host-mock --set foveation.preset=F2 --set runtime.ring_depth=3");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  EXPECT_NE(serve.output().find("board host-mock"), std::string::npos) << serve.output();
+  EXPECT_NE(serve.output().find("foveation F2"), std::string::npos) << serve.output();
+  EXPECT_NE(serve.output().find("ring depth 3"), std::string::npos) << serve.output();
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  const test::ProcessResult unknown = test::runCommand(fovead() + " serve --board no-such-board --frames 1");
+  EXPECT_EQ(unknown.exit_code, 2) << unknown.output;
+  EXPECT_NE(unknown.output.find("unknown board 'no-such-board'"), std::string::npos) << unknown.output;
 }
 
 std::string foveaOperator() {
