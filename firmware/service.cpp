@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "firmware/options.h"
+#include "hal/capture_retry.h"
 #include "net/codec.h"
 #include "net/key.h"
 
@@ -270,7 +271,13 @@ void Service::placeThread(const char* name, const ThreadPlacement& placement) {
 void Service::captureLoop() {
   placeThread("fovea-capture", config_.runtime.capture_thread);
   static LogRateLimit capture_site;
-  int64_t backoff_ns = 0;
+  // Retries, backoff and reopening after a disconnect: hal/capture_retry.h.
+  hal::CaptureRetryConfig retry_config;
+  retry_config.acquire_timeout = kAcquireTimeout;
+  retry_config.initial_backoff_ns = config_.camera.retry_initial_ms * 1'000'000;
+  retry_config.max_backoff_ns = config_.camera.retry_max_ms * 1'000'000;
+  hal::CaptureRetry retry(*camera_, retry_config);
+  hal::CaptureRetryStats failing_since;  // the counts when the current failure began
   pipeline::SlotRing& ring = frames_->ring();
   while (running_.load(std::memory_order_acquire)) {
     const uint64_t limit = max_frames_.load(std::memory_order_relaxed);
@@ -282,25 +289,45 @@ void Service::captureLoop() {
     }
     CapturedFrame& f = frames_->slot(slot);
     const int64_t t0 = monotonicNs();
-    if (Status s = camera_->acquire(f.frame, kAcquireTimeout); !s) {
-      ring.cancel(slot);
-      capture_errors_.fetch_add(1, std::memory_order_relaxed);
-      (void)log().logLimited(capture_site, LogLevel::kWarning, "capture: %s", s.toString().c_str());
-      if (s.code() != ErrorCode::kUnavailable) {
-        // A device error: back off (doubling) before the next try, for ever.
-        backoff_ns = backoff_ns == 0 ? config_.camera.retry_initial_ms * 1'000'000
-                                     : std::min(2 * backoff_ns, config_.camera.retry_max_ms * 1'000'000);
-        for (int64_t slept = 0; slept < backoff_ns && running_.load(std::memory_order_relaxed); slept += 10'000'000) {
-          sleepNs(std::min<int64_t>(10'000'000, backoff_ns - slept));
-        }
-      }
-      continue;
+    const hal::CaptureStep step = retry.step(t0, f.frame);
+    if (step.event == hal::CaptureEvent::kFailing) {
+      failing_since = retry.stats();
+      capture_failing_.store(true, std::memory_order_relaxed);
+      log().log(LogLevel::kWarning, "capture: failing (%s); retrying with backoff from %" PRId64 " ms",
+                errorCodeName(step.error), config_.camera.retry_initial_ms);
+    } else if (step.event == hal::CaptureEvent::kRecovered) {
+      capture_failing_.store(false, std::memory_order_relaxed);
+      const hal::CaptureRetryStats& now_stats = retry.stats();
+      log().log(LogLevel::kNotice, "capture: recovered after %" PRIu64 " failed acquires and %" PRIu64 " reopens",
+                now_stats.acquire_failures - failing_since.acquire_failures, now_stats.reopens - failing_since.reopens);
     }
-    backoff_ns = 0;
-    f.captured_ns = monotonicNs();
-    capture_latency_.add(f.captured_ns - t0);
-    last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
-    ring.publish(slot);
+    switch (step.action) {
+      case hal::CaptureAction::kFrame:
+        f.captured_ns = monotonicNs();
+        capture_latency_.add(f.captured_ns - t0);
+        last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
+        ring.publish(slot);
+        continue;
+      case hal::CaptureAction::kAcquireFailed:
+      case hal::CaptureAction::kReopenFailed:
+        capture_errors_.fetch_add(1, std::memory_order_relaxed);
+        (void)log().logLimited(capture_site, LogLevel::kWarning, "capture: %s %s",
+                               step.action == hal::CaptureAction::kReopenFailed ? "reopen failed:" : "acquire failed:",
+                               errorCodeName(step.error));
+        break;
+      case hal::CaptureAction::kReopened:
+        log().log(LogLevel::kNotice, "capture: camera reopened");
+        break;
+      case hal::CaptureAction::kWait:
+        break;
+    }
+    ring.cancel(slot);
+    // Wait for the next attempt in short sleeps, so a stop is never held up.
+    while (running_.load(std::memory_order_relaxed)) {
+      const int64_t left = step.next_ns - monotonicNs();
+      if (left <= 0) break;
+      sleepNs(std::min<int64_t>(left, 10'000'000));
+    }
   }
   // After the last publish: the foveation stage drains what is queued, then ends.
   capture_alive_.store(false, std::memory_order_release);
@@ -464,7 +491,11 @@ void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
 }
 
 void Service::supervise(int64_t now_ns) {
-  const bool healthy = now_ns - last_frame_ns_.load(std::memory_order_relaxed) <= stall_timeout_ns_;
+  // Healthy: frames arrive (within the stall timeout) and the capture stage is not
+  // retrying a failing camera.
+  const bool frames_flow = now_ns - last_frame_ns_.load(std::memory_order_relaxed) <= stall_timeout_ns_;
+  const bool capture_failing = capture_failing_.load(std::memory_order_relaxed);
+  const bool healthy = frames_flow && !capture_failing;
   const int64_t gaze_ns = gaze_received_ns_.load(std::memory_order_relaxed);
   StatusInputs inputs;
   inputs.healthy = healthy;
@@ -485,8 +516,12 @@ void Service::supervise(int64_t now_ns) {
   }
   if (state.fault != was_fault) {
     if (state.fault) {
-      log().log(LogLevel::kWarning, "fault: no frame for %" PRId64 " ms (camera stalled); watchdog keep-alives stop",
-                (now_ns - last_frame_ns_.load(std::memory_order_relaxed)) / 1'000'000);
+      if (!frames_flow) {
+        log().log(LogLevel::kWarning, "fault: no frame for %" PRId64 " ms (camera stalled); watchdog keep-alives stop",
+                  (now_ns - last_frame_ns_.load(std::memory_order_relaxed)) / 1'000'000);
+      } else {
+        log().log(LogLevel::kWarning, "fault: the camera fails (capture retrying); watchdog keep-alives stop");
+      }
     } else {
       log().log(LogLevel::kNotice, "fault cleared: frames flow again");
     }

@@ -233,6 +233,8 @@ class Service {
   std::atomic<bool> operator_connected_{false};
   std::atomic<int64_t> gaze_received_ns_{0};  // 0: none
   std::atomic<int64_t> last_frame_ns_{0};
+  // The capture stage is retrying (hal::CaptureRetry::faulted()): part of the fault line.
+  std::atomic<bool> capture_failing_{false};
   std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},
       frames_withheld_{0}, frames_unsent_{0}, reloads_applied_{0}, wire_bytes_{0};
   // Written by the supervisor, read by stats() from any thread.

@@ -2,7 +2,10 @@
 #pragma once
 
 #include <cstdint>
+#include <mutex>
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include "firmware/log.h"
 
@@ -23,6 +26,26 @@ class LastLineSink final : public LogSink {
   char text[kLogLineBytes] = {};
   std::size_t size = 0;
   uint64_t count = 0;
+};
+
+// Keeps every line, from any thread (allocation does not matter where it is used).
+class RecordingSink final : public LogSink {
+ public:
+  void write(LogLevel, int64_t, std::string_view line) override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    lines_.emplace_back(line);
+  }
+  bool contains(const std::string& text) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const std::string& line : lines_) {
+      if (line.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::string> lines_;
 };
 
 // A clock the test moves by hand.
