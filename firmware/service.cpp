@@ -586,12 +586,17 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   const int n = std::snprintf(
       out, size,
       "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
-      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s | memory %.1f MiB",
+      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s | memory %.1f MiB"
+      " | lines heartbeat %s streaming %d fault %d",
       static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
       static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
       w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
       static_cast<double>(w.wire_bytes - window_.wire_bytes) / dt_s / 1e6, gaze_age,
-      status_lines_->state().privacy_active ? " | privacy pause" : "", static_cast<double>(memory_.totalBytes()) / kMiB);
+      status_lines_->state().privacy_active ? " | privacy pause" : "", static_cast<double>(memory_.totalBytes()) / kMiB,
+      // The heartbeat's level changes every half period: report whether it toggles.
+      heartbeat_toggles_.load(std::memory_order_relaxed) != window_heartbeat_toggles_ ? "toggling" : "held",
+      status_lines_->state().streaming ? 1 : 0, status_lines_->state().fault ? 1 : 0);
+  window_heartbeat_toggles_ = heartbeat_toggles_.load(std::memory_order_relaxed);
   window_ = w;
   return n < 0 ? 0 : std::min(static_cast<std::size_t>(n), size - 1);
 }

@@ -235,6 +235,7 @@ class Service {
   std::atomic<int64_t> last_frame_ns_{0};
   // The capture stage is retrying (hal::CaptureRetry::faulted()): part of the fault line.
   std::atomic<bool> capture_failing_{false};
+  uint64_t window_heartbeat_toggles_ = 0;  // the supervisor's, at the last status line
   std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},
       frames_withheld_{0}, frames_unsent_{0}, reloads_applied_{0}, wire_bytes_{0};
   // Written by the supervisor, read by stats() from any thread.
