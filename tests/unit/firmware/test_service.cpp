@@ -5,10 +5,13 @@
 #include "firmware/service.h"
 
 #include <stdlib.h>
+#include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <functional>
 #include <mutex>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -16,6 +19,7 @@
 #include <gtest/gtest.h>
 
 #include "net/operator_link.h"
+#include "net/udp_socket.h"
 #include "tests/support/process.h"
 #include "tests/support/service_doubles.h"
 #include "tests/unit/firmware/log_sinks.h"
@@ -187,6 +191,8 @@ TEST(Service, SurvivesEveryInjectedCameraFault) {
 struct TestOperator {
   std::unique_ptr<net::OperatorLink> link;
   std::atomic<bool> stop{false};
+  std::atomic<bool> send_gaze{true};  // false: the gaze stream stops
+  std::atomic<bool> silent{false};    // true: the operator vanishes (no gaze, no Bye, nothing read)
   std::atomic<uint64_t> datagrams{0};
   std::thread thread;
 
@@ -200,7 +206,11 @@ struct TestOperator {
     thread = std::thread([this] {
       auto next = std::chrono::steady_clock::now();
       while (!stop.load()) {
-        if (std::chrono::steady_clock::now() >= next) {
+        if (silent.load()) {
+          std::this_thread::sleep_for(5ms);
+          continue;
+        }
+        if (send_gaze.load() && std::chrono::steady_clock::now() >= next) {
           net::GazeSample g;
           g.gaze_origin_m = {3.0, 0.35, 1.55};
           g.gaze_direction = {0.6, 0.8, 0.0};  // unit length
@@ -218,11 +228,73 @@ struct TestOperator {
   }
 };
 
+// Resident set in KiB (/proc/self/statm's second field, in pages).
+long residentKiB() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return -1;
+  long size = 0, resident = 0;
+  const int n = std::fscanf(f, "%ld %ld", &size, &resident);
+  std::fclose(f);
+  return n == 2 ? resident * (sysconf(_SC_PAGESIZE) / 1024) : -1;
+}
+
 ServiceConfig streamingConfig() {
   ServiceConfig config = test::smallServiceConfig(30.0);
   config.stream.link.listen = "127.0.0.1:0";
   config.stream.link.insecure = true;
   return config;
+}
+
+// The network side of the faults: a gaze stream that stops (the fallback takes
+// over, logged once), a flood of garbage datagrams (counted, dropped), an
+// operator that vanishes without a Bye (the session times out): the service
+// keeps foveating and its resident set stays flat.
+TEST(Service, StoppedGazeFloodAndAVanishedOperatorLeaveItRunningWithFlatMemory) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = streamingConfig();
+  config.stream.link.session_timeout_ns = 500'000'000;
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  TestOperator op;
+  ASSERT_TRUE(op.connect(running.service->localEndpoint()));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= 10; }, 5000ms));
+  EXPECT_TRUE(sink.contains("gaze: operator"));
+  const long rss_before = residentKiB();
+
+  op.send_gaze.store(false);
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("gaze: stale gaze (fallback)"); }, 3000ms));
+
+  // 20 000 datagrams of random bytes and lengths at the service's port.
+  {
+    const net::Endpoint robot = running.service->localEndpoint();
+    Result<net::UdpSocket> flooder = net::UdpSocket::forPeer(robot);
+    ASSERT_TRUE(flooder.isOk()) << flooder.status().message();
+    std::mt19937 rng(5);
+    std::vector<uint8_t> junk(1500);
+    for (int i = 0; i < 20000; ++i) {
+      const std::size_t n = std::uniform_int_distribution<std::size_t>(0, junk.size())(rng);
+      for (std::size_t k = 0; k < n; ++k) junk[k] = static_cast<uint8_t>(rng());
+      if (n >= 4 && i % 2 == 0) junk[0] = 'F', junk[1] = 'V', junk[2] = 1;  // half of them pass the magic
+      (void)flooder->sendTo(std::span<const uint8_t>(junk.data(), n), robot);
+    }
+  }
+  const uint64_t foveated = running.service->stats().frames_foveated;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= foveated + 10; }, 3000ms));
+
+  op.silent.store(true);
+  ASSERT_TRUE(waitUntil([&] { return !running.service->stats().operator_connected; }, 3000ms));
+  const uint64_t after = running.service->stats().frames_foveated;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= after + 10; }, 3000ms));
+  const long rss_after = residentKiB();
+  EXPECT_LT(rss_after - rss_before, 2048) << rss_before << " KiB before, " << rss_after << " KiB after";
+  // A new operator is served after the silent one timed out.
+  TestOperator next;
+  ASSERT_TRUE(next.connect(running.service->localEndpoint()));
+  const uint64_t sent = running.service->stats().frames_sent;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= sent + 5; }, 5000ms));
 }
 
 TEST(Service, StreamsToAnOperatorAndThePrivacyInputPausesIt) {
