@@ -16,7 +16,7 @@ Status GazePolicyConfig::validate() const {
 std::string_view gazeSourceName(GazeSource source) {
   switch (source) {
     case GazeSource::kOperator: return "operator";
-    case GazeSource::kNoGazeYet: return "no gaze yet (fallback)";
+    case GazeSource::kNoGazeYet: return "no operator gaze (fallback)";
     case GazeSource::kStale: return "stale gaze (fallback)";
   }
   return "?";

@@ -123,7 +123,7 @@ int serveCommand(int argc, char** argv) {
   Service& service = *created.value();
   std::printf("fovead serve: board %s, camera %s, foveation %s, ring depth %d\n", config->board.c_str(),
               config->camera.spec.c_str(), describeFoveation(config->foveation).c_str(), config->runtime.ring_depth);
-  std::printf("%s\n%s", service.memory().summary().c_str(), service.memory().breakdown().c_str());
+  std::printf("%s", service.memory().breakdown().c_str());  // the summary line is logged
   if (service.streaming()) {
     std::printf("streaming: listening on %s (%s), budget up to %.2f MB/s\n", service.localEndpoint().toString().c_str(),
                 config->stream.link.insecure ? "INSECURE" : "authenticated",

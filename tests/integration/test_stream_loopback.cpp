@@ -228,7 +228,7 @@ TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
   const test::ProcessResult r = test::runCommand(std::string("FOVEA_DEMO_SECONDS=3 FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR +
                                                  " " + FOVEA_SOURCE_DIR + "/toolchain/run-demo");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* expected : {"[robot]    fovead serve: board host-mock", "[robot]    memory: ",
+  for (const char* expected : {"[robot]    fovead serve: board host-mock", "info: memory: ",
                                "[robot]    streaming: listening on 127.0.0.1:", "[operator] connected to 127.0.0.1:",
                                "info: gaze: operator", "[operator] fps", "[operator] summary:", "info: status: fps in",
                                "lines heartbeat toggling streaming 1 fault 0", "[robot]    fovead serve: stopped after"}) {
