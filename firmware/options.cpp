@@ -97,6 +97,15 @@ Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_v
   return values;
 }
 
+Result<double> durationFromArgs(const Args& args) {
+  const std::string* v = args.get("--duration");
+  if (v == nullptr) return 0.0;
+  Result<double> d = parseDouble("--duration", *v);
+  if (!d) return d.status();
+  if (!(d.value() > 0.0)) return Result<double>(ErrorCode::kInvalidArgument, "--duration: must be positive");
+  return d.value();
+}
+
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text) {
   Result<std::vector<double>> values = parseDoubleList(flag, text);
   if (!values) return values.status();

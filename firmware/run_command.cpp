@@ -183,13 +183,9 @@ int runCommand(int argc, char** argv) {
   Result<long> frames = parseInteger("--frames", args->getOr("--frames", streaming ? "0" : "30"), streaming ? 0 : 1,
                                      100000000);
   if (!frames) return usage(frames.status());
-  double duration_s = 0.0;
-  if (const std::string* v = args->get("--duration")) {
-    Result<double> d = parseDouble("--duration", *v);
-    if (!d) return usage(d.status());
-    if (!(d.value() > 0.0)) return usage({ErrorCode::kInvalidArgument, "--duration: must be positive"});
-    duration_s = d.value();
-  }
+  Result<double> duration = durationFromArgs(args.value());
+  if (!duration) return usage(duration.status());
+  const double duration_s = duration.value();
   Result<long> every = parseInteger("--every", args->getOr("--every", "1"), 0, 100000000);
   if (!every) return usage(every.status());
   Result<long> threads = parseInteger("--threads", args->getOr("--threads", "1"), 1, 64);

@@ -103,13 +103,9 @@ int serveCommand(int argc, char** argv) {
   if (!config) return usage(config.status());
   Result<long> frames = parseInteger("--frames", args->getOr("--frames", "0"), 0, 100000000);
   if (!frames) return usage(frames.status());
-  double duration_s = 0.0;
-  if (const std::string* v = args->get("--duration")) {
-    Result<double> d = parseDouble("--duration", *v);
-    if (!d) return usage(d.status());
-    if (!(d.value() > 0.0)) return usage({ErrorCode::kInvalidArgument, "--duration: must be positive"});
-    duration_s = d.value();
-  }
+  Result<double> duration = durationFromArgs(args.value());
+  if (!duration) return usage(duration.status());
+  const double duration_s = duration.value();
   logger().setLevel(config->runtime.log_level);
 
   Service::Environment environment;
