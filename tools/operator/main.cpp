@@ -10,6 +10,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -31,12 +32,13 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) --gaze SCRIPT\n"
     "                      [--duration SECONDS] [--summary FILE.json] [--save-ply DIR]\n"
-    "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N] [--quiet]\n"
+    "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
+    "                      [--clock auto|shared|estimated] [--quiet]\n"
     "\n"
     "Connects to fovead run --listen, sends gaze samples from a script, receives and\n"
     "decodes the foveated frames, and prints once a second: frames per second, MB/s\n"
-    "on the wire, end-to-end latency from capture to decoded (p50, p99; the two hosts'\n"
-    "CLOCK_MONOTONIC must agree, as on one machine), datagrams lost, points per region.\n"
+    "on the wire, end-to-end latency from capture to decoded (p50, p99), datagrams lost,\n"
+    "points per region.\n"
     "\n"
     "  --connect HOST:PORT   the robot: 127.0.0.1:7000, [::1]:7000, robot.local:7000\n"
     "  --key-file FILE       the pre-shared key the robot has (fovead keygen FILE)\n"
@@ -51,6 +53,10 @@ const char* kHelp =
     "  --mtu BYTES           the largest UDP payload to ask for (default 1200)\n"
     "  --gaze-hz HZ          gaze samples per second (default 120, up to 200)\n"
     "  --max-points N        the largest frame to decode, in points (default 307200 = 640x480)\n"
+    "  --clock MODE          how capture stamps (robot clock) compare with arrival (this host's):\n"
+    "                        shared: one CLOCK_MONOTONIC (same host); estimated: the robot's clock\n"
+    "                        estimated from its status stamps and the round trip it measures\n"
+    "                        (RTT/2 each way); auto (default): shared on a loopback address\n"
     "  --quiet               no live lines\n";
 
 volatile std::sig_atomic_t g_stop = 0;
@@ -76,6 +82,7 @@ struct Options {
   double gaze_hz = 120.0;
   bool quiet = false;
   long max_points = 640 * 480;
+  std::string clock = "auto";
 };
 
 Result<double> number(const std::string& flag, const char* text) {
@@ -107,6 +114,11 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.ply_dir = value;
     } else if (flag == "--name") {
       o.name = value;
+    } else if (flag == "--clock") {
+      o.clock = value;
+      if (o.clock != "auto" && o.clock != "shared" && o.clock != "estimated") {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--clock: '" + o.clock + "' is not auto, shared or estimated");
+      }
     } else if (flag == "--max-points") {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
@@ -200,8 +212,17 @@ int main(int argc, char** argv) {
   }
   net::OperatorLink& link = *connected.value();
   if (!link.notice().empty()) std::fprintf(stderr, "fovea-operator: *** %s ***\n", link.notice().c_str());
-  std::printf("connected to %s: MTU %u, budget %.2f MB/s\n", link.robot().toString().c_str(), link.mtuBytes(),
-              static_cast<double>(link.budgetBytesPerS()) / 1e6);
+  // Latency compares the robot's capture stamp with this host's arrival time. On
+  // one host the clocks are one; across hosts the robot's clock is estimated from
+  // its status stamps: robot = local + offset, offset = stamp + RTT/2 - arrival.
+  const std::string robot_address = link.robot().toString();
+  const bool shared_clock = opt.clock == "shared" ||
+                            (opt.clock == "auto" && (robot_address.rfind("127.", 0) == 0 || robot_address.rfind("[::1]", 0) == 0));
+  std::optional<int64_t> clock_offset_ns;  // robot minus local
+  if (shared_clock) clock_offset_ns = 0;
+  std::printf("connected to %s: MTU %u, budget %.2f MB/s; latency on %s\n", robot_address.c_str(), link.mtuBytes(),
+              static_cast<double>(link.budgetBytesPerS()) / 1e6,
+              shared_clock ? "one clock" : "the robot's clock estimated from its status and round trip");
   std::fflush(stdout);
 
   // Room for the largest frame: the assembler refuses what does not fit, and counts it.
@@ -230,8 +251,12 @@ int main(int argc, char** argv) {
       const net::AssembledFrame& f = assembler.ready(i);
       tools::FrameObservation obs;
       obs.frame_id = f.frame_id;
-      // Capture to the arrival of the frame's last chunk (decoding it takes microseconds).
-      obs.latency_ms = static_cast<double>(f.last_chunk_received_ns - static_cast<int64_t>(f.capture_time_ns)) * 1e-6;
+      // Capture to the arrival of the frame's last chunk (decoding it takes
+      // microseconds); unknown (NaN, left out of the quantiles) until the
+      // robot's clock is estimated.
+      obs.latency_ms = clock_offset_ns ? static_cast<double>(f.last_chunk_received_ns + *clock_offset_ns -
+                                                             static_cast<int64_t>(f.capture_time_ns)) * 1e-6
+                                       : std::numeric_limits<double>::quiet_NaN();
       for (std::size_t r = 0; r < obs.points_per_region.size(); ++r) {
         obs.points_per_region[r] = f.points[r];
         obs.chunks_received += f.chunks_received[r];
@@ -297,8 +322,17 @@ int main(int argc, char** argv) {
       case net::MessageType::kBye:
         robot_said_bye = true;
         break;
+      case net::MessageType::kStatus:
+        // The link has decoded it (and echoes its stamp); the round trip the robot
+        // measured from earlier echoes dates the stamp.
+        if (!shared_clock) {
+          if (const auto& status = link.lastStatus(); status && status->rtt_ns >= 0) {
+            clock_offset_ns = tools::estimateClockOffsetNs(status->robot_stamp_ns, status->rtt_ns, received->received_ns);
+          }
+        }
+        break;
       default:
-        break;  // status: the link notes its timestamp for the RTT echo
+        break;
     }
     handleReady();
   }

@@ -18,7 +18,7 @@ void OperatorStats::add(Tally& t, const FrameObservation& f) {
   t.chunks_received += f.chunks_received;
   t.chunks_expected += f.chunks_expected;
   for (std::size_t r = 0; r < f.points_per_region.size(); ++r) t.points[r] += f.points_per_region[r];
-  t.latency_ms.push_back(f.latency_ms);
+  if (!std::isnan(f.latency_ms)) t.latency_ms.push_back(f.latency_ms);  // NaN: not known
 }
 
 void OperatorStats::frame(const FrameObservation& f) {

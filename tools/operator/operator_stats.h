@@ -13,12 +13,19 @@
 
 namespace fovea::tools {
 
+// The robot's clock minus this host's, from a robot timestamp received at
+// received_ns (this host's clock) and the round trip the robot measured:
+// the stamp was taken half a round trip before it arrived (symmetric paths).
+inline int64_t estimateClockOffsetNs(int64_t robot_stamp_ns, int64_t rtt_ns, int64_t received_ns) {
+  return robot_stamp_ns + rtt_ns / 2 - received_ns;
+}
+
 // Nearest-rank quantile of samples (q in [0, 1]); NaN when there are none.
 double quantile(std::vector<double> samples, double q);
 
 struct FrameObservation {
   uint32_t frame_id = 0;
-  double latency_ms = 0.0;  // capture (robot) to decoded (operator)
+  double latency_ms = 0.0;  // capture (robot) to decoded (operator); NaN: unknown (left out)
   std::array<uint32_t, pipeline::kMaxRegions> points_per_region{};
   uint32_t chunks_received = 0;
   uint32_t chunks_expected = 0;  // from the frame summary (0 when it was lost)
