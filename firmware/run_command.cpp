@@ -242,13 +242,15 @@ int runCommand(int argc, char** argv) {
     std::printf("kernels: ref (scalar references, one thread)\n");
   }
   std::unique_ptr<Streamer> streamer;
+  std::optional<GazePolicy> gaze_policy;  // the operator's gaze while fresh, else the fallback
   if (streaming) {
-    Result<std::unique_ptr<Streamer>> created_streamer = Streamer::create(**stream_config, max_points, config.value());
+    Result<std::unique_ptr<Streamer>> created_streamer = Streamer::create(**stream_config, max_points);
     if (!created_streamer) {
       std::fprintf(stderr, "fovead run: %s\n", created_streamer.status().message().c_str());
       return created_streamer.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
     }
     streamer = std::move(created_streamer.value());
+    gaze_policy.emplace((*stream_config)->gaze, config.value());
     if (!streamer->notice().empty()) std::fprintf(stderr, "fovead run: *** %s ***\n", streamer->notice().c_str());
     const net::RobotLinkConfig& link = (*stream_config)->link;
     std::printf("streaming: listening on %s (%s), budget up to %.2f MB/s, MTU up to %u, gaze timeout %lld ms, "
@@ -332,7 +334,11 @@ int runCommand(int argc, char** argv) {
     GazeSource source = GazeSource::kOperator;
     if (streamer) {
       streamer->poll();
-      const GazePolicy::Decision decision = streamer->decide(frame.T_world_cam, capture_ns);
+      pipeline::Gaze operator_gaze;
+      int64_t received_ns = 0;
+      const bool have_gaze = streamer->operatorGaze(operator_gaze, received_ns);
+      const GazePolicy::Decision decision =
+          gaze_policy->decide(have_gaze ? &operator_gaze : nullptr, received_ns, capture_ns, frame.T_world_cam);
       if (decision.changed) {
         std::printf("gaze: %s\n", std::string(gazeSourceName(decision.source)).c_str());
         std::fflush(stdout);

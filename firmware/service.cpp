@@ -192,7 +192,7 @@ Status Service::allocate() {
       stream.link.key = key->key;
     }
     before = heapInUse();
-    Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, pixels, config_.foveation);
+    Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, pixels);
     if (!streamer) return streamer.status();
     streamer_ = std::move(streamer.value());
     memory_.add("streamer (link, datagram pool, scheduler)", 1, delta(before, heapInUse()));

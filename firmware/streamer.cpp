@@ -22,8 +22,7 @@ int pollMs(int64_t wait_ns) {
 
 }  // namespace
 
-Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, std::size_t max_points,
-                                                   const pipeline::FoveationConfig& operator_foveation) {
+Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, std::size_t max_points) {
   if (Status s = config.gaze.validate(); !s) return s;
   if (Status s = net::validate(config.codec); !s) return s;
   if (!(config.burst_ms > 0.0 && config.burst_ms <= 1000.0)) {
@@ -38,16 +37,15 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
                                    static_cast<double>(4 * net::kMaxMtu), monotonicNs());
   if (!scheduler) return scheduler.status();
   return std::unique_ptr<Streamer>(
-      new Streamer(config, std::move(link.value()), std::move(scheduler.value()), max_points, operator_foveation));
+      new Streamer(config, std::move(link.value()), std::move(scheduler.value()), max_points));
 }
 
 Streamer::Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
-                   std::size_t max_points, const pipeline::FoveationConfig& operator_foveation)
+                   std::size_t max_points)
     : config_(config),
       link_(std::move(link)),
       scheduler_(std::move(scheduler)),
       max_points_(max_points),
-      policy_(config.gaze, operator_foveation),
       chunk_bytes_(max_points),
       chunk_regions_(max_points) {}
 
@@ -65,13 +63,6 @@ bool Streamer::operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const {
   gaze.direction = {s.gaze_direction.x, s.gaze_direction.y, s.gaze_direction.z};
   received_ns = latest->received_ns;
   return true;
-}
-
-GazePolicy::Decision Streamer::decide(const hal::Pose& camera, int64_t now_ns) {
-  pipeline::Gaze gaze;
-  int64_t received_ns = 0;
-  if (!operatorGaze(gaze, received_ns)) return policy_.decide(nullptr, 0, now_ns, camera);
-  return policy_.decide(&gaze, received_ns, now_ns, camera);
 }
 
 Status Streamer::setBudgetCap(uint64_t bytes_per_s, int64_t now_ns) {
@@ -100,7 +91,6 @@ Status Streamer::beginSession(int64_t now_ns) {
   encoder_.emplace(std::move(encoder.value()));
   if (Status s = applyBudget(now_ns); !s) return s;
   session_started_ns_ = session.started_ns;
-  ++sessions_started_;
   return Status::ok();
 }
 
@@ -122,7 +112,6 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   if (Status s = encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
                                   static_cast<uint64_t>(capture_ns));
       !s) {
-    ++encode_failures_;
     return s;
   }
   const std::size_t chunks = encoder_->chunkCount();

@@ -1,7 +1,7 @@
-// The robot side of a stream (fovead run --listen): the link to the operator,
-// the gaze policy, the chunk encoder and the uplink scheduler, driven once per
-// captured frame by the run loop. Single-threaded (issue 5 splits capture,
-// foveation and sending into threads). Everything is allocated by create()
+// The robot side of a stream: the link to the operator, the chunk encoder and
+// the uplink scheduler, driven once per frame by whoever sends (fovead run's
+// loop, or the service's send thread), which also picks the gaze with its own
+// GazePolicy from operatorGaze(). Everything is allocated by create()
 // and when a session starts (the encoder follows the session's MTU); a frame
 // allocates nothing.
 #pragma once
@@ -45,8 +45,7 @@ struct FrameSendReport {
 
 class Streamer {
  public:
-  static Result<std::unique_ptr<Streamer>> create(const StreamConfig& config, std::size_t max_points,
-                                                  const pipeline::FoveationConfig& operator_foveation);
+  static Result<std::unique_ptr<Streamer>> create(const StreamConfig& config, std::size_t max_points);
 
   // Non-empty in insecure mode: log it loudly.
   const std::string& notice() const { return link_->notice(); }
@@ -61,8 +60,6 @@ class Streamer {
   // The operator's newest valid gaze sample while a session stands (false
   // otherwise), and when it arrived.
   bool operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const;
-  // The gaze and foveation for a frame captured at now_ns with this camera pose.
-  GazePolicy::Decision decide(const hal::Pose& camera, int64_t now_ns);
 
   // Caps the uplink below the budget sessions negotiate (a reloaded
   // configuration): applies to the session in progress and the next ones.
@@ -87,12 +84,10 @@ class Streamer {
   void sendStatus(const net::StatusReport& report);
 
   const net::UplinkCounters& uplinkCounters() const { return scheduler_.counters(); }
-  uint64_t sessionsStarted() const { return sessions_started_; }
-  uint64_t encodeFailures() const { return encode_failures_; }
 
  private:
   Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
-           std::size_t max_points, const pipeline::FoveationConfig& operator_foveation);
+           std::size_t max_points);
   // Sets the encoder and the budget up for a new session.
   Status beginSession(int64_t now_ns);
   // Budget and burst for the current session, under the cap.
@@ -102,15 +97,12 @@ class Streamer {
   std::unique_ptr<net::RobotLink> link_;
   net::UplinkScheduler scheduler_;
   std::size_t max_points_;
-  GazePolicy policy_;
   std::optional<net::ChunkEncoder> encoder_;
   std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, max chunks
   std::vector<uint8_t> chunk_regions_;
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;
   uint64_t budget_cap_bytes_per_s_ = UINT64_MAX;
-  uint64_t sessions_started_ = 0;
-  uint64_t encode_failures_ = 0;
 };
 
 }  // namespace fovea::firmware
