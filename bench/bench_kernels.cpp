@@ -90,12 +90,16 @@ void setPointCounter(benchmark::State& state, std::size_t points) {
 
 // --- The scalar reference -------------------------------------------------
 
-void bmBackprojectRef(benchmark::State& state) {
+// One benchmark per kernel, templated on the variant (the table at the end
+// names them), so the reference and the SIMD kernel run the same loop.
+
+template <auto Backproject>
+void bmBackproject(benchmark::State& state) {
   Fixture& f = Fixture::get();
   PointCloud out(f.input.frame.pixelCount());
   pipeline::BackprojectCounts counts;
   for (auto _ : state) {
-    Status s = pipeline::backprojectRef(f.input.frame, f.range, out, counts);
+    Status s = Backproject(f.input.frame, f.range, out, counts);
     benchmark::DoNotOptimize(s);
     benchmark::DoNotOptimize(out.x());
     benchmark::ClobberMemory();
@@ -103,21 +107,23 @@ void bmBackprojectRef(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
-void bmPartitionRef(benchmark::State& state) {
+template <auto Partition>
+void bmPartition(benchmark::State& state) {
   Fixture& f = Fixture::get();
   std::vector<uint8_t> region(f.cloud.size());
   pipeline::PartitionCounts counts;
   for (auto _ : state) {
-    pipeline::partitionRef(f.cloud, f.gaze, f.bounds, region.data(), counts);
+    Partition(f.cloud, f.gaze, f.bounds, region.data(), counts);
     benchmark::DoNotOptimize(region.data());
     benchmark::ClobberMemory();
   }
   setPointCounter(state, f.points);
 }
 
-void bmVoxelSampleRef(benchmark::State& state) {
+template <typename Sampler>
+void bmVoxelSample(benchmark::State& state) {
   Fixture& f = Fixture::get();
-  pipeline::VoxelSampler sampler(f.cloud.size(), f.cloud.size());
+  Sampler sampler(f.cloud.size(), f.cloud.size());
   pipeline::FoveatedCloud out(f.cloud.size());
   pipeline::SampleCounts counts;
   for (auto _ : state) {
@@ -128,7 +134,8 @@ void bmVoxelSampleRef(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
-// Partition, fixation, voxel sizes and sampling: Foveator::foveate on the cloud.
+// --- The scalar reference -------------------------------------------------
+
 void bmFoveatorRef(benchmark::State& state) {
   Fixture& f = Fixture::get();
   pipeline::Foveator foveator =
@@ -162,46 +169,7 @@ void bmPipelineRef(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
-
 // --- The SIMD kernels (Highway, the target dispatch picks) --------------------
-
-void bmBackprojectSimd(benchmark::State& state) {
-  Fixture& f = Fixture::get();
-  PointCloud out(f.input.frame.pixelCount());
-  pipeline::BackprojectCounts counts;
-  for (auto _ : state) {
-    Status s = pipeline::backprojectSimd(f.input.frame, f.range, out, counts);
-    benchmark::DoNotOptimize(s);
-    benchmark::DoNotOptimize(out.x());
-    benchmark::ClobberMemory();
-  }
-  setPointCounter(state, f.points);
-}
-
-void bmPartitionSimd(benchmark::State& state) {
-  Fixture& f = Fixture::get();
-  std::vector<uint8_t> region(f.cloud.size());
-  pipeline::PartitionCounts counts;
-  for (auto _ : state) {
-    pipeline::partitionSimd(f.cloud, f.gaze, f.bounds, region.data(), counts);
-    benchmark::DoNotOptimize(region.data());
-    benchmark::ClobberMemory();
-  }
-  setPointCounter(state, f.points);
-}
-
-void bmVoxelSampleHash(benchmark::State& state) {
-  Fixture& f = Fixture::get();
-  pipeline::HashVoxelSampler sampler(f.cloud.size(), f.cloud.size());
-  pipeline::FoveatedCloud out(f.cloud.size());
-  pipeline::SampleCounts counts;
-  for (auto _ : state) {
-    Status s = sampler.sample(f.cloud, f.region.data(), f.region_count, f.voxel_size_m, out, counts);
-    benchmark::DoNotOptimize(s);
-    benchmark::ClobberMemory();
-  }
-  setPointCounter(state, f.points);
-}
 
 // The whole frame with the SIMD kernel set on `threads` threads.
 void pipelineSimd(benchmark::State& state, int threads) {
@@ -233,14 +201,14 @@ struct KernelBench {
 };
 
 const KernelBench kKernels[] = {
-    {"backproject/ref", &bmBackprojectRef},
-    {"partition/ref", &bmPartitionRef},
-    {"voxel_sample/ref", &bmVoxelSampleRef},
+    {"backproject/ref", &bmBackproject<pipeline::backprojectRef>},
+    {"partition/ref", &bmPartition<pipeline::partitionRef>},
+    {"voxel_sample/ref", &bmVoxelSample<pipeline::VoxelSampler>},
     {"foveate/ref", &bmFoveatorRef},    // partition + fixation + voxel sampling
     {"pipeline/ref", &bmPipelineRef},   // back-projection + foveate
-    {"backproject/simd", &bmBackprojectSimd},
-    {"partition/simd", &bmPartitionSimd},
-    {"voxel_sample/hash", &bmVoxelSampleHash},
+    {"backproject/simd", &bmBackproject<pipeline::backprojectSimd>},
+    {"partition/simd", &bmPartition<pipeline::partitionSimd>},
+    {"voxel_sample/hash", &bmVoxelSample<pipeline::HashVoxelSampler>},
     {"pipeline/simd-1t", &bmPipelineSimd1},
     {"pipeline/simd-all-cores", &bmPipelineSimdAll},
 };
