@@ -5,13 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <memory>
-#include <new>
 #include <string>
 #include <vector>
 
@@ -20,23 +17,7 @@
 #include "hal/camera.h"
 #include "hal/camera/mock/mock_camera.h"
 #include "hal/camera/mock/scene.h"
-
-// Counts every global allocation, to check that acquire() allocates nothing.
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-// GCC pairs the inlined replacement new with free() and warns; the pair is ours.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-#pragma GCC diagnostic pop
+#include "tests/support/alloc_counter.h"
 
 namespace fovea::hal::mock {
 namespace {
@@ -278,9 +259,9 @@ TEST(MockCamera, AcquireDoesNotAllocate) {
     std::unique_ptr<MockCamera> stopped = makeCamera("living-room,size=64x48");
     ASSERT_TRUE(stopped->open().isOk());
     RgbdFrame slot = makeSlot(*stopped);
-    const long before = g_allocations.load();
+    test::AllocationScope scope;
     EXPECT_EQ(stopped->acquire(slot, seconds(1)).code(), ErrorCode::kUnavailable);
-    EXPECT_EQ(g_allocations.load() - before, 0);
+    EXPECT_EQ(scope.allocations(), 0u);
   }
   for (const char* args :
        {"living-room", "living-room,path=orbit", "balloon", "balloon,path=pan,temporal_noise=off",
@@ -288,12 +269,12 @@ TEST(MockCamera, AcquireDoesNotAllocate) {
     std::unique_ptr<MockCamera> camera = makeStarted(args);
     RgbdFrame slot = makeSlot(*camera);
     RgbdFrame small(32, 32);
-    const long before = g_allocations.load();
+    test::AllocationScope scope;
     for (int i = 0; i < 3; ++i) {
       EXPECT_TRUE(camera->acquire(slot, seconds(1)).isOk());
     }
     EXPECT_EQ(camera->acquire(small, seconds(1)).code(), ErrorCode::kCapacityExceeded);
-    EXPECT_EQ(g_allocations.load() - before, 0) << args;
+    EXPECT_EQ(scope.allocations(), 0u) << args;
   }
 }
 

@@ -7,7 +7,6 @@
 #include <png.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,7 +15,6 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
-#include <new>
 #include <set>
 #include <string>
 #include <tuple>
@@ -25,21 +23,7 @@
 #include "hal/camera.h"
 #include "hal/camera/tum/png_reader.h"
 #include "hal/camera/tum/tum_camera.h"
-
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-#pragma GCC diagnostic pop
+#include "tests/support/alloc_counter.h"
 
 namespace fovea::hal::tum {
 namespace {
@@ -474,14 +458,13 @@ TEST(TumTeddy, AcquireAllocatesNothingAndLoopingKeepsStampsIncreasing) {
   RgbdFrame frame(640, 480);
   int64_t last_stamp = 0;
   bool increasing = true;
-  const long before = g_allocations.load();
+  test::AllocationScope scope;
   for (int i = 0; i < 12; ++i) {
     if (!camera.acquire(frame, milliseconds(100)).isOk()) increasing = false;
     increasing = increasing && frame.stamp_ns > last_stamp;
     last_stamp = frame.stamp_ns;
   }
-  const long allocations = g_allocations.load() - before;
-  EXPECT_EQ(allocations, 0);
+  EXPECT_EQ(scope.allocations(), 0u);
   EXPECT_TRUE(increasing);
   EXPECT_EQ(frame.sequence, 11u);
 }
