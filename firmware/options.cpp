@@ -102,7 +102,10 @@ Result<double> durationFromArgs(const Args& args) {
   if (v == nullptr) return 0.0;
   Result<double> d = parseDouble("--duration", *v);
   if (!d) return d.status();
-  if (!(d.value() > 0.0)) return Result<double>(ErrorCode::kInvalidArgument, "--duration: must be positive");
+  // Up to a year, so start + duration stays far inside int64 nanoseconds.
+  if (!(d.value() > 0.0 && d.value() <= 3.2e7)) {
+    return Result<double>(ErrorCode::kInvalidArgument, "--duration: must be within 0 .. 3.2e7 s (a year)");
+  }
   return d.value();
 }
 

@@ -31,7 +31,7 @@ class Args {
 
 Result<double> parseDouble(std::string_view flag, std::string_view text);
 Result<long> parseInteger(std::string_view flag, std::string_view text, long min, long max);
-// --duration S: positive seconds, or 0 when the flag is absent (no limit).
+// --duration S: seconds in (0, 3.2e7], or 0 when the flag is absent (no limit).
 Result<double> durationFromArgs(const Args& args);
 // "X,Y,Z", each a finite number.
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text);

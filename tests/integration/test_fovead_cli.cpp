@@ -65,6 +65,7 @@ TEST(FoveadCli, HelpAndBadArguments) {
   const Bad bad[] = {{"", "usage"},
                      {"fly", "unknown command"},
                      {"run --frames -3", "--frames"},
+                     {"run --duration 1e300", "--duration"},
                      {"run --preset F9", "F9"},
                      {"run --m -1", "slope"},
                      {"run --bounds 5,3", "bounds_deg[1]"},

@@ -79,8 +79,12 @@ Result<GazeScript> GazeScript::parse(std::string_view text) {
         std::replace(timing.begin(), timing.end(), '/', ',');
         Result<std::vector<double>> times = parseNumbers(timing, "--gaze scan timing");
         if (!times) return times.status();
-        if (times->empty() || times->size() > 2 || (*times)[0] <= 0 || (times->size() == 2 && (*times)[1] < 0)) {
-          return Result<GazeScript>(ErrorCode::kInvalidArgument, "--gaze scan: timing is @DWELL_MS[/SACCADE_MS], positive");
+        // Up to an hour each, so the times stay far inside int64 nanoseconds.
+        constexpr double kMaxMs = 3.6e6;
+        if (times->empty() || times->size() > 2 || !((*times)[0] > 0 && (*times)[0] <= kMaxMs) ||
+            (times->size() == 2 && !((*times)[1] >= 0 && (*times)[1] <= kMaxMs))) {
+          return Result<GazeScript>(ErrorCode::kInvalidArgument,
+                                    "--gaze scan: timing is @DWELL_MS[/SACCADE_MS], positive, up to an hour");
         }
         script.dwell_ns_ = static_cast<int64_t>((*times)[0] * 1e6);
         if (times->size() == 2) script.saccade_ns_ = static_cast<int64_t>((*times)[1] * 1e6);
@@ -128,6 +132,10 @@ Result<GazeScript> GazeScript::parse(std::string_view text) {
       }
       const Eigen::Vector3d d((*v)[4], (*v)[5], (*v)[6]);
       if (!(d.norm() > 1e-9)) return Result<GazeScript>(ErrorCode::kParseError, where + ": zero gaze direction");
+      // Up to a year: far inside int64 nanoseconds.
+      if (!((*v)[0] >= 0 && (*v)[0] <= 3.2e7)) {
+        return Result<GazeScript>(ErrorCode::kParseError, where + ": t_s must be within 0 .. 3.2e7 s");
+      }
       const auto t_ns = static_cast<int64_t>((*v)[0] * 1e9);
       if (!script.keys_.empty() && t_ns < script.keys_.back().t_ns) {
         return Result<GazeScript>(ErrorCode::kParseError, where + ": time goes backwards");

@@ -128,10 +128,14 @@ Result<Options> parseOptions(int argc, char** argv) {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
       if (flag == "--duration") {
-        if (!(v.value() > 0)) return Result<Options>(ErrorCode::kInvalidArgument, "--duration: must be positive");
+        if (!(v.value() > 0 && v.value() <= 3.2e7)) {
+          return Result<Options>(ErrorCode::kInvalidArgument, "--duration: must be within 0 .. 3.2e7 s (a year)");
+        }
         o.duration_s = v.value();
       } else if (flag == "--budget") {
-        if (!(v.value() > 0)) return Result<Options>(ErrorCode::kInvalidArgument, "--budget: must be positive");
+        if (!(v.value() >= 0.01 && v.value() <= 10000.0)) {
+          return Result<Options>(ErrorCode::kInvalidArgument, "--budget: must be within 0.01 .. 10000 MB/s");
+        }
         o.budget_mbps = v.value();
       } else if (flag == "--mtu") {
         if (v.value() < static_cast<double>(net::kMinMtu) || v.value() > static_cast<double>(net::kMaxMtu)) {

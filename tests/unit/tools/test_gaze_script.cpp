@@ -63,7 +63,7 @@ TEST(GazeScript, CsvTraceHoldsEachSampleUntilTheNext) {
 
 TEST(GazeScript, BadScriptsAreNamedErrors) {
   const char* bad[] = {"", "fixed", "fixed:1,2,3", "fixed:1,2>3,4,5", "fixed:1,2,3>1,2,3", "fixed:1,2,3>4,5,6;7,8,9",
-                       "scan:0,0,0>1,0,0@0", "scan:0,0,0>1,0,0@x", "scan:0,0,0>", "wobble:1", "fixed:nan,0,0>1,1,1",
+                       "scan:0,0,0>1,0,0@0", "scan:0,0,0>1,0,0@x", "scan:0,0,0>1,0,0@1e300", "scan:0,0,0>1,0,0@100/-1", "scan:0,0,0>", "wobble:1", "fixed:nan,0,0>1,1,1",
                        "csv:/nonexistent/trace.csv"};
   for (const char* text : bad) {
     auto s = GazeScript::parse(text);
@@ -73,7 +73,8 @@ TEST(GazeScript, BadScriptsAreNamedErrors) {
     }
   }
   const std::string path = ::testing::TempDir() + "/gaze_bad.csv";
-  for (const char* content : {"0,0,0,0,0,0\n", "0,0,0,0,0,0,0\n", "1,0,0,0,0,0,1\n0.5,0,0,0,0,0,1\n", "# only\n"}) {
+  for (const char* content : {"0,0,0,0,0,0\n", "0,0,0,0,0,0,0\n", "1,0,0,0,0,0,1\n0.5,0,0,0,0,0,1\n", "# only\n",
+                              "1e300,0,0,0,0,0,1\n", "-1,0,0,0,0,0,1\n"}) {
     { std::ofstream(path) << content; }
     EXPECT_FALSE(GazeScript::parse("csv:" + path).isOk()) << content;
   }
