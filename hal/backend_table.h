@@ -13,12 +13,24 @@
 
 namespace fovea::hal {
 
+// A device a backend can see now, for listings such as `fovead cameras`.
+struct DeviceListing {
+  std::string spec;                // what to pass as the spec ("v4l2:serial=123", "openni2:Dummy")
+  std::string model;               // "Intel RealSense D435", "vivid"; "" when unknown
+  std::string serial;              // "" when unknown
+  std::string detail;              // bus path, driver, node...
+  std::vector<std::string> modes;  // "depth Z16 640x480 @ 30 fps", "colour YUYV 1280x720 @ 30 fps"
+};
+
 template <typename Interface>
 struct Backend {
   std::string_view name;
   // args: the spec after "name:" ("" when there is no ':').
   Result<std::unique_ptr<Interface>> (*create)(std::string_view args);
   std::string (*help)();
+  // Lists the devices the backend sees now; nullptr when it cannot enumerate
+  // (mock, recordings). An error says why enumeration failed and what to do.
+  Result<std::vector<DeviceListing>> (*discover)();
 };
 
 // Creates the backend a "name[:args]" spec names. Errors name the spec, the

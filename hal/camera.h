@@ -11,6 +11,8 @@
 #include <string_view>
 #include <vector>
 
+#include "hal/backend_table.h"
+#include "hal/calibration.h"
 #include "hal/frame.h"
 #include "hal/result.h"
 
@@ -18,12 +20,17 @@ namespace fovea::hal {
 
 struct CameraInfo {
   std::string name;              // e.g. "mock:living-room"
-  CameraIntrinsics intrinsics;
+  std::string model;             // what the device says it is ("Orbbec Astra"); "" when unknown
+  std::string serial;            // "" when unknown
+  CameraIntrinsics intrinsics;   // of the depth image, which colour is registered to
   double depth_scale_m = 0.001;
   double fps = 30.0;
   // A world point of interest the backend knows, e.g. the centre of a mock
   // scene; demos aim the gaze at it. Empty for real cameras.
   std::optional<Eigen::Vector3d> focus_point_m;
+  // Memory the backend holds outside the heap for the whole run (V4L2 mmap
+  // streaming buffers, say); the service adds it to its memory budget.
+  std::size_t device_buffer_bytes = 0;
 };
 
 // Named counters instead of per-event logging; the supervisor reports them.
@@ -86,6 +93,21 @@ class Camera {
   virtual Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) = 0;
   virtual void stop() = 0;
 
+  // Resets the device on its bus (a USB port reset) so that the reopen that
+  // follows finds it fresh; hal::CaptureRetry calls it before reopening a camera
+  // whose stream stalled. kUnavailable, and nothing done, when the backend has
+  // no such reset; kNotFound when the device is gone.
+  virtual Status resetDevice() { return {ErrorCode::kUnavailable, "this camera has no device reset"}; }
+
+  // Calibration from the board profile or a calibration file, used from the
+  // next open(): what it sets overrides what the device reports, what it leaves
+  // unset comes from the device. kInvalidArgument when the backend cannot use
+  // it (a recording or a mock knows its own calibration exactly).
+  virtual Status setCalibration(const CameraCalibration& calibration) {
+    return {ErrorCode::kInvalidArgument, "camera " + info().name + " takes no external calibration (from " +
+                                             calibration.source + ")"};
+  }
+
   virtual const CameraInfo& info() const = 0;
   virtual CameraCounters counters() const = 0;
 };
@@ -100,5 +122,21 @@ std::string cameraSpecHelp();
 
 // The names of the backends compiled in ("mock", "tum"...), in table order.
 std::vector<std::string_view> cameraBackendNames();
+
+// Every camera backend fovea knows, compiled in or not, for `fovead cameras`.
+struct CameraBackendStatus {
+  std::string_view name;
+  bool compiled = false;
+  std::string_view why_not;  // when not compiled: what was missing at build time and how to get it
+};
+std::vector<CameraBackendStatus> cameraBackendStatus();
+
+// The devices each compiled backend that can enumerate sees now, backend by
+// backend (a backend whose enumeration failed gives its error, not a list).
+struct CameraDiscovery {
+  std::string_view backend;
+  Result<std::vector<DeviceListing>> devices;
+};
+std::vector<CameraDiscovery> discoverCameras();
 
 }  // namespace fovea::hal

@@ -13,9 +13,9 @@ namespace fovea::hal {
 namespace {
 
 const Backend<Gpio> kBackends[] = {
-    {"mock", &mock::MockGpio::create, &mock::mockGpioHelp},
+    {"mock", &mock::MockGpio::create, &mock::mockGpioHelp, nullptr},
 #ifdef FOVEA_HAVE_GPIOD
-    {"gpiod", &gpiod::GpiodGpio::create, &gpiod::gpiodGpioHelp},
+    {"gpiod", &gpiod::GpiodGpio::create, &gpiod::gpiodGpioHelp, nullptr},
 #endif
 };
 
