@@ -9,9 +9,17 @@
 // directory; FOVEA_USB_GADGET_SERIAL, the serial it carries.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <dirent.h>
+#include <linux/netlink.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
-#include <dirent.h>
+#include <cstring>
 #include <fstream>
 #include <string>
 #include <thread>
@@ -27,6 +35,113 @@ namespace {
 constexpr uint16_t kVendor = 0x2bc5;
 constexpr uint16_t kProduct = 0x0401;
 
+// A stand-in for udevd's broadcast, for the VM only. Debian's libusb is built
+// with libudev, whose monitor listens to udevd's netlink group (2), not to the
+// kernel's (1); the VM runs no udevd, so libusb's hot-plug would hear nothing.
+// This forwards each kernel uevent to group 2 in libudev's message format
+// (header, then the kernel's KEY=value properties), as udevd does after
+// processing it. On a real system udevd does this and fovea needs nothing.
+class UeventForwarder {
+ public:
+  ~UeventForwarder() { stop(); }
+
+  bool start() {
+    in_ = socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_KOBJECT_UEVENT);
+    out_ = socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_KOBJECT_UEVENT);
+    if (in_ < 0 || out_ < 0) return false;
+    sockaddr_nl kernel{};
+    kernel.nl_family = AF_NETLINK;
+    kernel.nl_groups = 1;  // the kernel's uevents
+    if (bind(in_, reinterpret_cast<sockaddr*>(&kernel), sizeof kernel) != 0) return false;
+    run_ = true;
+    thread_ = std::thread([this] { loop(); });
+    return true;
+  }
+  void stop() {
+    run_ = false;
+    if (thread_.joinable()) thread_.join();
+    if (in_ >= 0) close(in_);
+    if (out_ >= 0) close(out_);
+    in_ = out_ = -1;
+  }
+
+ private:
+  // systemd's string_hash32: MurmurHash2, seed 0 (libudev's socket filter compares it).
+  static uint32_t murmur2(const char* key) {
+    const uint32_t m = 0x5bd1e995;
+    std::size_t len = std::strlen(key);
+    uint32_t h = static_cast<uint32_t>(len);
+    const auto* data = reinterpret_cast<const unsigned char*>(key);
+    while (len >= 4) {
+      uint32_t k;
+      std::memcpy(&k, data, 4);
+      k *= m;
+      k ^= k >> 24;
+      k *= m;
+      h *= m;
+      h ^= k;
+      data += 4;
+      len -= 4;
+    }
+    switch (len) {
+      case 3: h ^= static_cast<uint32_t>(data[2]) << 16; [[fallthrough]];
+      case 2: h ^= static_cast<uint32_t>(data[1]) << 8; [[fallthrough]];
+      case 1: h ^= data[0]; h *= m; break;
+      default: break;
+    }
+    h ^= h >> 13;
+    h *= m;
+    h ^= h >> 15;
+    return h;
+  }
+
+  struct Header {  // libudev's monitor_netlink_header
+    char prefix[8];
+    uint32_t magic, header_size, properties_off, properties_len;
+    uint32_t filter_subsystem_hash, filter_devtype_hash, filter_tag_bloom_hi, filter_tag_bloom_lo;
+  };
+
+  void loop() {
+    std::vector<char> buf(8192);
+    while (run_) {
+      pollfd p{in_, POLLIN, 0};
+      if (poll(&p, 1, 50) <= 0) continue;
+      const ssize_t n = recv(in_, buf.data(), buf.size() - 1, 0);
+      if (n <= 0) continue;
+      buf[static_cast<std::size_t>(n)] = '\0';
+      const std::size_t first = std::strlen(buf.data()) + 1;  // "add@/devices/..."
+      if (first >= static_cast<std::size_t>(n)) continue;
+      std::string subsystem, devtype;
+      for (std::size_t i = first; i < static_cast<std::size_t>(n); i += std::strlen(&buf[i]) + 1) {
+        if (std::strncmp(&buf[i], "SUBSYSTEM=", 10) == 0) subsystem = &buf[i + 10];
+        if (std::strncmp(&buf[i], "DEVTYPE=", 8) == 0) devtype = &buf[i + 8];
+      }
+      Header h{};
+      std::memcpy(h.prefix, "libudev", 8);
+      h.magic = htonl(0xfeedcafe);
+      h.header_size = sizeof h;
+      h.properties_off = sizeof h;
+      h.properties_len = static_cast<uint32_t>(static_cast<std::size_t>(n) - first);
+      h.filter_subsystem_hash = htonl(murmur2(subsystem.c_str()));
+      if (!devtype.empty()) h.filter_devtype_hash = htonl(murmur2(devtype.c_str()));
+      iovec iov[2] = {{&h, sizeof h}, {&buf[first], h.properties_len}};
+      sockaddr_nl udev{};
+      udev.nl_family = AF_NETLINK;
+      udev.nl_groups = 2;  // udevd's group, where libudev monitors listen
+      msghdr msg{};
+      msg.msg_name = &udev;
+      msg.msg_namelen = sizeof udev;
+      msg.msg_iov = iov;
+      msg.msg_iovlen = 2;
+      (void)sendmsg(out_, &msg, 0);
+    }
+  }
+
+  int in_ = -1, out_ = -1;
+  std::atomic<bool> run_{false};
+  std::thread thread_;
+};
+
 class UsbGadget : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -40,6 +155,9 @@ class UsbGadget : public ::testing::Test {
     udc_name_ = firstUdc();
     ASSERT_FALSE(udc_name_.empty()) << "no UDC in /sys/class/udc (is dummy_hcd loaded?)";
     ASSERT_TRUE(bind(true));
+    if (std::getenv("FOVEA_VM") != nullptr && access("/run/udev/control", F_OK) != 0) {
+      ASSERT_TRUE(forwarder_.start()) << "cannot forward uevents: " << std::strerror(errno);
+    }
   }
 
   static std::string firstUdc() {
@@ -55,11 +173,15 @@ class UsbGadget : public ::testing::Test {
 
   // Writes the UDC name (bind: the device appears on the dummy host) or an
   // empty line (unbind: it disappears).
+  // Writing the UDC it is already bound to fails (EBUSY): only change state.
   bool bind(bool on) {
+    std::string current;
+    std::getline(std::ifstream(udc_file_) >> std::ws, current);
+    if (on ? current == udc_name_ : current.empty()) return true;
     std::ofstream out(udc_file_);
     out << (on ? udc_name_ : std::string()) << "\n";
     out.flush();
-    return static_cast<bool>(out) || !on;  // unbinding an unbound gadget fails harmlessly
+    return static_cast<bool>(out);
   }
 
   // The gadget as listUsbCameras() sees it, waiting up to 10 s for it.
@@ -89,6 +211,7 @@ class UsbGadget : public ::testing::Test {
     return false;
   }
 
+  UeventForwarder forwarder_;
   std::string udc_file_;
   std::string udc_name_;
   std::string serial_;
