@@ -1,6 +1,7 @@
 #include "hal/usb/usb_monitor.h"
 
 #include <libusb.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <condition_variable>
@@ -120,6 +121,11 @@ Status UsbMonitor::start() {
     }
   });
   impl_->available.store(true, std::memory_order_relaxed);
+  warning_.clear();
+  if (access("/run/udev/control", F_OK) != 0) {
+    warning_ = "udevd is not running (no /run/udev/control): libusb hears hot-plug events through udev, so "
+               "arrivals and removals will not be reported";
+  }
   return Status::ok();
 }
 

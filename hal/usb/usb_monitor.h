@@ -79,12 +79,17 @@ class UsbMonitor {
   UsbMonitorCounters counters() const;
   // Why start() failed ("" when it did not).
   const std::string& unavailableReason() const { return unavailable_reason_; }
+  // Set by a successful start() when events are unlikely to arrive: Debian's
+  // libusb hears hot-plug through udevd, and udevd is not running (a container,
+  // an initramfs). "" otherwise.
+  const std::string& warning() const { return warning_; }
 
   struct Impl;  // public for the libusb callback, defined in the .cpp
 
  private:
   std::unique_ptr<Impl> impl_;
   std::string unavailable_reason_;
+  std::string warning_;
 };
 
 }  // namespace fovea::hal::usb
