@@ -31,7 +31,7 @@ struct CalibrationError {
 
 std::string number(double v) {
   char text[32];
-  std::snprintf(text, sizeof text, "%.9g", v);
+  std::snprintf(text, sizeof text, "%.6g", v);
   return text;
 }
 
