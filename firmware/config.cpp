@@ -567,7 +567,8 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
   if (Status s = checkCameraGeometry(c.camera); !s) {
     const std::string& m = s.message();
     const std::size_t colon = m.find(':');
-    return FieldError{m.substr(0, colon), m.substr(colon + 2), {}};
+    return FieldError{m.substr(0, colon), m.substr(colon + 2),
+                      {"camera.extrinsics.rotation_xyzw", "camera.extrinsics.translation_m", "camera.pose.source"}};
   }
   if (c.pipeline.max_voxels > c.pipeline.max_points) {
     return FieldError{"pipeline.max_voxels",
