@@ -17,6 +17,7 @@
 
 #include <toml.hpp>
 
+#include "firmware/camera_setup.h"
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "net/codec.h"
@@ -86,6 +87,11 @@ using Plain = std::remove_cvref_t<T>;
     PATH, Kind::kString, 0, 0, {}, [](const ServiceConfig& c) -> Value { return c.MEMBER; },           \
         [](ServiceConfig& c, const Value& v) { c.MEMBER = std::get<std::string>(v); }, CHECK           \
   }
+#define FOVEA_FLOAT_LIST(PATH, MEMBER, LO, HI)                                                         \
+  Field {                                                                                              \
+    PATH, Kind::kFloatList, LO, HI, {}, [](const ServiceConfig& c) -> Value { return c.MEMBER; },      \
+        [](ServiceConfig& c, const Value& v) { c.MEMBER = std::get<std::vector<double>>(v); }           \
+  }
 #define FOVEA_THREAD(PATH, MEMBER)                                                     \
   FOVEA_INT(PATH ".core", MEMBER.core, -1, 1023),                                      \
       FOVEA_INT(PATH ".realtime_priority", MEMBER.realtime_priority, 0, 99)
@@ -113,6 +119,19 @@ const std::vector<Field>& fields() {
       FOVEA_INT("camera.retry_initial_ms", camera.retry_initial_ms, 1, 60'000),
       FOVEA_INT("camera.retry_max_ms", camera.retry_max_ms, 1, 3'600'000),
       FOVEA_INT("camera.stall_timeout_ms", camera.stall_timeout_ms, 0, 600'000),
+      FOVEA_STRING("camera.calibration_file", camera.calibration_file, nullptr),
+      // [camera.extrinsics]
+      FOVEA_FLOAT_LIST("camera.extrinsics.rotation_xyzw", camera.extrinsics_rotation_xyzw, -2.0, 2.0),
+      FOVEA_FLOAT_LIST("camera.extrinsics.translation_m", camera.extrinsics_translation_m, -10.0, 10.0),
+      // [camera.pose]
+      Field{"camera.pose.source", Kind::kChoice, 0, 0, {"none", "fixed", "socket"},
+            [](const ServiceConfig& c) -> Value { return c.camera.pose.source; },
+            [](ServiceConfig& c, const Value& v) { c.camera.pose.source = std::get<std::string>(v); }},
+      FOVEA_FLOAT_LIST("camera.pose.translation_m", camera.pose.translation_m, -1e7, 1e7),
+      FOVEA_FLOAT_LIST("camera.pose.rotation_xyzw", camera.pose.rotation_xyzw, -2.0, 2.0),
+      FOVEA_STRING("camera.pose.socket", camera.pose.socket, nullptr),
+      FOVEA_INT("camera.pose.max_age_ms", camera.pose.max_age_ms, 1, 60'000),
+      FOVEA_INT("camera.pose.buffer_poses", camera.pose.buffer_poses, 2, 100'000),
       // [pipeline]
       FOVEA_INT("pipeline.max_points", pipeline.max_points, 1, 50'000'000),
       FOVEA_INT("pipeline.max_voxels", pipeline.max_voxels, 1, 50'000'000),
@@ -210,6 +229,7 @@ const std::vector<Field>& fields() {
 #undef FOVEA_FLOAT
 #undef FOVEA_STRING
 #undef FOVEA_THREAD
+#undef FOVEA_FLOAT_LIST
 
 const Field* findField(std::string_view path) {
   for (const Field& field : fields()) {
@@ -543,6 +563,12 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
                       "must be at least camera.retry_initial_ms (got " + std::to_string(c.camera.retry_max_ms) + " < " +
                           std::to_string(c.camera.retry_initial_ms) + ")",
                       {"camera.retry_initial_ms"}};
+  }
+  if (Status s = checkCameraGeometry(c.camera); !s) {
+    const std::string& m = s.message();
+    const std::size_t colon = m.find(':');
+    return FieldError{m.substr(0, colon), m.substr(colon + 2),
+                      {"camera.extrinsics.rotation_xyzw", "camera.extrinsics.translation_m", "camera.pose.source"}};
   }
   if (c.pipeline.max_voxels > c.pipeline.max_points) {
     return FieldError{"pipeline.max_voxels",

@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 
+#include "firmware/camera_setup.h"
 #include "firmware/commands.h"
 #include "firmware/frame_foveator.h"
 #include "firmware/options.h"
@@ -32,6 +33,7 @@ const char* kRunHelp =
     "usage: fovead run [--camera SPEC] [--frames N] [--gaze MODE | --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
     "                  [--preset F1|F2|F3|FREF] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
     "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
+    "                  [--calibration FILE] [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH]\n"
     "                  [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "\n"
     "Runs the foveation pipeline on a camera and prints, per frame and for the run,\n"
@@ -51,6 +53,11 @@ const char* kRunHelp =
     "  --every N                print every Nth frame (default 1; 0: summary only)\n"
     "  --save-ply FILE          write the last foveated frame (world coordinates, region per point);\n"
     "                           with --listen, the last frame sent whole to the operator\n"
+    "  --calibration FILE       a calibration file (ROS camera_info, OpenCV FileStorage or fovea YAML,\n"
+    "                           docs/calibration.md), as camera.calibration_file\n"
+    "  --pose SPEC              where the camera is (docs/pose.md), as [camera.pose]: none (default: the\n"
+    "                           camera's own), fixed:X,Y,Z[,QX,QY,QZ,QW] (metres; quaternion x y z w), or\n"
+    "                           socket:PATH (the robot's poses as datagrams; --pose-max-age-ms MS, default 100)\n"
     "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
     "                           SIMD kernels only; the output does not depend on it)\n"
     "\n"
@@ -150,6 +157,39 @@ void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& 
   std::copy_n(from.weight.begin(), n, to.weight.begin());
 }
 
+// [camera] settings from --camera, --calibration, --pose and --pose-max-age-ms.
+Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
+  CameraSettings settings;
+  settings.spec = args.getOr("--camera", "mock:living-room");
+  settings.calibration_file = args.getOr("--calibration", "");
+  const std::string pose = args.getOr("--pose", "none");
+  if (pose == "none") {
+    settings.pose.source = "none";
+  } else if (pose.rfind("fixed:", 0) == 0) {
+    Result<std::vector<double>> values = parseDoubleList("--pose fixed:", pose.substr(6));
+    if (!values) return values.status();
+    if (values->size() != 3 && values->size() != 7) {
+      return Result<CameraSettings>(ErrorCode::kInvalidArgument, "--pose fixed: expects X,Y,Z or X,Y,Z,QX,QY,QZ,QW");
+    }
+    settings.pose.source = "fixed";
+    settings.pose.translation_m.assign(values->begin(), values->begin() + 3);
+    if (values->size() == 7) settings.pose.rotation_xyzw.assign(values->begin() + 3, values->end());
+  } else if (pose.rfind("socket:", 0) == 0 && pose.size() > 7) {
+    settings.pose.source = "socket";
+    settings.pose.socket = pose.substr(7);
+  } else {
+    return Result<CameraSettings>(ErrorCode::kInvalidArgument,
+                                  "--pose: '" + pose + "' is not none, fixed:X,Y,Z[,QX,QY,QZ,QW] or socket:PATH");
+  }
+  if (const std::string* v = args.get("--pose-max-age-ms")) {
+    Result<long> ms = parseInteger("--pose-max-age-ms", *v, 1, 60'000);
+    if (!ms) return ms.status();
+    settings.pose.max_age_ms = ms.value();
+  }
+  if (Status s = checkCameraGeometry(settings); !s) return s;
+  return settings;
+}
+
 // SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void onStopSignal(int) { g_stop = 1; }
@@ -159,7 +199,8 @@ extern "C" void onStopSignal(int) { g_stop = 1; }
 
 int runCommand(int argc, char** argv) {
   std::vector<std::string> flags = {"--camera", "--frames", "--duration", "--gaze", "--gaze-origin", "--gaze-dir",
-                                    "--depth-min", "--depth-max", "--every", "--save-ply", "--threads"};
+                                    "--depth-min", "--depth-max", "--every", "--save-ply", "--threads",
+                                    "--calibration", "--pose", "--pose-max-age-ms"};
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
   flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
   Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h", "--insecure"});
@@ -203,9 +244,19 @@ int runCommand(int argc, char** argv) {
   }
   if (Status s = range.validate(); !s) return usage(s);
 
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(args->getOr("--camera", "mock:living-room"));
+  Result<CameraSettings> camera_settings = cameraSettingsFromArgs(args.value());
+  if (!camera_settings) return usage(camera_settings.status());
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(camera_settings->spec);
   if (!created) return usage(created.status());
   hal::Camera& camera = *created.value();
+  // The service's own set-up (firmware/camera_setup.h): calibration before open, then the pose source.
+  Result<std::string> calibrated = applyCameraCalibration(camera, camera_settings.value());
+  if (!calibrated) return usage(calibrated.status());
+  Result<std::unique_ptr<hal::PoseSource>> pose_source = createPoseSource(camera_settings.value());
+  if (!pose_source) {
+    std::fprintf(stderr, "fovead run: %s\n", pose_source.status().message().c_str());
+    return pose_source.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
+  }
   if (Status s = camera.open(); !s) {
     std::fprintf(stderr, "fovead run: camera %s: %s\n", camera.info().name.c_str(), s.message().c_str());
     return kExitFailure;
@@ -235,6 +286,8 @@ int runCommand(int argc, char** argv) {
   std::printf("fovead run: camera %s %dx%d @ %g fps, depth %g..%g m\n", info.name.c_str(), width, height, info.fps,
               range.min_m, range.max_m);
   std::printf("foveation: %s\n", describeFoveation(config.value()).c_str());
+  if (!calibrated->empty()) std::printf("camera: %s\n", calibrated->c_str());
+  std::printf("pose: %s\n", pose_source.value()->describe().c_str());
   if (kernels == pipeline::KernelSet::kSimd) {
     std::printf("kernels: simd, target %s, %d thread%s (FOVEA_FORCE_KERNEL=ref for the references)\n",
                 pipeline::simdTargetName(pipeline::activeSimdTarget()), thread_count, thread_count == 1 ? "" : "s");
@@ -283,7 +336,7 @@ int runCommand(int argc, char** argv) {
   Samples points_in(sample_capacity), points_out(sample_capacity), d0_m(sample_capacity);
   Samples encode_ms(sample_capacity), send_ms(sample_capacity);
   RegionTotals totals;
-  uint64_t failed_frames = 0, attempted_frames = 0, fallback_frames = 0, frames_streamed = 0;
+  uint64_t failed_frames = 0, attempted_frames = 0, fallback_frames = 0, frames_streamed = 0, stale_pose_frames = 0;
   const int64_t period_ns = info.fps > 0 ? static_cast<int64_t>(1e9 / info.fps) : 33'333'333;
   const int64_t run_start_ns = monotonicNs();
   const int64_t run_end_ns = duration_s > 0 ? run_start_ns + static_cast<int64_t>(duration_s * 1e9) : INT64_MAX;
@@ -320,6 +373,7 @@ int runCommand(int argc, char** argv) {
       }
       continue;
     }
+    if (!pose_source.value()->apply(frame)) ++stale_pose_frames;
     const double t_capture = msSince(t0);
     const int64_t capture_ns = monotonicNs();
     t0 = std::chrono::steady_clock::now();
@@ -435,6 +489,14 @@ int runCommand(int argc, char** argv) {
 
   std::printf("\nsummary: %zu frames foveated, %llu failed; per frame on average:\n", points_in.count(),
               static_cast<unsigned long long>(failed_frames));
+  if (pose_source.value()->config().kind == hal::PoseSourceConfig::Kind::kSocket) {
+    const hal::PoseCounters pc = pose_source.value()->counters();
+    std::printf("pose: %llu frames with a stale pose (kept with the nearest pose); %llu poses received, %llu malformed, "
+                "%llu out of order, %llu dropped from the ring\n",
+                static_cast<unsigned long long>(stale_pose_frames), static_cast<unsigned long long>(pc.received),
+                static_cast<unsigned long long>(pc.malformed), static_cast<unsigned long long>(pc.out_of_order),
+                static_cast<unsigned long long>(pc.overwritten));
+  }
   printRegionTable(stdout, model, totals);
   std::printf("  d0 median %.3f m; valid points median %.0f, output median %.0f (%.2f%%)\n", d0_m.median(),
               points_in.median(), points_out.median(),

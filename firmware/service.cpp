@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "firmware/options.h"
+#include "firmware/camera_setup.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
 #include "net/key.h"
@@ -114,6 +115,11 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
     if (!camera) return R(camera.status().code(), "camera.spec: " + camera.status().message());
     environment.camera = std::move(camera.value());
   }
+  // Calibration before open(): the camera uses it from then on.
+  Result<std::string> calibrated = applyCameraCalibration(*environment.camera, config.camera);
+  if (!calibrated) return calibrated.status();
+  Result<std::unique_ptr<hal::PoseSource>> pose_source = createPoseSource(config.camera);
+  if (!pose_source) return pose_source.status();
   if (Status s = environment.camera->open(); !s) {
     return R(s.code(), "camera " + environment.camera->info().name + ": " + s.message());
   }
@@ -131,6 +137,9 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   if (const std::size_t mapped = service->camera_->info().device_buffer_bytes; mapped > 0) {
     service->memory_.add("camera device buffers (mapped)", 1, mapped);
   }
+  service->pose_source_ = std::move(pose_source.value());
+  if (!calibrated->empty()) service->log().log(LogLevel::kInfo, "camera: %s", calibrated->c_str());
+  service->log().log(LogLevel::kInfo, "pose: %s", service->pose_source_->describe().c_str());
   if (Status s = service->allocate(); !s) return s;
   service->log().log(LogLevel::kInfo, "%s", service->memory_.summary().c_str());
   return service;
@@ -311,6 +320,9 @@ void Service::captureLoop() {
     }
     switch (step.action) {
       case hal::CaptureAction::kFrame:
+        // The pose at the frame's capture stamp; a stale one keeps the frame
+        // with the nearest pose and raises the fault (docs/pose.md).
+        pose_stale_.store(!pose_source_->apply(f.frame), std::memory_order_relaxed);
         f.captured_ns = monotonicNs();
         capture_latency_.add(f.captured_ns - t0);
         last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
@@ -525,12 +537,15 @@ void Service::supervise(int64_t now_ns) {
   const bool frames_flow = now_ns - last_frame_ns_.load(std::memory_order_relaxed) <= stall_timeout_ns_;
   const bool capture_failing = capture_failing_.load(std::memory_order_relaxed);
   const bool healthy = frames_flow && !capture_failing;
+  // A stale pose is a fault (the line, the status) but not unhealthy: systemd's
+  // watchdog restarting fovead would not bring the robot's localisation back.
+  const bool pose_stale = pose_stale_.load(std::memory_order_relaxed);
   const int64_t gaze_ns = gaze_received_ns_.load(std::memory_order_relaxed);
   StatusInputs inputs;
   inputs.healthy = healthy;
   inputs.operator_connected = operator_connected_.load(std::memory_order_relaxed);
   inputs.gaze_fresh = gaze_ns != 0 && now_ns - gaze_ns <= config_.stream.gaze.timeout_ns;
-  inputs.fault = !healthy;
+  inputs.fault = !healthy || pose_stale;
   const bool was_privacy = status_lines_->state().privacy_active;
   const bool was_fault = status_lines_->state().fault;
   const StatusState& state = status_lines_->update(inputs, now_ns);
@@ -543,8 +558,22 @@ void Service::supervise(int64_t now_ns) {
     log().log(LogLevel::kNotice, state.privacy_active ? "privacy input active: streaming paused (frames are captured, none sent)"
                                                      : "privacy input released: streaming resumes");
   }
+  if (pose_stale != pose_was_stale_) {
+    pose_was_stale_ = pose_stale;
+    const hal::PoseCounters pc = pose_source_->counters();
+    if (pose_stale) {
+      log().log(LogLevel::kWarning,
+                "fault: the pose is stale (no pose within camera.pose.max_age_ms of the frame's stamp; %" PRIu64
+                " poses received, %" PRIu64 " malformed, %" PRIu64 " out of order): frames keep the nearest pose",
+                pc.received, pc.malformed, pc.out_of_order);
+    } else {
+      log().log(LogLevel::kNotice, "pose fresh again (%" PRIu64 " frames had a stale pose)", pc.frames_stale);
+    }
+  }
   if (state.fault != was_fault) {
-    if (state.fault) {
+    if (state.fault && healthy) {
+      // The pose's own line above says why.
+    } else if (state.fault) {
       if (!frames_flow) {
         log().log(LogLevel::kWarning, "fault: no frame for %" PRId64 " ms (camera stalled); watchdog keep-alives stop",
                   (now_ns - last_frame_ns_.load(std::memory_order_relaxed)) / 1'000'000);
@@ -552,7 +581,7 @@ void Service::supervise(int64_t now_ns) {
         log().log(LogLevel::kWarning, "fault: the camera fails (capture retrying); watchdog keep-alives stop");
       }
     } else {
-      log().log(LogLevel::kNotice, "fault cleared: frames flow again");
+      log().log(LogLevel::kNotice, "fault cleared: frames flow again%s", pose_stale ? "" : " (and the pose is fresh)");
     }
   }
   if (config_.runtime.systemd_notify && healthy && notifier_.watchdogNs() > 0 && now_ns >= next_watchdog_ns_) {
@@ -620,16 +649,22 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   } else {
     std::snprintf(gaze_age, sizeof gaze_age, "%" PRId64 " ms", (now - gaze_ns) / 1'000'000);
   }
+  char pose[64] = "";
+  if (pose_source_->config().kind == hal::PoseSourceConfig::Kind::kSocket) {
+    const hal::PoseCounters pc = pose_source_->counters();
+    std::snprintf(pose, sizeof pose, " | pose %s, %" PRIu64 " stale frames", pose_stale_.load() ? "STALE" : "fresh",
+                  pc.frames_stale);
+  }
   const int n = std::snprintf(
       out, size,
       "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
-      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s | memory %.1f MiB"
+      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s%s | memory %.1f MiB"
       " | lines heartbeat %s streaming %d fault %d | usb %s",
       static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
       static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
       w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
       static_cast<double>(w.wire_bytes - window_.wire_bytes) / dt_s / 1e6, gaze_age,
-      status_lines_->state().privacy_active ? " | privacy pause" : "", static_cast<double>(memory_.totalBytes()) / kMiB,
+      status_lines_->state().privacy_active ? " | privacy pause" : "", pose, static_cast<double>(memory_.totalBytes()) / kMiB,
       // The heartbeat's level changes every half period: report whether it toggles.
       heartbeat_toggles_.load(std::memory_order_relaxed) != window_heartbeat_toggles_ ? "toggling" : "held",
       status_lines_->state().streaming ? 1 : 0, status_lines_->state().fault ? 1 : 0, usb);
@@ -711,6 +746,8 @@ ServiceStats Service::stats() const {
   s.fault_line = fault_line_.load(std::memory_order_relaxed);
   s.privacy_active = privacy_active_.load(std::memory_order_relaxed);
   if (usb_monitor_) s.usb = usb_monitor_->counters();
+  s.pose = pose_source_->counters();
+  s.pose_stale = pose_stale_.load(std::memory_order_relaxed);
   return s;
 }
 

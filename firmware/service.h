@@ -45,6 +45,7 @@
 #include "firmware/systemd_notify.h"
 #include "hal/camera.h"
 #include "hal/gpio.h"
+#include "hal/pose_source.h"
 #include "hal/result.h"
 #include "hal/usb/usb_monitor.h"
 #include "pipeline/latest_value.h"
@@ -131,6 +132,9 @@ struct ServiceStats {
   bool privacy_active = false;
   // USB hot-plug of the known RGB-D cameras (hal/usb/usb_monitor.h).
   hal::usb::UsbMonitorCounters usb;
+  // The pose source's counts (hal/pose_source.h) and whether the last frame's pose was stale.
+  hal::PoseCounters pose;
+  bool pose_stale = false;
 };
 
 class Service {
@@ -211,6 +215,7 @@ class Service {
   ServiceConfig config_;
   std::unique_ptr<hal::Camera> camera_;
   std::unique_ptr<hal::Gpio> gpio_;
+  std::unique_ptr<hal::PoseSource> pose_source_;  // the capture thread's (counters: any thread)
   Reloader reloader_;
   Logger* logger_;
   int64_t period_ns_;
@@ -243,6 +248,8 @@ class Service {
   std::atomic<int64_t> last_frame_ns_{0};
   // The capture stage is retrying (hal::CaptureRetry::faulted()): part of the fault line.
   std::atomic<bool> capture_failing_{false};
+  std::atomic<bool> pose_stale_{false};  // the last frame's pose was stale
+  bool pose_was_stale_ = false;          // the supervisor's, for the log line
   uint64_t window_heartbeat_toggles_ = 0;  // the supervisor's, at the last status line
   std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},
       frames_withheld_{0}, frames_unsent_{0}, reloads_applied_{0}, wire_bytes_{0};

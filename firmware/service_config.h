@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "firmware/gaze_policy.h"
 #include "firmware/log.h"
@@ -26,8 +27,25 @@ struct ThreadPlacement {
   int realtime_priority = 0;
 };
 
+// Where the camera is (hal/pose_source.h, docs/pose.md).
+struct PoseSettings {
+  std::string source = "none";  // "none", "fixed", "socket"
+  // fixed: the camera's pose in the world; socket: its mount on the robot.
+  std::vector<double> translation_m = {0.0, 0.0, 0.0};
+  std::vector<double> rotation_xyzw = {0.0, 0.0, 0.0, 1.0};
+  std::string socket = "/run/fovea/pose.sock";
+  int64_t max_age_ms = 100;
+  int64_t buffer_poses = 256;
+};
+
 struct CameraSettings {
   std::string spec = "mock:living-room,realtime=on";  // hal::createCamera
+  // A calibration file (hal/calibration_file.h, docs/calibration.md); "": none.
+  std::string calibration_file;
+  // Depth-to-colour extrinsics over the file's (both empty: not given).
+  std::vector<double> extrinsics_rotation_xyzw;
+  std::vector<double> extrinsics_translation_m;
+  PoseSettings pose;
   pipeline::DepthRange depth;
   // Capture retries after a failure or a disconnect: from retry_initial_ms,
   // doubling up to retry_max_ms, for ever (the camera may come back).

@@ -124,12 +124,10 @@ Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const s
     StampedPose p;
     p.stamp_ns = stamp.value();
     p.t_world_cam = Eigen::Vector3d(v[0], v[1], v[2]);
-    p.q_world_cam = Eigen::Quaterniond(v[6], v[3], v[4], v[5]);  // w, x, y, z
-    const double norm = p.q_world_cam.norm();
-    if (!(norm > 0.5 && norm < 1.5)) {
+    // The file rounds to 4 decimals: normalised.
+    if (!normalisedQuaternion(v[3], v[4], v[5], v[6], p.q_world_cam)) {
       return {ErrorCode::kParseError, where + "quaternion is not of unit length"};
     }
-    p.q_world_cam.normalize();  // the file rounds to 4 decimals
     if (!poses.empty() && p.stamp_ns <= poses.back().stamp_ns) {
       return {ErrorCode::kParseError, where + "timestamps must increase"};
     }
@@ -138,34 +136,6 @@ Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const s
   });
   if (!s) return s;
   return poses;
-}
-
-bool interpolatePose(const std::vector<StampedPose>& poses, int64_t stamp_ns, int64_t clamp_ns, Pose& out) {
-  if (poses.empty()) return false;
-  const auto toPose = [](const Eigen::Vector3d& t, const Eigen::Quaterniond& q) {
-    Pose p;
-    p.R_world_cam = q.toRotationMatrix();
-    p.t_world_cam = t;
-    return p;
-  };
-  if (stamp_ns <= poses.front().stamp_ns) {
-    if (poses.front().stamp_ns - stamp_ns > clamp_ns) return false;
-    out = toPose(poses.front().t_world_cam, poses.front().q_world_cam);
-    return true;
-  }
-  if (stamp_ns >= poses.back().stamp_ns) {
-    if (stamp_ns - poses.back().stamp_ns > clamp_ns) return false;
-    out = toPose(poses.back().t_world_cam, poses.back().q_world_cam);
-    return true;
-  }
-  const auto after = std::upper_bound(poses.begin(), poses.end(), stamp_ns,
-                                      [](int64_t t, const StampedPose& p) { return t < p.stamp_ns; });
-  const StampedPose& b = *after;
-  const StampedPose& a = *(after - 1);
-  const double alpha = static_cast<double>(stamp_ns - a.stamp_ns) / static_cast<double>(b.stamp_ns - a.stamp_ns);
-  // Eigen's slerp takes the shorter arc (q and -q are the same rotation).
-  out = toPose(a.t_world_cam + (b.t_world_cam - a.t_world_cam) * alpha, a.q_world_cam.slerp(alpha, b.q_world_cam));
-  return true;
 }
 
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {

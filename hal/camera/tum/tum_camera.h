@@ -8,7 +8,7 @@
 //   fr3 images are already undistorted and depth is registered to colour.
 // - Pose: groundtruth.txt gives T_world_cam (OpenCV camera axes: x right, y down,
 //   z forward), the convention of hal::Pose. It is interpolated at the depth
-//   timestamp: translation linearly, rotation by slerp. A frame up to
+//   timestamp by hal::interpolatePose (hal/pose.h). A frame up to
 //   kPoseClampNs outside the ground truth's time span takes the nearest pose
 //   (the slice in shared/data starts 9 ms before its first pose); frames farther
 //   out are skipped at open() and counted (framesWithoutPose()).
@@ -33,6 +33,7 @@
 #include <Eigen/Geometry>
 
 #include "hal/camera.h"
+#include "hal/pose.h"  // StampedPose, interpolatePose
 
 namespace fovea::hal::tum {
 
@@ -60,20 +61,9 @@ std::string tumCameraHelp();
 // parsed exactly (a double holds such a stamp only to ~0.2 us).
 Result<int64_t> parseTumTimestampNs(std::string_view text);
 
-struct StampedPose {
-  int64_t stamp_ns = 0;
-  Eigen::Vector3d t_world_cam = Eigen::Vector3d::Zero();
-  Eigen::Quaterniond q_world_cam = Eigen::Quaterniond::Identity();  // normalised
-};
-
 // Reads groundtruth.txt lines (comments with '#'); stamps must increase.
 // kParseError naming the line otherwise.
 Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const std::string& path_for_errors);
-
-// The pose at stamp_ns: linear translation and slerp between the two
-// surrounding samples; the end pose within clamp_ns outside the span; false
-// when farther out or when `poses` is empty.
-bool interpolatePose(const std::vector<StampedPose>& poses, int64_t stamp_ns, int64_t clamp_ns, Pose& out);
 
 class TumCamera final : public Camera {
  public:

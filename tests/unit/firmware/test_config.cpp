@@ -197,6 +197,15 @@ const std::vector<std::string> kEveryKeyChanged = {
     "camera.retry_initial_ms=50",
     "camera.retry_max_ms=2000",
     "camera.stall_timeout_ms=250",
+    "camera.calibration_file=/etc/fovea/d435.yaml",
+    "camera.extrinsics.rotation_xyzw=[0, 0, 0.0087265, 0.9999619]",
+    "camera.extrinsics.translation_m=[0.015, -0.0001, 0.0002]",
+    "camera.pose.source=socket",
+    "camera.pose.translation_m=[0.2, 0.0, 0.45]",
+    "camera.pose.rotation_xyzw=[-0.5, 0.5, -0.5, 0.5]",
+    "camera.pose.socket=/run/fovea/robot-pose.sock",
+    "camera.pose.max_age_ms=250",
+    "camera.pose.buffer_poses=512",
     "pipeline.max_points=100000",
     "pipeline.max_voxels=90000",
     "pipeline.kernels=ref",
@@ -519,6 +528,49 @@ TEST(PrintConfig, ErrorsExitWithStatus2AndTheMessage) {
   // A board whose camera backend this build lacks still prints, with a note.
   r = test::runCommand("FOVEA_BOARD_DIR=" + boardDir() + " " + fovead() + " print-config --board rpi5-usb-rgbd");
   EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+}  // namespace
+}  // namespace fovea::firmware
+
+namespace fovea::firmware {
+namespace {
+
+TEST(Config, CameraGeometryKeysAreChecked) {
+  EXPECT_EQ(loadError("[camera.extrinsics]\nrotation_xyzw = [0, 0, 0, 1]\n"),
+            "fovea.toml:2: camera.extrinsics.translation_m: give camera.extrinsics.rotation_xyzw and translation_m "
+            "together (or neither)");
+  EXPECT_EQ(loadError("[camera.pose]\nsource = \"fixed\"\nrotation_xyzw = [0, 0, 0, 0]\n"),
+            "fovea.toml:3: camera.pose.rotation_xyzw: not a rotation quaternion (x, y, z, w with length near 1; got "
+            "length 0; the identity is [0, 0, 0, 1])");
+  EXPECT_EQ(loadError("[camera.pose]\ntranslation_m = [1, 2]\n"),
+            "fovea.toml:2: camera.pose.translation_m: a translation is 3 numbers x, y, z in metres (got 2)");
+  EXPECT_EQ(loadError("[camera.pose]\nsource = \"socket\"\nsocket = \"\"\n"),
+            "fovea.toml:3: camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
+  EXPECT_EQ(loadError("[camera.pose]\nsource = \"gps\"\n"),
+            "fovea.toml:2: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\" (got \"gps\")");
+  EXPECT_EQ(loadError("[camera.pose]\nmax_age_ms = 0\n"),
+            "fovea.toml:2: camera.pose.max_age_ms: must be within 1 .. 60000 (got 0)");
+  EXPECT_EQ(loadError("[camera]\ncalibration_file = \"d435.yaml\"\n[camera.pose]\nsource = \"fixed\"\n"
+                      "translation_m = [1.5, 0, 0.8]\nrotation_xyzw = [0, 0, 0, 1]\n"),
+            "(loaded)");  // the file is read at start-up, not by the configuration
+}
+
+TEST(Config, PrintConfigShowsTheCameraGeometry) {
+  ServiceConfig config;
+  ASSERT_TRUE(applyOverride(config, "camera.pose.source=fixed").isOk());
+  ASSERT_TRUE(applyOverride(config, "camera.pose.translation_m=[1.5, 0, 0.8]").isOk());
+  ASSERT_TRUE(applyOverride(config, "camera.calibration_file=/etc/fovea/cal.yaml").isOk());
+  const std::string text = formatServiceConfig(config);
+  EXPECT_NE(text.find("calibration_file = \"/etc/fovea/cal.yaml\"\n\n[camera.extrinsics]\nrotation_xyzw = []\n"
+                      "translation_m = []\n\n[camera.pose]\nsource = \"fixed\"\ntranslation_m = [1.5, 0.0, 0.8]\n"),
+            std::string::npos)
+      << text;
+  // And it loads back the same.
+  TempDir dir;
+  Result<ServiceConfig> back = loadServiceConfig(write(dir, "printed.toml", text), ServiceConfig{});
+  ASSERT_TRUE(back.isOk()) << back.status().message();
+  expectSame(back.value(), config);
 }
 
 }  // namespace

@@ -6,9 +6,12 @@
 #include "hal/usb/usb_devices.h"
 
 #include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstring>
 #include <cstdio>
 #include <functional>
 #include <mutex>
@@ -461,6 +464,78 @@ TEST(Service, SystemdNotifyReadyWatchdogAndStall) {
   bool stopping = false;
   for (const std::string& m : messages) stopping = stopping || m == "STOPPING=1";
   EXPECT_TRUE(stopping);
+}
+
+// A pose datagram to the service's pose socket (docs/pose.md), as a robot would.
+void sendPose(const std::string& path, int64_t stamp_ns, double x) {
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_un to{};
+  to.sun_family = AF_UNIX;
+  std::snprintf(to.sun_path, sizeof to.sun_path, "%s", path.c_str());
+  char text[96];
+  const int n = std::snprintf(text, sizeof text, "%lld %.3f 0 0 0 0 0 1\n", static_cast<long long>(stamp_ns), x);
+  EXPECT_EQ(::sendto(fd, text, static_cast<std::size_t>(n), MSG_DONTWAIT, reinterpret_cast<const sockaddr*>(&to),
+                     sizeof to),
+            n)
+      << std::strerror(errno);
+  ::close(fd);
+}
+
+// The pose socket through the service: frames posed while poses cover their
+// stamps (the mock's clock starts at 0), a stale pose raises the fault line and
+// says so in the log and the status line, fresh poses clear it; the watchdog
+// (healthy) is not what a stale pose stops.
+TEST(Service, PoseSocketPosesFramesAndAStalePoseRaisesTheFault) {
+  test::TempDir dir;
+  RecordingSink sink;
+  Logger logger(sink);
+  auto gpio = std::make_unique<test::LockedGpio>();
+  test::LockedGpio& chip = *gpio;
+  ServiceConfig config = test::smallServiceConfig();
+  config.camera.pose.source = "socket";
+  config.camera.pose.socket = dir.file("pose.sock");
+  config.camera.pose.max_age_ms = 100;
+  Service::Environment environment;
+  environment.gpio = std::move(gpio);
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  EXPECT_TRUE(sink.contains("pose: socket " + config.camera.pose.socket));
+  // No pose yet: stale.
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().fault_line; }, 3000ms));
+  EXPECT_TRUE(chip.value(2));
+  EXPECT_TRUE(sink.contains("fault: the pose is stale"));
+  // Poses spanning every stamp the mock will give in this test: fresh.
+  sendPose(config.camera.pose.socket, 0, 0.0);
+  sendPose(config.camera.pose.socket, 1'000'000'000'000, 1000.0);
+  ASSERT_TRUE(waitUntil([&] { return !running.service->stats().fault_line; }, 3000ms));
+  EXPECT_TRUE(sink.contains("pose fresh again"));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().pose.frames_fresh >= 5; }, 3000ms));
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("| pose fresh, "); }, 3000ms));
+  const ServiceStats stats = running.service->stats();
+  EXPECT_EQ(stats.pose.received, 2u);
+  EXPECT_GT(stats.pose.frames_stale, 0u);
+  EXPECT_FALSE(stats.pose_stale);
+  running.stop();
+}
+
+TEST(Service, ACameraThatTakesNoCalibrationWithOneConfiguredIsAStartUpError) {
+  test::TempDir dir;
+  const std::string path = dir.file("cal.yaml");
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  std::fputs("colour: {image_width: 160, image_height: 120, camera_matrix: [100, 0, 80, 0, 100, 60, 0, 0, 1]}\n", f);
+  std::fclose(f);
+  ServiceConfig config = test::smallServiceConfig();
+  config.camera.calibration_file = path;
+  Result<std::unique_ptr<Service>> created = Service::create(config, {});
+  ASSERT_FALSE(created.isOk());
+  EXPECT_NE(created.status().message().find("takes no external calibration (from " + path + ")"), std::string::npos)
+      << created.status().message();
+  config.camera.calibration_file = dir.file("missing.yaml");
+  created = Service::create(config, {});
+  ASSERT_FALSE(created.isOk());
+  EXPECT_EQ(created.status().code(), ErrorCode::kNotFound);
+  EXPECT_NE(created.status().message().find("camera.calibration_file: calibration file"), std::string::npos);
 }
 
 }  // namespace
