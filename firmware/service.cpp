@@ -127,6 +127,10 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   const int64_t period_ns = fps > 0 ? static_cast<int64_t>(1e9 / fps) : 33'333'333;
   std::unique_ptr<Service> service(new Service(config, std::move(environment), period_ns));
   service->memory_.add("camera backend", 1, camera_bytes);
+  // Streaming buffers a device maps outside the heap (V4L2 mmap) are memory too.
+  if (const std::size_t mapped = service->camera_->info().device_buffer_bytes; mapped > 0) {
+    service->memory_.add("camera device buffers (mapped)", 1, mapped);
+  }
   if (Status s = service->allocate(); !s) return s;
   service->log().log(LogLevel::kInfo, "%s", service->memory_.summary().c_str());
   return service;
