@@ -5,6 +5,19 @@
 // images); it writes each new colour frame into nextColourSlot(), commits it
 // with pushColour(), and for each depth frame asks which slot holds the colour
 // frame nearest in time within the tolerance.
+//
+// Contract (tests/unit/hal/test_pairing.cpp checks it against a brute-force scan):
+// - a colour frame matches a depth frame when |depth - colour| <= tolerance_ns
+//   (inclusive; computed without overflow for any int64 stamps);
+// - of the matching frames kept, the nearest wins; on a tie the earlier stamp,
+//   and between equal stamps the one pushed first;
+// - a colour frame may pair with several depth frames; it stays until displaced;
+// - colour_dropped counts every colour frame that leaves the history without
+//   ever having been paired (displaced by a newer one, or forgotten by clear()
+//   or a clock step);
+// - a colour stamp strictly older than the newest kept one is a clock step:
+//   counted, the history is forgotten, and the new frame is kept alone (in the
+//   slot nextColourSlot() gave; equal stamps are not a step).
 #pragma once
 
 #include <cstddef>
@@ -23,7 +36,9 @@ struct PairingCounts {
 
 class TimestampPairer {
  public:
-  // Keeps up to `capacity` colour frames (>= 1); pairs within tolerance_ns.
+  // Keeps up to `capacity` colour frames; pairs within tolerance_ns. The
+  // constructor never fails: a capacity of 0 is taken as 1 and a negative
+  // tolerance as 0.
   TimestampPairer(std::size_t capacity, int64_t tolerance_ns);
 
   // The slot (0 .. capacity-1) the next colour frame goes into: a free one,
