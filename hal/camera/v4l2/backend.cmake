@@ -34,10 +34,10 @@ if(NOT FOVEA_WITH_V4L2 STREQUAL "OFF")
       ${CMAKE_CURRENT_LIST_DIR}/v4l2_camera.cpp
     )
     add_library(fovea::hal_v4l2 ALIAS fovea_hal_v4l2)
-    # fovea::pipeline for the depth-to-colour registration kernel (it depends
-    # on fovea::hal_types only, so no cycle with fovea::hal).
+    # fovea::registration: the depth-to-colour registration kernel (it needs
+    # fovea::hal_types only, so no cycle with fovea::hal, which links this).
     target_link_libraries(fovea_hal_v4l2 PUBLIC fovea::hal_types fovea_build_flags Eigen3::Eigen
-                          PRIVATE fovea::pipeline PkgConfig::LIBV4L2 PkgConfig::TURBOJPEG)
+                          PRIVATE fovea::registration PkgConfig::LIBV4L2 PkgConfig::TURBOJPEG)
     target_compile_definitions(fovea_hal_v4l2 PUBLIC FOVEA_HAVE_V4L2=1)
     list(APPEND fovea_hal_backends fovea::hal_v4l2)
     message(STATUS "fovea: V4L2 camera backend (libv4l2 ${LIBV4L2_VERSION}, libturbojpeg ${TURBOJPEG_VERSION})")
