@@ -11,6 +11,12 @@
 #include <utility>
 
 #include "pipeline/kernels/registration.h"
+#ifdef FOVEA_V4L2_CALIBRATION_FILE
+#include "hal/calibration_file.h"
+#endif
+#ifdef FOVEA_V4L2_USB_RESET
+#include "hal/usb/usb_reset.h"
+#endif
 
 namespace fovea::hal::v4l2 {
 
@@ -45,7 +51,6 @@ std::string formatList(const std::vector<uint32_t>& formats) {
   for (uint32_t f : formats) {
     if (!text.empty()) text += ", ";
     text += fourccText(f);
-    while (!text.empty() && text.back() == ' ') text.pop_back();
   }
   return text.empty() ? "nothing" : text;
 }
@@ -141,8 +146,7 @@ bool matchesSelector(const NodeInfo& node, const NodeSelector& selector) {
 
 // The modes of one format: "depth Y16 640x480 @ 30/25/15 fps".
 void appendModes(const V4l2Node& node, const char* what, uint32_t fourcc, std::vector<std::string>& modes) {
-  std::string name = fourccText(fourcc);
-  while (!name.empty() && name.back() == ' ') name.pop_back();
+  const std::string name = fourccText(fourcc);
   for (const FrameSize& s : node.frameSizes(fourcc)) {
     std::string line = std::string(what) + " " + name + " " + sizeText(s.width, s.height);
     if (s.range) {
@@ -288,11 +292,34 @@ Result<std::unique_ptr<Camera>> V4l2Camera::create(std::string_view args) {
 }
 
 Status V4l2Camera::setCalibration(const CameraCalibration& calibration) {
-  if (calibration.colour && !hasColour()) {
-    // Harmless: a board profile may describe a colour camera this spec leaves out.
+  // A colour calibration without colour=... is harmless: a board profile may
+  // describe a colour camera this spec leaves out.
+  const auto valid = [](const std::optional<StreamCalibration>& c) {
+    if (!c) return true;
+    const CameraIntrinsics& k = c->intrinsics;
+    return k.width > 0 && k.height > 0 && std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0 &&
+           std::isfinite(k.cx) && std::isfinite(k.cy);
+  };
+  if (!valid(calibration.depth) || !valid(calibration.colour)) {
+    return {ErrorCode::kInvalidArgument, "v4l2: the calibration from " + calibration.source +
+                                             " has intrinsics without a positive size and focal length"};
   }
   calibration_ = calibration;
   return Status::ok();
+}
+
+Status V4l2Camera::resetDevice() {
+#ifdef FOVEA_V4L2_USB_RESET
+  if (usb_.port.empty()) {
+    return {ErrorCode::kUnavailable, "v4l2: " + (depth_.path().empty() ? selectorText(options_.depth) : depth_.path()) +
+                                         " is not on USB (or was never opened): no port to reset"};
+  }
+  Result<usb::UsbDeviceSelector> which = usb::usbSelectorFromPortPath(usb_.port);
+  if (!which) return which.status();
+  return usb::resetUsbDevice(which.value());
+#else
+  return Camera::resetDevice();
+#endif
 }
 
 PairingCounts V4l2Camera::pairingCounts() const { return pairer_ ? pairer_->counts() : PairingCounts{}; }
@@ -466,13 +493,28 @@ Status V4l2Camera::negotiateColour() {
 }
 
 Status V4l2Camera::prepareCalibration() {
-  CameraCalibration calibration = calibration_;
+  // calib=FILE, then what setCalibration() gave (the board profile) on top:
+  // the profile is the more specific of the two.
+  CameraCalibration calibration;
   if (!options_.calib_path.empty()) {
-    // The calibration file parser (hal/calibration_file.h) is another
-    // backend-independent piece; until this tree has it, a file cannot be read.
+#ifdef FOVEA_V4L2_CALIBRATION_FILE
+    Result<CameraCalibration> file = loadCalibrationFile(options_.calib_path);
+    if (!file) return {file.status().code(), "v4l2: calib=" + options_.calib_path + ": " + file.status().message()};
+    calibration = std::move(file).value();
+#else
     return {ErrorCode::kInvalidArgument,
             "v4l2: calib=" + options_.calib_path +
-                ": this build cannot read calibration files yet; give the calibration in the board profile"};
+                ": this build cannot read calibration files (no hal/calibration_file.h); give the calibration in "
+                "the board profile"};
+#endif
+  }
+  if (calibration_.depth) calibration.depth = calibration_.depth;
+  if (calibration_.colour) calibration.colour = calibration_.colour;
+  if (calibration_.T_colour_depth) calibration.T_colour_depth = calibration_.T_colour_depth;
+  if (calibration_.depth_scale_m) calibration.depth_scale_m = calibration_.depth_scale_m;
+  if (!calibration_.empty()) {
+    calibration.source = calibration.source.empty() ? calibration_.source
+                                                    : calibration.source + " and " + calibration_.source;
   }
   const int w = depth_.width();
   const int h = depth_.height();
@@ -626,6 +668,11 @@ Status V4l2Camera::gone() {
 
 int V4l2Camera::drainColour() {
   for (;;) {
+    // DQBUF only what poll says is there: libv4l2 prints every failed DQBUF,
+    // EAGAIN included, and the frame path must not log. POLLERR is left to
+    // acquire()'s poll.
+    pollfd ready{colour_.fd(), POLLIN, 0};
+    if (::poll(&ready, 1, 0) <= 0 || (ready.revents & POLLIN) == 0) return 0;
     V4l2Node::Frame f;
     const int err = colour_.dequeue(f);
     if (err == EAGAIN) return 0;

@@ -93,6 +93,10 @@ class V4l2Camera final : public Camera {
   Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) override;
   void stop() override;
   Status setCalibration(const CameraCalibration& calibration) override;
+  // A USB port reset of the camera's device (hal/usb), found by the port seen
+  // at the last open(); call after stop(). kUnavailable when the node is not
+  // on USB or fovea has no USB support.
+  Status resetDevice() override;
 
   const CameraInfo& info() const override { return info_; }
   CameraCounters counters() const override { return counters_.snapshot(); }

@@ -97,6 +97,7 @@ std::string fourccText(uint32_t fourcc) {
     const char c = static_cast<char>((fourcc >> (8 * i)) & 0xff);
     text[static_cast<std::size_t>(i)] = (c >= 0x20 && c < 0x7f) ? c : '?';
   }
+  while (!text.empty() && text.back() == ' ') text.pop_back();  // "Z16 " -> "Z16"
   return text;
 }
 

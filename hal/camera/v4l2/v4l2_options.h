@@ -27,7 +27,7 @@ struct NodeSelector {
 // "/dev/video2", "serial=123", "bus=usb-...", and for colour also "none", "auto".
 std::string selectorText(const NodeSelector& selector);
 
-// A V4L2 fourcc as the four characters V4L2 prints ("Z16 ", "YUYV").
+// A V4L2 fourcc as its characters without the padding ("Z16", "YUYV").
 std::string fourccText(uint32_t fourcc);
 
 struct V4l2CameraOptions {

@@ -137,7 +137,7 @@ TEST(V4l2Options, ColourOptionsNeedAColourNode) {
 }
 
 TEST(V4l2Options, FourccText) {
-  EXPECT_EQ(fourccText(V4L2_PIX_FMT_Z16), "Z16 ");
+  EXPECT_EQ(fourccText(V4L2_PIX_FMT_Z16), "Z16");
   EXPECT_EQ(fourccText(V4L2_PIX_FMT_YUYV), "YUYV");
   EXPECT_EQ(fourccText(0x01020304u), "????");
 }

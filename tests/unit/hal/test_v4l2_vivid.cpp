@@ -57,7 +57,9 @@ TEST(V4l2Vivid, DiscoveryListsBothNodesWithTheirModes) {
   ASSERT_TRUE(found.isOk()) << found.status().message();
   int vivid = 0;
   for (const DeviceListing& d : found.value()) {
-    std::printf("listing: %s | %s | %s\n", d.spec.c_str(), d.model.c_str(), d.detail.c_str());
+    std::printf("listing: %s | %s | %s | %zu modes\n", d.spec.c_str(), d.model.c_str(), d.detail.c_str(),
+                d.modes.size());
+    for (const std::string& m : d.modes) std::printf("  %s\n", m.c_str());
     if (d.spec != "v4l2:bus=platform:vivid-000" && d.spec != "v4l2:bus=platform:vivid-001") continue;
     ++vivid;
     EXPECT_EQ(d.model, "vivid");
@@ -210,16 +212,63 @@ TEST(V4l2Vivid, ABusyNodeSaysSo) {
   (*second)->stop();
 }
 
+TEST(V4l2Vivid, EveryColourFormatVividOffersConverts) {
+  REQUIRE_VIVID();
+  for (const char* format : {"YUYV", "UYVY", "RGB3", "BGR3"}) {
+    const std::string spec = std::string(kPair) + ",colour_format=" + format;
+    std::unique_ptr<Camera> camera = openCamera(spec.c_str());
+    ASSERT_NE(camera, nullptr) << format;
+    ASSERT_TRUE(camera->start().isOk()) << format;
+    RgbdFrame slot(640, 480);
+    const Status s = camera->acquire(slot, milliseconds(3000));
+    EXPECT_TRUE(s.isOk()) << format << ": " << s.toString();
+    EXPECT_TRUE(slot.has_rgb);
+    uint64_t coloured = 0;
+    for (std::size_t p = 0; p < slot.pixelCount(); ++p) coloured += slot.rgb()[3 * p] != 0 || slot.rgb()[3 * p + 2] != 0;
+    EXPECT_GT(coloured, slot.pixelCount() / 4) << format;
+    EXPECT_EQ(camera->counters().bad_frames, 0u) << format;
+    camera->stop();
+  }
+}
+
+TEST(V4l2Vivid, DepthThatNeverMatchesColourIsACountedFault) {
+  REQUIRE_VIVID();
+  // A 1 us tolerance: two free-running nodes never meet.
+  const std::string spec = std::string(kPair) + ",pair_tolerance_ms=0.001";
+  std::unique_ptr<Camera> camera = openCamera(spec.c_str());
+  ASSERT_NE(camera, nullptr);
+  ASSERT_TRUE(camera->start().isOk());
+  RgbdFrame slot(640, 480);
+  Status s;
+  for (int i = 0; i < 10 && s.code() != ErrorCode::kInvalidInput; ++i) s = camera->acquire(slot, milliseconds(2000));
+  EXPECT_EQ(s.code(), ErrorCode::kInvalidInput) << s.toString();
+  EXPECT_EQ(s.message(), "colour unpaired");
+  EXPECT_GE(camera->counters().errors, 1u);
+  EXPECT_EQ(camera->counters().frames_delivered, 0u);
+  EXPECT_GE(dynamic_cast<V4l2Camera*>(camera.get())->pairingCounts().depth_unmatched,
+            static_cast<uint64_t>(kMaxUnpairedDepth));
+  camera->stop();
+}
+
 // Last: it reloads the module with other node numbers.
 TEST(V4l2Vivid, ReconnectsAfterTheDriverGoesAndComesBackUnderAnotherNode) {
   REQUIRE_VIVID();
   if (std::getenv("FOVEA_VM") == nullptr) {
     GTEST_SKIP() << "unbinds and reloads the vivid module: only in the VM (FOVEA_VM=1)";
   }
-  std::unique_ptr<Camera> camera = openCamera(kDepth);
+  // Named by path, the hardest case: the path will belong to nobody afterwards.
+  std::string path;
+  {
+    std::unique_ptr<Camera> probe = openCamera(kDepth);
+    ASSERT_NE(probe, nullptr);
+    path = dynamic_cast<V4l2Camera*>(probe.get())->depthNodePath();
+  }
+  const std::string spec = "v4l2:" + path + ",format=Y16,size=640x480,fps=15,hfov_deg=60";
+  std::unique_ptr<Camera> camera = openCamera(spec.c_str());
   ASSERT_NE(camera, nullptr);
   auto* v4l2 = dynamic_cast<V4l2Camera*>(camera.get());
   const std::string first_node = v4l2->depthNodePath();
+  EXPECT_EQ(first_node, path);
   ASSERT_TRUE(camera->start().isOk());
   RgbdFrame slot(640, 480);
   ASSERT_TRUE(camera->acquire(slot, milliseconds(2000)).isOk());
