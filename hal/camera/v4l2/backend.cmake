@@ -31,6 +31,7 @@ if(NOT FOVEA_WITH_V4L2 STREQUAL "OFF")
       ${CMAKE_CURRENT_LIST_DIR}/pixel_formats.cpp
       ${CMAKE_CURRENT_LIST_DIR}/sysfs.cpp
       ${CMAKE_CURRENT_LIST_DIR}/v4l2_node.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/node_selection.cpp
       ${CMAKE_CURRENT_LIST_DIR}/v4l2_camera.cpp
     )
     add_library(fovea::hal_v4l2 ALIAS fovea_hal_v4l2)

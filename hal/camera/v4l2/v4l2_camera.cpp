@@ -22,28 +22,8 @@ namespace fovea::hal::v4l2 {
 
 namespace {
 
-constexpr uint32_t kDepthFormats[] = {V4L2_PIX_FMT_Z16, V4L2_PIX_FMT_Y16};
-// Colour formats fovea converts itself, in order of preference (RGB3 last: a
-// node that offers it natively is rare; libv4l2 emulates it for the rest).
-constexpr uint32_t kColourFormats[] = {V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_UYVY, V4L2_PIX_FMT_MJPEG,
-                                       V4L2_PIX_FMT_RGB24, V4L2_PIX_FMT_BGR24};
-
 bool contains(const std::vector<uint32_t>& formats, uint32_t fourcc) {
   return std::find(formats.begin(), formats.end(), fourcc) != formats.end();
-}
-
-bool offersDepth(const std::vector<uint32_t>& formats) {
-  for (uint32_t f : kDepthFormats) {
-    if (contains(formats, f)) return true;
-  }
-  return false;
-}
-
-bool offersColour(const std::vector<uint32_t>& formats) {
-  for (uint32_t f : kColourFormats) {
-    if (contains(formats, f)) return true;
-  }
-  return false;
 }
 
 std::string formatList(const std::vector<uint32_t>& formats) {
@@ -87,41 +67,6 @@ int64_t monotonicNowNs() {
   return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-// One capture node as discovery and node resolution see it.
-struct NodeInfo {
-  std::string path;
-  NodeCaps caps;
-  VideoNodeSysfs sysfs;
-  std::vector<uint32_t> formats;
-  bool depth = false;
-  bool colour = false;
-};
-
-struct Scan {
-  std::vector<NodeInfo> nodes;
-  std::vector<std::string> denied;  // nodes the user may not open
-};
-
-Scan scanNodes(const V4l2Paths& paths) {
-  Scan scan;
-  for (const std::string& name : listVideoNodes(paths.dev_root)) {
-    NodeInfo info;
-    info.path = paths.dev_root + "/" + name;
-    V4l2Node node(V4l2Node::Io::kRaw);
-    if (Status s = node.open(info.path); !s) {
-      if (node.lastOpenErrno() == EACCES || node.lastOpenErrno() == EPERM) scan.denied.push_back(info.path);
-      continue;  // gone meanwhile, or not a capture node (uvcvideo's metadata nodes)
-    }
-    info.caps = node.caps();
-    info.formats = node.formats();
-    info.sysfs = readVideoNodeSysfs(paths.sysfs_root, name);
-    info.depth = offersDepth(info.formats);
-    info.colour = offersColour(info.formats);
-    scan.nodes.push_back(std::move(info));
-  }
-  return scan;
-}
-
 Status deniedError(const std::vector<std::string>& denied) {
   std::string list;
   for (const std::string& d : denied) list += (list.empty() ? "" : ", ") + d;
@@ -129,19 +74,6 @@ Status deniedError(const std::vector<std::string>& denied) {
           "v4l2: permission denied opening " + list +
               ": add the service's user to the video group (sudo usermod -aG video $USER, then log in again) or "
               "install fovea's udev rule for the camera"};
-}
-
-bool matchesSelector(const NodeInfo& node, const NodeSelector& selector) {
-  switch (selector.kind) {
-    case NodeSelector::Kind::kPath: return node.path == selector.value;
-    case NodeSelector::Kind::kSerial: return !node.sysfs.usb.serial.empty() && node.sysfs.usb.serial == selector.value;
-    case NodeSelector::Kind::kBus:
-      return node.caps.bus_info == selector.value ||
-             (!node.sysfs.usb.port.empty() && node.sysfs.usb.port == selector.value);
-    case NodeSelector::Kind::kNone:
-    case NodeSelector::Kind::kAuto: return false;
-  }
-  return false;
 }
 
 // The modes of one format: "depth Y16 640x480 @ 30/25/15 fps".
@@ -164,11 +96,11 @@ void appendNodeModes(const NodeInfo& info, bool depth, std::vector<std::string>&
   V4l2Node node(V4l2Node::Io::kRaw);
   if (!node.open(info.path)) return;
   if (depth) {
-    for (uint32_t f : kDepthFormats) {
+    for (uint32_t f : kDepthFourccs) {
       if (contains(info.formats, f)) appendModes(node, "depth", f, modes);
     }
   } else {
-    for (uint32_t f : kColourFormats) {
+    for (uint32_t f : kColourFourccs) {
       if (contains(info.formats, f)) appendModes(node, "colour", f, modes);
     }
   }
@@ -185,11 +117,6 @@ std::string detailOf(const NodeInfo& info) {
   const UsbIdentity& usb = info.sysfs.usb;
   if (!usb.vendor_id.empty()) detail += ", USB " + usb.vendor_id + ":" + usb.product_id + " port " + usb.port;
   return detail;
-}
-
-bool sameDevice(const NodeInfo& a, const NodeInfo& b) {
-  if (!a.sysfs.usb.device_path.empty()) return a.sysfs.usb.device_path == b.sysfs.usb.device_path;
-  return !a.caps.bus_info.empty() && a.caps.bus_info == b.caps.bus_info;
 }
 
 // The nodes of a colour sibling: colour formats, no depth, same device.
@@ -229,7 +156,7 @@ std::string v4l2CameraHelp() {
 Result<std::vector<DeviceListing>> discoverV4l2Cameras() { return discoverV4l2CamerasIn(V4l2Paths{}); }
 
 Result<std::vector<DeviceListing>> discoverV4l2CamerasIn(const V4l2Paths& paths) {
-  const Scan scan = scanNodes(paths);
+  const NodeScan scan = scanNodes(paths);
   if (!scan.denied.empty()) return deniedError(scan.denied);
   std::vector<DeviceListing> listings;
   for (const NodeInfo& n : scan.nodes) {
@@ -326,31 +253,16 @@ PairingCounts V4l2Camera::pairingCounts() const { return pairer_ ? pairer_->coun
 
 Result<std::string> V4l2Camera::resolveDepthPath() {
   const NodeSelector& sel = options_.depth;
-  const bool by_path = sel.kind == NodeSelector::Kind::kPath;
-  const bool known = !known_depth_bus_.empty() || !known_depth_serial_.empty();
-  if (by_path && !known) return sel.value;  // first open: the path as given, its errors as they come
-  Scan scan = scanNodes(paths_);
-  const auto isKnown = [&](const NodeInfo& n) {
-    if (!known_depth_serial_.empty()) return n.sysfs.usb.serial == known_depth_serial_;
-    return n.caps.bus_info == known_depth_bus_;
-  };
-  if (by_path) {
-    // Still the same device under its old path? Else the device under a new one.
-    for (const NodeInfo& n : scan.nodes) {
-      if (n.path == sel.value && n.depth && isKnown(n)) return n.path;
-    }
-    for (const NodeInfo& n : scan.nodes) {
-      if (n.depth && isKnown(n)) return n.path;
-    }
-    if (!scan.denied.empty()) return deniedError(scan.denied);
+  // First open by path: the path as given, its errors as they come.
+  if (sel.kind == NodeSelector::Kind::kPath && seen_depth_.empty()) return sel.value;
+  const NodeScan scan = scanNodes(paths_);
+  if (const int i = pickDepthNode(scan.nodes, sel, seen_depth_); i >= 0) return scan.nodes[static_cast<std::size_t>(i)].path;
+  if (!scan.denied.empty()) return deniedError(scan.denied);
+  if (sel.kind == NodeSelector::Kind::kPath) {
     return Result<std::string>(ErrorCode::kNotFound,
-                               "v4l2: the depth camera of " + sel.value + " (" + known_depth_bus_ +
+                               "v4l2: the depth camera of " + sel.value + " (" + seen_depth_.bus_info +
                                    ") is gone: is it still plugged in? `fovead cameras` lists what is there");
   }
-  for (const NodeInfo& n : scan.nodes) {
-    if (n.depth && matchesSelector(n, sel)) return n.path;
-  }
-  if (!scan.denied.empty()) return deniedError(scan.denied);
   std::string seen;
   for (const NodeInfo& n : scan.nodes) {
     if (!n.depth) continue;
@@ -366,28 +278,10 @@ Result<std::string> V4l2Camera::resolveDepthPath() {
 
 Result<std::string> V4l2Camera::resolveColourPath() {
   const NodeSelector& sel = options_.colour;
-  const bool known = !known_colour_bus_.empty();
-  if (sel.kind == NodeSelector::Kind::kPath && !known) return sel.value;
-  Scan scan = scanNodes(paths_);
-  const NodeInfo* depth = nullptr;
-  for (const NodeInfo& n : scan.nodes) {
-    if (n.path == depth_.path()) depth = &n;
-  }
-  // Two passes: nodes without depth formats first (a UVC device's colour node
-  // shares the depth node's bus_info; vivid's nodes offer both).
-  for (int pass = 0; pass < 2; ++pass) {
-    for (const NodeInfo& n : scan.nodes) {
-      if (n.path == depth_.path() || !n.colour || (pass == 0 && n.depth)) continue;
-      bool match = false;
-      if (sel.kind == NodeSelector::Kind::kPath) {
-        match = n.caps.bus_info == known_colour_bus_;  // reconnect: the node seen at the first open
-      } else if (sel.kind == NodeSelector::Kind::kAuto) {
-        match = pass == 0 && depth != nullptr && sameDevice(n, *depth);
-      } else {
-        match = matchesSelector(n, sel);
-      }
-      if (match) return n.path;
-    }
+  if (sel.kind == NodeSelector::Kind::kPath && seen_colour_.empty()) return sel.value;
+  const NodeScan scan = scanNodes(paths_);
+  if (const int i = pickColourNode(scan.nodes, sel, depth_.path(), seen_colour_); i >= 0) {
+    return scan.nodes[static_cast<std::size_t>(i)].path;
   }
   if (!scan.denied.empty()) return deniedError(scan.denied);
   if (sel.kind == NodeSelector::Kind::kAuto) {
@@ -404,7 +298,7 @@ Status V4l2Camera::negotiateDepth() {
   const std::vector<uint32_t> formats = depth_.formats();
   uint32_t fourcc = options_.depth_format;
   if (fourcc == 0) {
-    for (uint32_t f : kDepthFormats) {
+    for (uint32_t f : kDepthFourccs) {
       if (fourcc == 0 && contains(formats, f)) fourcc = f;
     }
   }
@@ -452,7 +346,7 @@ Status V4l2Camera::negotiateColour() {
   const std::vector<uint32_t> formats = colour_.formats();  // through libv4l2: emulated formats included
   uint32_t fourcc = options_.colour_format;
   if (fourcc == 0) {
-    for (uint32_t f : kColourFormats) {
+    for (uint32_t f : kColourFourccs) {
       if (fourcc == 0 && contains(formats, f)) fourcc = f;
     }
   }
@@ -581,8 +475,7 @@ Status V4l2Camera::open() {
   const std::string node_name = depth_.path().substr(depth_.path().rfind('/') + 1);
   const VideoNodeSysfs sysfs = readVideoNodeSysfs(paths_.sysfs_root, node_name);
   usb_ = sysfs.usb;
-  known_depth_bus_ = depth_.caps().bus_info;
-  known_depth_serial_ = usb_.serial;
+  seen_depth_ = {depth_.caps().bus_info, usb_.serial, depth_.pixelFormat()};
   info_.model = !usb_.product.empty() ? usb_.product : depth_.caps().card;
   info_.serial = usb_.serial;
 
@@ -598,7 +491,9 @@ Status V4l2Camera::open() {
       closeNodes();
       return s;
     }
-    known_colour_bus_ = colour_.caps().bus_info;
+    const std::string colour_name = colour_.path().substr(colour_.path().rfind('/') + 1);
+    seen_colour_ = {colour_.caps().bus_info, readVideoNodeSysfs(paths_.sysfs_root, colour_name).usb.serial,
+                    colour_.pixelFormat()};
   }
   if (Status s = prepareCalibration(); !s) {
     closeNodes();

@@ -49,6 +49,7 @@
 
 #include "hal/camera.h"
 #include "hal/camera/pairing.h"
+#include "hal/camera/v4l2/node_selection.h"
 #include "hal/camera/v4l2/pixel_formats.h"
 #include "hal/camera/v4l2/sysfs.h"
 #include "hal/camera/v4l2/v4l2_node.h"
@@ -62,12 +63,6 @@ namespace fovea::hal::v4l2 {
 
 inline constexpr int kColourSlots = 4;
 inline constexpr int kMaxUnpairedDepth = 30;
-
-// Where device nodes and sysfs live; tests point them at a fake tree.
-struct V4l2Paths {
-  std::string dev_root = "/dev";
-  std::string sysfs_root = "/sys";
-};
 
 std::string v4l2CameraHelp();
 
@@ -114,7 +109,6 @@ class V4l2Camera final : public Camera {
   uint64_t colourBadFrames() const { return colour_bad_frames_; }
 
  private:
-  struct Candidate;
   Status openNodes();
   Status negotiateDepth();
   Status negotiateColour();
@@ -134,9 +128,8 @@ class V4l2Camera final : public Camera {
   V4l2Node colour_{V4l2Node::Io::kLibv4l2};
   UsbIdentity usb_;
   // What the first open found, to find the device again after it re-enumerates.
-  std::string known_depth_bus_;
-  std::string known_depth_serial_;
-  std::string known_colour_bus_;
+  SeenNode seen_depth_;
+  SeenNode seen_colour_;
 
   MjpegDecoder mjpeg_;
   std::optional<TimestampPairer> pairer_;
