@@ -8,13 +8,16 @@
 // Skips where no vivid node exists (the host); the VM must not skip.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 
 #include "hal/camera.h"
+#include "hal/capture_retry.h"
 #include "hal/camera/v4l2/v4l2_camera.h"
 #include "tests/support/alloc_counter.h"
 
@@ -274,30 +277,54 @@ TEST(V4l2Vivid, ReconnectsAfterTheDriverGoesAndComesBackUnderAnotherNode) {
   ASSERT_TRUE(camera->acquire(slot, milliseconds(2000)).isOk());
 
   // Unplugged mid-stream: the driver lets go of the device with the node open.
+  // The capture retry the service runs sees the disconnect and reopens.
+  CaptureRetryConfig config;
+  config.acquire_timeout = milliseconds(500);
+  config.initial_backoff_ns = 20'000'000;
+  config.max_backoff_ns = 100'000'000;
+  ASSERT_TRUE(config.validate().isOk());
+  CaptureRetry retry(*camera, config);
   { std::ofstream("/sys/bus/platform/drivers/vivid/unbind") << "vivid.0"; }
-  Status s;
-  for (int i = 0; i < 5; ++i) {
-    s = camera->acquire(slot, milliseconds(500));
-    if (s.code() == ErrorCode::kNotFound) break;
-  }
-  EXPECT_EQ(s.code(), ErrorCode::kNotFound) << s.toString();
+  const auto nowNs = [] {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  };
+  // Steps until `want` (or 100 steps), sleeping through the waits.
+  const auto stepUntil = [&](CaptureAction want) {
+    CaptureStep step;
+    for (int i = 0; i < 100; ++i) {
+      step = retry.step(nowNs(), slot);
+      if (step.action == want) break;
+      if (step.action == CaptureAction::kWait) {
+        std::this_thread::sleep_for(std::chrono::nanoseconds(std::max<int64_t>(step.next_ns - nowNs(), 0)));
+      }
+    }
+    return step;
+  };
+  CaptureStep step = stepUntil(CaptureAction::kReopenFailed);
+  EXPECT_EQ(step.action, CaptureAction::kReopenFailed);
+  EXPECT_EQ(step.error, ErrorCode::kNotFound);
+  EXPECT_EQ(retry.stats().disconnects, 1u);
   EXPECT_EQ(camera->counters().disconnects, 1u);
-  // What CaptureRetry does: stop, open (fails while the device is gone)...
-  camera->stop();
-  s = camera->open();
+  EXPECT_TRUE(retry.faulted());
+  Status s = camera->open();  // what the retry's reopen said
   EXPECT_EQ(s.code(), ErrorCode::kNotFound) << s.message();
   std::printf("while gone: %s\n", s.message().c_str());
+  camera->stop();
 
-  // ...and it comes back under other numbers.
+  // It comes back under other numbers (the old module must go first: the
+  // unbound instance keeps its numbers).
   ASSERT_EQ(std::system("rmmod vivid"), 0);
   ASSERT_EQ(std::system((std::string(kVividModule) + " vid_cap_nr=5,6").c_str()), 0);
-  s = camera->open();
-  ASSERT_TRUE(s.isOk()) << s.message();
-  EXPECT_NE(v4l2->depthNodePath(), first_node);
+  step = stepUntil(CaptureAction::kFrame);
+  EXPECT_EQ(step.action, CaptureAction::kFrame);
+  EXPECT_EQ(step.event, CaptureEvent::kRecovered);
+  EXPECT_FALSE(retry.faulted());
+  EXPECT_GE(retry.stats().reopens, 1u);
   EXPECT_EQ(v4l2->depthNodePath(), "/dev/video5");
-  ASSERT_TRUE(camera->start().isOk());
-  s = camera->acquire(slot, milliseconds(2000));
-  EXPECT_TRUE(s.isOk()) << s.message();
+  EXPECT_NE(v4l2->depthNodePath(), first_node);
+  step = retry.step(nowNs(), slot);
+  EXPECT_EQ(step.action, CaptureAction::kFrame);
   camera->stop();
 }
 
