@@ -73,7 +73,7 @@ Status deniedError(const std::vector<std::string>& denied) {
   return {ErrorCode::kUnavailable,
           "v4l2: permission denied opening " + list +
               ": add the service's user to the video group (sudo usermod -aG video $USER, then log in again) or "
-              "install fovea's udev rule for the camera"};
+              "install fovea's udev rule 60-fovea-rgbd-cameras.rules (docs/cameras-usb.md)"};
 }
 
 // The modes of one format: "depth Y16 640x480 @ 30/25/15 fps".

@@ -45,7 +45,7 @@ Status nodeOpenError(const std::string& path, int err) {
       return {ErrorCode::kUnavailable,
               "v4l2: permission denied opening " + path +
                   ": add the service's user to the video group (sudo usermod -aG video $USER, then log in again) or "
-                  "install fovea's udev rule for the camera"};
+                  "install fovea's udev rule 60-fovea-rgbd-cameras.rules (docs/cameras-usb.md)"};
     case EBUSY:
       return {ErrorCode::kUnavailable, "v4l2: " + path +
                                            " is busy: another program is streaming from it (`fuser -v " + path +

@@ -217,6 +217,15 @@ TEST(V4l2Camera, HfovIntrinsics) {
   EXPECT_NEAR(k.cy, 239.5, 1e-12);
 }
 
+TEST(V4l2Camera, ResetOfACameraNeverOpenedSaysWhy) {
+  V4l2CameraOptions options;
+  options.depth = {NodeSelector::Kind::kPath, "/dev/video-fovea-missing"};
+  V4l2Camera camera(options);
+  const Status s = camera.resetDevice();
+  EXPECT_EQ(s.code(), ErrorCode::kUnavailable);
+  EXPECT_FALSE(s.message().empty());
+}
+
 TEST(V4l2Camera, SetCalibrationIsAccepted) {
   V4l2CameraOptions options;
   options.depth = {NodeSelector::Kind::kPath, "/dev/video-fovea-missing"};
@@ -225,6 +234,10 @@ TEST(V4l2Camera, SetCalibrationIsAccepted) {
   calibration.depth = StreamCalibration{{640, 480, 600, 600, 320, 240}, {}};
   calibration.source = "test";
   EXPECT_TRUE(camera.setCalibration(calibration).isOk());
+  calibration.depth->intrinsics.fx = 0;
+  const Status bad = camera.setCalibration(calibration);
+  EXPECT_EQ(bad.code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(bad.message().find("from test"), std::string::npos) << bad.message();
 }
 
 }  // namespace

@@ -110,6 +110,10 @@ TEST(V4l2Vivid, DepthCaptureIntoTheSlotWithoutAllocating) {
   EXPECT_EQ(camera->counters().frames_delivered, 8u);
   EXPECT_EQ(camera->counters().bad_frames, 0u);
   camera->stop();
+  // vivid is a platform device: no USB port to reset, and the message says so.
+  const Status reset = camera->resetDevice();
+  EXPECT_EQ(reset.code(), ErrorCode::kUnavailable);
+  std::printf("reset: %s\n", reset.message().c_str());
 }
 
 TEST(V4l2Vivid, TwoNodesPairedAndRegisteredWithoutAllocating) {
