@@ -614,7 +614,10 @@ Status V4l2Camera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     return {ErrorCode::kCapacityExceeded, "slot too small"};
   }
   const bool colour = hasColour();
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  // Bounded so that now + timeout cannot overflow (nanoseconds::max() is a valid argument).
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::clamp<std::chrono::nanoseconds>(timeout, std::chrono::nanoseconds(0),
+                                                                              std::chrono::hours(24));
   for (;;) {
     if (colour) {
       if (const int err = drainColour(); err != 0) {

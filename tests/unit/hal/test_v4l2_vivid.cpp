@@ -104,10 +104,14 @@ TEST(V4l2Vivid, DepthCaptureIntoTheSlotWithoutAllocating) {
     EXPECT_EQ(slot.width(), 640);
   }
   EXPECT_EQ(allocations, 0u);
+  // Extreme timeouts are fine: none overflows, a zero one still takes a frame that is ready.
+  EXPECT_TRUE(camera->acquire(slot, std::chrono::nanoseconds::max()).isOk());
+  Status zero = camera->acquire(slot, std::chrono::nanoseconds(0));
+  EXPECT_TRUE(zero.isOk() || zero.code() == ErrorCode::kUnavailable) << zero.toString();
   uint64_t nonzero = 0;
   for (std::size_t p = 0; p < slot.pixelCount(); ++p) nonzero += slot.depth()[p] != 0;
   EXPECT_GT(nonzero, slot.pixelCount() / 2);  // vivid's test pattern
-  EXPECT_EQ(camera->counters().frames_delivered, 8u);
+  EXPECT_GE(camera->counters().frames_delivered, 9u);
   EXPECT_EQ(camera->counters().bad_frames, 0u);
   camera->stop();
   // vivid is a platform device: no USB port to reset, and the message says so.
