@@ -10,10 +10,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <vector>
 
 #include "hal/camera/v4l2/pixel_formats.h"
+#include "tests/support/alloc_counter.h"
 
 namespace fovea::hal::v4l2 {
 namespace {
@@ -145,6 +147,30 @@ TEST_F(V4l2Mjpeg, DecodesAKnownImage) {
   EXPECT_LE(worst, 8);  // JPEG is lossy; quality 95 on gradients stays within a few levels
   // The same decoder again (one handle for the whole run).
   ASSERT_TRUE(decoder_.decode(jpeg_.data(), jpeg_.size(), kW, kH, rgb.data()));
+}
+
+// fovea's part allocates nothing; libjpeg-turbo takes and frees its per-image
+// working memory in every decode (pixel_formats.h says so): the same count
+// each frame, so it does not grow with the run. The other conversions allocate nothing.
+TEST_F(V4l2Mjpeg, AllocationsPerFrameAreLibjpegsAndSteady) {
+  std::vector<uint8_t> rgb(image_.size(), 0);
+  ASSERT_TRUE(decoder_.decode(jpeg_.data(), jpeg_.size(), kW, kH, rgb.data()));
+  uint64_t per_frame[3] = {};
+  for (uint64_t& n : per_frame) {
+    test::AllocationScope scope;
+    ASSERT_TRUE(decoder_.decode(jpeg_.data(), jpeg_.size(), kW, kH, rgb.data()));
+    n = scope.allocations();
+  }
+  std::printf("libjpeg-turbo allocations per MJPEG frame: %llu\n", static_cast<unsigned long long>(per_frame[0]));
+  EXPECT_EQ(per_frame[0], per_frame[1]);
+  EXPECT_EQ(per_frame[1], per_frame[2]);
+  std::vector<uint8_t> yuyv(static_cast<std::size_t>(kW) * kH * 2, 128);
+  std::vector<uint16_t> depth(static_cast<std::size_t>(kW) * kH);
+  test::AllocationScope scope;
+  ASSERT_TRUE(yuyvToRgb(yuyv.data(), yuyv.size(), kW * 2, kW, kH, rgb.data()));
+  ASSERT_TRUE(uyvyToRgb(yuyv.data(), yuyv.size(), kW * 2, kW, kH, rgb.data()));
+  ASSERT_TRUE(depth16ToDepth(yuyv.data(), yuyv.size(), kW * 2, kW, kH, depth.data()));
+  EXPECT_EQ(scope.allocations(), 0u);
 }
 
 TEST_F(V4l2Mjpeg, WrongSizeIsRefused) {
