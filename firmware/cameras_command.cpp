@@ -7,18 +7,25 @@
 
 #include "firmware/commands.h"
 #include "hal/camera.h"
+#include "hal/usb/usb_devices.h"
+#include "hal/usb/usb_ids.h"
 
 namespace fovea::firmware {
 
 namespace {
 
 const char* kCamerasHelp =
-    "usage: fovead cameras\n"
+    "usage: fovead cameras [--udev-rules]\n"
     "\n"
     "Lists the cameras this build's backends can see now: the spec to pass to\n"
     "--camera (or camera.spec in a configuration file), the model, the serial and\n"
-    "the modes; then which camera backends are compiled in, and for each missing one\n"
-    "what its build lacked. Exits 0 whether or not a camera is found.\n";
+    "the modes; then the known RGB-D cameras on USB (with the backend that serves\n"
+    "each, and warnings: a USB 2 link, a serial unreadable for lack of permission);\n"
+    "then which camera backends are compiled in, and for each missing one what its\n"
+    "build lacked. Exits 0 whether or not a camera is found.\n"
+    "\n"
+    "  --udev-rules   print the udev rules for the known cameras instead (the file the\n"
+    "                build installs as lib/udev/rules.d/60-fovea-rgbd-cameras.rules)\n";
 
 void printListing(const hal::DeviceListing& device) {
   std::printf("  %s\n", device.spec.c_str());
@@ -34,6 +41,10 @@ void printListing(const hal::DeviceListing& device) {
 int camerasCommand(int argc, char** argv) {
   if (argc == 3 && (std::string(argv[2]) == "--help" || std::string(argv[2]) == "-h")) {
     std::fputs(kCamerasHelp, stdout);
+    return kExitOk;
+  }
+  if (argc == 3 && std::string(argv[2]) == "--udev-rules") {
+    std::fputs(hal::usb::udevRules().c_str(), stdout);
     return kExitOk;
   }
   if (argc != 2) {
@@ -58,6 +69,18 @@ int camerasCommand(int argc, char** argv) {
     found += devices.size();
   }
 
+  // The USB side: a camera no backend lists (no permission, a backend missing)
+  // still shows here with its model and what serves it.
+  Result<std::vector<hal::usb::UsbCameraDevice>> usb = hal::usb::listUsbCameras();
+  if (!usb) {
+    std::printf("usb: cannot list USB devices: %s\n", usb.status().message().c_str());
+  } else if (usb->empty()) {
+    std::printf("usb: no known RGB-D camera on USB\n");
+  } else {
+    std::printf("usb: %zu known RGB-D camera%s\n", usb->size(), usb->size() == 1 ? "" : "s");
+    for (const hal::usb::UsbCameraDevice& device : *usb) std::printf("  %s\n", hal::usb::formatUsbCamera(device).c_str());
+  }
+
   std::printf("\nbackends:");
   for (const hal::CameraBackendStatus& backend : hal::cameraBackendStatus()) {
     if (backend.compiled) std::printf(" %.*s", static_cast<int>(backend.name.size()), backend.name.data());
@@ -69,7 +92,14 @@ int camerasCommand(int argc, char** argv) {
                   static_cast<int>(backend.why_not.size()), backend.why_not.data());
     }
   }
-  if (found == 0) {
+  if (found == 0 && usb && !usb->empty()) {
+    std::printf(
+        "\nNo backend lists the USB camera%s above. Check the permissions (install the udev\n"
+        "rule: fovead cameras --udev-rules > /etc/udev/rules.d/60-fovea-rgbd-cameras.rules,\n"
+        "then udevadm control --reload && udevadm trigger, and replug), and that the backend\n"
+        "named for it is compiled in (below).\n",
+        usb->size() == 1 ? "" : "s");
+  } else if (found == 0) {
     std::printf(
         "\nNo camera found. Plug the camera in (USB 3 for depth cameras) and run this again;\n"
         "if `lsusb` lists it but nothing here does, see README.md, \"Use a real camera\"\n"

@@ -86,6 +86,13 @@ TEST(FoveadCli, CamerasListsBackendsAndExitsZeroWithoutACamera) {
   const ProcessResult extra = run(fovead() + " cameras --bogus");
   EXPECT_EQ(extra.exit_code, 2) << extra.output;
   EXPECT_EQ(run(fovead() + " cameras --help").exit_code, 0);
+  // The udev rules a user installs by hand: Orbbec's and Intel's ids, for both
+  // the USB device node and its V4L2 nodes.
+  const ProcessResult rules = run(fovead() + " cameras --udev-rules");
+  ASSERT_EQ(rules.exit_code, 0) << rules.output;
+  for (const char* expected : {"SUBSYSTEM==\"usb\"", "SUBSYSTEM==\"video4linux\"", "\"2bc5\"", "\"8086\"", "\"0b07\""}) {
+    EXPECT_NE(rules.output.find(expected), std::string::npos) << expected << " missing in:\n" << rules.output;
+  }
 }
 
 // A V4L2 camera that is not there: a message saying what to do, exit 1, no crash.

@@ -6,10 +6,8 @@
 # by writing its UDC file (hot-plug arrival and removal).
 suite_targets=(test_usb_gadget test_usb_host)
 suite_modules=(dummy_hcd libcomposite usb_f_acm)
-# configfs is a module in Debian's arm64 kernel (libcomposite pulls it in), so
-# the harness's early mount of /sys/kernel/config did nothing: mount it here.
+# configfs is a module (libcomposite pulls it in); the harness mounts it after the modules.
 suite_init='
-grep -q " /sys/kernel/config " /proc/mounts || mount -t configfs configfs /sys/kernel/config
 g=/sys/kernel/config/usb_gadget/fovea
 mkdir -p $g/strings/0x409 $g/configs/c.1/strings/0x409 $g/functions/acm.usb0
 echo 0x2bc5 > $g/idVendor
