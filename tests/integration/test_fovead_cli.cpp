@@ -95,6 +95,30 @@ TEST(FoveadCli, CamerasListsBackendsAndExitsZeroWithoutACamera) {
   }
 }
 
+// A V4L2 camera that is not there: a message saying what to do, exit 1, no crash.
+TEST(FoveadCli, RunWithAMissingV4l2CameraSaysWhatToDo) {
+  const ProcessResult cameras = run(fovead() + " cameras");
+  const std::size_t backends = cameras.output.find("\nbackends:");
+  ASSERT_NE(backends, std::string::npos) << cameras.output;
+  if (cameras.output.substr(backends, cameras.output.find('\n', backends + 1) - backends).find(" v4l2") ==
+      std::string::npos) {
+    GTEST_SKIP() << "this build has no v4l2 backend";
+  }
+  struct Case {
+    const char* spec;
+    const char* message;
+  };
+  const Case cases[] = {
+      {"v4l2:/dev/video-fovea-missing", "/dev/video-fovea-missing does not exist: is the camera plugged in?"},
+      {"v4l2:serial=fovea-no-such-serial,hfov_deg=60", "no depth node with serial=fovea-no-such-serial"},
+  };
+  for (const Case& c : cases) {
+    const ProcessResult r = run(fovead() + " run --frames 1 --camera " + c.spec);
+    EXPECT_EQ(r.exit_code, 1) << c.spec << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.message), std::string::npos) << c.spec << "\n" << r.output;
+  }
+}
+
 TEST(FoveadCli, HelpAndBadArguments) {
   EXPECT_EQ(run(fovead() + " --help").exit_code, 0);
   EXPECT_EQ(run(fovead() + " run --help").exit_code, 0);

@@ -1,0 +1,64 @@
+# fovea::hal_v4l2: UVC depth cameras (and a colour node beside them) through
+# V4L2. Needs the kernel headers (<linux/videodev2.h>) and libv4l2 (colour
+# nodes are opened through it so it can convert formats fovea does not decode);
+# libturbojpeg decodes MJPEG colour. FOVEA_WITH_V4L2: AUTO (built when found),
+# ON (required) or OFF. Exports FOVEA_HAVE_V4L2.
+set(FOVEA_WITH_V4L2 AUTO CACHE STRING "V4L2 camera backend (needs libv4l-dev, libturbojpeg0-dev): AUTO, ON or OFF")
+set_property(CACHE FOVEA_WITH_V4L2 PROPERTY STRINGS AUTO ON OFF)
+if(NOT FOVEA_WITH_V4L2 STREQUAL "OFF")
+  include(CheckIncludeFileCXX)
+  find_package(PkgConfig QUIET)
+  set(_fovea_v4l2_missing "")
+  check_include_file_cxx(linux/videodev2.h FOVEA_VIDEODEV2_H)
+  if(NOT FOVEA_VIDEODEV2_H)
+    list(APPEND _fovea_v4l2_missing "<linux/videodev2.h> (linux-libc-dev)")
+  endif()
+  if(PkgConfig_FOUND)
+    pkg_check_modules(LIBV4L2 QUIET IMPORTED_TARGET libv4l2)
+    pkg_check_modules(TURBOJPEG QUIET IMPORTED_TARGET libturbojpeg)
+    if(NOT LIBV4L2_FOUND)
+      list(APPEND _fovea_v4l2_missing "libv4l2 (libv4l-dev)")
+    endif()
+    if(NOT TURBOJPEG_FOUND)
+      list(APPEND _fovea_v4l2_missing "libturbojpeg (libturbojpeg0-dev)")
+    endif()
+  else()
+    list(APPEND _fovea_v4l2_missing "pkg-config")
+  endif()
+  if(_fovea_v4l2_missing STREQUAL "")
+    add_library(fovea_hal_v4l2
+      ${CMAKE_CURRENT_LIST_DIR}/v4l2_options.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/pixel_formats.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/sysfs.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/v4l2_node.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/node_selection.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/v4l2_camera.cpp
+    )
+    add_library(fovea::hal_v4l2 ALIAS fovea_hal_v4l2)
+    # fovea::registration: the depth-to-colour registration kernel (it needs
+    # fovea::hal_types only, so no cycle with fovea::hal, which links this).
+    target_link_libraries(fovea_hal_v4l2 PUBLIC fovea::hal_types fovea_build_flags Eigen3::Eigen
+                          PRIVATE fovea::registration PkgConfig::LIBV4L2 PkgConfig::TURBOJPEG)
+    target_compile_definitions(fovea_hal_v4l2 PUBLIC FOVEA_HAVE_V4L2=1)
+    # calib=FILE through hal::loadCalibrationFile once the tree has it
+    # (fovea::hal_calibration, defined later in hal/CMakeLists.txt).
+    if(EXISTS ${PROJECT_SOURCE_DIR}/hal/calibration_file.h)
+      target_link_libraries(fovea_hal_v4l2 PRIVATE fovea::hal_calibration)
+      target_compile_definitions(fovea_hal_v4l2 PRIVATE FOVEA_V4L2_CALIBRATION_FILE=1)
+    endif()
+    # resetDevice() through hal::usb::resetUsbDevice once the tree has hal/usb
+    # (fovea::hal_usb, defined later by hal/usb/backend.cmake).
+    if(EXISTS ${PROJECT_SOURCE_DIR}/hal/usb/usb_reset.h)
+      target_link_libraries(fovea_hal_v4l2 PRIVATE fovea::hal_usb)
+      target_compile_definitions(fovea_hal_v4l2 PRIVATE FOVEA_V4L2_USB_RESET=1)
+    endif()
+    list(APPEND fovea_hal_backends fovea::hal_v4l2)
+    message(STATUS "fovea: V4L2 camera backend (libv4l2 ${LIBV4L2_VERSION}, libturbojpeg ${TURBOJPEG_VERSION})")
+  elseif(FOVEA_WITH_V4L2 STREQUAL "ON")
+    message(FATAL_ERROR "fovea: FOVEA_WITH_V4L2=ON but missing: ${_fovea_v4l2_missing} "
+                        "(apt-get install libv4l-dev libturbojpeg0-dev pkg-config)")
+  else()
+    message(STATUS "fovea: V4L2 camera backend not built, missing: ${_fovea_v4l2_missing} "
+                   "(apt-get install libv4l-dev libturbojpeg0-dev)")
+  endif()
+endif()
