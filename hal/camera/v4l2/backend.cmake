@@ -37,21 +37,12 @@ if(NOT FOVEA_WITH_V4L2 STREQUAL "OFF")
     add_library(fovea::hal_v4l2 ALIAS fovea_hal_v4l2)
     # fovea::registration: the depth-to-colour registration kernel (it needs
     # fovea::hal_types only, so no cycle with fovea::hal, which links this).
+    # calib=FILE through fovea::hal_calibration; resetDevice() through
+    # fovea::hal_usb (a USB port reset; it reports kUnavailable without libusb).
     target_link_libraries(fovea_hal_v4l2 PUBLIC fovea::hal_types fovea_build_flags Eigen3::Eigen
-                          PRIVATE fovea::registration PkgConfig::LIBV4L2 PkgConfig::TURBOJPEG)
+                          PRIVATE fovea::registration fovea::hal_calibration fovea::hal_usb PkgConfig::LIBV4L2
+                                  PkgConfig::TURBOJPEG)
     target_compile_definitions(fovea_hal_v4l2 PUBLIC FOVEA_HAVE_V4L2=1)
-    # calib=FILE through hal::loadCalibrationFile once the tree has it
-    # (fovea::hal_calibration, defined later in hal/CMakeLists.txt).
-    if(EXISTS ${PROJECT_SOURCE_DIR}/hal/calibration_file.h)
-      target_link_libraries(fovea_hal_v4l2 PRIVATE fovea::hal_calibration)
-      target_compile_definitions(fovea_hal_v4l2 PRIVATE FOVEA_V4L2_CALIBRATION_FILE=1)
-    endif()
-    # resetDevice() through hal::usb::resetUsbDevice once the tree has hal/usb
-    # (fovea::hal_usb, defined later by hal/usb/backend.cmake).
-    if(EXISTS ${PROJECT_SOURCE_DIR}/hal/usb/usb_reset.h)
-      target_link_libraries(fovea_hal_v4l2 PRIVATE fovea::hal_usb)
-      target_compile_definitions(fovea_hal_v4l2 PRIVATE FOVEA_V4L2_USB_RESET=1)
-    endif()
     list(APPEND fovea_hal_backends fovea::hal_v4l2)
     message(STATUS "fovea: V4L2 camera backend (libv4l2 ${LIBV4L2_VERSION}, libturbojpeg ${TURBOJPEG_VERSION})")
   elseif(FOVEA_WITH_V4L2 STREQUAL "ON")

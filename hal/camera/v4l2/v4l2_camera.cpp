@@ -10,13 +10,9 @@
 #include <ctime>
 #include <utility>
 
-#include "pipeline/kernels/registration.h"
-#ifdef FOVEA_V4L2_CALIBRATION_FILE
 #include "hal/calibration_file.h"
-#endif
-#ifdef FOVEA_V4L2_USB_RESET
 #include "hal/usb/usb_reset.h"
-#endif
+#include "pipeline/kernels/registration.h"
 
 namespace fovea::hal::v4l2 {
 
@@ -236,7 +232,6 @@ Status V4l2Camera::setCalibration(const CameraCalibration& calibration) {
 }
 
 Status V4l2Camera::resetDevice() {
-#ifdef FOVEA_V4L2_USB_RESET
   if (usb_.port.empty()) {
     return {ErrorCode::kUnavailable, "v4l2: " + (depth_.path().empty() ? selectorText(options_.depth) : depth_.path()) +
                                          " is not on USB (or was never opened): no port to reset"};
@@ -244,9 +239,6 @@ Status V4l2Camera::resetDevice() {
   Result<usb::UsbDeviceSelector> which = usb::usbSelectorFromPortPath(usb_.port);
   if (!which) return which.status();
   return usb::resetUsbDevice(which.value());
-#else
-  return Camera::resetDevice();
-#endif
 }
 
 PairingCounts V4l2Camera::pairingCounts() const { return pairer_ ? pairer_->counts() : PairingCounts{}; }
@@ -391,16 +383,9 @@ Status V4l2Camera::prepareCalibration() {
   // the profile is the more specific of the two.
   CameraCalibration calibration;
   if (!options_.calib_path.empty()) {
-#ifdef FOVEA_V4L2_CALIBRATION_FILE
     Result<CameraCalibration> file = loadCalibrationFile(options_.calib_path);
     if (!file) return {file.status().code(), "v4l2: calib=" + options_.calib_path + ": " + file.status().message()};
     calibration = std::move(file).value();
-#else
-    return {ErrorCode::kInvalidArgument,
-            "v4l2: calib=" + options_.calib_path +
-                ": this build cannot read calibration files (no hal/calibration_file.h); give the calibration in "
-                "the board profile"};
-#endif
   }
   if (calibration_.depth) calibration.depth = calibration_.depth;
   if (calibration_.colour) calibration.colour = calibration_.colour;

@@ -162,6 +162,55 @@ TEST(V4l2Vivid, TwoNodesPairedAndRegisteredWithoutAllocating) {
   camera->stop();
 }
 
+// The calibration from a file (calib=FILE, fovea's combined YAML with two inline
+// camera_info mappings and a baseline) through the real parser: the intrinsics
+// the camera reports are the file's, and a pair registers with its extrinsics.
+TEST(V4l2Vivid, CalibrationFileGivesIntrinsicsAndExtrinsics) {
+  REQUIRE_VIVID();
+  const fs::path file = fs::temp_directory_path() / "fovea-vivid-calibration.yaml";
+  {
+    std::ofstream out(file);
+    out << "depth:\n"
+           "  image_width: 640\n  image_height: 480\n"
+           "  camera_matrix: {rows: 3, cols: 3, data: [580, 0, 319.5, 0, 581, 239.5, 0, 0, 1]}\n"
+           "  distortion_model: plumb_bob\n  distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}\n"
+           "colour:\n"
+           "  image_width: 640\n  image_height: 360\n"
+           "  camera_matrix: {rows: 3, cols: 3, data: [460, 0, 320, 0, 460, 180, 0, 0, 1]}\n"
+           "  distortion_model: plumb_bob\n"
+           "  distortion_coefficients: {rows: 1, cols: 5, data: [0.05, -0.01, 0, 0, 0]}\n"
+           "T_colour_depth:\n"
+           "  rotation: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n"
+           "  translation_m: [0.015, 0, 0]\n";
+  }
+  const std::string spec = "v4l2:bus=platform:vivid-000,format=Y16,size=640x480,fps=15,colour=bus=platform:vivid-001,"
+                           "colour_format=YUYV,colour_size=640x360,calib=" + file.string();
+  std::unique_ptr<Camera> camera = openCamera(spec.c_str());
+  ASSERT_NE(camera, nullptr);
+  EXPECT_DOUBLE_EQ(camera->info().intrinsics.fx, 580.0);
+  EXPECT_DOUBLE_EQ(camera->info().intrinsics.fy, 581.0);
+  EXPECT_DOUBLE_EQ(camera->info().intrinsics.cx, 319.5);
+  ASSERT_TRUE(camera->start().isOk());
+  RgbdFrame slot(640, 480);
+  int delivered = 0;
+  for (int i = 0; i < 40 && delivered < 3; ++i) delivered += camera->acquire(slot, milliseconds(2000)).isOk();
+  EXPECT_EQ(delivered, 3);
+  EXPECT_TRUE(slot.has_rgb);
+  camera->stop();
+
+  // A file that does not parse is a clear error at open, naming it.
+  {
+    std::ofstream out(file);
+    out << "depth: [unclosed\n";
+  }
+  Result<std::unique_ptr<Camera>> broken = createCamera(spec);
+  ASSERT_TRUE(broken.isOk());
+  const Status s = (*broken)->open();
+  EXPECT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("calib=" + file.string()), std::string::npos) << s.message();
+  fs::remove(file);
+}
+
 TEST(V4l2Vivid, UnofferedFormatSizeAndMissingCalibrationAreClear) {
   REQUIRE_VIVID();
   Result<std::unique_ptr<Camera>> z16 = createCamera("v4l2:bus=platform:vivid-000,format=Z16,hfov_deg=60");
