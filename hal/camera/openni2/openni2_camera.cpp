@@ -25,9 +25,15 @@ constexpr std::size_t kColourSlots = 3;
 // Depth frames that may wait for their colour frame: the Dummy's colour runs a
 // frame behind its depth, real devices' colour up to a frame or two.
 constexpr std::size_t kPendingDepthFrames = 3;
+// Consecutive depth frames without a colour frame (while colour frames keep
+// coming) after which the streams are out of step for good: the Dummy's
+// colour thread can fall whole frames behind its depth thread under load, and
+// its stamps count frames. acquire() then says so; a restart re-aligns them.
+constexpr uint64_t kOutOfStepFrames = 8;
 constexpr const char* kNoDeviceHint =
     "plug in the camera; `lsusb` should list it (Orbbec 2bc5:..., PrimeSense/Asus 1d27:...); if it is listed, "
-    "check USB permission: install the udev rule fovea ships (packaging/udev/) or add the user to the plugdev group";
+    "check USB permission: install the udev rules fovea ships for known camera ids, or add the user to the "
+    "group the rules name (video; plugdev on some distributions) (docs/cameras-openni2.md)";
 
 Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "openni2: " + std::move(message)); }
 
@@ -431,8 +437,8 @@ Status OpenNI2Camera::open() {
     return {ErrorCode::kInvalidArgument,
             "openni2: " + options_.uri +
                 " is an .oni recording: Debian's OpenNI2 2.2 plays .oni files back without frames and can crash "
-                "in libOniFile, so fovea does not open them; record with fovea's own recorder or convert the "
-                "recording to a TUM RGB-D folder and use tum:PATH"};
+                "in libOniFile, so fovea does not open them; convert the recording to a TUM RGB-D folder "
+                "(depth and rgb PNGs, associations.txt) and replay it with tum:PATH, or use the live camera"};
   }
   if (Status s = Runtime::acquire(); !s) return s;
   runtime_held_ = true;
@@ -625,6 +631,7 @@ Status OpenNI2Camera::start() {
   pending_size_ = 0;
   depth_seen_ = false;
   colour_seen_ = false;
+  unmatched_run_ = 0;
   clock_.reset();
   started_ = true;
   return Status::ok();
@@ -731,7 +738,11 @@ bool OpenNI2Camera::deliverOldestPending(RgbdFrame& slot) {
   pending_head_ = (pending_head_ + 1) % pending_.size();
   --pending_size_;
   const std::optional<int> c = pairer_.pairDepth(oldest.device_ns);
-  if (!c) return false;
+  if (!c) {
+    ++unmatched_run_;
+    return false;
+  }
+  unmatched_run_ = 0;
   std::memcpy(slot.depth(), oldest.depth.data(), oldest.depth.size() * sizeof(uint16_t));
   std::memcpy(slot.rgb(), colour_slots_[*c].data(), colour_slots_[*c].size());
   slot.has_rgb = true;
@@ -764,6 +775,11 @@ Status OpenNI2Camera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout)
       delivered = deliverOldestPending(slot);
     }
     if (delivered) break;
+    if (unmatched_run_ >= kOutOfStepFrames) {
+      unmatched_run_ = 0;
+      counters_.error();
+      return Status(ErrorCode::kUnavailable, "out of step");
+    }
     const auto left = deadline - std::chrono::steady_clock::now();
     const int left_ms = static_cast<int>(std::clamp<int64_t>(
         std::chrono::duration_cast<std::chrono::milliseconds>(left + std::chrono::microseconds(999)).count(), 0,

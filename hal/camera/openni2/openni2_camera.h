@@ -26,6 +26,12 @@
 //   device crystal's drift (tens of ppm) until the next start().
 // - Pairing: depth and colour arrive as separate streams and are paired by
 //   device stamp (hal::TimestampPairer, tolerance half a frame period).
+// - Out of step: when 8 depth frames in a row find no colour frame while
+//   colour keeps coming, the streams' stamps disagree for good (the Dummy's
+//   colour thread can fall whole frames behind its depth thread under load;
+//   its stamps count frames). acquire() returns kUnavailable "out of step",
+//   counted as an error; stop() and start() (hal::CaptureRetry's reopen)
+//   align them again.
 // - Memory: acquire() copies into the caller's slot and the colour slots
 //   allocated at open(). libOpenNI2 itself allocates one 24-byte list node
 //   every time a frame is given back to its pool (oniFrameRelease, measured);
@@ -168,6 +174,7 @@ class OpenNI2Camera final : public Camera {
   std::vector<PendingDepth> pending_;  // depth frames awaiting their colour frame, a ring
   std::size_t pending_head_ = 0;
   std::size_t pending_size_ = 0;
+  uint64_t unmatched_run_ = 0;  // consecutive depth frames without colour
   TimestampPairer pairer_{1, 0};
   int64_t newest_colour_ns_ = INT64_MIN;
   DeviceClockMapper clock_;
