@@ -14,6 +14,8 @@
 #include <thread>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "bench/bench_input.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
@@ -21,6 +23,7 @@
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
+#include "pipeline/kernels/registration.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -134,6 +137,41 @@ void bmVoxelSample(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
+// Colour registration of the fixture's depth (640x480) into a 1280x720 colour
+// image, D435-like: 15 mm baseline, a degree of rotation, a mild plumb-bob
+// distortion (so the polynomial is timed). per_point is per depth pixel here.
+template <auto Register>
+void bmRegister(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  const hal::RgbdFrame& frame = f.input.frame;
+  pipeline::RegistrationParams p;
+  p.depth.intrinsics = frame.intrinsics;
+  p.depth_scale_m = frame.depth_scale_m;
+  p.colour.intrinsics = {1280, 720, 910.0, 910.0, 641.3, 359.2};
+  p.colour.distortion.model = hal::Distortion::Model::kPlumbBob;
+  p.colour.distortion.coeffs = {0.08, -0.15, 4e-4, -2e-4, 0.05};
+  p.T_colour_depth.R_world_cam =
+      Eigen::AngleAxisd(0.017, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
+  p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.015, 0.0002, -0.0004);
+  Result<pipeline::DepthToColourRegistration> reg = pipeline::DepthToColourRegistration::create(p);
+  if (!reg) {
+    state.SkipWithError(reg.status().toString().c_str());
+    return;
+  }
+  std::vector<uint8_t> colour(1280 * 720 * 3);
+  for (std::size_t i = 0; i < colour.size(); ++i) colour[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
+  std::vector<uint8_t> out(frame.pixelCount() * 3);
+  pipeline::RegistrationCounts counts;
+  for (auto _ : state) {
+    counts = ((*reg).*Register)(frame.depth(), colour.data(), out.data());
+    benchmark::DoNotOptimize(counts);
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, frame.pixelCount());
+  state.counters["coloured"] = static_cast<double>(counts.coloured);
+}
+
 // --- The scalar reference -------------------------------------------------
 
 void bmFoveatorRef(benchmark::State& state) {
@@ -206,9 +244,11 @@ const KernelBench kKernels[] = {
     {"voxel_sample/ref", &bmVoxelSample<pipeline::VoxelSampler>},
     {"foveate/ref", &bmFoveatorRef},    // partition + fixation + voxel sampling
     {"pipeline/ref", &bmPipelineRef},   // back-projection + foveate
+    {"registration/ref", &bmRegister<&pipeline::DepthToColourRegistration::registerRef>},
     {"backproject/simd", &bmBackproject<pipeline::backprojectSimd>},
     {"partition/simd", &bmPartition<pipeline::partitionSimd>},
     {"voxel_sample/hash", &bmVoxelSample<pipeline::HashVoxelSampler>},
+    {"registration/simd", &bmRegister<&pipeline::DepthToColourRegistration::registerSimd>},
     {"pipeline/simd-1t", &bmPipelineSimd1},
     {"pipeline/simd-all-cores", &bmPipelineSimdAll},
 };

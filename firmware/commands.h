@@ -13,5 +13,6 @@ int foveateCommand(int argc, char** argv);  // fovead foveate ...
 int keygenCommand(int argc, char** argv);   // fovead keygen FILE
 int printConfigCommand(int argc, char** argv);  // fovead print-config ... (also --print-config)
 int serveCommand(int argc, char** argv);    // fovead serve ...
+int camerasCommand(int argc, char** argv);  // fovead cameras
 
 }  // namespace fovea::firmware

@@ -21,6 +21,7 @@ const char* kHelp =
     "            notifications; until SIGTERM (SIGHUP reloads the foveation parameters)\n"
     "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
     "  keygen    write a new pre-shared key file for the stream\n"
+    "  cameras   list the cameras this build can see, with the spec to use for each\n"
     "  print-config  print the effective configuration (board profile, --config FILE,\n"
     "            --set SECTION.KEY=VALUE) as TOML; also 'fovead --print-config'\n"
     "\n"
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
   if (std::strcmp(argv[1], "serve") == 0) return serveCommand(argc, argv);
   if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
   if (std::strcmp(argv[1], "keygen") == 0) return keygenCommand(argc, argv);
+  if (std::strcmp(argv[1], "cameras") == 0) return camerasCommand(argc, argv);
   if (std::strcmp(argv[1], "print-config") == 0 || std::strcmp(argv[1], "--print-config") == 0) {
     return printConfigCommand(argc, argv);
   }

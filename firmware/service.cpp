@@ -127,6 +127,10 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   const int64_t period_ns = fps > 0 ? static_cast<int64_t>(1e9 / fps) : 33'333'333;
   std::unique_ptr<Service> service(new Service(config, std::move(environment), period_ns));
   service->memory_.add("camera backend", 1, camera_bytes);
+  // Streaming buffers a device maps outside the heap (V4L2 mmap) are memory too.
+  if (const std::size_t mapped = service->camera_->info().device_buffer_bytes; mapped > 0) {
+    service->memory_.add("camera device buffers (mapped)", 1, mapped);
+  }
   if (Status s = service->allocate(); !s) return s;
   service->log().log(LogLevel::kInfo, "%s", service->memory_.summary().c_str());
   return service;
@@ -210,6 +214,9 @@ Status Service::allocate() {
 
   before = heapInUse();
   status_lines_ = std::make_unique<StatusLines>(*gpio_, config_.gpio.lines);
+  hal::usb::UsbMonitorOptions usb_options;
+  usb_options.report_present = true;  // the log says which known cameras are there at start
+  usb_monitor_ = std::make_unique<hal::usb::UsbMonitor>(usb_options);
   histogram_scratch_.reset(new uint64_t[LatencyHistogram::kBuckets]);
   for (auto& h : histogram_previous_) h.reset(new uint64_t[LatencyHistogram::kBuckets]());
   threads_.reserve(3);
@@ -232,6 +239,7 @@ Status Service::start() {
     status_lines_->stop();
     return {s.code(), "camera " + camera_->info().name + ": " + s.message()};
   }
+  startUsbMonitor();
   started_ns_ = monotonicNs();
   last_frame_ns_.store(started_ns_, std::memory_order_relaxed);  // start-up counts as fresh
   next_status_ns_ = started_ns_ + config_.runtime.status_interval_ms * 1'000'000;
@@ -490,7 +498,28 @@ void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
   stop();
 }
 
+void Service::startUsbMonitor() {
+  if (Status s = usb_monitor_->start(); !s) {
+    log().log(LogLevel::kInfo, "usb: hot-plug of RGB-D cameras not watched: %s", s.message().c_str());
+    return;
+  }
+  log().log(LogLevel::kInfo, "usb: watching arrivals and removals of %zu known RGB-D camera models",
+            hal::usb::knownUsbCameras().size());
+  if (!usb_monitor_->warning().empty()) log().log(LogLevel::kWarning, "usb: %s", usb_monitor_->warning().c_str());
+  drainUsbEvents();  // the ones present at start
+}
+
+void Service::drainUsbEvents() {
+  hal::usb::UsbEvent event;
+  while (usb_monitor_->poll(event)) {
+    char line[160];
+    hal::usb::formatUsbEvent(event, line, sizeof line);
+    log().log(event.kind == hal::usb::UsbEvent::Kind::kLeft ? LogLevel::kWarning : LogLevel::kNotice, "%s", line);
+  }
+}
+
 void Service::supervise(int64_t now_ns) {
+  drainUsbEvents();
   // Healthy: frames arrive (within the stall timeout) and the capture stage is not
   // retrying a failing camera.
   const bool frames_flow = now_ns - last_frame_ns_.load(std::memory_order_relaxed) <= stall_timeout_ns_;
@@ -577,6 +606,14 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
     }
   }
   const int64_t gaze_ns = gaze_received_ns_.load(std::memory_order_relaxed);
+  // USB hot-plug counts since start: "arrived 1 left 0", or "off" when not watched.
+  const hal::usb::UsbMonitorCounters usb_counts = usb_monitor_->counters();
+  char usb[48];
+  if (usb_counts.available) {
+    std::snprintf(usb, sizeof usb, "arrived %" PRIu64 " left %" PRIu64, usb_counts.arrivals, usb_counts.removals);
+  } else {
+    std::snprintf(usb, sizeof usb, "off");
+  }
   char gaze_age[32];
   if (gaze_ns == 0) {
     std::snprintf(gaze_age, sizeof gaze_age, "none");
@@ -587,7 +624,7 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
       out, size,
       "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
       " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s | memory %.1f MiB"
-      " | lines heartbeat %s streaming %d fault %d",
+      " | lines heartbeat %s streaming %d fault %d | usb %s",
       static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
       static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
       w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
@@ -595,7 +632,7 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
       status_lines_->state().privacy_active ? " | privacy pause" : "", static_cast<double>(memory_.totalBytes()) / kMiB,
       // The heartbeat's level changes every half period: report whether it toggles.
       heartbeat_toggles_.load(std::memory_order_relaxed) != window_heartbeat_toggles_ ? "toggling" : "held",
-      status_lines_->state().streaming ? 1 : 0, status_lines_->state().fault ? 1 : 0);
+      status_lines_->state().streaming ? 1 : 0, status_lines_->state().fault ? 1 : 0, usb);
   window_heartbeat_toggles_ = heartbeat_toggles_.load(std::memory_order_relaxed);
   window_ = w;
   return n < 0 ? 0 : std::min(static_cast<std::size_t>(n), size - 1);
@@ -637,6 +674,7 @@ void Service::stop() {
   if (was_running && config_.runtime.systemd_notify) notifier_.notify("STOPPING=1");
   for (std::thread& t : threads_) t.join();
   threads_.clear();
+  if (usb_monitor_) usb_monitor_->stop();
   if (was_running) camera_->stop();
   streamer_.reset();  // says Bye to the operator
   if (status_lines_) status_lines_->stop();
@@ -672,6 +710,7 @@ ServiceStats Service::stats() const {
   s.streaming_line = streaming_line_.load(std::memory_order_relaxed);
   s.fault_line = fault_line_.load(std::memory_order_relaxed);
   s.privacy_active = privacy_active_.load(std::memory_order_relaxed);
+  if (usb_monitor_) s.usb = usb_monitor_->counters();
   return s;
 }
 

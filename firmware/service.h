@@ -46,6 +46,7 @@
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "hal/result.h"
+#include "hal/usb/usb_monitor.h"
 #include "pipeline/latest_value.h"
 #include "pipeline/ring.h"
 
@@ -128,6 +129,8 @@ struct ServiceStats {
   bool streaming_line = false;
   bool fault_line = false;
   bool privacy_active = false;
+  // USB hot-plug of the known RGB-D cameras (hal/usb/usb_monitor.h).
+  hal::usb::UsbMonitorCounters usb;
 };
 
 class Service {
@@ -198,6 +201,10 @@ class Service {
   void sendLoop();
   void supervise(int64_t now_ns);
   void applyReload();
+  // USB hot-plug (supervisor only): start logs whether it runs, drain logs each
+  // arrival and removal of a known camera.
+  void startUsbMonitor();
+  void drainUsbEvents();
   void placeThread(const char* name, const ThreadPlacement& placement);
   Logger& log() { return *logger_; }
 
@@ -216,6 +223,7 @@ class Service {
   std::unique_ptr<GazePolicy> policy_;  // the foveation thread's
   std::unique_ptr<Streamer> streamer_;  // the send thread's only
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
+  std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;
   pipeline::LatestValue<OperatorGaze> gaze_box_;
   pipeline::LatestValue<ReloadedParameters> reload_to_foveation_;

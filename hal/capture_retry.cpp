@@ -47,6 +47,20 @@ CaptureStep CaptureRetry::step(int64_t now_ns, RgbdFrame& slot) {
   if (reopen_pending_) {
     ++stats_.reopen_attempts;
     camera_.stop();
+    if (reset_pending_) {
+      // Once per stall-triggered reopen, after stop(): open() then finds the
+      // device fresh, or (kNotFound) re-enumerated, which it handles like a
+      // reconnect. Whatever the reset says, the reopen goes ahead.
+      reset_pending_ = false;
+      ++stats_.reset_attempts;
+      const Status reset = camera_.resetDevice();
+      switch (reset.code()) {
+        case ErrorCode::kOk: ++stats_.resets; break;
+        case ErrorCode::kUnavailable: ++stats_.resets_unsupported; break;
+        case ErrorCode::kNotFound: ++stats_.resets_vanished; break;
+        default: ++stats_.reset_failures; break;
+      }
+    }
     ErrorCode error = ErrorCode::kOk;
     if (Status s = camera_.open(); !s) {
       error = s.code();
@@ -83,9 +97,12 @@ CaptureStep CaptureRetry::step(int64_t now_ns, RgbdFrame& slot) {
     default: break;
   }
   ++consecutive_failures_;
-  if (status.code() == ErrorCode::kNotFound ||
-      consecutive_failures_ >= config_.reopen_after_failures) {
+  if (status.code() == ErrorCode::kNotFound) {
     reopen_pending_ = true;
+    reset_pending_ = false;  // gone: nothing on the bus to reset
+  } else if (consecutive_failures_ >= config_.reopen_after_failures) {
+    reopen_pending_ = true;
+    reset_pending_ = true;  // a stall
   }
   return fail(now_ns, CaptureAction::kAcquireFailed, status.code());
 }

@@ -12,6 +12,11 @@
 // device went away) or after reopen_after_failures consecutive failed acquires
 // (timeouts, malformed frames); a successful reopen restarts that count but not
 // the backoff, so a camera that stays silent is reopened ever less often.
+// A reopen that follows a stall (consecutive failed acquires, not a kNotFound
+// disconnect) first resets the device on its bus, between stop() and open():
+// camera.resetDevice() (a USB port reset for USB cameras), once per reopen a
+// stall triggers (retries of a failed reopen do not reset again); a reset that
+// fails or is unsupported is counted and the reopen goes ahead.
 // Delays count from the now_ns of the step that failed (acquire() may itself
 // block up to acquire_timeout).
 //
@@ -72,6 +77,11 @@ struct CaptureRetryStats {
   uint64_t disconnects = 0;       //   kNotFound
   uint64_t reopen_attempts = 0;
   uint64_t reopens = 0;           // attempts that succeeded
+  uint64_t reset_attempts = 0;    // resetDevice() before a reopen after a stall, of which:
+  uint64_t resets = 0;            //   succeeded
+  uint64_t resets_unsupported = 0;  //   kUnavailable: the camera has no reset
+  uint64_t resets_vanished = 0;   //   kNotFound: the device re-enumerated or went away
+  uint64_t reset_failures = 0;    //   any other error
   uint64_t recoveries = 0;        // failing -> ok
 };
 
@@ -88,6 +98,8 @@ class CaptureRetry {
   CaptureState state() const { return state_; }
   int consecutiveFailures() const { return consecutive_failures_; }
   bool reopenPending() const { return reopen_pending_; }
+  // The pending reopen follows a stall: it resets the device first.
+  bool resetPending() const { return reset_pending_; }
   // The delay the next failure will schedule.
   int64_t backoffNs() const { return backoff_ns_; }
   int64_t nextNs() const { return next_ns_; }
@@ -102,6 +114,7 @@ class CaptureRetry {
   CaptureState state_ = CaptureState::kOk;
   int consecutive_failures_ = 0;
   bool reopen_pending_ = false;
+  bool reset_pending_ = false;
   int64_t backoff_ns_;
   int64_t next_ns_ = INT64_MIN;
   CaptureRetryStats stats_;

@@ -1,6 +1,7 @@
 // Every SIMD kernel against its scalar reference, bit for bit, on every Highway
 // target compiled in and supported here. The test cases are generated from the
 // list of targets (TargetTest/<Kernel>/<TARGET>), so CTest shows which targets ran.
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -19,6 +20,7 @@
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/registration.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"
@@ -337,6 +339,238 @@ TEST_P(TargetTest, VoxelIndexOnFacesAndSpecials) {
   const std::vector<double> inv = invTable(rng);
   for (double origin : {0.0, -0.0, 0.25, -0.75, 1e4, -1e4, 1e4 + 0.125}) {
     expectSameVoxelIndices(coord, region, origin, inv, "faces");
+  }
+}
+
+// ---- colour registration ------------------------------------------------------
+
+void expectSameRegistration(const RegistrationParams& params, const std::vector<uint16_t>& depth,
+                            const std::vector<uint8_t>& colour, const std::string& what) {
+  Result<DepthToColourRegistration> reg = DepthToColourRegistration::create(params);
+  ASSERT_TRUE(reg) << what << ": " << reg.status().toString();
+  // One byte past the image on each side: neither kernel writes outside it.
+  std::vector<uint8_t> ref(depth.size() * 3 + 2, 0xA5), simd(depth.size() * 3 + 2, 0xA5);
+  const RegistrationCounts cr = reg->registerRef(depth.data(), colour.data(), ref.data() + 1);
+  const RegistrationCounts cs = reg->registerSimd(depth.data(), colour.data(), simd.data() + 1);
+  EXPECT_EQ(cr.with_depth, cs.with_depth) << what;
+  EXPECT_EQ(cr.coloured, cs.coloured) << what;
+  EXPECT_EQ(cr.outside_colour, cs.outside_colour) << what;
+  EXPECT_EQ(ref.front(), 0xA5);
+  EXPECT_EQ(ref.back(), 0xA5);
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    ASSERT_EQ(ref[i], simd[i]) << what << ": byte " << i << " (pixel " << (i - 1) / 3 << " of " << depth.size()
+                               << ", depth " << (i > 0 && i <= 3 * depth.size() ? depth[(i - 1) / 3] : 0) << ")";
+  }
+}
+
+hal::StreamCalibration randomCamera(int w, int h, std::mt19937_64& rng, int distortion) {
+  hal::StreamCalibration c;
+  std::uniform_real_distribution<double> f(0.3, 2.0), off(-0.2, 0.2);
+  c.intrinsics = {w, h, f(rng) * w, f(rng) * w, w * (0.5 + off(rng)), h * (0.5 + off(rng))};
+  if (distortion > 0) {
+    c.distortion.model = hal::Distortion::Model::kPlumbBob;
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const double strength = distortion == 1 ? 0.1 : 3.0;  // realistic, or strong (fisheye-like folding)
+    c.distortion.coeffs = {u(rng) * strength, u(rng) * strength, u(rng) * strength * 0.05,
+                           u(rng) * strength * 0.05, u(rng) * strength};
+  }
+  return c;
+}
+
+// A rotation from the test's own generator (Eigen's UnitRandom uses std::rand,
+// whose state would differ from one target's test to the next).
+Eigen::Matrix3d randomRotation(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Quaterniond q(n(rng), n(rng), n(rng), n(rng));
+  return q.normalized().toRotationMatrix();
+}
+
+std::vector<uint8_t> randomColour(int w, int h, std::mt19937_64& rng) {
+  std::vector<uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (auto& b : rgb) b = static_cast<uint8_t>(rng() >> 13);
+  return rgb;
+}
+
+TEST_P(TargetTest, RegistrationRandomScenes) {
+  std::mt19937_64 rng(41);
+  // Depth widths around every vector width (1..64 lanes) exercise the tails.
+  const int sizes[][2] = {{640, 480}, {1, 1}, {3, 2}, {7, 5}, {15, 3}, {17, 4}, {31, 2}, {33, 3},
+                          {63, 2}, {65, 3}, {129, 2}, {1000, 1}, {1, 37}, {97, 61}};
+  const int colour_sizes[][2] = {{1280, 720}, {320, 240}, {1, 1}, {17, 3}, {640, 480}};
+  for (const auto& s : sizes) {
+    for (int rep = 0; rep < 4; ++rep) {
+      RegistrationParams p;
+      const auto& cs = colour_sizes[rng() % 5];
+      p.depth = randomCamera(s[0], s[1], rng, 0);
+      p.colour = randomCamera(cs[0], cs[1], rng, rep % 3);
+      // Large rotations too: any orientation, baselines up to a metre.
+      p.T_colour_depth.R_world_cam = rep == 0 ? Eigen::Matrix3d::Identity()
+                                              : randomRotation(rng);
+      std::uniform_real_distribution<double> t(-1.0, 1.0);
+      p.T_colour_depth.t_world_cam = Eigen::Vector3d(t(rng), t(rng), t(rng)) * (rep == 3 ? 1.0 : 0.05);
+      const double scales[] = {0.001, 1.0 / 5000.0, 0.0001, 0.01};
+      p.depth_scale_m = scales[rng() % 4];
+      std::vector<uint16_t> depth(static_cast<std::size_t>(s[0]) * s[1]);
+      for (auto& d : depth) {
+        const uint64_t r = rng();
+        d = (r % 7 == 0) ? 0 : (r % 11 == 0) ? 65535 : (r % 13 == 0) ? 1 : static_cast<uint16_t>(r >> 20);
+      }
+      expectSameRegistration(p, depth, randomColour(cs[0], cs[1], rng),
+                             std::to_string(s[0]) + "x" + std::to_string(s[1]) + " rep " + std::to_string(rep));
+    }
+  }
+}
+
+TEST_P(TargetTest, RegistrationEveryDepthValue) {
+  std::mt19937_64 rng(42);
+  std::vector<uint16_t> depth(256 * 256);
+  for (std::size_t i = 0; i < depth.size(); ++i) depth[i] = static_cast<uint16_t>(i);
+  for (int distortion = 0; distortion < 3; ++distortion) {
+    RegistrationParams p;
+    p.depth = randomCamera(256, 256, rng, 0);
+    p.colour = randomCamera(1280, 720, rng, distortion);
+    p.T_colour_depth.R_world_cam = randomRotation(rng);
+    p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.05, -0.3, 0.2);
+    for (double scale : {0.001, 1.0 / 5000.0, 1e-6}) {
+      p.depth_scale_m = scale;
+      expectSameRegistration(p, depth, randomColour(1280, 720, rng), "every depth, distortion " +
+                                                                         std::to_string(distortion));
+    }
+  }
+}
+
+// Ill-conditioned on purpose: telephoto cameras 45 degrees apart, the colour
+// image far off its optical axis (fx * a ~ 1e5, cx ~ -1e5), so one float ulp
+// anywhere moves a projection by about 0.01 px and about one pixel in a hundred
+// to its neighbour. A kernel that fused or reordered any operation fails here.
+TEST_P(TargetTest, RegistrationIllConditioned) {
+  std::mt19937_64 rng(45);
+  std::vector<uint16_t> depth(640 * 480);
+  for (auto& d : depth) d = static_cast<uint16_t>(300 + rng() % 20000);
+  // No distortion; every plumb-bob term large enough that its last bit shows.
+  const std::array<double, 5> distortions[] = {{0, 0, 0, 0, 0}, {0.2, -0.05, 0.1, 0.15, 0.01},
+                                               {-0.3, 0.08, -0.12, 0.2, -0.02}};
+  for (const auto& coeffs : distortions) {
+    RegistrationParams p;
+    std::uniform_real_distribution<double> small(-1e-4, 1e-4);
+    p.depth.intrinsics = {640, 480, 1e5, 1e5, 319.5 + 1e4 * small(rng), 239.5};
+    p.colour.intrinsics = {1280, 720, 1e5, 1e5, 0.0, 0.0};
+    p.colour.distortion.model = hal::Distortion::Model::kPlumbBob;
+    p.colour.distortion.coeffs = coeffs;
+    p.T_colour_depth.R_world_cam =
+        (Eigen::AngleAxisd(std::numbers::pi / 4 + small(rng), Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(small(rng), Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
+    p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.01, 0.002, -0.003);
+    // Put the principal point where the depth camera's axis lands plus the image
+    // centre, so the view falls on the image (the plumb-bob formula, in double).
+    const Eigen::Vector3d axis = p.T_colour_depth.R_world_cam * Eigen::Vector3d(0, 0, 1);
+    const double a = axis.x() / axis.z(), b = axis.y() / axis.z(), r2 = a * a + b * b;
+    const auto& k = coeffs;
+    const double radial = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]));
+    const double ad = a * radial + 2 * k[2] * a * b + k[3] * (r2 + 2 * a * a);
+    const double bd = b * radial + k[2] * (r2 + 2 * b * b) + 2 * k[3] * a * b;
+    p.colour.intrinsics.cx = 640.0 - 1e5 * ad;
+    p.colour.intrinsics.cy = 360.0 - 1e5 * bd;
+    const DepthToColourRegistration reg = DepthToColourRegistration::create(p).value();
+    std::vector<uint8_t> colour = randomColour(1280, 720, rng), out(depth.size() * 3);
+    const RegistrationCounts counts = reg.registerRef(depth.data(), colour.data(), out.data());
+    EXPECT_GT(counts.coloured, depth.size() / 10) << "the view should land on the image";
+    expectSameRegistration(p, depth, colour, "ill-conditioned, k1 " + std::to_string(coeffs[0]));
+  }
+}
+
+// Projections exactly on the rounding boundary between two colour pixels (and on
+// the image's own edges, -0.5 and width - 0.5), and their float neighbours.
+TEST_P(TargetTest, RegistrationOnPixelBorders) {
+  std::mt19937_64 rng(43);
+  const int w = 67, h = 13;
+  std::vector<uint16_t> depth(static_cast<std::size_t>(w) * h);
+  for (std::size_t i = 0; i < depth.size(); ++i) depth[i] = static_cast<uint16_t>(1 + i % 5000);
+  for (double shift : {0.5, -0.5, 0.25, 1.5, 66.5, -66.5}) {
+    for (double nudge : {0.0, 1e-7, -1e-7, 1e-5, -1e-5}) {
+      RegistrationParams p;
+      p.depth.intrinsics = {w, h, 64.0, 64.0, 33.0, 6.0};
+      p.colour = p.depth;
+      // Identity extrinsics: colour u = depth u + shift, so hu = u + shift + 0.5.
+      p.colour.intrinsics.cx += shift + nudge;
+      p.colour.intrinsics.cy += shift + nudge;
+      expectSameRegistration(p, depth, randomColour(w, h, rng), "shift " + std::to_string(shift + nudge));
+      // The same with a baseline giving a half-pixel disparity at some depths.
+      p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.5 / 64.0, 0.0, 0.0);
+      expectSameRegistration(p, depth, randomColour(w, h, rng), "baseline, shift " + std::to_string(shift + nudge));
+    }
+  }
+}
+
+// Overflow, NaN and huge values inside the kernel from parameters create()
+// accepts: both kernels must agree on black for them (and never convert them).
+TEST_P(TargetTest, RegistrationFarOutsideAndOverflow) {
+  std::mt19937_64 rng(44);
+  const int w = 41, h = 9;
+  std::vector<uint16_t> depth(static_cast<std::size_t>(w) * h);
+  for (auto& d : depth) d = static_cast<uint16_t>(rng());
+  depth[0] = 65535;
+  depth[1] = 1;
+  depth[2] = 0;
+  const std::vector<uint8_t> colour = randomColour(64, 48, rng);
+  RegistrationParams base;
+  base.depth.intrinsics = {w, h, 30.0, 30.0, 20.0, 4.0};
+  base.colour.intrinsics = {64, 48, 50.0, 50.0, 32.0, 24.0};
+  struct Case {
+    const char* what;
+    void (*apply)(RegistrationParams&);
+  };
+  const Case cases[] = {
+      {"far away", [](RegistrationParams& p) { p.T_colour_depth.t_world_cam = Eigen::Vector3d(1e3, -1e3, 0.0); }},
+      {"far ahead", [](RegistrationParams& p) { p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.0, 0.0, 1e30); }},
+      {"grazing", [](RegistrationParams& p) { p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.0, 0.0, -0.9999); }},
+      {"huge focal", [](RegistrationParams& p) { p.colour.intrinsics.fx = 3e38; }},
+      {"tiny focal", [](RegistrationParams& p) { p.colour.intrinsics.fy = 1e-38; }},
+      {"huge scale (inf - inf)",
+       [](RegistrationParams& p) {
+         p.depth_scale_m = 3e38;
+         p.T_colour_depth.t_world_cam = Eigen::Vector3d(-3e38, 3e38, -3e38);
+       }},
+      {"huge distortion",
+       [](RegistrationParams& p) {
+         p.colour.distortion.model = hal::Distortion::Model::kPlumbBob;
+         p.colour.distortion.coeffs = {1e30, -1e30, 1e20, -1e20, 3e38};
+       }},
+      {"far centre", [](RegistrationParams& p) { p.colour.intrinsics.cx = -1e9; }},
+      {"sideways", [](RegistrationParams& p) {
+         p.T_colour_depth.R_world_cam = Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
+       }},
+  };
+  for (const Case& c : cases) {
+    RegistrationParams p = base;
+    c.apply(p);
+    for (double scale : {0.001, 1.0}) {
+      if (p.depth_scale_m == 0.001) p.depth_scale_m = scale;
+      expectSameRegistration(p, depth, colour, c.what);
+    }
+  }
+}
+
+TEST(Registration, NaNProducingParametersAreRefused) {
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  RegistrationParams base;
+  base.depth.intrinsics = {64, 48, 50.0, 50.0, 32.0, 24.0};
+  base.colour = base.depth;
+  ASSERT_TRUE(DepthToColourRegistration::create(base));
+  double* fields[] = {&base.depth.intrinsics.fx, &base.depth.intrinsics.cy, &base.colour.intrinsics.fy,
+                      &base.colour.intrinsics.cx, &base.colour.distortion.coeffs[1],
+                      &base.T_colour_depth.t_world_cam.x(), &base.T_colour_depth.R_world_cam(2, 1),
+                      &base.depth_scale_m};
+  for (double* field : fields) {
+    for (double bad : {kNaN, kInf, -kInf, 1e39 /* infinite as float */}) {
+      const double saved = *field;
+      *field = bad;
+      base.colour.distortion.model = hal::Distortion::Model::kPlumbBob;
+      EXPECT_FALSE(DepthToColourRegistration::create(base)) << "field #" << (field - fields[0]) << " = " << bad;
+      *field = saved;
+    }
   }
 }
 

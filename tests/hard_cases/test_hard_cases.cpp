@@ -7,6 +7,7 @@
 
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "pipeline/kernels/registration.h"
 #include "tests/support/clouds.h"
 
 namespace fovea::pipeline {
@@ -304,6 +305,84 @@ TEST(HardCases, DenormalAndTinyCoordinates) {
   ASSERT_TRUE(f.foveate(cloud, Gaze{}, out, stats).isOk());
   EXPECT_EQ(stats.regions[0].points_in, 3u);
   EXPECT_NEAR(stats.fixation.d0_m, 1.0, 1e-9);
+}
+
+// ---- colour registration ------------------------------------------------------
+
+RegistrationParams sameCameras(int w, int h) {
+  RegistrationParams p;
+  p.depth.intrinsics = {w, h, 100.0, 100.0, (w - 1) / 2.0, (h - 1) / 2.0};
+  p.colour = p.depth;
+  return p;
+}
+
+TEST(HardCases, RegistrationWithNoDepthAtAllIsBlackAndCountsNothing) {
+  const DepthToColourRegistration reg = DepthToColourRegistration::create(sameCameras(37, 11)).value();
+  const std::vector<uint16_t> depth(37 * 11, 0);
+  const std::vector<uint8_t> colour(37 * 11 * 3, 200);
+  for (KernelSet ks : {KernelSet::kRef, KernelSet::kSimd}) {
+    std::vector<uint8_t> out(colour.size(), 1);
+    const RegistrationCounts c = reg.apply(depth.data(), colour.data(), out.data(), ks);
+    EXPECT_EQ(c.with_depth, 0u);
+    EXPECT_EQ(c.coloured, 0u);
+    EXPECT_EQ(out, std::vector<uint8_t>(colour.size(), 0)) << kernelSetName(ks);
+  }
+}
+
+// The last half pixel: a projection at width - 0.5 exactly is outside (pixel k
+// covers [k - 0.5, k + 0.5)), one float below it is the last column.
+TEST(HardCases, RegistrationProjectionOnTheImageEdgeHalfPixel) {
+  RegistrationParams p = sameCameras(8, 1);
+  p.depth.intrinsics = {8, 1, 64.0, 64.0, 0.0, 0.0};
+  // Colour u = depth u + shift: depth u = 0 lands at shift.
+  for (const auto& [shift, want] : {std::pair{7.5, -1}, std::pair{7.4999995, 7}, std::pair{-0.5, 0},
+                                    std::pair{-0.50000006, -1}}) {
+    p.colour.intrinsics = {8, 1, 64.0, 64.0, shift, 0.0};
+    const DepthToColourRegistration reg = DepthToColourRegistration::create(p).value();
+    const std::vector<uint16_t> depth = {1000, 0, 0, 0, 0, 0, 0, 0};
+    std::vector<uint8_t> colour(8 * 3);
+    for (int i = 0; i < 8; ++i) colour[3 * i] = static_cast<uint8_t>(10 + i);
+    for (KernelSet ks : {KernelSet::kRef, KernelSet::kSimd}) {
+      std::vector<uint8_t> out(8 * 3, 99);
+      const RegistrationCounts c = reg.apply(depth.data(), colour.data(), out.data(), ks);
+      EXPECT_EQ(out[0], want < 0 ? 0 : 10 + want) << "shift " << shift << " " << kernelSetName(ks);
+      EXPECT_EQ(c.coloured, want < 0 ? 0u : 1u) << "shift " << shift;
+      EXPECT_EQ(c.outside_colour, want < 0 ? 1u : 0u) << "shift " << shift;
+    }
+  }
+}
+
+// 65535 units at 1 m a unit is 65.5 km: far, but finite, and registered.
+TEST(HardCases, RegistrationOfTheLargestDepthValue) {
+  RegistrationParams p = sameCameras(16, 16);
+  p.depth_scale_m = 1.0;
+  p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.05, 0.0, 0.0);  // disparity 7.6e-5 px: none
+  const DepthToColourRegistration reg = DepthToColourRegistration::create(p).value();
+  const std::vector<uint16_t> depth(256, 65535);
+  std::vector<uint8_t> colour(256 * 3);
+  for (std::size_t i = 0; i < colour.size(); ++i) colour[i] = static_cast<uint8_t>(i * 7 + 1);
+  for (KernelSet ks : {KernelSet::kRef, KernelSet::kSimd}) {
+    std::vector<uint8_t> out(colour.size());
+    EXPECT_EQ(reg.apply(depth.data(), colour.data(), out.data(), ks).coloured, 256u);
+    EXPECT_EQ(out, colour) << kernelSetName(ks);
+  }
+}
+
+// A one-pixel colour camera: every depth pixel whose ray meets that pixel gets it.
+TEST(HardCases, RegistrationIntoAOnePixelColourImage) {
+  RegistrationParams p = sameCameras(9, 9);
+  // The colour pixel covers 25 x/z + 0.1 in [-0.5, 0.5): x/z in [-0.024, 0.016).
+  p.colour.intrinsics = {1, 1, 25.0, 25.0, 0.1, 0.1};
+  const DepthToColourRegistration reg = DepthToColourRegistration::create(p).value();
+  const std::vector<uint16_t> depth(81, 2000);
+  const std::vector<uint8_t> colour = {1, 2, 3};
+  for (KernelSet ks : {KernelSet::kRef, KernelSet::kSimd}) {
+    std::vector<uint8_t> out(81 * 3);
+    // Depth rays: (u - 4) / 100, inside for u = 2, 3, 4, 5 (and v alike): 4 x 4 pixels.
+    EXPECT_EQ(reg.apply(depth.data(), colour.data(), out.data(), ks).coloured, 16u) << kernelSetName(ks);
+    EXPECT_EQ(out[3 * 40 + 2], 3);
+    EXPECT_EQ(out[3 * 0 + 2], 0);
+  }
 }
 
 }  // namespace

@@ -51,6 +51,43 @@ TEST(FoveadCli, RunReducesThePointCountAndSavesAPly) {
   EXPECT_LT(saved->points.size(), 640u * 480u / 2);
 }
 
+// fovead cameras, as a new user runs it: every backend fovea knows is either
+// listed as compiled in or named with what its build lacked, each compiled
+// backend that can enumerate says what it found, and no camera is an answer
+// (exit 0), not a failure.
+TEST(FoveadCli, CamerasListsBackendsAndExitsZeroWithoutACamera) {
+  const ProcessResult r = run(fovead() + " cameras");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::size_t backends = r.output.find("\nbackends:");
+  ASSERT_NE(backends, std::string::npos) << r.output;
+  const std::string compiled = r.output.substr(backends, r.output.find('\n', backends + 1) - backends);
+  for (const char* name : {"mock", "tum", "openni2", "v4l2", "libcamera"}) {
+    const bool listed_compiled = compiled.find(std::string(" ") + name) != std::string::npos;
+    const bool listed_missing = r.output.find(std::string("  ") + name + ": not compiled in: ") != std::string::npos;
+    EXPECT_NE(listed_compiled, listed_missing) << name << " must be listed exactly once, in:\n" << r.output;
+  }
+  // Every enumerating backend that is compiled in answers on a line of its own:
+  // a count, "no camera found", or why it cannot list.
+  const std::string text = "\n" + r.output;
+  bool any_found = false;
+  for (const char* name : {"openni2", "v4l2", "libcamera"}) {
+    if (compiled.find(std::string(" ") + name) == std::string::npos) continue;
+    const std::size_t line = text.find("\n" + std::string(name) + ": ");
+    ASSERT_NE(line, std::string::npos) << name << " did not answer, in:\n" << r.output;
+    const std::string answer = text.substr(line + 1, text.find('\n', line + 1) - line - 1);
+    const bool none = answer.find(": no camera found") != std::string::npos;
+    const bool cannot = answer.find(": cannot list cameras: ") != std::string::npos;
+    const bool count = answer.find(" camera") != std::string::npos && !none;
+    EXPECT_TRUE(none || cannot || count) << answer;
+    any_found = any_found || (count && !cannot);
+  }
+  EXPECT_EQ(r.output.find("No camera found.") != std::string::npos, !any_found) << r.output;
+
+  const ProcessResult extra = run(fovead() + " cameras --bogus");
+  EXPECT_EQ(extra.exit_code, 2) << extra.output;
+  EXPECT_EQ(run(fovead() + " cameras --help").exit_code, 0);
+}
+
 TEST(FoveadCli, HelpAndBadArguments) {
   EXPECT_EQ(run(fovead() + " --help").exit_code, 0);
   EXPECT_EQ(run(fovead() + " run --help").exit_code, 0);

@@ -3,6 +3,7 @@
 // operator over loopback, reloads, and systemd notifications on a fake
 // NOTIFY_SOCKET (READY, WATCHDOG, and no WATCHDOG while the camera stalls).
 #include "firmware/service.h"
+#include "hal/usb/usb_devices.h"
 
 #include <stdlib.h>
 #include <unistd.h>
@@ -73,6 +74,31 @@ TEST(Service, RefusedThreadPlacementIsLoggedAndTheServiceRunsOn) {
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 5; }, 5000ms));
   EXPECT_TRUE(sink.contains("fovea-capture: pinning to core 4095 refused")) << "no warning logged";
   EXPECT_TRUE(sink.contains("memory: "));
+}
+
+// The USB hot-plug monitor: the service says at start whether it watches the
+// known RGB-D cameras (on this host: libusb with hot-plug, no camera), and its
+// status line carries the counts.
+TEST(Service, UsbHotplugIsWatchedAndCountedInTheStatusLine) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.status_interval_ms = 50;
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("status: fps in "); }, 5000ms));
+  const hal::usb::UsbMonitorCounters usb = running.service->stats().usb;
+  if (hal::usb::usbHotplugSupported().isOk() && usb.available) {
+    EXPECT_TRUE(sink.contains("usb: watching arrivals and removals of "));
+    EXPECT_TRUE(sink.contains("| usb arrived ")) << "status line without the usb counts";
+  } else {
+    EXPECT_TRUE(sink.contains("usb: hot-plug of RGB-D cameras not watched: "));
+    EXPECT_TRUE(sink.contains("| usb off"));
+  }
+  running.stop();
+  EXPECT_FALSE(running.service->stats().usb.available);  // stopped with the service
 }
 
 TEST(Service, MemoryBudgetCountsEveryPool) {

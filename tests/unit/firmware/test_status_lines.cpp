@@ -292,7 +292,7 @@ bool anyGpioChip() {
   return false;
 }
 
-// Real lines: run by tests/vm/run-gpio-vm on the arm64 VM's PL061 (lines 0, 1, 2
+// Real lines: run by tests/vm/run-vm on the arm64 VM's PL061 (lines 0, 1, 2
 // of gpiochip0; FOVEA_TEST_GPIO_CHIP names another chip), skipped without one.
 TEST(StatusLinesOnRealGpio, HeartbeatAndFaultSequenceReadBack) {
 #ifndef FOVEA_HAVE_GPIOD

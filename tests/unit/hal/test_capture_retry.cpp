@@ -171,6 +171,10 @@ TEST(CaptureRetry, StallRaisesTheFaultFlagUntilFramesResumeWithoutAReopenStorm) 
   EXPECT_EQ(s.timeouts, 8u);
   EXPECT_EQ(s.reopen_attempts, 1u);
   EXPECT_EQ(s.recoveries, 1u);
+  // The reopen after the stall tried a device reset first; the mock has none.
+  EXPECT_EQ(s.reset_attempts, 1u);
+  EXPECT_EQ(s.resets_unsupported, 1u);
+  EXPECT_EQ(s.resets, 0u);
   const CameraCounters c = rig.camera->counters();
   EXPECT_EQ(c.stalls, 1u);
   EXPECT_EQ(c.timeouts, 8u);
@@ -365,6 +369,216 @@ TEST(CaptureRetry, EveryFaultInOneRun) {
   EXPECT_EQ(c.injected_garbage, 3u);
   EXPECT_EQ(c.frames_delivered, 149u);
   EXPECT_EQ(rig.retry->stats().recoveries, 3u);
+}
+
+// ---- Device reset before the reopen that follows a stall ----
+
+// A camera double that plays a script of acquire() results and records every
+// call with the ManualClock's time. A failed acquire blocks for the timeout
+// (the clock advances by it), as a real camera's would.
+class ScriptedCamera final : public Camera {
+ public:
+  struct Call {
+    std::string what;  // "acquire", "stop", "reset", "open", "start"
+    int64_t t_ns;
+  };
+
+  ScriptedCamera(mock::ManualClock& clock, std::vector<ErrorCode> acquires) : clock_(clock), acquires_(std::move(acquires)) {
+    info_.name = "scripted";
+  }
+
+  Status open() override { return record("open", next(open_results_)); }
+  Status start() override { return record("start", ErrorCode::kOk); }
+  void stop() override { (void)record("stop", ErrorCode::kOk); }
+  Status resetDevice() override { return record("reset", reset_result_); }
+  Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) override {
+    const ErrorCode code = acquired_ < acquires_.size() ? acquires_[acquired_] : ErrorCode::kOk;
+    ++acquired_;
+    const Status s = record("acquire", code);
+    if (code == ErrorCode::kOk) {
+      slot.sequence = frames_++;
+    } else {
+      clock_.advanceNs(timeout.count());
+    }
+    return s;
+  }
+  const CameraInfo& info() const override { return info_; }
+  CameraCounters counters() const override { return {}; }
+
+  std::vector<std::string> calls() const {
+    std::vector<std::string> out;
+    for (const Call& c : calls_) out.push_back(c.what);
+    return out;
+  }
+  // The time of the n-th call named `what` (-1 when there is none).
+  int64_t timeOf(const std::string& what, int n = 0) const {
+    for (const Call& c : calls_) {
+      if (c.what == what && n-- == 0) return c.t_ns;
+    }
+    return -1;
+  }
+
+  ErrorCode reset_result_ = ErrorCode::kOk;
+  std::vector<ErrorCode> open_results_;  // consumed one per open(); then kOk
+
+ private:
+  static ErrorCode next(std::vector<ErrorCode>& results) {
+    if (results.empty()) return ErrorCode::kOk;
+    const ErrorCode code = results.front();
+    results.erase(results.begin());
+    return code;
+  }
+  Status record(const char* what, ErrorCode code) {
+    calls_.push_back({what, clock_.nowNs()});
+    if (code == ErrorCode::kOk) return Status::ok();
+    return {code, what};
+  }
+
+  mock::ManualClock& clock_;
+  std::vector<ErrorCode> acquires_;
+  std::size_t acquired_ = 0;
+  uint64_t frames_ = 0;
+  CameraInfo info_;
+  std::vector<Call> calls_;
+};
+
+// Steps the helper like the capture stage until `frames` frames arrived: sleep
+// until next_ns when told to wait, spend 33 ms on each frame.
+void runScripted(CaptureRetry& retry, mock::ManualClock& clock, uint64_t frames) {
+  RgbdFrame slot(4, 3);
+  const uint64_t target = retry.stats().frames + frames;
+  for (int i = 0; i < 10000 && retry.stats().frames < target; ++i) {
+    const CaptureStep step = retry.step(clock.nowNs(), slot);
+    if (step.action == CaptureAction::kWait) {
+      clock.setNs(step.next_ns);
+    } else if (step.action == CaptureAction::kFrame) {
+      clock.advanceNs(kFramePeriodNs);
+    }
+  }
+}
+
+CaptureRetryConfig resetConfig() {
+  CaptureRetryConfig config;
+  config.acquire_timeout = std::chrono::milliseconds(100);
+  config.initial_backoff_ns = 10 * kMs;
+  config.max_backoff_ns = 1000 * kMs;
+  config.reopen_after_failures = 3;
+  return config;
+}
+
+constexpr ErrorCode kOk = ErrorCode::kOk;
+constexpr ErrorCode kTimeout = ErrorCode::kUnavailable;
+constexpr ErrorCode kGone = ErrorCode::kNotFound;
+
+// Frames at 0 and 33 ms; timeouts at 66, 166 and 266 ms (each blocks 100 ms;
+// backoff 10, 20, 40 ms from each failing step); the third makes a stall, so
+// at 366 ms: stop, reset, open, start, and the next frame at once.
+TEST(CaptureRetryReset, AStallResetsTheDeviceBetweenStopAndTheReopen) {
+  mock::ManualClock clock(0);
+  ScriptedCamera camera(clock, {kOk, kOk, kTimeout, kTimeout, kTimeout});
+  CaptureRetry retry(camera, resetConfig());
+  runScripted(retry, clock, 3);
+
+  const std::vector<std::string> expected = {"acquire", "acquire", "acquire", "acquire", "acquire",
+                                             "stop",    "reset",   "open",    "start",   "acquire"};
+  EXPECT_EQ(camera.calls(), expected);
+  EXPECT_EQ(camera.timeOf("acquire", 2), 66 * kMs);
+  EXPECT_EQ(camera.timeOf("acquire", 4), 266 * kMs);
+  EXPECT_EQ(camera.timeOf("stop"), 366 * kMs);
+  EXPECT_EQ(camera.timeOf("reset"), 366 * kMs);
+  EXPECT_EQ(camera.timeOf("open"), 366 * kMs);
+  EXPECT_EQ(camera.timeOf("acquire", 5), 366 * kMs);
+  const CaptureRetryStats& s = retry.stats();
+  EXPECT_EQ(s.reset_attempts, 1u);
+  EXPECT_EQ(s.resets, 1u);
+  EXPECT_EQ(s.resets_unsupported + s.resets_vanished + s.reset_failures, 0u);
+  EXPECT_EQ(s.reopens, 1u);
+  EXPECT_EQ(s.recoveries, 1u);
+  EXPECT_FALSE(retry.resetPending());
+}
+
+// A disconnect (kNotFound) reopens at once after the backoff, with no reset:
+// there is nothing on the bus to reset. The first reopen fails (still gone).
+TEST(CaptureRetryReset, ADisconnectReopensWithoutAReset) {
+  mock::ManualClock clock(0);
+  ScriptedCamera camera(clock, {kOk, kGone});
+  camera.open_results_ = {kGone};
+  CaptureRetry retry(camera, resetConfig());
+  runScripted(retry, clock, 2);
+
+  const std::vector<std::string> expected = {"acquire", "acquire", "stop", "open", "stop", "open", "start", "acquire"};
+  EXPECT_EQ(camera.calls(), expected);
+  EXPECT_EQ(camera.timeOf("reset"), -1);
+  // acquire at 33 ms fails (blocks to 133); reopen at 33 + 10, already past: 133;
+  // it fails, the next at 133 + 20 = 153.
+  EXPECT_EQ(camera.timeOf("open", 0), 133 * kMs);
+  EXPECT_EQ(camera.timeOf("open", 1), 153 * kMs);
+  const CaptureRetryStats& s = retry.stats();
+  EXPECT_EQ(s.reset_attempts, 0u);
+  EXPECT_EQ(s.disconnects, 1u);
+  EXPECT_EQ(s.reopens, 1u);
+}
+
+// A camera without a reset (Camera's default, kUnavailable): counted as
+// unsupported, and the reopen happens exactly as with a reset.
+TEST(CaptureRetryReset, AnUnsupportedResetStillReopens) {
+  mock::ManualClock clock(0);
+  ScriptedCamera camera(clock, {kOk, kOk, kTimeout, kTimeout, kTimeout});
+  camera.reset_result_ = ErrorCode::kUnavailable;
+  CaptureRetry retry(camera, resetConfig());
+  runScripted(retry, clock, 3);
+
+  const std::vector<std::string> expected = {"acquire", "acquire", "acquire", "acquire", "acquire",
+                                             "stop",    "reset",   "open",    "start",   "acquire"};
+  EXPECT_EQ(camera.calls(), expected);
+  EXPECT_EQ(camera.timeOf("open"), 366 * kMs);
+  const CaptureRetryStats& s = retry.stats();
+  EXPECT_EQ(s.reset_attempts, 1u);
+  EXPECT_EQ(s.resets_unsupported, 1u);
+  EXPECT_EQ(s.resets, 0u);
+  EXPECT_EQ(s.reopens, 1u);
+  EXPECT_EQ(s.frames, 3u);
+}
+
+// A reset that fails (an I/O error) or makes the device re-enumerate
+// (kNotFound) does not stop the reopen; each is counted by kind.
+TEST(CaptureRetryReset, AFailedOrVanishingResetStillReopens) {
+  for (const ErrorCode reset : {ErrorCode::kIoError, ErrorCode::kNotFound}) {
+    mock::ManualClock clock(0);
+    ScriptedCamera camera(clock, {kTimeout, kTimeout, kTimeout});
+    camera.reset_result_ = reset;
+    CaptureRetry retry(camera, resetConfig());
+    runScripted(retry, clock, 1);
+    const std::vector<std::string> expected = {"acquire", "acquire", "acquire", "stop",
+                                               "reset",   "open",    "start",   "acquire"};
+    EXPECT_EQ(camera.calls(), expected) << errorCodeName(reset);
+    const CaptureRetryStats& s = retry.stats();
+    EXPECT_EQ(s.reset_failures, reset == ErrorCode::kIoError ? 1u : 0u);
+    EXPECT_EQ(s.resets_vanished, reset == ErrorCode::kNotFound ? 1u : 0u);
+    EXPECT_EQ(s.reopens, 1u);
+    EXPECT_EQ(s.frames, 1u);
+  }
+}
+
+// After a stall, a reopen that fails is retried without resetting again; a
+// second stall after the recovery resets again.
+TEST(CaptureRetryReset, OneResetPerStallNotPerReopenAttempt) {
+  mock::ManualClock clock(0);
+  ScriptedCamera camera(clock, {kTimeout, kTimeout, kTimeout, kOk, kTimeout, kTimeout, kTimeout, kOk});
+  camera.open_results_ = {ErrorCode::kIoError};
+  CaptureRetry retry(camera, resetConfig());
+  runScripted(retry, clock, 2);
+
+  const std::vector<std::string> expected = {
+      "acquire", "acquire", "acquire", "stop", "reset", "open",  // first reopen fails
+      "stop",    "open",    "start",   "acquire",                // retried without a reset; frame
+      "acquire", "acquire", "acquire", "stop", "reset", "open", "start", "acquire"};  // second stall
+  EXPECT_EQ(camera.calls(), expected);
+  const CaptureRetryStats& s = retry.stats();
+  EXPECT_EQ(s.reset_attempts, 2u);
+  EXPECT_EQ(s.resets, 2u);
+  EXPECT_EQ(s.reopen_attempts, 3u);
+  EXPECT_EQ(s.reopens, 2u);
 }
 
 TEST(CaptureRetry, ActionAndEventNames) {
