@@ -509,13 +509,20 @@ struct LibcameraCamera::Registration {
   pipeline::DepthToColourRegistration kernel;
 };
 
-LibcameraCamera::LibcameraCamera(LibcameraCameraOptions options) : options_(std::move(options)) {
+LibcameraCamera::LibcameraCamera(LibcameraCameraOptions options)
+    : options_(std::move(options)), colour_(std::make_unique<ColourStream>()) {
+  info_.name = "libcamera:" + options_.camera;
+}
+
+LibcameraCamera::LibcameraCamera(LibcameraCameraOptions options, std::unique_ptr<Camera> depth,
+                                 std::unique_ptr<ColourSource> colour)
+    : options_(std::move(options)), depth_(std::move(depth)), colour_(std::move(colour)) {
   info_.name = "libcamera:" + options_.camera;
 }
 
 LibcameraCamera::~LibcameraCamera() {
   stop();
-  colour_.close();
+  colour_->close();
 }
 
 Result<std::unique_ptr<Camera>> LibcameraCamera::create(std::string_view args) {
@@ -545,7 +552,7 @@ CameraCounters LibcameraCamera::counters() const {
     c.disconnects += d.disconnects;
     c.bad_frames += d.bad_frames;
   }
-  c.bad_frames += colour_.failedFrames();
+  c.bad_frames += colour_->failedFrames();
   return c;
 }
 
@@ -574,15 +581,15 @@ Status LibcameraCamera::open() {
   if (Status s = depth_->open(); !s) {
     return {s.code(), "libcamera: depth camera " + options_.depth_spec + ": " + s.message()};
   }
-  if (Status s = colour_.open(options_); !s) return s;
+  if (Status s = colour_->open(options_); !s) return s;
   const StreamCalibration& colour_cal = *calibration_->colour;
-  if (colour_cal.intrinsics.width != colour_.width() || colour_cal.intrinsics.height != colour_.height()) {
-    const std::string size = std::to_string(colour_.width()) + "x" + std::to_string(colour_.height());
-    colour_.close();
+  if (colour_cal.intrinsics.width != colour_->width() || colour_cal.intrinsics.height != colour_->height()) {
+    const std::string size = std::to_string(colour_->width()) + "x" + std::to_string(colour_->height());
+    colour_->close();
     return {ErrorCode::kInvalidArgument,
             "libcamera: the colour calibration from " + calibration_->source + " is for " +
                 std::to_string(colour_cal.intrinsics.width) + "x" + std::to_string(colour_cal.intrinsics.height) +
-                ", camera " + colour_.id() + " streams " + size + ": set size= to the calibrated size"};
+                ", camera " + colour_->id() + " streams " + size + ": set size= to the calibrated size"};
   }
   const CameraInfo& depth_info = depth_->info();
   pipeline::RegistrationParams params;
@@ -592,7 +599,7 @@ Status LibcameraCamera::open() {
   params.depth_scale_m = depth_info.depth_scale_m;
   Result<pipeline::DepthToColourRegistration> registration = pipeline::DepthToColourRegistration::create(params);
   if (!registration) {
-    colour_.close();
+    colour_->close();
     return {registration.status().code(), "libcamera: calibration from " + calibration_->source + ": " +
                                               registration.status().message()};
   }
@@ -600,11 +607,11 @@ Status LibcameraCamera::open() {
 
   info_ = depth_info;
   info_.name = "libcamera:" + options_.camera;
-  info_.model = colour_.model() + " + " + (depth_info.model.empty() ? options_.depth_spec : depth_info.model);
-  info_.device_buffer_bytes = depth_info.device_buffer_bytes + colour_.mappedBytes();
+  info_.model = colour_->model() + " + " + (depth_info.model.empty() ? options_.depth_spec : depth_info.model);
+  info_.device_buffer_bytes = depth_info.device_buffer_bytes + colour_->mappedBytes();
   constexpr std::size_t kColourSlots = 3;
   colour_slots_.assign(kColourSlots,
-                       std::vector<uint8_t>(static_cast<std::size_t>(colour_.width()) * colour_.height() * 3));
+                       std::vector<uint8_t>(static_cast<std::size_t>(colour_->width()) * colour_->height() * 3));
   pairer_ = TimestampPairer(kColourSlots, static_cast<int64_t>(0.5e9 / std::max(info_.fps, 1.0)));
   opened_ = true;
   return Status::ok();
@@ -614,7 +621,7 @@ Status LibcameraCamera::start() {
   if (!opened_) return {ErrorCode::kUnavailable, "libcamera camera: call open() before start()"};
   if (started_) return Status::ok();
   if (Status s = depth_->start(); !s) return s;
-  if (Status s = colour_.start(); !s) {
+  if (Status s = colour_->start(); !s) {
     depth_->stop();
     return s;
   }
@@ -627,25 +634,25 @@ Status LibcameraCamera::start() {
 void LibcameraCamera::stop() {
   if (!started_) return;
   started_ = false;
-  colour_.stop();
+  colour_->stop();
   depth_->stop();
 }
 
 // Converts every completed colour frame into the pairer's slots, waiting up to
 // `wait` for the first.
 void LibcameraCamera::drainColour(std::chrono::nanoseconds wait) {
-  ColourStream::Frame frame;
-  while (colour_.next(frame, wait).isOk()) {
+  ColourFrame frame;
+  while (colour_->next(frame, wait).isOk()) {
     wait = std::chrono::nanoseconds(0);
     const int slot = pairer_.nextColourSlot();
-    if (packedRgbToRgb8(colour_.layout(), frame.data, frame.bytes, frame.stride, colour_.width(), colour_.height(),
+    if (packedRgbToRgb8(colour_->layout(), frame.data, frame.bytes, frame.stride, colour_->width(), colour_->height(),
                         colour_slots_[static_cast<std::size_t>(slot)].data())) {
       pairer_.pushColour(frame.stamp_ns);
       newest_colour_ns_ = frame.stamp_ns;
     } else {
       counters_.badFrame();
     }
-    colour_.release(frame);
+    colour_->release(frame);
   }
 }
 

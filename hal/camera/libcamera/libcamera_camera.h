@@ -71,39 +71,61 @@ std::optional<PackedRgbLayout> packedRgbLayout(std::string_view libcamera_format
 [[nodiscard]] bool packedRgbToRgb8(const PackedRgbLayout& layout, const uint8_t* src, std::size_t bytes,
                                    std::size_t stride, int width, int height, uint8_t* rgb);
 
-// The colour side: one libcamera camera streaming into mmap()ed buffers.
-// Constructed empty; open() does the I/O. Exposed for tests.
-class ColourStream {
+// A colour frame source: libcamera's (ColourStream), or a test's.
+struct ColourFrame {
+  const uint8_t* data = nullptr;  // first plane, mapped
+  std::size_t bytes = 0;          // bytes the camera filled
+  std::size_t stride = 0;
+  int64_t stamp_ns = 0;           // CLOCK_MONOTONIC
+  uint64_t token = 0;             // give back with release()
+};
+
+class ColourSource {
  public:
-  struct Frame {
-    const uint8_t* data = nullptr;  // first plane, mapped
-    std::size_t bytes = 0;          // bytes the camera filled
-    std::size_t stride = 0;
-    int64_t stamp_ns = 0;           // CLOCK_MONOTONIC
-    uint64_t token = 0;             // give back with release()
-  };
+  virtual ~ColourSource() = default;
+  virtual Status open(const LibcameraCameraOptions& options) = 0;
+  virtual Status start() = 0;
+  // The next completed frame, waiting up to timeout; kUnavailable on timeout.
+  virtual Status next(ColourFrame& frame, std::chrono::nanoseconds timeout) = 0;
+  // Gives the frame's buffer back to the camera.
+  virtual void release(const ColourFrame& frame) = 0;
+  virtual void stop() = 0;
+  virtual void close() = 0;
+
+  virtual const std::string& id() const = 0;
+  virtual const std::string& model() const = 0;
+  virtual int width() const = 0;
+  virtual int height() const = 0;
+  virtual const PackedRgbLayout& layout() const = 0;
+  virtual uint64_t failedFrames() const = 0;  // completed with an error, not delivered
+  virtual std::size_t mappedBytes() const = 0;
+};
+
+// The colour side: one libcamera camera streaming into mmap()ed buffers.
+// Constructed empty; open() does the I/O.
+class ColourStream final : public ColourSource {
+ public:
+  using Frame = ColourFrame;
   ColourStream();
-  ~ColourStream();
+  ~ColourStream() override;
   ColourStream(const ColourStream&) = delete;
   ColourStream& operator=(const ColourStream&) = delete;
 
-  Status open(const LibcameraCameraOptions& options);
-  Status start();
-  // The next completed frame, waiting up to timeout; kUnavailable on timeout.
-  Status next(Frame& frame, std::chrono::nanoseconds timeout);
-  // Queues the frame's request again.
-  void release(const Frame& frame);
-  void stop();
-  void close();
+  Status open(const LibcameraCameraOptions& options) override;
+  Status start() override;
+  Status next(Frame& frame, std::chrono::nanoseconds timeout) override;
+  void release(const Frame& frame) override;
+  void stop() override;
+  void close() override;
 
-  const std::string& id() const;
-  const std::string& model() const;
-  int width() const;
-  int height() const;
+  const std::string& id() const override;
+  const std::string& model() const override;
+  int width() const override;
+  int height() const override;
   const std::string& formatName() const;
-  const PackedRgbLayout& layout() const;
-  uint64_t failedFrames() const;  // completed with an error status, not delivered
-  std::size_t mappedBytes() const;
+  const PackedRgbLayout& layout() const override;
+  uint64_t failedFrames() const override;
+  std::size_t mappedBytes() const override;
 
  private:
   struct Impl;
@@ -113,6 +135,8 @@ class ColourStream {
 class LibcameraCamera final : public Camera {
  public:
   explicit LibcameraCamera(LibcameraCameraOptions options);
+  // With a given depth camera and colour source (tests).
+  LibcameraCamera(LibcameraCameraOptions options, std::unique_ptr<Camera> depth, std::unique_ptr<ColourSource> colour);
   ~LibcameraCamera() override;
   static Result<std::unique_ptr<Camera>> create(std::string_view args);
 
@@ -134,7 +158,7 @@ class LibcameraCamera final : public Camera {
   CameraInfo info_;
   std::optional<CameraCalibration> calibration_;
   std::unique_ptr<Camera> depth_;
-  ColourStream colour_;
+  std::unique_ptr<ColourSource> colour_;
   std::unique_ptr<Registration> registration_;
   std::vector<std::vector<uint8_t>> colour_slots_;  // converted RGB8 colour frames
   TimestampPairer pairer_{1, 0};

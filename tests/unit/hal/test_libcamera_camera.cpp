@@ -3,11 +3,13 @@
 // errors; and frames from the vimc virtual camera where a kernel has it.
 #include "hal/camera/libcamera/libcamera_camera.h"
 
+#include <cmath>
 #include <string>
 
 #include <gtest/gtest.h>
 
 #include "hal/camera.h"
+#include "tests/support/alloc_counter.h"
 
 namespace fovea::hal::libcam {
 namespace {
@@ -168,6 +170,169 @@ TEST(LibcameraHost, WithCalibrationTheDepthCameraOpensAndTheMissingColourCameraI
   EXPECT_TRUE(contains(s.message(), "no camera found")) << s.message();
   // Open again: still a clear error, no crash, nothing leaked into a second manager.
   EXPECT_EQ(camera.value()->open().code(), ErrorCode::kNotFound);
+}
+
+// ------------------------------------------- acquire() with a fake colour source
+
+// Passes a mock depth camera through and notes its last stamp, so that the fake
+// colour source below can deliver "the colour frame taken with it".
+class StampNotingCamera final : public Camera {
+ public:
+  StampNotingCamera(std::unique_ptr<Camera> inner, int64_t* last_stamp_ns)
+      : inner_(std::move(inner)), last_stamp_ns_(last_stamp_ns) {}
+  Status open() override { return inner_->open(); }
+  Status start() override { return inner_->start(); }
+  Status acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) override {
+    const Status s = inner_->acquire(slot, timeout);
+    if (s) *last_stamp_ns_ = slot.stamp_ns;
+    return s;
+  }
+  void stop() override { inner_->stop(); }
+  const CameraInfo& info() const override { return inner_->info(); }
+  CameraCounters counters() const override { return inner_->counters(); }
+
+ private:
+  std::unique_ptr<Camera> inner_;
+  int64_t* last_stamp_ns_;
+};
+
+// Colour frames k = 0, 1, ... stamped k / fps (the mock depth camera's stamps),
+// each available once the depth frame of that stamp has been taken; BGR888
+// (R, G, B in memory) of one colour: R = 10 + k % 200, G = 100, B = 200.
+class FakeColour final : public ColourSource {
+ public:
+  FakeColour(int width, int height, double fps, const int64_t* depth_stamp_ns, bool deliver)
+      : width_(width), height_(height), period_ns_(1e9 / fps), depth_stamp_ns_(depth_stamp_ns), deliver_(deliver),
+        image_(static_cast<std::size_t>(width) * height * 3) {}
+  Status open(const LibcameraCameraOptions&) override { return Status::ok(); }
+  Status start() override {
+    next_ = 0;
+    return Status::ok();
+  }
+  Status next(ColourFrame& frame, std::chrono::nanoseconds) override {
+    const auto stamp = static_cast<int64_t>(std::llround(static_cast<double>(next_) * period_ns_));
+    if (!deliver_ || *depth_stamp_ns_ < 0 || stamp > *depth_stamp_ns_) return Status(ErrorCode::kUnavailable, "t");
+    for (std::size_t p = 0; p < image_.size(); p += 3) {
+      image_[p] = static_cast<uint8_t>(10 + next_ % 200);
+      image_[p + 1] = 100;
+      image_[p + 2] = 200;
+    }
+    frame.data = image_.data();
+    frame.bytes = image_.size();
+    frame.stride = static_cast<std::size_t>(width_) * 3;
+    frame.stamp_ns = stamp;
+    frame.token = next_++;
+    ++outstanding_;
+    return Status::ok();
+  }
+  void release(const ColourFrame&) override { --outstanding_; }
+  void stop() override {}
+  void close() override {}
+  const std::string& id() const override { return id_; }
+  const std::string& model() const override { return id_; }
+  int width() const override { return width_; }
+  int height() const override { return height_; }
+  const PackedRgbLayout& layout() const override { return layout_; }
+  uint64_t failedFrames() const override { return 0; }
+  std::size_t mappedBytes() const override { return image_.size(); }
+  int outstanding() const { return outstanding_; }
+
+ private:
+  int width_, height_;
+  double period_ns_;
+  const int64_t* depth_stamp_ns_;
+  bool deliver_;
+  std::vector<uint8_t> image_;
+  uint64_t next_ = 0;
+  int outstanding_ = 0;
+  std::string id_ = "fake";
+  PackedRgbLayout layout_ = *packedRgbLayout("BGR888");
+};
+
+struct FakeRig {
+  int64_t depth_stamp_ns = -1;
+  FakeColour* colour = nullptr;
+  std::unique_ptr<LibcameraCamera> camera;
+};
+
+FakeRig makeFakeRig(bool deliver_colour) {
+  FakeRig rig;
+  Result<std::unique_ptr<Camera>> mock = createCamera("mock:living-room,size=160x120,noise=off");
+  EXPECT_TRUE(mock.isOk());
+  auto depth = std::make_unique<StampNotingCamera>(std::move(mock).value(), &rig.depth_stamp_ns);
+  auto colour = std::make_unique<FakeColour>(160, 120, 30.0, &rig.depth_stamp_ns, deliver_colour);
+  rig.colour = colour.get();
+  LibcameraCameraOptions options;
+  options.camera = "0";
+  options.depth_spec = "mock:living-room,size=160x120,noise=off";
+  rig.camera = std::make_unique<LibcameraCamera>(options, std::move(depth), std::move(colour));
+  return rig;
+}
+
+TEST(LibcameraAcquire, ColourIsPairedByStampAndRegisteredWithoutAllocating) {
+  FakeRig rig = makeFakeRig(true);
+  // The colour camera sees what the depth camera sees (same intrinsics, no offset).
+  CameraCalibration calibration;
+  calibration.source = "identity";
+  calibration.colour = StreamCalibration{{160, 120, 525.0 * 160 / 640, 525.0 * 160 / 640, 79.5, 59.5}, {}};
+  calibration.T_colour_depth = Pose();
+  ASSERT_TRUE(rig.camera->setCalibration(calibration).isOk());
+  const Status opened = rig.camera->open();
+  ASSERT_TRUE(opened.isOk()) << opened.toString();
+  EXPECT_EQ(rig.camera->info().name, "libcamera:0");
+  EXPECT_EQ(rig.camera->info().intrinsics.width, 160);  // the depth camera's
+  ASSERT_TRUE(rig.camera->start().isOk());
+  RgbdFrame slot(160, 120);
+  ASSERT_TRUE(rig.camera->acquire(slot, milliseconds(1000)).isOk());  // warm-up
+  test::AllocationScope scope;
+  for (int i = 1; i <= 30; ++i) {
+    const Status s = rig.camera->acquire(slot, milliseconds(1000));
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(slot.has_rgb) << "frame " << i;
+    // Every pixel with depth shows colour frame i (same stamp): R = 10 + i, G = 100, B = 200.
+    std::size_t coloured = 0, with_depth = 0;
+    for (std::size_t p = 0; p < slot.pixelCount(); ++p) {
+      if (slot.depth()[p] == 0) continue;
+      ++with_depth;
+      const uint8_t* rgb = slot.rgb() + 3 * p;
+      coloured += rgb[0] == 10 + i && rgb[1] == 100 && rgb[2] == 200;
+    }
+    ASSERT_GT(with_depth, 1000u);
+    EXPECT_EQ(coloured, with_depth) << "frame " << i;
+  }
+  EXPECT_EQ(scope.allocations(), 0u);
+  EXPECT_EQ(rig.camera->pairingCounts().paired, 31u);
+  EXPECT_EQ(rig.camera->pairingCounts().depth_unmatched, 0u);
+  EXPECT_EQ(rig.colour->outstanding(), 0);  // every colour frame given back
+  EXPECT_EQ(rig.camera->counters().frames_delivered, 31u);
+  rig.camera->stop();
+}
+
+TEST(LibcameraAcquire, NoColourFrameGivesDepthWithoutColourCounted) {
+  FakeRig rig = makeFakeRig(false);
+  CameraCalibration calibration;
+  calibration.source = "identity";
+  calibration.colour = StreamCalibration{{160, 120, 131.25, 131.25, 79.5, 59.5}, {}};
+  calibration.T_colour_depth = Pose();
+  ASSERT_TRUE(rig.camera->setCalibration(calibration).isOk());
+  ASSERT_TRUE(rig.camera->open().isOk());
+  ASSERT_TRUE(rig.camera->start().isOk());
+  RgbdFrame slot(160, 120);
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_TRUE(rig.camera->acquire(slot, milliseconds(1000)).isOk());
+    EXPECT_FALSE(slot.has_rgb);
+  }
+  EXPECT_EQ(rig.camera->pairingCounts().depth_unmatched, 3u);
+  EXPECT_EQ(rig.camera->pairingCounts().paired, 0u);
+}
+
+TEST(LibcameraAcquire, ColourCalibrationOfAnotherSizeIsRefused) {
+  FakeRig rig = makeFakeRig(true);
+  ASSERT_TRUE(rig.camera->setCalibration(exampleCalibration(640, 480)).isOk());
+  const Status s = rig.camera->open();
+  ASSERT_FALSE(s.isOk());
+  EXPECT_TRUE(contains(s.message(), "is for 640x480")) << s.message();
+  EXPECT_TRUE(contains(s.message(), "streams 160x120")) << s.message();
 }
 
 // ------------------------------------------------------------------- vimc
