@@ -27,6 +27,15 @@ constexpr int kRgb888 = 200;      // openni::PIXEL_FORMAT_RGB888
     ASSERT_TRUE(status_.isOk()) << status_.toString(); \
   } while (0)
 
+// Cross builds tested through qemu-user: OpenNI2's runtime hangs there in its
+// first initialize (seen with the arm64 build under qemu-aarch64 7.2, not
+// investigated further); these tests run natively and on arm64 hardware.
+#ifdef FOVEA_TESTS_IN_QEMU_USER
+#define SKIP_UNDER_QEMU_USER() GTEST_SKIP() << "OpenNI2's runtime hangs under qemu-user: runs natively only"
+#else
+#define SKIP_UNDER_QEMU_USER() (void)0
+#endif
+
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 std::unique_ptr<Camera> makeCamera(const std::string& args) {
@@ -200,6 +209,7 @@ TEST(OpenNI2Camera, OniRecordingIsRefusedWithAReason) {
 // ------------------------------------------------------- OpenNI2's runtime
 
 TEST(OpenNI2Camera, FirstDeviceWhenNoneIsPluggedInSaysWhatToDo) {
+  SKIP_UNDER_QEMU_USER();
   Result<std::vector<DeviceListing>> listed = discoverOpenNI2Cameras();
   ASSERT_TRUE(listed.isOk()) << listed.status().toString();
   if (!listed->empty()) GTEST_SKIP() << "an OpenNI2 device is plugged in (" << listed->front().spec << ")";
@@ -216,6 +226,7 @@ TEST(OpenNI2Camera, FirstDeviceWhenNoneIsPluggedInSaysWhatToDo) {
 }
 
 TEST(OpenNI2Camera, UnknownUriIsNotFound) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("2bc5/0401@9/99");
   ASSERT_NE(camera, nullptr);
   const Status s = camera->open();
@@ -226,6 +237,7 @@ TEST(OpenNI2Camera, UnknownUriIsNotFound) {
 }
 
 TEST(OpenNI2Dummy, OpensWithItsModesModelAndNominalIntrinsics) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   ASSERT_NE(camera, nullptr);
   ASSERT_OK(camera->open());
@@ -254,6 +266,7 @@ TEST(OpenNI2Dummy, OpensWithItsModesModelAndNominalIntrinsics) {
 }
 
 TEST(OpenNI2Dummy, WrongSizeListsTheModes) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy,size=640x480");
   ASSERT_NE(camera, nullptr);
   const Status s = camera->open();
@@ -267,6 +280,7 @@ TEST(OpenNI2Dummy, WrongSizeListsTheModes) {
 }
 
 TEST(OpenNI2Dummy, DeliversAHundredPairedFramesWithoutAllocatingItself) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   ASSERT_NE(camera, nullptr);
   ASSERT_OK(camera->open());
@@ -338,6 +352,7 @@ TEST(OpenNI2Dummy, DeliversAHundredPairedFramesWithoutAllocatingItself) {
 }
 
 TEST(OpenNI2Dummy, StampsAreOnTheMonotonicClock) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   ASSERT_OK(camera->open());
   ASSERT_OK(camera->start());
@@ -354,6 +369,7 @@ TEST(OpenNI2Dummy, StampsAreOnTheMonotonicClock) {
 }
 
 TEST(OpenNI2Dummy, ColourOffGivesDepthOnly) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy,colour=off");
   ASSERT_OK(camera->open());
   EXPECT_FALSE(asOpenNI2(*camera).colourEnabled());
@@ -365,6 +381,7 @@ TEST(OpenNI2Dummy, ColourOffGivesDepthOnly) {
 }
 
 TEST(OpenNI2Dummy, StopStartAndReopenCycles) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   RgbdFrame slot(320, 240);
   for (int cycle = 0; cycle < 3; ++cycle) {
@@ -391,6 +408,7 @@ TEST(OpenNI2Dummy, StopStartAndReopenCycles) {
 }
 
 TEST(OpenNI2Dummy, SlotTooSmallAndNotStarted) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   ASSERT_OK(camera->open());
   RgbdFrame slot(320, 240);
@@ -402,6 +420,7 @@ TEST(OpenNI2Dummy, SlotTooSmallAndNotStarted) {
 }
 
 TEST(OpenNI2Dummy, CalibrationOverridesTheIntrinsics) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
   CameraCalibration calibration;
   calibration.source = "dummy.yaml";
@@ -434,6 +453,7 @@ TEST(OpenNI2Dummy, CalibrationOverridesTheIntrinsics) {
 }
 
 TEST(OpenNI2Dummy, TwoCamerasAndDiscoveryShareTheRuntime) {
+  SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> a = makeCamera("Dummy");
   std::unique_ptr<Camera> b = makeCamera("Dummy,colour=off");
   ASSERT_OK(a->open());
@@ -452,6 +472,7 @@ TEST(OpenNI2Dummy, TwoCamerasAndDiscoveryShareTheRuntime) {
 }
 
 TEST(OpenNI2Dummy, ThroughTheBackendTable) {
+  SKIP_UNDER_QEMU_USER();
   Result<std::unique_ptr<Camera>> camera = createCamera("openni2:Dummy");
   ASSERT_TRUE(camera.isOk()) << camera.status().toString();
   ASSERT_OK(camera.value()->open());
