@@ -72,6 +72,8 @@ if(FOVEA_UDEV_RULES_FILE)
     DEPENDS ${FOVEA_UDEV_RULES_FILE} ${_fovea_pkg_dir}/metainfo.cmake
     COMMENT "AppStream metadata of the udev rules' cameras")
   add_custom_target(fovea_metainfo ALL DEPENDS ${_fovea_metainfo})
+  # The rules file is another directory's custom output: order on its target.
+  add_dependencies(fovea_metainfo fovea_udev_rules_file)
   install(FILES ${_fovea_metainfo} DESTINATION ${CMAKE_INSTALL_DATADIR}/metainfo)
 endif()
 
