@@ -130,7 +130,7 @@ set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "foveated RGB-D point clouds for immersive
 # turning an empty line into Debian's " .".
 set(_fovea_tuned "")
 if(FOVEA_PACKAGE_BOARD)
-  set(_fovea_tuned "\n\nThis build is tuned for the board ${FOVEA_PACKAGE_BOARD} (-mcpu=${FOVEA_MCPU}): it runs on that\ncore and newer ones only.")
+  set(_fovea_tuned "\n\nThis build is tuned for the board ${FOVEA_PACKAGE_BOARD}\n(-mcpu=${FOVEA_MCPU}): it runs on that core and newer ones only.")
 endif()
 set(CPACK_DEBIAN_PACKAGE_DESCRIPTION "fovea is the robot-side service of an immersive telerobotics link: it turns
 each RGB-D camera frame into a point cloud, keeps full detail where the remote
