@@ -56,7 +56,9 @@ if(NOT CMAKE_CROSSCOMPILING OR CMAKE_CROSSCOMPILING_EMULATOR)
     DEPENDS fovea_udev_rules
     COMMENT "udev rules for the known RGB-D cameras: ${FOVEA_UDEV_RULES_FILE}")
   add_custom_target(fovea_udev_rules_file ALL DEPENDS ${FOVEA_UDEV_RULES_FILE})
-  install(FILES ${FOVEA_UDEV_RULES_FILE} DESTINATION lib/udev/rules.d)
+  # Debian 12 keeps rules in /lib/udev/rules.d: a package build sets FOVEA_UDEV_RULES_DIR.
+  set(FOVEA_UDEV_RULES_DIR lib/udev/rules.d CACHE STRING "Where udev rules are installed (relative: under the prefix)")
+  install(FILES ${FOVEA_UDEV_RULES_FILE} DESTINATION ${FOVEA_UDEV_RULES_DIR})
 else()
   unset(FOVEA_UDEV_RULES_FILE CACHE)
   message(STATUS "fovea: cross-compiling without an emulator: the udev rules file is not generated (run fovea_udev_rules on the target)")
