@@ -279,6 +279,22 @@ TEST(OpenNI2Dummy, WrongSizeListsTheModes) {
   ASSERT_OK(ok->open());
 }
 
+// The Dummy's colour thread can fall whole frames behind its depth on a loaded
+// machine, for good (see hal/camera/openni2/openni2_camera.cpp): acquire() then
+// says "out of step", and a restart, as hal::CaptureRetry does, aligns the
+// streams again. Up to kMaxRealigns such restarts per test; anything else fails.
+constexpr int kMaxRealigns = 10;
+Status acquireRealigning(Camera& camera, RgbdFrame& slot, int& restarts) {
+  Status s = camera.acquire(slot, milliseconds(2000));
+  while (!s.isOk() && s.message() == "out of step" && restarts < kMaxRealigns) {
+    ++restarts;
+    camera.stop();
+    if (Status started = camera.start(); !started.isOk()) return started;
+    s = camera.acquire(slot, milliseconds(2000));
+  }
+  return s;
+}
+
 TEST(OpenNI2Dummy, DeliversAHundredPairedFramesWithoutAllocatingItself) {
   SKIP_UNDER_QEMU_USER();
   std::unique_ptr<Camera> camera = makeCamera("Dummy");
@@ -299,15 +315,7 @@ TEST(OpenNI2Dummy, DeliversAHundredPairedFramesWithoutAllocatingItself) {
   {
     test::AllocationScope scope;
     for (int i = 0; i < 100; ++i) {
-      Status s = camera->acquire(slot, milliseconds(2000));
-      if (s.message() == "out of step" && restarts < 2) {
-        // The Dummy's colour fell whole frames behind (see the header): a
-        // restart, as hal::CaptureRetry would do, aligns the streams again.
-        ++restarts;
-        camera->stop();
-        ASSERT_OK(camera->start());
-        s = camera->acquire(slot, milliseconds(2000));
-      }
+      const Status s = acquireRealigning(*camera, slot, restarts);
       ASSERT_TRUE(s.isOk()) << s.toString() << " at frame " << i << "; paired " << cam.pairingCounts().paired
                             << ", depth unmatched " << cam.pairingCounts().depth_unmatched << ", colour dropped "
                             << cam.pairingCounts().colour_dropped << ", released " << cam.framesReleased();
@@ -389,7 +397,8 @@ TEST(OpenNI2Dummy, StopStartAndReopenCycles) {
     for (int run = 0; run < 2; ++run) {
       SCOPED_TRACE("cycle " + std::to_string(cycle) + " run " + std::to_string(run));
       ASSERT_OK(camera->start());
-      for (int i = 0; i < 3; ++i) ASSERT_OK(camera->acquire(slot, milliseconds(2000)));
+      int restarts = 0;
+      for (int i = 0; i < 3; ++i) ASSERT_OK(acquireRealigning(*camera, slot, restarts));
       camera->stop();
       const Status stopped = camera->acquire(slot, milliseconds(10));
       EXPECT_EQ(stopped.code(), ErrorCode::kUnavailable);
