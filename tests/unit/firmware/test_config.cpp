@@ -402,10 +402,11 @@ TEST(BoardProfiles, MissingCameraBackendIsReportedButTheProfileValidates) {
   ASSERT_EQ(missing.size(), 1u);
   EXPECT_EQ(missing[0], "camera.spec: backend 'nosuch' is not in this build (built: " + built + ")");
 
-  // The Raspberry Pi 5 profile names the V4L2 backend of issue 6.
+  // The Raspberry Pi 5 profile names the V4L2 backend and a calibration file.
   Result<ServiceConfig> rpi5 = loadServiceConfig(boardDir() + "/rpi5-usb-rgbd.toml", ServiceConfig{});
   ASSERT_TRUE(rpi5.isOk()) << rpi5.status().message();
-  EXPECT_EQ(rpi5->camera.spec, "v4l2:/dev/video0");
+  EXPECT_EQ(rpi5->camera.spec.rfind("v4l2:auto,", 0), 0u) << rpi5->camera.spec;
+  EXPECT_EQ(rpi5->camera.calibration_file, "/etc/fovea/camera.yaml");
   const std::vector<std::string_view> names = hal::cameraBackendNames();
   if (std::find(names.begin(), names.end(), "v4l2") != names.end()) GTEST_SKIP() << "this build has v4l2";
   const std::vector<std::string> rpi5_missing = missingBackends(*rpi5);
