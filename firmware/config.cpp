@@ -519,12 +519,11 @@ void collect(const toml::value& table, const std::string& prefix, std::vector<En
   }
 }
 
-// Applies a file over `config`: field by field in the file's order, each
-// checked alone (validate() checks the rules between fields).
-Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins) {
-  Result<std::string> text = readFile(path);
-  if (!text) return text.status();
-  Result<toml::value> root = parseToml(text.value(), path);
+// Applies a file's text over `config`: field by field in the file's order,
+// each checked alone (validate() checks the rules between fields). path names
+// the file in messages.
+Status loadTextInto(const std::string& text, const std::string& path, ServiceConfig& config, Origins& origins) {
+  Result<toml::value> root = parseToml(text, path);
   if (!root) return root.status();
   std::vector<Entry> entries;
   std::vector<std::pair<std::size_t, std::string>> errors;
@@ -540,6 +539,12 @@ Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins
   }
   if (!errors.empty()) return invalid(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
   return Status::ok();
+}
+
+Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins) {
+  Result<std::string> text = readFile(path);
+  if (!text) return text.status();
+  return loadTextInto(text.value(), path, config, origins);
 }
 
 struct FieldError {
@@ -659,9 +664,15 @@ Status applyOverrideTracked(ServiceConfig& config, std::string_view assignment, 
 }  // namespace
 
 Result<ServiceConfig> loadServiceConfig(const std::string& path, const ServiceConfig& base) {
+  Result<std::string> text = readFile(path);
+  if (!text) return text.status();
+  return parseServiceConfig(text.value(), path, base);
+}
+
+Result<ServiceConfig> parseServiceConfig(std::string_view text, const std::string& name, const ServiceConfig& base) {
   ServiceConfig config = base;
   Origins origins;
-  if (Status s = loadInto(path, config, origins); !s) return s;
+  if (Status s = loadTextInto(std::string(text), name, config, origins); !s) return s;
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;
 }
