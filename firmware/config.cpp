@@ -302,6 +302,46 @@ std::string formatValue(const Value& value) {
   return out + "]";
 }
 
+// What is wrong with a string value's bytes ("" when nothing). A TOML file is
+// UTF-8, so formatServiceConfig could not print anything else loadably (--set's
+// bare text is not parsed as TOML, so it can carry any bytes: fuzz_config found
+// it); a control character (a NUL cuts a path short) is always a mistake here.
+std::string checkText(std::string_view text) {
+  for (std::size_t i = 0; i < text.size();) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c < 0x20 || c == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "0x%02x", c);
+      return "must not contain control characters (byte " + std::to_string(i) + " is " + hex + ")";
+    }
+    // RFC 3629: the length from the lead byte, continuation bytes 10xxxxxx, no
+    // overlong forms, no surrogates, nothing above U+10FFFF.
+    std::size_t length = 1;
+    unsigned char lo = 0x80, hi = 0xbf;  // the range of the second byte
+    if (c >= 0xc2 && c <= 0xdf) {
+      length = 2;
+    } else if (c >= 0xe0 && c <= 0xef) {
+      length = 3;
+      if (c == 0xe0) lo = 0xa0;
+      if (c == 0xed) hi = 0x9f;
+    } else if (c >= 0xf0 && c <= 0xf4) {
+      length = 4;
+      if (c == 0xf0) lo = 0x90;
+      if (c == 0xf4) hi = 0x8f;
+    } else if (c >= 0x80) {
+      return "must be UTF-8 text (byte " + std::to_string(i) + " is not)";
+    }
+    for (std::size_t k = 1; k < length; ++k) {
+      const auto b = i + k < text.size() ? static_cast<unsigned char>(text[i + k]) : 0;
+      if (b < (k == 1 ? lo : 0x80) || b > (k == 1 ? hi : 0xbf)) {
+        return "must be UTF-8 text (byte " + std::to_string(i) + " is not)";
+      }
+    }
+    i += length;
+  }
+  return "";
+}
+
 // What is wrong with a value of the right type ("" when nothing).
 std::string checkValue(const Field& field, const Value& value) {
   auto outside = [&field](double v) { return !(v >= field.min && v <= field.max); };
@@ -321,9 +361,14 @@ std::string checkValue(const Field& field, const Value& value) {
       const double v = std::get<double>(value);
       return outside(v) ? range(formatNumber(v)) : "";
     }
-    case Kind::kString: return field.check ? field.check(std::get<std::string>(value)) : "";
+    case Kind::kString: {
+      const std::string& v = std::get<std::string>(value);
+      if (std::string error = checkText(v); !error.empty()) return error;
+      return field.check ? field.check(v) : "";
+    }
     case Kind::kChoice: {
       const std::string& v = std::get<std::string>(value);
+      if (std::string error = checkText(v); !error.empty()) return error;
       if (std::find(field.choices.begin(), field.choices.end(), v) != field.choices.end()) return "";
       std::string list;
       for (const std::string& choice : field.choices) list += (list.empty() ? "" : ", ") + quote(choice);
