@@ -17,14 +17,19 @@ void __libc_free(void* p);
 namespace {
 std::atomic<uint64_t> g_count{0};
 std::atomic<bool> g_enabled{false};
+thread_local uint64_t t_count = 0;  // the executable's static TLS: no allocation to reach it
 inline void note() {
-  if (g_enabled.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
+  if (g_enabled.load(std::memory_order_relaxed)) {
+    g_count.fetch_add(1, std::memory_order_relaxed);
+    ++t_count;
+  }
 }
 }  // namespace
 
 namespace fovea::test {
 uint64_t allocationCount() { return g_count.load(); }
 void setAllocationCounting(bool enabled) { g_enabled.store(enabled); }
+uint64_t threadAllocationCount() { return t_count; }
 }  // namespace fovea::test
 
 extern "C" {

@@ -10,6 +10,9 @@ namespace fovea::test {
 // Allocations made since the process started (counted only while enabled).
 uint64_t allocationCount();
 void setAllocationCounting(bool enabled);
+// Allocations the calling thread made while counting was enabled (to tell a
+// backend's own allocations from those of a library's threads).
+uint64_t threadAllocationCount();
 
 // Counts the allocations made in its scope.
 class AllocationScope {

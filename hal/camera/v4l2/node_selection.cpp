@@ -73,8 +73,19 @@ bool isSeen(const NodeInfo& n, const SeenNode& seen) {
 
 int pickDepthNode(const std::vector<NodeInfo>& nodes, const NodeSelector& selector, const SeenNode& seen) {
   const int n = static_cast<int>(nodes.size());
-  if (selector.kind == NodeSelector::Kind::kPath && !seen.empty()) {
-    // Still the same device under its old path? Else its node under a new one,
+  if (selector.kind == NodeSelector::Kind::kAuto && seen.empty()) {
+    // The first node offering the preferred depth format: a RealSense's depth
+    // node (Z16) before its infrared node (Y16), on whichever camera it is.
+    for (const uint32_t fourcc : kDepthFourccs) {
+      for (int i = 0; i < n; ++i) {
+        if (std::find(nodes[i].formats.begin(), nodes[i].formats.end(), fourcc) != nodes[i].formats.end()) return i;
+      }
+    }
+    return -1;
+  }
+  if ((selector.kind == NodeSelector::Kind::kPath || selector.kind == NodeSelector::Kind::kAuto) && !seen.empty()) {
+    // Still the same device under its old path? Else its node under a new one
+    // (auto: the device the first open took, not whichever comes first now),
     // the one offering the format used before first (a RealSense's infrared
     // node shares the device and may offer Y16 too).
     for (int i = 0; i < n; ++i) {

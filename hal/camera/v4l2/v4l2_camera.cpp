@@ -140,7 +140,7 @@ CameraIntrinsics intrinsicsFromHfov(int width, int height, double hfov_deg) {
 }
 
 std::string v4l2CameraHelp() {
-  return "v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO[,colour=none|auto|/dev/videoM|serial=..|bus=..,size=WxH,fps=N,"
+  return "v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO|auto[,colour=none|auto|/dev/videoM|serial=..|bus=..,size=WxH,fps=N,"
          "format=Z16|Y16,colour_size=WxH,colour_format=YUYV|UYVY|MJPG|RGB3|BGR3,depth_scale=M,calib=FILE,buffers=N,"
          "pair_tolerance_ms=T,hfov_deg=D,colour_hfov_deg=D,extrinsics=identity]  a UVC depth camera's depth node "
          "(Z16/Y16; `fovead cameras` lists them) and optionally its colour node (colour=auto: the sibling node of the "

@@ -11,7 +11,7 @@ namespace fovea::hal::v4l2 {
 namespace {
 
 constexpr std::string_view kForms =
-    "v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO[,colour=/dev/videoM|serial=..|bus=..|auto|none,size=WxH,fps=N,"
+    "v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO|auto[,colour=/dev/videoM|serial=..|bus=..|auto|none,size=WxH,fps=N,"
     "format=Z16|Y16,colour_size=WxH,colour_format=YUYV|UYVY|MJPG|RGB3|BGR3,depth_scale=M,calib=FILE,buffers=N,"
     "pair_tolerance_ms=T,hfov_deg=D,colour_hfov_deg=D,extrinsics=identity]";
 constexpr std::string_view kKeys =
@@ -42,12 +42,12 @@ Status parseSize(std::string_view key, std::string_view value, int& width, int& 
   return Status::ok();
 }
 
-// "serial=X", "bus=X" or a path; for colour also "auto" and "none".
+// "serial=X", "bus=X", a path or "auto"; for colour also "none".
 Status parseSelector(std::string_view what, std::string_view text, bool colour, NodeSelector& out) {
   const auto prefixed = [&](std::string_view prefix) { return text.substr(0, prefix.size()) == prefix; };
   if (colour && text == "none") {
     out = {NodeSelector::Kind::kNone, ""};
-  } else if (colour && text == "auto") {
+  } else if (text == "auto") {
     out = {NodeSelector::Kind::kAuto, ""};
   } else if (prefixed("serial=")) {
     out = {NodeSelector::Kind::kSerial, std::string(text.substr(7))};
@@ -56,8 +56,8 @@ Status parseSelector(std::string_view what, std::string_view text, bool colour, 
   } else if (prefixed("/dev/")) {
     out = {NodeSelector::Kind::kPath, std::string(text)};
   } else {
-    return invalid(std::string(what) + ": expected /dev/videoN, serial=SERIAL or bus=BUS_INFO" +
-                   (colour ? ", auto or none" : "") + ", got '" + std::string(text) + "'");
+    return invalid(std::string(what) + ": expected /dev/videoN, serial=SERIAL, bus=BUS_INFO" +
+                   (colour ? ", auto or none" : " or auto") + ", got '" + std::string(text) + "'");
   }
   if (out.kind != NodeSelector::Kind::kNone && out.kind != NodeSelector::Kind::kAuto && out.value.empty()) {
     return invalid(std::string(what) + ": '" + std::string(text) + "' names nothing");

@@ -15,7 +15,7 @@ namespace fovea::hal::v4l2 {
 struct NodeSelector {
   enum class Kind : uint8_t {
     kNone,    // colour only: no colour node (depth alone, has_rgb false)
-    kAuto,    // colour only: the colour node of the depth node's USB device
+    kAuto,    // depth: the first node offering depth (Z16 first); colour: the depth node's USB sibling
     kPath,    // "/dev/video2"
     kSerial,  // "serial=123": the USB device's serial (sysfs)
     kBus,     // "bus=usb-0000:01:00.0-1": VIDIOC_QUERYCAP's bus_info
@@ -24,7 +24,7 @@ struct NodeSelector {
   std::string value;  // the path, serial or bus_info
 };
 
-// "/dev/video2", "serial=123", "bus=usb-...", and for colour also "none", "auto".
+// "/dev/video2", "serial=123", "bus=usb-...", "auto", and for colour also "none".
 std::string selectorText(const NodeSelector& selector);
 
 // A V4L2 fourcc as its characters without the padding ("Z16", "YUYV").

@@ -67,6 +67,23 @@ TEST(V4l2NodeSelection, DepthBySerialBusAndPort) {
   EXPECT_EQ(depthPath({}, {Kind::kSerial, "AAA"}), "none");
 }
 
+// auto (a board profile that cannot know the serial): the first node offering
+// Z16, not an earlier Y16 infrared node; Y16 when no node has Z16; after a
+// re-plug, the camera the first open took, even when another now comes first.
+TEST(V4l2NodeSelection, DepthAutoTakesTheFirstDepthNodeAndKeepsItsDevice) {
+  std::vector<NodeInfo> nodes = twoCameras(0, 6);
+  std::swap(nodes[0], nodes[1]);  // camera A's infrared node (Y16) before its depth node
+  EXPECT_EQ(depthPath(nodes, {Kind::kAuto, ""}), "/dev/video0");
+  const std::vector<NodeInfo> y16_only = {node(3, "CCC", "1-1", {V4L2_PIX_FMT_YUYV}),
+                                          node(5, "CCC", "1-1", {V4L2_PIX_FMT_Y16})};
+  EXPECT_EQ(depthPath(y16_only, {Kind::kAuto, ""}), "/dev/video5");
+  EXPECT_EQ(depthPath({node(1, "CCC", "1-1", {V4L2_PIX_FMT_YUYV})}, {Kind::kAuto, ""}), "none");
+  SeenNode seen_b;
+  seen_b.serial = "BBB";
+  seen_b.format = V4L2_PIX_FMT_Z16;
+  EXPECT_EQ(depthPath(twoCameras(1, 7), {Kind::kAuto, ""}, seen_b), "/dev/video7");
+}
+
 TEST(V4l2NodeSelection, ColourAutoTakesTheSiblingOfTheSameDevice) {
   const std::vector<NodeInfo> nodes = twoCameras(0, 6);
   EXPECT_EQ(colourPath(nodes, {Kind::kAuto, ""}, "/dev/video0"), "/dev/video4");

@@ -98,12 +98,13 @@ TEST(V4l2Options, EveryModeOption) {
 }
 
 TEST(V4l2Options, BadSelectorsSayTheForms) {
-  EXPECT_NE(parseError("").find("v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO"), std::string::npos);
-  EXPECT_NE(parseError("video0").find("expected /dev/videoN, serial=SERIAL or bus=BUS_INFO"), std::string::npos);
+  EXPECT_NE(parseError("").find("v4l2:/dev/videoN|serial=SERIAL|bus=BUS_INFO|auto"), std::string::npos);
+  EXPECT_NE(parseError("video0").find("expected /dev/videoN, serial=SERIAL, bus=BUS_INFO or auto"), std::string::npos);
   EXPECT_NE(parseError("serial=").find("names nothing"), std::string::npos);
   EXPECT_NE(parseError("bus=").find("names nothing"), std::string::npos);
-  // auto and none are colour-only.
-  EXPECT_NE(parseError("auto").find("depth node"), std::string::npos);
+  // none is colour-only; auto picks the first depth node.
+  EXPECT_NE(parseError("none").find("depth node"), std::string::npos);
+  EXPECT_EQ(parseOk("auto,colour=auto").depth.kind, Kind::kAuto);
   EXPECT_NE(parseError("/dev/video0,colour=video4").find("auto or none"), std::string::npos);
 }
 

@@ -18,6 +18,7 @@
 
 #include "hal/camera.h"
 #include "hal/capture_retry.h"
+#include "hal/camera/v4l2/node_selection.h"
 #include "hal/camera/v4l2/v4l2_camera.h"
 #include "tests/support/alloc_counter.h"
 
@@ -72,6 +73,22 @@ TEST(V4l2Vivid, DiscoveryListsBothNodesWithTheirModes) {
     EXPECT_TRUE(y16_vga) << "no 'depth Y16 640x480 @ ...' mode";
   }
   EXPECT_EQ(vivid, 2);
+}
+
+// v4l2:auto (what the board profiles use) opens the first node offering depth:
+// vivid's first node, and captures from it.
+TEST(V4l2Vivid, AutoOpensTheFirstDepthNode) {
+  REQUIRE_VIVID();
+  std::unique_ptr<Camera> camera = openCamera("v4l2:auto,format=Y16,size=640x480,fps=15,hfov_deg=60");
+  ASSERT_NE(camera, nullptr);
+  auto* v4l2 = dynamic_cast<V4l2Camera*>(camera.get());
+  ASSERT_NE(v4l2, nullptr);
+  ASSERT_FALSE(fovea::hal::v4l2::scanNodes({}).nodes.empty());
+  EXPECT_EQ(v4l2->depthNodePath(), fovea::hal::v4l2::scanNodes({}).nodes.front().path);
+  ASSERT_TRUE(camera->start().isOk());
+  RgbdFrame slot(640, 480);
+  EXPECT_TRUE(camera->acquire(slot, milliseconds(2000)).isOk());
+  camera->stop();
 }
 
 TEST(V4l2Vivid, DepthCaptureIntoTheSlotWithoutAllocating) {
