@@ -302,6 +302,46 @@ std::string formatValue(const Value& value) {
   return out + "]";
 }
 
+// What is wrong with a string value's bytes ("" when nothing). A TOML file is
+// UTF-8, so formatServiceConfig could not print anything else loadably (--set's
+// bare text is not parsed as TOML, so it can carry any bytes: fuzz_config found
+// it); a control character (a NUL cuts a path short) is always a mistake here.
+std::string checkText(std::string_view text) {
+  for (std::size_t i = 0; i < text.size();) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c < 0x20 || c == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "0x%02x", c);
+      return "must not contain control characters (byte " + std::to_string(i) + " is " + hex + ")";
+    }
+    // RFC 3629: the length from the lead byte, continuation bytes 10xxxxxx, no
+    // overlong forms, no surrogates, nothing above U+10FFFF.
+    std::size_t length = 1;
+    unsigned char lo = 0x80, hi = 0xbf;  // the range of the second byte
+    if (c >= 0xc2 && c <= 0xdf) {
+      length = 2;
+    } else if (c >= 0xe0 && c <= 0xef) {
+      length = 3;
+      if (c == 0xe0) lo = 0xa0;
+      if (c == 0xed) hi = 0x9f;
+    } else if (c >= 0xf0 && c <= 0xf4) {
+      length = 4;
+      if (c == 0xf0) lo = 0x90;
+      if (c == 0xf4) hi = 0x8f;
+    } else if (c >= 0x80) {
+      return "must be UTF-8 text (byte " + std::to_string(i) + " is not)";
+    }
+    for (std::size_t k = 1; k < length; ++k) {
+      const auto b = i + k < text.size() ? static_cast<unsigned char>(text[i + k]) : 0;
+      if (b < (k == 1 ? lo : 0x80) || b > (k == 1 ? hi : 0xbf)) {
+        return "must be UTF-8 text (byte " + std::to_string(i) + " is not)";
+      }
+    }
+    i += length;
+  }
+  return "";
+}
+
 // What is wrong with a value of the right type ("" when nothing).
 std::string checkValue(const Field& field, const Value& value) {
   auto outside = [&field](double v) { return !(v >= field.min && v <= field.max); };
@@ -321,9 +361,14 @@ std::string checkValue(const Field& field, const Value& value) {
       const double v = std::get<double>(value);
       return outside(v) ? range(formatNumber(v)) : "";
     }
-    case Kind::kString: return field.check ? field.check(std::get<std::string>(value)) : "";
+    case Kind::kString: {
+      const std::string& v = std::get<std::string>(value);
+      if (std::string error = checkText(v); !error.empty()) return error;
+      return field.check ? field.check(v) : "";
+    }
     case Kind::kChoice: {
       const std::string& v = std::get<std::string>(value);
+      if (std::string error = checkText(v); !error.empty()) return error;
       if (std::find(field.choices.begin(), field.choices.end(), v) != field.choices.end()) return "";
       std::string list;
       for (const std::string& choice : field.choices) list += (list.empty() ? "" : ", ") + quote(choice);
@@ -519,12 +564,11 @@ void collect(const toml::value& table, const std::string& prefix, std::vector<En
   }
 }
 
-// Applies a file over `config`: field by field in the file's order, each
-// checked alone (validate() checks the rules between fields).
-Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins) {
-  Result<std::string> text = readFile(path);
-  if (!text) return text.status();
-  Result<toml::value> root = parseToml(text.value(), path);
+// Applies a file's text over `config`: field by field in the file's order,
+// each checked alone (validate() checks the rules between fields). path names
+// the file in messages.
+Status loadTextInto(const std::string& text, const std::string& path, ServiceConfig& config, Origins& origins) {
+  Result<toml::value> root = parseToml(text, path);
   if (!root) return root.status();
   std::vector<Entry> entries;
   std::vector<std::pair<std::size_t, std::string>> errors;
@@ -540,6 +584,12 @@ Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins
   }
   if (!errors.empty()) return invalid(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
   return Status::ok();
+}
+
+Status loadInto(const std::string& path, ServiceConfig& config, Origins& origins) {
+  Result<std::string> text = readFile(path);
+  if (!text) return text.status();
+  return loadTextInto(text.value(), path, config, origins);
 }
 
 struct FieldError {
@@ -659,9 +709,15 @@ Status applyOverrideTracked(ServiceConfig& config, std::string_view assignment, 
 }  // namespace
 
 Result<ServiceConfig> loadServiceConfig(const std::string& path, const ServiceConfig& base) {
+  Result<std::string> text = readFile(path);
+  if (!text) return text.status();
+  return parseServiceConfig(text.value(), path, base);
+}
+
+Result<ServiceConfig> parseServiceConfig(std::string_view text, const std::string& name, const ServiceConfig& base) {
   ServiceConfig config = base;
   Origins origins;
-  if (Status s = loadInto(path, config, origins); !s) return s;
+  if (Status s = loadTextInto(std::string(text), name, config, origins); !s) return s;
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;
 }

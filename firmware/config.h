@@ -25,6 +25,8 @@ namespace fovea::firmware {
 // Reads a TOML file over `base`: every key the file holds replaces base's value,
 // the rest stays. Then validates the whole configuration.
 Result<ServiceConfig> loadServiceConfig(const std::string& path, const ServiceConfig& base);
+// The same from the file's text (tests, fuzzing); name stands for the path in messages.
+Result<ServiceConfig> parseServiceConfig(std::string_view text, const std::string& name, const ServiceConfig& base);
 
 // One "section.key=value" (the command line's --set). The value is TOML
 // ("125", "true", "[5, 8, 18]", "\"text\""); a string or choice may also be

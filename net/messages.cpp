@@ -45,7 +45,9 @@ bool readText(const fb::String* s, std::size_t max_bytes, ShortText& out) {
 
 void ShortText::assign(std::string_view s) {
   size = s.size() < kCapacity ? s.size() : kCapacity;
-  std::memcpy(chars.data(), s.data(), size);
+  // An empty view may have a null data(), which memcpy must not get even for 0
+  // bytes (an absent FlatBuffers string is one: fuzz_messages found it).
+  if (size > 0) std::memcpy(chars.data(), s.data(), size);
   chars[size] = '\0';
 }
 

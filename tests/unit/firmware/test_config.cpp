@@ -341,6 +341,26 @@ TEST(Config, SetOverrides) {
   EXPECT_EQ(setError("runtime.capture_thread=1"), "--set: 'runtime.capture_thread' is a section; set one of its keys");
 }
 
+// Found by tests/fuzz/fuzz_config: --set's bare text took any bytes, and
+// print-config then wrote a file that does not load (TOML is UTF-8).
+TEST(Config, StringsAreUtf8WithoutControlCharacters) {
+  EXPECT_EQ(setError("camera.spec=mock:ball\xa6n"), "--set: camera.spec: must be UTF-8 text (byte 9 is not)");
+  EXPECT_EQ(setError(std::string("camera.spec=mock:ball\0n", 23)),
+            "--set: camera.spec: must not contain control characters (byte 9 is 0x00)");
+  EXPECT_EQ(setError("stream.key_file=/etc/\xc0\xafkey"), "--set: stream.key_file: must be UTF-8 text (byte 5 is not)");
+  EXPECT_EQ(setError("stream.key_file=/etc/\xed\xa0\x80"), "--set: stream.key_file: must be UTF-8 text (byte 5 is not)");
+  EXPECT_EQ(setError("stream.key_file=/etc/\xe2\x82"), "--set: stream.key_file: must be UTF-8 text (byte 5 is not)");
+  EXPECT_EQ(loadError("[camera]\nspec = \"mock:a\\u0007\"\n"),
+            "fovea.toml:2: camera.spec: must not contain control characters (byte 6 is 0x07)");
+  // Text that is UTF-8 still goes, and prints to a file that loads back.
+  ServiceConfig config;
+  ASSERT_TRUE(applyOverride(config, "camera.calibration_file=/home/zoë/カメラ.yaml").isOk());
+  ASSERT_TRUE(applyOverride(config, "stream.key_file=/etc/fovea/\xf0\x9f\x94\x91.key").isOk());
+  Result<ServiceConfig> again = parseServiceConfig(formatServiceConfig(config), "printed.toml", ServiceConfig{});
+  ASSERT_TRUE(again.isOk()) << again.status().message();
+  expectSame(config, *again);
+}
+
 std::string boardDir() { return std::string(FOVEA_SOURCE_DIR) + "/board"; }
 
 std::vector<std::filesystem::path> boardProfiles() {

@@ -16,6 +16,7 @@
 
 #include "net/key.h"
 #include "net/messages.h"
+#include "net/schema/control_generated.h"
 
 namespace fovea::net {
 namespace {
@@ -414,6 +415,24 @@ TEST(Messages, GarbageFailsVerification) {
   auto good = enc.encode(someGaze());
   std::vector<uint8_t> truncated(good.begin(), good.begin() + good.size() / 2);
   EXPECT_EQ(decode(truncated, g), DropReason::kVerify);
+}
+
+// A message whose text field is absent decodes to an empty text (readText
+// assigns an empty view with a null data(); memcpy of it was undefined
+// behaviour, which UBSan reports: found by tests/fuzz/fuzz_messages).
+TEST(Messages, AbsentTextDecodesEmpty) {
+  flatbuffers::FlatBufferBuilder builder;
+  builder.Finish(wire::CreateBye(builder));
+  const std::vector<uint8_t> payload(builder.GetBufferPointer(), builder.GetBufferPointer() + builder.GetSize());
+  ByeMsg bye;
+  bye.reason.assign("left over");
+  ASSERT_EQ(decode(payload, bye), std::nullopt);
+  EXPECT_EQ(bye.reason.view(), "");
+  EXPECT_EQ(bye.reason.chars[0], '\0');
+  ShortText text("abc");
+  text.assign(std::string_view{});
+  EXPECT_EQ(text.size, 0u);
+  EXPECT_EQ(text.chars[0], '\0');
 }
 
 TEST(Messages, HelloAcceptRefuseStatusRoundTrip) {
