@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "firmware/options.h"
+#include "firmware/sanitizer.h"
 #include "firmware/camera_setup.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
@@ -38,8 +39,13 @@ void sleepNs(int64_t ns) {
 // difference around its allocation (what the components really reserve,
 // including their own bookkeeping, without asking each for a size method).
 std::size_t heapInUse() {
+#ifdef FOVEA_SANITIZER_ALLOCATOR
+  // The sanitizer's allocator serves malloc; glibc's statistics would read zero.
+  return __sanitizer_get_current_allocated_bytes();
+#else
   const struct mallinfo2 m = mallinfo2();
   return m.uordblks + m.hblkhd;
+#endif
 }
 
 std::size_t delta(std::size_t before, std::size_t after) { return after > before ? after - before : 0; }
