@@ -17,6 +17,17 @@
 #endif
 #endif
 
+// ThreadSanitizer keeps shadow memory, per-thread traces and a table of
+// synchronisation objects that grow with the addresses and history a program
+// touches: a bound on the resident set does not hold under it.
+#if defined(__SANITIZE_THREAD__)
+#define FOVEA_THREAD_SANITIZER 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define FOVEA_THREAD_SANITIZER 1
+#endif
+#endif
+
 #ifdef FOVEA_SANITIZER_ALLOCATOR
 extern "C" {
 // Bytes the sanitizer's allocator has handed out and not had back.

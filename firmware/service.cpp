@@ -504,12 +504,12 @@ void Service::sendLoop() {
 void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
   const int64_t end_ns = max_duration_ns > 0 ? monotonicNs() + max_duration_ns : INT64_MAX;
   max_frames_.store(max_frames, std::memory_order_relaxed);
-  while (!stop_requested_.load(std::memory_order_relaxed)) {
+  while (!stop_requested_.load(std::memory_order_acquire)) {
     const int64_t now = monotonicNs();
     if (now >= end_ns) break;
     // The capture stage ends itself after max_frames; stop() drains the rest.
     if (max_frames > 0 && !capture_alive_.load(std::memory_order_acquire)) break;
-    if (reload_requested_.exchange(false, std::memory_order_relaxed)) applyReload();
+    if (reload_requested_.exchange(false, std::memory_order_acquire)) applyReload();
     supervise(now);
     sleepNs(kSuperviseEveryNs);
   }
