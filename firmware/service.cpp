@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "firmware/options.h"
+#include "firmware/sanitizer.h"
 #include "firmware/camera_setup.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
@@ -38,8 +39,13 @@ void sleepNs(int64_t ns) {
 // difference around its allocation (what the components really reserve,
 // including their own bookkeeping, without asking each for a size method).
 std::size_t heapInUse() {
+#ifdef FOVEA_SANITIZER_ALLOCATOR
+  // The sanitizer's allocator serves malloc; glibc's statistics would read zero.
+  return __sanitizer_get_current_allocated_bytes();
+#else
   const struct mallinfo2 m = mallinfo2();
   return m.uordblks + m.hblkhd;
+#endif
 }
 
 std::size_t delta(std::size_t before, std::size_t after) { return after > before ? after - before : 0; }
@@ -498,12 +504,12 @@ void Service::sendLoop() {
 void Service::run(uint64_t max_frames, int64_t max_duration_ns) {
   const int64_t end_ns = max_duration_ns > 0 ? monotonicNs() + max_duration_ns : INT64_MAX;
   max_frames_.store(max_frames, std::memory_order_relaxed);
-  while (!stop_requested_.load(std::memory_order_relaxed)) {
+  while (!stop_requested_.load(std::memory_order_acquire)) {
     const int64_t now = monotonicNs();
     if (now >= end_ns) break;
     // The capture stage ends itself after max_frames; stop() drains the rest.
     if (max_frames > 0 && !capture_alive_.load(std::memory_order_acquire)) break;
-    if (reload_requested_.exchange(false, std::memory_order_relaxed)) applyReload();
+    if (reload_requested_.exchange(false, std::memory_order_acquire)) applyReload();
     supervise(now);
     sleepNs(kSuperviseEveryNs);
   }

@@ -167,8 +167,12 @@ class Service {
   // Returns when all is down.
   void run(uint64_t max_frames = 0, int64_t max_duration_ns = 0);
   // Both async-signal-safe (lock-free atomic stores): for signal handlers.
-  void requestStop() { stop_requested_.store(true, std::memory_order_relaxed); }
-  void requestReload() { reload_requested_.store(true, std::memory_order_relaxed); }
+  // Release, paired with run()'s acquire: what the requesting thread did before
+  // (say, a test reading localEndpoint()) happens before the teardown or reload
+  // that follows. Relaxed, ThreadSanitizer found it racing stop()'s
+  // streamer_.reset().
+  void requestStop() { stop_requested_.store(true, std::memory_order_release); }
+  void requestReload() { reload_requested_.store(true, std::memory_order_release); }
   // Stops capturing, lets the foveation and send stages drain the frames
   // queued (sent if an operator is there), joins, stops the camera, says Bye,
   // drives the status lines low (idempotent).

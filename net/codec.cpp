@@ -17,6 +17,7 @@ namespace {
 
 constexpr std::size_t kMinPayload = kMinMtu - kDatagramOverhead;
 constexpr std::size_t kMaxPayload = kMaxMtu - kDatagramOverhead;
+constexpr std::size_t alignUp(std::size_t n, std::size_t alignment) { return (n + alignment - 1) / alignment * alignment; }
 constexpr int kRadixBits = 11;
 constexpr uint16_t kChunkCountPlaceholder = 0xffff;
 constexpr uint8_t kKnownFlags = kChunkFlagZstd | kChunkFlagHalfChroma;
@@ -360,7 +361,9 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   // chroma codes of at most 19 bits).
   const std::size_t per_chunk = s->data_budget - 23;
   s->max_chunks = (23 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
-  s->arena.resize(s->max_chunks * config.max_payload);
+  // Each chunk starts at a kPayloadAlignment boundary (net/wire.h): the patch
+  // below and every decoder read it in place.
+  s->arena.resize(s->max_chunks * alignUp(config.max_payload, kPayloadAlignment));
   s->chunks.resize(s->max_chunks);
 
   s->qx.resize(max_points);
@@ -628,7 +631,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
       std::memcpy(s.arena.data() + arena_used, s.fbb.GetBufferPointer(), size);
       s.chunks[s.chunk_count++] = {static_cast<uint32_t>(arena_used), static_cast<uint32_t>(size),
                                    static_cast<uint32_t>(points), static_cast<uint8_t>(r)};
-      arena_used += size;
+      arena_used += alignUp(size, kPayloadAlignment);
       k += points;
     }
   }
@@ -654,6 +657,9 @@ std::span<const uint8_t> ChunkEncoder::encodeSummary(uint32_t frame_id, std::spa
   std::copy_n(chunks_sent_per_region.begin(), std::min(regions, chunks_sent_per_region.size()), sent.begin());
   std::copy_n(chunks_cut_per_region.begin(), std::min(regions, chunks_cut_per_region.size()), cut.begin());
   s.summary_fbb.Clear();
+  // A summary's largest scalar has 4 bytes; every payload starts at 8 all the same
+  // (net/wire.h kPayloadAlignment), so it decodes in place wherever it is handed.
+  s.summary_fbb.TrackMinAlign(kPayloadAlignment);
   const auto sent_v = s.summary_fbb.CreateVector(sent.data(), regions);
   const auto cut_v = s.summary_fbb.CreateVector(cut.data(), regions);
   wire::FrameSummaryBuilder b(s.summary_fbb);
@@ -689,6 +695,7 @@ ThreadDecoder& threadDecoder() {
 
 Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::FoveatedCloud& out) {
   if (payload.size() < 8 || payload.size() > kMaxPayload) return parseError("payload size out of range");
+  if (!isPayloadAligned(payload.data())) return parseError("payload not aligned (net/wire.h kPayloadAlignment)");
   flatbuffers::Verifier verifier(payload.data(), payload.size(), /*max_depth=*/8, /*max_tables=*/16);
   if (!wire::VerifyPointChunkBuffer(verifier)) return parseError("FlatBuffers verification failed");
   const wire::PointChunk* c = wire::GetPointChunk(payload.data());
@@ -836,6 +843,9 @@ Result<FrameSummaryInfo> decodeSummary(std::span<const uint8_t> payload) {
   if (payload.size() < 8 || payload.size() > kMaxPayload) {
     return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: payload size out of range");
   }
+  if (!isPayloadAligned(payload.data())) {
+    return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: payload not aligned (net/wire.h)");
+  }
   flatbuffers::Verifier verifier(payload.data(), payload.size(), 8, 16);
   if (!verifier.VerifyBuffer<wire::FrameSummary>(nullptr)) {
     return Result<FrameSummaryInfo>(ErrorCode::kParseError, "summary: FlatBuffers verification failed");
@@ -923,6 +933,10 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload, int64_t receiv
   if (payload.size() < 8 || payload.size() > kMaxPayload) {
     ++counters_.bad_chunks;
     return {ErrorCode::kParseError, "chunk: payload size out of range"};
+  }
+  if (!isPayloadAligned(payload.data())) {
+    ++counters_.bad_chunks;
+    return {ErrorCode::kParseError, "chunk: payload not aligned (net/wire.h kPayloadAlignment)"};
   }
   flatbuffers::Verifier verifier(payload.data(), payload.size(), 8, 16);
   if (!wire::VerifyPointChunkBuffer(verifier)) {

@@ -112,7 +112,9 @@ struct DecodedChunk {
 // written relative to the caller's origin. Errors (nothing appended):
 // kParseError for malformed payloads, kCapacityExceeded when out is full,
 // kRangeExceeded when a point does not fit a float relative to out's origin.
-// Decompression uses a per-thread context (allocated on first use).
+// Decompression uses a per-thread context (allocated on first use). The payload
+// must start at a kPayloadAlignment boundary (net/wire.h), else kParseError;
+// this holds for every decoder here (summary, FrameAssembler).
 Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::FoveatedCloud& out);
 
 struct FrameSummaryInfo {

@@ -24,7 +24,9 @@ bool unit(const Quat& q) {
 
 template <typename T>
 const T* verified(std::span<const uint8_t> payload) {
-  if (payload.empty()) return nullptr;
+  // An unaligned payload is the caller's bug (net/wire.h kPayloadAlignment), but
+  // reading it would be undefined behaviour: drop it like a malformed one.
+  if (payload.empty() || !isPayloadAligned(payload.data())) return nullptr;
   fb::Verifier verifier(payload.data(), payload.size(), /*max_depth=*/8, /*max_tables=*/16);
   if (!verifier.VerifyBuffer<T>(nullptr)) return nullptr;
   return fb::GetRoot<T>(payload.data());
@@ -62,12 +64,19 @@ const char* refuseReasonName(RefuseReason reason) {
 
 MessageEncoder::MessageEncoder() : builder_(kMaxPayloadBytes) {}
 
+void MessageEncoder::begin() {
+  builder_.Clear();
+  // Every payload starts at a kPayloadAlignment boundary (net/wire.h), also those
+  // whose largest scalar is smaller (Bye), so the decoders' check holds for them too.
+  builder_.TrackMinAlign(kPayloadAlignment);
+}
+
 std::span<const uint8_t> MessageEncoder::finish() {
   return {builder_.GetBufferPointer(), builder_.GetSize()};
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const HelloMsg& m) {
-  builder_.Clear();
+  begin();
   const auto name = builder_.CreateString(m.operator_name.view());
   const wire::Nonce128 nonce = toWire(m.client_nonce);
   builder_.Finish(wire::CreateHello(builder_, m.protocol_version, name, m.budget_bytes_per_s, m.mtu_bytes, &nonce));
@@ -75,7 +84,7 @@ std::span<const uint8_t> MessageEncoder::encode(const HelloMsg& m) {
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const AcceptMsg& m) {
-  builder_.Clear();
+  begin();
   const wire::Nonce128 client = toWire(m.client_nonce);
   const wire::Nonce128 robot = toWire(m.robot_nonce);
   builder_.Finish(
@@ -84,7 +93,7 @@ std::span<const uint8_t> MessageEncoder::encode(const AcceptMsg& m) {
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const RefuseMsg& m) {
-  builder_.Clear();
+  begin();
   const auto text = builder_.CreateString(m.text.view());
   const wire::Nonce128 client = toWire(m.client_nonce);
   builder_.Finish(wire::CreateRefuse(builder_, &client, static_cast<wire::RefuseReason>(m.reason), text));
@@ -92,14 +101,14 @@ std::span<const uint8_t> MessageEncoder::encode(const RefuseMsg& m) {
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const ByeMsg& m) {
-  builder_.Clear();
+  begin();
   const auto reason = builder_.CreateString(m.reason.view());
   builder_.Finish(wire::CreateBye(builder_, reason));
   return finish();
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const GazeSample& m) {
-  builder_.Clear();
+  begin();
   const wire::Vec3d origin = toWire(m.gaze_origin_m);
   const wire::Vec3d direction = toWire(m.gaze_direction);
   const wire::Vec3d hmd = toWire(m.hmd_position_m);
@@ -112,7 +121,7 @@ std::span<const uint8_t> MessageEncoder::encode(const GazeSample& m) {
 }
 
 std::span<const uint8_t> MessageEncoder::encode(const StatusReport& m) {
-  builder_.Clear();
+  begin();
   builder_.Finish(wire::CreateStatus(builder_, m.robot_stamp_ns, m.frames_captured, m.frames_sent,
                                      m.frames_dropped, m.chunks_cut, m.datagrams_sent, m.bytes_sent,
                                      m.datagrams_received, m.datagrams_dropped, m.gaze_age_ns, m.rtt_ns,

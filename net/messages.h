@@ -120,11 +120,13 @@ class MessageEncoder {
   std::span<const uint8_t> encode(const StatusReport& m);
 
  private:
+  void begin();
   std::span<const uint8_t> finish();
   flatbuffers::FlatBufferBuilder builder_;
 };
 
-// Verify the FlatBuffers payload (kVerify) and its values (kSemantic).
+// Verify the FlatBuffers payload (kVerify) and its values (kSemantic). The
+// payload must start at a kPayloadAlignment boundary (net/wire.h), else kVerify.
 std::optional<DropReason> decode(std::span<const uint8_t> payload, HelloMsg& out);
 std::optional<DropReason> decode(std::span<const uint8_t> payload, AcceptMsg& out);
 std::optional<DropReason> decode(std::span<const uint8_t> payload, RefuseMsg& out);

@@ -104,7 +104,7 @@ class OperatorLink {
   MessageEncoder encoder_;
   OperatorLinkCounters counters_;
   std::array<uint8_t, kMaxMtu + 1> rx_buf_{};
-  std::array<uint8_t, kMaxMtu> plain_buf_{};
+  PlainBuffer plain_buf_;
   std::array<uint8_t, kMaxMtu> tx_buf_{};
 };
 

@@ -135,7 +135,7 @@ class RobotLink {
   RobotLinkCounters counters_;
   // One datagram in, its plaintext, one datagram out (preallocated).
   std::array<uint8_t, kMaxMtu + 1> rx_buf_{};
-  std::array<uint8_t, kMaxMtu> plain_buf_{};
+  PlainBuffer plain_buf_;
   std::array<uint8_t, kMaxMtu> tx_buf_{};
 };
 

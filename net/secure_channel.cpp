@@ -158,9 +158,10 @@ std::span<const uint8_t> seal(const Key& key, const Header& header, std::span<co
 }
 
 std::optional<std::span<const uint8_t>> openSealed(const Key& key, std::span<const uint8_t> datagram,
-                                                   std::span<uint8_t> plain) {
+                                                   PlainBuffer& plain_buffer) {
   if (datagram.size() < kDatagramOverhead) return std::nullopt;
   const std::size_t payload_bytes = datagram.size() - kDatagramOverhead;
+  const std::span<uint8_t> plain(plain_buffer.bytes);
   if (plain.size() < payload_bytes) return std::nullopt;
   uint8_t nonce[24];
   buildNonce(getLe64(datagram.data() + 4), getLe64(datagram.data() + 12), nonce);
@@ -209,7 +210,7 @@ std::span<const uint8_t> SessionChannel::seal(MessageType type, std::span<const 
 }
 
 std::optional<DropReason> SessionChannel::open(const Header& header, std::span<const uint8_t> datagram,
-                                               std::span<uint8_t> plain, std::span<const uint8_t>& payload,
+                                               PlainBuffer& plain, std::span<const uint8_t>& payload,
                                                const Key* key_override) {
   if (header.epoch != rx_epoch_) return DropReason::kNoSession;
   switch (window_.check(header.seq)) {

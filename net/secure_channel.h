@@ -74,6 +74,13 @@ struct Header {
 // Largest plaintext a datagram can carry.
 inline constexpr std::size_t kMaxPayloadBytes = kMaxMtu - kDatagramOverhead;
 
+// Where a datagram's payload is decrypted to, for every message kind: aligned so
+// that the FlatBuffers parsers read it in place (net/wire.h kPayloadAlignment).
+// A type rather than a span so an unaligned plaintext buffer cannot be passed.
+struct alignas(kPayloadAlignment) PlainBuffer {
+  std::array<uint8_t, kMaxPayloadBytes> bytes{};
+};
+
 // Checks size, magic, version and type; reads epoch and sequence number.
 // Does not authenticate anything.
 std::optional<DropReason> parseHeader(std::span<const uint8_t> datagram, Header& header);
@@ -84,10 +91,10 @@ std::span<const uint8_t> seal(const Key& key, const Header& header, std::span<co
                               std::span<uint8_t> out);
 
 // Authenticates and decrypts a datagram whose header parseHeader() accepted into
-// plain (at least datagram.size() - kDatagramOverhead bytes); returns the payload
-// or nullopt when authentication fails.
+// plain; returns the payload (aligned, at plain's start) or nullopt when
+// authentication fails or the datagram is longer than kMaxMtu.
 std::optional<std::span<const uint8_t>> openSealed(const Key& key, std::span<const uint8_t> datagram,
-                                                   std::span<uint8_t> plain);
+                                                   PlainBuffer& plain);
 
 // 128-bit random nonces of Hello and Accept.
 struct Nonce128 {
@@ -121,8 +128,8 @@ class SessionChannel {
 
   // Replay check, authentication, window update. header from parseHeader().
   // On success the payload lies in plain.
-  std::optional<DropReason> open(const Header& header, std::span<const uint8_t> datagram,
-                                 std::span<uint8_t> plain, std::span<const uint8_t>& payload,
+  std::optional<DropReason> open(const Header& header, std::span<const uint8_t> datagram, PlainBuffer& plain,
+                                 std::span<const uint8_t>& payload,
                                  const Key* key_override = nullptr);
 
   // New keys and peer epoch (the operator on Accept); the own sequence series goes on.

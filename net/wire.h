@@ -42,4 +42,14 @@ inline constexpr std::size_t kDefaultMtu = 1200;
 inline constexpr std::size_t kMinMtu = 256;
 inline constexpr std::size_t kMaxMtu = 8952;  // 9000 - IPv6 header (40) - UDP header (8)
 
+// FlatBuffers reads a payload's scalars in place (flatbuffers/buffer.h casts the
+// bytes to uoffset_t*, double*...), so a payload must start at an address aligned
+// for its largest scalar (ulong, double: 8 bytes). The 20-byte header leaves a
+// payload unaligned inside its datagram: payloads are decrypted into an aligned
+// buffer (net/secure_channel.h PlainBuffer) and the decoders reject unaligned input.
+inline constexpr std::size_t kPayloadAlignment = 8;
+inline bool isPayloadAligned(const uint8_t* payload) {
+  return reinterpret_cast<std::uintptr_t>(payload) % kPayloadAlignment == 0;
+}
+
 }  // namespace fovea::net

@@ -70,7 +70,7 @@ Fixture& fixture() {
 struct Receiver {
   const Side* side;
   SessionChannel channel;
-  std::vector<uint8_t> plain = std::vector<uint8_t>(kMaxMtu);
+  PlainBuffer plain;  // aligned, as the links hold it
 };
 
 // Parses an authentic payload as the link would for its type.

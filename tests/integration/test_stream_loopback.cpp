@@ -16,6 +16,7 @@
 #include <tuple>
 #include <vector>
 
+#include "firmware/sanitizer.h"
 #include "pipeline/io/ply.h"
 #include "tests/support/process.h"
 
@@ -225,6 +226,10 @@ TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
 
 TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
   if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
+#ifdef FOVEA_THREAD_SANITIZER
+  GTEST_SKIP() << "not under ThreadSanitizer: the demo's full-size mock camera foveates about 1 frame/s there, so "
+                  "the status it checks (streaming 1, fault 0) cannot hold; the other StreamLoopback cases run";
+#endif
   const test::ProcessResult r = test::runCommand(std::string("FOVEA_DEMO_SECONDS=3 FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR +
                                                  " " + FOVEA_SOURCE_DIR + "/toolchain/run-demo");
   ASSERT_EQ(r.exit_code, 0) << r.output;

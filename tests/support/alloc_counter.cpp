@@ -1,18 +1,21 @@
 #include "tests/support/alloc_counter.h"
 
+#include "firmware/sanitizer.h"
+
 #include <atomic>
 #include <cerrno>
 #include <cstddef>
+#include <cstdio>
+#include <cstdlib>
 #include <new>
 
-// glibc's own entry points, which the replacements forward to.
-extern "C" {
-void* __libc_malloc(std::size_t size);
-void* __libc_calloc(std::size_t n, std::size_t size);
-void* __libc_realloc(void* p, std::size_t size);
-void* __libc_memalign(std::size_t alignment, std::size_t size);
-void __libc_free(void* p);
-}
+// AddressSanitizer and ThreadSanitizer bring their own allocator and intercept
+// malloc themselves: replacing malloc here (forwarding to glibc's __libc_malloc)
+// hands them blocks they never allocated, and the binary crashes before main
+// (at test discovery). Under them the count comes from the sanitizer's own
+// allocation hook instead, which sees every allocation its allocator makes:
+// the same calls the replacement below sees, so the zero-allocation assertions
+// keep their meaning under the sanitizers. UBSan alone keeps glibc's allocator.
 
 namespace {
 std::atomic<uint64_t> g_count{0};
@@ -31,6 +34,33 @@ uint64_t allocationCount() { return g_count.load(); }
 void setAllocationCounting(bool enabled) { g_enabled.store(enabled); }
 uint64_t threadAllocationCount() { return t_count; }
 }  // namespace fovea::test
+
+#ifdef FOVEA_SANITIZER_ALLOCATOR
+
+namespace {
+void onMalloc(const volatile void*, std::size_t) { note(); }
+void onFree(const volatile void*) {}
+
+// Installed before main: a binary that cannot count must fail, never pass silently.
+const bool g_hooks_installed = [] {
+  if (__sanitizer_install_malloc_and_free_hooks(onMalloc, onFree) == 0) {
+    std::fprintf(stderr, "alloc_counter: the sanitizer refused the allocation hooks: cannot count allocations\n");
+    std::abort();
+  }
+  return true;
+}();
+}  // namespace
+
+#else
+
+// glibc's own entry points, which the replacements forward to.
+extern "C" {
+void* __libc_malloc(std::size_t size);
+void* __libc_calloc(std::size_t n, std::size_t size);
+void* __libc_realloc(void* p, std::size_t size);
+void* __libc_memalign(std::size_t alignment, std::size_t size);
+void __libc_free(void* p);
+}
 
 extern "C" {
 void* malloc(std::size_t size) {
@@ -62,3 +92,5 @@ int posix_memalign(void** out, std::size_t alignment, std::size_t size) {
   return 0;
 }
 }
+
+#endif

@@ -1,6 +1,8 @@
 // Counts heap allocations in this test binary. alloc_counter.cpp replaces the C
 // allocator (malloc, calloc, realloc, aligned variants) and, through it, every
-// operator new, so nothing that allocates can hide.
+// operator new, so nothing that allocates can hide. Under AddressSanitizer or
+// ThreadSanitizer, which own the allocator, it counts through the sanitizer's
+// allocation hook instead, so these tests run and assert under them too.
 #pragma once
 
 #include <cstdint>

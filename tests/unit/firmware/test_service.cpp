@@ -22,6 +22,7 @@
 
 #include <gtest/gtest.h>
 
+#include "firmware/sanitizer.h"
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
 #include "tests/support/process.h"
@@ -318,7 +319,12 @@ TEST(Service, StoppedGazeFloodAndAVanishedOperatorLeaveItRunningWithFlatMemory) 
   const uint64_t after = running.service->stats().frames_foveated;
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= after + 10; }, 3000ms));
   const long rss_after = residentKiB();
+#ifdef FOVEA_THREAD_SANITIZER
+  std::printf("resident set NOT checked under ThreadSanitizer (%ld KiB before, %ld KiB after): its shadow memory "
+              "and tables grow with what the process touches (firmware/sanitizer.h)\n", rss_before, rss_after);
+#else
   EXPECT_LT(rss_after - rss_before, 2048) << rss_before << " KiB before, " << rss_after << " KiB after";
+#endif
   // A new operator is served after the silent one timed out.
   TestOperator next;
   ASSERT_TRUE(next.connect(running.service->localEndpoint()));

@@ -345,6 +345,32 @@ TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
   EXPECT_EQ(enc.chunkCount(), 1u);
 }
 
+// FlatBuffers reads a payload in place (net/wire.h kPayloadAlignment): every
+// payload the encoder hands out starts aligned, and one off the boundary is an
+// error, never read (UBSan: misaligned load in flatbuffers/buffer.h).
+TEST(CodecDecode, PayloadUnalignedIsAnErrorNotARead) {
+  const test::MockFoveatedFrame& f = livingRoom();
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
+  ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, 3, 0).isOk());
+  ASSERT_GT(enc.chunkCount(), 2u);
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) EXPECT_TRUE(isPayloadAligned(enc.chunk(i).data())) << i;
+  std::array<uint16_t, 4> sent{1, 1, 1, 1};
+  const std::span<const uint8_t> summary = enc.encodeSummary(3, sent, sent);
+  EXPECT_TRUE(isPayloadAligned(summary.data()));
+
+  const std::span<const uint8_t> chunk = enc.chunk(0);
+  std::vector<uint8_t> shifted(chunk.size() + kPayloadAlignment);
+  std::copy(chunk.begin(), chunk.end(), shifted.begin() + 1);
+  pipeline::FoveatedCloud out(f.cloud.size());
+  Result<DecodedChunk> d = decodeChunk({shifted.data() + 1, chunk.size()}, out);
+  EXPECT_EQ(d.status().code(), ErrorCode::kParseError);
+  EXPECT_EQ(out.size(), 0u);
+  std::copy(summary.begin(), summary.end(), shifted.begin() + 1);
+  EXPECT_EQ(decodeSummary({shifted.data() + 1, summary.size()}).status().code(), ErrorCode::kParseError);
+  std::copy(chunk.begin(), chunk.end(), shifted.begin());
+  EXPECT_TRUE(decodeChunk({shifted.data(), chunk.size()}, out).isOk());
+}
+
 TEST(CodecDecode, FullOutputCloudIsAnErrorAndAppendsNothing) {
   const test::MockFoveatedFrame& f = livingRoom();
   ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());

@@ -510,7 +510,7 @@ RefuseMsg refusalOf(RobotLink& robot, const Key& key, const HelloMsg& hello) {
   MessageEncoder encoder;
   std::array<uint8_t, kMaxMtu> out{};
   std::array<uint8_t, kMaxMtu + 1> in{};
-  std::array<uint8_t, kMaxMtu> plain{};
+  PlainBuffer plain;
   EXPECT_TRUE(raw->sendTo(channel.seal(MessageType::kHello, encoder.encode(hello), out), robot.localEndpoint()));
   const uint64_t refusals = robot.counters().refusals;
   for (int i = 0; i < 200 && robot.counters().refusals == refusals; ++i) robot.poll(5);

@@ -37,7 +37,7 @@ struct Pair {
   SessionChannel robot{sessionKeys(psk, Role::kRobot, client, robot_nonce), robot_epoch, operator_epoch};
   SessionChannel op{sessionKeys(psk, Role::kOperator, client, robot_nonce), operator_epoch, robot_epoch};
   std::array<uint8_t, kMaxMtu> out{};
-  std::array<uint8_t, kMaxMtu> plain{};
+  PlainBuffer plain;
 
   // Opens at the operator; returns the drop reason or nullopt.
   std::optional<DropReason> openAtOperator(std::span<const uint8_t> d, std::span<const uint8_t>* payload = nullptr) {
@@ -433,6 +433,41 @@ TEST(Messages, AbsentTextDecodesEmpty) {
   text.assign(std::string_view{});
   EXPECT_EQ(text.size, 0u);
   EXPECT_EQ(text.chars[0], '\0');
+}
+
+// The datagram's 20-byte header leaves its payload unaligned; FlatBuffers reads
+// in place, so payloads are opened into an aligned PlainBuffer, every encoder
+// output starts aligned, and a payload off the boundary is dropped unread
+// (UBSan found the Hello parsed at an odd address: flatbuffers/buffer.h:124).
+TEST(Messages, PayloadUnalignedIsDroppedNotRead) {
+  static_assert(alignof(PlainBuffer) >= kPayloadAlignment);
+  MessageEncoder enc;
+  HelloMsg hello;
+  hello.operator_name.assign("alice");
+  hello.mtu_bytes = 1200;
+  hello.client_nonce = {1, 2};
+  const std::span<const uint8_t> good = enc.encode(hello);
+  EXPECT_TRUE(isPayloadAligned(good.data()));
+  ByeMsg bye;  // no 8-byte field of its own, aligned all the same
+  bye.reason.assign("done");
+  EXPECT_TRUE(isPayloadAligned(enc.encode(bye).data()));
+
+  const std::span<const uint8_t> hello_bytes = enc.encode(hello);
+  std::vector<uint8_t> shifted(hello_bytes.size() + kPayloadAlignment);
+  std::copy(hello_bytes.begin(), hello_bytes.end(), shifted.begin() + 1);
+  HelloMsg out;
+  EXPECT_EQ(decode({shifted.data() + 1, hello_bytes.size()}, out), DropReason::kVerify);
+  std::copy(hello_bytes.begin(), hello_bytes.end(), shifted.begin());
+  EXPECT_EQ(decode({shifted.data(), hello_bytes.size()}, out), std::nullopt);
+
+  // Through the channel: the opened payload lies at the aligned buffer's start.
+  Pair p;
+  const auto d = p.sealChunk(hello_bytes);
+  std::span<const uint8_t> opened;
+  ASSERT_EQ(p.openAtOperator(d, &opened), std::nullopt);
+  EXPECT_EQ(opened.data(), p.plain.bytes.data());
+  EXPECT_TRUE(isPayloadAligned(opened.data()));
+  EXPECT_EQ(decode(opened, out), std::nullopt);
 }
 
 TEST(Messages, HelloAcceptRefuseStatusRoundTrip) {
