@@ -118,11 +118,11 @@ std::optional<std::span<const uint8_t>> receive(Receiver& rx, std::span<const ui
 
 Receiver robotReceiver() {
   const Fixture& f = fixture();
-  return {&f.robot, SessionChannel(f.robot.session, kRobotEpoch, kOperatorEpoch)};
+  return {&f.robot, SessionChannel(f.robot.session, kRobotEpoch, kOperatorEpoch), {}};
 }
 Receiver operatorReceiver() {
   const Fixture& f = fixture();
-  return {&f.op, SessionChannel(f.op.session, kOperatorEpoch, kRobotEpoch)};
+  return {&f.op, SessionChannel(f.op.session, kOperatorEpoch, kRobotEpoch), {}};
 }
 
 void receiveRaw(std::span<const uint8_t> datagram) {
