@@ -1,6 +1,7 @@
 #include "tools/lossy_relay/lossy_relay.h"
 
 #include <poll.h>
+#include <sys/socket.h>
 
 #include <algorithm>
 #include <cmath>
@@ -16,6 +17,17 @@ uint64_t splitmix64(uint64_t& state) {
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
   return z ^ (z >> 31);
+}
+
+// Each socket's receive buffer: a frame's burst of about a hundred datagrams must
+// wait in the kernel while the relay is off the CPU, or the kernel drops them
+// where the relay cannot count them. SO_RCVBUFFORCE passes net.core.rmem_max as
+// root; otherwise the kernel caps SO_RCVBUF at that limit (about 208 KiB).
+void enlargeReceiveBuffer(int fd) {
+  const int bytes = 8 << 20;
+  if (::setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &bytes, sizeof bytes) != 0) {
+    (void)::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
+  }
 }
 
 bool isShare(double v) { return std::isfinite(v) && v >= 0.0 && v <= 1.0; }
@@ -56,6 +68,8 @@ Result<LossyRelay> LossyRelay::create(const LossyRelayConfig& config) {
   if (!client_side) return client_side.status();
   Result<net::UdpSocket> server_side = net::UdpSocket::forPeer(config.server);
   if (!server_side) return server_side.status();
+  enlargeReceiveBuffer(client_side->fd());
+  enlargeReceiveBuffer(server_side->fd());
   return LossyRelay(config, std::move(client_side.value()), std::move(server_side.value()), up.value(), down.value());
 }
 
