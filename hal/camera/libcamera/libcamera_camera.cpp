@@ -1,3 +1,4 @@
+#include "hal/spec_options.h"
 #include "hal/camera/libcamera/libcamera_camera.h"
 
 #include <sys/mman.h>
@@ -20,12 +21,6 @@ namespace fovea::hal::libcam {
 namespace {
 
 Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "libcamera: " + std::move(message)); }
-
-bool parsePositiveInt(std::string_view text, int& out) {
-  if (text.empty()) return false;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return ec == std::errc() && end == text.data() + text.size() && out > 0;
-}
 
 constexpr const char* kFormatsWeConvert = "BGR888, RGB888, XBGR8888, XRGB8888";
 constexpr const char* kNoCameraHint =
@@ -122,14 +117,7 @@ Result<LibcameraCameraOptions> parseLibcameraCameraOptions(std::string_view args
     const std::string_view key = piece.substr(0, eq);
     const std::string_view value = piece.substr(eq + 1);
     if (key == "size") {
-      const std::size_t x = value.find('x');
-      int w = 0, h = 0;
-      if (x == std::string_view::npos || !parsePositiveInt(value.substr(0, x), w) ||
-          !parsePositiveInt(value.substr(x + 1), h) || w > 16384 || h > 16384) {
-        return invalid("size: expected WxH (e.g. 1280x720), got '" + std::string(value) + "'");
-      }
-      options.width = w;
-      options.height = h;
+      if (Status s = parseSpecSize("libcamera", key, value, 1, 16384, options.width, options.height); !s) return s;
     } else if (key == "format") {
       if (!packedRgbLayout(value)) {
         return invalid("format: '" + std::string(value) + "' is not converted by this backend (it takes " +
@@ -138,7 +126,7 @@ Result<LibcameraCameraOptions> parseLibcameraCameraOptions(std::string_view args
       options.format = std::string(value);
     } else if (key == "buffers") {
       int n = 0;
-      if (!parsePositiveInt(value, n) || n < 2 || n > 32) {
+      if (!parseSpecInt(value, n) || n < 2 || n > 32) {
         return invalid("buffers: expected 2..32, got '" + std::string(value) + "'");
       }
       options.buffers = n;

@@ -1,3 +1,4 @@
+#include "hal/spec_options.h"
 #include "hal/camera/mock/mock_camera.h"
 
 #include <algorithm>
@@ -58,44 +59,6 @@ std::string formatNumber(double value) {
   return ec == std::errc() ? std::string(buffer, end) : std::string("?");
 }
 
-bool parseUint(std::string_view text, uint64_t& out) {
-  if (text.empty()) return false;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return ec == std::errc() && end == text.data() + text.size();
-}
-
-bool parseDouble(std::string_view text, double& out) {
-  if (text.empty()) return false;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return ec == std::errc() && end == text.data() + text.size() && std::isfinite(out);
-}
-
-Status parseOnOff(std::string_view key, std::string_view value, bool& out) {
-  if (value == "on") {
-    out = true;
-  } else if (value == "off") {
-    out = false;
-  } else {
-    return invalid(std::string(key) + ": expected on|off, got '" + std::string(value) + "'");
-  }
-  return Status::ok();
-}
-
-Status parseSize(std::string_view value, int& width, int& height) {
-  const auto fail = [&] {
-    return invalid("size: expected WxH with W and H in " + std::to_string(kMinSide) + ".." +
-                   std::to_string(kMaxSide) + " (e.g. 640x480), got '" + std::string(value) + "'");
-  };
-  const std::size_t x = value.find('x');
-  if (x == std::string_view::npos) return fail();
-  uint64_t w = 0, h = 0;
-  if (!parseUint(value.substr(0, x), w) || !parseUint(value.substr(x + 1), h)) return fail();
-  if (w < kMinSide || w > kMaxSide || h < kMinSide || h > kMaxSide) return fail();
-  width = static_cast<int>(w);
-  height = static_cast<int>(h);
-  return Status::ok();
-}
-
 Status parseKeyframes(std::string_view list, std::vector<Keyframe>& keyframes) {
   const std::string format =
       "expected keyframes:t,x,y,z,tx,ty,tz;... (time in s, eye and look-at target in world m)";
@@ -116,7 +79,7 @@ Status parseKeyframes(std::string_view list, std::vector<Keyframe>& keyframes) {
       const std::size_t comma = std::min(group.find(',', pos), group.size());
       const std::string_view field = group.substr(pos, comma - pos);
       if (count == 7) return invalid(label + " has more than 7 numbers; " + format);
-      if (!parseDouble(field, numbers[count])) {
+      if (!parseSpecDouble(field, numbers[count])) {
         return invalid(label + ": '" + std::string(field) + "' is not a number; " + format);
       }
       ++count;
@@ -278,24 +241,24 @@ Result<MockCameraOptions> parseMockCameraOptions(std::string_view args) {
     seen.push_back(key);
     Status status;
     if (key == "seed") {
-      if (!parseUint(value, options.seed)) {
+      if (!parseSpecUint(value, options.seed)) {
         status = invalid("seed: expected an unsigned integer, got '" + value + "'");
       }
     } else if (key == "size") {
-      status = parseSize(value, options.width, options.height);
+      status = parseSpecSize("mock", key, value, kMinSide, kMaxSide, options.width, options.height);
     } else if (key == "fps") {
-      if (!parseDouble(value, options.fps) || options.fps <= 0.0 || options.fps > kMaxFps) {
+      if (!parseSpecDouble(value, options.fps) || options.fps <= 0.0 || options.fps > kMaxFps) {
         status = invalid("fps: expected a number in (0, " + formatNumber(kMaxFps) + "], got '" +
                          value + "'");
       }
     } else if (key == "path") {
       status = parsePath(value, options.path);
     } else if (key == "noise") {
-      status = parseOnOff(key, value, options.noise);
+      status = parseSpecOnOff("mock", key, value, options.noise);
     } else if (key == "temporal_noise") {
-      status = parseOnOff(key, value, options.temporal_noise);
+      status = parseSpecOnOff("mock", key, value, options.temporal_noise);
     } else if (key == "realtime") {
-      status = parseOnOff(key, value, options.realtime);
+      status = parseSpecOnOff("mock", key, value, options.realtime);
     } else if (key == "fault") {
       Result<std::vector<FaultSpec>> faults = parseFaults(value);
       if (faults.isOk()) {

@@ -1,3 +1,4 @@
+#include "hal/spec_options.h"
 #include "hal/camera/openni2/openni2_camera.h"
 
 #include <time.h>
@@ -36,23 +37,6 @@ constexpr const char* kNoDeviceHint =
     "group the rules name (video; plugdev on some distributions) (docs/cameras-openni2.md)";
 
 Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "openni2: " + std::move(message)); }
-
-Status parseOnOff(std::string_view key, std::string_view value, bool& out) {
-  if (value == "on") {
-    out = true;
-  } else if (value == "off") {
-    out = false;
-  } else {
-    return invalid(std::string(key) + ": expected on|off, got '" + std::string(value) + "'");
-  }
-  return Status::ok();
-}
-
-bool parsePositiveInt(std::string_view text, int& out) {
-  if (text.empty()) return false;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return ec == std::errc() && end == text.data() + text.size() && out > 0;
-}
 
 int64_t monotonicNowNs() {
   timespec ts{};
@@ -239,26 +223,19 @@ Result<OpenNI2CameraOptions> parseOpenNI2CameraOptions(std::string_view args) {
     const std::string_view key = piece.substr(0, eq);
     const std::string_view value = piece.substr(eq + 1);
     if (key == "size") {
-      const std::size_t x = value.find('x');
-      int w = 0, h = 0;
-      if (x == std::string_view::npos || !parsePositiveInt(value.substr(0, x), w) ||
-          !parsePositiveInt(value.substr(x + 1), h) || w > 8192 || h > 8192) {
-        return invalid("size: expected WxH (e.g. 640x480), got '" + std::string(value) + "'");
-      }
-      options.width = w;
-      options.height = h;
+      if (Status s = parseSpecSize("openni2", key, value, 1, 8192, options.width, options.height); !s) return s;
     } else if (key == "fps") {
       int fps = 0;
-      if (!parsePositiveInt(value, fps) || fps > 1000) {
+      if (!parseSpecInt(value, fps) || fps < 1 || fps > 1000) {
         return invalid("fps: expected a positive integer, got '" + std::string(value) + "'");
       }
       options.fps = fps;
     } else if (key == "colour" || key == "color") {
-      if (Status s = parseOnOff(key, value, options.colour); !s) return s;
+      if (Status s = parseSpecOnOff("openni2", key, value, options.colour); !s) return s;
     } else if (key == "registration") {
-      if (Status s = parseOnOff(key, value, options.registration); !s) return s;
+      if (Status s = parseSpecOnOff("openni2", key, value, options.registration); !s) return s;
     } else if (key == "sync") {
-      if (Status s = parseOnOff(key, value, options.sync); !s) return s;
+      if (Status s = parseSpecOnOff("openni2", key, value, options.sync); !s) return s;
     } else {
       return invalid("unknown option '" + std::string(key) + "' (keys: size, fps, colour, registration, sync)");
     }

@@ -1,3 +1,4 @@
+#include "hal/spec_options.h"
 #include "hal/camera/tum/tum_camera.h"
 
 #include <algorithm>
@@ -17,17 +18,6 @@ namespace {
 
 Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "tum: " + std::move(message)); }
 
-Status parseOnOff(std::string_view key, std::string_view value, bool& out) {
-  if (value == "on") {
-    out = true;
-  } else if (value == "off") {
-    out = false;
-  } else {
-    return invalid(std::string(key) + ": expected on|off, got '" + std::string(value) + "'");
-  }
-  return Status::ok();
-}
-
 // Whitespace-separated fields of one line.
 std::vector<std::string_view> splitFields(std::string_view line) {
   std::vector<std::string_view> fields;
@@ -39,12 +29,6 @@ std::vector<std::string_view> splitFields(std::string_view line) {
     if (i > start) fields.push_back(line.substr(start, i - start));
   }
   return fields;
-}
-
-bool parseDouble(std::string_view text, double& out) {
-  if (text.empty()) return false;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return ec == std::errc() && end == text.data() + text.size() && std::isfinite(out);
 }
 
 Result<std::string> readWholeFile(const std::filesystem::path& path) {
@@ -116,7 +100,7 @@ Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const s
     if (!stamp) return {ErrorCode::kParseError, where + stamp.status().message()};
     double v[7];
     for (int i = 0; i < 7; ++i) {
-      if (!parseDouble(f[static_cast<std::size_t>(i) + 1], v[i])) {
+      if (!parseSpecDouble(f[static_cast<std::size_t>(i) + 1], v[i])) {
         return {ErrorCode::kParseError, where + "'" + std::string(f[static_cast<std::size_t>(i) + 1]) +
                                             "' is not a finite number"};
       }
@@ -159,9 +143,9 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
     const std::string_view key = piece.substr(0, eq);
     const std::string_view value = piece.substr(eq + 1);
     if (key == "loop") {
-      if (Status s = parseOnOff(key, value, options.loop); !s) return s;
+      if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) return s;
     } else if (key == "realtime") {
-      if (Status s = parseOnOff(key, value, options.realtime); !s) return s;
+      if (Status s = parseSpecOnOff("tum", key, value, options.realtime); !s) return s;
     } else if (key == "frames") {
       std::size_t n = 0;
       const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), n);

@@ -1,3 +1,4 @@
+#include "hal/spec_options.h"
 #include "hal/camera/v4l2/v4l2_options.h"
 
 #include <linux/videodev2.h>
@@ -21,26 +22,6 @@ constexpr int kMaxSide = 16384;
 constexpr int kMaxBuffers = 32;
 
 Status invalid(std::string message) { return {ErrorCode::kInvalidArgument, "v4l2: " + std::move(message)}; }
-
-bool parseInt(std::string_view text, int& out) {
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return !text.empty() && ec == std::errc() && end == text.data() + text.size();
-}
-
-bool parseDouble(std::string_view text, double& out) {
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return !text.empty() && ec == std::errc() && end == text.data() + text.size() && std::isfinite(out);
-}
-
-Status parseSize(std::string_view key, std::string_view value, int& width, int& height) {
-  const std::size_t x = value.find('x');
-  if (x == std::string_view::npos || !parseInt(value.substr(0, x), width) || !parseInt(value.substr(x + 1), height) ||
-      width < 1 || height < 1 || width > kMaxSide || height > kMaxSide) {
-    return invalid(std::string(key) + ": expected WxH with W and H in 1.." + std::to_string(kMaxSide) + ", got '" +
-                   std::string(value) + "'");
-  }
-  return Status::ok();
-}
 
 // "serial=X", "bus=X", a path or "auto"; for colour also "none".
 Status parseSelector(std::string_view what, std::string_view text, bool colour, NodeSelector& out) {
@@ -136,11 +117,11 @@ Result<V4l2CameraOptions> parseV4l2CameraOptions(std::string_view args) {
     if (key == "colour" || key == "color") {
       if (Status s = parseSelector("colour", value, true, options.colour); !s) return s;
     } else if (key == "size") {
-      if (Status s = parseSize(key, value, options.width, options.height); !s) return s;
+      if (Status s = parseSpecSize("v4l2", key, value, 1, kMaxSide, options.width, options.height); !s) return s;
     } else if (key == "colour_size" || key == "color_size") {
-      if (Status s = parseSize(key, value, options.colour_width, options.colour_height); !s) return s;
+      if (Status s = parseSpecSize("v4l2", key, value, 1, kMaxSide, options.colour_width, options.colour_height); !s) return s;
     } else if (key == "fps") {
-      if (!parseInt(value, options.fps) || options.fps < 1 || options.fps > 1000) {
+      if (!parseSpecInt(value, options.fps) || options.fps < 1 || options.fps > 1000) {
         return invalid("fps: expected an integer in 1..1000, got '" + std::string(value) + "'");
       }
     } else if (key == "format") {
@@ -148,7 +129,7 @@ Result<V4l2CameraOptions> parseV4l2CameraOptions(std::string_view args) {
     } else if (key == "colour_format" || key == "color_format") {
       if (Status s = parseFourcc(key, value, true, options.colour_format); !s) return s;
     } else if (key == "depth_scale") {
-      if (!parseDouble(value, options.depth_scale_m) || !(options.depth_scale_m > 0.0) ||
+      if (!parseSpecDouble(value, options.depth_scale_m) || !(options.depth_scale_m > 0.0) ||
           options.depth_scale_m > 1.0) {
         return invalid("depth_scale: expected metres per depth unit in (0, 1] (0.001 for millimetres), got '" +
                        std::string(value) + "'");
@@ -158,19 +139,19 @@ Result<V4l2CameraOptions> parseV4l2CameraOptions(std::string_view args) {
       if (value.empty()) return invalid("calib: expected a calibration file path");
       options.calib_path = std::string(value);
     } else if (key == "buffers") {
-      if (!parseInt(value, options.buffers) || options.buffers < 2 || options.buffers > kMaxBuffers) {
+      if (!parseSpecInt(value, options.buffers) || options.buffers < 2 || options.buffers > kMaxBuffers) {
         return invalid("buffers: expected an integer in 2.." + std::to_string(kMaxBuffers) + ", got '" +
                        std::string(value) + "'");
       }
     } else if (key == "pair_tolerance_ms") {
       double ms = 0.0;
-      if (!parseDouble(value, ms) || !(ms > 0.0) || ms > 1000.0) {
+      if (!parseSpecDouble(value, ms) || !(ms > 0.0) || ms > 1000.0) {
         return invalid("pair_tolerance_ms: expected milliseconds in (0, 1000], got '" + std::string(value) + "'");
       }
       options.pair_tolerance_ns = static_cast<int64_t>(std::llround(ms * 1e6));
     } else if (key == "hfov_deg" || key == "colour_hfov_deg" || key == "color_hfov_deg") {
       double deg = 0.0;
-      if (!parseDouble(value, deg) || !(deg >= 10.0) || !(deg <= 170.0)) {
+      if (!parseSpecDouble(value, deg) || !(deg >= 10.0) || !(deg <= 170.0)) {
         return invalid(std::string(key) + ": expected a horizontal field of view in 10..170 degrees, got '" +
                        std::string(value) + "'");
       }
