@@ -57,6 +57,24 @@ bool sizeOffered(const std::vector<FrameSize>& sizes, int w, int h) {
   return false;
 }
 
+// The size to negotiate: the requested one, or without a request 640x480 (the
+// node's first size when it lacks 640x480). False when the node does not offer
+// the requested size (a node listing no sizes takes any).
+bool chooseSize(const std::vector<FrameSize>& sizes, int requested_w, int requested_h, int& w, int& h) {
+  w = requested_w;
+  h = requested_h;
+  if (w == 0) {
+    w = 640;
+    h = 480;
+    if (!sizes.empty() && !sizeOffered(sizes, w, h)) {
+      w = sizes.front().width;
+      h = sizes.front().height;
+    }
+    return true;
+  }
+  return sizes.empty() || sizeOffered(sizes, w, h);
+}
+
 int64_t monotonicNowNs() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -303,16 +321,9 @@ Status V4l2Camera::negotiateDepth() {
                 "; `fovead cameras` lists the depth nodes"};
   }
   const std::vector<FrameSize> sizes = depth_.frameSizes(fourcc);
-  int w = options_.width;
-  int h = options_.height;
-  if (w == 0) {
-    w = 640;
-    h = 480;
-    if (!sizes.empty() && !sizeOffered(sizes, w, h)) {
-      w = sizes.front().width;
-      h = sizes.front().height;
-    }
-  } else if (!sizes.empty() && !sizeOffered(sizes, w, h)) {
+  int w = 0;
+  int h = 0;
+  if (!chooseSize(sizes, options_.width, options_.height, w, h)) {
     return {ErrorCode::kInvalidArgument, "v4l2: " + depth_.path() + " offers no " + fourccText(fourcc) + " at " +
                                              sizeText(w, h) + "; it offers " + sizeList(sizes)};
   }
@@ -349,16 +360,9 @@ Status V4l2Camera::negotiateColour() {
                 "; it offers " + formatList(formats)};
   }
   const std::vector<FrameSize> sizes = colour_.frameSizes(fourcc);
-  int w = options_.colour_width;
-  int h = options_.colour_height;
-  if (w == 0) {
-    w = 640;
-    h = 480;
-    if (!sizes.empty() && !sizeOffered(sizes, w, h)) {
-      w = sizes.front().width;
-      h = sizes.front().height;
-    }
-  } else if (!sizes.empty() && !sizeOffered(sizes, w, h)) {
+  int w = 0;
+  int h = 0;
+  if (!chooseSize(sizes, options_.colour_width, options_.colour_height, w, h)) {
     return {ErrorCode::kInvalidArgument, "v4l2: colour node " + colour_.path() + " offers no " + fourccText(fourcc) +
                                              " at " + sizeText(w, h) + "; it offers " + sizeList(sizes)};
   }
