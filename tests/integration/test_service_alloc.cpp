@@ -18,20 +18,17 @@
 #include "net/operator_link.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/service_doubles.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::firmware {
 namespace {
 
 using namespace std::chrono_literals;
 
-// Waits (without allocating) until the service has foveated `frames` frames.
+// Waits (without allocating) until the service has foveated `frames` frames;
+// the timeout scales under emulators and sanitizers (tests/support/test_time.h).
 bool waitForFrames(const Service& service, uint64_t frames, std::chrono::seconds timeout) {
-  const auto end = std::chrono::steady_clock::now() + timeout;
-  while (service.stats().frames_foveated < frames) {
-    if (std::chrono::steady_clock::now() > end) return false;
-    std::this_thread::sleep_for(2ms);
-  }
-  return true;
+  return test::waitUntil([&] { return service.stats().frames_foveated >= frames; }, timeout);
 }
 
 TEST(ServiceAllocation, CounterSeesOtherThreads) {
@@ -58,11 +55,10 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpWithoutStreaming) {
   // privacy input still read every few milliseconds.
   config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
       StatusLinesConfig::kNoLine;
-  Result<std::unique_ptr<Service>> created = Service::create(config, std::move(environment));
-  ASSERT_TRUE(created.isOk()) << created.status().toString();
-  Service& service = *created.value();
-  ASSERT_TRUE(service.start().isOk());
-  std::thread supervisor([&] { service.run(); });
+  test::RunningService running;  // stops the service on every way out of the test
+  const Status started = running.start(config, std::move(environment));
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  Service& service = *running.service;
   ASSERT_TRUE(waitForFrames(service, 30, 10s));  // warm-up
 
   uint64_t allocations = 0, frames = 0;
@@ -74,8 +70,7 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpWithoutStreaming) {
     allocations = scope.allocations();
     EXPECT_TRUE(ok);
   }
-  service.requestStop();
-  supervisor.join();
+  running.stop();
   std::printf("steady state: %llu frames, %llu heap allocations\n", static_cast<unsigned long long>(frames),
               static_cast<unsigned long long>(allocations));
   EXPECT_GE(frames, 300u);
@@ -92,11 +87,10 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
   config.stream.link.insecure = true;
   Service::Environment environment;
   environment.gpio = std::make_unique<hal::mock::MockGpio>(8);
-  Result<std::unique_ptr<Service>> created = Service::create(config, std::move(environment));
-  ASSERT_TRUE(created.isOk()) << created.status().toString();
-  Service& service = *created.value();
-  ASSERT_TRUE(service.start().isOk());
-  std::thread supervisor([&] { service.run(); });
+  test::RunningService running;  // stops the service on every way out of the test
+  const Status started = running.start(config, std::move(environment));
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  Service& service = *running.service;
 
   net::OperatorLinkConfig op_config;
   op_config.insecure = true;
@@ -118,6 +112,14 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
       (void)op.value()->receive(2);
     }
   });
+  struct JoinOnExit {  // a failed ASSERT below must not leave the thread joinable
+    std::atomic<bool>& stop;
+    std::thread& thread;
+    ~JoinOnExit() {
+      stop.store(true);
+      if (thread.joinable()) thread.join();
+    }
+  } join_operator{stop, operator_thread};
   ASSERT_TRUE(waitForFrames(service, 50, 10s));  // warm-up: the session's encoder is made here
   ASSERT_GT(service.stats().frames_sent, 0u);
 
@@ -133,8 +135,7 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
   }
   stop.store(true);
   operator_thread.join();
-  service.requestStop();
-  supervisor.join();
+  running.stop();
   std::printf("steady state streaming: %llu frames, %llu sent, %llu heap allocations\n",
               static_cast<unsigned long long>(frames), static_cast<unsigned long long>(sent),
               static_cast<unsigned long long>(allocations));
@@ -160,17 +161,15 @@ TEST(ServiceMemory, ResidentSetStaysFlatOverAThousandFrames) {
   config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
       StatusLinesConfig::kNoLine;
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=250";
-  Result<std::unique_ptr<Service>> created = Service::create(config, std::move(environment));
-  ASSERT_TRUE(created.isOk()) << created.status().toString();
-  Service& service = *created.value();
-  ASSERT_TRUE(service.start().isOk());
-  std::thread supervisor([&] { service.run(); });
+  test::RunningService running;  // stops the service on every way out of the test
+  const Status started = running.start(config, std::move(environment));
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  Service& service = *running.service;
   ASSERT_TRUE(waitForFrames(service, 100, 10s));  // warm-up
   const long before = residentPages();
   ASSERT_TRUE(waitForFrames(service, 1100, 30s));
   const long after = residentPages();
-  service.requestStop();
-  supervisor.join();
+  running.stop();
   const long page_kib = sysconf(_SC_PAGESIZE) / 1024;
   std::printf("resident set: %ld KiB after warm-up, %ld KiB after 1000 more frames\n", before * page_kib,
               after * page_kib);

@@ -16,10 +16,12 @@
 #include <thread>
 #include <vector>
 
+#include "firmware/service.h"
 #include "firmware/service_config.h"
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "hal/gpio/mock/mock_gpio.h"
+#include "hal/result.h"
 
 namespace fovea::test {
 
@@ -156,5 +158,33 @@ inline firmware::ServiceConfig smallServiceConfig(double fps = 60.0) {
   config.stream.link.listen.clear();  // no stream unless a test asks
   return config;
 }
+
+// A created and started service whose run() supervises in a thread. Stops and
+// joins on destruction, so a failed ASSERT that returns early leaves no thread
+// running (std::thread's destructor would terminate the test binary).
+struct RunningService {
+  std::unique_ptr<firmware::Service> service;
+  std::thread supervisor;
+
+  RunningService() = default;
+  RunningService(const RunningService&) = delete;
+  RunningService& operator=(const RunningService&) = delete;
+  ~RunningService() { stop(); }
+
+  // Creates and starts the service; the status says why not.
+  Status start(const firmware::ServiceConfig& config, firmware::Service::Environment environment) {
+    Result<std::unique_ptr<firmware::Service>> created = firmware::Service::create(config, std::move(environment));
+    if (!created) return created.status();
+    service = std::move(created.value());
+    if (Status s = service->start(); !s) return s;
+    supervisor = std::thread([this] { service->run(); });
+    return Status::ok();
+  }
+  void stop() {
+    if (!service) return;
+    service->requestStop();
+    if (supervisor.joinable()) supervisor.join();
+  }
+};
 
 }  // namespace fovea::test

@@ -27,6 +27,7 @@
 #include "net/udp_socket.h"
 #include "tests/support/process.h"
 #include "tests/support/service_doubles.h"
+#include "tests/support/test_time.h"
 #include "tests/unit/firmware/log_sinks.h"
 
 namespace fovea::firmware {
@@ -34,34 +35,12 @@ namespace {
 
 using namespace std::chrono_literals;
 
-bool waitUntil(const std::function<bool()>& pred, std::chrono::milliseconds timeout) {
-  const auto end = std::chrono::steady_clock::now() + timeout;
-  while (!pred()) {
-    if (std::chrono::steady_clock::now() > end) return false;
-    std::this_thread::sleep_for(5ms);
-  }
-  return true;
-}
-
-// A created and started service whose run() supervises in a thread.
-struct RunningService {
-  std::unique_ptr<Service> service;
-  std::thread supervisor;
-
-  ~RunningService() { stop(); }
-  void stop() {
-    if (!service) return;
-    service->requestStop();
-    if (supervisor.joinable()) supervisor.join();
-  }
-};
+using test::RunningService;
+using test::waitUntil;  // its timeouts scale under emulators and sanitizers (tests/support/test_time.h)
 
 void startService(RunningService& running, const ServiceConfig& config, Service::Environment environment) {
-  Result<std::unique_ptr<Service>> created = Service::create(config, std::move(environment));
-  ASSERT_TRUE(created.isOk()) << created.status().toString();
-  running.service = std::move(created.value());
-  ASSERT_TRUE(running.service->start().isOk());
-  running.supervisor = std::thread([&running] { running.service->run(); });
+  const Status started = running.start(config, std::move(environment));
+  ASSERT_TRUE(started.isOk()) << started.toString();
 }
 
 using test::RecordingSink;

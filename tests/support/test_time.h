@@ -1,0 +1,47 @@
+// Timeouts of tests that wait for threads or processes, scaled for slow runs.
+//
+// A wait's timeout is an upper bound: a passing run on a fast host never
+// reaches it. Under an emulator (qemu-aarch64) or a sanitizer the same frames
+// take several times longer, so CTest sets FOVEA_TEST_TIME_SCALE for those
+// builds (tests/CMakeLists.txt) and every timeout below is multiplied by it.
+// Fixed sleeps that mean "let this much time pass" are not scaled.
+#pragma once
+
+#include <chrono>
+#include <cstdlib>
+#include <thread>
+
+namespace fovea::test {
+
+// FOVEA_TEST_TIME_SCALE, a number in [1, 100]; 1 when unset or invalid.
+// Neither this nor the waits allocate (the allocation-counting tests use them).
+inline double timeScale() {
+  static const double scale = [] {
+    const char* text = std::getenv("FOVEA_TEST_TIME_SCALE");
+    if (text == nullptr) return 1.0;
+    char* end = nullptr;
+    const double value = std::strtod(text, &end);
+    return (end != text && *end == '\0' && value >= 1.0 && value <= 100.0) ? value : 1.0;
+  }();
+  return scale;
+}
+
+template <class Rep, class Period>
+std::chrono::milliseconds scaled(std::chrono::duration<Rep, Period> timeout) {
+  const double ms = std::chrono::duration<double, std::milli>(timeout).count() * timeScale();
+  return std::chrono::milliseconds(static_cast<int64_t>(ms));
+}
+
+// Polls `done` every few milliseconds until it holds (true) or the scaled
+// timeout passes (false).
+template <class Predicate, class Rep, class Period>
+bool waitUntil(Predicate&& done, std::chrono::duration<Rep, Period> timeout) {
+  const auto end = std::chrono::steady_clock::now() + scaled(timeout);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return true;
+}
+
+}  // namespace fovea::test
