@@ -86,13 +86,15 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
                                        std::to_string(bounds.size()));
     }
     for (std::size_t i = 0; i < bounds.size(); ++i) {
-      const std::string field = "bounds_deg[" + std::to_string(i) + "]";
+      // The field's name only on error: a valid configuration is applied on the
+      // frame path (Foveator::setConfig), which must not build strings.
+      auto field = [i] { return "bounds_deg[" + std::to_string(i) + "]"; };
       const double b = bounds[i];
-      if (!std::isfinite(b)) return invalid(field, "must be a finite number, got " + formatDouble(b));
-      if (!(b > 0.0 && b < 180.0)) return invalid(field, formatDouble(b) + " is outside (0, 180) degrees");
+      if (!std::isfinite(b)) return invalid(field(), "must be a finite number, got " + formatDouble(b));
+      if (!(b > 0.0 && b < 180.0)) return invalid(field(), formatDouble(b) + " is outside (0, 180) degrees");
       if (i > 0 && !(b > bounds[i - 1])) {
-        return invalid(field, formatDouble(b) + " is not greater than the previous bound " +
-                                  formatDouble(bounds[i - 1]) + " (bounds must increase strictly)");
+        return invalid(field(), formatDouble(b) + " is not greater than the previous bound " +
+                                    formatDouble(bounds[i - 1]) + " (bounds must increase strictly)");
       }
       model.bound_deg_[i] = b;
     }

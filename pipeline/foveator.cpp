@@ -43,6 +43,10 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
                                                    : VoxelSampler()),
       hash_sampler_(capacity.kernels == KernelSet::kSimd ? HashVoxelSampler(capacity.max_points, capacity.max_voxels)
                                                          : HashVoxelSampler()) {
+  // setConfig copies a configuration into config_ on the frame path (the gaze
+  // policy switching between the operator's and the fallback's): with room for
+  // the most bounds a model may have, that copy never allocates.
+  config_.acuity.custom_bounds_deg.reserve(kMaxRegions - 1);
   if (capacity.kernels == KernelSet::kSimd && capacity.threads > 1) {
     pool_ = std::make_unique<WorkerPool>(capacity.threads);
     part_histograms_.assign(static_cast<std::size_t>(capacity.threads) * 256, 0);

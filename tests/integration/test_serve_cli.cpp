@@ -118,6 +118,14 @@ TEST(FoveadServe, StreamsToFoveaOperator) {
   stopSeconds(serve, SIGTERM, exit_code);
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
+  // Each frame counted once: never more than the service sent. (The operator
+  // used to count a frame again for every status datagram, one a second, that
+  // came after it; the soak test's totals showed it.)
+  std::smatch stopped;
+  const std::string serve_out = serve.output();
+  ASSERT_TRUE(std::regex_search(serve_out, stopped, std::regex("stopped: [0-9]+ frames captured, [0-9]+ foveated, ([0-9]+) sent")))
+      << serve_out;
+  EXPECT_LE(std::stoi(frames[1].str()), std::stoi(stopped[1].str())) << op.output << serve_out;
 }
 
 TEST(FoveadServe, FrameLimitAndBadFlags) {

@@ -14,6 +14,7 @@
 
 #include "firmware/sanitizer.h"
 
+#include "firmware/log.h"
 #include "firmware/service.h"
 #include "net/operator_link.h"
 #include "tests/support/alloc_counter.h"
@@ -78,15 +79,36 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpWithoutStreaming) {
   EXPECT_GE(service.stats().status_lines, 1u);
 }
 
-TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
+// Counts, without allocating, the log lines that say the gaze source changed.
+class GazeChangeSink final : public firmware::LogSink {
+ public:
+  void write(firmware::LogLevel, int64_t, std::string_view line) override {
+    if (line.find("gaze: ") != std::string_view::npos) changes.fetch_add(1);
+  }
+  std::atomic<uint64_t> changes{0};
+};
+
+struct StreamingCount {
+  uint64_t frames = 0, sent = 0, allocations = 0, gaze_changes = 0;
+};
+
+// The service streaming to an operator on loopback, 300 frames counted after
+// warm-up. The operator sends its gaze every 10 ms; with `gaps`, it falls
+// silent for 250 ms after every 150 ms, longer than the gaze timeout (100 ms),
+// so the service keeps switching between the operator's foveation and the
+// fallback's (firmware/gaze_policy.h) during the count.
+void countWhileStreaming(bool gaps, StreamingCount& count) {
   ServiceConfig config = allocConfig();
   config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
       StatusLinesConfig::kNoLine;
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=100";
   config.stream.link.listen = "127.0.0.1:0";
   config.stream.link.insecure = true;
+  GazeChangeSink sink;
+  firmware::Logger logger(sink);
   Service::Environment environment;
   environment.gpio = std::make_unique<hal::mock::MockGpio>(8);
+  environment.logger = &logger;
   test::RunningService running;  // stops the service on every way out of the test
   const Status started = running.start(config, std::move(environment));
   ASSERT_TRUE(started.isOk()) << started.toString();
@@ -100,13 +122,18 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
   // and after the count, and during it only sends and receives into fixed buffers).
   std::atomic<bool> stop{false};
   std::thread operator_thread([&] {
-    auto next = std::chrono::steady_clock::now();
+    const auto begin = std::chrono::steady_clock::now();
+    auto next = begin;
     while (!stop.load()) {
-      if (std::chrono::steady_clock::now() >= next) {
-        net::GazeSample g;
-        g.gaze_origin_m = {3.0, 0.35, 1.55};
-        g.gaze_direction = {0.6, 0.8, 0.0};
-        (void)op.value()->sendGaze(g);
+      const auto now = std::chrono::steady_clock::now();
+      const bool silent = gaps && (now - begin) % 400ms >= 150ms;
+      if (now >= next) {
+        if (!silent) {
+          net::GazeSample g;
+          g.gaze_origin_m = {3.0, 0.35, 1.55};
+          g.gaze_direction = {0.6, 0.8, 0.0};
+          (void)op.value()->sendGaze(g);
+        }
         next += 10ms;
       }
       (void)op.value()->receive(2);
@@ -123,24 +150,45 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
   ASSERT_TRUE(waitForFrames(service, 50, 10s));  // warm-up: the session's encoder is made here
   ASSERT_GT(service.stats().frames_sent, 0u);
 
-  uint64_t allocations = 0, frames = 0, sent = 0;
   {
     test::AllocationScope scope;
     const ServiceStats start = service.stats();
+    const uint64_t changes_before = sink.changes.load();
     EXPECT_TRUE(waitForFrames(service, start.frames_foveated + 300, 20s));
     const ServiceStats end = service.stats();
-    frames = end.frames_foveated - start.frames_foveated;
-    sent = end.frames_sent - start.frames_sent;
-    allocations = scope.allocations();
+    count.frames = end.frames_foveated - start.frames_foveated;
+    count.sent = end.frames_sent - start.frames_sent;
+    count.gaze_changes = sink.changes.load() - changes_before;
+    count.allocations = scope.allocations();
   }
   stop.store(true);
   operator_thread.join();
   running.stop();
-  std::printf("steady state streaming: %llu frames, %llu sent, %llu heap allocations\n",
-              static_cast<unsigned long long>(frames), static_cast<unsigned long long>(sent),
-              static_cast<unsigned long long>(allocations));
-  EXPECT_GE(sent, 250u);
-  EXPECT_EQ(allocations, 0u);
+  std::printf("steady state streaming%s: %llu frames, %llu sent, %llu gaze source changes, %llu heap allocations\n",
+              gaps ? " (gaze with gaps)" : "", static_cast<unsigned long long>(count.frames),
+              static_cast<unsigned long long>(count.sent), static_cast<unsigned long long>(count.gaze_changes),
+              static_cast<unsigned long long>(count.allocations));
+}
+
+TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpStreamingToAnOperator) {
+  StreamingCount count;
+  countWhileStreaming(false, count);
+  if (HasFatalFailure()) return;
+  EXPECT_GE(count.sent, 250u);
+  EXPECT_EQ(count.allocations, 0u);
+}
+
+// A gaze that comes and goes switches the foveation configuration on the frame
+// path many times (Foveator::setConfig): that must not allocate either. (Under
+// TSan a slow run once counted 29 allocations while the gaze flapped; natively
+// this test counts none, also before setConfig's copy got reserved room.)
+TEST(ServiceAllocation, ThreeHundredFramesWhileTheOperatorGazeComesAndGoes) {
+  StreamingCount count;
+  countWhileStreaming(true, count);
+  if (HasFatalFailure()) return;
+  EXPECT_GE(count.gaze_changes, 4u) << "the gaze never switched to the fallback and back during the count";
+  EXPECT_GE(count.sent, 250u);
+  EXPECT_EQ(count.allocations, 0u);
 }
 
 long residentPages() {

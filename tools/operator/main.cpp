@@ -317,11 +317,16 @@ int main(int argc, char** argv) {
     if (!received) continue;
     stats.datagram(received->payload.size() + net::kDatagramOverhead);
     switch (received->type) {
+      // The assembler's ready frames are those of its last call: look at them
+      // right after a chunk or summary only (after any other datagram they
+      // would be counted again).
       case net::MessageType::kChunk:
         (void)assembler.addChunk(received->payload, received->received_ns);  // failures are counted by the assembler
+        handleReady();
         break;
       case net::MessageType::kFrameSummary:
         (void)assembler.addSummary(received->payload);
+        handleReady();
         break;
       case net::MessageType::kBye:
         robot_said_bye = true;
@@ -338,7 +343,6 @@ int main(int argc, char** argv) {
       default:
         break;
     }
-    handleReady();
   }
   assembler.flush();
   handleReady();

@@ -7,6 +7,7 @@
 #include <set>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,28 @@
 
 namespace fovea::firmware {
 namespace {
+
+// FOVEA_BOARD_DIR for a scope, then what was there before (CTest sets it for
+// every test, tests/CMakeLists.txt, and fovead subprocesses read it).
+class ScopedBoardDir {
+ public:
+  explicit ScopedBoardDir(const std::string& dir) {
+    if (const char* old = std::getenv("FOVEA_BOARD_DIR")) saved_ = old;
+    setenv("FOVEA_BOARD_DIR", dir.c_str(), 1);
+  }
+  ~ScopedBoardDir() {
+    if (saved_) {
+      setenv("FOVEA_BOARD_DIR", saved_->c_str(), 1);
+    } else {
+      unsetenv("FOVEA_BOARD_DIR");
+    }
+  }
+  ScopedBoardDir(const ScopedBoardDir&) = delete;
+  ScopedBoardDir& operator=(const ScopedBoardDir&) = delete;
+
+ private:
+  std::optional<std::string> saved_;
+};
 
 using test::TempDir;
 
@@ -375,7 +398,7 @@ std::vector<std::filesystem::path> boardProfiles() {
 TEST(BoardProfiles, EveryProfileLoadsAndValidates) {
   const std::vector<std::filesystem::path> profiles = boardProfiles();
   ASSERT_GE(profiles.size(), 4u);
-  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const ScopedBoardDir board_dir(boardDir());
   for (const std::filesystem::path& profile : profiles) {
     SCOPED_TRACE(profile.string());
     Result<ServiceConfig> config = loadServiceConfig(profile.string(), ServiceConfig{});
@@ -397,13 +420,11 @@ TEST(BoardProfiles, EveryProfileLoadsAndValidates) {
     ASSERT_TRUE(printed.isOk()) << printed.status().message();
     expectSame(*printed, *config);
   }
-  unsetenv("FOVEA_BOARD_DIR");
 }
 
 TEST(BoardProfiles, DefaultIsHostMock) {
-  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const ScopedBoardDir board_dir(boardDir());
   Result<ServiceConfig> config = resolveServiceConfig(std::nullopt, std::nullopt, {});
-  unsetenv("FOVEA_BOARD_DIR");
   ASSERT_TRUE(config.isOk()) << config.status().message();
   EXPECT_EQ(config->board, "host-mock");
   EXPECT_EQ(config->camera.spec.rfind("mock:", 0), 0u);
@@ -436,7 +457,7 @@ TEST(BoardProfiles, MissingCameraBackendIsReportedButTheProfileValidates) {
 
 TEST(Resolve, BoardThenFileThenSet) {
   TempDir dir;
-  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const ScopedBoardDir board_dir(boardDir());
   const std::string file = write(dir, "fovea.toml", "[pipeline]\nthreads = 1\n[stream]\nbudget_mbps = 50\n");
   const std::vector<std::string> sets = {"stream.budget_mbps=25", "foveation.preset=F2"};
   Result<ServiceConfig> config = resolveServiceConfig("rpi5-usb-rgbd", file, sets);
@@ -479,14 +500,13 @@ TEST(Resolve, BoardThenFileThenSet) {
   ASSERT_FALSE(unknown.isOk());
   EXPECT_EQ(unknown.status().message(), "unknown board 'nope': no nope.toml in " + boardDir() +
                                             " (boards: host-mock, jetson-orin-nano, rk3588, rpi5-usb-rgbd)");
-  unsetenv("FOVEA_BOARD_DIR");
 }
 
 TEST(Resolve, BoardDirectoryFromTheEnvironment) {
   TempDir dir;
   write(dir, "bench.toml", "# bench: a test bench\nboard = \"bench\"\n[pipeline]\nthreads = 5\n");
   write(dir, "wrong.toml", "board = \"other\"\n");
-  setenv("FOVEA_BOARD_DIR", dir.path().c_str(), 1);
+  const ScopedBoardDir board_dir(dir.path());
   EXPECT_EQ(boardDirectory(), dir.path());
   Result<ServiceConfig> config = resolveServiceConfig("bench", std::nullopt, {});
   ASSERT_TRUE(config.isOk()) << config.status().message();
@@ -494,7 +514,6 @@ TEST(Resolve, BoardDirectoryFromTheEnvironment) {
   Result<ServiceConfig> wrong = resolveServiceConfig("wrong", std::nullopt, {});
   ASSERT_FALSE(wrong.isOk());
   EXPECT_EQ(wrong.status().message(), dir.file("wrong.toml") + ":1: board: 'other' in wrong.toml (they must match)");
-  unsetenv("FOVEA_BOARD_DIR");
 }
 
 std::string fovead() {
@@ -512,10 +531,9 @@ TEST(PrintConfig, PrintsTheEffectiveConfigurationAsLoadableToml) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   Result<ServiceConfig> loaded = loadServiceConfig(printed, ServiceConfig{});
   ASSERT_TRUE(loaded.isOk()) << loaded.status().message();
-  setenv("FOVEA_BOARD_DIR", boardDir().c_str(), 1);
+  const ScopedBoardDir board_dir(boardDir());
   const std::vector<std::string> sets = {"stream.budget_mbps=25", "pipeline.threads=1"};
   Result<ServiceConfig> expected = resolveServiceConfig("rpi5-usb-rgbd", std::nullopt, sets);
-  unsetenv("FOVEA_BOARD_DIR");
   ASSERT_TRUE(expected.isOk()) << expected.status().message();
   expectSame(*loaded, *expected);
 

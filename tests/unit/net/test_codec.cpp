@@ -411,11 +411,12 @@ TEST(CodecRobustness, RandomBytesTruncationsAndBitFlips) {
     for (uint8_t& b : bytes) b = static_cast<uint8_t>(rng());
     expectSafeDecode(bytes, out);
   }
-  // Every truncation and every single-bit flip of some chunks (raw and zstd), and multi-byte garbage.
-  std::size_t zstd_chunks = 0, flips_ok = 0, flips = 0;
+  // Every truncation and every single-bit flip of some chunks, and multi-byte garbage.
+  // (Raw chunks only: with entropy_coding on, zstd is kept only where it makes a chunk
+  // smaller, which on the mock room it never does, net/codec.h.)
+  std::size_t flips_ok = 0, flips = 0;
   for (std::size_t i = 0; i < enc.chunkCount(); i += std::max<std::size_t>(1, enc.chunkCount() / 6)) {
     const std::span<const uint8_t> chunk = enc.chunk(i);
-    zstd_chunks += (chunk.size() > 0);
     for (std::size_t len = 0; len < chunk.size(); ++len) {
       bytes.assign(chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(len));
       out.clear();
