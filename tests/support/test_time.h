@@ -1,10 +1,12 @@
 // Timeouts of tests that wait for threads or processes, scaled for slow runs.
 //
-// A wait's timeout is an upper bound: a passing run on a fast host never
-// reaches it. Under an emulator (qemu-aarch64) or a sanitizer the same frames
-// take several times longer, so CTest sets FOVEA_TEST_TIME_SCALE for those
-// builds (tests/CMakeLists.txt) and every timeout below is multiplied by it.
-// Fixed sleeps that mean "let this much time pass" are not scaled.
+// Under an emulator (qemu-aarch64) or a sanitizer the same frames take several
+// times longer, so CTest sets FOVEA_TEST_TIME_SCALE for those builds
+// (tests/CMakeLists.txt): scaled() multiplies a bound the code must meet ("stops
+// within a second") by it. A wait's timeout is only an upper bound (a passing
+// run never reaches it), so waitUntil() allows kWaitMargin times more on top,
+// for a machine loaded by other builds (CI runs stages side by side). Fixed
+// sleeps that mean "let this much time pass" are not scaled.
 #pragma once
 
 #include <chrono>
@@ -32,11 +34,13 @@ std::chrono::milliseconds scaled(std::chrono::duration<Rep, Period> timeout) {
   return std::chrono::milliseconds(static_cast<int64_t>(ms));
 }
 
+inline constexpr int kWaitMargin = 3;
+
 // Polls `done` every few milliseconds until it holds (true) or the scaled
-// timeout passes (false).
+// timeout, times kWaitMargin, passes (false).
 template <class Predicate, class Rep, class Period>
 bool waitUntil(Predicate&& done, std::chrono::duration<Rep, Period> timeout) {
-  const auto end = std::chrono::steady_clock::now() + scaled(timeout);
+  const auto end = std::chrono::steady_clock::now() + kWaitMargin * scaled(timeout);
   while (!done()) {
     if (std::chrono::steady_clock::now() > end) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
