@@ -804,7 +804,9 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
     for (const std::string& name : names) list += (list.empty() ? "" : ", ") + name;
     return Result<ServiceConfig>(ErrorCode::kNotFound, "unknown board '" + board_name + "': no " + board_name +
                                                            ".toml in " + dir + " (boards: " +
-                                                           (list.empty() ? "none" : list) + ")");
+                                                           (list.empty() ? "none: set FOVEA_BOARD_DIR to the profiles' directory"
+                                                                         : list) +
+                                                           ")");
   }
   ServiceConfig config;
   config.board = board_name;
