@@ -59,6 +59,9 @@ bool Streamer::operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const {
   const auto& latest = link_->latestGaze();
   if (!link_->hasSession() || !latest) return false;
   const net::GazeSample& s = latest->sample;
+  // Confidence 0: the operator's station keeps the session but does not know
+  // where the eye is (no tracker sample yet); the robot falls back as without gaze.
+  if (!(s.confidence > 0.0f)) return false;
   gaze.origin_m = {s.gaze_origin_m.x, s.gaze_origin_m.y, s.gaze_origin_m.z};
   gaze.direction = {s.gaze_direction.x, s.gaze_direction.y, s.gaze_direction.z};
   received_ns = latest->received_ns;
@@ -182,7 +185,13 @@ net::StatusReport Streamer::statusReport(uint64_t frames_captured, uint64_t fram
   status.bytes_sent = lc.bytes_sent;
   status.datagrams_received = lc.datagrams_received;
   status.datagrams_dropped = lc.dropped.total();
-  if (const auto& g = link_->latestGaze()) status.gaze_age_ns = now_ns - g->received_ns;
+  if (const auto& g = link_->latestGaze()) {
+    status.gaze_age_ns = now_ns - g->received_ns;
+    if (g->sample.confidence > 0.0f) {
+      status.gaze_origin_m = g->sample.gaze_origin_m;
+      status.gaze_direction = g->sample.gaze_direction;
+    }
+  }
   status.rtt_ns = link_->lastRttNs();
   return status;
 }

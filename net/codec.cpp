@@ -970,6 +970,7 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload, int64_t receiv
   current_.capture_time_ns = d->capture_time_ns;
   current_.chunk_count = d->chunk_count;
   current_.points[d->region] += static_cast<uint32_t>(d->points);
+  current_.step_m[d->region] = d->step_m;
   ++current_.chunks_received[d->region];
   current_.last_chunk_received_ns = received_ns;
   return Status::ok();

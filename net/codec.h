@@ -137,6 +137,10 @@ struct AssembledFrame {
   std::array<uint16_t, pipeline::kMaxRegions> chunks_expected{};
   std::array<uint16_t, pipeline::kMaxRegions> chunks_cut{};
   uint16_t chunk_count = 0;  // chunks the encoder made (from any chunk or the summary)
+  // Per region, the lattice step of its decoded chunks (0: no chunk of it arrived).
+  // For a voxel-sampled region it is CodecConfig::periphery_step_ratio times the
+  // voxel size; a viewer sizes a point's splat from it.
+  std::array<double, pipeline::kMaxRegions> step_m{};
   // The caller's arrival time of the frame's last decoded chunk (addChunk's
   // received_ns): when the frame was decoded, whatever later event completed it.
   int64_t last_chunk_received_ns = 0;

@@ -13,6 +13,7 @@ namespace fb = flatbuffers;
 wire::Nonce128 toWire(const Nonce128& n) { return wire::Nonce128(n.lo, n.hi); }
 Nonce128 fromWire(const wire::Nonce128* n) { return n ? Nonce128{n->lo(), n->hi()} : Nonce128{}; }
 wire::Vec3d toWire(const Vec3& v) { return wire::Vec3d(v.x, v.y, v.z); }
+Vec3 fromWire(const wire::Vec3d& v) { return Vec3{v.x(), v.y(), v.z()}; }
 
 bool finite(double v) { return std::isfinite(v); }
 bool finite(const Vec3& v) { return finite(v.x) && finite(v.y) && finite(v.z); }
@@ -122,10 +123,14 @@ std::span<const uint8_t> MessageEncoder::encode(const GazeSample& m) {
 
 std::span<const uint8_t> MessageEncoder::encode(const StatusReport& m) {
   begin();
+  const bool gaze = m.gaze_origin_m && m.gaze_direction;
+  const wire::Vec3d origin = gaze ? toWire(*m.gaze_origin_m) : wire::Vec3d();
+  const wire::Vec3d direction = gaze ? toWire(*m.gaze_direction) : wire::Vec3d();
   builder_.Finish(wire::CreateStatus(builder_, m.robot_stamp_ns, m.frames_captured, m.frames_sent,
                                      m.frames_dropped, m.chunks_cut, m.datagrams_sent, m.bytes_sent,
                                      m.datagrams_received, m.datagrams_dropped, m.gaze_age_ns, m.rtt_ns,
-                                     m.latency_p50_ns, m.latency_p99_ns));
+                                     m.latency_p50_ns, m.latency_p99_ns, gaze ? &origin : nullptr,
+                                     gaze ? &direction : nullptr));
   return finish();
 }
 
@@ -183,10 +188,9 @@ std::optional<DropReason> decode(std::span<const uint8_t> payload, GazeSample& o
   GazeSample g;
   g.sequence = m->sequence();
   g.operator_stamp_ns = m->operator_stamp_ns();
-  const auto vec = [](const wire::Vec3d* v) { return Vec3{v->x(), v->y(), v->z()}; };
-  g.gaze_origin_m = vec(m->gaze_origin_m());
-  g.gaze_direction = vec(m->gaze_direction());
-  g.hmd_position_m = vec(m->hmd_position_m());
+  g.gaze_origin_m = fromWire(*m->gaze_origin_m());
+  g.gaze_direction = fromWire(*m->gaze_direction());
+  g.hmd_position_m = fromWire(*m->hmd_position_m());
   const wire::Quatd* q = m->hmd_orientation();
   g.hmd_orientation = Quat{q->w(), q->x(), q->y(), q->z()};
   g.confidence = m->confidence();
@@ -204,10 +208,17 @@ std::optional<DropReason> decode(std::span<const uint8_t> payload, GazeSample& o
 std::optional<DropReason> decode(std::span<const uint8_t> payload, StatusReport& out) {
   const auto* m = verified<wire::Status>(payload);
   if (m == nullptr) return DropReason::kVerify;
-  out = StatusReport{m->robot_stamp_ns(),     m->frames_captured(),   m->frames_sent(),   m->frames_dropped(),
-                     m->chunks_cut(),         m->datagrams_sent(),    m->bytes_sent(),    m->datagrams_received(),
-                     m->datagrams_dropped(),  m->gaze_age_ns(),       m->rtt_ns(),        m->latency_p50_ns(),
-                     m->latency_p99_ns()};
+  out = StatusReport{m->robot_stamp_ns(),    m->frames_captured(), m->frames_sent(), m->frames_dropped(),
+                     m->chunks_cut(),        m->datagrams_sent(),  m->bytes_sent(),  m->datagrams_received(),
+                     m->datagrams_dropped(), m->gaze_age_ns(),     m->rtt_ns(),      m->latency_p50_ns(),
+                     m->latency_p99_ns(),    std::nullopt,         std::nullopt};
+  if (m->gaze_origin_m() != nullptr && m->gaze_direction() != nullptr) {
+    const Vec3 origin = fromWire(*m->gaze_origin_m());
+    const Vec3 direction = fromWire(*m->gaze_direction());
+    if (!finite(origin) || !finite(direction) || !unit(direction)) return DropReason::kSemantic;
+    out.gaze_origin_m = origin;
+    out.gaze_direction = direction;
+  }
   return std::nullopt;
 }
 

@@ -105,6 +105,9 @@ struct StatusReport {
   int64_t rtt_ns = -1;
   int64_t latency_p50_ns = -1;
   int64_t latency_p99_ns = -1;
+  // The newest operator gaze the robot holds (one with an eye: confidence > 0).
+  std::optional<Vec3> gaze_origin_m;
+  std::optional<Vec3> gaze_direction;
 };
 
 // Encodes messages into a builder whose buffer is reserved once (kMaxPayloadBytes).

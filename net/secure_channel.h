@@ -61,6 +61,9 @@ const char* dropReasonName(DropReason reason);
 struct DropCounters {
   std::array<uint64_t, kDropReasonCount> by_reason{};
   void add(DropReason r) { ++by_reason[static_cast<std::size_t>(r)]; }
+  void add(const DropCounters& other) {
+    for (std::size_t i = 0; i < kDropReasonCount; ++i) by_reason[i] += other.by_reason[i];
+  }
   uint64_t operator[](DropReason r) const { return by_reason[static_cast<std::size_t>(r)]; }
   uint64_t total() const;
 };

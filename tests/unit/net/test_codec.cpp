@@ -483,6 +483,11 @@ TEST(FrameAssembler, CollectsFramesAndCountsWhatWasLost) {
     EXPECT_EQ(a.points[r], points_by_region[r]);
     EXPECT_EQ(a.chunks_received[r], received[r]);
     EXPECT_EQ(a.chunks_expected[r], sent[r]);
+    // The step a viewer sizes splats from: the fovea's absolute step, the
+    // periphery's a fraction of its voxel.
+    const CodecConfig defaults;
+    const double voxel = f.voxel_size_m[r];
+    EXPECT_DOUBLE_EQ(a.step_m[r], r == 0 || voxel == 0.0 ? defaults.fovea_step_m : voxel * defaults.periphery_step_ratio) << r;
     total += a.points[r];
   }
   EXPECT_EQ(a.cloud->size(), total);

@@ -511,6 +511,19 @@ TEST(Messages, HelloAcceptRefuseStatusRoundTrip) {
   EXPECT_EQ(s2.frames_sent, 30u);
   EXPECT_EQ(s2.rtt_ns, 1234);
   EXPECT_EQ(s2.gaze_age_ns, -1);
+  EXPECT_FALSE(s2.gaze_origin_m.has_value());
+  EXPECT_FALSE(s2.gaze_direction.has_value());
+
+  // The robot's gaze round-trips; a non-unit direction is refused.
+  status.gaze_origin_m = Vec3{3.0, 0.35, 1.55};
+  status.gaze_direction = Vec3{0.0, 0.6, 0.8};
+  ASSERT_EQ(decode(enc.encode(status), s2), std::nullopt);
+  ASSERT_TRUE(s2.gaze_origin_m && s2.gaze_direction);
+  EXPECT_EQ(s2.gaze_origin_m->y, 0.35);
+  EXPECT_EQ(s2.gaze_direction->z, 0.8);
+  status.gaze_direction = Vec3{0.0, 0.0, 2.0};
+  StatusReport s3;
+  EXPECT_EQ(decode(enc.encode(status), s3), DropReason::kSemantic);
 }
 
 }  // namespace
