@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -203,6 +204,13 @@ struct TestOperator {
   std::atomic<bool> stop{false};
   std::atomic<bool> send_gaze{true};  // false: the gaze stream stops
   std::atomic<bool> silent{false};    // true: the operator vanishes (no gaze, no Bye, nothing read)
+  std::atomic<float> confidence{1.0f};  // 0: a station that does not know where the eye is
+  std::mutex status_mu;
+  std::optional<net::StatusReport> status;  // the newest the robot sent (under status_mu)
+  std::optional<net::StatusReport> lastStatus() {
+    std::lock_guard lock(status_mu);
+    return status;
+  }
   std::atomic<uint64_t> datagrams{0};
   std::thread thread;
 
@@ -224,10 +232,17 @@ struct TestOperator {
           net::GazeSample g;
           g.gaze_origin_m = {3.0, 0.35, 1.55};
           g.gaze_direction = {0.6, 0.8, 0.0};  // unit length
+          g.confidence = confidence.load();
           (void)link->sendGaze(g);
           next += 10ms;
         }
-        if (link->receive(2)) datagrams.fetch_add(1);
+        if (const auto r = link->receive(2)) {
+          datagrams.fetch_add(1);
+          if (r->type == net::MessageType::kStatus) {
+            std::lock_guard lock(status_mu);
+            status = link->lastStatus();
+          }
+        }
       }
     });
     return true;
@@ -253,6 +268,34 @@ ServiceConfig streamingConfig() {
   config.stream.link.listen = "127.0.0.1:0";
   config.stream.link.insecure = true;
   return config;
+}
+
+// A gaze of confidence 0 (a viewer before its first cursor sample) keeps the
+// session and the stream but does not steer the fovea: the robot falls back as
+// without gaze, and reports no gaze of its own; a real sample then takes over.
+TEST(Service, AGazeWithoutAnEyeKeepsTheSessionButNotTheFovea) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = streamingConfig();
+  config.stream.link.session_timeout_ns = 500'000'000;
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  TestOperator op;
+  op.confidence.store(0.0f);
+  ASSERT_TRUE(op.connect(running.service->localEndpoint()));
+  // Several session timeouts long: the session holds on confidence-0 samples.
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_sent >= 30; }, 5000ms));
+  EXPECT_TRUE(running.service->stats().operator_connected);
+  EXPECT_FALSE(sink.contains("gaze: operator"));
+  ASSERT_TRUE(waitUntil([&] { return op.lastStatus().has_value(); }, 3000ms));
+  EXPECT_FALSE(op.lastStatus()->gaze_origin_m.has_value());
+  op.confidence.store(1.0f);
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("gaze: operator"); }, 3000ms));
+  ASSERT_TRUE(waitUntil([&] { return op.lastStatus() && op.lastStatus()->gaze_direction.has_value(); }, 3000ms));
+  EXPECT_EQ(op.lastStatus()->gaze_direction->y, 0.8);
+  running.stop();
 }
 
 // The network side of the faults: a gaze stream that stops (the fallback takes
