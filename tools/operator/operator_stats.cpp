@@ -37,25 +37,35 @@ std::string jsonNumber(double v) {
 
 }  // namespace
 
-std::string OperatorStats::liveLine(double seconds) {
+LiveFigures OperatorStats::takeWindow(double seconds) {
   const double s = seconds > 0 ? seconds : 1.0;
-  uint64_t points = 0;
-  for (uint64_t p : window_.points) points += p;
+  LiveFigures f;
+  f.fps = static_cast<double>(window_.frames) / s;
+  f.wire_mb_per_s = static_cast<double>(window_.wire_bytes) / s / 1e6;
+  f.latency_p50_ms = quantile(window_.latency_ms, 0.5);
+  f.latency_p99_ms = quantile(window_.latency_ms, 0.99);
+  f.lost = window_.lost;
+  for (std::size_t r = 0; r < window_.points.size(); ++r) {
+    f.points_per_region[r] = window_.frames ? window_.points[r] / window_.frames : 0;
+    f.points_per_frame += window_.points[r];
+  }
+  f.points_per_frame = window_.frames ? f.points_per_frame / window_.frames : 0;
+  window_ = Tally{};
+  return f;
+}
+
+std::string liveLine(const LiveFigures& f) {
   char line[512];
   int n = std::snprintf(line, sizeof line,
-                        "fps %5.1f | %6.2f MB/s | latency ms p50 %6.1f p99 %6.1f | lost %llu | points/frame %llu:",
-                        static_cast<double>(window_.frames) / s, static_cast<double>(window_.wire_bytes) / s / 1e6,
-                        quantile(window_.latency_ms, 0.5), quantile(window_.latency_ms, 0.99),
-                        static_cast<unsigned long long>(window_.lost),
-                        static_cast<unsigned long long>(window_.frames ? points / window_.frames : 0));
+                        "fps %5.1f | %6.2f MB/s | latency ms p50 %6.1f p99 %6.1f | lost %llu | points/frame %llu:", f.fps,
+                        f.wire_mb_per_s, f.latency_p50_ms, f.latency_p99_ms, static_cast<unsigned long long>(f.lost),
+                        static_cast<unsigned long long>(f.points_per_frame));
   std::string out(line, static_cast<std::size_t>(std::max(n, 0)));
-  for (std::size_t r = 0; r < window_.points.size(); ++r) {
-    if (window_.points[r] == 0) continue;
-    std::snprintf(line, sizeof line, " r%zu=%llu", r,
-                  static_cast<unsigned long long>(window_.frames ? window_.points[r] / window_.frames : 0));
+  for (std::size_t r = 0; r < f.points_per_region.size(); ++r) {
+    if (f.points_per_region[r] == 0) continue;
+    std::snprintf(line, sizeof line, " r%zu=%llu", r, static_cast<unsigned long long>(f.points_per_region[r]));
     out += line;
   }
-  window_ = Tally{};
   return out;
 }
 

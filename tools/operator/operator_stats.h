@@ -31,6 +31,19 @@ struct FrameObservation {
   uint32_t chunks_expected = 0;  // from the frame summary (0 when it was lost)
 };
 
+// One window's figures (NaN latency: none measured).
+struct LiveFigures {
+  double fps = 0.0;
+  double wire_mb_per_s = 0.0;
+  double latency_p50_ms = 0.0;
+  double latency_p99_ms = 0.0;
+  uint64_t lost = 0;
+  uint64_t points_per_frame = 0;
+  std::array<uint64_t, pipeline::kMaxRegions> points_per_region{};  // per frame
+};
+// The live line fovea-operator prints.
+std::string liveLine(const LiveFigures& f);
+
 class OperatorStats {
  public:
   void datagram(std::size_t wire_bytes) {
@@ -45,8 +58,8 @@ class OperatorStats {
   }
   void frame(const FrameObservation& f);
 
-  // One line for the last window of `seconds`, then a new window starts.
-  std::string liveLine(double seconds);
+  // The last window of `seconds`; then a new window starts.
+  LiveFigures takeWindow(double seconds);
   // The whole run as a JSON object; `extra` (already JSON members, may be empty)
   // is added at the top level.
   std::string summaryJson(double seconds, const std::string& extra) const;

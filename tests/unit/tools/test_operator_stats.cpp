@@ -49,13 +49,13 @@ TEST(OperatorStats, LiveWindowResetsSummaryKeepsAll) {
   FrameObservation unknown = f;  // a frame whose latency is not known yet
   unknown.latency_ms = NAN;
   stats.frame(unknown);
-  const std::string line = stats.liveLine(3.0);
+  const std::string line = liveLine(stats.takeWindow(3.0));
   EXPECT_NE(line.find("fps   1.0"), std::string::npos) << line;
   EXPECT_NE(line.find("0.00 MB/s"), std::string::npos) << line;
   EXPECT_NE(line.find("p50   12.5"), std::string::npos) << line;
   EXPECT_NE(line.find("lost 2"), std::string::npos) << line;
   EXPECT_NE(line.find("r0=100 r2=50"), std::string::npos) << line;
-  EXPECT_NE(stats.liveLine(1.0).find("fps   0.0"), std::string::npos);  // a fresh window
+  EXPECT_NE(liveLine(stats.takeWindow(1.0)).find("fps   0.0"), std::string::npos);  // a fresh window
 
   const std::string json = stats.summaryJson(4.0, "\"name\": \"x\"");
   EXPECT_NE(json.find("\"name\": \"x\","), std::string::npos) << json;

@@ -1,0 +1,75 @@
+#include "tools/operator/view_frame.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+namespace fovea::tools {
+
+// The page reads the frame with typed arrays in the machine's order, which is
+// little-endian on every browser platform; the writer copies memory as it is.
+static_assert(std::endian::native == std::endian::little, "the viewer's frame layout is little-endian");
+
+std::array<float, pipeline::kMaxRegions> SplatSizer::sizes(const net::AssembledFrame& frame) {
+  std::array<float, pipeline::kMaxRegions> out{};
+  for (std::size_t r = 1; r < out.size(); ++r) {
+    if (frame.points[r] > 0 && frame.step_m[r] > 0.0) out[r] = static_cast<float>(frame.step_m[r] / ratio_);
+  }
+  if (frame.cloud == nullptr || frame.points[0] < 2 || scratch_.empty()) return out;
+  const pipeline::FoveatedCloud& c = *frame.cloud;
+  const pipeline::PointCloud& p = c.points;
+  // Every region-0 pair of consecutive points, thinned evenly to the scratch.
+  const std::size_t n = p.size();
+  const std::size_t stride = std::max<std::size_t>(1, frame.points[0] / scratch_.size());
+  std::size_t pairs = 0, seen = 0;
+  for (std::size_t i = 1; i < n && pairs < scratch_.size(); ++i) {
+    if (c.region[i] != 0 || c.region[i - 1] != 0) continue;
+    if (seen++ % stride != 0) continue;
+    const float dx = p.x()[i] - p.x()[i - 1], dy = p.y()[i] - p.y()[i - 1], dz = p.z()[i] - p.z()[i - 1];
+    scratch_[pairs++] = std::sqrt(dx * dx + dy * dy + dz * dz);
+  }
+  if (pairs == 0) return out;
+  auto mid = scratch_.begin() + static_cast<std::ptrdiff_t>(pairs / 2);
+  std::nth_element(scratch_.begin(), mid, scratch_.begin() + static_cast<std::ptrdiff_t>(pairs));
+  out[0] = *mid;
+  return out;
+}
+
+std::size_t packViewFrame(const net::AssembledFrame& frame, const std::array<float, pipeline::kMaxRegions>& splat_m,
+                          std::span<uint8_t> out) {
+  if (frame.cloud == nullptr) return 0;
+  const pipeline::FoveatedCloud& c = *frame.cloud;
+  const std::size_t n = c.points.size();
+  const std::size_t bytes = viewFrameBytes(n);
+  if (out.size() < bytes) return 0;
+  uint8_t* d = out.data();
+  const auto put = [&d](const void* src, std::size_t len) {
+    std::memcpy(d, src, len);
+    d += len;
+  };
+  put("FVF1", 4);
+  const uint32_t head[3] = {frame.frame_id, static_cast<uint32_t>(n), 0};
+  put(head, sizeof head);
+  const double origin[3] = {c.points.origin_m.x(), c.points.origin_m.y(), c.points.origin_m.z()};
+  put(origin, sizeof origin);
+  put(splat_m.data(), sizeof(float) * splat_m.size());
+  put(frame.points.data(), sizeof(uint32_t) * frame.points.size());
+  // Positions interleaved (x, y, z) for one vertex attribute; then colours and regions.
+  for (std::size_t i = 0; i < n; ++i) {
+    const float v[3] = {c.points.x()[i], c.points.y()[i], c.points.z()[i]};
+    std::memcpy(d + 12 * i, v, sizeof v);
+  }
+  d += 12 * n;
+  const uint32_t* rgb = c.points.rgb();
+  for (std::size_t i = 0; i < n; ++i) {
+    d[3 * i] = pipeline::rgbRed(rgb[i]);
+    d[3 * i + 1] = pipeline::rgbGreen(rgb[i]);
+    d[3 * i + 2] = pipeline::rgbBlue(rgb[i]);
+  }
+  d += 3 * n;
+  put(c.region.data(), n);
+  return bytes;
+}
+
+}  // namespace fovea::tools
