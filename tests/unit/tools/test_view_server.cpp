@@ -2,10 +2,8 @@
 // client) over loopback: the page's files, frames to every tab, the newest
 // frame for a slow tab (the others unaffected), malformed messages counted
 // without closing anything, tabs over the limit refused, reconnection.
-#include <atomic>
 #include <chrono>
 #include <cstring>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -14,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/test_time.h"
+#include "tests/support/websocket_tab.h"
 #include "tools/operator/view_assets.h"
 #include "tools/operator/view_server.h"
 
@@ -22,75 +21,7 @@ namespace {
 
 using namespace std::chrono_literals;
 using test::waitUntil;
-
-// A tab: a WebSocket client that records what it receives; delay_ms makes it
-// slow (its reading thread sleeps after every binary message).
-class Tab {
- public:
-  explicit Tab(int port, int delay_ms = 0) : delay_ms_(delay_ms) {
-    char error[256] = {0};
-    conn_ = mg_connect_websocket_client("127.0.0.1", port, 0, error, sizeof error, "/ws", nullptr, &Tab::onData,
-                                        &Tab::onClose, this);
-    error_ = error;
-  }
-  ~Tab() { close(); }
-  void close() {
-    if (conn_ != nullptr) mg_close_connection(conn_);
-    conn_ = nullptr;
-  }
-  bool connected() const { return conn_ != nullptr; }
-  const std::string& error() const { return error_; }
-  void send(const std::string& text, int opcode = MG_WEBSOCKET_OPCODE_TEXT) {
-    ASSERT_GT(mg_websocket_client_write(conn_, opcode, text.data(), text.size()), 0);
-  }
-  std::vector<std::string> texts() {
-    std::lock_guard lock(mu_);
-    return texts_;
-  }
-  bool hasText(const std::string& part) {
-    for (const std::string& t : texts()) {
-      if (t.find(part) != std::string::npos) return true;
-    }
-    return false;
-  }
-  std::size_t frames() {
-    std::lock_guard lock(mu_);
-    return frames_;
-  }
-  std::vector<uint8_t> lastFrame() {
-    std::lock_guard lock(mu_);
-    return last_frame_;
-  }
-  bool closedByServer() const { return closed_.load(); }
-
- private:
-  static int onData(mg_connection*, int bits, char* data, std::size_t len, void* self_ptr) {
-    auto* self = static_cast<Tab*>(self_ptr);
-    const int opcode = bits & 0x0f;
-    {
-      std::lock_guard lock(self->mu_);
-      if (opcode == MG_WEBSOCKET_OPCODE_TEXT) self->texts_.emplace_back(data, len);
-      if (opcode == MG_WEBSOCKET_OPCODE_BINARY) {
-        ++self->frames_;
-        self->last_frame_.assign(data, data + len);
-      }
-    }
-    if (opcode == MG_WEBSOCKET_OPCODE_BINARY && self->delay_ms_ > 0) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(self->delay_ms_));
-    }
-    return opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE ? 0 : 1;
-  }
-  static void onClose(const mg_connection*, void* self_ptr) { static_cast<Tab*>(self_ptr)->closed_.store(true); }
-
-  int delay_ms_;
-  mg_connection* conn_ = nullptr;
-  std::string error_;
-  std::mutex mu_;
-  std::vector<std::string> texts_;
-  std::size_t frames_ = 0;
-  std::vector<uint8_t> last_frame_;
-  std::atomic<bool> closed_{false};
-};
+using test::Tab;
 
 std::unique_ptr<ViewServer> startServer(std::size_t max_tabs = 4, std::size_t max_points = 1000) {
   ViewServerConfig config;
