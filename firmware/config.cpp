@@ -142,7 +142,7 @@ const std::vector<Field>& fields() {
             }},
       FOVEA_INT("pipeline.threads", pipeline.threads, 1, 64),
       // [foveation]
-      Field{"foveation.preset", Kind::kChoice, 0, 0, {"F1", "F2", "F3", "FREF", "custom"},
+      Field{"foveation.preset", Kind::kChoice, 0, 0, {"F1", "F2", "F3", "FREF", "ACUITY", "custom"},
             [](const ServiceConfig& c) -> Value { return std::string(pipeline::presetName(c.foveation.acuity.preset)); },
             [](ServiceConfig& c, const Value& v) {
               const std::string& name = std::get<std::string>(v);
@@ -156,6 +156,10 @@ const std::vector<Field>& fields() {
             }},
       FOVEA_FLOAT("foveation.slope", foveation.acuity.slope, 0.0001, 1.0),
       FOVEA_FLOAT("foveation.far_ecc_deg", foveation.acuity.far_ecc_deg, 0.01, 180.0),
+      // preset ACUITY (docs/acuity-levels.md)
+      FOVEA_FLOAT("foveation.level_voxel_m", foveation.acuity.level_voxel_m, 0.0001, 1.0),
+      FOVEA_FLOAT("foveation.floor_m", foveation.acuity.floor_m, 0.0, 1.0),
+      FOVEA_FLOAT("foveation.level_margin", foveation.acuity.level_margin, 0.1, 10.0),
       // [foveation.fixation]
       Field{"foveation.fixation.mode", Kind::kChoice, 0, 0, {"hit", "centroid", "fixed"},
             [](const ServiceConfig& c) -> Value {

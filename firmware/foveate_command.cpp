@@ -15,7 +15,7 @@ namespace {
 
 const char* kFoveateHelp =
     "usage: fovead foveate --in IN.ply --out OUT.ply --gaze-origin X,Y,Z --gaze-dir X,Y,Z\n"
-    "                      [--preset F1|F2|F3|FREF] [--m 0.022] [--far-ecc 90] [--fixation centroid|hit|fixed:D0]\n"
+    "                      [--preset F1|F2|F3|FREF|ACUITY] [--m 0.022] [--far-ecc 90] [--fixation centroid|hit|fixed:D0]\n"
     "                      [--ascii]\n"
     "\n"
     "Foveates a recorded point cloud given in world coordinates (PLY, ascii or binary;\n"

@@ -168,7 +168,9 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args) {
 }
 
 std::string foveationFlagsHelp() {
-  return "  --preset F1|F2|F3|FREF   regions of the paper's section III (default F1)\n"
+  return "  --preset F1|F2|F3|FREF   regions of the paper's section III (default F1); ACUITY: each point on\n"
+         "                           the coarsest lattice level its own acuity allows (docs/acuity-levels.md;\n"
+         "                           configuration keys foveation.level_voxel_m, floor_m, level_margin)\n"
          "  --bounds E1,E2,...       custom region bounds in degrees, strictly increasing in (0, 180)\n"
          "  --m SLOPE                slope of MAR(E) = m E + 1 arcmin (default 0.022; the paper: 0.022..0.034)\n"
          "  --far-ecc DEG            eccentricity whose MAR sizes the outermost region (default 90)\n"

@@ -37,7 +37,9 @@ void printRegionTable(std::FILE* out, const pipeline::RegionModel& model, const 
   uint64_t all_in = 0, all_out = 0;
   for (int r = 0; r < model.regionCount(); ++r) {
     char ecc[16], voxel[16];
-    if (r < model.boundCount()) {
+    if (model.levels()) {
+      std::snprintf(ecc, sizeof ecc, "%s", "own");  // each point at its own eccentricity
+    } else if (r < model.boundCount()) {
       std::snprintf(ecc, sizeof ecc, "<= %g", model.boundDeg(r));
     } else if (r > 0) {
       std::snprintf(ecc, sizeof ecc, "> %g", model.boundDeg(r - 1));

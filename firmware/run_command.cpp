@@ -31,7 +31,7 @@ namespace {
 
 const char* kRunHelp =
     "usage: fovead run [--camera SPEC] [--frames N] [--gaze MODE | --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
-    "                  [--preset F1|F2|F3|FREF] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
+    "                  [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
     "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
     "                  [--calibration FILE] [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH]\n"
     "                  [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"

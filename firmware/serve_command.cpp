@@ -20,7 +20,7 @@ const char* kServeHelp =
     "usage: fovead serve [--board NAME] [--config FILE] [--set SECTION.KEY=VALUE ...]\n"
     "                    [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
-    "                    [--preset F1|F2|F3|FREF] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
+    "                    [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
     "                    [--threads N] [--memory-lock] [--log-level LEVEL]\n"
     "\n"
     "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"

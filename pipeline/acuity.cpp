@@ -13,6 +13,8 @@ namespace {
 constexpr std::array<double, 5> kTableIBoundsDeg = {5.0, 8.0, 18.0, 30.0, 60.0};
 constexpr std::array<const char*, 6> kTableINames = {
     "fovea", "parafovea", "perifovea", "near-periphery", "mid-periphery", "far-periphery"};
+constexpr std::array<const char*, kMaxRegions> kLevelNames = {"raw", "level1", "level2", "level3",
+                                                              "level4", "level5", "level6", "level7"};
 constexpr std::array<const char*, kMaxRegions> kCustomNames = {
     "region0", "region1", "region2", "region3", "region4", "region5", "region6", "region7"};
 
@@ -39,6 +41,7 @@ std::string_view presetName(Preset preset) {
     case Preset::kF3: return "F3";
     case Preset::kFRef: return "FREF";
     case Preset::kCustom: return "custom";
+    case Preset::kAcuity: return "ACUITY";
   }
   return "?";
 }
@@ -51,8 +54,9 @@ Result<Preset> parsePreset(std::string_view text) {
   if (upper == "F3") return Preset::kF3;
   if (upper == "FREF") return Preset::kFRef;
   if (upper == "CUSTOM") return Preset::kCustom;
+  if (upper == "ACUITY") return Preset::kAcuity;
   return Result<Preset>(ErrorCode::kInvalidArgument,
-                        "preset: unknown name '" + std::string(text) + "' (use F1, F2, F3 or FREF)");
+                        "preset: unknown name '" + std::string(text) + "' (use F1, F2, F3, FREF or ACUITY)");
 }
 
 Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
@@ -72,8 +76,24 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
     case Preset::kF3: table_bounds = 5; break;
     case Preset::kFRef: table_bounds = 0; break;
     case Preset::kCustom: table_bounds = -1; break;
+    case Preset::kAcuity: table_bounds = -2; break;
   }
-  if (table_bounds >= 0) {
+  if (table_bounds == -2) {
+    // Levels 1 .. kMaxRegions - 1 of the nested lattice; region 0 holds the raw points.
+    const double v = config.level_voxel_m;
+    if (!std::isfinite(v) || !(v >= 1e-4 && v <= 1.0)) {
+      return invalid("level_voxel_m", formatDouble(v) + " is outside [0.0001, 1] m");
+    }
+    const double f = config.floor_m;
+    if (!std::isfinite(f) || !(f >= 0.0 && f <= 1.0)) return invalid("floor_m", formatDouble(f) + " is outside [0, 1] m");
+    const double k = config.level_margin;
+    if (!std::isfinite(k) || !(k >= 0.1 && k <= 10.0)) return invalid("level_margin", formatDouble(k) + " is outside [0.1, 10]");
+    model.level_voxel_m_ = v;
+    model.floor_m_ = f;
+    model.level_margin_ = k;
+    model.region_count_ = kMaxRegions;
+    for (int n = 0; n < kMaxRegions; ++n) model.names_[n] = kLevelNames[n];
+  } else if (table_bounds >= 0) {
     for (int n = 0; n < table_bounds; ++n) model.bound_deg_[n] = kTableIBoundsDeg[n];
     model.region_count_ = table_bounds + 1;
     for (int n = 0; n < table_bounds; ++n) model.names_[n] = kTableINames[n];

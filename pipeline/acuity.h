@@ -27,11 +27,13 @@ inline double marDeg(double slope, double ecc_deg) { return slope * ecc_deg + kM
 // Eq. 5: v_0 = d0 * tan(MAR0), the smallest resolvable length at distance d0.
 double foveaVoxelSizeM(double d0_m);
 
-// The paper's test conditions (section III) and a user-defined list.
-enum class Preset { kF1, kF2, kF3, kFRef, kCustom };
+// The paper's test conditions (section III), a user-defined list, and fovea's
+// own mode beyond the paper (kAcuity, docs/acuity-levels.md): each point on the
+// coarsest level of a nested world lattice that its own acuity allows.
+enum class Preset { kF1, kF2, kF3, kFRef, kCustom, kAcuity };
 
 std::string_view presetName(Preset preset);
-// Accepts "F1", "F2", "F3", "FREF" (any case).
+// Accepts "F1", "F2", "F3", "FREF", "ACUITY" (any case).
 Result<Preset> parsePreset(std::string_view text);
 
 struct AcuityConfig {
@@ -41,6 +43,17 @@ struct AcuityConfig {
   std::vector<double> custom_bounds_deg;
   double slope = kDefaultSlope;                 // m of Eq. 1
   double far_ecc_deg = kDefaultFarEccDeg;       // E used for the outermost region
+  // Preset::kAcuity: the finest lattice's voxel (level 1; level n is 2^(n-1) times
+  // it, up to kMaxRegions - 1) and the sensor floor: no point is kept finer than
+  // the level whose voxel reaches floor_m (0: no floor, points too fine for
+  // level 1 stay raw in region 0).
+  double level_voxel_m = 0.002;
+  double floor_m = 0.0;
+  // A point may use level n when margin * v_n <= r sin(MAR(E)) (acuity_levels.h):
+  // sqrt(3) guarantees every displacement under the MAR (a voxel's diagonal);
+  // smaller values trade a measured share above the MAR for bytes. 0.5: about
+  // F3's bytes at half its share above the MAR (docs/acuity-levels.md).
+  double level_margin = 0.5;
 };
 
 // A validated region list. Region n < count-1 holds the points whose eccentricity
@@ -52,14 +65,22 @@ class RegionModel {
   static Result<RegionModel> create(const AcuityConfig& config);
 
   int regionCount() const { return region_count_; }
-  int boundCount() const { return region_count_ - 1; }
+  // Preset::kAcuity: the regions are lattice levels, not eccentricity bands.
+  bool levels() const { return preset_ == Preset::kAcuity; }
+  int boundCount() const { return levels() ? 0 : region_count_ - 1; }
   double boundDeg(int n) const { return bound_deg_[n]; }
   // Eccentricity whose MAR sets region n's voxel size (n >= 1).
   double voxelEccDeg(int n) const;
   // v_n / v_0 = MAR(E_n) / MAR0; 1 for the fovea.
   double voxelScale(int n) const;
-  // v_n for fixation distance d0_m.
-  double voxelSizeM(int n, double d0_m) const { return foveaVoxelSizeM(d0_m) * voxelScale(n); }
+  // v_n for fixation distance d0_m (levels: the level's voxel, whatever d0).
+  double voxelSizeM(int n, double d0_m) const {
+    if (levels()) return n <= 0 ? 0.0 : level_voxel_m_ * static_cast<double>(1 << (n - 1));
+    return foveaVoxelSizeM(d0_m) * voxelScale(n);
+  }
+  double levelVoxelM() const { return level_voxel_m_; }
+  double levelMargin() const { return level_margin_; }
+  double floorM() const { return floor_m_; }
   const char* regionName(int n) const { return names_[n]; }
   double slope() const { return slope_; }
   double farEccDeg() const { return far_ecc_deg_; }
@@ -73,6 +94,9 @@ class RegionModel {
   std::array<const char*, kMaxRegions> names_{};
   double slope_ = kDefaultSlope;
   double far_ecc_deg_ = kDefaultFarEccDeg;
+  double level_voxel_m_ = 0.0;
+  double floor_m_ = 0.0;
+  double level_margin_ = 0.0;
 };
 
 }  // namespace fovea::pipeline

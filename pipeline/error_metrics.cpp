@@ -153,7 +153,7 @@ Status ErrorEvaluator::evaluate(const PointCloud& in, const uint8_t* region, con
     e.ratio_p95 = quantile(scratch_.data(), k, 0.95);
     e.ratio_median_first_deg = kNaN;
     e.ratio_median_last_deg = kNaN;
-    if (r >= 1) {
+    if (r >= 1 && r - 1 < model.boundCount()) {  // levels (Preset::kAcuity) have no bounds
       const double inner = model.boundDeg(r - 1);
       k = gather([&](std::size_t i) { return in_region(i) && ecc_deg_[i] <= inner + kBorderBandDeg; });
       e.first_deg_points = static_cast<uint32_t>(k);

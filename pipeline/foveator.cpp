@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "pipeline/acuity_levels.h"
 #include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::pipeline {
@@ -37,6 +38,7 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
       config_(config),
       model_(model),
       bounds_(ConeBounds::fromModel(model)),
+      levels_(LevelBounds::fromModel(model)),
       region_(capacity.max_points),
       t_scratch_(capacity.max_points),
       sampler_(capacity.kernels == KernelSet::kRef ? VoxelSampler(capacity.max_points, capacity.max_voxels)
@@ -92,6 +94,7 @@ Status Foveator::setConfig(const FoveationConfig& config) {
   if (!model) return model.status();
   model_ = model.value();
   bounds_ = ConeBounds::fromModel(model_);
+  levels_ = LevelBounds::fromModel(model_);
   config_ = config;
   return Status::ok();
 }
@@ -111,7 +114,11 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
 
   const int64_t t0 = nowNs();
   PartitionCounts partition_counts;
-  if (pool_) {
+  if (model_.levels()) {
+    // The acuity mode's levels: the scalar reference on this thread for every
+    // kernel set (no SIMD path yet); the samplers below are shared.
+    assignLevelsRef(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
+  } else if (pool_) {
     partitionParallel(in, unit_gaze.value(), partition_counts);
   } else if (capacity_.kernels == KernelSet::kSimd) {
     partitionSimd(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);

@@ -11,6 +11,7 @@
 
 #include "hal/result.h"
 #include "pipeline/acuity.h"
+#include "pipeline/acuity_levels.h"
 #include "pipeline/fixation.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/kernels/kernel_set.h"
@@ -86,6 +87,7 @@ class Foveator {
   FoveationConfig config_;
   RegionModel model_;
   ConeBounds bounds_;
+  LevelBounds levels_;  // Preset::kAcuity
   std::vector<uint8_t> region_;
   std::vector<double> t_scratch_;
   VoxelSampler sampler_;           // kernels == kRef (only the one in use is allocated)

@@ -54,8 +54,11 @@ const char* kHelp =
     "  --frames N        frames to average over (default 30)\n"
     "  --out-dir DIR     where report.md, report.csv, report.gp, report_plot.dat, report.png go\n"
     "                    (default docs/report; created if missing)\n"
-    "  --presets LIST    comma-separated presets (default F1,F2,F3,FREF)\n"
+    "  --presets LIST    comma-separated presets (default F1,F2,F3,FREF,ACUITY)\n"
     "  --slopes LIST     comma-separated slopes m of MAR = m E + 1 arcmin (default 0.022,0.028,0.034)\n"
+    "  --acuity-margins LIST  ACUITY's level margins k, a row each (default 1.732,0.7,0.5,0.42;\n"
+    "                    docs/acuity-levels.md)\n"
+    "  --acuity-floors LIST  ACUITY's sensor floors in mm, 0 for none (default 0); a row each margin x floor\n"
     "  --reference-m M   slope of a fixed observer every configuration is also judged by (default 0.022)\n"
     "  --no-plot         do not run gnuplot (report.gp is still written)\n";
 
@@ -64,8 +67,13 @@ struct Options {
   long frames = 30;
   std::string out_dir = "docs/report";
   std::vector<pipeline::Preset> presets = {pipeline::Preset::kF1, pipeline::Preset::kF2, pipeline::Preset::kF3,
-                                           pipeline::Preset::kFRef};
+                                           pipeline::Preset::kFRef, pipeline::Preset::kAcuity};
   std::vector<double> slopes = {0.022, 0.028, 0.034};
+  // ACUITY's level margins k (AcuityConfig::level_margin): sqrt(3) guarantees
+  // every point under its MAR; smaller ones trade a share above it for bytes.
+  std::vector<double> acuity_margins = {1.7320508075688772, 0.7, 0.5, 0.42};
+  // ... and sensor floors in mm (0: none), a row each margin x floor.
+  std::vector<double> acuity_floors_mm = {0.0};
   double reference_slope = pipeline::kDefaultSlope;
   bool plot = true;
 };
@@ -80,6 +88,21 @@ std::vector<std::string> splitCommas(std::string_view text) {
     start = comma + 1;
   }
   return parts;
+}
+
+// A configuration's name in the tables: the preset, and for ACUITY its level margin.
+std::string configName(const pipeline::AcuityConfig& a) {
+  std::string name(pipeline::presetName(a.preset));
+  if (a.preset == pipeline::Preset::kAcuity) {
+    char margin[32];
+    std::snprintf(margin, sizeof margin, " k=%.2f", a.level_margin);
+    name += margin;
+    if (a.floor_m > 0.0) {
+      std::snprintf(margin, sizeof margin, " floor %gmm", a.floor_m * 1e3);
+      name += margin;
+    }
+  }
+  return name;
 }
 
 Result<double> parseNumber(const std::string& flag, const std::string& text) {
@@ -126,9 +149,25 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
       for (const std::string& name : splitCommas(value)) {
         Result<pipeline::Preset> p = pipeline::parsePreset(name);
         if (!p || p.value() == pipeline::Preset::kCustom) {
-          return Result<Options>(ErrorCode::kInvalidArgument, "--presets: '" + name + "' is not F1, F2, F3 or FREF");
+          return Result<Options>(ErrorCode::kInvalidArgument, "--presets: '" + name + "' is not F1, F2, F3, FREF or ACUITY");
         }
         options.presets.push_back(p.value());
+      }
+    } else if (flag == "--acuity-margins") {
+      options.acuity_margins.clear();
+      for (const std::string& text : splitCommas(value)) {
+        Result<double> k = parseNumber(flag, text);
+        if (!k) return k.status();
+        if (*k < 0.1 || *k > 10.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-margins: '" + text + "' is outside [0.1, 10]");
+        options.acuity_margins.push_back(*k);
+      }
+    } else if (flag == "--acuity-floors") {
+      options.acuity_floors_mm.clear();
+      for (const std::string& text : splitCommas(value)) {
+        Result<double> mm = parseNumber(flag, text);
+        if (!mm) return mm.status();
+        if (*mm < 0.0 || *mm > 1000.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-floors: '" + text + "' is outside [0, 1000] mm");
+        options.acuity_floors_mm.push_back(*mm);
       }
     } else if (flag == "--reference-m") {
       Result<double> m = parseNumber(flag, value);
@@ -294,12 +333,22 @@ int run(int argc, char** argv) {
   std::vector<ConfigRun> runs;
   for (pipeline::Preset preset : options.presets) {
     for (double slope : options.slopes) {
-      ConfigRun r;
-      r.config.acuity.preset = preset;
-      r.config.acuity.slope = slope;
-      r.time_ms.reserve(options.frames);
-      r.wall_ms.reserve(options.frames);
-      runs.push_back(std::move(r));
+      // The acuity mode once per level margin (its rows say which).
+      const bool acuity = preset == pipeline::Preset::kAcuity;
+      for (double margin : acuity ? options.acuity_margins : std::vector<double>{0.0}) {
+        for (double floor_mm : acuity ? options.acuity_floors_mm : std::vector<double>{0.0}) {
+          ConfigRun r;
+          r.config.acuity.preset = preset;
+          r.config.acuity.slope = slope;
+          if (acuity) {
+            r.config.acuity.level_margin = margin;
+            r.config.acuity.floor_m = floor_mm * 1e-3;
+          }
+          r.time_ms.reserve(options.frames);
+          r.wall_ms.reserve(options.frames);
+          runs.push_back(std::move(r));
+        }
+      }
     }
   }
   // The scalar reference kernels: the report's time column says so.
@@ -396,8 +445,7 @@ int run(int argc, char** argv) {
         }
       }
       if (!s) {
-        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f,
-                     std::string(pipeline::presetName(r.config.acuity.preset)).c_str(), r.config.acuity.slope,
+        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f, configName(r.config.acuity).c_str(), r.config.acuity.slope,
                      s.toString().c_str());
         return kExitFailure;
       }
@@ -430,7 +478,7 @@ int run(int argc, char** argv) {
   for (const ConfigRun& r : runs) {
     Result<pipeline::RegionModel> model = pipeline::RegionModel::create(r.config.acuity);
     ConfigSummary c;
-    c.preset = std::string(pipeline::presetName(r.config.acuity.preset));
+    c.preset = configName(r.config.acuity);
     c.slope = r.config.acuity.slope;
     c.frames = r.frames;
     c.time_ms_median = quantileOf(r.time_ms, 0.5);
@@ -443,8 +491,12 @@ int run(int argc, char** argv) {
       RegionSummary s = r.regions[reg].summarise(r.frames);
       s.index = reg;
       s.name = model->regionName(reg);
-      s.ecc_min_deg = reg == 0 ? 0.0 : model->boundDeg(reg - 1);
-      s.ecc_max_deg = reg < model->boundCount() ? model->boundDeg(reg) : 180.0;
+      if (model->levels()) {
+        s.ecc_min_deg = s.ecc_max_deg = kNaN;  // no band: each point at its own eccentricity
+      } else {
+        s.ecc_min_deg = reg == 0 ? 0.0 : model->boundDeg(reg - 1);
+        s.ecc_max_deg = reg < model->boundCount() ? model->boundDeg(reg) : 180.0;
+      }
       if (reg == 0) s.voxel_mm = 0.0, s.rms_over_voxel = kNaN, s.max_over_voxel = kNaN;
       c.regions.push_back(s);
     }

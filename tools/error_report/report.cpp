@@ -29,6 +29,7 @@ std::string csvNumber(double v) {
 std::string percent(double share) { return fixed(100.0 * share, 1) + " %"; }
 
 std::string eccBand(const RegionSummary& r) {
+  if (r.index >= 0 && std::isnan(r.ecc_max_deg)) return "own";  // ACUITY's levels: each point at its own
   if (r.index <= 0) return r.index < 0 ? "all" : "0-" + fixed(r.ecc_max_deg, 0);
   if (r.ecc_max_deg >= 180.0) return "> " + fixed(r.ecc_min_deg, 0);
   return fixed(r.ecc_min_deg, 0) + "-" + fixed(r.ecc_max_deg, 0);
@@ -160,6 +161,8 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
      << "| preset | m | border [deg] | inside (region) | outside (region) | step | voxel ratio |\n"
      << "|---|---|---:|---:|---:|---:|---:|\n";
   for (const ConfigSummary& c : configs) {
+    // ACUITY's levels have no eccentricity borders (each point is on its own level).
+    if (!c.regions.empty() && std::isnan(c.regions[0].ecc_max_deg)) continue;
     for (std::size_t j = 0; j + 1 < c.regions.size(); ++j) {
       const RegionSummary& inner = c.regions[j];
       const RegionSummary& outer = c.regions[j + 1];

@@ -115,7 +115,7 @@ TEST(Config, OutOfRange) {
   EXPECT_EQ(loadError("[stream]\nmax_mtu_bytes = 9000\n"),
             "fovea.toml:2: stream.max_mtu_bytes: must be within 256 .. 8952 (got 9000)");
   EXPECT_EQ(loadError("[foveation]\npreset = \"F9\"\n"),
-            "fovea.toml:2: foveation.preset: must be one of \"F1\", \"F2\", \"F3\", \"FREF\", \"custom\" (got \"F9\")");
+            "fovea.toml:2: foveation.preset: must be one of \"F1\", \"F2\", \"F3\", \"FREF\", \"ACUITY\", \"custom\" (got \"F9\")");
   EXPECT_EQ(loadError("[runtime]\nlog_level = \"loud\"\n"),
             "fovea.toml:2: runtime.log_level: must be one of \"error\", \"warning\", \"notice\", \"info\", \"debug\" "
             "(got \"loud\")");
@@ -237,6 +237,9 @@ const std::vector<std::string> kEveryKeyChanged = {
     "foveation.custom_bounds_deg=[2.5, 7, 19.125]",
     "foveation.slope=0.031",
     "foveation.far_ecc_deg=75.5",
+    "foveation.level_voxel_m=0.004",
+    "foveation.floor_m=0.016",
+    "foveation.level_margin=0.7",
     "foveation.fixation.mode=fixed",
     "foveation.fixation.fixed_m=1.75",
     "foveation.fixation.hit_cone_deg=0.5",

@@ -1,0 +1,66 @@
+#include "pipeline/acuity_levels.h"
+
+#include <cmath>
+#include <numbers>
+
+namespace fovea::pipeline {
+
+namespace {
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+}  // namespace
+
+LevelBounds LevelBounds::fromModel(const RegionModel& model) {
+  LevelBounds b;
+  b.slope = model.slope();
+  for (int n = 1; n < kMaxRegions; ++n) b.min_allowed_m[n] = model.levelMargin() * model.voxelSizeM(n, 0.0);
+  if (model.floorM() > 0.0) {
+    b.floor_level = kMaxRegions - 1;
+    for (int n = 1; n < kMaxRegions; ++n) {
+      if (model.voxelSizeM(n, 0.0) >= model.floorM()) {
+        b.floor_level = static_cast<uint8_t>(n);
+        break;
+      }
+    }
+  }
+  return b;
+}
+
+uint8_t LevelBounds::classify(double r_m, double ecc_deg) const {
+  const double allowed = r_m * std::sin((slope * ecc_deg + kMar0Deg) * kDegToRad);
+  uint8_t level = 0;
+  for (int n = kMaxRegions - 1; n >= 1; --n) {
+    if (min_allowed_m[n] <= allowed) {
+      level = static_cast<uint8_t>(n);
+      break;
+    }
+  }
+  return level < floor_level ? floor_level : level;
+}
+
+void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
+                     PartitionCounts& counts) {
+  counts = {};
+  // P - H = (origin - H) + p: the large parts cancel in double first (as the partition).
+  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;
+  const float* x = cloud.x();
+  const float* y = cloud.y();
+  const float* z = cloud.z();
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    if (!std::isfinite(x[i]) || !std::isfinite(y[i]) || !std::isfinite(z[i])) {
+      region_out[i] = kRegionInvalid;
+      ++counts.invalid;
+      continue;
+    }
+    const double vx = origin_minus_eye.x() + static_cast<double>(x[i]);
+    const double vy = origin_minus_eye.y() + static_cast<double>(y[i]);
+    const double vz = origin_minus_eye.z() + static_cast<double>(z[i]);
+    const AxialRadial ar = axialRadial(vx, vy, vz, gaze.direction);
+    const double r = std::sqrt(vx * vx + vy * vy + vz * vz);
+    const uint8_t level = bounds.classify(r, std::atan2(ar.d, ar.t) * kRadToDeg);
+    region_out[i] = level;
+    ++counts.per_region[level];
+  }
+}
+
+}  // namespace fovea::pipeline

@@ -1,0 +1,237 @@
+// The acuity mode's level assignment (Preset::kAcuity, pipeline/acuity_levels.h):
+// against an independent long-double reference written here, its guarantee
+// (at the default margin, no point is displaced by more than its MAR, measured
+// by the error metrics), monotonicity, the sensor floor, hard cases, and the
+// model's validation.
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/acuity_levels.h"
+#include "pipeline/error_metrics.h"
+#include "pipeline/foveator.h"
+#include "tests/support/clouds.h"
+
+namespace fovea::pipeline {
+namespace {
+
+using LD = long double;
+
+AcuityConfig acuityConfig(double margin = std::sqrt(3.0), double floor_m = 0.0, double slope = kDefaultSlope) {
+  AcuityConfig a;
+  a.preset = Preset::kAcuity;
+  a.level_margin = margin;
+  a.floor_m = floor_m;
+  a.slope = slope;
+  return a;
+}
+
+// The level from first principles, in long double: the eccentricity from the
+// angle between P - H and the gaze (acos of the normalised dot product, not the
+// kernel's atan2 of the axial and radial parts), the largest level whose margin
+// times voxel fits under r sin(MAR); the floor lifts it. `slack` reports how
+// close the decision was (relative distance of `allowed` to the nearest threshold).
+int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack) {
+  const LD vx = p.x() - g.origin_m.x(), vy = p.y() - g.origin_m.y(), vz = p.z() - g.origin_m.z();
+  const LD r = std::sqrt(vx * vx + vy * vy + vz * vz);
+  const LD dx = g.direction.x(), dy = g.direction.y(), dz = g.direction.z();
+  const LD dn = std::sqrt(dx * dx + dy * dy + dz * dz);
+  LD ecc = 0;
+  if (r > 0) {
+    LD c = (vx * dx + vy * dy + vz * dz) / (r * dn);
+    c = std::max<LD>(-1, std::min<LD>(1, c));
+    ecc = std::acos(c) * 180 / std::numbers::pi_v<LD>;
+  }
+  const LD allowed = r * std::sin((static_cast<LD>(a.slope) * ecc + static_cast<LD>(1.0 / 60.0)) * std::numbers::pi_v<LD> / 180);
+  int level = 0;
+  slack = 1;
+  for (int n = 1; n < kMaxRegions; ++n) {
+    const LD threshold = static_cast<LD>(a.level_margin) * static_cast<LD>(a.level_voxel_m) * (LD{1} * (1 << (n - 1)));
+    slack = std::min(slack, std::fabs(allowed - threshold) / threshold);
+    if (threshold <= allowed) level = n;
+  }
+  if (a.floor_m > 0) {
+    for (int n = 1; n < kMaxRegions; ++n) {
+      if (a.level_voxel_m * (1 << (n - 1)) >= a.floor_m || n == kMaxRegions - 1) {
+        level = std::max(level, n);
+        break;
+      }
+    }
+  }
+  return level;
+}
+
+TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
+  for (double margin : {std::sqrt(3.0), 0.5}) {
+    for (double floor_m : {0.0, 0.008}) {
+      const AcuityConfig a = acuityConfig(margin, floor_m);
+      const RegionModel model = RegionModel::create(a).value();
+      const LevelBounds bounds = LevelBounds::fromModel(model);
+      std::mt19937_64 rng(7);
+      for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 30)}) {
+        PointCloud cloud = test::randomCloud(20000, origin, 6.0f, rng());
+        Gaze gaze;
+        gaze.origin_m = origin + Eigen::Vector3d(0.3, -0.2, 0.1);
+        gaze.direction = Eigen::Vector3d(0.2, 1.0, -0.3).normalized();
+        std::vector<uint8_t> level(cloud.size());
+        PartitionCounts counts;
+        assignLevelsRef(cloud, gaze, bounds, level.data(), counts);
+        std::size_t close_calls = 0;
+        for (std::size_t i = 0; i < cloud.size(); ++i) {
+          LD slack = 0;
+          const int expected = bruteForceLevel(a, cloud.world(i), gaze, slack);
+          if (level[i] != expected) {
+            // Only where double and long double may round a threshold differently.
+            ASSERT_LT(slack, 1e-9L) << "point " << i << ": level " << int(level[i]) << ", expected " << expected;
+            ++close_calls;
+          }
+        }
+        EXPECT_LE(close_calls, 2u);
+        uint32_t total = 0;
+        for (uint32_t c : counts.per_region) total += c;
+        EXPECT_EQ(total, cloud.size());
+        EXPECT_EQ(counts.invalid, 0u);
+      }
+    }
+  }
+}
+
+// At the default margin (sqrt(3), a voxel's diagonal) no point is displaced, seen
+// from the eye, by more than the MAR at its own eccentricity, whatever its distance
+// or eccentricity; and the mode uses the coarse levels where the eye allows them.
+TEST(AcuityLevels, DefaultMarginKeepsEveryPointUnderItsMar) {
+  // A wall 6 m x 3 m sampled every 5 mm, 4 m in front of the eye, and a random
+  // scatter in front of it; 40 m from the world origin.
+  const Eigen::Vector3d origin(40.0, 12.0, 1.5);
+  PointCloud scatter = test::randomCloud(20000, origin, 3.0f, 3);
+  PointCloud in(20000 + 1200 * 600);
+  in.origin_m = origin;
+  for (std::size_t i = 0; i < scatter.size(); ++i) {
+    ASSERT_TRUE(in.push(scatter.x()[i], scatter.y()[i], scatter.z()[i], scatter.rgb()[i]));
+  }
+  for (int u = 0; u < 1200; ++u) {
+    for (int v = 0; v < 600; ++v) {
+      ASSERT_TRUE(in.push(-3.0f + 0.005f * static_cast<float>(u), 3.0f, -1.5f + 0.005f * static_cast<float>(v), 0x808080));
+    }
+  }
+  Gaze gaze;
+  gaze.origin_m = origin + Eigen::Vector3d(0.0, -1.0, 0.2);
+  gaze.direction = Eigen::Vector3d(0.1, 1.0, -0.05).normalized();
+  FoveationConfig config;
+  config.acuity = acuityConfig();
+  Foveator foveator = Foveator::create({in.size(), in.size()}, config).value();
+  FoveatedCloud out(in.size());
+  FoveationStats stats;
+  std::vector<uint32_t> rep(in.size());
+  ASSERT_TRUE(foveator.foveate(in, gaze, out, stats, rep.data()).isOk());
+  ErrorModel error_model{&foveator.model(), {}};
+  for (int r = 0; r < stats.region_count; ++r) error_model.voxel_size_m[r] = stats.regions[r].voxel_size_m;
+  ErrorEvaluator evaluator = ErrorEvaluator::create(in.size()).value();
+  ErrorMetrics m;
+  ASSERT_TRUE(evaluator.evaluate(in, foveator.lastRegions(), rep.data(), out.points, gaze, error_model, m).isOk());
+  EXPECT_EQ(m.all.above_mar, 0u);
+  EXPECT_LE(m.all.ratio_max, 1.0);
+  EXPECT_GT(m.all.seen, in.size() / 2);
+  // Not vacuous: points were thinned, on several levels, some displaced by a good part of their MAR.
+  EXPECT_LT(out.size(), in.size() / 2);
+  EXPECT_GT(m.all.ratio_max, 0.3);
+  int used = 0;
+  for (int r = 1; r < kMaxRegions; ++r) used += stats.regions[r].points_in > 0;
+  EXPECT_GE(used, 3);
+  EXPECT_EQ(stats.regions[3].voxel_size_m, 0.008);
+}
+
+// Farther or more eccentric never means finer: the level is monotone in both.
+TEST(AcuityLevels, LevelGrowsWithDistanceAndEccentricity) {
+  const LevelBounds b = LevelBounds::fromModel(RegionModel::create(acuityConfig()).value());
+  uint8_t previous = 0;
+  for (double r = 0.0; r <= 100.0; r += 0.01) {
+    const uint8_t level = b.classify(r, 10.0);
+    EXPECT_GE(level, previous) << r;
+    previous = level;
+  }
+  EXPECT_EQ(previous, kMaxRegions - 1);
+  previous = 0;
+  for (double ecc = 0.0; ecc <= 180.0; ecc += 0.05) {
+    const uint8_t level = b.classify(3.0, ecc);
+    EXPECT_GE(level, previous) << ecc;
+    previous = level;
+  }
+  EXPECT_EQ(b.classify(3.0, 0.0), 0);  // 1 arcmin at 3 m is under 1 mm: raw
+}
+
+TEST(AcuityLevels, TheSensorFloorLiftsFinePointsToItsLevel) {
+  const LevelBounds none = LevelBounds::fromModel(RegionModel::create(acuityConfig()).value());
+  const LevelBounds floor8 = LevelBounds::fromModel(RegionModel::create(acuityConfig(std::sqrt(3.0), 0.008)).value());
+  EXPECT_EQ(floor8.floor_level, 3);  // 2, 4, 8 mm
+  EXPECT_EQ(none.classify(1.0, 0.0), 0);
+  EXPECT_EQ(floor8.classify(1.0, 0.0), 3);
+  EXPECT_EQ(floor8.classify(0.0, 0.0), 3);  // at the eye too
+  // Coarser than the floor: unchanged.
+  EXPECT_EQ(floor8.classify(10.0, 60.0), none.classify(10.0, 60.0));
+  // A floor coarser than every level: the coarsest.
+  const LevelBounds huge = LevelBounds::fromModel(RegionModel::create(acuityConfig(std::sqrt(3.0), 0.9)).value());
+  EXPECT_EQ(huge.floor_level, kMaxRegions - 1);
+}
+
+TEST(AcuityLevels, HardCases) {
+  const LevelBounds b = LevelBounds::fromModel(RegionModel::create(acuityConfig()).value());
+  PointCloud cloud(16);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  ASSERT_TRUE(cloud.push(0, 0, 0, 0));      // at the eye: no direction, raw
+  ASSERT_TRUE(cloud.push(0, 0, 3, 0));      // on the gaze axis
+  ASSERT_TRUE(cloud.push(0, 0, -3, 0));     // behind the eye: MAR keeps growing
+  ASSERT_TRUE(cloud.push(3, 0, 0, 0));      // at 90 degrees
+  ASSERT_TRUE(cloud.push(nan, 0, 1, 0));
+  ASSERT_TRUE(cloud.push(0, inf, 1, 0));
+  ASSERT_TRUE(cloud.push(0, 0, -inf, 0));
+  Gaze gaze;  // at the origin, along +z
+  std::vector<uint8_t> level(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, gaze, b, level.data(), counts);
+  EXPECT_EQ(level[0], 0);
+  EXPECT_EQ(level[1], 0);  // 3 m on the axis: 0.87 mm < 2 mm * sqrt(3)
+  EXPECT_GT(level[2], level[3]);
+  EXPECT_GT(level[3], level[1]);
+  for (int i = 4; i < 7; ++i) EXPECT_EQ(level[i], kRegionInvalid) << i;
+  EXPECT_EQ(counts.invalid, 3u);
+  // A gaze along each axis sees a point on it at the same level.
+  for (const Eigen::Vector3d& axis :
+       {Eigen::Vector3d(Eigen::Vector3d::UnitX()), Eigen::Vector3d(Eigen::Vector3d::UnitY()), Eigen::Vector3d(-Eigen::Vector3d::UnitZ())}) {
+    PointCloud one(1);
+    ASSERT_TRUE(one.push(static_cast<float>(5 * axis.x()), static_cast<float>(5 * axis.y()), static_cast<float>(5 * axis.z()), 0));
+    Gaze g;
+    g.direction = axis;
+    uint8_t l = 0;
+    assignLevelsRef(one, g, b, &l, counts);
+    EXPECT_EQ(l, b.classify(5.0, 0.0));
+  }
+}
+
+TEST(AcuityLevels, ModelValidatesItsFields) {
+  EXPECT_EQ(parsePreset("acuity").value(), Preset::kAcuity);
+  EXPECT_EQ(presetName(Preset::kAcuity), "ACUITY");
+  const RegionModel m = RegionModel::create(acuityConfig()).value();
+  EXPECT_TRUE(m.levels());
+  EXPECT_EQ(m.regionCount(), kMaxRegions);
+  EXPECT_EQ(m.boundCount(), 0);
+  EXPECT_EQ(m.voxelSizeM(0, 4.0), 0.0);
+  EXPECT_EQ(m.voxelSizeM(1, 4.0), 0.002);
+  EXPECT_EQ(m.voxelSizeM(7, 1.0), 0.128);
+  AcuityConfig bad = acuityConfig();
+  bad.level_voxel_m = 0.0;
+  EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.level_voxel_m"), std::string::npos);
+  bad = acuityConfig(std::sqrt(3.0), -1.0);
+  EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.floor_m"), std::string::npos);
+  bad = acuityConfig(std::nan(""));
+  EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.level_margin"), std::string::npos);
+  // The paper's presets are no levels.
+  AcuityConfig f1;
+  EXPECT_FALSE(RegionModel::create(f1).value().levels());
+}
+
+}  // namespace
+}  // namespace fovea::pipeline
