@@ -209,18 +209,26 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
   for (const ConfigSummary& c : configs) {
     if (std::find(slopes.begin(), slopes.end(), c.slope) == slopes.end()) slopes.push_back(c.slope);
   }
+  // A gnuplot index block per slope for the paper's presets and, when there are
+  // any, one for the ACUITY rows (labelled by their margin): each joined by its own line.
+  const auto is_acuity = [](const ConfigSummary& c) { return c.preset.rfind("ACUITY", 0) == 0; };
+  const bool any_acuity = std::any_of(configs.begin(), configs.end(), is_acuity);
+  const int families = any_acuity ? 2 : 1;
   std::ostringstream data;
-  data << "# preset m bytes_per_frame_MB cpu_time_ms_median rms_mm share_above_mar_percent points_out "
+  data << "# label m bytes_per_frame_MB cpu_time_ms_median rms_mm share_above_mar_percent points_out "
           "share_above_reference_mar_percent\n";
   for (std::size_t s = 0; s < slopes.size(); ++s) {
-    if (s > 0) data << "\n\n";  // a new gnuplot index block per slope
-    data << "# m " << csvNumber(slopes[s]) << "\n";
-    for (const ConfigSummary& c : configs) {
-      if (c.slope != slopes[s]) continue;
-      data << c.preset << ' ' << csvNumber(c.slope) << ' ' << csvNumber(c.bytesPerFrame() / 1e6) << ' '
-           << csvNumber(c.time_ms_median) << ' ' << csvNumber(c.all.rms_mm) << ' '
-           << csvNumber(100.0 * c.all.share_above_mar) << ' ' << csvNumber(c.all.points_out) << ' '
-           << csvNumber(100.0 * c.all.share_above_reference_mar) << "\n";
+    for (int family = 0; family < families; ++family) {
+      if (s > 0 || family > 0) data << "\n\n";  // a new gnuplot index block
+      data << "# m " << csvNumber(slopes[s]) << (family == 0 ? ", the paper's presets" : ", ACUITY") << "\n";
+      for (const ConfigSummary& c : configs) {
+        if (c.slope != slopes[s] || is_acuity(c) != (family == 1)) continue;
+        const std::string label = family == 1 ? c.preset.substr(std::string("ACUITY ").size()) : c.preset;
+        data << '"' << label << "\" " << csvNumber(c.slope) << ' ' << csvNumber(c.bytesPerFrame() / 1e6) << ' '
+             << csvNumber(c.time_ms_median) << ' ' << csvNumber(c.all.rms_mm) << ' '
+             << csvNumber(100.0 * c.all.share_above_mar) << ' ' << csvNumber(c.all.points_out) << ' '
+             << csvNumber(100.0 * c.all.share_above_reference_mar) << "\n";
+      }
     }
   }
   if (Status s = writeFile(data_path, data.str()); !s) return s;
@@ -246,19 +254,24 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
   auto series = [&](int x_col, int y_col, bool lines) {
     std::ostringstream p;
     for (std::size_t s = 0; s < slopes.size(); ++s) {
-      if (s > 0) p << ", \\\n     ";
-      p << "'" << data_name << "' index " << s << " using " << x_col << ':' << y_col << (lines ? " with linespoints lw 1.5 pt " : " with points pt ")
-        << (5 + 2 * static_cast<int>(s)) << " ps 1.6 lc " << s + 1 << " title 'm = " << csvNumber(slopes[s])
-        << "', \\\n     '' index " << s << " using " << x_col << ':' << y_col
-        << ":1 with labels offset char " << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt " << s + 1
-        << " notitle";
+      for (int family = 0; family < families; ++family) {
+        if (s > 0 || family > 0) p << ", \\\n     ";
+        const std::size_t index = static_cast<std::size_t>(families) * s + static_cast<std::size_t>(family);
+        p << "'" << data_name << "' index " << index << " using " << x_col << ':' << y_col
+          << (lines ? " with linespoints lw 1.5 pt " : " with points pt ") << (5 + 2 * static_cast<int>(s) + family)
+          << (family == 1 && lines ? " dt 4" : "") << " ps 1.6 lc " << s + 1 << " title '"
+          << (family == 1 ? "ACUITY, " : "") << "m = " << csvNumber(slopes[s]) << "', \\\n     '' index " << index
+          << " using " << x_col << ':' << y_col << ":1 with labels offset char "
+          << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt " << s + 1 << " notitle";
+      }
     }
     return p.str();
   };
   gp << series(3, 6, true);
   for (std::size_t s = 0; s < slopes.size(); ++s) {
     if (slopes[s] == context.reference_slope) continue;  // the same as its solid line
-    gp << ", \\\n     '" << data_name << "' index " << s << " using 3:8 with linespoints dt 2 lw 1 pt "
+    gp << ", \\\n     '" << data_name << "' index " << static_cast<std::size_t>(families) * s
+       << " using 3:8 with linespoints dt 2 lw 1 pt "
        << (4 + 2 * static_cast<int>(s)) << " ps 1.3 lc " << s + 1 << " title 'm = " << csvNumber(slopes[s])
        << ", judged by an m = " << csvNumber(context.reference_slope) << " eye'";
   }
