@@ -132,11 +132,13 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
   pipeline::FoveatedCloud out(50000);
   pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam().kernels, GetParam().threads}, {}).value();
-  std::vector<pipeline::FoveationConfig> configs(4);
+  std::vector<pipeline::FoveationConfig> configs(5);
   configs[0].acuity.preset = pipeline::Preset::kF1;
   configs[1].acuity.preset = pipeline::Preset::kF2;
   configs[2].acuity.preset = pipeline::Preset::kF3;
   configs[3].acuity.preset = pipeline::Preset::kFRef;
+  configs[4].acuity.preset = pipeline::Preset::kAcuity;
+  configs[4].acuity.floor_m = 0.008;
   configs[1].fixation.mode = pipeline::FixationMode::kCentroid;
   pipeline::FoveationStats stats;
   ASSERT_TRUE(foveator.foveate(clouds[0], pipeline::Gaze{}, out, stats).isOk());
@@ -144,7 +146,7 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   test::AllocationScope scope;
   bool all_ok = true;
   for (int i = 0; i < 100; ++i) {
-    all_ok = foveator.setConfig(configs[i % 4]).isOk() && all_ok;
+    all_ok = foveator.setConfig(configs[i % 5]).isOk() && all_ok;
     all_ok = foveator.foveate(clouds[i % 4], pipeline::Gaze{}, out, stats).isOk() && all_ok;
   }
   const uint64_t allocations = scope.allocations();
