@@ -1,13 +1,11 @@
 #include "pipeline/acuity_levels.h"
 
 #include <cmath>
-#include <numbers>
 
 namespace fovea::pipeline {
 
 namespace {
-constexpr double kDegToRad = std::numbers::pi / 180.0;
-constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+constexpr double kDegToRad = kLevelsPi / 180.0;
 }  // namespace
 
 LevelBounds LevelBounds::fromModel(const RegionModel& model) {
@@ -27,14 +25,9 @@ LevelBounds LevelBounds::fromModel(const RegionModel& model) {
 }
 
 uint8_t LevelBounds::classify(double r_m, double ecc_deg) const {
-  const double allowed = r_m * std::sin((slope * ecc_deg + kMar0Deg) * kDegToRad);
+  const double allowed = r_m * sinSpec((slope * ecc_deg + kMar0Deg) * kDegToRad);
   uint8_t level = 0;
-  for (int n = kMaxRegions - 1; n >= 1; --n) {
-    if (min_allowed_m[n] <= allowed) {
-      level = static_cast<uint8_t>(n);
-      break;
-    }
-  }
+  for (int n = 1; n < kMaxRegions; ++n) level += min_allowed_m[n] <= allowed ? 1 : 0;
   return level < floor_level ? floor_level : level;
 }
 
@@ -57,7 +50,7 @@ void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBound
     const double vz = origin_minus_eye.z() + static_cast<double>(z[i]);
     const AxialRadial ar = axialRadial(vx, vy, vz, gaze.direction);
     const double r = std::sqrt(vx * vx + vy * vy + vz * vz);
-    const uint8_t level = bounds.classify(r, std::atan2(ar.d, ar.t) * kRadToDeg);
+    const uint8_t level = bounds.classify(r, eccentricitySpecDeg(ar.t, ar.d));
     region_out[i] = level;
     ++counts.per_region[level];
   }

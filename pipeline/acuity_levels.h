@@ -17,7 +17,11 @@
 // sensor's noise and pitch carries nothing). Points with a non-finite coordinate
 // get kRegionInvalid and are counted.
 //
-// The arithmetic below is the specification (double, this order, no FMA).
+// The arithmetic below is the specification that the SIMD kernel reproduces bit
+// for bit (double, this order, no FMA): atan and sin are fixed polynomials
+// (atanUnit, sinSpec), not libm's, whose results differ between libraries and
+// from any vector implementation. Their errors (under 1e-5 rad) are far below
+// what the model needs.
 #pragma once
 
 #include <array>
@@ -29,6 +33,46 @@
 
 namespace fovea::pipeline {
 
+// atan(q) for q in [0, 1]: an odd minimax polynomial in Horner form (Mul then Add).
+inline constexpr double kAtanCoefficients[6] = {0.99997726, -0.33262347, 0.19354346,
+                                               -0.11643287, 0.05265332, -0.01172120};
+inline double atanUnit(double q) {
+  const double q2 = q * q;
+  double p = kAtanCoefficients[5];
+  for (int k = 4; k >= 0; --k) p = p * q2 + kAtanCoefficients[k];
+  return p * q;
+}
+
+// atan2(d, t) in degrees for d >= 0 (0 at the eye, d = t = 0), from atanUnit by octant.
+inline constexpr double kLevelsPi = 3.14159265358979323846;
+inline double eccentricitySpecDeg(double t, double d) {
+  const double at = t < 0.0 ? -t : t;
+  const double hi = at > d ? at : d;
+  const double lo = at > d ? d : at;
+  if (!(hi > 0.0)) return 0.0;
+  double a = atanUnit(lo / hi);
+  if (d > at) a = kLevelsPi / 2.0 - a;
+  if (t < 0.0) a = kLevelsPi - a;
+  return a * (180.0 / kLevelsPi);
+}
+
+// sin(x) for x in [0, pi/2]; larger x is taken as pi/2 (a MAR beyond 90 degrees allows
+// anything: sin stays at 1 and the level stays monotone). Taylor to x^13 in Horner form.
+inline constexpr double kSinCoefficients[7] = {1.0,
+                                              -1.0 / 6.0,
+                                              1.0 / 120.0,
+                                              -1.0 / 5040.0,
+                                              1.0 / 362880.0,
+                                              -1.0 / 39916800.0,
+                                              1.0 / 6227020800.0};
+inline double sinSpec(double x) {
+  const double y = x < kLevelsPi / 2.0 ? x : kLevelsPi / 2.0;
+  const double y2 = y * y;
+  double p = kSinCoefficients[6];
+  for (int k = 5; k >= 0; --k) p = p * y2 + kSinCoefficients[k];
+  return p * y;
+}
+
 struct LevelBounds {
   double slope = kDefaultSlope;
   // k * v_n for n = 1 .. kMaxRegions - 1 (index 0 unused).
@@ -37,7 +81,9 @@ struct LevelBounds {
 
   static LevelBounds fromModel(const RegionModel& model);
 
-  // The level of a point at distance r_m from the eye, eccentricity ecc_deg.
+  // The level of a point at distance r_m from the eye, eccentricity ecc_deg: the
+  // number of levels n >= 1 whose k v_n fits under r sin(MAR) (they grow with n),
+  // lifted to the floor.
   uint8_t classify(double r_m, double ecc_deg) const;
 };
 

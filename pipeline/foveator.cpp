@@ -74,18 +74,45 @@ void partitionPart(void* ctx, int part, int parts) {
                           WorkerPool::rangeBegin(n, part + 1, parts), job->region, histogram);
 }
 
+struct LevelJob {
+  const PointCloud* cloud;
+  const kernels::LevelParams* params;
+  uint8_t* region;
+  uint32_t* histograms;  // 256 per part
+};
+
+void levelPart(void* ctx, int part, int parts) {
+  auto* job = static_cast<LevelJob*>(ctx);
+  const std::size_t n = job->cloud->size();
+  uint32_t* histogram = job->histograms + 256 * static_cast<std::size_t>(part);
+  std::fill(histogram, histogram + 256, 0u);
+  kernels::levelRange(*job->cloud, *job->params, WorkerPool::rangeBegin(n, part, parts),
+                      WorkerPool::rangeBegin(n, part + 1, parts), job->region, histogram);
+}
+
 }  // namespace
 
-void Foveator::partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
-  const kernels::PartitionParams params = kernels::preparePartition(in, gaze, bounds_);
-  PartitionJob job{&in, &params, region_.data(), part_histograms_.data()};
-  pool_->run(partitionPart, &job);
+void Foveator::sumHistograms(PartitionCounts& counts) const {
   counts = {};
   for (int part = 0; part < pool_->parts(); ++part) {
     const uint32_t* histogram = part_histograms_.data() + 256 * static_cast<std::size_t>(part);
     for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] += histogram[r];
     counts.invalid += histogram[kRegionInvalid];
   }
+}
+
+void Foveator::levelsParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+  const kernels::LevelParams params = kernels::prepareLevels(in, gaze, levels_);
+  LevelJob job{&in, &params, region_.data(), part_histograms_.data()};
+  pool_->run(levelPart, &job);
+  sumHistograms(counts);
+}
+
+void Foveator::partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+  const kernels::PartitionParams params = kernels::preparePartition(in, gaze, bounds_);
+  PartitionJob job{&in, &params, region_.data(), part_histograms_.data()};
+  pool_->run(partitionPart, &job);
+  sumHistograms(counts);
 }
 
 Status Foveator::setConfig(const FoveationConfig& config) {
@@ -115,9 +142,14 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   const int64_t t0 = nowNs();
   PartitionCounts partition_counts;
   if (model_.levels()) {
-    // The acuity mode's levels: the scalar reference on this thread for every
-    // kernel set (no SIMD path yet); the samplers below are shared.
-    assignLevelsRef(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
+    // The acuity mode's levels in place of the cones; the samplers below are shared.
+    if (pool_) {
+      levelsParallel(in, unit_gaze.value(), partition_counts);
+    } else if (capacity_.kernels == KernelSet::kSimd) {
+      assignLevelsSimd(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
+    } else {
+      assignLevelsRef(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
+    }
   } else if (pool_) {
     partitionParallel(in, unit_gaze.value(), partition_counts);
   } else if (capacity_.kernels == KernelSet::kSimd) {

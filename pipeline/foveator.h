@@ -82,6 +82,8 @@ class Foveator {
  private:
   Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
   void partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
+  void levelsParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
+  void sumHistograms(PartitionCounts& counts) const;  // the pool's parts' histograms
 
   PipelineCapacity capacity_;
   FoveationConfig config_;

@@ -196,6 +196,93 @@ inline void PartitionRangeT(const float* x, const float* y, const float* z, cons
   }
 }
 
+// ---- ACUITY's levels -------------------------------------------------------------
+
+// Levels of one vector of points: assignLevelsRef's expressions, op for op
+// (acuity_levels.h: axialRadial, r, eccentricitySpecDeg, sinSpec, classify).
+template <class DD>
+HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const float* ys, const float* zs,
+                            double* level_out) {
+  const hn::Rebind<float, DD> df;
+  const auto px = hn::PromoteTo(dd, hn::LoadU(df, xs));
+  const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
+  const auto pz = hn::PromoteTo(dd, hn::LoadU(df, zs));
+  const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
+  const auto vx = hn::Add(hn::Set(dd, p.origin_minus_eye[0]), px);
+  const auto vy = hn::Add(hn::Set(dd, p.origin_minus_eye[1]), py);
+  const auto vz = hn::Add(hn::Set(dd, p.origin_minus_eye[2]), pz);
+  const auto lx = hn::Set(dd, p.l[0]);
+  const auto ly = hn::Set(dd, p.l[1]);
+  const auto lz = hn::Set(dd, p.l[2]);
+  const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
+  const auto rx = hn::Sub(vx, hn::Mul(t, lx));
+  const auto ry = hn::Sub(vy, hn::Mul(t, ly));
+  const auto rz = hn::Sub(vz, hn::Mul(t, lz));
+  const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+  const auto r = hn::Sqrt(hn::Add(hn::Add(hn::Mul(vx, vx), hn::Mul(vy, vy)), hn::Mul(vz, vz)));
+  // eccentricitySpecDeg(t, d)
+  const auto zero = hn::Zero(dd);
+  const auto negative = hn::Lt(t, zero);
+  const auto at = hn::IfThenElse(negative, hn::Neg(t), t);
+  const auto at_wins = hn::Gt(at, d);
+  const auto hi = hn::IfThenElse(at_wins, at, d);
+  const auto lo = hn::IfThenElse(at_wins, d, at);
+  const auto q = hn::Div(lo, hi);
+  const auto q2 = hn::Mul(q, q);
+  auto poly = hn::Set(dd, kAtanCoefficients[5]);
+  for (int k = 4; k >= 0; --k) poly = hn::Add(hn::Mul(poly, q2), hn::Set(dd, kAtanCoefficients[k]));
+  auto a = hn::Mul(poly, q);
+  a = hn::IfThenElse(hn::Gt(d, at), hn::Sub(hn::Set(dd, kLevelsPi / 2.0), a), a);
+  a = hn::IfThenElse(negative, hn::Sub(hn::Set(dd, kLevelsPi), a), a);
+  const auto ecc = hn::IfThenElse(hn::Gt(hi, zero), hn::Mul(a, hn::Set(dd, 180.0 / kLevelsPi)), zero);
+  // classify(r, ecc): allowed = r sinSpec((m ecc + MAR0) deg-to-rad)
+  const auto x = hn::Mul(hn::Add(hn::Mul(hn::Set(dd, p.bounds.slope), ecc), hn::Set(dd, kMar0Deg)),
+                         hn::Set(dd, kLevelsPi / 180.0));
+  const auto half_pi = hn::Set(dd, kLevelsPi / 2.0);
+  const auto y = hn::IfThenElse(hn::Lt(x, half_pi), x, half_pi);
+  const auto y2 = hn::Mul(y, y);
+  auto sin_poly = hn::Set(dd, kSinCoefficients[6]);
+  for (int k = 5; k >= 0; --k) sin_poly = hn::Add(hn::Mul(sin_poly, y2), hn::Set(dd, kSinCoefficients[k]));
+  const auto allowed = hn::Mul(r, hn::Mul(sin_poly, y));
+  const auto one = hn::Set(dd, 1.0);
+  auto level = zero;
+  for (int n = 1; n < kMaxRegions; ++n) {
+    level = hn::Add(level, hn::IfThenElseZero(hn::Le(hn::Set(dd, p.bounds.min_allowed_m[n]), allowed), one));
+  }
+  level = hn::Max(level, hn::Set(dd, static_cast<double>(p.bounds.floor_level)));
+  hn::StoreU(hn::IfThenElse(finite, level, hn::Set(dd, static_cast<double>(kRegionInvalid))), dd, level_out);
+}
+
+inline void LevelRangeT(const float* x, const float* y, const float* z, const LevelParams& p, std::size_t begin,
+                        std::size_t end, uint8_t* region_out, uint32_t* histogram) {
+  const hn::ScalableTag<double> dd;
+  const std::size_t lanes = hn::Lanes(dd);
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  HWY_ALIGN double level[kMax];
+  std::size_t i = begin;
+  for (; i + lanes <= end; i += lanes) {
+    LevelVector(dd, p, x + i, y + i, z + i, level);
+    for (std::size_t k = 0; k < lanes; ++k) {
+      const auto r = static_cast<uint8_t>(level[k]);
+      region_out[i + k] = r;
+      ++histogram[r];
+    }
+  }
+  if (i < end) {
+    HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
+    const std::size_t rest = end - i;
+    std::memcpy(tx, x + i, rest * sizeof(float));
+    std::memcpy(ty, y + i, rest * sizeof(float));
+    std::memcpy(tz, z + i, rest * sizeof(float));
+    LevelVector(dd, p, tx, ty, tz, level);
+    for (std::size_t k = 0; k < rest; ++k) {
+      const auto r = static_cast<uint8_t>(level[k]);
+      region_out[i + k] = r;
+      ++histogram[r];
+    }
+  }
+}
+
 // ---- voxel indices ------------------------------------------------------------
 
 template <class DD>

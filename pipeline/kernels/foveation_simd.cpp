@@ -23,6 +23,7 @@ namespace kernels {
 HWY_EXPORT(BackprojectCountRowsT);
 HWY_EXPORT(BackprojectRowsT);
 HWY_EXPORT(PartitionRangeT);
+HWY_EXPORT(LevelRangeT);
 HWY_EXPORT(VoxelIndexRangeT);
 HWY_EXPORT(VoxelKeyRangeT);
 HWY_EXPORT(HitConeRangeT);
@@ -85,6 +86,22 @@ PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, cons
 void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
                     uint8_t* region_out, uint32_t* histogram256) {
   HWY_DYNAMIC_DISPATCH(PartitionRangeT)(cloud.x(), cloud.y(), cloud.z(), params, begin, end, region_out, histogram256);
+}
+
+LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds) {
+  LevelParams p;
+  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;  // as assignLevelsRef
+  for (int a = 0; a < 3; ++a) {
+    p.origin_minus_eye[a] = origin_minus_eye[a];
+    p.l[a] = gaze.direction[a];
+  }
+  p.bounds = bounds;
+  return p;
+}
+
+void levelRange(const PointCloud& cloud, const LevelParams& params, std::size_t begin, std::size_t end,
+                uint8_t* region_out, uint32_t* histogram256) {
+  HWY_DYNAMIC_DISPATCH(LevelRangeT)(cloud.x(), cloud.y(), cloud.z(), params, begin, end, region_out, histogram256);
 }
 
 void VoxelKeyState::reset() {
@@ -167,6 +184,15 @@ void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& 
   uint32_t histogram[256] = {};
   const kernels::PartitionParams p = kernels::preparePartition(cloud, gaze, bounds);
   kernels::partitionRange(cloud, p, 0, cloud.size(), region_out, histogram);
+  for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] = histogram[r];
+  counts.invalid = histogram[kRegionInvalid];
+}
+
+void assignLevelsSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
+                      PartitionCounts& counts) {
+  counts = {};
+  uint32_t histogram[256] = {};
+  kernels::levelRange(cloud, kernels::prepareLevels(cloud, gaze, bounds), 0, cloud.size(), region_out, histogram);
   for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] = histogram[r];
   counts.invalid = histogram[kRegionInvalid];
 }

@@ -3,6 +3,7 @@
 // Each kernel reproduces its scalar reference BIT FOR BIT (docs/kernels.md):
 //   backprojectSimd  == backprojectRef   (float; same operation order, Mul and Add, never MulAdd)
 //   partitionSimd    == partitionRef     (double; t, rejection vector, sqrt, ConeBounds::inside)
+//   assignLevelsSimd == assignLevelsRef  (double; ACUITY's levels, acuity_levels.h's polynomials)
 //   voxelIndexSimd   == voxelIndex()     (double floor((origin + double(p)) * inv_voxel))
 // The best target the CPU supports is picked at the first call (Highway's
 // HWY_DYNAMIC_DISPATCH); forceSimdTarget() restricts it (tests, benchmarks).
@@ -17,6 +18,7 @@
 
 #include "hal/frame.h"
 #include "hal/result.h"
+#include "pipeline/acuity_levels.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
 #include "pipeline/kernels/kernel_set.h"
@@ -38,6 +40,10 @@ Status backproject(const hal::RgbdFrame& frame, const DepthRange& range, PointCl
 // Same contract as partitionRef.
 void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds, uint8_t* region_out,
                    PartitionCounts& counts);
+
+// Same contract as assignLevelsRef.
+void assignLevelsSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
+                      PartitionCounts& counts);
 
 // index_out[i] = voxelIndex(origin_m, coord[i], inv_voxel_by_region[region[i]]) for i in [0, n).
 // inv_voxel_by_region has 256 entries (any region byte, kRegionInvalid included).
@@ -100,6 +106,16 @@ PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, cons
 // Regions of points [begin, end); histogram[r] += points of region r (r = kRegionInvalid too).
 void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
                     uint8_t* region_out, uint32_t* histogram256);
+
+struct LevelParams {
+  double origin_minus_eye[3] = {};
+  double l[3] = {};
+  LevelBounds bounds;
+};
+LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds);
+// Levels of points [begin, end); histogram[r] += points of level r (r = kRegionInvalid too).
+void levelRange(const PointCloud& cloud, const LevelParams& params, std::size_t begin, std::size_t end,
+                uint8_t* region_out, uint32_t* histogram256);
 
 // Packed voxel keys for the hash sampler, with the reference's checks' inputs.
 // key_out[i] = (region << 60) | (i & M) << 40 | (j & M) << 20 | (k & M), M = 2^20 - 1,

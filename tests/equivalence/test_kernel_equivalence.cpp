@@ -279,6 +279,80 @@ TEST_P(TargetTest, PartitionNonFiniteDenormalAndFarPoints) {
   }
 }
 
+// ---- ACUITY's levels ------------------------------------------------------------
+
+std::vector<LevelBounds> allLevelBounds() {
+  std::vector<LevelBounds> all;
+  for (double slope : {0.022, 1.0}) {  // 1.0: MARs beyond 90 degrees (sin held at 1)
+    for (double margin : {std::sqrt(3.0), 0.5}) {
+      for (double floor_m : {0.0, 0.008}) {
+        AcuityConfig config;
+        config.preset = Preset::kAcuity;
+        config.slope = slope;
+        config.level_margin = margin;
+        config.floor_m = floor_m;
+        all.push_back(LevelBounds::fromModel(RegionModel::create(config).value()));
+      }
+    }
+  }
+  return all;
+}
+
+void expectSameLevels(const PointCloud& cloud, const Gaze& raw_gaze, const LevelBounds& bounds, const char* what) {
+  const Gaze gaze = normalizeGaze(raw_gaze).value();
+  std::vector<uint8_t> ref(cloud.size() + 1, 0xAB), simd(cloud.size() + 1, 0xAB);
+  PartitionCounts cr, cs;
+  assignLevelsRef(cloud, gaze, bounds, ref.data(), cr);
+  assignLevelsSimd(cloud, gaze, bounds, simd.data(), cs);
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    ASSERT_EQ(ref[i], simd[i]) << what << ": point " << i << " of " << cloud.size() << " (" << cloud.x()[i] << ", "
+                               << cloud.y()[i] << ", " << cloud.z()[i] << ")";  // [size] checks nothing is overrun
+  }
+  EXPECT_EQ(cr.per_region, cs.per_region) << what;
+  EXPECT_EQ(cr.invalid, cs.invalid) << what;
+}
+
+TEST_P(TargetTest, LevelsRandomClouds) {
+  std::mt19937_64 rng(41);
+  const std::vector<LevelBounds> all = allLevelBounds();
+  for (std::size_t n : {0, 1, 2, 3, 5, 7, 9, 15, 17, 33, 1000, 20011}) {
+    for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 1e4)}) {
+      // Clouds of a few metres and of a few hundred: every level is used.
+      for (float extent : {3.0f, 300.0f}) {
+        const PointCloud cloud = test::randomCloud(n, origin, extent, rng());
+        for (const LevelBounds& b : all) {
+          expectSameLevels(cloud, gazeAlong(test::randomUnit(rng), origin + 0.5 * test::randomUnit(rng)), b, "random");
+        }
+      }
+    }
+  }
+}
+
+TEST_P(TargetTest, LevelsGazeAlongAxesSpecialsAndFarPoints) {
+  std::mt19937_64 rng(42);
+  const PointCloud cloud = test::randomCloud(5003, Eigen::Vector3d::Zero(), 20.0f, 43);
+  const Eigen::Vector3d axes[] = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                                  -Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
+  PointCloud specials(4000);
+  const float values[] = {kNaNf, -kNaNf, kInff, -kInff, kDenormf, -kDenormf, 1e-38f, 0.0f, -0.0f,
+                          3e38f, -3e38f, 1.0f, -2.5f, 1e4f, -1e4f};
+  std::uniform_int_distribution<int> pick(0, 14);
+  for (int i = 0; i < 4000; ++i) (void)specials.push(values[pick(rng)], values[pick(rng)], values[pick(rng)], 0);
+  // On the gaze axis ahead and behind, at the eye, and at exactly 90 degrees.
+  PointCloud axis_points(64);
+  for (float z : {0.0f, -0.0f, 0.001f, 1.0f, 3.0f, 1e3f, -0.001f, -1.0f, -3.0f}) (void)axis_points.push(0.0f, 0.0f, z, 0);
+  for (float x : {0.001f, 1.0f, 100.0f}) (void)axis_points.push(x, 0.0f, 0.0f, 0);
+  const PointCloud far = test::randomCloud(3001, Eigen::Vector3d(1e4, 1e4, -1e4), 50.0f, 44);
+  for (const LevelBounds& b : allLevelBounds()) {
+    for (const auto& axis : axes) expectSameLevels(cloud, gazeAlong(axis), b, "axis");
+    expectSameLevels(specials, gazeAlong(Eigen::Vector3d(1, 2, 3)), b, "specials");
+    expectSameLevels(specials, gazeAlong(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(0, 0, 1e4)), b, "specials far");
+    expectSameLevels(axis_points, gazeAlong(Eigen::Vector3d::UnitZ()), b, "on the axis");
+    expectSameLevels(far, gazeAlong(Eigen::Vector3d(1, 1, -1), Eigen::Vector3d::Zero()), b, "far");
+    expectSameLevels(far, gazeAlong(test::randomUnit(rng), Eigen::Vector3d(1e4, 1e4, -1e4)), b, "far, eye inside");
+  }
+}
+
 // ---- voxel indices ------------------------------------------------------------
 
 void expectSameVoxelIndices(const std::vector<float>& coord, const std::vector<uint8_t>& region, double origin,

@@ -84,12 +84,13 @@ TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
           LD slack = 0;
           const int expected = bruteForceLevel(a, cloud.world(i), gaze, slack);
           if (level[i] != expected) {
-            // Only where double and long double may round a threshold differently.
-            ASSERT_LT(slack, 1e-9L) << "point " << i << ": level " << int(level[i]) << ", expected " << expected;
+            // Only where the specification's polynomials (errors under 1e-5) and long
+            // double's libm decide a threshold differently.
+            ASSERT_LT(slack, 1e-4L) << "point " << i << ": level " << int(level[i]) << ", expected " << expected;
             ++close_calls;
           }
         }
-        EXPECT_LE(close_calls, 2u);
+        EXPECT_LE(close_calls, 20u);
         uint32_t total = 0;
         for (uint32_t c : counts.per_region) total += c;
         EXPECT_EQ(total, cloud.size());
@@ -145,6 +146,28 @@ TEST(AcuityLevels, DefaultMarginKeepsEveryPointUnderItsMar) {
 }
 
 // Farther or more eccentric never means finer: the level is monotone in both.
+// The specification's atan and sin against libm, over their whole ranges.
+TEST(AcuityLevels, SpecificationPolynomialsAreAccurate) {
+  double worst_atan = 0.0, worst_sin = 0.0;
+  for (int i = 0; i <= 100000; ++i) {
+    const double q = i / 100000.0;
+    worst_atan = std::max(worst_atan, std::fabs(atanUnit(q) - std::atan(q)));
+    const double x = q * std::numbers::pi / 2.0;
+    worst_sin = std::max(worst_sin, std::fabs(sinSpec(x) - std::sin(x)));
+  }
+  EXPECT_LT(worst_atan, 1e-5);
+  EXPECT_LT(worst_sin, 1e-7);
+  EXPECT_EQ(sinSpec(3.0), sinSpec(std::numbers::pi / 2.0));  // held at 1 beyond 90 degrees
+  // The eccentricity in every octant, at the eye and on the axes.
+  for (double angle = 0.0; angle <= 180.0; angle += 0.37) {
+    const double rad = angle * std::numbers::pi / 180.0;
+    EXPECT_NEAR(eccentricitySpecDeg(std::cos(rad) * 2.5, std::sin(rad) * 2.5), angle, 1e-3) << angle;
+  }
+  EXPECT_EQ(eccentricitySpecDeg(0.0, 0.0), 0.0);
+  EXPECT_NEAR(eccentricitySpecDeg(0.0, 1.0), 90.0, 1e-9);
+  EXPECT_NEAR(eccentricitySpecDeg(-1.0, 0.0), 180.0, 1e-9);
+}
+
 TEST(AcuityLevels, LevelGrowsWithDistanceAndEccentricity) {
   const LevelBounds b = LevelBounds::fromModel(RegionModel::create(acuityConfig()).value());
   uint8_t previous = 0;
