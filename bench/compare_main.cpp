@@ -107,13 +107,16 @@ class FloorMethod final : public Method {
 // kernels on `threads` threads. The outputs are identical (docs/kernels.md).
 class FoveaMethod final : public Method {
  public:
-  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads)
+  // acuity: Preset::kAcuity in place of the input's preset (a different method:
+  // its output is not compared with PCL's).
+  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, bool acuity = false)
       : input_(input),
+        acuity_(acuity),
         capacity_(input.has_frame ? input.frame.pixelCount() : input.cloud.size()),
         cloud_(input.has_frame ? capacity_ : 0),
         out_(capacity_),
         backprojector_(threads, kernels),
-        foveator_(pipeline::Foveator::create({capacity_, capacity_, kernels, threads}, input.config).value()) {}
+        foveator_(pipeline::Foveator::create({capacity_, capacity_, kernels, threads}, configFor(input, acuity)).value()) {}
   Status run() override {
     const PointCloud* in = &input_.cloud;
     if (input_.has_frame) {
@@ -125,6 +128,7 @@ class FoveaMethod final : public Method {
   }
   std::size_t outputSize() const override { return out_.size(); }
   bool output(Output& o) const override {
+    if (acuity_) return false;
     o.world.clear();
     o.region.clear();
     for (std::size_t i = 0; i < out_.size(); ++i) {
@@ -141,7 +145,13 @@ class FoveaMethod final : public Method {
   const PointCloud& cloud() const { return input_.has_frame ? cloud_ : input_.cloud; }
 
  private:
+  static pipeline::FoveationConfig configFor(const Input& input, bool acuity) {
+    pipeline::FoveationConfig config = input.config;
+    if (acuity) config.acuity.preset = pipeline::Preset::kAcuity;
+    return config;
+  }
   const Input& input_;
+  bool acuity_;
   std::size_t capacity_;
   PointCloud cloud_;
   pipeline::FoveatedCloud out_;
@@ -182,7 +192,13 @@ class PclMethod final : public Method {
   }
 
  private:
+  static pipeline::FoveationConfig configFor(const Input& input, bool acuity) {
+    pipeline::FoveationConfig config = input.config;
+    if (acuity) config.acuity.preset = pipeline::Preset::kAcuity;
+    return config;
+  }
   const Input& input_;
+  bool acuity_;
   std::size_t capacity_;
   PointCloud cloud_;
   PclFoveation pcl_;
@@ -214,6 +230,10 @@ const MethodEntry kMethods[] = {
     {"fovea-simd-mt", "fovea SIMD kernels and hash sampler, one thread per core",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, allCores());
+     }},
+    {"acuity-simd-1t", "ACUITY (docs/acuity-levels.md): SIMD levels and hash sampler, one thread",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, true);
      }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
