@@ -115,6 +115,8 @@ std::span<uint8_t> ViewServer::frameBuffer() {
       }
     }
   }
+  // Unreachable by the count above; an empty span makes the caller pack nothing.
+  if (writing_ < 0) return {};
   return buffers_[static_cast<std::size_t>(writing_)].data;
 }
 
