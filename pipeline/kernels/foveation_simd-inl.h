@@ -166,20 +166,27 @@ HWY_INLINE void PartitionVector(DD dd, const PartitionParams& p, const float* xs
   hn::StoreU(region, dd, region_out);
 }
 
-inline void PartitionRangeT(const float* x, const float* y, const float* z, const PartitionParams& p,
-                            std::size_t begin, std::size_t end, uint8_t* region_out, uint32_t* histogram) {
+// Runs vector(dd, xs, ys, zs, out) over points [begin, end), one vector of
+// doubles at a time (the tail on a zero-padded copy), and writes each result as
+// the point's region byte, counted in histogram. The partition and ACUITY's levels.
+template <class VectorFn>
+HWY_INLINE void RegionRange(const float* x, const float* y, const float* z, std::size_t begin, std::size_t end,
+                            uint8_t* region_out, uint32_t* histogram, const VectorFn& vector) {
   const hn::ScalableTag<double> dd;
   const std::size_t lanes = hn::Lanes(dd);
   constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
   HWY_ALIGN double region[kMax];
-  std::size_t i = begin;
-  for (; i + lanes <= end; i += lanes) {
-    PartitionVector(dd, p, x + i, y + i, z + i, region);
-    for (std::size_t k = 0; k < lanes; ++k) {
+  const auto emit = [&](std::size_t i, std::size_t count) {
+    for (std::size_t k = 0; k < count; ++k) {
       const auto r = static_cast<uint8_t>(region[k]);
       region_out[i + k] = r;
       ++histogram[r];
     }
+  };
+  std::size_t i = begin;
+  for (; i + lanes <= end; i += lanes) {
+    vector(dd, x + i, y + i, z + i, region);
+    emit(i, lanes);
   }
   if (i < end) {
     HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
@@ -187,13 +194,17 @@ inline void PartitionRangeT(const float* x, const float* y, const float* z, cons
     std::memcpy(tx, x + i, rest * sizeof(float));
     std::memcpy(ty, y + i, rest * sizeof(float));
     std::memcpy(tz, z + i, rest * sizeof(float));
-    PartitionVector(dd, p, tx, ty, tz, region);
-    for (std::size_t k = 0; k < rest; ++k) {
-      const auto r = static_cast<uint8_t>(region[k]);
-      region_out[i + k] = r;
-      ++histogram[r];
-    }
+    vector(dd, tx, ty, tz, region);
+    emit(i, rest);
   }
+}
+
+inline void PartitionRangeT(const float* x, const float* y, const float* z, const PartitionParams& p,
+                            std::size_t begin, std::size_t end, uint8_t* region_out, uint32_t* histogram) {
+  RegionRange(x, y, z, begin, end, region_out, histogram,
+              [&p](auto dd, const float* xs, const float* ys, const float* zs, double* out) {
+                PartitionVector(dd, p, xs, ys, zs, out);
+              });
 }
 
 // ---- ACUITY's levels -------------------------------------------------------------
@@ -255,32 +266,10 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
 
 inline void LevelRangeT(const float* x, const float* y, const float* z, const LevelParams& p, std::size_t begin,
                         std::size_t end, uint8_t* region_out, uint32_t* histogram) {
-  const hn::ScalableTag<double> dd;
-  const std::size_t lanes = hn::Lanes(dd);
-  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
-  HWY_ALIGN double level[kMax];
-  std::size_t i = begin;
-  for (; i + lanes <= end; i += lanes) {
-    LevelVector(dd, p, x + i, y + i, z + i, level);
-    for (std::size_t k = 0; k < lanes; ++k) {
-      const auto r = static_cast<uint8_t>(level[k]);
-      region_out[i + k] = r;
-      ++histogram[r];
-    }
-  }
-  if (i < end) {
-    HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
-    const std::size_t rest = end - i;
-    std::memcpy(tx, x + i, rest * sizeof(float));
-    std::memcpy(ty, y + i, rest * sizeof(float));
-    std::memcpy(tz, z + i, rest * sizeof(float));
-    LevelVector(dd, p, tx, ty, tz, level);
-    for (std::size_t k = 0; k < rest; ++k) {
-      const auto r = static_cast<uint8_t>(level[k]);
-      region_out[i + k] = r;
-      ++histogram[r];
-    }
-  }
+  RegionRange(x, y, z, begin, end, region_out, histogram,
+              [&p](auto dd, const float* xs, const float* ys, const float* zs, double* out) {
+                LevelVector(dd, p, xs, ys, zs, out);
+              });
 }
 
 // ---- voxel indices ------------------------------------------------------------

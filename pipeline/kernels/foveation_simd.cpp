@@ -72,13 +72,21 @@ void backprojectRows(const BackprojectParams& params, int row0, int row1, std::s
   HWY_DYNAMIC_DISPATCH(BackprojectRowsT)(params, row0, row1, out_offset);
 }
 
-PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds) {
-  PartitionParams p;
-  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;  // as partitionRef
+namespace {
+// origin - H (the large parts cancelled in double, as the references do) and L.
+template <class Params>
+void fillEye(const PointCloud& cloud, const Gaze& gaze, Params& p) {
+  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;
   for (int a = 0; a < 3; ++a) {
     p.origin_minus_eye[a] = origin_minus_eye[a];
     p.l[a] = gaze.direction[a];
   }
+}
+}  // namespace
+
+PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& bounds) {
+  PartitionParams p;
+  fillEye(cloud, gaze, p);
   p.bounds = bounds;
   return p;
 }
@@ -90,11 +98,7 @@ void partitionRange(const PointCloud& cloud, const PartitionParams& params, std:
 
 LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds) {
   LevelParams p;
-  const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;  // as assignLevelsRef
-  for (int a = 0; a < 3; ++a) {
-    p.origin_minus_eye[a] = origin_minus_eye[a];
-    p.l[a] = gaze.direction[a];
-  }
+  fillEye(cloud, gaze, p);
   p.bounds = bounds;
   return p;
 }

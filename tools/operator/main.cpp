@@ -19,6 +19,7 @@
 #include "net/codec.h"
 #include "net/key.h"
 #include "net/operator_link.h"
+#include "net/udp_socket.h"
 #include "pipeline/io/ply.h"
 #include "tools/operator/gaze_script.h"
 #include "tools/operator/operator_stats.h"
@@ -69,11 +70,7 @@ const char* kHelp =
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void onStopSignal(int) { g_stop = 1; }
 
-int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
+using net::monotonicNs;
 
 struct Options {
   std::string connect;

@@ -2,22 +2,16 @@
 
 #include <algorithm>
 #include <cstring>
-#include <ctime>
 
 #include <civetweb.h>
 
+#include "net/udp_socket.h"
 #include "tools/operator/view_assets.h"
 #include "tools/operator/view_frame.h"
 
 namespace fovea::tools {
 
 namespace {
-
-int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 // civetweb's library set-up is process-wide; the first server does it, once.
 void initCivetweb() {
@@ -295,7 +289,7 @@ int ViewServer::onWsData(mg_connection* conn, int bits, char* data, std::size_t 
     return 1;
   }
   if (m->kind == ViewerMessage::Kind::kGaze) {
-    self->gaze_ = TabGaze{m->gaze, tab->id, monotonicNs()};
+    self->gaze_ = TabGaze{m->gaze, tab->id, net::monotonicNs()};
     ++self->counters_.gaze_received;
   } else {
     self->mode_ = m->mode;
