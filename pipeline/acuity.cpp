@@ -59,6 +59,23 @@ Result<Preset> parsePreset(std::string_view text) {
                         "preset: unknown name '" + std::string(text) + "' (use F1, F2, F3, FREF or ACUITY)");
 }
 
+std::string_view viewCullName(ViewCull cull) {
+  switch (cull) {
+    case ViewCull::kOff: return "off";
+    case ViewCull::kCoarsest: return "coarsest";
+    case ViewCull::kDrop: return "drop";
+  }
+  return "?";
+}
+
+Result<ViewCull> parseViewCull(std::string_view text) {
+  if (text == "off") return ViewCull::kOff;
+  if (text == "coarsest") return ViewCull::kCoarsest;
+  if (text == "drop") return ViewCull::kDrop;
+  return Result<ViewCull>(ErrorCode::kInvalidArgument,
+                          "view cull: unknown value '" + std::string(text) + "' (use off, coarsest or drop)");
+}
+
 Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
   if (!std::isfinite(config.slope)) return invalid("slope", "must be a finite number, got " + formatDouble(config.slope));
   if (config.slope < 0.0) return invalid("slope", "must not be negative, got " + formatDouble(config.slope));
@@ -91,6 +108,12 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
     model.level_voxel_m_ = v;
     model.floor_m_ = f;
     model.level_margin_ = k;
+    const double c = config.view_cull_deg;
+    if (!std::isfinite(c) || !(c > 0.0 && c <= 180.0)) {
+      return invalid("view_cull_deg", formatDouble(c) + " is outside (0, 180] degrees");
+    }
+    model.view_cull_ = config.view_cull;
+    model.view_cull_deg_ = c;
     model.region_count_ = kMaxRegions;
     for (int n = 0; n < kMaxRegions; ++n) model.names_[n] = kLevelNames[n];
   } else if (table_bounds >= 0) {

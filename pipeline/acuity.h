@@ -36,6 +36,12 @@ std::string_view presetName(Preset preset);
 // Accepts "F1", "F2", "F3", "FREF", "ACUITY" (any case).
 Result<Preset> parsePreset(std::string_view text);
 
+// What Preset::kAcuity does with points outside the viewer's field of view.
+enum class ViewCull { kOff, kCoarsest, kDrop };
+std::string_view viewCullName(ViewCull cull);
+// Accepts "off", "coarsest", "drop".
+Result<ViewCull> parseViewCull(std::string_view text);
+
 struct AcuityConfig {
   Preset preset = Preset::kF1;
   // For Preset::kCustom: the outer eccentricity bound of each region but the last,
@@ -54,6 +60,12 @@ struct AcuityConfig {
   // smaller values trade a measured share above the MAR for bytes. 0.5: about
   // F3's bytes at half its share above the MAR (docs/acuity-levels.md).
   double level_margin = 0.5;
+  // Preset::kAcuity, when the gaze carries the head's pose (Gaze::view_known): a
+  // point further than view_cull_deg from the head's forward axis (the HMD's field
+  // of view plus a margin for head motion within the loop's latency) goes to the
+  // coarsest level (kCoarsest) or is not sent (kDrop). docs/acuity-levels.md.
+  ViewCull view_cull = ViewCull::kOff;
+  double view_cull_deg = 70.0;
 };
 
 // A validated region list. Region n < count-1 holds the points whose eccentricity
@@ -81,6 +93,8 @@ class RegionModel {
   double levelVoxelM() const { return level_voxel_m_; }
   double levelMargin() const { return level_margin_; }
   double floorM() const { return floor_m_; }
+  ViewCull viewCull() const { return view_cull_; }
+  double viewCullDeg() const { return view_cull_deg_; }
   const char* regionName(int n) const { return names_[n]; }
   double slope() const { return slope_; }
   double farEccDeg() const { return far_ecc_deg_; }
@@ -97,6 +111,8 @@ class RegionModel {
   double level_voxel_m_ = 0.0;
   double floor_m_ = 0.0;
   double level_margin_ = 0.0;
+  ViewCull view_cull_ = ViewCull::kOff;
+  double view_cull_deg_ = 0.0;
 };
 
 }  // namespace fovea::pipeline

@@ -21,6 +21,10 @@ LevelBounds LevelBounds::fromModel(const RegionModel& model) {
       }
     }
   }
+  if (model.viewCull() != ViewCull::kOff) {
+    b.cull_region = model.viewCull() == ViewCull::kDrop ? kRegionCulled : static_cast<uint8_t>(kMaxRegions - 1);
+    b.cull_cos = std::cos(model.viewCullDeg() * kDegToRad);
+  }
   return b;
 }
 
@@ -36,6 +40,8 @@ void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBound
   counts = {};
   // P - H = (origin - H) + p: the large parts cancel in double first (as the partition).
   const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;
+  const bool cull = bounds.cull_region != 0 && gaze.view_known;
+  const Eigen::Vector3d& f = gaze.view_forward;
   const float* x = cloud.x();
   const float* y = cloud.y();
   const float* z = cloud.z();
@@ -50,9 +56,16 @@ void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBound
     const double vz = origin_minus_eye.z() + static_cast<double>(z[i]);
     const AxialRadial ar = axialRadial(vx, vy, vz, gaze.direction);
     const double r = std::sqrt(vx * vx + vy * vy + vz * vz);
-    const uint8_t level = bounds.classify(r, eccentricitySpecDeg(ar.t, ar.d));
+    double ecc = eccentricitySpecDeg(ar.t, ar.d) - gaze.fovea_growth_deg;
+    ecc = ecc < 0.0 ? 0.0 : ecc;
+    uint8_t level = bounds.classify(r, ecc);
+    if (cull && vx * f.x() + vy * f.y() + vz * f.z() < r * bounds.cull_cos) level = bounds.cull_region;
     region_out[i] = level;
-    ++counts.per_region[level];
+    if (level == kRegionCulled) {
+      ++counts.culled;
+    } else {
+      ++counts.per_region[level];
+    }
   }
 }
 

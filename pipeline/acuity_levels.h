@@ -17,6 +17,14 @@
 // sensor's noise and pitch carries nothing). Points with a non-finite coordinate
 // get kRegionInvalid and are counted.
 //
+// Two inputs from the gaze (partition.h) widen or narrow what is kept:
+// - the fovea's growth g (Gaze::fovea_growth_deg): the eccentricity is taken as
+//   max(0, E - g), so everything within g of the gaze is kept at the fovea's acuity
+//   and the whole falloff moves out by g (a saccade in flight lands on detail);
+// - the view cull (AcuityConfig::view_cull, when Gaze::view_known): with F the
+//   head's unit forward axis and c = cos(view_cull_deg), a point with a.F < r c lies
+//   outside the field of view and goes to the coarsest level or to kRegionCulled.
+//
 // The arithmetic below is the specification that the SIMD kernel reproduces bit
 // for bit (double, this order, no FMA): atan and sin are fixed polynomials
 // (atanUnit, sinSpec), not libm's, whose results differ between libraries and
@@ -78,6 +86,10 @@ struct LevelBounds {
   // k * v_n for n = 1 .. kMaxRegions - 1 (index 0 unused).
   std::array<double, kMaxRegions> min_allowed_m{};
   uint8_t floor_level = 0;  // no point below this level (0: no floor)
+  // The view cull: what a point outside the field of view gets (0: no cull;
+  // kMaxRegions - 1, or kRegionCulled), and cos(view_cull_deg).
+  uint8_t cull_region = 0;
+  double cull_cos = -1.0;
 
   static LevelBounds fromModel(const RegionModel& model);
 

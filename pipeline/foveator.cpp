@@ -98,6 +98,7 @@ void Foveator::sumHistograms(PartitionCounts& counts) const {
     const uint32_t* histogram = part_histograms_.data() + 256 * static_cast<std::size_t>(part);
     for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] += histogram[r];
     counts.invalid += histogram[kRegionInvalid];
+    counts.culled += histogram[kRegionCulled];
   }
 }
 
@@ -176,6 +177,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   stats.fixation_ns = t2 - t1;
   stats.sample_ns = t3 - t2;
   stats.dropped_nonfinite = partition_counts.invalid;
+  stats.culled = partition_counts.culled;
   stats.points_in = static_cast<uint32_t>(in.size()) - partition_counts.invalid;
   for (int r = 0; r < model_.regionCount(); ++r) {
     stats.regions[r].points_in = partition_counts.per_region[r];

@@ -51,6 +51,7 @@ struct FoveationStats {
   uint32_t points_in = 0;          // valid input points
   uint32_t points_out = 0;
   uint32_t dropped_nonfinite = 0;  // input points with NaN/Inf coordinates
+  uint32_t culled = 0;             // ACUITY's view cull (drop): outside the field of view, not sent
   Fixation fixation;
   int64_t partition_ns = 0;
   int64_t fixation_ns = 0;

@@ -18,6 +18,16 @@ Result<Gaze> normalizeGaze(const Gaze& gaze) {
   }
   Gaze unit = gaze;
   unit.direction = gaze.direction / norm;
+  if (!(gaze.fovea_growth_deg >= 0.0 && gaze.fovea_growth_deg <= 180.0)) {
+    return Result<Gaze>(ErrorCode::kInvalidInput, "gaze: fovea growth is outside [0, 180] degrees");
+  }
+  if (gaze.view_known) {
+    const double view_norm = gaze.view_forward.allFinite() ? gaze.view_forward.norm() : 0.0;
+    if (!(view_norm > 1e-12)) {
+      return Result<Gaze>(ErrorCode::kInvalidInput, "gaze: view direction is not finite or has zero length");
+    }
+    unit.view_forward = gaze.view_forward / view_norm;
+  }
   return unit;
 }
 

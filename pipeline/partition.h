@@ -28,15 +28,25 @@
 namespace fovea::pipeline {
 
 inline constexpr uint8_t kRegionInvalid = 0xFF;
+// Preset::kAcuity with view_cull = drop: outside the viewer's field of view, not sent.
+inline constexpr uint8_t kRegionCulled = 0xFE;
 
 // Eye position and gaze direction in world coordinates.
 struct Gaze {
   Eigen::Vector3d origin_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+  // Used by Preset::kAcuity only (acuity_levels.h); the paper's presets ignore them.
+  // Degrees by which the fovea is widened to cover where the eye may be when the
+  // frame is shown (the gaze's age and the eye's speed: firmware/gaze_policy.h).
+  double fovea_growth_deg = 0.0;
+  // The forward axis of the viewer's head (HMD), when known: the view cull's axis.
+  bool view_known = false;
+  Eigen::Vector3d view_forward = Eigen::Vector3d::UnitZ();
 };
 
-// Checks that the gaze is finite and has a usable direction; returns it with a
-// unit direction. kInvalidInput otherwise (NaN/Inf, zero or denormal length).
+// Checks that the gaze is finite and has a usable direction (and view_forward when
+// view_known), and that fovea_growth_deg is within [0, 180]; returns it with unit
+// directions. kInvalidInput otherwise (NaN/Inf, zero or denormal length).
 Result<Gaze> normalizeGaze(const Gaze& gaze);
 
 // The per-bound constants of the cone test, precomputed once per configuration.
@@ -82,6 +92,7 @@ inline AxialRadial axialRadial(double vx, double vy, double vz, const Eigen::Vec
 struct PartitionCounts {
   std::array<uint32_t, kMaxRegions> per_region{};
   uint32_t invalid = 0;  // non-finite coordinates
+  uint32_t culled = 0;   // outside the viewer's field of view, dropped (kRegionCulled)
 };
 
 // Scalar reference. gaze must come from normalizeGaze(). Writes cloud.size()

@@ -245,7 +245,10 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
   auto a = hn::Mul(poly, q);
   a = hn::IfThenElse(hn::Gt(d, at), hn::Sub(hn::Set(dd, kLevelsPi / 2.0), a), a);
   a = hn::IfThenElse(negative, hn::Sub(hn::Set(dd, kLevelsPi), a), a);
-  const auto ecc = hn::IfThenElse(hn::Gt(hi, zero), hn::Mul(a, hn::Set(dd, 180.0 / kLevelsPi)), zero);
+  auto ecc = hn::IfThenElse(hn::Gt(hi, zero), hn::Mul(a, hn::Set(dd, 180.0 / kLevelsPi)), zero);
+  // The fovea's growth: max(0, E - g), written as the reference's compare (NaN stays).
+  ecc = hn::Sub(ecc, hn::Set(dd, p.growth_deg));
+  ecc = hn::IfThenElse(hn::Lt(ecc, zero), zero, ecc);
   // classify(r, ecc): allowed = r sinSpec((m ecc + MAR0) deg-to-rad)
   const auto x = hn::Mul(hn::Add(hn::Mul(hn::Set(dd, p.bounds.slope), ecc), hn::Set(dd, kMar0Deg)),
                          hn::Set(dd, kLevelsPi / 180.0));
@@ -261,6 +264,12 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
     level = hn::Add(level, hn::IfThenElseZero(hn::Le(hn::Set(dd, p.bounds.min_allowed_m[n]), allowed), one));
   }
   level = hn::Max(level, hn::Set(dd, static_cast<double>(p.bounds.floor_level)));
+  if (p.cull) {
+    const auto ft = hn::Add(hn::Add(hn::Mul(vx, hn::Set(dd, p.f[0])), hn::Mul(vy, hn::Set(dd, p.f[1]))),
+                            hn::Mul(vz, hn::Set(dd, p.f[2])));
+    level = hn::IfThenElse(hn::Lt(ft, hn::Mul(r, hn::Set(dd, p.bounds.cull_cos))),
+                           hn::Set(dd, static_cast<double>(p.bounds.cull_region)), level);
+  }
   hn::StoreU(hn::IfThenElse(finite, level, hn::Set(dd, static_cast<double>(kRegionInvalid))), dd, level_out);
 }
 

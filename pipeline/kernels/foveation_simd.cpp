@@ -100,6 +100,9 @@ LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const Level
   LevelParams p;
   fillEye(cloud, gaze, p);
   p.bounds = bounds;
+  p.growth_deg = gaze.fovea_growth_deg;
+  p.cull = bounds.cull_region != 0 && gaze.view_known;
+  for (int a = 0; a < 3; ++a) p.f[a] = gaze.view_forward[a];
   return p;
 }
 
@@ -199,6 +202,7 @@ void assignLevelsSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBoun
   kernels::levelRange(cloud, kernels::prepareLevels(cloud, gaze, bounds), 0, cloud.size(), region_out, histogram);
   for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] = histogram[r];
   counts.invalid = histogram[kRegionInvalid];
+  counts.culled = histogram[kRegionCulled];
 }
 
 void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,

@@ -111,6 +111,9 @@ struct LevelParams {
   double origin_minus_eye[3] = {};
   double l[3] = {};
   LevelBounds bounds;
+  double growth_deg = 0.0;  // Gaze::fovea_growth_deg
+  bool cull = false;        // bounds.cull_region != 0 and the gaze knows the view
+  double f[3] = {};         // Gaze::view_forward
 };
 LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds);
 // Levels of points [begin, end); histogram[r] += points of level r (r = kRegionInvalid too).

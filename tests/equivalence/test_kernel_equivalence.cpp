@@ -283,6 +283,9 @@ TEST_P(TargetTest, PartitionNonFiniteDenormalAndFarPoints) {
 
 std::vector<LevelBounds> allLevelBounds() {
   std::vector<LevelBounds> all;
+  // The view cull's variants take turns rather than multiply the list.
+  const std::pair<ViewCull, double> culls[] = {
+      {ViewCull::kOff, 70.0}, {ViewCull::kCoarsest, 70.0}, {ViewCull::kDrop, 40.0}, {ViewCull::kDrop, 120.0}};
   for (double slope : {0.022, 1.0}) {  // 1.0: MARs beyond 90 degrees (sin held at 1)
     for (double margin : {std::sqrt(3.0), 0.5}) {
       for (double floor_m : {0.0, 0.008}) {
@@ -291,6 +294,8 @@ std::vector<LevelBounds> allLevelBounds() {
         config.slope = slope;
         config.level_margin = margin;
         config.floor_m = floor_m;
+        config.view_cull = culls[all.size() % 4].first;
+        config.view_cull_deg = culls[all.size() % 4].second;
         all.push_back(LevelBounds::fromModel(RegionModel::create(config).value()));
       }
     }
@@ -298,8 +303,21 @@ std::vector<LevelBounds> allLevelBounds() {
   return all;
 }
 
+// The gaze with a fovea growth and a head of its own (or none), chosen by seed.
+Gaze withHead(Gaze gaze, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const double growths[] = {0.0, 0.0, 2.5, 30.0, 180.0};
+  gaze.fovea_growth_deg = growths[rng() % 5];
+  gaze.view_known = rng() % 4 != 0;
+  // The head mostly near the gaze, sometimes anywhere (the cull then takes most).
+  gaze.view_forward = rng() % 2 ? gaze.direction + 0.3 * test::randomUnit(rng) : test::randomUnit(rng);
+  if (gaze.view_forward.norm() < 1e-3) gaze.view_forward = gaze.direction;
+  return gaze;
+}
+
 void expectSameLevels(const PointCloud& cloud, const Gaze& raw_gaze, const LevelBounds& bounds, const char* what) {
-  const Gaze gaze = normalizeGaze(raw_gaze).value();
+  static uint64_t seed = 1;
+  const Gaze gaze = normalizeGaze(withHead(raw_gaze, seed++)).value();
   std::vector<uint8_t> ref(cloud.size() + 1, 0xAB), simd(cloud.size() + 1, 0xAB);
   PartitionCounts cr, cs;
   assignLevelsRef(cloud, gaze, bounds, ref.data(), cr);
@@ -310,6 +328,7 @@ void expectSameLevels(const PointCloud& cloud, const Gaze& raw_gaze, const Level
   }
   EXPECT_EQ(cr.per_region, cs.per_region) << what;
   EXPECT_EQ(cr.invalid, cs.invalid) << what;
+  EXPECT_EQ(cr.culled, cs.culled) << what;
 }
 
 TEST_P(TargetTest, LevelsRandomClouds) {

@@ -106,15 +106,25 @@ TEST(Threads, BackprojectionIsIdenticalForOneToFourThreads) {
 
 TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
   std::mt19937_64 rng(62);
-  for (Preset preset : {Preset::kF1, Preset::kF3}) {
+  // ACUITY twice: plain, and with a grown fovea and a view cull that drops points.
+  for (int variant = 0; variant < 4; ++variant) {
     FoveationConfig config;
-    config.acuity.preset = preset;
+    config.acuity.preset = variant == 0 ? Preset::kF1 : variant == 1 ? Preset::kF3 : Preset::kAcuity;
+    if (variant == 3) {
+      config.acuity.view_cull = ViewCull::kDrop;
+      config.acuity.view_cull_deg = 30.0;
+    }
     for (std::size_t n : {std::size_t{3}, std::size_t{50001}}) {
       PointCloud cloud = test::randomCloud(n, Eigen::Vector3d(1e4, 0, 0), 4.0f, rng());
       cloud.x()[n / 2] = std::numeric_limits<float>::quiet_NaN();
       Gaze gaze;
       gaze.origin_m = cloud.origin_m + Eigen::Vector3d(0, 0, -4);
       gaze.direction = Eigen::Vector3d(0.1, 0, 1);
+      if (variant == 3) {
+        gaze.fovea_growth_deg = 6.0;
+        gaze.view_known = true;
+        gaze.view_forward = Eigen::Vector3d(0.4, 0.1, 1);
+      }
       Foveator ref = Foveator::create({n, n, KernelSet::kRef}, config).value();
       FoveatedCloud expected(n);
       FoveationStats es;
@@ -129,6 +139,8 @@ TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
         EXPECT_TRUE(sameFoveated(expected, out)) << threads << " threads";
         EXPECT_EQ(expected_rep, rep);
         EXPECT_EQ(es.dropped_nonfinite, st.dropped_nonfinite);
+        EXPECT_EQ(es.culled, st.culled);
+        if (variant == 3 && n > 3) EXPECT_GT(st.culled, 0u);
         for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(es.regions[r].points_in, st.regions[r].points_in);
       }
     }

@@ -3,6 +3,7 @@
 // (at the default margin, no point is displaced by more than its MAR, measured
 // by the error metrics), monotonicity, the sensor floor, hard cases, and the
 // model's validation.
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -34,7 +35,10 @@ AcuityConfig acuityConfig(double margin = std::sqrt(3.0), double floor_m = 0.0, 
 // kernel's atan2 of the axial and radial parts), the largest level whose margin
 // times voxel fits under r sin(MAR); the floor lifts it. `slack` reports how
 // close the decision was (relative distance of `allowed` to the nearest threshold).
-int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack) {
+// The gaze's growth lowers the eccentricity (not below 0); with a view cull and a
+// known head, a point whose angle to the head's axis exceeds view_cull_deg gets
+// the cull's region (view_slack: how close that angle was, in degrees).
+int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack, LD& view_slack) {
   const LD vx = p.x() - g.origin_m.x(), vy = p.y() - g.origin_m.y(), vz = p.z() - g.origin_m.z();
   const LD r = std::sqrt(vx * vx + vy * vy + vz * vz);
   const LD dx = g.direction.x(), dy = g.direction.y(), dz = g.direction.z();
@@ -45,6 +49,7 @@ int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze&
     c = std::max<LD>(-1, std::min<LD>(1, c));
     ecc = std::acos(c) * 180 / std::numbers::pi_v<LD>;
   }
+  ecc = std::max<LD>(0, ecc - static_cast<LD>(g.fovea_growth_deg));
   const LD allowed = r * std::sin((static_cast<LD>(a.slope) * ecc + static_cast<LD>(1.0 / 60.0)) * std::numbers::pi_v<LD> / 180);
   int level = 0;
   slack = 1;
@@ -61,7 +66,20 @@ int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze&
       }
     }
   }
+  view_slack = 180;
+  if (a.view_cull != ViewCull::kOff && g.view_known && r > 0) {
+    const LD fx = g.view_forward.x(), fy = g.view_forward.y(), fz = g.view_forward.z();
+    LD c = (vx * fx + vy * fy + vz * fz) / (r * std::sqrt(fx * fx + fy * fy + fz * fz));
+    c = std::max<LD>(-1, std::min<LD>(1, c));
+    const LD angle = std::acos(c) * 180 / std::numbers::pi_v<LD>;
+    view_slack = std::fabs(angle - static_cast<LD>(a.view_cull_deg));
+    if (angle > static_cast<LD>(a.view_cull_deg)) level = a.view_cull == ViewCull::kDrop ? kRegionCulled : kMaxRegions - 1;
+  }
   return level;
+}
+int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack) {
+  LD view_slack = 0;
+  return bruteForceLevel(a, p, g, slack, view_slack);
 }
 
 TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
@@ -98,6 +116,133 @@ TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
       }
     }
   }
+}
+
+// The fovea's growth and the view cull, against the same independent reference.
+TEST(AcuityLevels, GrowthAndViewCullMatchTheIndependentReference) {
+  std::mt19937_64 rng(8);
+  for (ViewCull cull : {ViewCull::kOff, ViewCull::kCoarsest, ViewCull::kDrop}) {
+    for (double growth : {0.0, 4.0, 25.0}) {
+      AcuityConfig a = acuityConfig(0.5);
+      a.view_cull = cull;
+      a.view_cull_deg = 35.0;
+      const LevelBounds bounds = LevelBounds::fromModel(RegionModel::create(a).value());
+      const PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(5, 5, 5), 6.0f, rng());
+      Gaze gaze;
+      gaze.origin_m = Eigen::Vector3d(5.5, 4.5, 5.1);
+      gaze.direction = Eigen::Vector3d(0.2, 1.0, -0.3).normalized();
+      gaze.fovea_growth_deg = growth;
+      gaze.view_known = true;
+      gaze.view_forward = (gaze.direction + Eigen::Vector3d(0.5, 0, 0)).normalized();
+      std::vector<uint8_t> level(cloud.size());
+      PartitionCounts counts;
+      assignLevelsRef(cloud, gaze, bounds, level.data(), counts);
+      std::size_t close_calls = 0, culled = 0;
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        LD slack = 0, view_slack = 0;
+        const int expected = bruteForceLevel(a, cloud.world(i), gaze, slack, view_slack);
+        culled += expected == kRegionCulled;
+        if (level[i] != expected) {
+          ASSERT_TRUE(slack < 1e-4L || view_slack < 1e-9L)
+              << "point " << i << ": level " << int(level[i]) << ", expected " << expected;
+          ++close_calls;
+        }
+      }
+      EXPECT_LE(close_calls, 20u);
+      EXPECT_EQ(counts.culled, level.end() - level.begin() - std::count_if(level.begin(), level.end(), [](uint8_t l) {
+                                 return l != kRegionCulled;
+                               }));
+      if (cull == ViewCull::kDrop) EXPECT_GT(culled, 1000u);  // the cull really cuts
+      uint32_t total = counts.culled;
+      for (uint32_t c : counts.per_region) total += c;
+      EXPECT_EQ(total, cloud.size());
+    }
+  }
+}
+
+// A grown fovea keeps every point within the growth at the fovea's acuity (the
+// level of eccentricity 0 at its distance), and no point coarser than without it.
+TEST(AcuityLevels, GrowthKeepsTheFoveaWithinItAndNeverCoarsens) {
+  const LevelBounds b = LevelBounds::fromModel(RegionModel::create(acuityConfig(0.5)).value());
+  const PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(0, 0, 3), 4.0f, 9);
+  Gaze plain;  // at the origin, along +z
+  Gaze grown = plain;
+  grown.fovea_growth_deg = 10.0;
+  std::vector<uint8_t> l0(cloud.size()), l1(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, plain, b, l0.data(), counts);
+  assignLevelsRef(cloud, grown, b, l1.data(), counts);
+  std::size_t inside = 0, finer = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3d p = cloud.world(i);
+    EXPECT_LE(l1[i], l0[i]) << i;
+    finer += l1[i] < l0[i];
+    const double ecc = std::acos(std::clamp(p.z() / p.norm(), -1.0, 1.0)) * 180.0 / std::numbers::pi;
+    if (ecc < 9.99) {
+      ++inside;
+      EXPECT_EQ(l1[i], b.classify(p.norm(), 0.0)) << i;
+    }
+  }
+  EXPECT_GT(inside, 200u);
+  EXPECT_GT(finer, 500u);
+}
+
+// The view cull's hard cases: an empty field of view (the head turned away), the
+// head along each axis, a point at the eye (no direction: kept), a non-finite one.
+TEST(AcuityLevels, ViewCullHardCases) {
+  AcuityConfig a = acuityConfig(0.5);
+  a.view_cull = ViewCull::kDrop;
+  a.view_cull_deg = 50.0;
+  const LevelBounds b = LevelBounds::fromModel(RegionModel::create(a).value());
+  PointCloud cloud(8);
+  ASSERT_TRUE(cloud.push(0, 0, 0, 0));   // at the eye
+  ASSERT_TRUE(cloud.push(0, 0, 3, 0));   // ahead
+  ASSERT_TRUE(cloud.push(0, 0, -3, 0));  // behind
+  ASSERT_TRUE(cloud.push(3, 0, 0, 0));   // at 90 degrees
+  ASSERT_TRUE(cloud.push(std::numeric_limits<float>::quiet_NaN(), 0, 1, 0));
+  Gaze gaze;
+  gaze.view_known = true;
+  std::vector<uint8_t> level(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, gaze, b, level.data(), counts);
+  EXPECT_NE(level[0], kRegionCulled);
+  EXPECT_NE(level[1], kRegionCulled);
+  EXPECT_EQ(level[2], kRegionCulled);
+  EXPECT_EQ(level[3], kRegionCulled);
+  EXPECT_EQ(level[4], kRegionInvalid);
+  EXPECT_EQ(counts.culled, 2u);
+  EXPECT_EQ(counts.invalid, 1u);
+  // The head turned away: only the point at the eye is left; without a known
+  // head nothing is culled.
+  gaze.view_forward = -Eigen::Vector3d::UnitX();
+  assignLevelsRef(cloud, gaze, b, level.data(), counts);
+  EXPECT_EQ(counts.culled, 3u);
+  gaze.view_known = false;
+  assignLevelsRef(cloud, gaze, b, level.data(), counts);
+  EXPECT_EQ(counts.culled, 0u);
+  // Coarsest instead of drop: the same points at the coarsest level.
+  a.view_cull = ViewCull::kCoarsest;
+  const LevelBounds c = LevelBounds::fromModel(RegionModel::create(a).value());
+  gaze.view_known = true;
+  gaze.view_forward = Eigen::Vector3d::UnitZ();
+  assignLevelsRef(cloud, gaze, c, level.data(), counts);
+  EXPECT_EQ(level[2], kMaxRegions - 1);
+  EXPECT_EQ(level[3], kMaxRegions - 1);
+  EXPECT_EQ(counts.culled, 0u);
+  // A gaze whose growth or head is unusable is refused, not foveated.
+  Gaze bad;
+  bad.fovea_growth_deg = -1.0;
+  EXPECT_FALSE(normalizeGaze(bad).isOk());
+  bad.fovea_growth_deg = std::nan("");
+  EXPECT_FALSE(normalizeGaze(bad).isOk());
+  bad = Gaze{};
+  bad.view_known = true;
+  bad.view_forward = Eigen::Vector3d::Zero();
+  EXPECT_FALSE(normalizeGaze(bad).isOk());
+  bad.view_forward = Eigen::Vector3d(std::numeric_limits<double>::infinity(), 0, 1);
+  EXPECT_FALSE(normalizeGaze(bad).isOk());
+  bad.view_forward = Eigen::Vector3d(0, 0, 5);
+  EXPECT_NEAR(normalizeGaze(bad).value().view_forward.norm(), 1.0, 1e-15);
 }
 
 // At the default margin (sqrt(3), a voxel's diagonal) no point is displaced, seen
@@ -251,6 +396,12 @@ TEST(AcuityLevels, ModelValidatesItsFields) {
   EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.floor_m"), std::string::npos);
   bad = acuityConfig(std::nan(""));
   EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.level_margin"), std::string::npos);
+  bad = acuityConfig();
+  bad.view_cull_deg = 0.0;
+  EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.view_cull_deg"), std::string::npos);
+  EXPECT_EQ(parseViewCull("drop").value(), ViewCull::kDrop);
+  EXPECT_EQ(viewCullName(ViewCull::kCoarsest), "coarsest");
+  EXPECT_FALSE(parseViewCull("sometimes").isOk());
   // The paper's presets are no levels.
   AcuityConfig f1;
   EXPECT_FALSE(RegionModel::create(f1).value().levels());
