@@ -160,6 +160,14 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("foveation.level_voxel_m", foveation.acuity.level_voxel_m, 0.0001, 1.0),
       FOVEA_FLOAT("foveation.floor_m", foveation.acuity.floor_m, 0.0, 1.0),
       FOVEA_FLOAT("foveation.level_margin", foveation.acuity.level_margin, 0.1, 10.0),
+      Field{"foveation.view_cull", Kind::kChoice, 0, 0, {"off", "coarsest", "drop"},
+            [](const ServiceConfig& c) -> Value {
+              return std::string(pipeline::viewCullName(c.foveation.acuity.view_cull));
+            },
+            [](ServiceConfig& c, const Value& v) {
+              c.foveation.acuity.view_cull = pipeline::parseViewCull(std::get<std::string>(v)).value();
+            }},
+      FOVEA_FLOAT("foveation.view_cull_deg", foveation.acuity.view_cull_deg, 0.001, 180.0),
       // [foveation.fixation]
       Field{"foveation.fixation.mode", Kind::kChoice, 0, 0, {"hit", "centroid", "fixed"},
             [](const ServiceConfig& c) -> Value {
@@ -190,6 +198,8 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("stream.burst_ms", stream.burst_ms, 0.1, 1000.0),
       FOVEA_NS_AS_MS("stream.gaze_timeout_ms", stream.gaze.timeout_ns, 1, 60'000),
       FOVEA_FLOAT("stream.fallback_voxel_m", stream.gaze.fallback_voxel_m, 0.001, 1.0),
+      FOVEA_FLOAT("stream.gaze_growth_max_deg", stream.gaze.growth_max_deg, 0.0, 90.0),
+      FOVEA_NS_AS_MS("stream.gaze_lead_ms", stream.gaze.lead_ns, 0, 10'000),
       FOVEA_FLOAT("stream.fovea_step_m", stream.codec.fovea_step_m, 1e-6, 1.0),
       FOVEA_FLOAT("stream.periphery_step_ratio", stream.codec.periphery_step_ratio, 1.0 / 1024, 1.0),
       Field{"stream.chroma", Kind::kChoice, 0, 0, {"full", "half"},

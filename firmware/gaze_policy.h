@@ -9,6 +9,14 @@
 // scene evenly rather than placing a sharp fovea where the operator may not be
 // looking. The fallback is FREF's "no foveation" at a safe voxel size.
 // docs/protocol.md ("Gaze fallback") documents it for operators.
+//
+// A fresh gaze also carries how far the fovea must reach beyond it (used by the
+// ACUITY preset, pipeline/acuity_levels.h): the eye moves on while the sample
+// travels to the robot and the frame travels back, so the fovea is widened by the
+// eye's measured speed (between the last two samples, on the operator's clock)
+// times the sample's age plus the frame's expected time to the display (lead),
+// up to growth_max_deg. A fixating eye gets no growth; a saccade in flight (up to
+// some 500 deg/s) gets the bound, so where it lands is already sharp.
 #pragma once
 
 #include <cstdint>
@@ -23,11 +31,24 @@ namespace fovea::firmware {
 struct GazePolicyConfig {
   int64_t timeout_ns = 100'000'000;
   double fallback_voxel_m = 0.05;
+  // The fovea's growth (ACUITY): bound, and the capture-to-display time it looks
+  // ahead (the stream's capture-to-decoded p50 is about 13 ms on loopback, plus a
+  // display refresh; docs/acuity-levels.md). growth_max_deg = 0 disables it.
+  double growth_max_deg = 10.0;
+  int64_t lead_ns = 30'000'000;
 
   Status validate() const;
 };
 
 enum class GazeSource { kOperator, kNoGazeYet, kStale };
+
+// The operator's newest gaze sample as the robot holds it.
+struct OperatorGaze {
+  bool valid = false;  // a session with a valid sample
+  pipeline::Gaze gaze;  // with the head's forward axis (view_known) from the HMD pose
+  int64_t received_ns = 0;  // robot's clock
+  int64_t stamp_ns = 0;     // operator's clock (the eye's speed between samples)
+};
 std::string_view gazeSourceName(GazeSource source);
 
 // The foveation configuration that samples every point on one uniform lattice
@@ -46,12 +67,12 @@ class GazePolicy {
     const pipeline::FoveationConfig* foveation = nullptr;
     bool changed = false;  // source differs from the previous decision (log it once)
     int64_t age_ns = -1;   // of the operator's sample; -1 when there is none
+    double eye_speed_deg_s = 0.0;  // between the operator's last two samples
   };
 
-  // newest: the operator's newest valid sample (nullptr: none yet), received at
-  // received_ns; camera: the frame's pose, for the fallback's gaze along the
-  // optical axis.
-  Decision decide(const pipeline::Gaze* newest, int64_t received_ns, int64_t now_ns, const hal::Pose& camera);
+  // newest: the operator's newest sample (valid false: none yet); camera: the
+  // frame's pose, for the fallback's gaze along the optical axis.
+  Decision decide(const OperatorGaze& newest, int64_t now_ns, const hal::Pose& camera);
 
   // A new operator-side configuration (SIGHUP, issue 5); the fallback stays.
   void setOperatorConfig(const pipeline::FoveationConfig& config) { operator_config_ = config; }
@@ -63,6 +84,11 @@ class GazePolicy {
   pipeline::FoveationConfig fallback_config_;
   bool first_ = true;
   GazeSource last_ = GazeSource::kNoGazeYet;
+  // The eye's speed: the previous sample's direction and operator stamp.
+  bool have_previous_ = false;
+  Eigen::Vector3d previous_direction_ = Eigen::Vector3d::UnitZ();
+  int64_t previous_stamp_ns_ = 0;
+  double eye_speed_deg_s_ = 0.0;
 };
 
 }  // namespace fovea::firmware

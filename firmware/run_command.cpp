@@ -388,11 +388,9 @@ int runCommand(int argc, char** argv) {
     GazeSource source = GazeSource::kOperator;
     if (streamer) {
       streamer->poll();
-      pipeline::Gaze operator_gaze;
-      int64_t received_ns = 0;
-      const bool have_gaze = streamer->operatorGaze(operator_gaze, received_ns);
-      const GazePolicy::Decision decision =
-          gaze_policy->decide(have_gaze ? &operator_gaze : nullptr, received_ns, capture_ns, frame.T_world_cam);
+      OperatorGaze operator_gaze;
+      (void)streamer->operatorGaze(operator_gaze);
+      const GazePolicy::Decision decision = gaze_policy->decide(operator_gaze, capture_ns, frame.T_world_cam);
       if (decision.changed) {
         std::printf("gaze: %s\n", std::string(gazeSourceName(decision.source)).c_str());
         std::fflush(stdout);

@@ -394,8 +394,7 @@ void Service::foveationLoop() {
     Status s = stage_->backproject(f.frame, counts);
     GazePolicy::Decision decision;
     if (s) {
-      const OperatorGaze& g = gaze_box_.current();
-      decision = policy_->decide(g.valid ? &g.gaze : nullptr, g.received_ns, monotonicNs(), f.frame.T_world_cam);
+      decision = policy_->decide(gaze_box_.current(), monotonicNs(), f.frame.T_world_cam);
       s = stage_->use(decision.foveation);
     }
     if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
@@ -427,14 +426,11 @@ void Service::sendLoop() {
   int64_t gaze_received_ns = -1;
   // Hands the operator's newest gaze to the foveation stage when it changes.
   auto publishGaze = [&] {
-    pipeline::Gaze gaze;
-    int64_t received_ns = 0;
-    const bool valid = streamer_->operatorGaze(gaze, received_ns);
+    OperatorGaze gaze;
+    const bool valid = streamer_->operatorGaze(gaze);
+    const int64_t received_ns = gaze.received_ns;
     if (valid != gaze_valid || (valid && received_ns != gaze_received_ns)) {
-      OperatorGaze& w = gaze_box_.writeBuffer();
-      w.valid = valid;
-      w.gaze = gaze;
-      w.received_ns = received_ns;
+      gaze_box_.writeBuffer() = gaze;
       gaze_box_.publish();
       gaze_valid = valid;
       gaze_received_ns = received_ns;

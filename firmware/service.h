@@ -93,12 +93,7 @@ class LatencyHistogram {
   std::array<std::atomic<uint64_t>, kBuckets> counts_{};
 };
 
-// The operator's newest gaze, from the send thread to the foveation thread.
-struct OperatorGaze {
-  bool valid = false;  // a session with a valid sample
-  pipeline::Gaze gaze;
-  int64_t received_ns = 0;
-};
+
 
 // The parameters SIGHUP reloads, from the supervisor to the stage threads.
 struct ReloadedParameters {

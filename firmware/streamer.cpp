@@ -4,6 +4,8 @@
 #include <ctime>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 namespace fovea::firmware {
 
 namespace {
@@ -55,16 +57,23 @@ void Streamer::idleUntil(int64_t until_ns) {
   }
 }
 
-bool Streamer::operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const {
+bool Streamer::operatorGaze(OperatorGaze& out) const {
+  out = {};
   const auto& latest = link_->latestGaze();
   if (!link_->hasSession() || !latest) return false;
   const net::GazeSample& s = latest->sample;
   // Confidence 0: the operator's station keeps the session but does not know
   // where the eye is (no tracker sample yet); the robot falls back as without gaze.
   if (!(s.confidence > 0.0f)) return false;
-  gaze.origin_m = {s.gaze_origin_m.x, s.gaze_origin_m.y, s.gaze_origin_m.z};
-  gaze.direction = {s.gaze_direction.x, s.gaze_direction.y, s.gaze_direction.z};
-  received_ns = latest->received_ns;
+  out.gaze.origin_m = {s.gaze_origin_m.x, s.gaze_origin_m.y, s.gaze_origin_m.z};
+  out.gaze.direction = {s.gaze_direction.x, s.gaze_direction.y, s.gaze_direction.z};
+  // The head's forward axis: the eye's z axis turned into the world (docs/protocol.md).
+  const Eigen::Quaterniond q(s.hmd_orientation.w, s.hmd_orientation.x, s.hmd_orientation.y, s.hmd_orientation.z);
+  out.gaze.view_forward = q.normalized() * Eigen::Vector3d::UnitZ();
+  out.gaze.view_known = true;
+  out.received_ns = latest->received_ns;
+  out.stamp_ns = s.operator_stamp_ns;
+  out.valid = true;
   return true;
 }
 

@@ -57,9 +57,10 @@ class Streamer {
   // Handles datagrams until now >= until_ns (waits in poll, no busy loop).
   void idleUntil(int64_t until_ns);
 
-  // The operator's newest valid gaze sample while a session stands (false
-  // otherwise), and when it arrived.
-  bool operatorGaze(pipeline::Gaze& gaze, int64_t& received_ns) const;
+  // The operator's newest valid gaze sample while a session stands, with the
+  // head's forward axis from its HMD pose, when it arrived and its operator stamp;
+  // out.valid (returned) is false otherwise.
+  bool operatorGaze(OperatorGaze& out) const;
 
   // Caps the uplink below the budget sessions negotiate (a reloaded
   // configuration): applies to the session in progress and the next ones.

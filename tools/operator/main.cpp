@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "net/codec.h"
 #include "net/key.h"
 #include "net/operator_link.h"
@@ -204,6 +206,10 @@ GazeChoice chooseGaze(const std::optional<tools::GazeScript>& script, const tool
     const tools::GazePoint g = script->at(t_ns);
     s.gaze_origin_m = {g.origin_m.x(), g.origin_m.y(), g.origin_m.z()};
     s.gaze_direction = {g.direction.x(), g.direction.y(), g.direction.z()};
+    // A script has no head: the head is taken to face where the eye looks (the
+    // robot's view cull then keeps what is around the gaze).
+    const Eigen::Quaterniond head = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), g.direction);
+    s.hmd_orientation = {head.w(), head.x(), head.y(), head.z()};
   } else {
     if (last_sent) s = *last_sent;
     s.confidence = 0.0f;
