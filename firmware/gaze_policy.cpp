@@ -1,11 +1,7 @@
 #include "firmware/gaze_policy.h"
 
-#include <algorithm>
 #include <cmath>
-#include <numbers>
 #include <string>
-
-#include <Eigen/Geometry>
 
 namespace fovea::firmware {
 
@@ -49,42 +45,21 @@ pipeline::FoveationConfig uniformFoveationConfig(double voxel_m) {
 GazePolicy::GazePolicy(const GazePolicyConfig& config, const pipeline::FoveationConfig& operator_config)
     : config_(config), operator_config_(operator_config), fallback_config_(uniformFoveationConfig(config.fallback_voxel_m)) {}
 
-namespace {
-// Faster than any saccade: a larger figure comes from clock jitter between two
-// samples stamped close together.
-constexpr double kMaxEyeSpeedDegS = 1000.0;
-}  // namespace
-
 GazePolicy::Decision GazePolicy::decide(const OperatorGaze& newest, int64_t now_ns, const hal::Pose& camera) {
   Decision d;
   if (newest.valid) {
     d.age_ns = now_ns - newest.received_ns;
     d.source = d.age_ns <= config_.timeout_ns ? GazeSource::kOperator : GazeSource::kStale;
-    if (!have_previous_ || newest.stamp_ns != previous_stamp_ns_) {
-      const Eigen::Vector3d direction = newest.gaze.direction.normalized();
-      const int64_t dt_ns = newest.stamp_ns - previous_stamp_ns_;
-      if (have_previous_ && dt_ns > 0 && direction.allFinite()) {
-        const double angle_deg =
-            std::atan2(previous_direction_.cross(direction).norm(), previous_direction_.dot(direction)) * 180.0 /
-            std::numbers::pi;
-        eye_speed_deg_s_ = std::min(kMaxEyeSpeedDegS, angle_deg / (static_cast<double>(dt_ns) * 1e-9));
-      } else {
-        eye_speed_deg_s_ = 0.0;
-      }
-      have_previous_ = direction.allFinite();
-      previous_direction_ = direction;
-      previous_stamp_ns_ = newest.stamp_ns;
-    }
-    d.eye_speed_deg_s = eye_speed_deg_s_;
+    eye_speed_.observe(newest.gaze.direction, newest.stamp_ns);
+    d.eye_speed_deg_s = eye_speed_.speedDegS();
   } else {
     d.source = GazeSource::kNoGazeYet;
-    have_previous_ = false;
-    eye_speed_deg_s_ = 0.0;
+    eye_speed_.reset();
   }
   if (d.source == GazeSource::kOperator) {
     d.gaze = newest.gaze;
-    const double ahead_s = static_cast<double>(std::max<int64_t>(0, d.age_ns) + config_.lead_ns) * 1e-9;
-    d.gaze.fovea_growth_deg = std::min(config_.growth_max_deg, eye_speed_deg_s_ * ahead_s);
+    d.gaze.fovea_growth_deg =
+        pipeline::foveaGrowthDeg(d.eye_speed_deg_s, d.age_ns, config_.lead_ns, config_.growth_max_deg);
     d.foveation = &operator_config_;
   } else {
     d.gaze.origin_m = camera.t_world_cam;

@@ -10,13 +10,9 @@
 // looking. The fallback is FREF's "no foveation" at a safe voxel size.
 // docs/protocol.md ("Gaze fallback") documents it for operators.
 //
-// A fresh gaze also carries how far the fovea must reach beyond it (used by the
-// ACUITY preset, pipeline/acuity_levels.h): the eye moves on while the sample
-// travels to the robot and the frame travels back, so the fovea is widened by the
-// eye's measured speed (between the last two samples, on the operator's clock)
-// times the sample's age plus the frame's expected time to the display (lead),
-// up to growth_max_deg. A fixating eye gets no growth; a saccade in flight (up to
-// some 500 deg/s) gets the bound, so where it lands is already sharp.
+// A fresh gaze also carries how far the fovea must reach beyond it, for the
+// ACUITY preset: the eye's speed between the operator's samples times the
+// sample's age plus lead, up to growth_max_deg (pipeline/eye_speed.h).
 #pragma once
 
 #include <cstdint>
@@ -24,6 +20,7 @@
 
 #include "hal/frame.h"
 #include "hal/result.h"
+#include "pipeline/eye_speed.h"
 #include "pipeline/foveator.h"
 
 namespace fovea::firmware {
@@ -84,11 +81,7 @@ class GazePolicy {
   pipeline::FoveationConfig fallback_config_;
   bool first_ = true;
   GazeSource last_ = GazeSource::kNoGazeYet;
-  // The eye's speed: the previous sample's direction and operator stamp.
-  bool have_previous_ = false;
-  Eigen::Vector3d previous_direction_ = Eigen::Vector3d::UnitZ();
-  int64_t previous_stamp_ns_ = 0;
-  double eye_speed_deg_s_ = 0.0;
+  pipeline::EyeSpeed eye_speed_;  // between the operator's samples
 };
 
 }  // namespace fovea::firmware
