@@ -159,6 +159,7 @@ const std::vector<Field>& fields() {
       // preset ACUITY (docs/acuity-levels.md)
       FOVEA_FLOAT("foveation.level_voxel_m", foveation.acuity.level_voxel_m, 0.0001, 1.0),
       FOVEA_FLOAT("foveation.floor_m", foveation.acuity.floor_m, 0.0, 1.0),
+      FOVEA_FLOAT("foveation.floor_per_m2", foveation.acuity.floor_per_m2, 0.0, 1.0),
       FOVEA_FLOAT("foveation.level_margin", foveation.acuity.level_margin, 0.1, 10.0),
       Field{"foveation.view_cull", Kind::kChoice, 0, 0, {"off", "coarsest", "drop"},
             [](const ServiceConfig& c) -> Value {

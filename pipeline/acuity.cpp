@@ -107,6 +107,11 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
     if (!std::isfinite(k) || !(k >= 0.1 && k <= 10.0)) return invalid("level_margin", formatDouble(k) + " is outside [0.1, 10]");
     model.level_voxel_m_ = v;
     model.floor_m_ = f;
+    const double q = config.floor_per_m2;
+    if (!std::isfinite(q) || !(q >= 0.0 && q <= 1.0)) {
+      return invalid("floor_per_m2", formatDouble(q) + " is outside [0, 1] m per square metre");
+    }
+    model.floor_per_m2_ = q;
     model.level_margin_ = k;
     const double c = config.view_cull_deg;
     if (!std::isfinite(c) || !(c > 0.0 && c <= 180.0)) {

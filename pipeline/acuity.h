@@ -55,6 +55,12 @@ struct AcuityConfig {
   // level 1 stay raw in region 0).
   double level_voxel_m = 0.002;
   double floor_m = 0.0;
+  // ... and a floor that grows with the square of the point's distance s from the
+  // sensor (the cloud's origin: the camera, for a captured frame), as a depth
+  // camera's noise does (about 0.0019 s^2 m for a Kinect-type sensor): no point
+  // finer than the level whose voxel reaches floor_m + floor_per_m2 * s^2.
+  // 0: the constant floor only.
+  double floor_per_m2 = 0.0;
   // A point may use level n when margin * v_n <= r sin(MAR(E)) (acuity_levels.h):
   // sqrt(3) guarantees every displacement under the MAR (a voxel's diagonal);
   // smaller values trade a measured share above the MAR for bytes. 0.5: about
@@ -93,6 +99,7 @@ class RegionModel {
   double levelVoxelM() const { return level_voxel_m_; }
   double levelMargin() const { return level_margin_; }
   double floorM() const { return floor_m_; }
+  double floorPerM2() const { return floor_per_m2_; }
   ViewCull viewCull() const { return view_cull_; }
   double viewCullDeg() const { return view_cull_deg_; }
   const char* regionName(int n) const { return names_[n]; }
@@ -110,6 +117,7 @@ class RegionModel {
   double far_ecc_deg_ = kDefaultFarEccDeg;
   double level_voxel_m_ = 0.0;
   double floor_m_ = 0.0;
+  double floor_per_m2_ = 0.0;
   double level_margin_ = 0.0;
   ViewCull view_cull_ = ViewCull::kOff;
   double view_cull_deg_ = 0.0;

@@ -21,6 +21,11 @@ LevelBounds LevelBounds::fromModel(const RegionModel& model) {
       }
     }
   }
+  if (model.floorPerM2() > 0.0) {
+    b.floor_a_m = model.floorM();
+    b.floor_b_per_m2 = model.floorPerM2();
+    for (int n = 1; n < kMaxRegions; ++n) b.voxel_m[n] = model.voxelSizeM(n, 0.0);
+  }
   if (model.viewCull() != ViewCull::kOff) {
     b.cull_region = model.viewCull() == ViewCull::kDrop ? kRegionCulled : static_cast<uint8_t>(kMaxRegions - 1);
     b.cull_cos = std::cos(model.viewCullDeg() * kDegToRad);
@@ -33,6 +38,14 @@ uint8_t LevelBounds::classify(double r_m, double ecc_deg) const {
   uint8_t level = 0;
   for (int n = 1; n < kMaxRegions; ++n) level += min_allowed_m[n] <= allowed ? 1 : 0;
   return level < floor_level ? floor_level : level;
+}
+
+uint8_t LevelBounds::noiseFloorLevel(double s2_m2) const {
+  if (!(floor_b_per_m2 > 0.0)) return 0;
+  const double floor = floor_a_m + floor_b_per_m2 * s2_m2;
+  uint8_t lift = 1;
+  for (int n = 1; n < kMaxRegions; ++n) lift += voxel_m[n] < floor ? 1 : 0;
+  return lift > kMaxRegions - 1 ? static_cast<uint8_t>(kMaxRegions - 1) : lift;
 }
 
 void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
@@ -59,6 +72,11 @@ void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBound
     double ecc = eccentricitySpecDeg(ar.t, ar.d) - gaze.fovea_growth_deg;
     ecc = ecc < 0.0 ? 0.0 : ecc;
     uint8_t level = bounds.classify(r, ecc);
+    if (bounds.floor_b_per_m2 > 0.0) {
+      const double px = x[i], py = y[i], pz = z[i];
+      const uint8_t lift = bounds.noiseFloorLevel(px * px + py * py + pz * pz);
+      level = level < lift ? lift : level;
+    }
     if (cull && vx * f.x() + vy * f.y() + vz * f.z() < r * bounds.cull_cos) level = bounds.cull_region;
     region_out[i] = level;
     if (level == kRegionCulled) {

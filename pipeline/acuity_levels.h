@@ -14,7 +14,11 @@
 // above the MAR for bytes), and goes to the largest such n (at most kMaxRegions - 1). A point for which no
 // level holds stays raw (region 0), unless the sensor floor lifts it: no point is
 // kept finer than the first level whose voxel reaches floor_m (finer than the
-// sensor's noise and pitch carries nothing). Points with a non-finite coordinate
+// sensor's noise and pitch carries nothing), or, with floor_per_m2 > 0, reaches
+// floor_m + floor_per_m2 * s^2, s^2 = x^2 + y^2 + z^2 of the point's coordinates
+// relative to the cloud's origin (the camera: its noise grows with the square of
+// the distance from the sensor, not from the eye): the level is lifted to
+// min(kMaxRegions - 1, 1 + the number of levels whose voxel is below that). Points with a non-finite coordinate
 // get kRegionInvalid and are counted.
 //
 // Two inputs from the gaze (partition.h) widen or narrow what is kept:
@@ -86,6 +90,10 @@ struct LevelBounds {
   // k * v_n for n = 1 .. kMaxRegions - 1 (index 0 unused).
   std::array<double, kMaxRegions> min_allowed_m{};
   uint8_t floor_level = 0;  // no point below this level (0: no floor)
+  // The distance-dependent floor (0: none): floor_a_m + floor_b_per_m2 s^2 against v_n.
+  double floor_a_m = 0.0;
+  double floor_b_per_m2 = 0.0;
+  std::array<double, kMaxRegions> voxel_m{};  // v_n (index 0 unused)
   // The view cull: what a point outside the field of view gets (0: no cull;
   // kMaxRegions - 1, or kRegionCulled), and cos(view_cull_deg).
   uint8_t cull_region = 0;
@@ -97,6 +105,9 @@ struct LevelBounds {
   // number of levels n >= 1 whose k v_n fits under r sin(MAR) (they grow with n),
   // lifted to the floor.
   uint8_t classify(double r_m, double ecc_deg) const;
+  // The distance-dependent floor's level for a point at s2_m2 = s^2 from the sensor
+  // (0 when floor_b_per_m2 is 0).
+  uint8_t noiseFloorLevel(double s2_m2) const;
 };
 
 // Scalar reference. gaze must come from normalizeGaze(). Writes cloud.size()

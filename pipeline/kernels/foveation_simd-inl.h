@@ -264,6 +264,16 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
     level = hn::Add(level, hn::IfThenElseZero(hn::Le(hn::Set(dd, p.bounds.min_allowed_m[n]), allowed), one));
   }
   level = hn::Max(level, hn::Set(dd, static_cast<double>(p.bounds.floor_level)));
+  if (p.bounds.floor_b_per_m2 > 0.0) {
+    // s^2 from the sensor (the cloud's origin): px^2 + py^2 + pz^2, left to right.
+    const auto s2 = hn::Add(hn::Add(hn::Mul(px, px), hn::Mul(py, py)), hn::Mul(pz, pz));
+    const auto floor = hn::Add(hn::Set(dd, p.bounds.floor_a_m), hn::Mul(hn::Set(dd, p.bounds.floor_b_per_m2), s2));
+    auto lift = one;
+    for (int n = 1; n < kMaxRegions; ++n) {
+      lift = hn::Add(lift, hn::IfThenElseZero(hn::Lt(hn::Set(dd, p.bounds.voxel_m[n]), floor), one));
+    }
+    level = hn::Max(level, hn::Min(lift, hn::Set(dd, static_cast<double>(kMaxRegions - 1))));
+  }
   if (p.cull) {
     const auto ft = hn::Add(hn::Add(hn::Mul(vx, hn::Set(dd, p.f[0])), hn::Mul(vy, hn::Set(dd, p.f[1]))),
                             hn::Mul(vz, hn::Set(dd, p.f[2])));

@@ -294,6 +294,8 @@ std::vector<LevelBounds> allLevelBounds() {
         config.slope = slope;
         config.level_margin = margin;
         config.floor_m = floor_m;
+        // A floor growing with the squared distance on every other model.
+        config.floor_per_m2 = all.size() % 3 == 1 ? 0.002 : 0.0;
         config.view_cull = culls[all.size() % 4].first;
         config.view_cull_deg = culls[all.size() % 4].second;
         all.push_back(LevelBounds::fromModel(RegionModel::create(config).value()));

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -24,6 +25,7 @@
 #include "pipeline/error_metrics.h"
 #include "pipeline/quantile.h"
 #include "pipeline/foveator.h"
+#include "tools/error_report/dynamics.h"
 #include "tools/error_report/report.h"
 
 #ifndef FOVEA_BUILD_TYPE
@@ -59,7 +61,14 @@ const char* kHelp =
     "  --acuity-margins LIST  ACUITY's level margins k, a row each (default 1.732,0.7,0.5,0.42;\n"
     "                    docs/acuity-levels.md)\n"
     "  --acuity-floors LIST  ACUITY's sensor floors in mm, 0 for none (default 0); a row each margin x floor\n"
+    "  --acuity-noise-floors LIST  ACUITY's distance-dependent floors, mm per square metre of distance\n"
+    "                    (foveation.floor_per_m2 x 1000); a row each margin x floor besides (default none)\n"
     "  --reference-m M   slope of a fixed observer every configuration is also judged by (default 0.022)\n"
+    "  --dynamics-frames N  frames of the temporal-stability figure, after the measured ones (default 30;\n"
+    "                    0 skips it and the latency-corrected coverage; both use the first slope)\n"
+    "  --down-ms MS      capture to display for the coverage figure (default 13: the stream's p50 on loopback)\n"
+    "  --up-ms MS        operator to robot for the coverage figure (default 1)\n"
+    "  --growth-max-deg D  ACUITY's fovea growth bound in the coverage figure (default 10, the service's)\n"
     "  --no-plot         do not run gnuplot (report.gp is still written)\n";
 
 struct Options {
@@ -74,8 +83,10 @@ struct Options {
   std::vector<double> acuity_margins = {1.7320508075688772, 0.7, 0.5, 0.42};
   // ... and sensor floors in mm (0: none), a row each margin x floor.
   std::vector<double> acuity_floors_mm = {0.0};
+  std::vector<double> acuity_noise_floors_mm = {};  // per m^2 of distance
   double reference_slope = pipeline::kDefaultSlope;
   bool plot = true;
+  DynamicsOptions dynamics;
 };
 
 std::vector<std::string> splitCommas(std::string_view text) {
@@ -99,6 +110,10 @@ std::string configName(const pipeline::AcuityConfig& a) {
     name += margin;
     if (a.floor_m > 0.0) {
       std::snprintf(margin, sizeof margin, " floor %gmm", a.floor_m * 1e3);
+      name += margin;
+    }
+    if (a.floor_per_m2 > 0.0) {
+      std::snprintf(margin, sizeof margin, " floor %gmm*r^2", a.floor_per_m2 * 1e3);
       name += margin;
     }
   }
@@ -161,6 +176,14 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (*k < 0.1 || *k > 10.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-margins: '" + text + "' is outside [0.1, 10]");
         options.acuity_margins.push_back(*k);
       }
+    } else if (flag == "--acuity-noise-floors") {
+      options.acuity_noise_floors_mm.clear();
+      for (const std::string& text : splitCommas(value)) {
+        Result<double> mm = parseNumber(flag, text);
+        if (!mm) return mm.status();
+        if (*mm <= 0.0 || *mm > 1000.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + text + "' is outside (0, 1000] mm per m^2");
+        options.acuity_noise_floors_mm.push_back(*mm);
+      }
     } else if (flag == "--acuity-floors") {
       options.acuity_floors_mm.clear();
       for (const std::string& text : splitCommas(value)) {
@@ -169,6 +192,23 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (*mm < 0.0 || *mm > 1000.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-floors: '" + text + "' is outside [0, 1000] mm");
         options.acuity_floors_mm.push_back(*mm);
       }
+    } else if (flag == "--dynamics-frames") {
+      Result<double> n = parseNumber(flag, value);
+      if (!n) return n.status();
+      if (*n < 0 || *n > 10000 || std::floor(*n) != *n) {
+        return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is not an integer in [0, 10000]");
+      }
+      options.dynamics.stability_frames = static_cast<int>(*n);
+    } else if (flag == "--growth-max-deg") {
+      Result<double> g = parseNumber(flag, value);
+      if (!g) return g.status();
+      if (*g < 0.0 || *g > 90.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [0, 90]");
+      options.dynamics.growth_max_deg = *g;
+    } else if (flag == "--down-ms" || flag == "--up-ms") {
+      Result<double> ms = parseNumber(flag, value);
+      if (!ms) return ms.status();
+      if (*ms < 0.0 || *ms > 10000.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [0, 10000] ms");
+      (flag == "--down-ms" ? options.dynamics.down_ms : options.dynamics.up_ms) = *ms;
     } else if (flag == "--reference-m") {
       Result<double> m = parseNumber(flag, value);
       if (!m) return m.status();
@@ -336,13 +376,19 @@ int run(int argc, char** argv) {
       // The acuity mode once per level margin (its rows say which).
       const bool acuity = preset == pipeline::Preset::kAcuity;
       for (double margin : acuity ? options.acuity_margins : std::vector<double>{0.0}) {
-        for (double floor_mm : acuity ? options.acuity_floors_mm : std::vector<double>{0.0}) {
+        // Constant floors (>= 0), then distance-dependent ones (stored negated).
+        std::vector<double> floors = acuity ? options.acuity_floors_mm : std::vector<double>{0.0};
+        if (acuity) {
+          for (double q : options.acuity_noise_floors_mm) floors.push_back(-q);
+        }
+        for (double floor_mm : floors) {
           ConfigRun r;
           r.config.acuity.preset = preset;
           r.config.acuity.slope = slope;
           if (acuity) {
             r.config.acuity.level_margin = margin;
-            r.config.acuity.floor_m = floor_mm * 1e-3;
+            r.config.acuity.floor_m = std::max(floor_mm, 0.0) * 1e-3;
+            r.config.acuity.floor_per_m2 = std::max(-floor_mm, 0.0) * 1e-3;
           }
           r.time_ms.reserve(options.frames);
           r.wall_ms.reserve(options.frames);
@@ -467,6 +513,18 @@ int run(int argc, char** argv) {
     }
   }
   if (interactive) std::printf("\n");
+  // The figures over time, on the camera's next frames.
+  std::optional<DynamicsReport> dynamics;
+  if (options.dynamics.stability_frames > 0 && failed < options.frames) {
+    DynamicsOptions d = options.dynamics;
+    if (info.fps > 0) d.fps = info.fps;
+    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), options.acuity_floors_mm, options.acuity_noise_floors_mm), d);
+    if (!measured) {
+      std::fprintf(stderr, "fovea-error-report: temporal figures: %s\n", measured.status().toString().c_str());
+      return kExitFailure;
+    }
+    dynamics = std::move(measured.value());
+  }
   camera.stop();
   if (failed == options.frames) {
     std::fprintf(stderr, "fovea-error-report: no frame could be captured\n");
@@ -528,6 +586,7 @@ int run(int argc, char** argv) {
   context.pixel_pitch_arcmin = std::atan(1.0 / info.intrinsics.fx) * 180.0 / 3.14159265358979323846 * 60.0;
   context.frames = static_cast<int>(options.frames - failed);
   context.date_utc = utcNow();
+  if (dynamics) context.extra_markdown = dynamicsMarkdown(*dynamics);
 
   std::error_code ec;
   std::filesystem::create_directories(options.out_dir, ec);
@@ -572,8 +631,22 @@ int run(int argc, char** argv) {
     std::printf("%-5s %6.3f %9.0f %10.3f %9.2f %9.2f %8.1f %8.1f%%\n", c.preset.c_str(), c.slope, c.all.points_out,
                 c.bytesPerFrame() / 1e6, c.time_ms_median, c.all.rms_mm, c.all.max_mm, 100.0 * c.all.share_above_mar);
   }
-  std::printf("wrote report.md, report.csv, report.gp, report_plot.dat%s to %s\n", have_plot ? ", report.png" : "",
-              options.out_dir.c_str());
+  if (dynamics) {
+    if (Status s = writeDynamicsCsv((dir / "dynamics.csv").string(), *dynamics); !s) {
+      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+    std::printf("%-22s %9s %9s %10s %10s %9s\n", "over time", "chg fix", "chg drift", "cover all", "cover mov",
+                "MB/frame");
+    for (std::size_t c = 0; c < dynamics->stability.size(); ++c) {
+      const StabilityResult& s = dynamics->stability[c];
+      const CoverageResult& r = dynamics->coverage[c];
+      std::printf("%-22s %8.1f%% %8.1f%% %9.1f%% %9.1f%% %9.3f\n", s.name.c_str(), 100.0 * s.changed_fixed,
+                  100.0 * s.changed_drift, 100.0 * r.coverage_all, 100.0 * r.coverage_moving, r.bytes_per_frame / 1e6);
+    }
+  }
+  std::printf("wrote report.md, report.csv, report.gp, report_plot.dat%s%s to %s\n", have_plot ? ", report.png" : "",
+              dynamics ? ", dynamics.csv" : "", options.out_dir.c_str());
   return kExitOk;
 }
 

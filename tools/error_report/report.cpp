@@ -199,6 +199,7 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
     }
     md << "\n";
   }
+  md << context.extra_markdown;
   if (!context.date_utc.empty()) md << "\n";
   return writeFile(path, md.str());
 }

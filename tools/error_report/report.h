@@ -70,6 +70,7 @@ struct ReportContext {
   double pixel_pitch_arcmin = 0.0;  // atan(1 / fx) of the camera
   double reference_slope = 0.022;   // the fixed observer's m
   std::string date_utc;
+  std::string extra_markdown;  // sections appended to report.md (dynamics.h)
 };
 
 // Writes out_dir/report.csv, out_dir/report.md, out_dir/report_plot.dat and

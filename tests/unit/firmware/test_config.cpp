@@ -239,6 +239,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "foveation.far_ecc_deg=75.5",
     "foveation.level_voxel_m=0.004",
     "foveation.floor_m=0.016",
+    "foveation.floor_per_m2=0.0025",
     "foveation.level_margin=0.7",
     "foveation.view_cull=\"drop\"",
     "foveation.view_cull_deg=65.0",

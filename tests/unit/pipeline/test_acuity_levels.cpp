@@ -38,7 +38,8 @@ AcuityConfig acuityConfig(double margin = std::sqrt(3.0), double floor_m = 0.0, 
 // The gaze's growth lowers the eccentricity (not below 0); with a view cull and a
 // known head, a point whose angle to the head's axis exceeds view_cull_deg gets
 // the cull's region (view_slack: how close that angle was, in degrees).
-int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack, LD& view_slack) {
+int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Eigen::Vector3d& sensor, const Gaze& g,
+                    LD& slack, LD& view_slack) {
   const LD vx = p.x() - g.origin_m.x(), vy = p.y() - g.origin_m.y(), vz = p.z() - g.origin_m.z();
   const LD r = std::sqrt(vx * vx + vy * vy + vz * vz);
   const LD dx = g.direction.x(), dy = g.direction.y(), dz = g.direction.z();
@@ -58,9 +59,13 @@ int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze&
     slack = std::min(slack, std::fabs(allowed - threshold) / threshold);
     if (threshold <= allowed) level = n;
   }
-  if (a.floor_m > 0) {
+  // The distance-dependent floor counts from the sensor (the cloud's origin).
+  const Eigen::Vector3d local = p - sensor;
+  const LD s2 = static_cast<LD>(local.squaredNorm());
+  const LD floor = static_cast<LD>(a.floor_m) + static_cast<LD>(a.floor_per_m2) * s2;
+  if (floor > 0) {
     for (int n = 1; n < kMaxRegions; ++n) {
-      if (a.level_voxel_m * (1 << (n - 1)) >= a.floor_m || n == kMaxRegions - 1) {
+      if (static_cast<LD>(a.level_voxel_m) * (1 << (n - 1)) >= floor || n == kMaxRegions - 1) {
         level = std::max(level, n);
         break;
       }
@@ -77,15 +82,17 @@ int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze&
   }
   return level;
 }
-int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Gaze& g, LD& slack) {
+int bruteForceLevel(const AcuityConfig& a, const Eigen::Vector3d& p, const Eigen::Vector3d& sensor, const Gaze& g,
+                    LD& slack) {
   LD view_slack = 0;
-  return bruteForceLevel(a, p, g, slack, view_slack);
+  return bruteForceLevel(a, p, sensor, g, slack, view_slack);
 }
 
 TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
   for (double margin : {std::sqrt(3.0), 0.5}) {
-    for (double floor_m : {0.0, 0.008}) {
-      const AcuityConfig a = acuityConfig(margin, floor_m);
+    for (double floor_m : {0.0, 0.008, -1.0}) {  // -1: a floor of 0.004 r^2 (m)
+      AcuityConfig a = acuityConfig(margin, std::max(floor_m, 0.0));
+      if (floor_m < 0) a.floor_per_m2 = 0.004;
       const RegionModel model = RegionModel::create(a).value();
       const LevelBounds bounds = LevelBounds::fromModel(model);
       std::mt19937_64 rng(7);
@@ -100,7 +107,7 @@ TEST(AcuityLevels, MatchAnIndependentReferenceOnRandomClouds) {
         std::size_t close_calls = 0;
         for (std::size_t i = 0; i < cloud.size(); ++i) {
           LD slack = 0;
-          const int expected = bruteForceLevel(a, cloud.world(i), gaze, slack);
+          const int expected = bruteForceLevel(a, cloud.world(i), cloud.origin_m, gaze, slack);
           if (level[i] != expected) {
             // Only where the specification's polynomials (errors under 1e-5) and long
             // double's libm decide a threshold differently.
@@ -140,7 +147,7 @@ TEST(AcuityLevels, GrowthAndViewCullMatchTheIndependentReference) {
       std::size_t close_calls = 0, culled = 0;
       for (std::size_t i = 0; i < cloud.size(); ++i) {
         LD slack = 0, view_slack = 0;
-        const int expected = bruteForceLevel(a, cloud.world(i), gaze, slack, view_slack);
+        const int expected = bruteForceLevel(a, cloud.world(i), cloud.origin_m, gaze, slack, view_slack);
         culled += expected == kRegionCulled;
         if (level[i] != expected) {
           ASSERT_TRUE(slack < 1e-4L || view_slack < 1e-9L)
