@@ -152,7 +152,7 @@ Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<Dy
   for (int f = 0; f < options.stability_frames; ++f) {
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) return s;
     if (f == 0) {
-      eye = frame.T_world_cam.t_world_cam;
+      eye = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
       look = info.focus_point_m ? Eigen::Vector3d(*info.focus_point_m - eye)
                                 : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
       up = -frame.T_world_cam.R_world_cam.col(1);

@@ -23,6 +23,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "hal/camera.h"
 #include "hal/result.h"
 #include "pipeline/foveator.h"
@@ -40,6 +42,7 @@ struct DynamicsOptions {
   double down_ms = 13.0;   // capture to decoded: the stream's measured p50 on loopback
   double growth_max_deg = 10.0;  // ACUITY's growth: firmware/gaze_policy.h's defaults
   double lead_ms = 30.0;
+  Eigen::Vector3d eye_offset_cam = Eigen::Vector3d::Zero();  // fovea-error-report --eye-offset
 };
 
 // One configuration of the dynamic figures.

@@ -63,13 +63,20 @@ const char* kHelp =
     "  --acuity-floors LIST  ACUITY's sensor floors in mm, 0 for none (default 0); a row each margin x floor\n"
     "  --acuity-noise-floors LIST  ACUITY's distance-dependent floors, mm per square metre of distance\n"
     "                    (foveation.floor_per_m2 x 1000); a row each margin x floor besides (default none)\n"
+    "  --eye-offset X,Y,Z  the eye relative to the camera, metres in the camera's frame (x right, y down,\n"
+    "                    z forward; default 0,0,0): an operator's head is rarely where the camera is, and\n"
+    "                    depth noise along the camera's rays is visible only from elsewhere\n"
     "  --reference-m M   slope of a fixed observer every configuration is also judged by (default 0.022)\n"
     "  --dynamics-frames N  frames of the temporal-stability figure, after the measured ones (default 30;\n"
     "                    0 skips it and the latency-corrected coverage; both use the first slope)\n"
     "  --down-ms MS      capture to display for the coverage figure (default 13: the stream's p50 on loopback)\n"
     "  --up-ms MS        operator to robot for the coverage figure (default 1)\n"
     "  --growth-max-deg D  ACUITY's fovea growth bound in the coverage figure (default 10, the service's)\n"
-    "  --no-plot         do not run gnuplot (report.gp is still written)\n";
+    "  --no-plot         do not run gnuplot (report.gp is still written)\n"
+    "\n"
+    "With a mock camera, the same scene without sensor noise (noise=off, same seed and path) is the true\n"
+    "surface: every configuration is also judged against it (the columns 'true surface'), so that noise the\n"
+    "output keeps counts as error, not as detail.\n";
 
 struct Options {
   std::string camera = "mock:living-room";
@@ -86,6 +93,7 @@ struct Options {
   std::vector<double> acuity_noise_floors_mm = {};  // per m^2 of distance
   double reference_slope = pipeline::kDefaultSlope;
   bool plot = true;
+  Eigen::Vector3d eye_offset_cam = Eigen::Vector3d::Zero();
   DynamicsOptions dynamics;
 };
 
@@ -192,6 +200,16 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (*mm < 0.0 || *mm > 1000.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-floors: '" + text + "' is outside [0, 1000] mm");
         options.acuity_floors_mm.push_back(*mm);
       }
+    } else if (flag == "--eye-offset") {
+      const std::vector<std::string> parts = splitCommas(value);
+      if (parts.size() != 3) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is not X,Y,Z");
+      for (int a = 0; a < 3; ++a) {
+        Result<double> v = parseNumber(flag, parts[a]);
+        if (!v) return v.status();
+        if (std::fabs(*v) > 100.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + parts[a] + "' is beyond 100 m");
+        options.eye_offset_cam[a] = *v;
+      }
+      options.dynamics.eye_offset_cam = options.eye_offset_cam;
     } else if (flag == "--dynamics-frames") {
       Result<double> n = parseNumber(flag, value);
       if (!n) return n.status();
@@ -293,6 +311,7 @@ struct ConfigRun {
   std::vector<double> d0_m;
   std::array<RegionAccumulator, pipeline::kMaxRegions> regions;
   RegionAccumulator all;
+  RegionAccumulator truth;  // all points, against the noiseless surface (mock cameras)
   uint64_t at_eye = 0, no_representative = 0;
   int frames = 0;
 };
@@ -415,6 +434,17 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-error-report: %s\n", evaluator.status().message().c_str());
     return kExitFailure;
   }
+  // The true surface: the mock scene without sensor noise, frame for frame.
+  std::unique_ptr<hal::Camera> truth_camera;
+  if (options.camera.rfind("mock:", 0) == 0 && options.camera.find("noise=off") == std::string::npos) {
+    Result<std::unique_ptr<hal::Camera>> t = hal::createCamera(options.camera + ",noise=off");
+    if (t && t.value()->open() && t.value()->start()) truth_camera = std::move(t.value());
+    if (!truth_camera) std::printf("fovea-error-report: no noiseless twin of %s: no true-surface columns\n", options.camera.c_str());
+  }
+  hal::RgbdFrame truth_frame(width, height);
+  std::vector<uint16_t> noisy(max_points);
+  pipeline::PointCloud truth_cloud(max_points);
+  const pipeline::RawDepthRange raw_range = pipeline::rawDepthRange(pipeline::DepthRange{}, info.depth_scale_m);
   hal::RgbdFrame frame(width, height);
   pipeline::PointCloud cloud(max_points);
   pipeline::FoveatedCloud out(max_points);
@@ -428,12 +458,18 @@ int run(int argc, char** argv) {
   }
 
   const bool have_focus = info.focus_point_m.has_value();
-  char gaze_text[160];
+  char gaze_text[320];
+  char eye_text[96] = "the camera";
+  if (!options.eye_offset_cam.isZero()) {
+    std::snprintf(eye_text, sizeof eye_text, "an eye at (%.2f, %.2f, %.2f) m from the camera (its x right, y down, z forward)",
+                  options.eye_offset_cam.x(), options.eye_offset_cam.y(), options.eye_offset_cam.z());
+  }
   if (have_focus) {
-    std::snprintf(gaze_text, sizeof gaze_text, "from the camera towards the scene's focus point (%.2f, %.2f, %.2f) m",
+    std::snprintf(gaze_text, sizeof gaze_text, "from %s towards the scene's focus point (%.2f, %.2f, %.2f) m", eye_text,
                   info.focus_point_m->x(), info.focus_point_m->y(), info.focus_point_m->z());
   } else {
-    std::snprintf(gaze_text, sizeof gaze_text, "along the camera's optical axis (the camera has no focus point)");
+    std::snprintf(gaze_text, sizeof gaze_text, "from %s along the camera's optical axis (the camera has no focus point)",
+                  eye_text);
   }
   std::printf("fovea-error-report: camera %s %dx%d, %ld frames, %zu configurations; gaze %s\n", info.name.c_str(),
               width, height, options.frames, runs.size(), gaze_text);
@@ -451,8 +487,24 @@ int run(int argc, char** argv) {
       ++failed;
       continue;
     }
+    // The true position of every input point: the noisy frame with each valid
+    // pixel's depth replaced by the noiseless twin's (where that is valid too), so
+    // that its back-projection has the same points in the same order.
+    bool have_truth = false;
+    if (truth_camera && truth_camera->acquire(truth_frame, std::chrono::seconds(2))) {
+      const uint16_t* clean = truth_frame.depth();
+      const std::size_t pixels = frame.pixelCount();
+      std::copy(frame.depth(), frame.depth() + pixels, noisy.begin());
+      for (std::size_t i = 0; i < pixels; ++i) {
+        const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
+        if (valid(frame.depth()[i]) && valid(clean[i])) frame.depth()[i] = clean[i];
+      }
+      pipeline::BackprojectCounts truth_counts;
+      have_truth = pipeline::backprojectRef(frame, range, truth_cloud, truth_counts).isOk();
+      std::copy(noisy.begin(), noisy.begin() + static_cast<std::ptrdiff_t>(pixels), frame.depth());
+    }
     pipeline::Gaze gaze;
-    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.origin_m = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
     gaze.direction = have_focus ? Eigen::Vector3d(*info.focus_point_m - gaze.origin_m)
                                 : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
     // Side by side: every configuration on this frame, starting with a different
@@ -503,6 +555,14 @@ int run(int argc, char** argv) {
                            stats.regions[reg].voxel_size_m, wire_bytes[reg]);
       }
       r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0, wire_total);
+      if (have_truth) {
+        pipeline::ErrorMetrics truth_metrics;
+        if (Status t = evaluator->evaluate(truth_cloud, foveator->lastRegions(), representative.data(), out.points, gaze,
+                                           error_model, truth_metrics);
+            t) {
+          r.truth.add(truth_metrics.all, 0, 0, 0.0, 0);
+        }
+      }
       r.at_eye += metrics.at_eye;
       r.no_representative += metrics.no_representative;
       ++r.frames;
@@ -513,6 +573,7 @@ int run(int argc, char** argv) {
     }
   }
   if (interactive) std::printf("\n");
+  if (truth_camera) truth_camera->stop();
   // The figures over time, on the camera's next frames.
   std::optional<DynamicsReport> dynamics;
   if (options.dynamics.stability_frames > 0 && failed < options.frames) {
@@ -563,6 +624,10 @@ int run(int argc, char** argv) {
     c.all.voxel_mm = 0.0;
     c.all.ratio_first_deg = kNaN;
     c.all.ratio_last_deg = kNaN;
+    if (r.truth.seen > 0) {
+      c.truth = r.truth.summarise(r.frames);
+      c.have_truth = true;
+    }
     summaries.push_back(std::move(c));
   }
 

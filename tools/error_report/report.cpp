@@ -61,7 +61,8 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
   std::ostringstream out;
   out << "preset,m,region,region_name,ecc_min_deg,ecc_max_deg,frames,voxel_mm,points_in,points_out,bytes_per_frame,raw_bytes_per_frame,"
          "time_ms_median,time_ms_p90,wall_ms_median,rms_mm,max_mm,rms_over_voxel,max_over_voxel,points_seen,share_above_mar,share_above_reference_mar,"
-         "ratio_median,ratio_p95,ratio_max,ratio_median_first_deg,ratio_median_last_deg\n";
+         "ratio_median,ratio_p95,ratio_max,ratio_median_first_deg,ratio_median_last_deg,share_above_mar_true_surface,"
+         "ratio_p95_true_surface\n";
   for (const ConfigSummary& c : configs) {
     auto row = [&](const RegionSummary& r) {
       const bool all = r.index < 0;
@@ -74,8 +75,9 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
           << csvNumber(r.rms_over_voxel) << ',' << csvNumber(r.max_over_voxel) << ',' << r.seen << ','
           << csvNumber(r.share_above_mar) << ',' << csvNumber(r.share_above_reference_mar) << ','
           << csvNumber(r.ratio_median) << ',' << csvNumber(r.ratio_p95) << ','
-          << csvNumber(r.ratio_max) << ',' << csvNumber(r.ratio_first_deg) << ',' << csvNumber(r.ratio_last_deg)
-          << '\n';
+          << csvNumber(r.ratio_max) << ',' << csvNumber(r.ratio_first_deg) << ',' << csvNumber(r.ratio_last_deg) << ','
+          << (all && c.have_truth ? csvNumber(c.truth.share_above_mar) : "") << ','
+          << (all && c.have_truth ? csvNumber(c.truth.ratio_p95) : "") << '\n';
     };
     for (const RegionSummary& r : c.regions) row(r);
     row(c.all);
@@ -93,7 +95,7 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
      << "- " << context.frames << " frames; every configuration foveates the same frames, side by side in this run\n"
      << "- host: " << context.host << "\n"
      << "- the camera's pixel pitch at the image centre: " << fixed(context.pixel_pitch_arcmin, 1)
-     << " arcmin (the eye sits at the camera), against MAR0 = 1 arcmin\n"
+     << " arcmin (seen from the camera), against MAR0 = 1 arcmin\n"
      << "- **bytes**: what the frame costs on the wire with fovea's chunk codec (net/codec.h at its defaults: 1 mm "
         "steps in the fovea, 1/8 of the voxel elsewhere, exact colour, 1200-byte datagrams, framing and "
         "authentication tag included; docs/protocol-chunks.md). The CSV also gives the raw payload, "
@@ -121,19 +123,31 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
     md << "(No plot: gnuplot was not found. `cd` here and run `gnuplot report.gp` to draw report.png.)\n\n";
   }
 
-  md << "## Per configuration\n\n"
-     << "| preset | m | points out | kept | bytes / frame | CPU time / frame [ms] median (p90) | wall [ms] median | RMS [mm] | max [mm] | "
-        "above MAR, all points | above MAR, outside the fovea | above MAR of the m = " << fixed(context.reference_slope, 3)
-     << " eye | d0 [m] |\n"
-     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  const bool any_truth = std::any_of(configs.begin(), configs.end(), [](const ConfigSummary& c) { return c.have_truth; });
+  md << "## Per configuration\n\n";
+  if (any_truth) {
+    md << "*true surface*: the same displacements measured from where each input point really is (the camera's "
+          "noiseless twin, same pixel) rather than from its noisy reading: sensor noise that the output keeps is "
+          "error there, noise that a voxel averages away is not. alpha/MAR p95: median over frames of each frame's "
+          "95th percentile.\n\n";
+  }
+  md << "| preset | m | points out | kept | bytes / frame | CPU time / frame [ms] median (p90) | wall [ms] median | RMS [mm] | max [mm] | "
+        "above MAR, all points | alpha/MAR p95 | above MAR, outside the fovea | above MAR of the m = " << fixed(context.reference_slope, 3)
+     << " eye | d0 [m] |" << (any_truth ? " above MAR, true surface | alpha/MAR p95, true surface |" : "") << "\n"
+     << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|" << (any_truth ? "---:|---:|" : "") << "\n";
   for (const ConfigSummary& c : configs) {
     const double kept = c.all.points_in > 0 ? c.all.points_out / c.all.points_in : 0.0;
     md << "| " << c.preset << " | " << fixed(c.slope, 3) << " | " << fixed(c.all.points_out, 0) << " | "
        << percent(kept) << " | " << fixed(c.bytesPerFrame() / 1e6, 3) << " MB | " << fixed(c.time_ms_median, 2)
        << " (" << fixed(c.time_ms_p90, 2) << ") | " << fixed(c.wall_ms_median, 2) << " | " << fixed(c.all.rms_mm, 2) << " | " << fixed(c.all.max_mm, 1)
-       << " | " << percent(c.all.share_above_mar) << " | "
+       << " | " << percent(c.all.share_above_mar) << " | " << fixed(c.all.ratio_p95, 2) << " | "
        << (c.regions.size() > 1 ? percent(peripheralShare(c)) : std::string("-")) << " | "
-       << percent(c.all.share_above_reference_mar) << " | " << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |\n";
+       << percent(c.all.share_above_reference_mar) << " | " << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |";
+    if (any_truth) {
+      md << " " << (c.have_truth ? percent(c.truth.share_above_mar) : std::string("-")) << " | "
+         << (c.have_truth ? fixed(c.truth.ratio_p95, 2) : std::string("-")) << " |";
+    }
+    md << "\n";
   }
 
   md << "\n## Per region\n\n"

@@ -55,6 +55,9 @@ struct ConfigSummary {
   uint64_t no_representative = 0;
   std::vector<RegionSummary> regions;
   RegionSummary all;
+  // All points against the true (noiseless) surface, when the camera has one.
+  bool have_truth = false;
+  RegionSummary truth;
   // What the frame costs on the wire: fovea's chunk codec (default settings,
   // 1200-byte datagrams, framing and authentication tag included).
   double bytesPerFrame() const { return all.wire_bytes; }
