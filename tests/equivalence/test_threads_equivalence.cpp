@@ -140,7 +140,9 @@ TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
         EXPECT_EQ(expected_rep, rep);
         EXPECT_EQ(es.dropped_nonfinite, st.dropped_nonfinite);
         EXPECT_EQ(es.culled, st.culled);
-        if (variant == 3 && n > 3) EXPECT_GT(st.culled, 0u);
+        if (variant == 3 && n > 3) {
+          EXPECT_GT(st.culled, 0u);
+        }
         for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(es.regions[r].points_in, st.regions[r].points_in);
       }
     }

@@ -156,6 +156,88 @@ TEST(ErrorReportCli, HelpAndBadArguments) {
   EXPECT_EQ(run(kTool + " --slopes -0.1").exit_code, 2);
   EXPECT_EQ(run(kTool + " --camera mock:nowhere-scene-x,size=1x").exit_code, 2);
   EXPECT_EQ(run(kTool + " --bogus").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --eye-offset 1,2").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --dynamics-frames -1").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --acuity-noise-floors 0").exit_code, 2);
+}
+
+// The figures over time on a scene with nothing moving and no sensor noise: a
+// fixed gaze gives the same output every frame (0 changed) in every configuration;
+// a drifting gaze changes something; the fovea's growth never coarsens, so its
+// coverage is at least that without it; and with no noise there is no true-surface
+// twin (with noise there is).
+TEST(ErrorReportCli, DynamicsFiguresOnANoiselessStaticScene) {
+  TempDir dir;
+  const ProcessResult r = run(kTool + " --camera mock:living-room,size=160x120,noise=off --frames 1 --presets F1,ACUITY "
+                                      "--slopes 0.022 --acuity-margins 0.5 --acuity-noise-floors 1 --dynamics-frames 8 "
+                                      "--out-dir " + dir.path());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream csv(dir.file("dynamics.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  const std::vector<std::string> header = splitCsvLine(line);
+  std::map<std::string, std::size_t> column;
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  for (const char* name : {"configuration", "changed_fixed", "changed_drift", "coverage_all", "coverage_moving",
+                           "moving_frames", "frames", "bytes_per_frame"}) {
+    ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
+  }
+  std::map<std::string, std::vector<std::string>> rows;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    ASSERT_EQ(f.size(), header.size()) << line;
+    rows[f[0]] = f;
+  }
+  for (const char* name : {"F1", "F2", "F3", "ACUITY k=0.50", "ACUITY k=0.50 growth", "ACUITY k=0.50 growth floor 1mm*r^2"}) {
+    ASSERT_TRUE(rows.count(name)) << name;
+  }
+  const auto value = [&](const std::string& row, const char* col) { return std::stod(rows[row][column[col]]); };
+  double drift_changed = 0.0;
+  for (const auto& [name, f] : rows) {
+    EXPECT_EQ(value(name, "changed_fixed"), 0.0) << name;
+    drift_changed += value(name, "changed_drift");
+    EXPECT_GT(value(name, "moving_frames"), 0.0) << name;
+    EXPECT_GT(value(name, "coverage_all"), 0.0) << name;
+    EXPECT_LE(value(name, "coverage_all"), 1.0) << name;
+    EXPECT_GT(value(name, "bytes_per_frame"), 0.0) << name;
+  }
+  EXPECT_GT(drift_changed, 0.0);
+  EXPECT_GE(value("ACUITY k=0.50 growth", "coverage_moving"), value("ACUITY k=0.50", "coverage_moving"));
+  EXPECT_GE(value("ACUITY k=0.50 growth", "bytes_per_frame"), value("ACUITY k=0.50", "bytes_per_frame"));
+  const std::string md = readAll(dir.file("report.md"));
+  EXPECT_NE(md.find("## Temporal stability"), std::string::npos);
+  EXPECT_NE(md.find("## Latency-corrected fovea coverage"), std::string::npos);
+  EXPECT_EQ(md.find("true surface |"), std::string::npos);
+
+  // With sensor noise: the true-surface columns; --dynamics-frames 0: no figures over time.
+  TempDir noisy;
+  const ProcessResult n = run(kTool + " --camera mock:living-room,size=160x120 --frames 1 --presets FREF --slopes 0.022 "
+                                      "--dynamics-frames 0 --eye-offset 0.5,0,0 --out-dir " + noisy.path());
+  ASSERT_EQ(n.exit_code, 0) << n.output;
+  const std::string noisy_md = readAll(noisy.file("report.md"));
+  EXPECT_NE(noisy_md.find("true surface |"), std::string::npos);
+  EXPECT_EQ(noisy_md.find("## Temporal stability"), std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(noisy.file("dynamics.csv")));
+  // FREF sends every reading as it is: against its own readings nothing is
+  // displaced; against the true surface, seen from beside the camera, the noise is.
+  std::ifstream noisy_csv(noisy.file("report.csv"));
+  ASSERT_TRUE(std::getline(noisy_csv, line));
+  const std::vector<std::string> h = splitCsvLine(line);
+  std::size_t share = 0, share_true = 0;
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    if (h[i] == "share_above_mar") share = i;
+    if (h[i] == "share_above_mar_true_surface") share_true = i;
+  }
+  ASSERT_GT(share_true, 0u);
+  bool saw_all = false;
+  while (std::getline(noisy_csv, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    if (f[2] != "all") continue;
+    saw_all = true;
+    EXPECT_EQ(std::stod(f[share]), 0.0);
+    EXPECT_GT(std::stod(f[share_true]), 0.0);
+  }
+  EXPECT_TRUE(saw_all);
 }
 
 }  // namespace
