@@ -108,10 +108,14 @@ class FloorMethod final : public Method {
 class FoveaMethod final : public Method {
  public:
   // acuity: Preset::kAcuity in place of the input's preset (a different method:
-  // its output is not compared with PCL's).
-  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, bool acuity = false)
+  // its output is not compared with PCL's); kEveryFeature adds the
+  // distance-dependent floor (1 mm per m^2), a 5-degree fovea growth and the view
+  // cull (drop, the head along the gaze), to time what they cost when on.
+  enum class Acuity { kNo, kDefault, kEveryFeature };
+  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
       : input_(input),
-        acuity_(acuity),
+        acuity_(acuity != Acuity::kNo),
+        gaze_(gazeFor(input, acuity)),
         capacity_(input.has_frame ? input.frame.pixelCount() : input.cloud.size()),
         cloud_(input.has_frame ? capacity_ : 0),
         out_(capacity_),
@@ -124,7 +128,7 @@ class FoveaMethod final : public Method {
       if (Status s = backprojector_.run(input_.frame, input_.range, cloud_, counts); !s) return s;
       in = &cloud_;
     }
-    return foveator_.foveate(*in, input_.gaze, out_, stats_);
+    return foveator_.foveate(*in, gaze_, out_, stats_);
   }
   std::size_t outputSize() const override { return out_.size(); }
   bool output(Output& o) const override {
@@ -145,13 +149,27 @@ class FoveaMethod final : public Method {
   const PointCloud& cloud() const { return input_.has_frame ? cloud_ : input_.cloud; }
 
  private:
-  static pipeline::FoveationConfig configFor(const Input& input, bool acuity) {
+  static pipeline::FoveationConfig configFor(const Input& input, Acuity acuity) {
     pipeline::FoveationConfig config = input.config;
-    if (acuity) config.acuity.preset = pipeline::Preset::kAcuity;
+    if (acuity != Acuity::kNo) config.acuity.preset = pipeline::Preset::kAcuity;
+    if (acuity == Acuity::kEveryFeature) {
+      config.acuity.floor_per_m2 = 0.001;
+      config.acuity.view_cull = pipeline::ViewCull::kDrop;
+    }
     return config;
+  }
+  static pipeline::Gaze gazeFor(const Input& input, Acuity acuity) {
+    pipeline::Gaze gaze = input.gaze;
+    if (acuity == Acuity::kEveryFeature) {
+      gaze.fovea_growth_deg = 5.0;
+      gaze.view_known = true;
+      gaze.view_forward = gaze.direction;
+    }
+    return gaze;
   }
   const Input& input_;
   bool acuity_;
+  pipeline::Gaze gaze_;
   std::size_t capacity_;
   PointCloud cloud_;
   pipeline::FoveatedCloud out_;
@@ -192,13 +210,7 @@ class PclMethod final : public Method {
   }
 
  private:
-  static pipeline::FoveationConfig configFor(const Input& input, bool acuity) {
-    pipeline::FoveationConfig config = input.config;
-    if (acuity) config.acuity.preset = pipeline::Preset::kAcuity;
-    return config;
-  }
   const Input& input_;
-  bool acuity_;
   std::size_t capacity_;
   PointCloud cloud_;
   PclFoveation pcl_;
@@ -233,7 +245,12 @@ const MethodEntry kMethods[] = {
      }},
     {"acuity-simd-1t", "ACUITY (docs/acuity-levels.md): SIMD levels and hash sampler, one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, true);
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kDefault);
+     }},
+    {"acuity-features-simd-1t",
+     "ACUITY with the distance floor (1 mm/m^2), a 5-degree fovea growth and the view cull (drop), one thread",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kEveryFeature);
      }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -18,6 +19,8 @@
 #include <vector>
 
 #include <unistd.h>
+
+#include <Eigen/Geometry>
 
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
@@ -63,6 +66,10 @@ const char* kHelp =
     "  --acuity-floors LIST  ACUITY's sensor floors in mm, 0 for none (default 0); a row each margin x floor\n"
     "  --acuity-noise-floors LIST  ACUITY's distance-dependent floors, mm per square metre of distance\n"
     "                    (foveation.floor_per_m2 x 1000); a row each margin x floor besides (default none)\n"
+    "  --view-culls LIST  ACUITY's view cull (off, coarsest, drop; foveation.view_cull_deg 70), a row each\n"
+    "                    (default off)\n"
+    "  --head-turn-deg D  the operator's head faces D degrees right of the gaze, about the camera's up axis\n"
+    "                    (default 0: the head faces the gaze)\n"
     "  --eye-offset X,Y,Z  the eye relative to the camera, metres in the camera's frame (x right, y down,\n"
     "                    z forward; default 0,0,0): an operator's head is rarely where the camera is, and\n"
     "                    depth noise along the camera's rays is visible only from elsewhere\n"
@@ -91,6 +98,10 @@ struct Options {
   // ... and sensor floors in mm (0: none), a row each margin x floor.
   std::vector<double> acuity_floors_mm = {0.0};
   std::vector<double> acuity_noise_floors_mm = {};  // per m^2 of distance
+  // ACUITY's view cull (foveation.view_cull_deg's default), a row each, and the
+  // head's turn from the gaze about the camera's up axis.
+  std::vector<pipeline::ViewCull> view_culls = {pipeline::ViewCull::kOff};
+  double head_turn_deg = 0.0;
   double reference_slope = pipeline::kDefaultSlope;
   bool plot = true;
   Eigen::Vector3d eye_offset_cam = Eigen::Vector3d::Zero();
@@ -124,6 +135,7 @@ std::string configName(const pipeline::AcuityConfig& a) {
       std::snprintf(margin, sizeof margin, " floor %gmm*r^2", a.floor_per_m2 * 1e3);
       name += margin;
     }
+    if (a.view_cull != pipeline::ViewCull::kOff) name += " cull " + std::string(pipeline::viewCullName(a.view_cull));
   }
   return name;
 }
@@ -184,6 +196,18 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (*k < 0.1 || *k > 10.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-margins: '" + text + "' is outside [0.1, 10]");
         options.acuity_margins.push_back(*k);
       }
+    } else if (flag == "--view-culls") {
+      options.view_culls.clear();
+      for (const std::string& text : splitCommas(value)) {
+        Result<pipeline::ViewCull> c = pipeline::parseViewCull(text);
+        if (!c) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": " + c.status().message());
+        options.view_culls.push_back(c.value());
+      }
+    } else if (flag == "--head-turn-deg") {
+      Result<double> d = parseNumber(flag, value);
+      if (!d) return d.status();
+      if (std::fabs(*d) > 180.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [-180, 180]");
+      options.head_turn_deg = *d;
     } else if (flag == "--acuity-noise-floors") {
       options.acuity_noise_floors_mm.clear();
       for (const std::string& text : splitCommas(value)) {
@@ -401,17 +425,20 @@ int run(int argc, char** argv) {
           for (double q : options.acuity_noise_floors_mm) floors.push_back(-q);
         }
         for (double floor_mm : floors) {
-          ConfigRun r;
-          r.config.acuity.preset = preset;
-          r.config.acuity.slope = slope;
-          if (acuity) {
-            r.config.acuity.level_margin = margin;
-            r.config.acuity.floor_m = std::max(floor_mm, 0.0) * 1e-3;
-            r.config.acuity.floor_per_m2 = std::max(-floor_mm, 0.0) * 1e-3;
+          for (pipeline::ViewCull cull : acuity ? options.view_culls : std::vector<pipeline::ViewCull>{pipeline::ViewCull::kOff}) {
+            ConfigRun r;
+            r.config.acuity.preset = preset;
+            r.config.acuity.slope = slope;
+            if (acuity) {
+              r.config.acuity.level_margin = margin;
+              r.config.acuity.floor_m = std::max(floor_mm, 0.0) * 1e-3;
+              r.config.acuity.floor_per_m2 = std::max(-floor_mm, 0.0) * 1e-3;
+              r.config.acuity.view_cull = cull;
+            }
+            r.time_ms.reserve(options.frames);
+            r.wall_ms.reserve(options.frames);
+            runs.push_back(std::move(r));
           }
-          r.time_ms.reserve(options.frames);
-          r.wall_ms.reserve(options.frames);
-          runs.push_back(std::move(r));
         }
       }
     }
@@ -507,6 +534,11 @@ int run(int argc, char** argv) {
     gaze.origin_m = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
     gaze.direction = have_focus ? Eigen::Vector3d(*info.focus_point_m - gaze.origin_m)
                                 : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
+    // The head (ACUITY's view cull): along the gaze, turned about the camera's up axis.
+    gaze.view_known = true;
+    gaze.view_forward = Eigen::AngleAxisd(-options.head_turn_deg * std::numbers::pi / 180.0,
+                                          Eigen::Vector3d(-frame.T_world_cam.R_world_cam.col(1))) *
+                        gaze.direction;
     // Side by side: every configuration on this frame, starting with a different
     // one each frame so that no configuration always runs first (cold caches).
     for (std::size_t k = 0; k < runs.size(); ++k) {
@@ -640,6 +672,12 @@ int run(int argc, char** argv) {
   }
   context.camera = info.name + " " + std::to_string(width) + "x" + std::to_string(height);
   context.gaze = gaze_text;
+  if (options.head_turn_deg != 0.0) {
+    char head[128];
+    std::snprintf(head, sizeof head, "; the head faces %.0f degrees right of the gaze (ACUITY's view cull)",
+                  options.head_turn_deg);
+    context.gaze += head;
+  }
   char load_text[160] = "load average unknown";
   if (!std::isnan(load_before)) {
     std::snprintf(load_text, sizeof load_text, "1-minute load average %.2f before the run%s", load_before,
