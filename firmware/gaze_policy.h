@@ -38,15 +38,16 @@ struct GazePolicyConfig {
 };
 
 enum class GazeSource { kOperator, kNoGazeYet, kStale };
+std::string_view gazeSourceName(GazeSource source);
 
-// The operator's newest gaze sample as the robot holds it.
+// The operator's newest gaze sample as the robot holds it (the send thread hands
+// it to the foveation thread).
 struct OperatorGaze {
-  bool valid = false;  // a session with a valid sample
-  pipeline::Gaze gaze;  // with the head's forward axis (view_known) from the HMD pose
+  bool valid = false;       // a session with a valid sample
+  pipeline::Gaze gaze;      // with the head's forward axis (view_known) from the HMD pose
   int64_t received_ns = 0;  // robot's clock
   int64_t stamp_ns = 0;     // operator's clock (the eye's speed between samples)
 };
-std::string_view gazeSourceName(GazeSource source);
 
 // The foveation configuration that samples every point on one uniform lattice
 // of voxel_m: a one-bound custom model whose inner region (within 0.001 deg of

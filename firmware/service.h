@@ -93,8 +93,6 @@ class LatencyHistogram {
   std::array<std::atomic<uint64_t>, kBuckets> counts_{};
 };
 
-
-
 // The parameters SIGHUP reloads, from the supervisor to the stage threads.
 struct ReloadedParameters {
   pipeline::FoveationConfig foveation;

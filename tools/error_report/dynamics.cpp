@@ -14,6 +14,7 @@
 #include "net/codec.h"
 #include "pipeline/backproject.h"
 #include "pipeline/eye_speed.h"
+#include "tools/error_report/report.h"
 #include "tools/operator/gaze_script.h"
 
 namespace fovea::tools {
@@ -73,12 +74,7 @@ double angleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) / kDegToRad;
 }
 
-std::string fixed(double v, int precision) {
-  if (std::isnan(v)) return "-";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "%.*f", precision, v);
-  return buffer;
-}
+std::string fixed(double v, int precision) { return formatFixed(v, precision); }
 
 std::string point(const Eigen::Vector3d& p) {
   char buffer[96];

@@ -8,15 +8,16 @@
 
 namespace fovea::tools {
 
-namespace {
-
-// "%.*f", or `missing` for NaN.
-std::string fixed(double v, int precision, const char* missing = "-") {
+std::string formatFixed(double v, int precision, const char* missing) {
   if (std::isnan(v)) return missing;
   char buffer[64];
   std::snprintf(buffer, sizeof buffer, "%.*f", precision, v);
   return buffer;
 }
+
+namespace {
+
+std::string fixed(double v, int precision, const char* missing = "-") { return formatFixed(v, precision, missing); }
 
 // Shortest round-trip-ish form for the CSV; empty for NaN.
 std::string csvNumber(double v) {

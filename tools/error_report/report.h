@@ -76,6 +76,9 @@ struct ReportContext {
   std::string extra_markdown;  // sections appended to report.md (dynamics.h)
 };
 
+// "%.*f" of v, or `missing` for NaN (the tables' number format).
+std::string formatFixed(double v, int precision, const char* missing = "-");
+
 // Writes out_dir/report.csv, out_dir/report.md, out_dir/report_plot.dat and
 // out_dir/report.gp. kIoError naming the file on failure.
 Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& configs);
