@@ -47,7 +47,7 @@ const std::string kTool =
 TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
   TempDir dir;
   const ProcessResult r =
-      run(kTool + " --camera mock:living-room,size=160x120 --frames 1 --out-dir " + dir.path());
+      run(kTool + " --camera mock:living-room,size=160x120 --frames 1 --dynamics-frames 0 --out-dir " + dir.path());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* name : {"report.csv", "report.md", "report.gp", "report_plot.dat"}) {
     EXPECT_TRUE(std::filesystem::exists(dir.file(name))) << name << "\n" << r.output;
@@ -138,7 +138,7 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
 TEST(ErrorReportCli, SubsetOfPresetsAndSlopes) {
   TempDir dir;
   const ProcessResult r = run(kTool + " --camera mock:balloon,size=96x72 --frames 2 --presets F3,FREF --slopes 0.03 "
-                                      "--no-plot --out-dir " + dir.path());
+                                      "--no-plot --dynamics-frames 0 --out-dir " + dir.path());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_FALSE(std::filesystem::exists(dir.file("report.png")));
   const std::string csv = readAll(dir.file("report.csv"));
@@ -169,7 +169,8 @@ TEST(ErrorReportCli, HelpAndBadArguments) {
 TEST(ErrorReportCli, DynamicsFiguresOnANoiselessStaticScene) {
   TempDir dir;
   const ProcessResult r = run(kTool + " --camera mock:living-room,size=160x120,noise=off --frames 1 --presets F1,ACUITY "
-                                      "--slopes 0.022 --acuity-margins 0.5 --acuity-noise-floors 1 --dynamics-frames 8 "
+                                      "--slopes 0.022 --acuity-margins 0.5 --acuity-noise-floors 1 --dynamics-frames 4 "
+                                      "--coverage-seconds 0.6 "
                                       "--out-dir " + dir.path());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream csv(dir.file("dynamics.csv"));

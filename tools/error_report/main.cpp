@@ -78,6 +78,7 @@ const char* kHelp =
     "                    0 skips it and the latency-corrected coverage; both use the first slope)\n"
     "  --down-ms MS      capture to display for the coverage figure (default 13: the stream's p50 on loopback)\n"
     "  --up-ms MS        operator to robot for the coverage figure (default 1)\n"
+    "  --coverage-seconds S  length of the scripted scan the coverage figure replays (default 3.6: two rounds)\n"
     "  --growth-max-deg D  ACUITY's fovea growth bound in the coverage figure (default 10, the service's)\n"
     "  --no-plot         do not run gnuplot (report.gp is still written)\n"
     "\n"
@@ -241,6 +242,11 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is not an integer in [0, 10000]");
       }
       options.dynamics.stability_frames = static_cast<int>(*n);
+    } else if (flag == "--coverage-seconds") {
+      Result<double> t = parseNumber(flag, value);
+      if (!t) return t.status();
+      if (*t < 0.1 || *t > 3600.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [0.1, 3600] s");
+      options.dynamics.coverage_seconds = *t;
     } else if (flag == "--growth-max-deg") {
       Result<double> g = parseNumber(flag, value);
       if (!g) return g.status();

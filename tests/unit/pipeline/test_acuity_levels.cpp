@@ -134,7 +134,7 @@ TEST(AcuityLevels, GrowthAndViewCullMatchTheIndependentReference) {
       a.view_cull = cull;
       a.view_cull_deg = 35.0;
       const LevelBounds bounds = LevelBounds::fromModel(RegionModel::create(a).value());
-      const PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(5, 5, 5), 6.0f, rng());
+      const PointCloud cloud = test::randomCloud(8000, Eigen::Vector3d(5, 5, 5), 6.0f, rng());
       Gaze gaze;
       gaze.origin_m = Eigen::Vector3d(5.5, 4.5, 5.1);
       gaze.direction = Eigen::Vector3d(0.2, 1.0, -0.3).normalized();
@@ -158,7 +158,7 @@ TEST(AcuityLevels, GrowthAndViewCullMatchTheIndependentReference) {
       EXPECT_LE(close_calls, 20u);
       EXPECT_EQ(counts.culled, std::count(level.begin(), level.end(), kRegionCulled));
       if (cull == ViewCull::kDrop) {
-        EXPECT_GT(culled, 1000u);  // the cull really cuts
+        EXPECT_GT(culled, 400u);  // the cull really cuts
       }
       uint32_t total = counts.culled;
       for (uint32_t c : counts.per_region) total += c;
