@@ -84,37 +84,28 @@ std::string point(const Eigen::Vector3d& p) {
 
 }  // namespace
 
-std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<double>& floors_mm,
-                                            const std::vector<double>& noise_floors_mm) {
+std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors) {
   std::vector<DynamicsConfig> configs;
   for (pipeline::Preset preset : {pipeline::Preset::kF1, pipeline::Preset::kF2, pipeline::Preset::kF3}) {
     DynamicsConfig c;
-    c.name = std::string(pipeline::presetName(preset));
     c.config.acuity.preset = preset;
     c.config.acuity.slope = slope;
     configs.push_back(c);
   }
-  std::vector<std::pair<bool, double>> variants = {{false, 0.0}, {true, 0.0}};
-  for (double floor_mm : floors_mm) {
-    if (floor_mm > 0.0) variants.emplace_back(true, floor_mm);
+  std::vector<std::pair<bool, AcuityFloor>> variants = {{false, {}}, {true, {}}};
+  for (const AcuityFloor& floor : floors) {
+    if (floor.m > 0.0 || floor.per_m2 > 0.0) variants.emplace_back(true, floor);
   }
-  for (double q : noise_floors_mm) variants.emplace_back(true, -q);  // negated: per m^2
-  for (const auto& [growth, floor_mm] : variants) {
+  for (const auto& [growth, floor] : variants) {
     DynamicsConfig c;
     c.config.acuity.preset = pipeline::Preset::kAcuity;
     c.config.acuity.slope = slope;
-    c.config.acuity.floor_m = std::max(floor_mm, 0.0) * 1e-3;
-    c.config.acuity.floor_per_m2 = std::max(-floor_mm, 0.0) * 1e-3;
+    c.config.acuity.floor_m = floor.m;
+    c.config.acuity.floor_per_m2 = floor.per_m2;
     c.growth = growth;
-    char name[64];
-    std::snprintf(name, sizeof name, "ACUITY k=%.2f%s", c.config.acuity.level_margin, growth ? " growth" : "");
-    c.name = name;
-    if (floor_mm != 0.0) {
-      std::snprintf(name, sizeof name, floor_mm > 0.0 ? " floor %gmm" : " floor %gmm*r^2", std::fabs(floor_mm));
-      c.name += name;
-    }
     configs.push_back(c);
   }
+  for (DynamicsConfig& c : configs) c.name = configName(c.config.acuity, c.growth ? " growth" : "");
   return configs;
 }
 

@@ -28,6 +28,7 @@
 #include "hal/camera.h"
 #include "hal/result.h"
 #include "pipeline/foveator.h"
+#include "tools/error_report/report.h"
 
 namespace fovea::tools {
 
@@ -79,10 +80,9 @@ struct DynamicsReport {
 };
 
 // The configurations the figures compare: the paper's presets at m and ACUITY
-// at the service's defaults, without and with growth, and with growth at each
-// non-zero sensor floor (mm) and distance-dependent floor (mm per m^2).
-std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<double>& floors_mm,
-                                            const std::vector<double>& noise_floors_mm);
+// at the service's defaults, without and with growth, and with growth at each of
+// `floors` that has a floor.
+std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors);
 
 // Runs both figures on `camera` (open and started), from its next frames.
 Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<DynamicsConfig>& configs,

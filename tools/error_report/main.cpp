@@ -121,26 +121,6 @@ std::vector<std::string> splitCommas(std::string_view text) {
   return parts;
 }
 
-// A configuration's name in the tables: the preset, and for ACUITY its level margin.
-std::string configName(const pipeline::AcuityConfig& a) {
-  std::string name(pipeline::presetName(a.preset));
-  if (a.preset == pipeline::Preset::kAcuity) {
-    char margin[32];
-    std::snprintf(margin, sizeof margin, " k=%.2f", a.level_margin);
-    name += margin;
-    if (a.floor_m > 0.0) {
-      std::snprintf(margin, sizeof margin, " floor %gmm", a.floor_m * 1e3);
-      name += margin;
-    }
-    if (a.floor_per_m2 > 0.0) {
-      std::snprintf(margin, sizeof margin, " floor %gmm*r^2", a.floor_per_m2 * 1e3);
-      name += margin;
-    }
-    if (a.view_cull != pipeline::ViewCull::kOff) name += " cull " + std::string(pipeline::viewCullName(a.view_cull));
-  }
-  return name;
-}
-
 Result<double> parseNumber(const std::string& flag, const std::string& text) {
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
@@ -234,7 +214,6 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (std::fabs(*v) > 100.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + parts[a] + "' is beyond 100 m");
         options.eye_offset_cam[a] = *v;
       }
-      options.dynamics.eye_offset_cam = options.eye_offset_cam;
     } else if (flag == "--dynamics-frames") {
       Result<double> n = parseNumber(flag, value);
       if (!n) return n.status();
@@ -425,20 +404,18 @@ int run(int argc, char** argv) {
       // The acuity mode once per level margin (its rows say which).
       const bool acuity = preset == pipeline::Preset::kAcuity;
       for (double margin : acuity ? options.acuity_margins : std::vector<double>{0.0}) {
-        // Constant floors (>= 0), then distance-dependent ones (stored negated).
-        std::vector<double> floors = acuity ? options.acuity_floors_mm : std::vector<double>{0.0};
-        if (acuity) {
-          for (double q : options.acuity_noise_floors_mm) floors.push_back(-q);
-        }
-        for (double floor_mm : floors) {
+        const std::vector<AcuityFloor> floors =
+            acuity ? acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm)
+                   : std::vector<AcuityFloor>{AcuityFloor{}};
+        for (const AcuityFloor& floor : floors) {
           for (pipeline::ViewCull cull : acuity ? options.view_culls : std::vector<pipeline::ViewCull>{pipeline::ViewCull::kOff}) {
             ConfigRun r;
             r.config.acuity.preset = preset;
             r.config.acuity.slope = slope;
             if (acuity) {
               r.config.acuity.level_margin = margin;
-              r.config.acuity.floor_m = std::max(floor_mm, 0.0) * 1e-3;
-              r.config.acuity.floor_per_m2 = std::max(-floor_mm, 0.0) * 1e-3;
+              r.config.acuity.floor_m = floor.m;
+              r.config.acuity.floor_per_m2 = floor.per_m2;
               r.config.acuity.view_cull = cull;
             }
             r.time_ms.reserve(options.frames);
@@ -475,7 +452,6 @@ int run(int argc, char** argv) {
     if (!truth_camera) std::printf("fovea-error-report: no noiseless twin of %s: no true-surface columns\n", options.camera.c_str());
   }
   hal::RgbdFrame truth_frame(width, height);
-  std::vector<uint16_t> noisy(max_points);
   pipeline::PointCloud truth_cloud(max_points);
   const pipeline::RawDepthRange raw_range = pipeline::rawDepthRange(pipeline::DepthRange{}, info.depth_scale_m);
   hal::RgbdFrame frame(width, height);
@@ -520,21 +496,20 @@ int run(int argc, char** argv) {
       ++failed;
       continue;
     }
-    // The true position of every input point: the noisy frame with each valid
-    // pixel's depth replaced by the noiseless twin's (where that is valid too), so
-    // that its back-projection has the same points in the same order.
+    // The true position of every input point: the twin's frame (same pose and
+    // intrinsics) keeps its noiseless depth where both readings are valid and takes
+    // the noisy one elsewhere, so that its back-projection has the same points in
+    // the same order as the noisy frame's.
     bool have_truth = false;
     if (truth_camera && truth_camera->acquire(truth_frame, std::chrono::seconds(2))) {
-      const uint16_t* clean = truth_frame.depth();
-      const std::size_t pixels = frame.pixelCount();
-      std::copy(frame.depth(), frame.depth() + pixels, noisy.begin());
-      for (std::size_t i = 0; i < pixels; ++i) {
-        const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
-        if (valid(frame.depth()[i]) && valid(clean[i])) frame.depth()[i] = clean[i];
+      const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
+      const uint16_t* noisy = frame.depth();
+      uint16_t* clean = truth_frame.depth();
+      for (std::size_t i = 0; i < frame.pixelCount(); ++i) {
+        if (!valid(noisy[i]) || !valid(clean[i])) clean[i] = noisy[i];
       }
       pipeline::BackprojectCounts truth_counts;
-      have_truth = pipeline::backprojectRef(frame, range, truth_cloud, truth_counts).isOk();
-      std::copy(noisy.begin(), noisy.begin() + static_cast<std::ptrdiff_t>(pixels), frame.depth());
+      have_truth = pipeline::backprojectRef(truth_frame, range, truth_cloud, truth_counts).isOk();
     }
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
@@ -617,7 +592,8 @@ int run(int argc, char** argv) {
   if (options.dynamics.stability_frames > 0 && failed < options.frames) {
     DynamicsOptions d = options.dynamics;
     if (info.fps > 0) d.fps = info.fps;
-    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), options.acuity_floors_mm, options.acuity_noise_floors_mm), d);
+    d.eye_offset_cam = options.eye_offset_cam;
+    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm)), d);
     if (!measured) {
       std::fprintf(stderr, "fovea-error-report: temporal figures: %s\n", measured.status().toString().c_str());
       return kExitFailure;

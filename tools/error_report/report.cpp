@@ -8,6 +8,33 @@
 
 namespace fovea::tools {
 
+std::vector<AcuityFloor> acuityFloors(const std::vector<double>& floors_mm, const std::vector<double>& noise_floors_mm) {
+  std::vector<AcuityFloor> floors;
+  for (double mm : floors_mm) floors.push_back({mm * 1e-3, 0.0});
+  for (double mm : noise_floors_mm) floors.push_back({0.0, mm * 1e-3});
+  return floors;
+}
+
+std::string configName(const pipeline::AcuityConfig& a, std::string_view after_margin) {
+  std::string name(pipeline::presetName(a.preset));
+  if (a.preset == pipeline::Preset::kAcuity) {
+    char part[48];
+    std::snprintf(part, sizeof part, " k=%.2f", a.level_margin);
+    name += part;
+    name += after_margin;
+    if (a.floor_m > 0.0) {
+      std::snprintf(part, sizeof part, " floor %gmm", a.floor_m * 1e3);
+      name += part;
+    }
+    if (a.floor_per_m2 > 0.0) {
+      std::snprintf(part, sizeof part, " floor %gmm*r^2", a.floor_per_m2 * 1e3);
+      name += part;
+    }
+    if (a.view_cull != pipeline::ViewCull::kOff) name += " cull " + std::string(pipeline::viewCullName(a.view_cull));
+  }
+  return name;
+}
+
 std::string formatFixed(double v, int precision, const char* missing) {
   if (std::isnan(v)) return missing;
   char buffer[64];

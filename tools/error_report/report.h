@@ -4,9 +4,11 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "hal/result.h"
+#include "pipeline/acuity.h"
 
 namespace fovea::tools {
 
@@ -75,6 +77,20 @@ struct ReportContext {
   std::string date_utc;
   std::string extra_markdown;  // sections appended to report.md (dynamics.h)
 };
+
+// ACUITY's sensor floor of one row: constant (AcuityConfig::floor_m) and growing
+// with the squared distance (floor_per_m2).
+struct AcuityFloor {
+  double m = 0.0;
+  double per_m2 = 0.0;
+};
+// The rows' floors: each constant one in mm (0: none), then each distance-dependent
+// one in mm per m^2 (--acuity-floors, --acuity-noise-floors).
+std::vector<AcuityFloor> acuityFloors(const std::vector<double>& floors_mm, const std::vector<double>& noise_floors_mm);
+
+// A configuration's name in the tables: the preset, and for ACUITY its level
+// margin, then `after_margin` (e.g. " growth"), its floors and its view cull.
+std::string configName(const pipeline::AcuityConfig& a, std::string_view after_margin = "");
 
 // "%.*f" of v, or `missing` for NaN (the tables' number format).
 std::string formatFixed(double v, int precision, const char* missing = "-");
