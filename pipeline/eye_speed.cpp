@@ -16,8 +16,10 @@ void EyeSpeed::observe(const Eigen::Vector3d& direction, int64_t stamp_ns) {
     return;
   }
   const Eigen::Vector3d unit = direction / norm;
-  const int64_t dt_ns = stamp_ns - previous_stamp_ns_;
-  if (have_previous_ && dt_ns > 0) {
+  // Stamps come from the operator: compare first, then subtract unsigned, so that
+  // stamps far apart cannot overflow.
+  if (have_previous_ && stamp_ns > previous_stamp_ns_) {
+    const uint64_t dt_ns = static_cast<uint64_t>(stamp_ns) - static_cast<uint64_t>(previous_stamp_ns_);
     // atan2 of the cross and dot products: accurate for small angles too (acos is not).
     const double angle_deg = std::atan2(previous_.cross(unit).norm(), previous_.dot(unit)) * 180.0 / std::numbers::pi;
     speed_deg_s_ = std::min(kMaxEyeSpeedDegS, angle_deg / (static_cast<double>(dt_ns) * 1e-9));

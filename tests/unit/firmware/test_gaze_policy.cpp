@@ -90,6 +90,14 @@ TEST(GazePolicy, FoveaGrowsWithTheEyesSpeedAndTheSamplesAgeUpToTheBound) {
   g.gaze.direction = {0, 0, 1};
   g.received_ns = 600 * kMs;
   EXPECT_EQ(policy.decide(g, 600 * kMs, camera).eye_speed_deg_s, 1000.0);
+  // Stamps at the ends of the clock's range: no overflow (UBSan checks), speed ~0.
+  g.stamp_ns = INT64_MIN;
+  (void)policy.decide(g, 600 * kMs, camera);
+  g.stamp_ns = INT64_MAX;
+  g.gaze.direction = {1, 0, 0};
+  d = policy.decide(g, 600 * kMs, camera);
+  EXPECT_GE(d.eye_speed_deg_s, 0.0);
+  EXPECT_LT(d.eye_speed_deg_s, 1e-6);
   // growth_max_deg = 0 turns it off.
   config.growth_max_deg = 0.0;
   GazePolicy off(config, pipeline::FoveationConfig{});
