@@ -98,6 +98,7 @@ TEST(GazePolicy, FoveaGrowsWithTheEyesSpeedAndTheSamplesAgeUpToTheBound) {
   d = policy.decide(g, 600 * kMs, camera);
   EXPECT_GE(d.eye_speed_deg_s, 0.0);
   EXPECT_LT(d.eye_speed_deg_s, 1e-6);
+  g.stamp_ns = 2000 * kMs;  // back to ordinary stamps
   // growth_max_deg = 0 turns it off.
   config.growth_max_deg = 0.0;
   GazePolicy off(config, pipeline::FoveationConfig{});
