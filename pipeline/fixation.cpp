@@ -22,6 +22,7 @@ std::string_view fixationSourceName(FixationSource source) {
     case FixationSource::kCentroid: return "centroid";
     case FixationSource::kFixed: return "fixed";
     case FixationSource::kFallback: return "fallback";
+    case FixationSource::kNone: return "none";
   }
   return "?";
 }

@@ -24,7 +24,8 @@
 namespace fovea::pipeline {
 
 enum class FixationMode { kHit, kCentroid, kFixed };
-enum class FixationSource { kHit, kCentroid, kFixed, kFallback };
+// kNone: no d0 was computed (the acuity mode sizes each point's voxel by its own distance).
+enum class FixationSource { kHit, kCentroid, kFixed, kFallback, kNone };
 
 std::string_view fixationModeName(FixationMode mode);
 std::string_view fixationSourceName(FixationSource source);

@@ -159,9 +159,15 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
     partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
   }
   const int64_t t1 = nowNs();
-  stats.fixation = capacity_.kernels == KernelSet::kSimd
-                       ? computeFixationSimd(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data())
-                       : computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+  // The levels need no fixation distance: each point's own distance sizes its voxel.
+  if (model_.levels()) {
+    stats.fixation.source = FixationSource::kNone;
+  } else {
+    stats.fixation =
+        capacity_.kernels == KernelSet::kSimd
+            ? computeFixationSimd(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data())
+            : computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+  }
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();
