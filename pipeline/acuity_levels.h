@@ -30,10 +30,13 @@
 //   outside the field of view and goes to the coarsest level or to kRegionCulled.
 //
 // The arithmetic below is the specification that the SIMD kernel reproduces bit
-// for bit (double, this order, no FMA): atan and sin are fixed polynomials
-// (atanUnit, sinSpec), not libm's, whose results differ between libraries and
-// from any vector implementation. Their errors (under 1e-5 rad) are far below
-// what the model needs.
+// for bit: single precision from the eye's offset on (P - H is formed in double,
+// where the large parts of the coordinates cancel, then rounded to float), this
+// order, no FMA. Float carries 7 digits, far more than a level decision needs (the
+// thresholds are a factor of 2 apart), and doubles the lanes of every vector. atan
+// and sin are fixed polynomials (atanUnit, sinSpec), not libm's, whose results
+// differ between libraries and from any vector implementation. Their errors (under
+// 1e-5 rad) are far below what the model needs.
 #pragma once
 
 #include <array>
@@ -45,69 +48,74 @@
 
 namespace fovea::pipeline {
 
+inline constexpr float kLevelsPi = 3.14159265358979323846f;
+inline constexpr float kLevelsHalfPi = 1.57079632679489661923f;
+inline constexpr float kLevelsRadToDeg = static_cast<float>(180.0 / 3.14159265358979323846);
+inline constexpr float kLevelsDegToRad = static_cast<float>(3.14159265358979323846 / 180.0);
+inline constexpr float kLevelsMar0Deg = static_cast<float>(kMar0Deg);
+
 // atan(q) for q in [0, 1]: an odd minimax polynomial in Horner form (Mul then Add).
-inline constexpr double kAtanCoefficients[6] = {0.99997726, -0.33262347, 0.19354346,
-                                               -0.11643287, 0.05265332, -0.01172120};
-inline double atanUnit(double q) {
-  const double q2 = q * q;
-  double p = kAtanCoefficients[5];
+inline constexpr float kAtanCoefficients[6] = {0.99997726f, -0.33262347f, 0.19354346f,
+                                              -0.11643287f, 0.05265332f,  -0.01172120f};
+inline float atanUnit(float q) {
+  const float q2 = q * q;
+  float p = kAtanCoefficients[5];
   for (int k = 4; k >= 0; --k) p = p * q2 + kAtanCoefficients[k];
   return p * q;
 }
 
 // atan2(d, t) in degrees for d >= 0 (0 at the eye, d = t = 0), from atanUnit by octant.
-inline constexpr double kLevelsPi = 3.14159265358979323846;
-inline double eccentricitySpecDeg(double t, double d) {
-  const double at = t < 0.0 ? -t : t;
-  const double hi = at > d ? at : d;
-  const double lo = at > d ? d : at;
-  if (!(hi > 0.0)) return 0.0;
-  double a = atanUnit(lo / hi);
-  if (d > at) a = kLevelsPi / 2.0 - a;
-  if (t < 0.0) a = kLevelsPi - a;
-  return a * (180.0 / kLevelsPi);
+inline float eccentricitySpecDeg(float t, float d) {
+  const float at = t < 0.0f ? -t : t;
+  const float hi = at > d ? at : d;
+  const float lo = at > d ? d : at;
+  if (!(hi > 0.0f)) return 0.0f;
+  float a = atanUnit(lo / hi);
+  if (d > at) a = kLevelsHalfPi - a;
+  if (t < 0.0f) a = kLevelsPi - a;
+  return a * kLevelsRadToDeg;
 }
 
 // sin(x) for x in [0, pi/2]; larger x is taken as pi/2 (a MAR beyond 90 degrees allows
-// anything: sin stays at 1 and the level stays monotone). Taylor to x^13 in Horner form.
-inline constexpr double kSinCoefficients[7] = {1.0,
-                                              -1.0 / 6.0,
-                                              1.0 / 120.0,
-                                              -1.0 / 5040.0,
-                                              1.0 / 362880.0,
-                                              -1.0 / 39916800.0,
-                                              1.0 / 6227020800.0};
-inline double sinSpec(double x) {
-  const double y = x < kLevelsPi / 2.0 ? x : kLevelsPi / 2.0;
-  const double y2 = y * y;
-  double p = kSinCoefficients[6];
-  for (int k = 5; k >= 0; --k) p = p * y2 + kSinCoefficients[k];
+// anything: sin stays at 1 and the level stays monotone). Taylor to x^11 in Horner form
+// (the next term is below float's rounding on [0, pi/2]).
+inline constexpr float kSinCoefficients[6] = {1.0f,
+                                             static_cast<float>(-1.0 / 6.0),
+                                             static_cast<float>(1.0 / 120.0),
+                                             static_cast<float>(-1.0 / 5040.0),
+                                             static_cast<float>(1.0 / 362880.0),
+                                             static_cast<float>(-1.0 / 39916800.0)};
+inline float sinSpec(float x) {
+  const float y = x < kLevelsHalfPi ? x : kLevelsHalfPi;
+  const float y2 = y * y;
+  float p = kSinCoefficients[5];
+  for (int k = 4; k >= 0; --k) p = p * y2 + kSinCoefficients[k];
   return p * y;
 }
 
 struct LevelBounds {
-  double slope = kDefaultSlope;
+  float slope = static_cast<float>(kDefaultSlope);
   // k * v_n for n = 1 .. kMaxRegions - 1 (index 0 unused).
-  std::array<double, kMaxRegions> min_allowed_m{};
+  std::array<float, kMaxRegions> min_allowed_m{};
   uint8_t floor_level = 0;  // no point below this level (0: no floor)
   // The distance-dependent floor (0: none): floor_a_m + floor_b_per_m2 s^2 against v_n.
-  double floor_a_m = 0.0;
-  double floor_b_per_m2 = 0.0;
-  std::array<double, kMaxRegions> voxel_m{};  // v_n (index 0 unused)
+  float floor_a_m = 0.0f;
+  float floor_b_per_m2 = 0.0f;
+  std::array<float, kMaxRegions> voxel_m{};  // v_n (index 0 unused)
   // The view cull: what a point outside the field of view gets (0: no cull;
   // kMaxRegions - 1, or kRegionCulled), and cos(view_cull_deg).
   uint8_t cull_region = 0;
-  double cull_cos = -1.0;
+  float cull_cos = -1.0f;
 
   static LevelBounds fromModel(const RegionModel& model);
 
   // The level of a point at distance r_m from the eye, eccentricity ecc_deg: the
   // number of levels n >= 1 whose k v_n fits under r sin(MAR) (they grow with n),
   // lifted to the floor.
-  uint8_t classify(double r_m, double ecc_deg) const;
+  uint8_t classify(float r_m, float ecc_deg) const;
   // The distance-dependent floor's level for a point at s2_m2 = s^2 from the sensor
   // (0 when floor_b_per_m2 is 0).
-  uint8_t noiseFloorLevel(double s2_m2) const;
+  uint8_t noiseFloorLevel(float s2_m2) const;
 };
 
 // Scalar reference. gaze must come from normalizeGaze(). Writes cloud.size()

@@ -131,8 +131,8 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
 
 // Regions of one vector of points (x, y, z: float arrays of at least Lanes(dd)).
 template <class DD>
-HWY_INLINE void PartitionVector(DD dd, const PartitionParams& p, const float* xs, const float* ys, const float* zs,
-                                double* region_out) {
+HWY_INLINE hn::Vec<DD> PartitionVector(DD dd, const PartitionParams& p, const float* xs, const float* ys,
+                                       const float* zs) {
   const hn::Rebind<float, DD> df;
   const auto px = hn::PromoteTo(dd, hn::LoadU(df, xs));
   const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
@@ -162,69 +162,79 @@ HWY_INLINE void PartitionVector(DD dd, const PartitionParams& p, const float* xs
                                                            : hn::Or(ahead, hn::Ge(d, hn::Mul(tan_e, hn::Neg(t))));
     region = hn::IfThenElse(inside, hn::Set(dd, static_cast<double>(j)), region);
   }
-  region = hn::IfThenElse(finite, region, hn::Set(dd, static_cast<double>(kRegionInvalid)));
-  hn::StoreU(region, dd, region_out);
+  return hn::IfThenElse(finite, region, hn::Set(dd, static_cast<double>(kRegionInvalid)));
 }
 
-// Runs vector(dd, xs, ys, zs, out) over points [begin, end), one vector of
-// doubles at a time (the tail on a zero-padded copy), and writes each result as
-// the point's region byte, counted in histogram. The partition and ACUITY's levels.
-template <class VectorFn>
+// Runs vector(d, xs, ys, zs) (a vector of T, one region per lane: double for the
+// partition, float for ACUITY's levels) over points [begin, end), one vector at a time
+// (the tail on a zero-padded copy), writes each result as the point's region byte and
+// counts them in histogram. The bytes are narrowed in registers: reading the lanes
+// back from a vector store would stall on store forwarding at every point.
+template <typename T, class VectorFn>
 HWY_INLINE void RegionRange(const float* x, const float* y, const float* z, std::size_t begin, std::size_t end,
                             uint8_t* region_out, uint32_t* histogram, const VectorFn& vector) {
-  const hn::ScalableTag<double> dd;
-  const std::size_t lanes = hn::Lanes(dd);
-  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(double);
-  HWY_ALIGN double region[kMax];
-  const auto emit = [&](std::size_t i, std::size_t count) {
-    for (std::size_t k = 0; k < count; ++k) {
-      const auto r = static_cast<uint8_t>(region[k]);
-      region_out[i + k] = r;
-      ++histogram[r];
+  const hn::ScalableTag<T> d;
+  const hn::Rebind<int32_t, decltype(d)> di;
+  const hn::Rebind<uint8_t, decltype(d)> du8;
+  const auto bytes = [&](auto v) {
+    if constexpr (sizeof(T) == sizeof(int32_t)) {
+      return hn::DemoteTo(du8, hn::ConvertTo(di, v));
+    } else {
+      return hn::DemoteTo(du8, hn::DemoteTo(di, v));
     }
   };
+  const std::size_t lanes = hn::Lanes(d);
+  constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(T);
   std::size_t i = begin;
-  for (; i + lanes <= end; i += lanes) {
-    vector(dd, x + i, y + i, z + i, region);
-    emit(i, lanes);
-  }
+  for (; i + lanes <= end; i += lanes) hn::StoreU(bytes(vector(d, x + i, y + i, z + i)), du8, region_out + i);
   if (i < end) {
     HWY_ALIGN float tx[kMax] = {}, ty[kMax] = {}, tz[kMax] = {};
+    HWY_ALIGN uint8_t tail[kMax];
     const std::size_t rest = end - i;
     std::memcpy(tx, x + i, rest * sizeof(float));
     std::memcpy(ty, y + i, rest * sizeof(float));
     std::memcpy(tz, z + i, rest * sizeof(float));
-    vector(dd, tx, ty, tz, region);
-    emit(i, rest);
+    hn::Store(bytes(vector(d, tx, ty, tz)), du8, tail);
+    std::memcpy(region_out + i, tail, rest);
   }
+  // Four histograms, byte k counted in part k % 4: neighbouring points mostly share a
+  // region, and one counter would make each increment wait for the previous one.
+  uint32_t part[4][256] = {};
+  std::size_t k = begin;
+  for (; k + 4 <= end; k += 4) {
+    ++part[0][region_out[k]];
+    ++part[1][region_out[k + 1]];
+    ++part[2][region_out[k + 2]];
+    ++part[3][region_out[k + 3]];
+  }
+  for (; k < end; ++k) ++part[0][region_out[k]];
+  for (int r = 0; r < 256; ++r) histogram[r] += part[0][r] + part[1][r] + part[2][r] + part[3][r];
 }
 
 inline void PartitionRangeT(const float* x, const float* y, const float* z, const PartitionParams& p,
                             std::size_t begin, std::size_t end, uint8_t* region_out, uint32_t* histogram) {
-  RegionRange(x, y, z, begin, end, region_out, histogram,
-              [&p](auto dd, const float* xs, const float* ys, const float* zs, double* out) {
-                PartitionVector(dd, p, xs, ys, zs, out);
+  RegionRange<double>(x, y, z, begin, end, region_out, histogram,
+              [&p](auto dd, const float* xs, const float* ys, const float* zs) {
+                return PartitionVector(dd, p, xs, ys, zs);
               });
 }
 
 // ---- ACUITY's levels -------------------------------------------------------------
 
-// Levels of one vector of points: assignLevelsRef's expressions, op for op
-// (acuity_levels.h: axialRadial, r, eccentricitySpecDeg, sinSpec, classify).
-template <class DD>
-HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const float* ys, const float* zs,
-                            double* level_out) {
-  const hn::Rebind<float, DD> df;
-  const auto px = hn::PromoteTo(dd, hn::LoadU(df, xs));
-  const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
-  const auto pz = hn::PromoteTo(dd, hn::LoadU(df, zs));
+// Levels of one vector of points: assignLevelsRef's expressions, op for op, in float
+// (acuity_levels.h: t, d, r, eccentricitySpecDeg, sinSpec, classify).
+template <class DF>
+HWY_INLINE hn::Vec<DF> LevelVector(DF df, const LevelParams& p, const float* xs, const float* ys, const float* zs) {
+  const auto px = hn::LoadU(df, xs);
+  const auto py = hn::LoadU(df, ys);
+  const auto pz = hn::LoadU(df, zs);
   const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
-  const auto vx = hn::Add(hn::Set(dd, p.origin_minus_eye[0]), px);
-  const auto vy = hn::Add(hn::Set(dd, p.origin_minus_eye[1]), py);
-  const auto vz = hn::Add(hn::Set(dd, p.origin_minus_eye[2]), pz);
-  const auto lx = hn::Set(dd, p.l[0]);
-  const auto ly = hn::Set(dd, p.l[1]);
-  const auto lz = hn::Set(dd, p.l[2]);
+  const auto vx = hn::Add(hn::Set(df, p.origin_minus_eye[0]), px);
+  const auto vy = hn::Add(hn::Set(df, p.origin_minus_eye[1]), py);
+  const auto vz = hn::Add(hn::Set(df, p.origin_minus_eye[2]), pz);
+  const auto lx = hn::Set(df, p.l[0]);
+  const auto ly = hn::Set(df, p.l[1]);
+  const auto lz = hn::Set(df, p.l[2]);
   const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
   const auto rx = hn::Sub(vx, hn::Mul(t, lx));
   const auto ry = hn::Sub(vy, hn::Mul(t, ly));
@@ -232,7 +242,7 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
   const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
   const auto r = hn::Sqrt(hn::Add(hn::Add(hn::Mul(vx, vx), hn::Mul(vy, vy)), hn::Mul(vz, vz)));
   // eccentricitySpecDeg(t, d)
-  const auto zero = hn::Zero(dd);
+  const auto zero = hn::Zero(df);
   const auto negative = hn::Lt(t, zero);
   const auto at = hn::IfThenElse(negative, hn::Neg(t), t);
   const auto at_wins = hn::Gt(at, d);
@@ -240,54 +250,54 @@ HWY_INLINE void LevelVector(DD dd, const LevelParams& p, const float* xs, const 
   const auto lo = hn::IfThenElse(at_wins, d, at);
   const auto q = hn::Div(lo, hi);
   const auto q2 = hn::Mul(q, q);
-  auto poly = hn::Set(dd, kAtanCoefficients[5]);
-  for (int k = 4; k >= 0; --k) poly = hn::Add(hn::Mul(poly, q2), hn::Set(dd, kAtanCoefficients[k]));
+  auto poly = hn::Set(df, kAtanCoefficients[5]);
+  for (int k = 4; k >= 0; --k) poly = hn::Add(hn::Mul(poly, q2), hn::Set(df, kAtanCoefficients[k]));
   auto a = hn::Mul(poly, q);
-  a = hn::IfThenElse(hn::Gt(d, at), hn::Sub(hn::Set(dd, kLevelsPi / 2.0), a), a);
-  a = hn::IfThenElse(negative, hn::Sub(hn::Set(dd, kLevelsPi), a), a);
-  auto ecc = hn::IfThenElse(hn::Gt(hi, zero), hn::Mul(a, hn::Set(dd, 180.0 / kLevelsPi)), zero);
+  a = hn::IfThenElse(hn::Gt(d, at), hn::Sub(hn::Set(df, kLevelsHalfPi), a), a);
+  a = hn::IfThenElse(negative, hn::Sub(hn::Set(df, kLevelsPi), a), a);
+  auto ecc = hn::IfThenElse(hn::Gt(hi, zero), hn::Mul(a, hn::Set(df, kLevelsRadToDeg)), zero);
   // The fovea's growth: max(0, E - g), written as the reference's compare (NaN stays).
-  ecc = hn::Sub(ecc, hn::Set(dd, p.growth_deg));
+  ecc = hn::Sub(ecc, hn::Set(df, p.growth_deg));
   ecc = hn::IfThenElse(hn::Lt(ecc, zero), zero, ecc);
   // classify(r, ecc): allowed = r sinSpec((m ecc + MAR0) deg-to-rad)
-  const auto x = hn::Mul(hn::Add(hn::Mul(hn::Set(dd, p.bounds.slope), ecc), hn::Set(dd, kMar0Deg)),
-                         hn::Set(dd, kLevelsPi / 180.0));
-  const auto half_pi = hn::Set(dd, kLevelsPi / 2.0);
+  const auto x = hn::Mul(hn::Add(hn::Mul(hn::Set(df, p.bounds.slope), ecc), hn::Set(df, kLevelsMar0Deg)),
+                         hn::Set(df, kLevelsDegToRad));
+  const auto half_pi = hn::Set(df, kLevelsHalfPi);
   const auto y = hn::IfThenElse(hn::Lt(x, half_pi), x, half_pi);
   const auto y2 = hn::Mul(y, y);
-  auto sin_poly = hn::Set(dd, kSinCoefficients[6]);
-  for (int k = 5; k >= 0; --k) sin_poly = hn::Add(hn::Mul(sin_poly, y2), hn::Set(dd, kSinCoefficients[k]));
+  auto sin_poly = hn::Set(df, kSinCoefficients[5]);
+  for (int k = 4; k >= 0; --k) sin_poly = hn::Add(hn::Mul(sin_poly, y2), hn::Set(df, kSinCoefficients[k]));
   const auto allowed = hn::Mul(r, hn::Mul(sin_poly, y));
-  const auto one = hn::Set(dd, 1.0);
+  const auto one = hn::Set(df, 1.0f);
   auto level = zero;
   for (int n = 1; n < kMaxRegions; ++n) {
-    level = hn::Add(level, hn::IfThenElseZero(hn::Le(hn::Set(dd, p.bounds.min_allowed_m[n]), allowed), one));
+    level = hn::Add(level, hn::IfThenElseZero(hn::Le(hn::Set(df, p.bounds.min_allowed_m[n]), allowed), one));
   }
-  level = hn::Max(level, hn::Set(dd, static_cast<double>(p.bounds.floor_level)));
-  if (p.bounds.floor_b_per_m2 > 0.0) {
+  level = hn::Max(level, hn::Set(df, static_cast<float>(p.bounds.floor_level)));
+  if (p.bounds.floor_b_per_m2 > 0.0f) {
     // s^2 from the sensor (the cloud's origin): px^2 + py^2 + pz^2, left to right.
     const auto s2 = hn::Add(hn::Add(hn::Mul(px, px), hn::Mul(py, py)), hn::Mul(pz, pz));
-    const auto floor = hn::Add(hn::Set(dd, p.bounds.floor_a_m), hn::Mul(hn::Set(dd, p.bounds.floor_b_per_m2), s2));
+    const auto floor = hn::Add(hn::Set(df, p.bounds.floor_a_m), hn::Mul(hn::Set(df, p.bounds.floor_b_per_m2), s2));
     auto lift = one;
     for (int n = 1; n < kMaxRegions; ++n) {
-      lift = hn::Add(lift, hn::IfThenElseZero(hn::Lt(hn::Set(dd, p.bounds.voxel_m[n]), floor), one));
+      lift = hn::Add(lift, hn::IfThenElseZero(hn::Lt(hn::Set(df, p.bounds.voxel_m[n]), floor), one));
     }
-    level = hn::Max(level, hn::Min(lift, hn::Set(dd, static_cast<double>(kMaxRegions - 1))));
+    level = hn::Max(level, hn::Min(lift, hn::Set(df, static_cast<float>(kMaxRegions - 1))));
   }
   if (p.cull) {
-    const auto ft = hn::Add(hn::Add(hn::Mul(vx, hn::Set(dd, p.f[0])), hn::Mul(vy, hn::Set(dd, p.f[1]))),
-                            hn::Mul(vz, hn::Set(dd, p.f[2])));
-    level = hn::IfThenElse(hn::Lt(ft, hn::Mul(r, hn::Set(dd, p.bounds.cull_cos))),
-                           hn::Set(dd, static_cast<double>(p.bounds.cull_region)), level);
+    const auto ft = hn::Add(hn::Add(hn::Mul(vx, hn::Set(df, p.f[0])), hn::Mul(vy, hn::Set(df, p.f[1]))),
+                            hn::Mul(vz, hn::Set(df, p.f[2])));
+    level = hn::IfThenElse(hn::Lt(ft, hn::Mul(r, hn::Set(df, p.bounds.cull_cos))),
+                           hn::Set(df, static_cast<float>(p.bounds.cull_region)), level);
   }
-  hn::StoreU(hn::IfThenElse(finite, level, hn::Set(dd, static_cast<double>(kRegionInvalid))), dd, level_out);
+  return hn::IfThenElse(finite, level, hn::Set(df, static_cast<float>(kRegionInvalid)));
 }
 
 inline void LevelRangeT(const float* x, const float* y, const float* z, const LevelParams& p, std::size_t begin,
                         std::size_t end, uint8_t* region_out, uint32_t* histogram) {
-  RegionRange(x, y, z, begin, end, region_out, histogram,
-              [&p](auto dd, const float* xs, const float* ys, const float* zs, double* out) {
-                LevelVector(dd, p, xs, ys, zs, out);
+  RegionRange<float>(x, y, z, begin, end, region_out, histogram,
+              [&p](auto df, const float* xs, const float* ys, const float* zs) {
+                return LevelVector(df, p, xs, ys, zs);
               });
 }
 

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <numbers>
 #include <string>
+#include <type_traits>
 
 #include "hwy/targets.h"
 
@@ -73,13 +74,15 @@ void backprojectRows(const BackprojectParams& params, int row0, int row1, std::s
 }
 
 namespace {
-// origin - H (the large parts cancelled in double, as the references do) and L.
+// origin - H (the large parts cancelled in double, as the references do) and L, in
+// the params' own precision (double for the partition, float for the levels).
 template <class Params>
 void fillEye(const PointCloud& cloud, const Gaze& gaze, Params& p) {
+  using T = std::remove_reference_t<decltype(p.l[0])>;
   const Eigen::Vector3d origin_minus_eye = cloud.origin_m - gaze.origin_m;
   for (int a = 0; a < 3; ++a) {
-    p.origin_minus_eye[a] = origin_minus_eye[a];
-    p.l[a] = gaze.direction[a];
+    p.origin_minus_eye[a] = static_cast<T>(origin_minus_eye[a]);
+    p.l[a] = static_cast<T>(gaze.direction[a]);
   }
 }
 }  // namespace
@@ -100,9 +103,9 @@ LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const Level
   LevelParams p;
   fillEye(cloud, gaze, p);
   p.bounds = bounds;
-  p.growth_deg = gaze.fovea_growth_deg;
+  p.growth_deg = static_cast<float>(gaze.fovea_growth_deg);
   p.cull = bounds.cull_region != 0 && gaze.view_known;
-  for (int a = 0; a < 3; ++a) p.f[a] = gaze.view_forward[a];
+  for (int a = 0; a < 3; ++a) p.f[a] = static_cast<float>(gaze.view_forward[a]);
   return p;
 }
 

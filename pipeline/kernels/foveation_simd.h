@@ -107,13 +107,14 @@ PartitionParams preparePartition(const PointCloud& cloud, const Gaze& gaze, cons
 void partitionRange(const PointCloud& cloud, const PartitionParams& params, std::size_t begin, std::size_t end,
                     uint8_t* region_out, uint32_t* histogram256);
 
+// In float, as assignLevelsRef (origin - H is the double difference, rounded).
 struct LevelParams {
-  double origin_minus_eye[3] = {};
-  double l[3] = {};
+  float origin_minus_eye[3] = {};
+  float l[3] = {};
   LevelBounds bounds;
-  double growth_deg = 0.0;  // Gaze::fovea_growth_deg
+  float growth_deg = 0.0f;  // Gaze::fovea_growth_deg
   bool cull = false;        // bounds.cull_region != 0 and the gaze knows the view
-  double f[3] = {};         // Gaze::view_forward
+  float f[3] = {};          // Gaze::view_forward
 };
 LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds);
 // Levels of points [begin, end); histogram[r] += points of level r (r = kRegionInvalid too).

@@ -298,17 +298,18 @@ TEST(AcuityLevels, DefaultMarginKeepsEveryPointUnderItsMar) {
 }
 
 // Farther or more eccentric never means finer: the level is monotone in both.
-// The specification's atan and sin against libm, over their whole ranges.
+// The specification's atan and sin (float) against libm in double at the same float
+// inputs, over their whole ranges.
 TEST(AcuityLevels, SpecificationPolynomialsAreAccurate) {
   double worst_atan = 0.0, worst_sin = 0.0;
   for (int i = 0; i <= 100000; ++i) {
-    const double q = i / 100000.0;
-    worst_atan = std::max(worst_atan, std::fabs(atanUnit(q) - std::atan(q)));
-    const double x = q * std::numbers::pi / 2.0;
-    worst_sin = std::max(worst_sin, std::fabs(sinSpec(x) - std::sin(x)));
+    const auto q = static_cast<float>(i / 100000.0);
+    worst_atan = std::max(worst_atan, std::fabs(atanUnit(q) - std::atan(double{q})));
+    const auto x = static_cast<float>(q * std::numbers::pi / 2.0);
+    worst_sin = std::max(worst_sin, std::fabs(sinSpec(x) - std::sin(double{x})));
   }
   EXPECT_LT(worst_atan, 1e-5);
-  EXPECT_LT(worst_sin, 1e-7);
+  EXPECT_LT(worst_sin, 3e-7);  // a few float roundings (its unit at 1 is 6e-8)
   EXPECT_EQ(sinSpec(3.0), sinSpec(std::numbers::pi / 2.0));  // held at 1 beyond 90 degrees
   // The eccentricity in every octant, at the eye and on the axes.
   for (double angle = 0.0; angle <= 180.0; angle += 0.37) {
