@@ -17,6 +17,7 @@
 #include <Eigen/Geometry>
 
 #include "bench/bench_input.h"
+#include "pipeline/acuity_levels.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
 #include "pipeline/foveator.h"
@@ -44,6 +45,12 @@ struct Fixture {
   pipeline::ConeBounds bounds;
   std::array<double, pipeline::kMaxRegions> voxel_size_m{};
   std::size_t points = 0;
+  // The same cloud under Preset::kAcuity (docs/acuity-levels.md): its levels and voxels.
+  pipeline::FoveationConfig acuity_config;
+  std::vector<uint8_t> level;
+  int level_count = 0;
+  pipeline::LevelBounds level_bounds;
+  std::array<double, pipeline::kMaxRegions> level_voxel_m{};
 
   static Fixture& get() {
     static Fixture* fixture = build();
@@ -80,6 +87,18 @@ struct Fixture {
     f->region_count = stats.region_count;
     f->bounds = pipeline::ConeBounds::fromModel(foveator.model());
     for (int r = 0; r < stats.region_count; ++r) f->voxel_size_m[r] = stats.regions[r].voxel_size_m;
+
+    f->acuity_config.acuity.preset = pipeline::Preset::kAcuity;
+    pipeline::Foveator acuity =
+        pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f->acuity_config).value();
+    if (Status s = acuity.foveate(f->cloud, f->gaze, out, stats); !s) {
+      std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
+      std::exit(1);
+    }
+    f->level.assign(acuity.lastRegions(), acuity.lastRegions() + f->cloud.size());
+    f->level_count = stats.region_count;
+    f->level_bounds = pipeline::LevelBounds::fromModel(acuity.model());
+    for (int r = 0; r < stats.region_count; ++r) f->level_voxel_m[r] = stats.regions[r].voxel_size_m;
     return f;
   }
 };
@@ -123,18 +142,37 @@ void bmPartition(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
-template <typename Sampler>
+// ACUITY's level assignment (in place of the partition).
+template <auto AssignLevels>
+void bmLevels(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  std::vector<uint8_t> level(f.cloud.size());
+  pipeline::PartitionCounts counts;
+  for (auto _ : state) {
+    AssignLevels(f.cloud, f.gaze, f.level_bounds, level.data(), counts);
+    benchmark::DoNotOptimize(level.data());
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, f.points);
+}
+
+// Voxel sampling of the fixture's F1 regions, or (kAcuityLevels) of its ACUITY levels.
+template <typename Sampler, bool kAcuityLevels = false>
 void bmVoxelSample(benchmark::State& state) {
   Fixture& f = Fixture::get();
   Sampler sampler(f.cloud.size(), f.cloud.size());
   pipeline::FoveatedCloud out(f.cloud.size());
   pipeline::SampleCounts counts;
+  const uint8_t* region = kAcuityLevels ? f.level.data() : f.region.data();
+  const int count = kAcuityLevels ? f.level_count : f.region_count;
+  const auto& voxel_m = kAcuityLevels ? f.level_voxel_m : f.voxel_size_m;
   for (auto _ : state) {
-    Status s = sampler.sample(f.cloud, f.region.data(), f.region_count, f.voxel_size_m, out, counts);
+    Status s = sampler.sample(f.cloud, region, count, voxel_m, out, counts);
     benchmark::DoNotOptimize(s);
     benchmark::ClobberMemory();
   }
   setPointCounter(state, f.points);
+  state.counters["out"] = static_cast<double>(out.size());
 }
 
 // Colour registration of the fixture's depth (640x480) into a 1280x720 colour
@@ -209,12 +247,13 @@ void bmPipelineRef(benchmark::State& state) {
 
 // --- The SIMD kernels (Highway, the target dispatch picks) --------------------
 
-// The whole frame with the SIMD kernel set on `threads` threads.
-void pipelineSimd(benchmark::State& state, int threads) {
+// The whole frame with the SIMD kernel set on `threads` threads (F1, or ACUITY).
+void pipelineSimd(benchmark::State& state, int threads, bool acuity = false) {
   Fixture& f = Fixture::get();
   const std::size_t pixels = f.input.frame.pixelCount();
-  pipeline::Foveator foveator =
-      pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kSimd, threads}, f.config).value();
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kSimd, threads},
+                                                           acuity ? f.acuity_config : f.config)
+                                    .value();
   pipeline::Backprojector backprojector(threads, pipeline::KernelSet::kSimd);
   PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
@@ -229,6 +268,7 @@ void pipelineSimd(benchmark::State& state, int threads) {
   setPointCounter(state, f.points);
 }
 void bmPipelineSimd1(benchmark::State& state) { pipelineSimd(state, 1); }
+void bmPipelineAcuitySimd1(benchmark::State& state) { pipelineSimd(state, 1, true); }
 void bmPipelineSimdAll(benchmark::State& state) {
   pipelineSimd(state, std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
 }
@@ -251,6 +291,11 @@ const KernelBench kKernels[] = {
     {"registration/simd", &bmRegister<&pipeline::DepthToColourRegistration::registerSimd>},
     {"pipeline/simd-1t", &bmPipelineSimd1},
     {"pipeline/simd-all-cores", &bmPipelineSimdAll},
+    // ACUITY (docs/acuity-levels.md): its levels, and the hash sampler on them
+    {"levels/ref", &bmLevels<pipeline::assignLevelsRef>},
+    {"levels/simd", &bmLevels<pipeline::assignLevelsSimd>},
+    {"voxel_sample/hash-acuity", &bmVoxelSample<pipeline::HashVoxelSampler, true>},
+    {"pipeline/acuity-simd-1t", &bmPipelineAcuitySimd1},
 };
 
 }  // namespace
