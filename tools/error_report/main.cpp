@@ -562,7 +562,8 @@ int run(int argc, char** argv) {
       }
       r.time_ms.push_back(cpu1 - cpu0);
       r.wall_ms.push_back(msBetween(t0, t1));
-      r.d0_m.push_back(stats.fixation.d0_m);
+      // (ACUITY has no d0: its column says "-".)
+      if (stats.fixation.source != pipeline::FixationSource::kNone) r.d0_m.push_back(stats.fixation.d0_m);
       for (int reg = 0; reg < stats.region_count; ++reg) {
         r.regions[reg].add(metrics.regions[reg], stats.regions[reg].points_in, stats.regions[reg].points_out,
                            stats.regions[reg].voxel_size_m, wire_bytes[reg]);

@@ -170,7 +170,7 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
        << " (" << fixed(c.time_ms_p90, 2) << ") | " << fixed(c.wall_ms_median, 2) << " | " << fixed(c.all.rms_mm, 2) << " | " << fixed(c.all.max_mm, 1)
        << " | " << percent(c.all.share_above_mar) << " | " << fixed(c.all.ratio_p95, 2) << " | "
        << (c.regions.size() > 1 ? percent(peripheralShare(c)) : std::string("-")) << " | "
-       << percent(c.all.share_above_reference_mar) << " | " << (c.regions.size() > 1 ? fixed(c.d0_median_m, 3) : std::string("-")) << " |";
+       << percent(c.all.share_above_reference_mar) << " | " << (c.regions.size() > 1 && !std::isnan(c.d0_median_m) ? fixed(c.d0_median_m, 3) : std::string("-")) << " |";
     if (any_truth) {
       md << " " << (c.have_truth ? percent(c.truth.share_above_mar) : std::string("-")) << " | "
          << (c.have_truth ? fixed(c.truth.ratio_p95, 2) : std::string("-")) << " |";

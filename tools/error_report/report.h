@@ -52,7 +52,7 @@ struct ConfigSummary {
   double time_ms_median = 0.0;
   double time_ms_p90 = 0.0;
   double wall_ms_median = 0.0;
-  double d0_median_m = 0.0;
+  double d0_median_m = 0.0;  // NaN: no d0 (ACUITY)
   uint64_t at_eye = 0;
   uint64_t no_representative = 0;
   std::vector<RegionSummary> regions;
