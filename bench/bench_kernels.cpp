@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -173,6 +174,9 @@ void bmVoxelSample(benchmark::State& state) {
   }
   setPointCounter(state, f.points);
   state.counters["out"] = static_cast<double>(out.size());
+  if constexpr (std::is_same_v<Sampler, pipeline::HashVoxelSampler>) {
+    state.counters["runs"] = static_cast<double>(sampler.lastRuns());  // voxel changes along the points
+  }
 }
 
 // Colour registration of the fixture's depth (640x480) into a 1280x720 colour

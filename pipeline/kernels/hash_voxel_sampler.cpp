@@ -221,6 +221,7 @@ bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::
     }
     const float px = px_in[i], py = py_in[i], pz = pz_in[i];
     if (key != current) {
+      ++runs_;
       if (current != kEmpty) store();
       bool fresh;
       slot = findSlot(key, fresh);
@@ -295,6 +296,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   table_mask_ = active_ - 1;
   recent_key_.fill(kEmpty);
   voxels_ = 0;
+  runs_ = 0;
 
   for (kernels::VoxelKeyState& st : part_state_) {
     st.reset();

@@ -60,6 +60,9 @@ class HashVoxelSampler {
   std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
   std::size_t tableSize() const { return table_key_.size(); }
+  // Runs of consecutive sampled points with the same voxel in the last sample(): each
+  // run costs a store, a look-up and a load (benchmarks report it).
+  std::size_t lastRuns() const { return runs_; }
 
   static constexpr std::size_t kChunk = 2048;  // points per key batch
 
@@ -105,6 +108,7 @@ class HashVoxelSampler {
   std::size_t table_mask_ = 0;
   std::size_t last_voxels_ = 0;
   std::size_t voxels_ = 0;  // occupied this frame
+  std::size_t runs_ = 0;    // key changes this frame
   int shift_ = 64;
   // The table: keys (probed; 8 bytes an entry keeps it dense in cache) and, beside
   // them, the slots (read on a match only).
