@@ -21,7 +21,7 @@ const char* kServeHelp =
     "                    [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
     "                    [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
-    "                    [--threads N] [--memory-lock] [--log-level LEVEL]\n"
+    "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--timing-log FILE]\n"
     "\n"
     "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"
     "by latest-wins rings, all memory allocated at start-up (printed), status GPIO lines,\n"
@@ -45,6 +45,9 @@ const char* kServeHelp =
     "  --depth-min M, --depth-max M   valid depth range (default 0.1 .. 10 m)\n"
     "  --memory-lock            mlockall after start-up\n"
     "  --log-level LEVEL        error, warning, notice, info (default), debug\n"
+    "  --timing-log FILE        one CSV line per frame sent: its time in each stage, in microseconds\n"
+    "                           (acquire, queue, back-projection, partition, sampling, hand-off, encoding,\n"
+    "                           pacing and sending; docs/eval.md)\n"
 
     "  stream options as for fovead run: --budget, --max-mtu, --gaze-timeout-ms, --fallback-voxel,\n"
     "                           --fovea-step, --chroma, --entropy\n";

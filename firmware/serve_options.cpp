@@ -11,7 +11,7 @@ namespace {
 std::vector<std::string> serveFlags() {
   std::vector<std::string> flags = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
                                     "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
-                                    "--depth-max",  "--log-level"};
+                                    "--depth-max",  "--log-level", "--timing-log"};
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
   flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
   return flags;
@@ -55,6 +55,10 @@ Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base
   if (stream->has_value()) {
     config.stream = **stream;
     if (const std::string* v = args.get("--key-file")) config.key_file = *v;
+  }
+  if (const std::string* v = args.get("--timing-log")) {
+    if (v->empty()) return R(ErrorCode::kInvalidArgument, "--timing-log: expected a file path");
+    config.runtime.timing_log = *v;
   }
   if (const std::string* v = args.get("--ring-depth")) {
     Result<long> depth = parseInteger("--ring-depth", *v, 1, 64);

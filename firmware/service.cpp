@@ -236,7 +236,36 @@ Status Service::allocate() {
   for (auto& h : histogram_previous_) h.reset(new uint64_t[LatencyHistogram::kBuckets]());
   threads_.reserve(3);
   memory_.add("status, latency histograms", 1, delta(before, heapInUse()) + 3 * sizeof(LatencyHistogram));
+
+  if (!config_.runtime.timing_log.empty()) {
+    before = heapInUse();
+    std::FILE* file = std::fopen(config_.runtime.timing_log.c_str(), "w");
+    if (file == nullptr) {
+      return {ErrorCode::kIoError, "timing log " + config_.runtime.timing_log + ": " + std::strerror(errno)};
+    }
+    timing_log_.reset(file);
+    // Our buffer, so that writing never allocates; a line per frame, flushed when full.
+    constexpr std::size_t kTimingBufferBytes = 64 * 1024;
+    timing_log_buffer_.reset(new char[kTimingBufferBytes]);
+    std::setvbuf(file, timing_log_buffer_.get(), _IOFBF, kTimingBufferBytes);
+    std::fputs(kTimingLogHeader, file);
+    memory_.add("timing log buffer", 1, delta(before, heapInUse()));
+  }
   return Status::ok();
+}
+
+void Service::logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent) {
+  // Microseconds as integers: integer formatting never allocates.
+  const auto us = [](int64_t ns) { return ns / 1000; };
+  const pipeline::FoveationStats& st = f.stats;
+  std::fprintf(timing_log_.get(),
+               "%u,%" PRId64 ",%" PRId64 ",%" PRId64 ",%" PRId64 ",%" PRId64 ",%" PRId64 ",%" PRId64 ",%" PRId64
+               ",%" PRId64 ",%" PRId64 ",%u,%u,%" PRIu64 ",%d\n",
+               f.frame_id, f.captured_ns, us(f.acquire_ns), us(f.foveation_start_ns - f.captured_ns),
+               us(f.backproject_ns), us(st.partition_ns), us(st.fixation_ns + st.sample_ns),
+               us(send_start_ns - f.foveated_ns), us(sent.encode_ns), us(sent.send_ns),
+               us(monotonicNs() - f.captured_ns), st.points_out, sent.chunks_sent, sent.bytes_sent,
+               sent.completed ? 1 : 0);
 }
 
 net::Endpoint Service::localEndpoint() const { return streamer_ ? streamer_->localEndpoint() : net::Endpoint{}; }
@@ -330,7 +359,8 @@ void Service::captureLoop() {
         // with the nearest pose and raises the fault (docs/pose.md).
         pose_stale_.store(!pose_source_->apply(f.frame), std::memory_order_relaxed);
         f.captured_ns = monotonicNs();
-        capture_latency_.add(f.captured_ns - t0);
+        f.acquire_ns = f.captured_ns - t0;
+        capture_latency_.add(f.acquire_ns);
         last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
         ring.publish(slot);
         continue;
@@ -392,6 +422,7 @@ void Service::foveationLoop() {
     const int64_t t0 = monotonicNs();
     pipeline::BackprojectCounts counts;
     Status s = stage_->backproject(f.frame, counts);
+    o.backproject_ns = monotonicNs() - t0;
     GazePolicy::Decision decision;
     if (s) {
       decision = policy_->decide(gaze_box_.current(), monotonicNs(), f.frame.T_world_cam);
@@ -400,6 +431,8 @@ void Service::foveationLoop() {
     if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
     o.frame_id = static_cast<uint32_t>(f.frame.sequence);
     o.captured_ns = f.captured_ns;
+    o.acquire_ns = f.acquire_ns;
+    o.foveation_start_ns = t0;
     (void)in_ring.release(in);
     if (!s) {
       out_ring.cancel(out);
@@ -411,7 +444,8 @@ void Service::foveationLoop() {
       const std::string_view name = gazeSourceName(decision.source);
       log().log(LogLevel::kInfo, "gaze: %.*s", static_cast<int>(name.size()), name.data());
     }
-    foveate_latency_.add(monotonicNs() - t0);
+    o.foveated_ns = monotonicNs();
+    foveate_latency_.add(o.foveated_ns - t0);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
     out_ring.publish(out);
   }
@@ -477,6 +511,7 @@ void Service::sendLoop() {
       } else if (sent->had_session) {
         send_latency_.add(monotonicNs() - t0);
         frames_sent_.fetch_add(1, std::memory_order_relaxed);
+        if (timing_log_) logTiming(f, t0, sent.value());
       } else {
         frames_unsent_.fetch_add(1, std::memory_order_relaxed);
       }
@@ -714,6 +749,7 @@ void Service::stop() {
   if (usb_monitor_) usb_monitor_->stop();
   if (was_running) camera_->stop();
   streamer_.reset();  // says Bye to the operator
+  if (timing_log_) std::fflush(timing_log_.get());
   if (status_lines_) status_lines_->stop();
   if (was_running) {
     const ServiceStats s = stats();

@@ -30,6 +30,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <memory>
 #include <string>
@@ -52,6 +53,16 @@
 #include "pipeline/ring.h"
 
 namespace fovea::firmware {
+
+// The columns of fovead serve --timing-log, one line per frame sent (times in
+// microseconds): acquire (the camera call, which waits for the next frame), queue
+// (captured to foveation start), back-projection, partition (or ACUITY's levels),
+// sampling (fixation and voxel sampling), hand-off (foveated to send start),
+// encoding, pacing and sending (first datagram to the frame summary), and captured
+// to the end of sending. docs/eval.md.
+inline constexpr const char* kTimingLogHeader =
+    "frame_id,captured_ns,acquire_us,queue_us,backproject_us,partition_us,sample_us,handoff_us,encode_us,send_us,"
+    "captured_to_sent_us,points_out,chunks_sent,bytes_sent,completed\n";
 
 // The memory the service allocated at start-up, pool by pool.
 struct MemoryPool {
@@ -186,13 +197,20 @@ class Service {
   struct CapturedFrame {
     hal::RgbdFrame frame;
     int64_t captured_ns = 0;  // when acquire returned (CLOCK_MONOTONIC)
+    int64_t acquire_ns = 0;   // how long acquire took (it waits for the camera's next frame)
   };
   struct FoveatedFrame {
     pipeline::FoveatedCloud cloud{0};
     pipeline::FoveationStats stats;
     uint32_t frame_id = 0;
     int64_t captured_ns = 0;
+    int64_t acquire_ns = 0;
+    int64_t foveation_start_ns = 0;  // taken from the capture ring
+    int64_t backproject_ns = 0;
+    int64_t foveated_ns = 0;  // published to the send ring
   };
+  // The timing log's line for one frame sent (no allocation: the file's buffer is ours).
+  void logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent);
 
   Service(const ServiceConfig& config, Environment environment, int64_t period_ns);
   Status allocate();
@@ -267,6 +285,12 @@ class Service {
   } window_;
   std::unique_ptr<uint64_t[]> histogram_scratch_;  // 2 x kBuckets, for the quantiles
   std::array<std::unique_ptr<uint64_t[]>, 3> histogram_previous_;
+  // --timing-log: the file and its buffer, both made at start-up (the send stage writes).
+  struct FileCloser {
+    void operator()(std::FILE* f) const { std::fclose(f); }
+  };
+  std::unique_ptr<std::FILE, FileCloser> timing_log_;
+  std::unique_ptr<char[]> timing_log_buffer_;
   bool stopped_ = false;
 };
 

@@ -70,6 +70,9 @@ struct RuntimeSettings {
   LogLevel log_level = LogLevel::kInfo;
   int64_t status_interval_ms = 5000;  // the status log line
   bool systemd_notify = true;         // READY, STATUS, WATCHDOG when NOTIFY_SOCKET is set
+  // One CSV line per frame sent, with its time in each stage (fovead serve
+  // --timing-log; docs/eval.md). "": none.
+  std::string timing_log;
 };
 
 struct ServiceConfig {
