@@ -4,6 +4,7 @@
 // the wire, end-to-end latency, losses. The decoding is fovea::net's library
 // (ChunkEncoder's counterpart), which a VR front end links the same way.
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -36,7 +37,8 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) (--gaze SCRIPT | --view [ADDR:]PORT)\n"
-    "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--save-ply DIR]\n"
+    "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
+    "                      [--save-ply DIR]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
     "                      [--clock auto|shared|estimated] [--quiet]\n"
     "\n"
@@ -57,6 +59,8 @@ const char* kHelp =
     "  --view-tabs N         viewer tabs served at once (default 4, 1 .. 64)\n"
     "  --duration SECONDS    stop after this long (default: until SIGINT/SIGTERM or the robot's bye)\n"
     "  --summary FILE.json   write the whole run's figures as JSON at the end\n"
+    "  --frame-log FILE      one CSV line per frame decoded: frame id, capture stamp (robot clock),\n"
+    "                        decoded (this host's clock), latency, points, chunks (docs/eval.md)\n"
     "  --save-ply DIR        write every decoded frame as DIR/frame_ID.ply (world coordinates, region)\n"
     "  --name NAME           the name the robot shows (default fovea-operator)\n"
     "  --budget MBPS         the bandwidth to ask for, MB/s (default: what the robot allows)\n"
@@ -81,6 +85,7 @@ struct Options {
   std::string gaze;
   double duration_s = 0.0;
   std::string summary_path;
+  std::string frame_log_path;
   std::string ply_dir;
   std::string name = "fovea-operator";
   double budget_mbps = 0.0;
@@ -118,6 +123,8 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.gaze = value;
     } else if (flag == "--summary") {
       o.summary_path = value;
+    } else if (flag == "--frame-log") {
+      o.frame_log_path = value;
     } else if (flag == "--save-ply") {
       o.ply_dir = value;
     } else if (flag == "--name") {
@@ -312,6 +319,16 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   }
 
+  std::ofstream frame_log;
+  if (!opt.frame_log_path.empty()) {
+    frame_log.open(opt.frame_log_path);
+    frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received\n";
+    if (!frame_log) {
+      std::fprintf(stderr, "fovea-operator: --frame-log: cannot write '%s'\n", opt.frame_log_path.c_str());
+      return kExitFailure;
+    }
+  }
+
   std::signal(SIGINT, onStopSignal);
   std::signal(SIGTERM, onStopSignal);
   tools::OperatorStats stats;
@@ -379,6 +396,8 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     publishState(tools::LinkState::kStreaming, "");
 
+    // What a packet capture adds to each UDP payload: the IP and UDP headers.
+    const std::size_t ip_udp_header_bytes = robot_address.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
     const int64_t session_start_ns = monotonicNs();
     int64_t next_gaze_ns = session_start_ns;
     int64_t next_live_ns = session_start_ns + 1'000'000'000;
@@ -403,6 +422,14 @@ int main(int argc, char** argv) {
           obs.chunks_expected += f.chunks_expected[r];
         }
         stats.frame(obs);
+        if (frame_log) {
+          uint32_t points = 0;
+          for (uint32_t p : obs.points_per_region) points += p;
+          frame_log << f.frame_id << ',' << f.capture_time_ns << ',' << f.last_chunk_received_ns << ','
+                    << (std::isnan(obs.latency_ms) ? std::string() : std::to_string(std::llround(obs.latency_ms * 1e3)))
+                    << ',' << points << ',' << obs.chunks_received << ',' << obs.chunks_expected << ','
+                    << (f.summary_received ? 1 : 0) << '\n';
+        }
         last_frame_id = f.frame_id;
         if (view) view->publishFrame(tools::packViewFrame(f, splat_sizer.sizes(f), view->frameBuffer()));
         if (!opt.ply_dir.empty() && f.cloud != nullptr) {
@@ -475,7 +502,7 @@ int main(int argc, char** argv) {
       const int timeout_ms = static_cast<int>(std::clamp<int64_t>((wake_ns - now + 999'999) / 1'000'000, 0, 1000));
       const std::optional<net::Received> received = link.receive(timeout_ms);
       if (!received) continue;
-      stats.datagram(received->payload.size() + net::kDatagramOverhead);
+      stats.datagram(received->payload.size() + net::kDatagramOverhead, ip_udp_header_bytes);
       switch (received->type) {
         // The assembler's ready frames are those of its last call: look at them
         // right after a chunk or summary only (after any other datagram they

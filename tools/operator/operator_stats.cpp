@@ -80,6 +80,8 @@ std::string OperatorStats::summaryJson(double seconds, const std::string& extra)
   j += "  \"datagrams_lost\": " + std::to_string(total_.lost) + ",\n";
   j += "  \"wire_bytes\": " + std::to_string(total_.wire_bytes) + ",\n";
   j += "  \"wire_mb_per_s\": " + jsonNumber(static_cast<double>(total_.wire_bytes) / s / 1e6) + ",\n";
+  j += "  \"ip_udp_bytes\": " + std::to_string(total_.ip_bytes) + ",\n";
+  j += "  \"ip_udp_mb_per_s\": " + jsonNumber(static_cast<double>(total_.ip_bytes) / s / 1e6) + ",\n";
   j += "  \"chunks_received\": " + std::to_string(total_.chunks_received) + ",\n";
   j += "  \"chunks_expected\": " + std::to_string(total_.chunks_expected) + ",\n";
   j += "  \"latency_ms\": {\"p50\": " + jsonNumber(quantile(total_.latency_ms, 0.5)) +

@@ -46,11 +46,14 @@ std::string liveLine(const LiveFigures& f);
 
 class OperatorStats {
  public:
-  void datagram(std::size_t wire_bytes) {
+  // wire_bytes: the UDP payload; ip_udp_header_bytes: the IP and UDP headers a
+  // packet capture would also count (28 for IPv4, 48 for IPv6).
+  void datagram(std::size_t wire_bytes, std::size_t ip_udp_header_bytes = 0) {
     window_.datagrams += 1;
     window_.wire_bytes += wire_bytes;
     total_.datagrams += 1;
     total_.wire_bytes += wire_bytes;
+    total_.ip_bytes += wire_bytes + ip_udp_header_bytes;
   }
   void lost(uint64_t datagrams) {
     window_.lost += datagrams;
@@ -72,6 +75,7 @@ class OperatorStats {
     uint64_t frames = 0;
     uint64_t datagrams = 0;
     uint64_t wire_bytes = 0;
+    uint64_t ip_bytes = 0;  // wire_bytes with the IP and UDP headers
     uint64_t lost = 0;
     uint64_t chunks_received = 0;
     uint64_t chunks_expected = 0;

@@ -36,7 +36,7 @@ TEST(ClockOffset, RecoversARobotClockAheadOrBehind) {
 
 TEST(OperatorStats, LiveWindowResetsSummaryKeepsAll) {
   OperatorStats stats;
-  for (int i = 0; i < 10; ++i) stats.datagram(1000);
+  for (int i = 0; i < 10; ++i) stats.datagram(1000, i < 5 ? 28 : 48);  // IPv4, then IPv6 headers
   stats.lost(2);
   FrameObservation f;
   f.latency_ms = 12.5;
@@ -63,6 +63,8 @@ TEST(OperatorStats, LiveWindowResetsSummaryKeepsAll) {
   EXPECT_NE(json.find("\"fps\": 0.75,"), std::string::npos) << json;
   EXPECT_NE(json.find("\"datagrams_lost\": 2,"), std::string::npos) << json;
   EXPECT_NE(json.find("\"wire_bytes\": 10000,"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"ip_udp_bytes\": 10380,"), std::string::npos) << json;  // 10000 + 5 x 28 + 5 x 48
+  EXPECT_NE(json.find("\"ip_udp_mb_per_s\": 0.002595,"), std::string::npos) << json;
   EXPECT_NE(json.find("\"chunks_expected\": 30,"), std::string::npos) << json;
   EXPECT_NE(json.find("\"p50\": 12.5"), std::string::npos) << json;
   EXPECT_NE(json.find("[100, 0, 50, 0"), std::string::npos) << json;
