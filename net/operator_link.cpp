@@ -34,6 +34,7 @@ Result<std::unique_ptr<OperatorLink>> OperatorLink::connect(std::string_view add
   if (!socket) return R(socket.status());
   link->robot_ = robot.value();
   link->socket_ = std::move(socket).value();
+  link->receive_buffer_bytes_ = link->socket_.setReceiveBuffer(config.receive_buffer_bytes);
   link->handshake_ = handshakeKeys(link->psk_, Role::kOperator);
   link->channel_ = SessionChannel(link->handshake_, randomU64(), 0);
 

@@ -27,6 +27,10 @@ struct OperatorLinkConfig {
   uint32_t mtu_bytes = kDefaultMtu;       // kMinMtu..kMaxMtu
   int connect_timeout_ms = 3000;          // give up after this long
   int first_retry_ms = 100;               // Hello again after this, doubling up to 1 s
+  // Room for the datagrams of a whole frame that arrive faster than they are
+  // decoded (a 1.3 MB frame at a high budget): the default of about 200 KB holds
+  // some 90 datagrams and overflows. The kernel may grant less (net.core.rmem_max).
+  int receive_buffer_bytes = 4 << 20;
 };
 
 struct OperatorLinkCounters {
@@ -64,6 +68,8 @@ class OperatorLink {
   // False after a Bye (either way).
   bool sessionActive() const { return active_; }
   const Endpoint& robot() const { return robot_; }
+  // The receive buffer the kernel granted (OperatorLinkConfig::receive_buffer_bytes).
+  int receiveBufferBytes() const { return receive_buffer_bytes_; }
 
   // Sends a gaze sample. The link numbers it (sequence), stamps it if
   // operator_stamp_ns is 0, and fills the feedback except last_frame_id
@@ -91,6 +97,7 @@ class OperatorLink {
   DirectionKeys handshake_;
   UdpSocket socket_;
   Endpoint robot_;
+  int receive_buffer_bytes_ = -1;
   std::string notice_;
   SessionChannel channel_;
   bool active_ = false;

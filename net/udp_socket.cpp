@@ -153,6 +153,17 @@ Result<UdpSocket> UdpSocket::bind(const Endpoint& local) {
   return socket;
 }
 
+int UdpSocket::setReceiveBuffer(int bytes) {
+  const auto granted = [this] {
+    int size = 0;
+    socklen_t len = sizeof size;
+    return ::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, &len) == 0 ? size / 2 : -1;
+  };
+  (void)::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
+  if (granted() < bytes) (void)::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &bytes, sizeof bytes);
+  return granted();
+}
+
 Result<UdpSocket> UdpSocket::forPeer(const Endpoint& peer) {
   if (peer.family() == AF_INET6) {
     sockaddr_in6 any{};

@@ -62,6 +62,11 @@ class UdpSocket {
 
   Endpoint localEndpoint() const;
   int fd() const { return fd_; }
+  // Asks the kernel for a receive buffer of `bytes` (SO_RCVBUF, which it caps at
+  // net.core.rmem_max; then SO_RCVBUFFORCE, which only a privileged process may
+  // use past that) and returns what it granted, in bytes of datagrams (the kernel
+  // reports twice that, with its bookkeeping), or -1 on error.
+  int setReceiveBuffer(int bytes);
 
  private:
   explicit UdpSocket(int fd) : fd_(fd) {}

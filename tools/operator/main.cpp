@@ -390,8 +390,9 @@ int main(int argc, char** argv) {
                               (opt.clock == "auto" && (robot_address.rfind("127.", 0) == 0 || robot_address.rfind("[::1]", 0) == 0));
     std::optional<int64_t> clock_offset_ns;  // robot minus local
     if (shared_clock) clock_offset_ns = 0;
-    std::printf("connected to %s: MTU %u, budget %.2f MB/s; latency on %s\n", robot_address.c_str(), link.mtuBytes(),
-                static_cast<double>(link.budgetBytesPerS()) / 1e6,
+    std::printf("connected to %s: MTU %u, budget %.2f MB/s, receive buffer %d KiB; latency on %s\n",
+                robot_address.c_str(), link.mtuBytes(), static_cast<double>(link.budgetBytesPerS()) / 1e6,
+                link.receiveBufferBytes() / 1024,
                 shared_clock ? "one clock" : "the robot's clock estimated from its status and round trip");
     std::fflush(stdout);
     publishState(tools::LinkState::kStreaming, "");
