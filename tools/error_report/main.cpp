@@ -28,6 +28,7 @@
 #include "pipeline/error_metrics.h"
 #include "pipeline/quantile.h"
 #include "pipeline/foveator.h"
+#include "tools/common/gnuplot.h"
 #include "tools/error_report/dynamics.h"
 #include "tools/error_report/report.h"
 
@@ -687,20 +688,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
     return kExitFailure;
   }
-  if (options.plot) {
-    if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) {
-      std::printf("gnuplot not found: no report.png (install gnuplot-nox, then run 'gnuplot report.gp' in %s)\n",
-                  options.out_dir.c_str());
-    } else {
-      std::string quoted = "'";
-      for (char ch : std::filesystem::absolute(dir).string()) quoted += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
-      quoted += "'";
-      std::filesystem::remove(dir / "report.png", ec);
-      const int rc = std::system(("cd " + quoted + " && gnuplot report.gp").c_str());
-      have_plot = rc == 0 && std::filesystem::exists(dir / "report.png");
-      if (!have_plot) std::printf("gnuplot failed (status %d): no report.png\n", rc);
-    }
-  }
+  if (options.plot) have_plot = drawWithGnuplot(dir.string(), "report.gp", "report.png");
   for (const auto& [writer, name] :
        {std::pair{0, "report.csv"}, std::pair{1, "report.md"}}) {
     const std::string path = (dir / name).string();
