@@ -35,7 +35,8 @@ if(NOT FOVEA_MAN_PAGES STREQUAL "OFF")
       "fovead-cameras|fovead|cameras|list the cameras this build can see"
       "fovead-print-config|fovead|print-config|print fovead's effective configuration as TOML"
       "fovea-operator|fovea-operator||the operator station without the headset: gaze out, foveated frames in"
-      "fovea-error-report|fovea-error-report||speed against error of the foveation presets")
+      "fovea-error-report|fovea-error-report||speed against error of the foveation presets"
+      "fovea-eval|fovea-eval||the paper's Table II over real sockets, with objective image quality")
     set(_fovea_man_dir ${PROJECT_BINARY_DIR}/man)
     string(JOIN " " _fovea_emulator ${CMAKE_CROSSCOMPILING_EMULATOR})
     set(_fovea_man_outputs "")
@@ -138,7 +139,7 @@ operator looks and thins the rest out as the eye's acuity falls off, and
 streams it to the operator over authenticated, encrypted UDP.
 
 This package holds the service fovead (a systemd unit, installed but not
-enabled), the operator station fovea-operator, fovea-error-report, board
+enabled), the operator station fovea-operator, fovea-error-report, fovea-eval, board
 profiles, a default configuration and udev rules for the known RGB-D cameras
 and the GPIO chips.${_fovea_tuned}")
 set(CPACK_DEBIAN_PACKAGE_VERSION ${FOVEA_DEB_VERSION})

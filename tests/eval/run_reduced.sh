@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# fovea-eval's reduced run (tests/eval/CMakeLists.txt): every dataset there is and
+# every condition, 40 frames at 2 HMD positions, then the report's files and the
+# figures that must hold whatever the machine: every run present, foveation
+# cutting bandwidth against FREF, FREF's images identical to themselves.
+# usage: run_reduced.sh FOVEA_EVAL OUT_DIR TUM_DIR
+set -euo pipefail
+eval_bin="$1" out="$2" tum="$3"
+fail() { echo "run_reduced: $*" >&2; exit 1; }
+
+args=(--out-dir "$out" --frames 40 --positions 2 --quality-positions 1 --fresh)
+datasets=2
+if [ -f "$tum/associations.txt" ]; then
+  args+=(--tum "$tum"); datasets=3
+else
+  echo "run_reduced: no TUM sequence at $tum: living-room and balloon only"
+fi
+"$eval_bin" "${args[@]}" || fail "fovea-eval failed"
+
+for f in report.md runs.csv table2.csv stages.csv quality.csv bandwidth.gp stages.gp; do
+  [ -s "$out/$f" ] || fail "no $f"
+done
+runs=$(($(wc -l < "$out/runs.csv") - 1))
+[ "$runs" -eq $((datasets * 5 * 2)) ] || fail "runs.csv has $runs runs, expected $((datasets * 5 * 2))"
+# Every run's figures are numbers, every run decoded its 40 frames.
+awk -F, 'NR > 1 && ($4 != 40 || $7 + 0 <= 0 || $10 + 0 <= 0) { print "bad run: " $0; bad = 1 } END { exit bad }' \
+  "$out/runs.csv" || fail "a run without its frames, bandwidth or latency"
+# Loopback at a gigabit budget with a 4 MiB receive buffer loses (almost) nothing.
+awk -F, 'NR > 1 && !($12 + 0 > 0 && $13 + 0 <= 0.01 * $12) { print "datagrams lost: " $0; bad = 1 } END { exit bad }' \
+  "$out/runs.csv" || fail "a run lost more than 1 % of its datagrams"
+# F1, F2, F3 and ACUITY send less than FREF on every dataset (table2.csv column 7: reduction %).
+awk -F, 'NR > 1 && $2 != "FREF" && !($7 + 0 > 20) { print "no bandwidth reduction: " $0; bad = 1 } END { exit bad }' \
+  "$out/table2.csv" || fail "a condition that does not cut bandwidth against FREF"
+# Quality: FREF against itself is perfect; every other condition is measured and below it.
+awk -F, 'NR > 1 && $2 == "FREF" && ($8 != "inf" || $9 != "1.00000") { print "FREF not identical: " $0; bad = 1 }
+         NR > 1 && $2 != "FREF" && !($7 + 0 > 0 && $7 + 0 < 1) { print "quality not measured: " $0; bad = 1 }
+         END { exit bad }' "$out/quality.csv" || fail "quality rows wrong"
+images=$(ls "$out"/images/*.png 2>/dev/null | wc -l)
+[ "$images" -eq $((datasets * 4)) ] || fail "$images side-by-side images, expected $((datasets * 4))"
+grep -q "Table II" "$out/report.md" || fail "report.md has no table"
+grep -q "not a user study" "$out/report.md" || fail "report.md does not say the quality figures are proxies"
+echo "run_reduced: $runs runs, $images images, report in $out"

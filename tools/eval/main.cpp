@@ -1,0 +1,521 @@
+// fovea-eval: the paper's experiment (Table II) end to end over real sockets
+// (issue 14, docs/eval.md). For each dataset, seeded HMD position and condition
+// it runs `fovead serve` and `fovea-operator` as two processes over loopback,
+// reads back the service's timing log and the operator's frame log, and writes
+// the table (bandwidth and latency against FREF, Welch's t-test across
+// positions), the per-stage latencies, and an objective stand-in for the
+// paper's user study (foveated PSNR and SSIM of the splat-rendered clouds,
+// tools/eval/quality_eval.h). A run that finished is kept in runs/ and not
+// repeated: an interrupted evaluation resumes where it stopped.
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "hal/camera.h"
+#include "tools/eval/plan.h"
+#include "tools/eval/quality_eval.h"
+#include "tools/eval/report.h"
+#include "tools/eval/results.h"
+
+extern char** environ;
+
+namespace fovea::tools::eval {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+constexpr int kExitInterrupted = 130;
+// The link's budget in every run, a gigabit link's: far above any condition's rate
+// (FREF on the mock room is about 39 MB/s at 30 fps), so that no condition is cut
+// to fit and the bandwidth measured is what the condition needs (docs/eval.md).
+const std::string kBudgetMbps = "125";
+
+const char* kHelp =
+    "usage: fovea-eval [--out-dir DIR] [--frames N] [--positions N] [--seed S] [--datasets LIST]\n"
+    "                  [--conditions LIST] [--tum PATH] [--quality-positions N] [--quality-frame K]\n"
+    "                  [--fovead PATH] [--operator PATH] [--fresh] [--no-plot]\n"
+    "\n"
+    "The paper's experiment (Table II) on fovea's own pipeline: for each dataset, HMD position and\n"
+    "condition, `fovead serve` streams the camera to `fovea-operator` over loopback, paced in real time,\n"
+    "while the operator's scripted gaze fixates and saccades around the scene. It reports the bandwidth at\n"
+    "the socket (UDP payloads plus IP and UDP headers), the latency of every stage and end to end, their\n"
+    "reduction against FREF with Welch's t-test across positions, and foveated PSNR and SSIM of each\n"
+    "condition's splat-rendered cloud against FREF's from the same eye (docs/eval.md). Finished runs are\n"
+    "kept in DIR/runs: interrupted (Ctrl-C), the same command resumes.\n"
+    "\n"
+    "  --out-dir DIR          where report.md, the CSV files, plots and images go (default eval-report)\n"
+    "  --frames N             frames per position (default 400, the paper's)\n"
+    "  --positions N          HMD positions per dataset (default 5, the paper's)\n"
+    "  --seed S               the positions' and fixations' seed (default 1)\n"
+    "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
+    "  --conditions LIST      F1, F2, F3, FREF, ACUITY (default: all)\n"
+    "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
+    "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
+    "  --quality-frame K      the frame (0-based) the images are made from (default 30)\n"
+    "  --fovead PATH, --operator PATH   the programs (default: beside fovea-eval, build tree or installed)\n"
+    "  --fresh                discard the runs of an earlier evaluation in DIR\n"
+    "  --no-plot              do not run gnuplot (the .gp scripts are still written)\n";
+
+struct Options {
+  std::string out_dir = "eval-report";
+  int frames = 400;
+  int positions = 5;
+  uint64_t seed = 1;
+  std::string datasets;
+  std::string conditions = "F1,F2,F3,FREF,ACUITY";
+  std::string tum = "../shared/data/tum-fr3-teddy";
+  bool tum_given = false;
+  int quality_positions = -1;
+  int quality_frame = 30;
+  std::string fovead, op;
+  bool fresh = false;
+  bool plot = true;
+};
+
+volatile std::sig_atomic_t g_stop = 0;
+void onSignal(int) { g_stop = 1; }
+
+Result<long> integer(const std::string& flag, const char* text, long lo, long hi) {
+  char* end = nullptr;
+  const long v = std::strtol(text, &end, 10);
+  if (end == text || *end != '\0' || v < lo || v > hi) {
+    return Result<long>(ErrorCode::kInvalidArgument,
+                        flag + ": '" + text + "' is not a whole number within " + std::to_string(lo) + " .. " + std::to_string(hi));
+  }
+  return v;
+}
+
+Result<Options> parseOptions(int argc, char** argv, bool& help) {
+  using R = Result<Options>;
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") { help = true; return o; }
+    if (flag == "--fresh") { o.fresh = true; continue; }
+    if (flag == "--no-plot") { o.plot = false; continue; }
+    if (i + 1 >= argc) return R(ErrorCode::kInvalidArgument, flag + ": unknown, or needs a value (see --help)");
+    const char* v = argv[++i];
+    const auto set = [&](int& field, long lo, long hi) -> Status {
+      Result<long> n = integer(flag, v, lo, hi);
+      if (!n) return n.status();
+      field = static_cast<int>(n.value());
+      return Status::ok();
+    };
+    Status s = Status::ok();
+    if (flag == "--out-dir") o.out_dir = v;
+    else if (flag == "--frames") s = set(o.frames, 2, 100000);
+    else if (flag == "--positions") s = set(o.positions, 2, 100);
+    else if (flag == "--quality-positions") s = set(o.quality_positions, 0, 100);
+    else if (flag == "--quality-frame") s = set(o.quality_frame, 0, 100000);
+    else if (flag == "--seed") {
+      Result<long> n = integer(flag, v, 0, std::numeric_limits<long>::max());
+      if (!n) return n.status();
+      o.seed = static_cast<uint64_t>(n.value());
+    } else if (flag == "--datasets") o.datasets = v;
+    else if (flag == "--conditions") o.conditions = v;
+    else if (flag == "--tum") { o.tum = v; o.tum_given = true; }
+    else if (flag == "--fovead") o.fovead = v;
+    else if (flag == "--operator") o.op = v;
+    else return R(ErrorCode::kInvalidArgument, "unknown argument '" + flag + "' (see --help)");
+    if (!s) return s;
+  }
+  if (o.out_dir.empty()) return R(ErrorCode::kInvalidArgument, "--out-dir: empty");
+  return o;
+}
+
+// The programs: given, or beside this one (installed: the same directory; the
+// build tree: build/tools/eval/fovea-eval, build/firmware/fovead, build/tools/fovea-operator).
+std::string findProgram(const std::string& given, const std::string& name, const std::vector<std::string>& relative) {
+  if (!given.empty()) return given;
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    for (const std::string& r : relative) {
+      const fs::path p = self.parent_path() / r / name;
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  return name;  // from PATH
+}
+
+// A free UDP port on the loopback (the kernel's choice; released for fovead to take).
+int freePort() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  if (fd < 0) return 0;
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  socklen_t len = sizeof a;
+  int port = 0;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) {
+    port = ntohs(a.sin_port);
+  }
+  ::close(fd);
+  return port;
+}
+
+// Starts argv[0] with stdout and stderr to log_path; -1 when it cannot start.
+pid_t spawn(const std::vector<std::string>& args, const std::string& log_path) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  pid_t pid = -1;
+  const int rc = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  return rc == 0 ? pid : -1;
+}
+
+// Waits for pid until deadline (steady clock) or a stop; then SIGTERM, and SIGKILL
+// 2 s later. Returns the exit status (or -1 when it had to be stopped).
+int waitFor(pid_t pid, std::chrono::steady_clock::time_point deadline) {
+  int status = 0;
+  for (;;) {
+    const pid_t r = ::waitpid(pid, &status, WNOHANG);
+    if (r == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    if (r < 0) return -1;
+    if (g_stop || std::chrono::steady_clock::now() >= deadline) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(pid, SIGTERM);
+  for (int i = 0; i < 100; ++i) {
+    if (::waitpid(pid, &status, WNOHANG) == pid) return -1;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return -1;
+}
+
+std::string tail(const std::string& path) {
+  std::ifstream in(path);
+  std::string line, last;
+  while (std::getline(in, line)) {
+    if (!line.empty()) last = line;
+  }
+  return last;
+}
+
+struct RunSpec {
+  Dataset dataset;
+  Condition condition;
+  HmdPosition position;
+  std::string dir;
+};
+
+// One run: the service and the operator as processes over loopback.
+Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string& fovead, const std::string& op) {
+  using R = Result<RunResult>;
+  std::error_code ec;
+  fs::remove_all(run.dir, ec);
+  fs::create_directories(run.dir, ec);
+  if (ec) return R(ErrorCode::kIoError, run.dir + ": " + ec.message());
+  // The camera runs at 30 fps; frames before the operator's hello are not sent,
+  // so the service captures a second and a half more than are measured.
+  const int fps = 30;
+  const int captured = o.frames + 45;
+  const double seconds = static_cast<double>(captured) / fps;
+  std::string last_error;
+  for (int attempt = 0; attempt < 3 && !g_stop; ++attempt) {
+    const int port = freePort();
+    const std::string listen = "127.0.0.1:" + std::to_string(port);
+    const pid_t robot = spawn({fovead, "serve", "--listen", listen, "--insecure", "--camera", run.dataset.camera_spec,
+                               "--preset", run.condition.preset, "--budget", kBudgetMbps, "--frames",
+                               std::to_string(captured), "--timing-log",
+                               run.dir + "/timing.csv", "--log-level", "warning", "--status-interval-ms", "600000"},
+                              run.dir + "/fovead.log");
+    if (robot < 0) return R(ErrorCode::kNotFound, "cannot start " + fovead + " (--fovead PATH)");
+    // The operator says hello until the service answers (3 s): the service may still
+    // be opening its camera (TUM decodes every frame first).
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const pid_t operator_pid =
+        spawn({op, "--connect", listen, "--insecure", "--gaze", gazeScript(run.position, 400, 50), "--frame-log",
+               run.dir + "/frames.csv", "--summary", run.dir + "/summary.json", "--budget", kBudgetMbps, "--quiet", "--duration",
+               std::to_string(static_cast<int>(seconds + 20))},
+              run.dir + "/operator.log");
+    if (operator_pid < 0) {
+      (void)waitFor(robot, std::chrono::steady_clock::now());
+      return R(ErrorCode::kNotFound, "cannot start " + op + " (--operator PATH)");
+    }
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(static_cast<int>(seconds * 2 + 30));
+    const int op_status = waitFor(operator_pid, deadline);
+    const int robot_status = waitFor(robot, std::chrono::steady_clock::now() + std::chrono::seconds(10));
+    if (g_stop) break;
+    Result<RunResult> r = readRun(run.dir, o.frames);
+    if (r && r->frames >= o.frames) {
+      r->dataset = run.dataset.name;
+      r->condition = run.condition.name;
+      r->position = run.position.index;
+      return r;
+    }
+    last_error = (r ? "only " + std::to_string(r->frames) + " of " + std::to_string(o.frames) + " frames decoded"
+                    : r.status().message()) +
+                 " (operator exit " + std::to_string(op_status) + ": " + tail(run.dir + "/operator.log") +
+                 "; fovead exit " + std::to_string(robot_status) + ": " + tail(run.dir + "/fovead.log") + ")";
+    std::printf("    attempt %d failed: %s\n", attempt + 1, last_error.c_str());
+  }
+  if (g_stop) return R(ErrorCode::kUnavailable, "interrupted");
+  return R(ErrorCode::kIoError, last_error);
+}
+
+// The scene's geometry and the quality frame, from the dataset's camera in this process.
+struct DatasetScene {
+  SceneGeometry geometry;
+  hal::RgbdFrame quality_frame;
+};
+
+Result<DatasetScene> openScene(const Dataset& d, int quality_frame) {
+  using R = Result<DatasetScene>;
+  std::string spec = d.camera_spec;
+  if (const auto at = spec.find(",realtime=on"); at != std::string::npos) spec.erase(at, 12);  // as fast as it decodes
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(spec);
+  if (!created) return created.status();
+  hal::Camera& camera = *created.value();
+  if (Status s = camera.open(); !s) return s;
+  if (Status s = camera.start(); !s) return s;
+  const hal::CameraInfo& info = camera.info();
+  DatasetScene scene{{}, hal::RgbdFrame(info.intrinsics.width, info.intrinsics.height)};
+  for (int k = 0; k <= quality_frame; ++k) {
+    if (Status s = camera.acquire(scene.quality_frame, std::chrono::seconds(5)); !s) {
+      return R(s.code(), d.name + ": frame " + std::to_string(k) + ": " + s.message());
+    }
+    if (k == 0) {
+      const hal::RgbdFrame& f = scene.quality_frame;
+      scene.geometry.camera_m = f.T_world_cam.t_world_cam;
+      scene.geometry.up = -f.T_world_cam.R_world_cam.col(1);
+      if (info.focus_point_m) {
+        scene.geometry.centre_m = *info.focus_point_m;
+      } else {
+        // The median of the first frame's points, per axis, in the world.
+        std::vector<double> axis[3];
+        const double fx = f.intrinsics.fx, fy = f.intrinsics.fy, cx = f.intrinsics.cx, cy = f.intrinsics.cy;
+        for (int v = 0; v < f.height(); v += 4) {
+          for (int u = 0; u < f.width(); u += 4) {
+            const uint16_t raw = f.depth()[static_cast<std::size_t>(v) * f.width() + u];
+            if (raw == 0) continue;
+            const double z = raw * f.depth_scale_m;
+            const Eigen::Vector3d cam((u - cx) * z / fx, (v - cy) * z / fy, z);
+            const Eigen::Vector3d w = f.T_world_cam.R_world_cam * cam + f.T_world_cam.t_world_cam;
+            for (int a = 0; a < 3; ++a) axis[a].push_back(w[a]);
+          }
+        }
+        if (axis[0].empty()) return R(ErrorCode::kInvalidInput, d.name + ": the first frame has no depth");
+        for (int a = 0; a < 3; ++a) {
+          std::nth_element(axis[a].begin(), axis[a].begin() + axis[a].size() / 2, axis[a].end());
+          scene.geometry.centre_m[a] = axis[a][axis[a].size() / 2];
+        }
+      }
+    }
+  }
+  camera.stop();
+  return scene;
+}
+
+std::string minutes(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%d:%02d", static_cast<int>(s) / 60, static_cast<int>(s) % 60);
+  return buf;
+}
+
+int run(int argc, char** argv) {
+  bool help = false;
+  Result<Options> parsed = parseOptions(argc, argv, help);
+  if (help) {
+    std::printf("%s", kHelp);
+    return kExitOk;
+  }
+  if (!parsed) {
+    std::fprintf(stderr, "fovea-eval: %s\n", parsed.status().message().c_str());
+    return kExitUsage;
+  }
+  const Options& o = parsed.value();
+  std::error_code ec;
+  const bool have_tum = fs::exists(o.tum + "/associations.txt", ec);
+  if (o.tum_given && !have_tum) {
+    std::fprintf(stderr, "fovea-eval: --tum %s: no TUM sequence there (associations.txt)\n", o.tum.c_str());
+    return kExitUsage;
+  }
+  const std::vector<Dataset> available = defaultDatasets(have_tum ? fs::absolute(o.tum).string() : "");
+  std::vector<Dataset> datasets = available;
+  if (!o.datasets.empty()) {
+    Result<std::vector<Dataset>> d = selectDatasets(available, o.datasets);
+    if (!d) {
+      std::fprintf(stderr, "fovea-eval: %s\n", d.status().message().c_str());
+      return kExitUsage;
+    }
+    datasets = d.value();
+  }
+  Result<std::vector<Condition>> conditions = selectConditions(o.conditions);
+  if (!conditions) {
+    std::fprintf(stderr, "fovea-eval: %s\n", conditions.status().message().c_str());
+    return kExitUsage;
+  }
+  const std::string fovead = findProgram(o.fovead, "fovead", {".", "../firmware", "../../firmware"});
+  const std::string op = findProgram(o.op, "fovea-operator", {".", ".."});
+
+  const fs::path out(o.out_dir);
+  if (o.fresh) fs::remove_all(out / "runs", ec);
+  fs::create_directories(out / "runs", ec);
+  fs::create_directories(out / "images", ec);
+  if (ec) {
+    std::fprintf(stderr, "fovea-eval: %s: %s\n", o.out_dir.c_str(), ec.message().c_str());
+    return kExitFailure;
+  }
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  // The plan: per dataset its positions, then every condition at each position
+  // (so that a change in the machine's load hits all conditions alike).
+  ReportInput report;
+  report.options_line = "fovea-eval";
+  for (int i = 1; i < argc; ++i) report.options_line += std::string(" ") + argv[i];
+  report.frames = o.frames;
+  report.seed = o.seed;
+  report.conditions = conditions.value();
+  std::vector<RunSpec> plan;
+  std::map<std::string, DatasetScene> scenes;
+  for (const Dataset& d : datasets) {
+    Result<DatasetScene> scene = openScene(d, o.quality_frame);
+    if (!scene) {
+      std::fprintf(stderr, "fovea-eval: %s: %s\n", d.name.c_str(), scene.status().message().c_str());
+      return kExitFailure;
+    }
+    const std::vector<HmdPosition> positions = makePositions(scene->geometry, o.positions, o.seed);
+    report.datasets.push_back({d, scene->geometry, positions});
+    for (const HmdPosition& p : positions) {
+      for (const Condition& c : conditions.value()) {
+        plan.push_back({d, c, p, (out / "runs" / runName(d, c, p)).string()});
+      }
+    }
+    scenes.emplace(d.name, std::move(scene.value()));
+  }
+
+  // Streaming runs.
+  const auto started = std::chrono::steady_clock::now();
+  double measured_s = 0.0;
+  int measured = 0, failed = 0;
+  for (std::size_t k = 0; k < plan.size() && !g_stop; ++k) {
+    const RunSpec& r = plan[k];
+    const std::string done = r.dir + "/done";
+    if (fs::exists(done, ec)) {
+      Result<RunResult> again = readRun(r.dir, o.frames);
+      if (again && again->frames >= o.frames) {
+        again->dataset = r.dataset.name;
+        again->condition = r.condition.name;
+        again->position = r.position.index;
+        report.runs.push_back(std::move(again.value()));
+        continue;
+      }
+    }
+    const std::size_t left = plan.size() - k;
+    const double per_run = measured > 0 ? measured_s / measured : (o.frames + 45) / 30.0 + 1.0;
+    std::printf("[%zu/%zu] %s %s position %d (%.2f m from the centre): %d frames; about %s left\n", k + 1, plan.size(),
+                r.dataset.name.c_str(), r.condition.name.c_str(), r.position.index, r.position.distance_m, o.frames,
+                minutes(per_run * static_cast<double>(left)).c_str());
+    std::fflush(stdout);
+    const auto t0 = std::chrono::steady_clock::now();
+    Result<RunResult> result = runOne(r, o, fovead, op);
+    if (g_stop) break;
+    measured_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++measured;
+    if (!result) {
+      std::printf("    failed: %s\n", result.status().message().c_str());
+      ++failed;
+      continue;
+    }
+    std::ofstream(done) << "ok\n";
+    std::printf("    %.3f MB/s, latency %.1f ms mean, %d frames\n", result->mb_per_s,
+                result->end_to_end_ms.empty() ? 0.0 : [&] {
+                  double s = 0;
+                  for (double v : result->end_to_end_ms) s += v;
+                  return s / static_cast<double>(result->end_to_end_ms.size());
+                }(),
+                result->frames);
+    report.runs.push_back(std::move(result.value()));
+  }
+  if (g_stop) {
+    std::printf("interrupted: %zu runs are kept in %s/runs; the same command resumes\n", report.runs.size(),
+                o.out_dir.c_str());
+    return kExitInterrupted;
+  }
+
+  // Quality: the images of each dataset's first positions.
+  Result<std::unique_ptr<QualityEvaluator>> evaluator = [&]() -> Result<std::unique_ptr<QualityEvaluator>> {
+    std::size_t max_points = 0;
+    for (const auto& [name, s] : scenes) max_points = std::max(max_points, s.quality_frame.pixelCount());
+    return QualityEvaluator::create(max_points);
+  }();
+  if (!evaluator) {
+    std::fprintf(stderr, "fovea-eval: %s\n", evaluator.status().message().c_str());
+    return kExitFailure;
+  }
+  QualityOptions quality;
+  report.quality_options = quality;
+  report.quality_frame = o.quality_frame;
+  for (const ReportDataset& d : report.datasets) {
+    const int count = o.quality_positions < 0 ? static_cast<int>(d.positions.size())
+                                              : std::min<int>(o.quality_positions, static_cast<int>(d.positions.size()));
+    for (int k = 0; k < count && !g_stop; ++k) {
+      QualityOptions q = quality;
+      // Side-by-side images of the first position only: enough to look at.
+      if (k == 0) q.image_path_prefix = (out / "images" / (d.dataset.name + "_p1")).string();
+      std::printf("quality: %s position %d\n", d.dataset.name.c_str(), d.positions[k].index);
+      std::fflush(stdout);
+      Result<std::vector<QualityRow>> rows =
+          (*evaluator)->evaluate(scenes.at(d.dataset.name).quality_frame, d.dataset, d.positions[k], report.conditions, q);
+      if (!rows) {
+        std::fprintf(stderr, "fovea-eval: quality %s position %d: %s\n", d.dataset.name.c_str(), d.positions[k].index,
+                     rows.status().message().c_str());
+        return kExitFailure;
+      }
+      for (QualityRow& row : rows.value()) {
+        if (!row.image.empty()) row.image = fs::relative(row.image, out, ec).string();
+        report.quality.push_back(std::move(row));
+      }
+    }
+  }
+  if (g_stop) return kExitInterrupted;
+
+  report.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  report.failed_runs = failed;
+  if (Status s = writeReport(out.string(), report, o.plot); !s) {
+    std::fprintf(stderr, "fovea-eval: %s\n", s.message().c_str());
+    return kExitFailure;
+  }
+  std::printf("wrote %s/report.md (%zu runs, %d failed)\n", o.out_dir.c_str(), report.runs.size(), failed);
+  return failed == 0 ? kExitOk : kExitFailure;
+}
+
+}  // namespace
+}  // namespace fovea::tools::eval
+
+int main(int argc, char** argv) { return fovea::tools::eval::run(argc, argv); }

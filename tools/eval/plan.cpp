@@ -1,0 +1,110 @@
+#include "tools/eval/plan.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <random>
+#include <sstream>
+
+#include <Eigen/Geometry>
+
+namespace fovea::tools::eval {
+
+std::vector<Dataset> defaultDatasets(const std::string& tum_path) {
+  std::vector<Dataset> d = {{"living-room", "LIV", "mock:living-room,realtime=on"},
+                            {"balloon", "BAL", "mock:balloon,realtime=on"}};
+  if (!tum_path.empty()) d.push_back({"tum", "", "tum:" + tum_path + ",realtime=on,loop=on"});
+  return d;
+}
+
+std::vector<Condition> defaultConditions() {
+  return {{"F1", "F1"}, {"F2", "F2"}, {"F3", "F3"}, {"FREF", "FREF"}, {"ACUITY", "ACUITY"}};
+}
+
+namespace {
+std::vector<std::string> splitComma(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+}  // namespace
+
+Result<std::vector<Condition>> selectConditions(const std::string& names) {
+  const std::vector<Condition> all = defaultConditions();
+  std::vector<Condition> out;
+  for (const std::string& n : splitComma(names)) {
+    auto it = std::find_if(all.begin(), all.end(), [&](const Condition& c) { return c.name == n; });
+    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY)");
+    out.push_back(*it);
+  }
+  if (out.empty()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: none given");
+  return out;
+}
+
+Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, const std::string& names) {
+  std::vector<Dataset> out;
+  for (const std::string& n : splitComma(names)) {
+    auto it = std::find_if(all.begin(), all.end(), [&](const Dataset& d) { return d.name == n; });
+    if (it == all.end()) {
+      return Result<std::vector<Dataset>>(ErrorCode::kInvalidArgument,
+                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, tum with --tum PATH)");
+    }
+    out.push_back(*it);
+  }
+  if (out.empty()) return Result<std::vector<Dataset>>(ErrorCode::kInvalidArgument, "--datasets: none given");
+  return out;
+}
+
+std::vector<HmdPosition> makePositions(const SceneGeometry& scene, int count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const Eigen::Vector3d up = scene.up.normalized();
+  Eigen::Vector3d toward = scene.camera_m - scene.centre_m;  // the camera's bearing, from the centre
+  const double height = toward.dot(up);
+  toward -= height * up;
+  const double ground = toward.norm();
+  const Eigen::Vector3d bearing = ground > 1e-9 ? Eigen::Vector3d(toward / ground) : up.unitOrthogonal();
+  const double base = std::max(0.5, (scene.camera_m - scene.centre_m).norm());
+  std::vector<HmdPosition> out;
+  for (int k = 0; k < count; ++k) {
+    const double spread = count > 1 ? static_cast<double>(k) / (count - 1) : 0.5;
+    const double distance = base * (0.6 + 0.8 * spread + 0.05 * unit(rng));
+    const double azimuth = 30.0 * unit(rng) * std::numbers::pi / 180.0;
+    const double dh = 0.15 * unit(rng);
+    const Eigen::Vector3d dir = Eigen::AngleAxisd(azimuth, up) * bearing;
+    // The eye keeps the camera's height above the centre (plus jitter); the
+    // horizontal distance makes the straight-line distance the chosen one.
+    const double h = height + dh;
+    const double horizontal = std::sqrt(std::max(0.01, distance * distance - h * h));
+    HmdPosition p;
+    p.index = k + 1;
+    p.eye_m = scene.centre_m + horizontal * dir + h * up;
+    p.distance_m = (p.eye_m - scene.centre_m).norm();
+    const Eigen::Vector3d across = up.cross(dir).normalized();
+    p.targets_m.push_back(scene.centre_m);
+    for (int t = 0; t < 4; ++t) p.targets_m.push_back(scene.centre_m + 0.5 * unit(rng) * across + 0.3 * unit(rng) * up);
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+std::string gazeScript(const HmdPosition& position, int dwell_ms, int saccade_ms) {
+  char buf[96];
+  const auto v = [&](const Eigen::Vector3d& x) {
+    std::snprintf(buf, sizeof buf, "%.4f,%.4f,%.4f", x.x(), x.y(), x.z());
+    return std::string(buf);
+  };
+  std::string s = "scan:" + v(position.eye_m) + ">";
+  for (std::size_t i = 0; i < position.targets_m.size(); ++i) s += (i ? ";" : "") + v(position.targets_m[i]);
+  return s + "@" + std::to_string(dwell_ms) + "/" + std::to_string(saccade_ms);
+}
+
+std::string runName(const Dataset& d, const Condition& c, const HmdPosition& p) {
+  return d.name + "_" + c.name + "_p" + std::to_string(p.index);
+}
+
+}  // namespace fovea::tools::eval

@@ -1,0 +1,65 @@
+// What fovea-eval runs (issue 14, docs/eval.md): datasets, conditions, and the
+// seeded HMD positions with their gaze scripts, as in the paper's section IV:
+// five positions at varying distances from the scene's centre, each watching a
+// fixation-and-saccade sequence around it.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hal/result.h"
+
+namespace fovea::tools::eval {
+
+struct Dataset {
+  std::string name;         // "living-room" (LIV), "balloon" (BAL), "tum"
+  std::string paper_name;   // "LIV", "BAL", "" (not in the paper)
+  std::string camera_spec;  // for fovead serve --camera (paced in real time)
+};
+
+// living-room and balloon from the mock camera; tum when tum_path is not empty.
+std::vector<Dataset> defaultDatasets(const std::string& tum_path);
+
+struct Condition {
+  std::string name;    // F1, F2, F3, FREF, ACUITY
+  std::string preset;  // fovead --preset
+};
+// The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper).
+std::vector<Condition> defaultConditions();
+// Picks names out of defaultConditions() (comma list); errors name the unknown one.
+Result<std::vector<Condition>> selectConditions(const std::string& names);
+Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, const std::string& names);
+
+// Where the scene is, from the camera's first frame: its centre (the camera's
+// focus point, or the median of the first frame's points), the camera's position
+// and the world's up (minus the camera's y axis).
+struct SceneGeometry {
+  Eigen::Vector3d centre_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d camera_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+};
+
+struct HmdPosition {
+  int index = 0;                           // 1-based
+  Eigen::Vector3d eye_m;                   // the HMD (the eye between the lenses)
+  double distance_m = 0.0;                 // to the scene's centre
+  std::vector<Eigen::Vector3d> targets_m;  // fixations, in order; the first is the centre
+};
+
+// `count` positions, seeded (the same seed gives the same positions): distances
+// spread from 0.6 to 1.4 times the camera's distance to the centre (in order, with
+// a seeded jitter), each on the camera's side of the scene within 30 degrees of
+// its bearing, at the camera's height within 0.15 m; five fixations per position,
+// the centre and four seeded points within 0.5 m of it across the view.
+std::vector<HmdPosition> makePositions(const SceneGeometry& scene, int count, uint64_t seed);
+
+// fovea-operator --gaze for a position: scan:EYE>T1;T2;...@DWELL/SACCADE.
+std::string gazeScript(const HmdPosition& position, int dwell_ms, int saccade_ms);
+
+// A run's directory name under the output's runs/: "living-room_F1_p3".
+std::string runName(const Dataset& d, const Condition& c, const HmdPosition& p);
+
+}  // namespace fovea::tools::eval

@@ -1,0 +1,166 @@
+#include "tools/eval/quality_eval.h"
+
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "net/codec.h"
+#include "pipeline/backproject.h"
+#include "pipeline/error_metrics.h"
+#include "pipeline/foveator.h"
+#include "tools/eval/quality/png_writer.h"
+#include "tools/eval/quality/splat_renderer.h"
+
+namespace fovea::tools::eval {
+
+struct QualityEvaluator::State {
+  std::size_t max_points = 0;
+  pipeline::PointCloud cloud;
+  pipeline::FoveatedCloud out;
+  pipeline::FoveatedCloud decoded;
+  std::vector<uint32_t> representative;
+  std::vector<float> size_m;
+  pipeline::ErrorEvaluator errors;
+  net::ChunkEncoder encoder;
+  pipeline::Foveator foveator;  // reconfigured per condition
+  Image reference, image;
+};
+
+QualityEvaluator::QualityEvaluator(std::unique_ptr<State> state) : s_(std::move(state)) {}
+QualityEvaluator::~QualityEvaluator() = default;
+
+Result<std::unique_ptr<QualityEvaluator>> QualityEvaluator::create(std::size_t max_points) {
+  Result<pipeline::ErrorEvaluator> errors = pipeline::ErrorEvaluator::create(max_points);
+  if (!errors) return errors.status();
+  // The stream's codec at its defaults (what fovead serve sends).
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
+  if (!encoder) return encoder.status();
+  Result<pipeline::Foveator> foveator =
+      pipeline::Foveator::create({max_points, max_points, pipeline::KernelSet::kSimd, 1}, pipeline::FoveationConfig{});
+  if (!foveator) return foveator.status();
+  auto state = std::unique_ptr<State>(new State{max_points, pipeline::PointCloud(max_points),
+                                                pipeline::FoveatedCloud(max_points), pipeline::FoveatedCloud(max_points),
+                                                std::vector<uint32_t>(max_points), std::vector<float>(max_points),
+                                                std::move(errors.value()), std::move(encoder.value()),
+                                                std::move(foveator.value()), {}, {}});
+  return std::unique_ptr<QualityEvaluator>(new QualityEvaluator(std::move(state)));
+}
+
+EyeCamera eyeCamera(const HmdPosition& position, const Eigen::Vector3d& up, const QualityOptions& options) {
+  EyeCamera camera;
+  camera.position_m = position.eye_m;
+  const Eigen::Vector3d forward = (position.targets_m.front() - position.eye_m).normalized();
+  Eigen::Vector3d down = -(up - up.dot(forward) * forward);
+  down = down.norm() > 1e-9 ? Eigen::Vector3d(down.normalized()) : forward.unitOrthogonal();
+  const Eigen::Vector3d right = down.cross(forward);  // x = y cross z
+  camera.world_from_eye.col(0) = right;
+  camera.world_from_eye.col(1) = down;
+  camera.world_from_eye.col(2) = forward;
+  camera.width = options.width;
+  camera.height = options.height;
+  camera.horizontal_fov_deg = options.horizontal_fov_deg;
+  return camera;
+}
+
+Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame& frame, const Dataset& dataset,
+                                                           const HmdPosition& position,
+                                                           const std::vector<Condition>& conditions,
+                                                           const QualityOptions& options) {
+  using R = Result<std::vector<QualityRow>>;
+  State& s = *s_;
+  pipeline::BackprojectCounts counts;
+  if (Status st = pipeline::backprojectRef(frame, pipeline::DepthRange{}, s.cloud, counts); !st) return st;
+  pipeline::Gaze gaze;
+  gaze.origin_m = position.eye_m;
+  gaze.direction = (position.targets_m.front() - position.eye_m).normalized();
+  gaze.view_known = true;  // the head looks where the eye does (fovea-operator's scripted head)
+  gaze.view_forward = gaze.direction;
+  const Eigen::Vector3d up = -frame.T_world_cam.R_world_cam.col(1);
+  const EyeCamera camera = eyeCamera(position, up, options);
+  const double fx = frame.intrinsics.fx;
+  const Eigen::Vector3d sensor = frame.T_world_cam.t_world_cam;
+
+  // FREF first: its drawing is the reference for every other condition.
+  std::vector<Condition> order = {{"FREF", "FREF"}};
+  for (const Condition& c : conditions) {
+    if (c.name != "FREF") order.push_back(c);
+  }
+  std::vector<QualityRow> rows;
+  for (const Condition& c : order) {
+    pipeline::FoveationConfig config;
+    Result<pipeline::Preset> preset = pipeline::parsePreset(c.preset);
+    if (!preset) return preset.status();
+    config.acuity.preset = preset.value();
+    config.acuity.slope = options.slope;
+    pipeline::Foveator* foveator = &s.foveator;
+    if (Status st = foveator->setConfig(config); !st) return st;
+    pipeline::FoveationStats stats;
+    if (Status st = foveator->foveate(s.cloud, gaze, s.out, stats, s.representative.data()); !st) return st;
+    QualityRow row;
+    row.dataset = dataset.name;
+    row.condition = c.name;
+    row.position = position.index;
+    pipeline::ErrorModel model{&foveator->model(), {}, options.slope};
+    for (int r = 0; r < stats.region_count; ++r) model.voxel_size_m[r] = stats.regions[r].voxel_size_m;
+    pipeline::ErrorMetrics metrics;
+    if (Status st = s.errors.evaluate(s.cloud, foveator->lastRegions(), s.representative.data(), s.out.points, gaze,
+                                      model, metrics);
+        !st) {
+      return st;
+    }
+    row.above_mar_share = metrics.all.shareAboveMar();
+
+    // Through the codec and back: what the operator draws.
+    std::array<double, pipeline::kMaxRegions> voxel_m{};
+    for (int r = 0; r < stats.region_count; ++r) voxel_m[r] = stats.regions[r].voxel_size_m;
+    if (Status st = s.encoder.encode(s.out, std::span<const double>(voxel_m.data(), stats.region_count), 0, 0); !st) {
+      return st;
+    }
+    s.decoded.clear();
+    for (std::size_t i = 0; i < s.encoder.chunkCount(); ++i) {
+      Result<net::DecodedChunk> chunk = net::decodeChunk(s.encoder.chunk(i), s.decoded);
+      if (!chunk) return R(chunk.status().code(), "decoding " + c.name + ": " + chunk.status().message());
+    }
+    // Splats: a voxel-sampled point covers its voxel; a raw one (the fovea, FREF)
+    // the camera pixel it came from, at its distance from the sensor.
+    const pipeline::PointCloud& p = s.decoded.points;
+    const std::vector<uint8_t>& regions = s.decoded.region;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      const uint8_t region = regions[i];
+      if (region != 0 && region < stats.region_count) {
+        s.size_m[i] = static_cast<float>(stats.regions[region].voxel_size_m);
+      } else {
+        const Eigen::Vector3d world = p.origin_m + Eigen::Vector3d(p.x()[i], p.y()[i], p.z()[i]);
+        s.size_m[i] = static_cast<float>((world - sensor).norm() / fx);
+      }
+    }
+    SplatCloud splats;
+    splats.x = p.x();
+    splats.y = p.y();
+    splats.z = p.z();
+    splats.rgb = p.rgb();
+    splats.size_m = s.size_m.data();
+    splats.count = p.size();
+    splats.origin_m = p.origin_m;
+    row.points = static_cast<uint32_t>(p.size());
+    const bool is_reference = c.name == "FREF";
+    Image& target = is_reference ? s.reference : s.image;
+    (void)renderSplats(splats, camera, {0, 0, 0}, target);
+    Result<FoveatedQuality> q =
+        foveatedQuality(s.reference, target, camera, gaze.direction, options.ring_edges_deg, options.slope);
+    if (!q) return q.status();
+    row.quality = q.value();
+    if (!options.image_path_prefix.empty() && !is_reference) {
+      row.image = options.image_path_prefix + "_" + c.name + ".png";
+      if (Status st = writeSideBySidePng(row.image, s.reference, target, camera, gaze.direction, options.ring_edges_deg,
+                                         options.image_scale);
+          !st) {
+        return st;
+      }
+    }
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+}  // namespace fovea::tools::eval
