@@ -29,6 +29,7 @@
 #include "pipeline/quantile.h"
 #include "pipeline/foveator.h"
 #include "tools/common/gnuplot.h"
+#include "tools/common/host.h"
 #include "tools/error_report/dynamics.h"
 #include "tools/error_report/report.h"
 
@@ -339,29 +340,14 @@ double threadCpuMs() {
 }
 
 std::string hostDescription() {
-  std::string arch = "unknown";
-#if defined(__x86_64__)
-  arch = "x86-64";
-#elif defined(__aarch64__)
-  arch = "aarch64";
-#endif
-  return arch + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads (the run uses one), " +
+  return std::string(cpuArchitecture()) + ", " + std::to_string(std::thread::hardware_concurrency()) +
+         " hardware threads (the run uses one), " +
 #if defined(__clang__)
          "clang " + std::string(__clang_version__) +
 #else
          "g++ " + std::string(__VERSION__) +
 #endif
          ", CMake build type " + FOVEA_BUILD_TYPE;
-}
-
-// The 1-minute load average; NaN where /proc is absent.
-double loadAverage() {
-  std::FILE* f = std::fopen("/proc/loadavg", "r");
-  if (!f) return kNaN;
-  double one = 0.0;
-  const int n = std::fscanf(f, "%lf", &one);
-  std::fclose(f);
-  return n == 1 ? one : kNaN;
 }
 
 std::string utcNow() {
