@@ -6,7 +6,8 @@
 // positions), the per-stage latencies, and an objective stand-in for the
 // paper's user study (foveated PSNR and SSIM of the splat-rendered clouds,
 // tools/eval/quality_eval.h). A run that finished is kept in runs/ and not
-// repeated: an interrupted evaluation resumes where it stopped.
+// repeated (its `done` file says with what settings): an interrupted evaluation
+// resumes where it stopped.
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -24,6 +25,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <optional>
@@ -232,6 +234,20 @@ struct RunSpec {
   std::string dir;
 };
 
+// What a finished run was, kept beside its logs: a run of the same name made with
+// other settings (frames, seed, positions) is not taken for this one on resume.
+// (The seed and the number of positions fix each position on a given scene.)
+std::string runSignature(const RunSpec& r, const Options& o) {
+  return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + "\nframes " + std::to_string(o.frames) +
+         "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
+         std::to_string(r.position.index) + " of " + std::to_string(o.positions) + "\n";
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
 // One run: the service and the operator as processes over loopback.
 Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string& fovead, const std::string& op) {
   using R = Result<RunResult>;
@@ -426,13 +442,14 @@ int run(int argc, char** argv) {
   for (std::size_t k = 0; k < plan.size() && !g_stop; ++k) {
     const RunSpec& r = plan[k];
     const std::string done = r.dir + "/done";
-    if (fs::exists(done, ec)) {
+    if (readFile(done) == runSignature(r, o)) {
       Result<RunResult> again = readRun(r.dir, o.frames);
       if (again && again->frames >= o.frames) {
         again->dataset = r.dataset.name;
         again->condition = r.condition.name;
         again->position = r.position.index;
         report.runs.push_back(std::move(again.value()));
+        ++report.resumed_runs;
         continue;
       }
     }
@@ -452,7 +469,7 @@ int run(int argc, char** argv) {
       ++failed;
       continue;
     }
-    std::ofstream(done) << "ok\n";
+    std::ofstream(done) << runSignature(r, o);
     std::printf("    %.3f MB/s, latency %.1f ms mean, %d frames\n", result->mb_per_s,
                 result->end_to_end_ms.empty() ? 0.0 : [&] {
                   double s = 0;

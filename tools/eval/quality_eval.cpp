@@ -1,5 +1,6 @@
 #include "tools/eval/quality_eval.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Geometry>
@@ -24,6 +25,8 @@ struct QualityEvaluator::State {
   net::ChunkEncoder encoder;
   pipeline::Foveator foveator;  // reconfigured per condition
   Image reference, image;
+  std::vector<float> spacing = std::vector<float>(4096);  // sampled pairs of one region
+  float raw_spacing_m = 0.0f;  // FREF's, for the raw points of every condition
 };
 
 QualityEvaluator::QualityEvaluator(std::unique_ptr<State> state) : s_(std::move(state)) {}
@@ -121,14 +124,39 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
       Result<net::DecodedChunk> chunk = net::decodeChunk(s.encoder.chunk(i), s.decoded);
       if (!chunk) return R(chunk.status().code(), "decoding " + c.name + ": " + chunk.status().message());
     }
-    // Splats: a voxel-sampled point covers its voxel; a raw one (the fovea, FREF)
-    // the camera pixel it came from, at its distance from the sensor.
+    // Splats, per region: the median spacing of the region's consecutive decoded
+    // points (the codec writes them in Morton order, so these are neighbours), or
+    // its voxel when that is larger. The spacing sizes raw points as the operator's
+    // viewer does (tools/operator/view_frame.h), FREF's for every condition's raw
+    // points (the same point is drawn the same in each), and keeps voxels finer than
+    // the sensor's sampling (ACUITY's 2 to 8 mm levels, one sample each) from leaving
+    // holes between them.
     const pipeline::PointCloud& p = s.decoded.points;
     const std::vector<uint8_t>& regions = s.decoded.region;
+    std::array<float, pipeline::kMaxRegions> region_size{};
+    for (int r = 0; r < pipeline::kMaxRegions; ++r) {
+      std::size_t pairs = 0;
+      for (std::size_t i = 1; i < p.size() && pairs < s.spacing.size(); ++i) {
+        if (regions[i] != r || regions[i - 1] != r) continue;
+        const float dx = p.x()[i] - p.x()[i - 1], dy = p.y()[i] - p.y()[i - 1], dz = p.z()[i] - p.z()[i - 1];
+        s.spacing[pairs++] = std::sqrt(dx * dx + dy * dy + dz * dz);
+      }
+      float spacing = 0.0f;
+      if (pairs > 0) {
+        const auto mid = s.spacing.begin() + static_cast<std::ptrdiff_t>(pairs / 2);
+        std::nth_element(s.spacing.begin(), mid, s.spacing.begin() + static_cast<std::ptrdiff_t>(pairs));
+        spacing = *mid;
+      }
+      const double voxel_m = r > 0 && r < stats.region_count ? stats.regions[r].voxel_size_m : 0.0;
+      region_size[r] = std::max(static_cast<float>(voxel_m), spacing);
+    }
+    if (c.name == "FREF") s.raw_spacing_m = region_size[0];
+    region_size[0] = s.raw_spacing_m;
     for (std::size_t i = 0; i < p.size(); ++i) {
-      const uint8_t region = regions[i];
-      if (region != 0 && region < stats.region_count) {
-        s.size_m[i] = static_cast<float>(stats.regions[region].voxel_size_m);
+      // (A lone point of a region without pairs: the camera pixel it stands for.)
+      const float size = region_size[regions[i] < pipeline::kMaxRegions ? regions[i] : 0];
+      if (size > 0.0f) {
+        s.size_m[i] = size;
       } else {
         const Eigen::Vector3d world = p.origin_m + Eigen::Vector3d(p.x()[i], p.y()[i], p.z()[i]);
         s.size_m[i] = static_cast<float>((world - sensor).norm() / fx);

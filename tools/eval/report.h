@@ -27,6 +27,7 @@ struct ReportInput {
   std::vector<ReportDataset> datasets;
   std::vector<RunResult> runs;
   int failed_runs = 0;
+  int resumed_runs = 0;  // read back from runs/ rather than measured by this invocation
   QualityOptions quality_options;
   int quality_frame = 0;
   std::vector<QualityRow> quality;
