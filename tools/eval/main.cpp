@@ -455,9 +455,10 @@ int run(int argc, char** argv) {
     }
     const std::size_t left = plan.size() - k;
     const double per_run = measured > 0 ? measured_s / measured : (o.frames + 45) / 30.0 + 1.0;
-    std::printf("[%zu/%zu] %s %s position %d (%.2f m from the centre): %d frames; about %s left\n", k + 1, plan.size(),
-                r.dataset.name.c_str(), r.condition.name.c_str(), r.position.index, r.position.distance_m, o.frames,
-                minutes(per_run * static_cast<double>(left)).c_str());
+    std::printf("[%zu/%zu] %s %s position %d (%.2f m from the centre): %d frames (%zu of %zu done); about %s left\n",
+                k + 1, plan.size(), r.dataset.name.c_str(), r.condition.name.c_str(), r.position.index,
+                r.position.distance_m, o.frames, k * static_cast<std::size_t>(o.frames),
+                plan.size() * static_cast<std::size_t>(o.frames), minutes(per_run * static_cast<double>(left)).c_str());
     std::fflush(stdout);
     const auto t0 = std::chrono::steady_clock::now();
     Result<RunResult> result = runOne(r, o, fovead, op);

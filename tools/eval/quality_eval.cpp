@@ -179,8 +179,15 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     if (!q) return q.status();
     row.quality = q.value();
     if (!options.image_path_prefix.empty() && !is_reference) {
+      // The lines on the difference: the condition's own region borders (the paper's
+      // cones), or, for ACUITY, which has none, the measuring rings.
+      std::vector<double> lines = {0.0};
+      for (int b = 0; b < foveator->model().boundCount(); ++b) {
+        if (foveator->model().boundDeg(b) < 90.0) lines.push_back(foveator->model().boundDeg(b));
+      }
+      if (lines.size() < 2) lines = options.ring_edges_deg;
       row.image = options.image_path_prefix + "_" + c.name + ".png";
-      if (Status st = writeSideBySidePng(row.image, s.reference, target, camera, gaze.direction, options.ring_edges_deg,
+      if (Status st = writeSideBySidePng(row.image, s.reference, target, camera, gaze.direction, lines,
                                          options.image_scale);
           !st) {
         return st;

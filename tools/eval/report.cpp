@@ -383,8 +383,9 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     }
     md << "\n";
   }
-  md << "### Side by side\n\nReference (FREF) | condition | difference x4 with the rings drawn, from position 1's eye "
-        "(4x smaller than rendered):\n\n";
+  md << "### Side by side\n\nReference (FREF) | condition | difference x4, from position 1's eye (4x smaller than "
+        "rendered). On the difference: the condition's region borders (its cones, those within 90 degrees) in cyan, or "
+        "for ACUITY, which has none, the measuring rings; the gaze is the magenta cross.\n\n";
   for (const QualityRow& q : in.quality) {
     if (q.image.empty() || q.condition == "FREF") continue;
     md << "- " << q.dataset << ", " << q.condition << ": [" << q.image << "](" << q.image << ")\n";
