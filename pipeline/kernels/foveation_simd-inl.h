@@ -127,6 +127,35 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
   }
 }
 
+// ---- the eye's offset ------------------------------------------------------------
+
+// A point seen from the eye: v = (origin - H) + p, its part t along the unit gaze L
+// and its distance d from the gaze axis, with axialRadial()'s expressions in that
+// order (partition.h): t = vx lx + vy ly + vz lz, left to right; r = v - t L;
+// d = sqrt(rx^2 + ry^2 + rz^2). In the vectors' precision (double for the partition
+// and the hit cone, float for ACUITY's levels).
+template <class D>
+struct EyeOffset {
+  hn::Vec<D> vx, vy, vz, t, d;
+};
+template <class D, typename T>
+HWY_INLINE EyeOffset<D> EyeOffsetVector(D d, const T* origin_minus_eye, const T* l, hn::Vec<D> px, hn::Vec<D> py,
+                                        hn::Vec<D> pz) {
+  EyeOffset<D> e;
+  e.vx = hn::Add(hn::Set(d, origin_minus_eye[0]), px);
+  e.vy = hn::Add(hn::Set(d, origin_minus_eye[1]), py);
+  e.vz = hn::Add(hn::Set(d, origin_minus_eye[2]), pz);
+  const auto lx = hn::Set(d, l[0]);
+  const auto ly = hn::Set(d, l[1]);
+  const auto lz = hn::Set(d, l[2]);
+  e.t = hn::Add(hn::Add(hn::Mul(e.vx, lx), hn::Mul(e.vy, ly)), hn::Mul(e.vz, lz));
+  const auto rx = hn::Sub(e.vx, hn::Mul(e.t, lx));
+  const auto ry = hn::Sub(e.vy, hn::Mul(e.t, ly));
+  const auto rz = hn::Sub(e.vz, hn::Mul(e.t, lz));
+  e.d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+  return e;
+}
+
 // ---- partition ----------------------------------------------------------------
 
 // Regions of one vector of points (x, y, z: float arrays of at least Lanes(dd)).
@@ -138,18 +167,9 @@ HWY_INLINE hn::Vec<DD> PartitionVector(DD dd, const PartitionParams& p, const fl
   const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
   const auto pz = hn::PromoteTo(dd, hn::LoadU(df, zs));
   const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
-  const auto vx = hn::Add(hn::Set(dd, p.origin_minus_eye[0]), px);
-  const auto vy = hn::Add(hn::Set(dd, p.origin_minus_eye[1]), py);
-  const auto vz = hn::Add(hn::Set(dd, p.origin_minus_eye[2]), pz);
-  const auto lx = hn::Set(dd, p.l[0]);
-  const auto ly = hn::Set(dd, p.l[1]);
-  const auto lz = hn::Set(dd, p.l[2]);
-  // t = vx lx + vy ly + vz lz (left to right); r = v - t l; d = sqrt(rx^2 + ry^2 + rz^2)
-  const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
-  const auto rx = hn::Sub(vx, hn::Mul(t, lx));
-  const auto ry = hn::Sub(vy, hn::Mul(t, ly));
-  const auto rz = hn::Sub(vz, hn::Mul(t, lz));
-  const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+  const EyeOffset<DD> e = EyeOffsetVector(dd, p.origin_minus_eye, p.l, px, py, pz);
+  const auto t = e.t;
+  const auto d = e.d;
   const auto zero = hn::Zero(dd);
   const auto ahead = hn::Ge(t, zero);
   // The first bound that holds wins: walk them from the outermost inwards.
@@ -229,17 +249,8 @@ HWY_INLINE hn::Vec<DF> LevelVector(DF df, const LevelParams& p, const float* xs,
   const auto py = hn::LoadU(df, ys);
   const auto pz = hn::LoadU(df, zs);
   const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
-  const auto vx = hn::Add(hn::Set(df, p.origin_minus_eye[0]), px);
-  const auto vy = hn::Add(hn::Set(df, p.origin_minus_eye[1]), py);
-  const auto vz = hn::Add(hn::Set(df, p.origin_minus_eye[2]), pz);
-  const auto lx = hn::Set(df, p.l[0]);
-  const auto ly = hn::Set(df, p.l[1]);
-  const auto lz = hn::Set(df, p.l[2]);
-  const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
-  const auto rx = hn::Sub(vx, hn::Mul(t, lx));
-  const auto ry = hn::Sub(vy, hn::Mul(t, ly));
-  const auto rz = hn::Sub(vz, hn::Mul(t, lz));
-  const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+  const EyeOffset<DF> e = EyeOffsetVector(df, p.origin_minus_eye, p.l, px, py, pz);
+  const auto vx = e.vx, vy = e.vy, vz = e.vz, t = e.t, d = e.d;
   const auto r = hn::Sqrt(hn::Add(hn::Add(hn::Mul(vx, vx), hn::Mul(vy, vy)), hn::Mul(vz, vz)));
   // eccentricitySpecDeg(t, d)
   const auto zero = hn::Zero(df);
@@ -353,9 +364,6 @@ inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z,
   constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
   HWY_ALIGN double reg[kMax];
   HWY_ALIGN float tx[kMax], ty[kMax], tz[kMax];
-  const auto lx = hn::Set(dd, l[0]);
-  const auto ly = hn::Set(dd, l[1]);
-  const auto lz = hn::Set(dd, l[2]);
   const auto zero = hn::Zero(dd);
   std::size_t m = 0;
   for (std::size_t b = 0; b < n; b += kBlock) {
@@ -388,14 +396,10 @@ inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z,
         std::memcpy(tz, zs, valid * sizeof(float));
         xs = tx, ys = ty, zs = tz;
       }
-      const auto vx = hn::Add(hn::Set(dd, origin_minus_eye[0]), hn::PromoteTo(dd, hn::LoadU(df, xs)));
-      const auto vy = hn::Add(hn::Set(dd, origin_minus_eye[1]), hn::PromoteTo(dd, hn::LoadU(df, ys)));
-      const auto vz = hn::Add(hn::Set(dd, origin_minus_eye[2]), hn::PromoteTo(dd, hn::LoadU(df, zs)));
-      const auto t = hn::Add(hn::Add(hn::Mul(vx, lx), hn::Mul(vy, ly)), hn::Mul(vz, lz));
-      const auto rx = hn::Sub(vx, hn::Mul(t, lx));
-      const auto ry = hn::Sub(vy, hn::Mul(t, ly));
-      const auto rz = hn::Sub(vz, hn::Mul(t, lz));
-      const auto d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
+      const auto e = EyeOffsetVector(dd, origin_minus_eye, l, hn::PromoteTo(dd, hn::LoadU(df, xs)),
+                                     hn::PromoteTo(dd, hn::LoadU(df, ys)), hn::PromoteTo(dd, hn::LoadU(df, zs)));
+      const auto t = e.t;
+      const auto d = e.d;
       const auto inside = hn::And(hn::And(hn::Gt(hn::Load(dd, reg), zero), hn::Gt(t, zero)),
                                   hn::Le(d, hn::Mul(hn::Set(dd, tan_cone), t)));
       m += hn::CompressBlendedStore(t, inside, dd, t_out + m);
