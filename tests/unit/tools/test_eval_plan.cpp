@@ -1,6 +1,7 @@
 // fovea-eval's plan (seeded HMD positions, gaze scripts, selections) and its
 // reading of a run's logs (tools/eval/results.h) on logs written here by hand.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
