@@ -127,33 +127,24 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
   }
 }
 
-// ---- the eye's offset ------------------------------------------------------------
+// ---- the point seen from the eye ------------------------------------------------
 
-// A point seen from the eye: v = (origin - H) + p, its part t along the unit gaze L
-// and its distance d from the gaze axis, with axialRadial()'s expressions in that
-// order (partition.h): t = vx lx + vy ly + vz lz, left to right; r = v - t L;
-// d = sqrt(rx^2 + ry^2 + rz^2). In the vectors' precision (double for the partition
-// and the hit cone, float for ACUITY's levels).
-template <class D>
-struct EyeOffset {
-  hn::Vec<D> vx, vy, vz, t, d;
-};
+// With v = P - H (vx, vy, vz) and the unit gaze L: t = v.L, the part of v along the
+// gaze, and d = |v - t L|, its distance from the gaze axis, with axialRadial()'s
+// expressions in that order (partition.h): t = vx lx + vy ly + vz lz, left to right;
+// r = v - t L; d = sqrt(rx^2 + ry^2 + rz^2). In the vectors' precision (double for
+// the partition and the hit cone, float for ACUITY's levels). Two functions, not a
+// struct: SVE's vectors are sizeless and cannot be members.
 template <class D, typename T>
-HWY_INLINE EyeOffset<D> EyeOffsetVector(D d, const T* origin_minus_eye, const T* l, hn::Vec<D> px, hn::Vec<D> py,
-                                        hn::Vec<D> pz) {
-  EyeOffset<D> e;
-  e.vx = hn::Add(hn::Set(d, origin_minus_eye[0]), px);
-  e.vy = hn::Add(hn::Set(d, origin_minus_eye[1]), py);
-  e.vz = hn::Add(hn::Set(d, origin_minus_eye[2]), pz);
-  const auto lx = hn::Set(d, l[0]);
-  const auto ly = hn::Set(d, l[1]);
-  const auto lz = hn::Set(d, l[2]);
-  e.t = hn::Add(hn::Add(hn::Mul(e.vx, lx), hn::Mul(e.vy, ly)), hn::Mul(e.vz, lz));
-  const auto rx = hn::Sub(e.vx, hn::Mul(e.t, lx));
-  const auto ry = hn::Sub(e.vy, hn::Mul(e.t, ly));
-  const auto rz = hn::Sub(e.vz, hn::Mul(e.t, lz));
-  e.d = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
-  return e;
+HWY_INLINE hn::Vec<D> AlongGaze(D d, const T* l, hn::Vec<D> vx, hn::Vec<D> vy, hn::Vec<D> vz) {
+  return hn::Add(hn::Add(hn::Mul(vx, hn::Set(d, l[0])), hn::Mul(vy, hn::Set(d, l[1]))), hn::Mul(vz, hn::Set(d, l[2])));
+}
+template <class D, typename T>
+HWY_INLINE hn::Vec<D> FromGazeAxis(D d, const T* l, hn::Vec<D> vx, hn::Vec<D> vy, hn::Vec<D> vz, hn::Vec<D> t) {
+  const auto rx = hn::Sub(vx, hn::Mul(t, hn::Set(d, l[0])));
+  const auto ry = hn::Sub(vy, hn::Mul(t, hn::Set(d, l[1])));
+  const auto rz = hn::Sub(vz, hn::Mul(t, hn::Set(d, l[2])));
+  return hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), hn::Mul(rz, rz)));
 }
 
 // ---- partition ----------------------------------------------------------------
@@ -167,9 +158,11 @@ HWY_INLINE hn::Vec<DD> PartitionVector(DD dd, const PartitionParams& p, const fl
   const auto py = hn::PromoteTo(dd, hn::LoadU(df, ys));
   const auto pz = hn::PromoteTo(dd, hn::LoadU(df, zs));
   const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
-  const EyeOffset<DD> e = EyeOffsetVector(dd, p.origin_minus_eye, p.l, px, py, pz);
-  const auto t = e.t;
-  const auto d = e.d;
+  const auto vx = hn::Add(hn::Set(dd, p.origin_minus_eye[0]), px);
+  const auto vy = hn::Add(hn::Set(dd, p.origin_minus_eye[1]), py);
+  const auto vz = hn::Add(hn::Set(dd, p.origin_minus_eye[2]), pz);
+  const auto t = AlongGaze(dd, p.l, vx, vy, vz);
+  const auto d = FromGazeAxis(dd, p.l, vx, vy, vz, t);
   const auto zero = hn::Zero(dd);
   const auto ahead = hn::Ge(t, zero);
   // The first bound that holds wins: walk them from the outermost inwards.
@@ -249,8 +242,11 @@ HWY_INLINE hn::Vec<DF> LevelVector(DF df, const LevelParams& p, const float* xs,
   const auto py = hn::LoadU(df, ys);
   const auto pz = hn::LoadU(df, zs);
   const auto finite = hn::And(hn::And(hn::IsFinite(px), hn::IsFinite(py)), hn::IsFinite(pz));
-  const EyeOffset<DF> e = EyeOffsetVector(df, p.origin_minus_eye, p.l, px, py, pz);
-  const auto vx = e.vx, vy = e.vy, vz = e.vz, t = e.t, d = e.d;
+  const auto vx = hn::Add(hn::Set(df, p.origin_minus_eye[0]), px);
+  const auto vy = hn::Add(hn::Set(df, p.origin_minus_eye[1]), py);
+  const auto vz = hn::Add(hn::Set(df, p.origin_minus_eye[2]), pz);
+  const auto t = AlongGaze(df, p.l, vx, vy, vz);
+  const auto d = FromGazeAxis(df, p.l, vx, vy, vz, t);
   const auto r = hn::Sqrt(hn::Add(hn::Add(hn::Mul(vx, vx), hn::Mul(vy, vy)), hn::Mul(vz, vz)));
   // eccentricitySpecDeg(t, d)
   const auto zero = hn::Zero(df);
@@ -396,10 +392,11 @@ inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z,
         std::memcpy(tz, zs, valid * sizeof(float));
         xs = tx, ys = ty, zs = tz;
       }
-      const auto e = EyeOffsetVector(dd, origin_minus_eye, l, hn::PromoteTo(dd, hn::LoadU(df, xs)),
-                                     hn::PromoteTo(dd, hn::LoadU(df, ys)), hn::PromoteTo(dd, hn::LoadU(df, zs)));
-      const auto t = e.t;
-      const auto d = e.d;
+      const auto vx = hn::Add(hn::Set(dd, origin_minus_eye[0]), hn::PromoteTo(dd, hn::LoadU(df, xs)));
+      const auto vy = hn::Add(hn::Set(dd, origin_minus_eye[1]), hn::PromoteTo(dd, hn::LoadU(df, ys)));
+      const auto vz = hn::Add(hn::Set(dd, origin_minus_eye[2]), hn::PromoteTo(dd, hn::LoadU(df, zs)));
+      const auto t = AlongGaze(dd, l, vx, vy, vz);
+      const auto d = FromGazeAxis(dd, l, vx, vy, vz, t);
       const auto inside = hn::And(hn::And(hn::Gt(hn::Load(dd, reg), zero), hn::Gt(t, zero)),
                                   hn::Le(d, hn::Mul(hn::Set(dd, tan_cone), t)));
       m += hn::CompressBlendedStore(t, inside, dd, t_out + m);
