@@ -139,9 +139,9 @@ operator looks and thins the rest out as the eye's acuity falls off, and
 streams it to the operator over authenticated, encrypted UDP.
 
 This package holds the service fovead (a systemd unit, installed but not
-enabled), the operator station fovea-operator, fovea-error-report, fovea-eval, board
-profiles, a default configuration and udev rules for the known RGB-D cameras
-and the GPIO chips.${_fovea_tuned}")
+enabled), the operator station fovea-operator, the reports fovea-error-report
+and fovea-eval, board profiles, a default configuration and udev rules for the
+known RGB-D cameras and the GPIO chips.${_fovea_tuned}")
 set(CPACK_DEBIAN_PACKAGE_VERSION ${FOVEA_DEB_VERSION})
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_MAINTAINER "${FOVEA_DEB_MAINTAINER}")
