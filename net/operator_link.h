@@ -30,6 +30,7 @@ struct OperatorLinkConfig {
   // Room for the datagrams of a whole frame that arrive faster than they are
   // decoded (a 1.3 MB frame at a high budget): the default of about 200 KB holds
   // some 90 datagrams and overflows. The kernel may grant less (net.core.rmem_max).
+  // 0: the kernel's default.
   int receive_buffer_bytes = 4 << 20;
 };
 

@@ -159,6 +159,7 @@ int UdpSocket::setReceiveBuffer(int bytes) {
     socklen_t len = sizeof size;
     return ::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, &len) == 0 ? size / 2 : -1;
   };
+  if (bytes <= 0) return granted();  // the kernel's default stays
   (void)::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
   if (granted() < bytes) (void)::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &bytes, sizeof bytes);
   return granted();

@@ -65,7 +65,8 @@ class UdpSocket {
   // Asks the kernel for a receive buffer of `bytes` (SO_RCVBUF, which it caps at
   // net.core.rmem_max; then SO_RCVBUFFORCE, which only a privileged process may
   // use past that) and returns what it granted, in bytes of datagrams (the kernel
-  // reports twice that, with its bookkeeping), or -1 on error.
+  // reports twice that, with its bookkeeping), or -1 on error. bytes <= 0 keeps the
+  // kernel's default (and returns it).
   int setReceiveBuffer(int bytes);
 
  private:

@@ -89,8 +89,9 @@ class GazeChangeSink final : public firmware::LogSink {
 };
 
 // The send path must run through the count, not keep pace: on a loaded machine
-// the send stage drops frames by design (176 of 300 sent once, CI beside a soak).
-constexpr uint64_t kSentDuringTheCount = 100;
+// the send stage drops frames by design (176 of 300 sent once, CI beside a soak;
+// 31 under TSan beside CI's other stages). How many is timing, not bounded here.
+constexpr uint64_t kSentDuringTheCount = 10;
 
 struct StreamingCount {
   uint64_t frames = 0, sent = 0, allocations = 0, gaze_changes = 0;
@@ -120,6 +121,9 @@ void countWhileStreaming(bool gaps, StreamingCount& count) {
 
   net::OperatorLinkConfig op_config;
   op_config.insecure = true;
+  // The operator is load here, on the service's cores: with the kernel's default
+  // buffer, what it cannot drain is dropped rather than queued for it to decrypt.
+  op_config.receive_buffer_bytes = 0;
   Result<std::unique_ptr<net::OperatorLink>> op = net::OperatorLink::connect(service.localEndpoint().toString(), op_config);
   ASSERT_TRUE(op.isOk()) << op.status().toString();
   // The operator (its own allocations are not the service's: it runs before
