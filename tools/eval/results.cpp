@@ -9,6 +9,7 @@
 #include <map>
 #include <sstream>
 
+#include "pipeline/quantile.h"
 #include "tools/eval/statistics.h"
 
 namespace fovea::tools::eval {
@@ -62,12 +63,8 @@ bool parseNumber(const std::string& s, double& out) {
   return end == s.c_str() + s.size() && std::isfinite(out);
 }
 
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return kNaN;
-  std::sort(v.begin(), v.end());
-  const auto k = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
-  return v[std::min(v.size() - 1, k == 0 ? 0 : k - 1)];  // nearest rank
-}
+// Nearest rank (pipeline/quantile.h) of a copy; NaN when there are no values.
+double quantile(std::vector<double> v, double q) { return v.empty() ? kNaN : pipeline::nearestRankQuantile(v, q); }
 
 std::string number(double v, int precision = 4) {
   if (!std::isfinite(v)) return "";
