@@ -9,6 +9,7 @@
 #include "pipeline/backproject.h"
 #include "pipeline/error_metrics.h"
 #include "pipeline/foveator.h"
+#include "tools/common/splat_spacing.h"
 #include "tools/eval/quality/png_writer.h"
 #include "tools/eval/quality/splat_renderer.h"
 
@@ -25,7 +26,7 @@ struct QualityEvaluator::State {
   net::ChunkEncoder encoder;
   pipeline::Foveator foveator;  // reconfigured per condition
   Image reference, image;
-  std::vector<float> spacing = std::vector<float>(4096);  // sampled pairs of one region
+  std::vector<float> spacing = std::vector<float>(4096 * pipeline::kMaxRegions);  // sampled pairs, per region
   float raw_spacing_m = 0.0f;  // FREF's, for the raw points of every condition
 };
 
@@ -124,31 +125,20 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
       Result<net::DecodedChunk> chunk = net::decodeChunk(s.encoder.chunk(i), s.decoded);
       if (!chunk) return R(chunk.status().code(), "decoding " + c.name + ": " + chunk.status().message());
     }
-    // Splats, per region: the median spacing of the region's consecutive decoded
-    // points (the codec writes them in Morton order, so these are neighbours), or
-    // its voxel when that is larger. The spacing sizes raw points as the operator's
-    // viewer does (tools/operator/view_frame.h), FREF's for every condition's raw
-    // points (the same point is drawn the same in each), and keeps voxels finer than
-    // the sensor's sampling (ACUITY's 2 to 8 mm levels, one sample each) from leaving
-    // holes between them.
+    // Splats, per region: the median spacing of the region's decoded points, or its
+    // voxel when that is larger, as the operator's viewer sizes them
+    // (tools/operator/view_frame.h): voxels finer than the sensor's sampling (ACUITY's
+    // 2 to 8 mm levels, one sample each) would otherwise leave holes. Raw points get
+    // FREF's spacing in every condition (the same point is drawn the same in each).
     const pipeline::PointCloud& p = s.decoded.points;
     const std::vector<uint8_t>& regions = s.decoded.region;
-    std::array<float, pipeline::kMaxRegions> region_size{};
-    for (int r = 0; r < pipeline::kMaxRegions; ++r) {
-      std::size_t pairs = 0;
-      for (std::size_t i = 1; i < p.size() && pairs < s.spacing.size(); ++i) {
-        if (regions[i] != r || regions[i - 1] != r) continue;
-        const float dx = p.x()[i] - p.x()[i - 1], dy = p.y()[i] - p.y()[i - 1], dz = p.z()[i] - p.z()[i - 1];
-        s.spacing[pairs++] = std::sqrt(dx * dx + dy * dy + dz * dz);
-      }
-      float spacing = 0.0f;
-      if (pairs > 0) {
-        const auto mid = s.spacing.begin() + static_cast<std::ptrdiff_t>(pairs / 2);
-        std::nth_element(s.spacing.begin(), mid, s.spacing.begin() + static_cast<std::ptrdiff_t>(pairs));
-        spacing = *mid;
-      }
-      const double voxel_m = r > 0 && r < stats.region_count ? stats.regions[r].voxel_size_m : 0.0;
-      region_size[r] = std::max(static_cast<float>(voxel_m), spacing);
+    std::array<uint32_t, pipeline::kMaxRegions> region_points{};
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (regions[i] < pipeline::kMaxRegions) ++region_points[regions[i]];
+    }
+    std::array<float, pipeline::kMaxRegions> region_size = medianNeighbourSpacing(s.decoded, region_points, s.spacing);
+    for (int r = 1; r < stats.region_count; ++r) {
+      region_size[r] = std::max(static_cast<float>(stats.regions[r].voxel_size_m), region_size[r]);
     }
     if (c.name == "FREF") s.raw_spacing_m = region_size[0];
     region_size[0] = s.raw_spacing_m;

@@ -1,5 +1,7 @@
 #include "tools/operator/view_frame.h"
 
+#include "tools/common/splat_spacing.h"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -13,26 +15,14 @@ static_assert(std::endian::native == std::endian::little, "the viewer's frame la
 
 std::array<float, pipeline::kMaxRegions> SplatSizer::sizes(const net::AssembledFrame& frame) {
   std::array<float, pipeline::kMaxRegions> out{};
-  for (std::size_t r = 1; r < out.size(); ++r) {
-    if (frame.points[r] > 0 && frame.step_m[r] > 0.0) out[r] = static_cast<float>(frame.step_m[r] / ratio_);
+  if (frame.cloud != nullptr) out = medianNeighbourSpacing(*frame.cloud, frame.points, scratch_);
+  for (std::size_t r = 0; r < out.size(); ++r) {
+    if (frame.points[r] == 0) {
+      out[r] = 0.0f;
+    } else if (r > 0 && frame.step_m[r] > 0.0) {
+      out[r] = std::max(out[r], static_cast<float>(frame.step_m[r] / ratio_));
+    }
   }
-  if (frame.cloud == nullptr || frame.points[0] < 2 || scratch_.empty()) return out;
-  const pipeline::FoveatedCloud& c = *frame.cloud;
-  const pipeline::PointCloud& p = c.points;
-  // Every region-0 pair of consecutive points, thinned evenly to the scratch.
-  const std::size_t n = p.size();
-  const std::size_t stride = std::max<std::size_t>(1, frame.points[0] / scratch_.size());
-  std::size_t pairs = 0, seen = 0;
-  for (std::size_t i = 1; i < n && pairs < scratch_.size(); ++i) {
-    if (c.region[i] != 0 || c.region[i - 1] != 0) continue;
-    if (seen++ % stride != 0) continue;
-    const float dx = p.x()[i] - p.x()[i - 1], dy = p.y()[i] - p.y()[i - 1], dz = p.z()[i] - p.z()[i - 1];
-    scratch_[pairs++] = std::sqrt(dx * dx + dy * dy + dz * dz);
-  }
-  if (pairs == 0) return out;
-  auto mid = scratch_.begin() + static_cast<std::ptrdiff_t>(pairs / 2);
-  std::nth_element(scratch_.begin(), mid, scratch_.begin() + static_cast<std::ptrdiff_t>(pairs));
-  out[0] = *mid;
   return out;
 }
 

@@ -29,15 +29,17 @@ inline constexpr std::size_t viewFrameBytes(std::size_t points) {
   return kViewFrameHeaderBytes + kViewFrameBytesPerPoint * points;
 }
 
-// Splat sizes per region: a voxel-sampled region's voxel (its lattice step over
-// periphery_step_ratio), and for the fovea, which is not voxel-sampled, the
-// median spacing of its points (consecutive points in the decoded Morton
-// order are neighbours), measured on up to scratch.size() pairs. Regions
-// without points get 0.
+// Splat sizes per region, what covers the surface without holes: the median spacing
+// of the region's points in the frame (tools/common/splat_spacing.h), or, for a
+// voxel-sampled region, its voxel (its lattice step over periphery_step_ratio) when
+// that is larger. The spacing matters where voxels are finer than the camera samples
+// the surface (ACUITY's 2 to 8 mm levels a few metres away hold one pixel each): drawn
+// at their voxel they would leave holes between them. Measured on up to max_pairs
+// pairs per region; regions without points get 0, a lone point its voxel.
 class SplatSizer {
  public:
   explicit SplatSizer(double periphery_step_ratio, std::size_t max_pairs = 4096)
-      : ratio_(periphery_step_ratio), scratch_(max_pairs) {}
+      : ratio_(periphery_step_ratio), scratch_(max_pairs * pipeline::kMaxRegions) {}
   std::array<float, pipeline::kMaxRegions> sizes(const net::AssembledFrame& frame);
 
  private:

@@ -106,5 +106,39 @@ TEST(SplatSizer, PeripheryFromItsStepAndTheFoveaFromItsSpacing) {
   EXPECT_EQ(s[3], 0.0f);
 }
 
+TEST(SplatSizer, VoxelsFinerThanTheSamplingAreDrawnAtTheSpacing) {
+  Frame f;
+  // Region 1: 2 mm voxels (ACUITY's finest level) holding one camera sample each,
+  // 6 mm apart: drawn at 2 mm they would leave 4 mm holes.
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_TRUE(f.cloud.points.push(0.006f * static_cast<float>(i), 0.f, 3.f, 0));
+    f.cloud.region[static_cast<std::size_t>(i)] = 1;
+  }
+  // Region 3: 64 mm voxels, dense: each a neighbour of the next. Its splat stays its voxel.
+  for (int i = 0; i < 40; ++i) {
+    ASSERT_TRUE(f.cloud.points.push(0.064f * static_cast<float>(i), 1.f, 3.f, 0));
+    f.cloud.region[static_cast<std::size_t>(100 + i)] = 3;
+  }
+  // Region 4: one lone voxel, no pair to measure: its voxel.
+  ASSERT_TRUE(f.cloud.points.push(5.f, 5.f, 5.f, 0));
+  f.cloud.region[140] = 4;
+  // A region-1 point after it does not pair with region 1's run across region 4.
+  ASSERT_TRUE(f.cloud.points.push(9.f, 9.f, 9.f, 0));
+  f.cloud.region[141] = 1;
+  f.frame.cloud = &f.cloud;
+  f.frame.points[1] = 101;
+  f.frame.points[3] = 40;
+  f.frame.points[4] = 1;
+  f.frame.step_m[1] = 0.002 * 0.125;
+  f.frame.step_m[3] = 0.064 * 0.125;
+  f.frame.step_m[4] = 0.128 * 0.125;
+  SplatSizer sizer(0.125);
+  const auto s = sizer.sizes(f.frame);
+  EXPECT_NEAR(s[1], 0.006f, 1e-6f);
+  EXPECT_NEAR(s[3], 0.064f, 1e-6f);
+  EXPECT_NEAR(s[4], 0.128f, 1e-6f);
+  EXPECT_EQ(s[0], 0.0f);
+}
+
 }  // namespace
 }  // namespace fovea::tools
