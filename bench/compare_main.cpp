@@ -110,8 +110,9 @@ class FoveaMethod final : public Method {
   // acuity: Preset::kAcuity in place of the input's preset (a different method:
   // its output is not compared with PCL's); kEveryFeature adds the
   // distance-dependent floor (1 mm per m^2), a 5-degree fovea growth and the view
-  // cull (drop, the head along the gaze), to time what they cost when on.
-  enum class Acuity { kNo, kDefault, kEveryFeature };
+  // cull (drop, the head along the gaze), to time what they cost when on;
+  // kFloor only the floor: ACUITY at F1's bytes (docs/acuity-levels.md).
+  enum class Acuity { kNo, kDefault, kFloor, kEveryFeature };
   FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
       : input_(input),
         acuity_(acuity != Acuity::kNo),
@@ -152,8 +153,8 @@ class FoveaMethod final : public Method {
   static pipeline::FoveationConfig configFor(const Input& input, Acuity acuity) {
     pipeline::FoveationConfig config = input.config;
     if (acuity != Acuity::kNo) config.acuity.preset = pipeline::Preset::kAcuity;
+    if (acuity == Acuity::kFloor || acuity == Acuity::kEveryFeature) config.acuity.floor_per_m2 = 0.001;
     if (acuity == Acuity::kEveryFeature) {
-      config.acuity.floor_per_m2 = 0.001;
       config.acuity.view_cull = pipeline::ViewCull::kDrop;
     }
     return config;
@@ -246,6 +247,10 @@ const MethodEntry kMethods[] = {
     {"acuity-simd-1t", "ACUITY (docs/acuity-levels.md): SIMD levels and hash sampler, one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kDefault);
+     }},
+    {"acuity-floor-simd-1t", "ACUITY with the distance floor (1 mm/m^2): F1's bytes on the mock room, one thread",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kFloor);
      }},
     {"acuity-features-simd-1t",
      "ACUITY with the distance floor (1 mm/m^2), a 5-degree fovea growth and the view cull (drop), one thread",
@@ -549,12 +554,12 @@ int run(int argc, char** argv) {
     for (int r = 1; r < s.region_count; ++r) std::printf(" region %d %.2f mm", r, 1000.0 * s.regions[r].voxel_size_m);
     std::printf("\n");
   }
-  std::printf("\n%-14s %9s %9s %9s %10s %9s %9s %9s %12s\n", "method", "median ms", "min ms", "max ms", "out points",
+  std::printf("\n%-23s %9s %9s %9s %10s %9s %9s %9s %12s\n", "method", "median ms", "min ms", "max ms", "out points",
               "ns/point", "vs pcl", "vs floor", "max d [mm]");
   for (const Row& row : rows) {
     const Timing& t = row.timing;
     if (!t.ran) {
-      std::printf("%-14s %9s   -- %s\n", row.entry->name, "-", row.entry->what);
+      std::printf("%-23s %9s   -- %s\n", row.entry->name, "-", row.entry->what);
       continue;
     }
     char vs_pcl[16] = "-", vs_floor[16] = "-", diff[24] = "-";
@@ -565,7 +570,7 @@ int run(int argc, char** argv) {
     } else if (&t == pcl) {
       std::snprintf(diff, sizeof diff, "(reference)");
     }
-    std::printf("%-14s %9.3f %9.3f %9.3f %10zu %9.2f %9s %9s %12s\n", row.entry->name, t.median, t.min, t.max,
+    std::printf("%-23s %9.3f %9.3f %9.3f %10zu %9.2f %9s %9s %12s\n", row.entry->name, t.median, t.min, t.max,
                 t.out_points, 1e6 * t.median / static_cast<double>(input.input_points), vs_pcl, vs_floor, diff);
   }
   std::printf(
