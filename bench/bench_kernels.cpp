@@ -175,7 +175,7 @@ void bmVoxelSample(benchmark::State& state) {
   setPointCounter(state, f.points);
   state.counters["out"] = static_cast<double>(out.size());
   if constexpr (std::is_same_v<Sampler, pipeline::HashVoxelSampler>) {
-    state.counters["runs"] = static_cast<double>(sampler.lastRuns());  // voxel changes along the points
+    state.counters["lookups"] = static_cast<double>(sampler.lastTableLookups());  // recent-voxel cache misses
   }
 }
 

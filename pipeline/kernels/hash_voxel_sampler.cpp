@@ -16,7 +16,6 @@ namespace {
 // As the reference: |index| below 2^52 converts to int64 exactly.
 constexpr double kMaxAbsIndex = 4503599627370496.0;
 constexpr std::size_t kInitialTableEntries = std::size_t{1} << 14;  // 128 KiB of keys
-constexpr uint32_t kNoSlot = UINT32_MAX;
 constexpr uint64_t kAxisMask = (uint64_t{1} << kVoxelAxisBits) - 1;
 // Points done by the scalar code after the SIMD kernel stops (any vector width divides it).
 constexpr std::size_t kScalarRun = 64;
@@ -24,7 +23,6 @@ constexpr std::size_t kScalarRun = 64;
 constexpr std::size_t kPrefetchAhead = 32;
 
 const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
-uint64_t hashKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
 // copyFovea() with its pointers in locals, skipping 8 points at a time where none is
 // in the fovea (the usual case outside it). Same output, same representatives.
@@ -93,6 +91,7 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       sort_slot_scratch_(max_voxels),
       point_slot_(max_points),
       chunk_key_(kChunk),
+      chunk_slot_(kChunk),
       part_state_(1),
       part_bad_(1) {
   table_key_.assign(std::bit_ceil(std::max<std::size_t>(2 * max_voxels, 16)), kEmpty);
@@ -117,7 +116,7 @@ void HashVoxelSampler::growTable(std::size_t voxels) {
   --shift_;
   table_mask_ = active_ - 1;
   for (std::size_t s = 0; s < voxels; ++s) {
-    std::size_t pos = hashKey(voxel_key_[s]) >> shift_;
+    std::size_t pos = hashVoxelKey(voxel_key_[s]) >> shift_;
     while (table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
     table_key_[pos] = voxel_key_[s];
     table_slot_[pos] = static_cast<uint32_t>(s);
@@ -156,15 +155,8 @@ bool HashVoxelSampler::computeKeys(const PointCloud& in, const uint8_t* region, 
   return true;
 }
 
-inline uint32_t HashVoxelSampler::findSlot(uint64_t key, bool& fresh) {
-  fresh = false;
-  const uint64_t hash = hashKey(key);
-  const std::size_t line = hash >> (64 - kRecentBits);
-  if (recent_key_[line] == key) return recent_slot_[line];
-  return findSlotInTable(key, hash, line, fresh);
-}
-
 uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh) {
+  fresh = false;
   std::size_t pos = hash >> shift_;
   while (table_key_[pos] != key && table_key_[pos] != kEmpty) pos = (pos + 1) & table_mask_;
   uint32_t slot;
@@ -180,86 +172,83 @@ uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::siz
     voxel_table_pos_[slot] = static_cast<uint32_t>(pos);
     if (2 * voxels_ > active_ && active_ < table_key_.size()) growTable(voxels_);  // load factor <= 1/2
   }
-  recent_key_[line] = key;
-  recent_slot_[line] = slot;
+  if (line != kEmptyLine) {  // that line answers kEmpty (fovea and skipped points)
+    recent_key_[line] = key;
+    recent_slot_[line] = slot;
+  }
   return slot;
 }
 
 template <bool kRepresentative>
 bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys) {
+  for (std::size_t c0 = begin; c0 < end; c0 += kChunk) {
+    const std::size_t c1 = std::min(end, c0 + kChunk);
+    if (!accumulateChunk<kRepresentative>(in, c0, c1, keys + (c0 - begin))) return false;
+  }
+  return true;
+}
+
+template <bool kRepresentative>
+bool HashVoxelSampler::accumulateChunk(const PointCloud& in, std::size_t begin, std::size_t end,
+                                       const uint64_t* keys) {
   const float* px_in = in.x();
   const float* py_in = in.y();
   const float* pz_in = in.z();
   const uint32_t* rgb_in = in.rgb();
-  uint32_t* point_slot = point_slot_.data();
   Acc* acc = acc_.get();
-  uint64_t current = kEmpty;
-  uint32_t slot = 0;
-  // The current voxel's accumulator, in locals (registers) while the key repeats.
-  double sx = 0, sy = 0, sz = 0;
-  float fx = 0, fy = 0, fz = 0, lox = 0, loy = 0, loz = 0, hix = 0, hiy = 0, hiz = 0;
-  uint32_t count = 0;
-  uint64_t sr = 0, sg = 0, sb = 0;
-  const auto store = [&] {
-    Acc& a = acc[slot];
-    a.sx = sx, a.sy = sy, a.sz = sz;  // (the first point is stored once, when the voxel starts)
-    a.lo[0] = lox, a.lo[1] = loy, a.lo[2] = loz;
-    a.hi[0] = hix, a.hi[1] = hiy, a.hi[2] = hiz;
-    a.n = count;
-    a.sr = sr, a.sg = sg, a.sb = sb;
-  };
+  uint32_t* slot_of = chunk_slot_.data();
+  // Pass 1: each point's voxel slot. A look-up in the recent-voxel cache for every
+  // point costs less than a branch on "same voxel as the last point", which noisy
+  // depth makes unpredictable; the table behind the cache is the rare case. A fresh
+  // voxel starts at its first point.
   for (std::size_t i = begin; i < end; ++i) {
     const uint64_t key = keys[i - begin];
     // The table entry a later point will probe: a miss in a table of megabytes
     // costs more than everything else done for a point, and keys are known ahead.
     if (i + kPrefetchAhead < end) {
-      __builtin_prefetch(&table_key_[hashKey(keys[i + kPrefetchAhead - begin]) >> shift_]);
+      __builtin_prefetch(&table_key_[hashVoxelKey(keys[i + kPrefetchAhead - begin]) >> shift_]);
     }
-    if (key == kEmpty) {  // fovea or skipped
-      if constexpr (kRepresentative) point_slot[i] = kNoSlot;
-      continue;
-    }
-    const float px = px_in[i], py = py_in[i], pz = pz_in[i];
-    if (key != current) {
-      ++runs_;
-      if (current != kEmpty) store();
+    const uint64_t hash = hashVoxelKey(key);
+    const std::size_t line = hash >> (64 - kRecentBits);
+    uint32_t slot = recent_slot_[line];  // kNoSlot for kEmpty (fovea or skipped)
+    if (recent_key_[line] != key) [[unlikely]] {
+      ++lookups_;
       bool fresh;
-      slot = findSlot(key, fresh);
+      slot = findSlotInTable(key, hash, line, fresh);
       if (slot == kNoSlot) return false;
       if (fresh) {
-        sx = sy = sz = 0.0;
-        fx = lox = hix = px;
-        fy = loy = hiy = py;
-        fz = loz = hiz = pz;
-        acc[slot].fx = px, acc[slot].fy = py, acc[slot].fz = pz;
-        count = 0;
-        sr = sg = sb = 0;
-      } else {
-        const Acc& a = acc[slot];
-        sx = a.sx, sy = a.sy, sz = a.sz;
-        fx = a.fx, fy = a.fy, fz = a.fz;
-        lox = a.lo[0], loy = a.lo[1], loz = a.lo[2];
-        hix = a.hi[0], hiy = a.hi[1], hiz = a.hi[2];
-        count = a.n;
-        sr = a.sr, sg = a.sg, sb = a.sb;
+        Acc& a = acc[slot];
+        const float px = px_in[i], py = py_in[i], pz = pz_in[i];
+        a.sx = a.sy = a.sz = 0.0;
+        a.fx = a.lo[0] = a.hi[0] = px;
+        a.fy = a.lo[1] = a.hi[1] = py;
+        a.fz = a.lo[2] = a.hi[2] = pz;
+        a.n = 0;
+        a.sr = a.sg = a.sb = 0;
       }
-      current = key;
     }
-    if constexpr (kRepresentative) point_slot[i] = slot;
-    // reduceVoxel()'s loop body, point by point in input order.
-    sx += static_cast<double>(px) - fx;
-    sy += static_cast<double>(py) - fy;
-    sz += static_cast<double>(pz) - fz;
-    lox = std::min(lox, px), hix = std::max(hix, px);
-    loy = std::min(loy, py), hiy = std::max(hiy, py);
-    loz = std::min(loz, pz), hiz = std::max(hiz, pz);
-    const uint32_t c = rgb_in[i];
-    sr += rgbRed(c);
-    sg += rgbGreen(c);
-    sb += rgbBlue(c);
-    ++count;
+    slot_of[i - begin] = slot;
   }
-  if (current != kEmpty) store();
+  // Pass 2: reduceVoxel()'s loop body, point by point in input order, into the slots.
+  uint32_t* point_slot = point_slot_.data();
+  for (std::size_t i = begin; i < end; ++i) {
+    const uint32_t slot = slot_of[i - begin];
+    if constexpr (kRepresentative) point_slot[i] = slot;
+    if (slot == kNoSlot) continue;
+    Acc& a = acc[slot];
+    const float px = px_in[i], py = py_in[i], pz = pz_in[i];
+    a.sx += static_cast<double>(px) - a.fx;
+    a.sy += static_cast<double>(py) - a.fy;
+    a.sz += static_cast<double>(pz) - a.fz;
+    a.lo[0] = std::min(a.lo[0], px), a.hi[0] = std::max(a.hi[0], px);
+    a.lo[1] = std::min(a.lo[1], py), a.hi[1] = std::max(a.hi[1], py);
+    a.lo[2] = std::min(a.lo[2], pz), a.hi[2] = std::max(a.hi[2], pz);
+    const uint32_t c = rgb_in[i];
+    a.sr += rgbRed(c);
+    a.sg += rgbGreen(c);
+    a.sb += rgbBlue(c);
+    ++a.n;
+  }
   return true;
 }
 
@@ -294,9 +283,11 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   active_ = std::min(table_key_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
   shift_ = 64 - std::countr_zero(active_);
   table_mask_ = active_ - 1;
-  recent_key_.fill(kEmpty);
+  recent_key_.fill(kEmpty - 1);  // no key (keys never set bit 63), and not kEmpty
+  recent_key_[kEmptyLine] = kEmpty;
+  recent_slot_[kEmptyLine] = kNoSlot;
   voxels_ = 0;
-  runs_ = 0;
+  lookups_ = 0;
 
   for (kernels::VoxelKeyState& st : part_state_) {
     st.reset();

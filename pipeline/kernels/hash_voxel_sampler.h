@@ -7,13 +7,15 @@
 //    unique within the span the reference allows (a wider region is refused anyway).
 //    Points it does not take (an index of 2^51 or more in magnitude, or a bad one) are
 //    done by the scalar code, which also finds the reference's first bad point.
-// 2. A scalar loop over the chunk keeps the current voxel's accumulator in registers
-//    while the key does not change (image coherence: consecutive pixels mostly share a
-//    voxel). On a change it stores it back to the voxel's slot and loads (or starts)
-//    the new voxel's, found through a 1024-entry direct-mapped cache of recent voxels,
-//    then a preallocated open-addressing table (power of two >= 2 max_voxels, linear
-//    probing, multiplicative hash; a frame starts on a prefix sized from the previous
-//    frame's voxel count, at least 16 Ki entries, and doubles it when half full).
+// 2. Two passes over the chunk accumulate every voxel in place. The first finds each
+//    point's voxel slot through a 1024-entry direct-mapped cache of recent voxels
+//    (consecutive pixels mostly share a voxel or revisit one of the last row's), then a
+//    preallocated open-addressing table (power of two >= 2 max_voxels, linear probing,
+//    multiplicative hash; a frame starts on a prefix sized from the previous frame's
+//    voxel count, at least 16 Ki entries, and doubles it when half full). The second
+//    adds each point to its slot's accumulator, without a branch on whether the voxel
+//    changed (noisy depth makes that branch unpredictable: keeping the current voxel in
+//    registers and switching on a change was 10 % slower on the mock room).
 //    The accumulator holds exactly what reduceVoxel() computes (first point, double
 //    sums relative to it, float min/max, integer colour sums, count), updated with the
 //    same expressions in input order, so centroids are bit-identical.
@@ -43,6 +45,10 @@
 
 namespace fovea::pipeline {
 
+// The sampler's multiplicative (Fibonacci) hash of a packed voxel key: its top bits
+// index the recent-voxel cache and the table.
+constexpr uint64_t hashVoxelKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
+
 class HashVoxelSampler {
  public:
   HashVoxelSampler() = default;
@@ -60,9 +66,10 @@ class HashVoxelSampler {
   std::size_t maxPoints() const { return point_slot_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }
   std::size_t tableSize() const { return table_key_.size(); }
-  // Runs of consecutive sampled points with the same voxel in the last sample(): each
-  // run costs a store, a look-up and a load (benchmarks report it).
-  std::size_t lastRuns() const { return runs_; }
+  // Points of the last sample() whose voxel was not in the recent-voxel cache: each
+  // costs a table probe and a mispredicted branch (benchmarks report it). At least
+  // the number of voxels, since a voxel's first point is one.
+  std::size_t lastTableLookups() const { return lookups_; }
 
   static constexpr std::size_t kChunk = 2048;  // points per key batch
 
@@ -85,6 +92,9 @@ class HashVoxelSampler {
   };
   static constexpr uint64_t kEmpty = kernels::kNoVoxelKey;  // keys never set bit 63
   static constexpr int kRecentBits = 10;
+  // The recent-voxel cache's line of kEmpty, which always holds it (slot kNoSlot).
+  static constexpr std::size_t kEmptyLine = hashVoxelKey(kEmpty) >> (64 - kRecentBits);
+  static constexpr uint32_t kNoSlot = UINT32_MAX;
 
   struct KeyJob;
   // Keys of points [begin, end) into keys[0, end - begin), with the scalar code for
@@ -95,9 +105,11 @@ class HashVoxelSampler {
   // false when a voxel beyond max_voxels appears (nothing more is accumulated).
   template <bool kRepresentative>
   bool accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
-  // The slot of `key`, inserting a fresh voxel; kNoSlot past max_voxels.
-  uint32_t findSlot(uint64_t key, bool& fresh);
-  // findSlot() past the recent-voxel cache.
+  // accumulate() on at most kChunk points (the slot scratch).
+  template <bool kRepresentative>
+  bool accumulateChunk(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
+  // The slot of `key` past the recent-voxel cache (updating its line), inserting a
+  // fresh voxel; kNoSlot past max_voxels.
   [[gnu::noinline]] uint32_t findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh);
   void clearTable(std::size_t voxels);
   // Doubles the table's active prefix and reinserts the voxels found so far.
@@ -108,7 +120,7 @@ class HashVoxelSampler {
   std::size_t table_mask_ = 0;
   std::size_t last_voxels_ = 0;
   std::size_t voxels_ = 0;  // occupied this frame
-  std::size_t runs_ = 0;    // key changes this frame
+  std::size_t lookups_ = 0;  // recent-voxel cache misses this frame
   int shift_ = 64;
   // The table: keys (probed; 8 bytes an entry keeps it dense in cache) and, beside
   // them, the slots (read on a match only).
@@ -127,6 +139,7 @@ class HashVoxelSampler {
   std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot (only with representatives)
   std::vector<uint64_t> point_key_;   // keys of the whole cloud (threaded key pass only)
   std::vector<uint64_t> chunk_key_;   // kChunk keys (single-threaded)
+  std::vector<uint32_t> chunk_slot_;  // kChunk voxel slots (accumulateChunk's first pass)
   std::vector<kernels::VoxelKeyState> part_state_;
   std::vector<BadPoint> part_bad_;
   std::array<uint64_t, std::size_t{1} << kRecentBits> recent_key_{};
