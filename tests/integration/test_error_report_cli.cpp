@@ -159,6 +159,8 @@ TEST(ErrorReportCli, HelpAndBadArguments) {
   EXPECT_EQ(run(kTool + " --eye-offset 1,2").exit_code, 2);
   EXPECT_EQ(run(kTool + " --dynamics-frames -1").exit_code, 2);
   EXPECT_EQ(run(kTool + " --acuity-noise-floors 0").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --growth-lead-ms -5").exit_code, 2);
+  EXPECT_EQ(run(kTool + " --growth-lead-ms 2000").exit_code, 2);
 }
 
 // The figures over time on a scene with nothing moving and no sensor noise: a

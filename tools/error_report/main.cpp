@@ -82,6 +82,7 @@ const char* kHelp =
     "  --up-ms MS        operator to robot for the coverage figure (default 1)\n"
     "  --coverage-seconds S  length of the scripted scan the coverage figure replays (default 3.6: two rounds)\n"
     "  --growth-max-deg D  ACUITY's fovea growth bound in the coverage figure (default 10, the service's)\n"
+    "  --growth-lead-ms T  ACUITY's fovea growth lead in the coverage figure (default 30, the service's)\n"
     "  --no-plot         do not run gnuplot (report.gp is still written)\n"
     "\n"
     "With a mock camera, the same scene without sensor noise (noise=off, same seed and path) is the true\n"
@@ -233,6 +234,11 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
       if (!g) return g.status();
       if (*g < 0.0 || *g > 90.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [0, 90]");
       options.dynamics.growth_max_deg = *g;
+    } else if (flag == "--growth-lead-ms") {
+      Result<double> t = parseNumber(flag, value);
+      if (!t) return t.status();
+      if (*t < 0.0 || *t > 1000.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is outside [0, 1000] ms");
+      options.dynamics.lead_ms = *t;
     } else if (flag == "--down-ms" || flag == "--up-ms") {
       Result<double> ms = parseNumber(flag, value);
       if (!ms) return ms.status();
