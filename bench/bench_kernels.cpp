@@ -46,12 +46,17 @@ struct Fixture {
   pipeline::ConeBounds bounds;
   std::array<double, pipeline::kMaxRegions> voxel_size_m{};
   std::size_t points = 0;
-  // The same cloud under Preset::kAcuity (docs/acuity-levels.md): its levels and voxels.
-  pipeline::FoveationConfig acuity_config;
-  std::vector<uint8_t> level;
-  int level_count = 0;
-  pipeline::LevelBounds level_bounds;
-  std::array<double, pipeline::kMaxRegions> level_voxel_m{};
+  // The same cloud under Preset::kAcuity (docs/acuity-levels.md): its levels and voxels,
+  // with the defaults and with the 1 mm/m^2 distance floor (F1's bytes on this frame).
+  struct Acuity {
+    pipeline::FoveationConfig config;
+    std::vector<uint8_t> level;
+    int level_count = 0;
+    pipeline::LevelBounds bounds;
+    std::array<double, pipeline::kMaxRegions> voxel_m{};
+  };
+  Acuity acuity, acuity_floor;
+  const Acuity& acuityVariant(bool floor) const { return floor ? acuity_floor : acuity; }
 
   static Fixture& get() {
     static Fixture* fixture = build();
@@ -89,17 +94,20 @@ struct Fixture {
     f->bounds = pipeline::ConeBounds::fromModel(foveator.model());
     for (int r = 0; r < stats.region_count; ++r) f->voxel_size_m[r] = stats.regions[r].voxel_size_m;
 
-    f->acuity_config.acuity.preset = pipeline::Preset::kAcuity;
-    pipeline::Foveator acuity =
-        pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f->acuity_config).value();
-    if (Status s = acuity.foveate(f->cloud, f->gaze, out, stats); !s) {
-      std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
-      std::exit(1);
+    for (Acuity* a : {&f->acuity, &f->acuity_floor}) {
+      a->config.acuity.preset = pipeline::Preset::kAcuity;
+      if (a == &f->acuity_floor) a->config.acuity.floor_per_m2 = 0.001;
+      pipeline::Foveator levels =
+          pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, a->config).value();
+      if (Status s = levels.foveate(f->cloud, f->gaze, out, stats); !s) {
+        std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
+        std::exit(1);
+      }
+      a->level.assign(levels.lastRegions(), levels.lastRegions() + f->cloud.size());
+      a->level_count = stats.region_count;
+      a->bounds = pipeline::LevelBounds::fromModel(levels.model());
+      for (int r = 0; r < stats.region_count; ++r) a->voxel_m[r] = stats.regions[r].voxel_size_m;
     }
-    f->level.assign(acuity.lastRegions(), acuity.lastRegions() + f->cloud.size());
-    f->level_count = stats.region_count;
-    f->level_bounds = pipeline::LevelBounds::fromModel(acuity.model());
-    for (int r = 0; r < stats.region_count; ++r) f->level_voxel_m[r] = stats.regions[r].voxel_size_m;
     return f;
   }
 };
@@ -143,30 +151,33 @@ void bmPartition(benchmark::State& state) {
   setPointCounter(state, f.points);
 }
 
-// ACUITY's level assignment (in place of the partition).
-template <auto AssignLevels>
+// ACUITY's level assignment (in place of the partition), without or with the floor.
+template <auto AssignLevels, bool kFloor = false>
 void bmLevels(benchmark::State& state) {
   Fixture& f = Fixture::get();
+  const Fixture::Acuity& a = f.acuityVariant(kFloor);
   std::vector<uint8_t> level(f.cloud.size());
   pipeline::PartitionCounts counts;
   for (auto _ : state) {
-    AssignLevels(f.cloud, f.gaze, f.level_bounds, level.data(), counts);
+    AssignLevels(f.cloud, f.gaze, a.bounds, level.data(), counts);
     benchmark::DoNotOptimize(level.data());
     benchmark::ClobberMemory();
   }
   setPointCounter(state, f.points);
 }
 
-// Voxel sampling of the fixture's F1 regions, or (kAcuityLevels) of its ACUITY levels.
-template <typename Sampler, bool kAcuityLevels = false>
+// Voxel sampling of the fixture's F1 regions, or (kAcuityLevels) of its ACUITY levels,
+// without or with the floor.
+template <typename Sampler, bool kAcuityLevels = false, bool kFloor = false>
 void bmVoxelSample(benchmark::State& state) {
   Fixture& f = Fixture::get();
+  const Fixture::Acuity& a = f.acuityVariant(kFloor);
   Sampler sampler(f.cloud.size(), f.cloud.size());
   pipeline::FoveatedCloud out(f.cloud.size());
   pipeline::SampleCounts counts;
-  const uint8_t* region = kAcuityLevels ? f.level.data() : f.region.data();
-  const int count = kAcuityLevels ? f.level_count : f.region_count;
-  const auto& voxel_m = kAcuityLevels ? f.level_voxel_m : f.voxel_size_m;
+  const uint8_t* region = kAcuityLevels ? a.level.data() : f.region.data();
+  const int count = kAcuityLevels ? a.level_count : f.region_count;
+  const auto& voxel_m = kAcuityLevels ? a.voxel_m : f.voxel_size_m;
   for (auto _ : state) {
     Status s = sampler.sample(f.cloud, region, count, voxel_m, out, counts);
     benchmark::DoNotOptimize(s);
@@ -251,12 +262,13 @@ void bmPipelineRef(benchmark::State& state) {
 
 // --- The SIMD kernels (Highway, the target dispatch picks) --------------------
 
-// The whole frame with the SIMD kernel set on `threads` threads (F1, or ACUITY).
-void pipelineSimd(benchmark::State& state, int threads, bool acuity = false) {
+// The whole frame with the SIMD kernel set on `threads` threads (F1, or ACUITY's
+// configuration).
+void pipelineSimd(benchmark::State& state, int threads, const pipeline::FoveationConfig* acuity = nullptr) {
   Fixture& f = Fixture::get();
   const std::size_t pixels = f.input.frame.pixelCount();
   pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kSimd, threads},
-                                                           acuity ? f.acuity_config : f.config)
+                                                           acuity ? *acuity : f.config)
                                     .value();
   pipeline::Backprojector backprojector(threads, pipeline::KernelSet::kSimd);
   PointCloud cloud(pixels);
@@ -272,7 +284,10 @@ void pipelineSimd(benchmark::State& state, int threads, bool acuity = false) {
   setPointCounter(state, f.points);
 }
 void bmPipelineSimd1(benchmark::State& state) { pipelineSimd(state, 1); }
-void bmPipelineAcuitySimd1(benchmark::State& state) { pipelineSimd(state, 1, true); }
+void bmPipelineAcuitySimd1(benchmark::State& state) { pipelineSimd(state, 1, &Fixture::get().acuity.config); }
+void bmPipelineAcuityFloorSimd1(benchmark::State& state) {
+  pipelineSimd(state, 1, &Fixture::get().acuity_floor.config);
+}
 void bmPipelineSimdAll(benchmark::State& state) {
   pipelineSimd(state, std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
 }
@@ -300,6 +315,10 @@ const KernelBench kKernels[] = {
     {"levels/simd", &bmLevels<pipeline::assignLevelsSimd>},
     {"voxel_sample/hash-acuity", &bmVoxelSample<pipeline::HashVoxelSampler, true>},
     {"pipeline/acuity-simd-1t", &bmPipelineAcuitySimd1},
+    // ... with the 1 mm/m^2 distance floor: F1's bytes on this frame
+    {"levels/simd-floor", &bmLevels<pipeline::assignLevelsSimd, true>},
+    {"voxel_sample/hash-acuity-floor", &bmVoxelSample<pipeline::HashVoxelSampler, true, true>},
+    {"pipeline/acuity-floor-simd-1t", &bmPipelineAcuityFloorSimd1},
 };
 
 }  // namespace
