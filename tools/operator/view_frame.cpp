@@ -1,11 +1,11 @@
 #include "tools/operator/view_frame.h"
 
-#include "tools/common/splat_spacing.h"
-
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
+
+#include "tools/common/splat_spacing.h"
 
 namespace fovea::tools {
 
