@@ -72,6 +72,9 @@ class HashVoxelSampler {
   std::size_t lastTableLookups() const { return lookups_; }
 
   static constexpr std::size_t kChunk = 2048;  // points per key batch
+  // The recent-voxel cache has 2^kRecentBits lines, indexed by the top bits of
+  // hashVoxelKey(); the line of kNoVoxelKey (fovea and skipped points) always holds it.
+  static constexpr int kRecentBits = 10;
 
  private:
   // What reduceVoxel() accumulates for one voxel.
@@ -91,7 +94,6 @@ class HashVoxelSampler {
     uint8_t region = 0;
   };
   static constexpr uint64_t kEmpty = kernels::kNoVoxelKey;  // keys never set bit 63
-  static constexpr int kRecentBits = 10;
   // The recent-voxel cache's line of kEmpty, which always holds it (slot kNoSlot).
   static constexpr std::size_t kEmptyLine = hashVoxelKey(kEmpty) >> (64 - kRecentBits);
   static constexpr uint32_t kNoSlot = UINT32_MAX;

@@ -199,6 +199,40 @@ TEST_P(SamplerTarget, RunsAndAlternatingKeys) {
   }
 }
 
+TEST_P(SamplerTarget, AVoxelOnTheRecentCacheLineOfFoveaPoints) {
+  // Fovea and skipped points look up kNoVoxelKey, whose recent-voxel cache line always
+  // answers "no voxel"; a voxel whose key hashes to that line must still be found (in
+  // the table, every time) and must never take the line over.
+  constexpr int kShift = 64 - HashVoxelSampler::kRecentBits;
+  const uint64_t empty_line = hashVoxelKey(kernels::kNoVoxelKey) >> kShift;
+  // Region 1, 1 m voxels, the origin at 0: voxel (i, 0, 0) packs to 1 << 60 | i << 40.
+  int64_t found = -1;
+  for (int64_t i = 0; i < (int64_t{1} << 20) && found < 0; ++i) {
+    const uint64_t key = (uint64_t{1} << 60) | (static_cast<uint64_t>(i) << 40);
+    if (hashVoxelKey(key) >> kShift == empty_line) found = i;
+  }
+  ASSERT_GE(found, 0);
+  std::mt19937_64 rng(48);
+  PointCloud cloud(4000);
+  std::vector<uint8_t> region;
+  std::size_t on_line = 0;
+  for (int i = 0; i < 4000; ++i) {
+    const uint64_t pick = rng() % 6;
+    // The voxel on the line, a neighbour, fovea points and skipped points, interleaved.
+    const float x = static_cast<float>(found) + (pick == 1 ? 1.5f : 0.5f) + 0.01f * static_cast<float>(rng() % 40);
+    (void)cloud.push(x, 0.5f, 0.5f, static_cast<uint32_t>(rng()));
+    region.push_back(pick == 2 ? 0 : (pick == 3 ? kRegionInvalid : 1));
+    if (pick != 1 && pick != 2 && pick != 3) ++on_line;
+  }
+  expectSameSampling(cloud, region, 2, {0, 1.0}, cloud.size(), "a voxel on the fovea's cache line");
+  HashVoxelSampler fast(cloud.size(), cloud.size());
+  FoveatedCloud out(cloud.size());
+  SampleCounts counts;
+  ASSERT_TRUE(fast.sample(cloud, region.data(), 2, {0, 1.0}, out, counts).isOk());
+  EXPECT_EQ(counts.out[1], 2u);
+  EXPECT_GE(fast.lastTableLookups(), on_line);  // each of its points went to the table
+}
+
 TEST_P(SamplerTarget, LargeIndicesAndSpecialsOutsideTheSampledRegions) {
   // Indices between 2^51 and 2^52 are valid but leave the SIMD key path; at 2^52 and
   // beyond they are refused. NaN and infinities in the fovea or skipped points are ignored.
