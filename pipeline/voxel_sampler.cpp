@@ -71,6 +71,44 @@ void radixSortPairs(uint64_t* keys, uint32_t* index, uint64_t* keys_scratch, uin
   }
 }
 
+void radixSortBits(uint64_t* values, uint64_t* scratch, std::size_t n, int lo_bit, int bits) {
+  if (n < 2 || bits <= 0) return;
+  constexpr int kMaxDigitBits = 11;
+  constexpr int kMaxPasses = (64 + kMaxDigitBits - 1) / kMaxDigitBits;
+  // Digits of equal width: 40 bits take four passes of 10, not three of 11 and one of 7.
+  const int passes = (bits + kMaxDigitBits - 1) / kMaxDigitBits;
+  const int digit_bits = (bits + passes - 1) / passes;
+  const uint64_t digit_mask = (uint64_t{1} << digit_bits) - 1;
+  static_assert(kMaxPasses * (std::size_t{1} << kMaxDigitBits) * sizeof(uint32_t) <= 48 * 1024);
+  uint32_t histogram[kMaxPasses][std::size_t{1} << kMaxDigitBits];
+  const std::size_t buckets = std::size_t{1} << digit_bits;
+  for (int p = 0; p < passes; ++p) std::memset(histogram[p], 0, buckets * sizeof(uint32_t));
+  // The last digit may reach past lo_bit + bits: those bits are masked off, not sorted.
+  const uint64_t field_mask = bits >= 64 ? ~uint64_t{0} : ((uint64_t{1} << bits) - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint64_t field = (values[i] >> lo_bit) & field_mask;
+    for (int p = 0; p < passes; ++p) ++histogram[p][(field >> (p * digit_bits)) & digit_mask];
+  }
+  uint64_t* src = values;
+  uint64_t* dst = scratch;
+  for (int p = 0; p < passes; ++p) {
+    uint32_t* h = histogram[p];
+    const int shift = lo_bit + p * digit_bits;
+    const uint64_t mask = p == passes - 1 ? (field_mask >> (p * digit_bits)) : digit_mask;
+    // A digit that is the same in every value does not reorder anything.
+    if (h[(src[0] >> shift) & mask] == n) continue;
+    uint32_t offset = 0;
+    for (std::size_t v = 0; v < buckets; ++v) {
+      const uint32_t c = h[v];
+      h[v] = offset;
+      offset += c;
+    }
+    for (std::size_t i = 0; i < n; ++i) dst[h[(src[i] >> shift) & mask]++] = src[i];
+    std::swap(src, dst);
+  }
+  if (src != values) std::memcpy(values, src, n * sizeof *values);
+}
+
 Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                             const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                             SampleCounts& counts, uint32_t* representative) {

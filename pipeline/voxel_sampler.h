@@ -135,4 +135,10 @@ class VoxelSampler {
 void radixSortPairs(uint64_t* keys, uint32_t* index, uint64_t* keys_scratch, uint32_t* index_scratch,
                     std::size_t n);
 
+// Sorts values by their bits [lo_bit, lo_bit + bits), stably, with LSD radix passes of
+// at most 11 bits (fewer passes than bytes, and one array moved instead of two: a
+// payload packed below lo_bit, such as an index, rides along). Uses the scratch array
+// (n long); never allocates. 0 <= lo_bit, 0 <= bits, lo_bit + bits <= 64.
+void radixSortBits(uint64_t* values, uint64_t* scratch, std::size_t n, int lo_bit, int bits);
+
 }  // namespace fovea::pipeline

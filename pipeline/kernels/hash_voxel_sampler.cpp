@@ -398,7 +398,9 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   //    Within the span, k - lo is (wrapped k - wrapped lo) mod 2^20: no index is recomputed.
   //    The sort key packs (region, i - lo, j - lo, k - lo) with as many bits per axis as
   //    the widest region needs, which orders like the reference's 20-bit fields and
-  //    leaves the radix sort fewer bytes that vary.
+  //    leaves the radix sort fewer bits that vary. Where the key and the slot fit one
+  //    64-bit word together (any frame of a camera), the slot rides below the key and
+  //    one array is sorted; otherwise (key, slot) pairs are.
   int width[3] = {0, 0, 0};
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
@@ -409,6 +411,10 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   }
   const int shift[3] = {width[1] + width[2], width[2], 0};
   const int region_shift = width[0] + width[1] + width[2];
+  const int key_bits = region_shift + static_cast<int>(std::bit_width(static_cast<unsigned>(region_count - 1)));
+  const int slot_bits = std::max(1, static_cast<int>(std::bit_width(voxels)));
+  const bool packed = key_bits + slot_bits <= 64;
+  const int key_shift = packed ? slot_bits : 0;
   for (std::size_t s = 0; s < voxels; ++s) {
     const uint64_t hash_key = voxel_key_[s];
     const auto r = static_cast<uint8_t>(hash_key >> (3 * kVoxelAxisBits));
@@ -417,10 +423,23 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
       const uint64_t wrapped = (hash_key >> ((2 - a) * kVoxelAxisBits)) & kAxisMask;
       key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift[a];
     }
-    sort_keys_[s] = key;
-    sort_slot_[s] = static_cast<uint32_t>(s);
+    if (packed) {
+      sort_keys_[s] = (key << key_shift) | s;
+    } else {
+      sort_keys_[s] = key;
+      sort_slot_[s] = static_cast<uint32_t>(s);
+    }
   }
-  radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(), voxels);
+  if (packed) {
+    radixSortBits(sort_keys_.data(), sort_keys_scratch_.data(), voxels, slot_bits, key_bits);
+  } else {
+    radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(),
+                   voxels);
+  }
+  const uint64_t slot_mask = (uint64_t{1} << slot_bits) - 1;
+  const auto slotAt = [&](std::size_t q) {
+    return packed ? static_cast<uint32_t>(sort_keys_[q] & slot_mask) : sort_slot_[q];
+  };
 
   // The fovea, untouched and in input order.
   copyFoveaFast(in, region, out, representative);
@@ -429,15 +448,15 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   // One point per voxel, with reduceVoxel()'s final expressions.
   for (std::size_t q = 0; q < voxels; ++q) {
     const std::size_t o = fovea + q;
-    const uint32_t slot = sort_slot_[q];
+    const uint32_t slot = slotAt(q);
     if (q + 16 < voxels) {
-      const Acc* ahead = &acc_[sort_slot_[q + 16]];
+      const Acc* ahead = &acc_[slotAt(q + 16)];
       __builtin_prefetch(ahead);
       __builtin_prefetch(reinterpret_cast<const char*>(ahead) + sizeof(Acc) - 1);
     }
     rank_[slot] = static_cast<uint32_t>(o);
     const Acc& a = acc_[slot];
-    const auto r = static_cast<uint8_t>(sort_keys_[q] >> region_shift);
+    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (key_shift + region_shift));
     const auto cnt = static_cast<uint64_t>(a.n);
     const double inv_n = 1.0 / static_cast<double>(cnt);
     out.points.x()[o] = std::clamp(static_cast<float>(a.fx + a.sx * inv_n), a.lo[0], a.hi[0]);

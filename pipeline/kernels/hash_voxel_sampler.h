@@ -20,8 +20,9 @@
 //    sums relative to it, float min/max, integer colour sums, count), updated with the
 //    same expressions in input order, so centroids are bit-identical.
 // 3. Only the occupied voxels are radix-sorted, by the reference's packed key
-//    (region, i, j, k relative to the region's smallest index), and written out in
-//    that order with reduceVoxel()'s final expressions.
+//    (region, i, j, k relative to the region's smallest index; the voxel's slot packed
+//    below it where both fit 64 bits), and written out in that order with
+//    reduceVoxel()'s final expressions.
 // With a worker pool, step 1 runs on its threads over contiguous ranges (keys kept for
 // every point, ranges and first bad point merged in point order); steps 2-3 are
 // sequential. All memory is allocated by the constructor; sample() never allocates.

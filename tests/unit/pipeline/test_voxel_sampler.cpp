@@ -235,6 +235,31 @@ TEST(VoxelSampler, RadixSortMatchesStableSort) {
   }
 }
 
+TEST(VoxelSampler, RadixSortBitsMatchesStableSortOnTheField) {
+  std::mt19937_64 rng(23);
+  struct Field {
+    int lo_bit, bits;
+  };
+  for (const Field f : {Field{0, 64}, Field{0, 0}, Field{17, 40}, Field{20, 44}, Field{1, 11}, Field{3, 12},
+                        Field{9, 23}, Field{0, 33}, Field{63, 1}}) {
+    for (std::size_t n : {0, 1, 2, 100, 5000, 70000}) {
+      std::vector<uint64_t> values(n), scratch(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        // Every third value random; the rest with many ties and digits that never vary.
+        values[i] = (i % 3 == 0) ? rng() : (rng() & 0xF00F0000FF0F00F3ull);
+      }
+      const auto field = [&](uint64_t v) {
+        return f.bits == 0 ? uint64_t{0} : (v >> f.lo_bit) & (~uint64_t{0} >> (64 - f.bits));
+      };
+      std::vector<uint64_t> expected = values;
+      std::stable_sort(expected.begin(), expected.end(),
+                       [&](uint64_t a, uint64_t b) { return field(a) < field(b); });
+      radixSortBits(values.data(), scratch.data(), n, f.lo_bit, f.bits);
+      ASSERT_EQ(values, expected) << "lo_bit " << f.lo_bit << " bits " << f.bits << " n " << n;
+    }
+  }
+}
+
 TEST(VoxelSampler, TooManyVoxelsForTheCapacityIsAnError) {
   PointCloud in = test::randomCloud(1000, Eigen::Vector3d::Zero(), 10.0f, 19);
   const std::vector<uint8_t> region(in.size(), 1);
