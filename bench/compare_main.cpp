@@ -47,6 +47,7 @@ struct Input {
   pipeline::Gaze gaze;          // normalised
   pipeline::DepthRange range;   // back-projection range (fovead's default 0.1..10 m)
   pipeline::FoveationConfig config;
+  double acuity_floor_per_m2 = 0.001;  // the floor of acuity-floor-simd-1t and acuity-features-simd-1t
   std::string description;
   std::size_t input_points = 0;  // valid points after back-projection (the ns/point denominator)
 };
@@ -109,9 +110,10 @@ class FoveaMethod final : public Method {
  public:
   // acuity: Preset::kAcuity in place of the input's preset (a different method:
   // its output is not compared with PCL's); kEveryFeature adds the
-  // distance-dependent floor (1 mm per m^2), a 5-degree fovea growth and the view
-  // cull (drop, the head along the gaze), to time what they cost when on;
-  // kFloor only the floor: ACUITY at F1's bytes (docs/acuity-levels.md).
+  // distance-dependent floor (--acuity-floor, 1 mm per m^2 by default), a 5-degree
+  // fovea growth and the view cull (drop, the head along the gaze), to time what they
+  // cost when on; kFloor only the floor: at 1 mm/m^2, ACUITY at F1's bytes
+  // (docs/acuity-levels.md).
   enum class Acuity { kNo, kDefault, kFloor, kEveryFeature };
   FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
       : input_(input),
@@ -153,7 +155,9 @@ class FoveaMethod final : public Method {
   static pipeline::FoveationConfig configFor(const Input& input, Acuity acuity) {
     pipeline::FoveationConfig config = input.config;
     if (acuity != Acuity::kNo) config.acuity.preset = pipeline::Preset::kAcuity;
-    if (acuity == Acuity::kFloor || acuity == Acuity::kEveryFeature) config.acuity.floor_per_m2 = 0.001;
+    if (acuity == Acuity::kFloor || acuity == Acuity::kEveryFeature) {
+      config.acuity.floor_per_m2 = input.acuity_floor_per_m2;
+    }
     if (acuity == Acuity::kEveryFeature) {
       config.acuity.view_cull = pipeline::ViewCull::kDrop;
     }
@@ -248,12 +252,13 @@ const MethodEntry kMethods[] = {
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kDefault);
      }},
-    {"acuity-floor-simd-1t", "ACUITY with the distance floor (1 mm/m^2): F1's bytes on the mock room, one thread",
+    {"acuity-floor-simd-1t",
+     "ACUITY with the distance floor (--acuity-floor; 1 mm/m^2: F1's bytes on the mock room), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kFloor);
      }},
     {"acuity-features-simd-1t",
-     "ACUITY with the distance floor (1 mm/m^2), a 5-degree fovea growth and the view cull (drop), one thread",
+     "ACUITY with the distance floor (--acuity-floor), a 5-degree fovea growth and the view cull (drop), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kEveryFeature);
      }},
@@ -395,10 +400,13 @@ std::size_t latticeDisagreements(const PointCloud& cloud, const uint8_t* region,
 int usage(const char* message) {
   if (message) std::fprintf(stderr, "fovea-compare: %s\n", message);
   std::fprintf(stderr,
-               "usage: fovea-compare [--runs N] [--preset F1|F2|F3|FREF]\n"
+               "usage: fovea-compare [--runs N] [--preset F1|F2|F3|FREF] [--acuity-floor MM]\n"
                "                     [--tum PATH [--frame N] | --ply FILE --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
                "Runs the foveation methods on one input (default: the mock living-room frame, 640x480)\n"
-               "and prints a table and one `method=... ms_median=...` line per method.\n");
+               "and prints a table and one `method=... ms_median=...` line per method.\n"
+               "  --acuity-floor MM  distance floor of the acuity-floor and acuity-features methods, mm per m^2\n"
+               "                     of distance (foveation.floor_per_m2 x 1000; default 1: F1's bytes on the\n"
+               "                     mock room)\n");
   return 2;
 }
 
@@ -413,6 +421,7 @@ int run(int argc, char** argv) {
   int runs = 20;
   std::string tum_path, ply_path, preset = "F1";
   int frame_index = 0;
+  double acuity_floor_mm = 1.0;
   std::optional<Eigen::Vector3d> gaze_origin, gaze_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
@@ -435,6 +444,12 @@ int run(int argc, char** argv) {
       ply_path = v;
     } else if (arg == "--preset") {
       preset = v;
+    } else if (arg == "--acuity-floor") {
+      char* end = nullptr;
+      acuity_floor_mm = std::strtod(v, &end);
+      if (end == v || *end != '\0' || !(acuity_floor_mm > 0.0 && acuity_floor_mm <= 1000.0)) {
+        return usage("--acuity-floor: expected mm per m^2 in (0, 1000]");
+      }
     } else if (arg == "--gaze-origin" || arg == "--gaze-dir") {
       Eigen::Vector3d vec;
       if (!parseVector(v, vec)) return usage((std::string(arg) + ": expected X,Y,Z").c_str());
@@ -451,6 +466,7 @@ int run(int argc, char** argv) {
   Result<pipeline::Preset> parsed_preset = pipeline::parsePreset(preset);
   if (!parsed_preset) return usage(parsed_preset.status().message().c_str());
   input.config.acuity.preset = parsed_preset.value();
+  input.acuity_floor_per_m2 = acuity_floor_mm * 1e-3;
   pipeline::Gaze gaze;
   if (!ply_path.empty()) {
     Result<pipeline::PlyCloud> ply = pipeline::readPly(ply_path);
@@ -499,9 +515,11 @@ int run(int argc, char** argv) {
   std::printf("  SIMD target %s, %d cores for fovea-simd-mt\n", pipeline::simdTargetName(pipeline::activeSimdTarget()),
               allCores());
   std::printf("  gaze origin (%.3f, %.3f, %.3f) m, direction (%.4f, %.4f, %.4f); preset %s, fixation hit; "
-              "%zu input points; %d timed rounds (each method once per round) after one warm-up\n",
+              "%zu input points; %d timed rounds (each method once per round) after one warm-up; ACUITY's "
+              "distance floor %g mm/m^2\n",
               input.gaze.origin_m.x(), input.gaze.origin_m.y(), input.gaze.origin_m.z(), input.gaze.direction.x(),
-              input.gaze.direction.y(), input.gaze.direction.z(), preset.c_str(), input.input_points, runs);
+              input.gaze.direction.y(), input.gaze.direction.z(), preset.c_str(), input.input_points, runs,
+              acuity_floor_mm);
 
   struct Row {
     const MethodEntry* entry;
