@@ -293,7 +293,9 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
      << "set title 'perceptual error against size'\n"
      << "plot ";
   // Lines join the presets of one slope in the left panel (sizes fall from FREF to
-  // F1); in the right panel the times do not order them, so points only.
+  // F1); in the right panel the times do not order them, so points only. ACUITY's
+  // many rows (margin x floor) are labelled for the first slope only: repeated for
+  // every slope, their labels covered each other and the points.
   auto series = [&](int x_col, int y_col, bool lines) {
     std::ostringstream p;
     for (std::size_t s = 0; s < slopes.size(); ++s) {
@@ -303,9 +305,11 @@ Status writePlotFiles(const std::string& data_path, const std::string& script_pa
         p << "'" << data_name << "' index " << index << " using " << x_col << ':' << y_col
           << (lines ? " with linespoints lw 1.5 pt " : " with points pt ") << (5 + 2 * static_cast<int>(s) + family)
           << (family == 1 && lines ? " dt 4" : "") << " ps 1.6 lc " << s + 1 << " title '"
-          << (family == 1 ? "ACUITY, " : "") << "m = " << csvNumber(slopes[s]) << "', \\\n     '' index " << index
-          << " using " << x_col << ':' << y_col << ":1 with labels offset char "
-          << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt " << s + 1 << " notitle";
+          << (family == 1 ? "ACUITY, " : "") << "m = " << csvNumber(slopes[s]) << "'";
+        if (family == 1 && s > 0) continue;
+        p << ", \\\n     '' index " << index << " using " << x_col << ':' << y_col
+          << ":1 with labels offset char " << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt "
+          << s + 1 << " notitle";
       }
     }
     return p.str();
