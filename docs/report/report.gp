@@ -17,11 +17,9 @@ plot 'report_plot.dat' index 0 using 3:6 with linespoints lw 1.5 pt 5 ps 1.6 lc 
      'report_plot.dat' index 2 using 3:6 with linespoints lw 1.5 pt 7 ps 1.6 lc 2 title 'm = 0.028', \
      '' index 2 using 3:6:1 with labels offset char 1.2,-0.8 tc lt 2 notitle, \
      'report_plot.dat' index 3 using 3:6 with linespoints lw 1.5 pt 8 dt 4 ps 1.6 lc 2 title 'ACUITY, m = 0.028', \
-     '' index 3 using 3:6:1 with labels offset char 1.2,-0.8 tc lt 2 notitle, \
      'report_plot.dat' index 4 using 3:6 with linespoints lw 1.5 pt 9 ps 1.6 lc 3 title 'm = 0.034', \
      '' index 4 using 3:6:1 with labels offset char -2.5,0.8 tc lt 3 notitle, \
      'report_plot.dat' index 5 using 3:6 with linespoints lw 1.5 pt 10 dt 4 ps 1.6 lc 3 title 'ACUITY, m = 0.034', \
-     '' index 5 using 3:6:1 with labels offset char -2.5,0.8 tc lt 3 notitle, \
      'report_plot.dat' index 2 using 3:8 with linespoints dt 2 lw 1 pt 6 ps 1.3 lc 2 title 'm = 0.028, judged by an m = 0.022 eye', \
      'report_plot.dat' index 4 using 3:8 with linespoints dt 2 lw 1 pt 8 ps 1.3 lc 3 title 'm = 0.034, judged by an m = 0.022 eye'
 unset logscale x
@@ -36,9 +34,7 @@ plot 'report_plot.dat' index 0 using 4:5 with points pt 5 ps 1.6 lc 1 title 'm =
      'report_plot.dat' index 2 using 4:5 with points pt 7 ps 1.6 lc 2 title 'm = 0.028', \
      '' index 2 using 4:5:1 with labels offset char 1.2,-0.8 tc lt 2 notitle, \
      'report_plot.dat' index 3 using 4:5 with points pt 8 ps 1.6 lc 2 title 'ACUITY, m = 0.028', \
-     '' index 3 using 4:5:1 with labels offset char 1.2,-0.8 tc lt 2 notitle, \
      'report_plot.dat' index 4 using 4:5 with points pt 9 ps 1.6 lc 3 title 'm = 0.034', \
      '' index 4 using 4:5:1 with labels offset char -2.5,0.8 tc lt 3 notitle, \
-     'report_plot.dat' index 5 using 4:5 with points pt 10 ps 1.6 lc 3 title 'ACUITY, m = 0.034', \
-     '' index 5 using 4:5:1 with labels offset char -2.5,0.8 tc lt 3 notitle
+     'report_plot.dat' index 5 using 4:5 with points pt 10 ps 1.6 lc 3 title 'ACUITY, m = 0.034'
 unset multiplot
