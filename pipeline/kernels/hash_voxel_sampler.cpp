@@ -399,7 +399,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   //    The sort key packs (region, i - lo, j - lo, k - lo) with as many bits per axis as
   //    the widest region needs, which orders like the reference's 20-bit fields and
   //    leaves the radix sort fewer bits that vary. Where the key and the slot fit one
-  //    64-bit word together (any frame of a camera), the slot rides below the key and
+  //    64-bit word together (camera frames do), the slot rides below the key and
   //    one array is sorted; otherwise (key, slot) pairs are.
   int width[3] = {0, 0, 0};
   for (int r = 1; r < region_count; ++r) {

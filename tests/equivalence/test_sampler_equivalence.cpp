@@ -238,17 +238,18 @@ TEST_P(SamplerTarget, SortKeysAtAndPastTheWidthThatPacksWithTheSlot) {
   // its span. Where the key and the voxel's slot fit one 64-bit word the slot is packed
   // below the key; where they do not, (key, slot) pairs are sorted. Regions spanning the
   // widest span on every axis (20 bits each) put the key at 61 bits (2 regions) or 63
-  // (8 regions), so a handful of voxels reaches exactly 64 bits and one more passes it.
+  // (8 regions): with 2 regions, 4 to 7 voxels (3 bits of slot) fill exactly 64 bits and
+  // 8 or more pass it; with 8 regions every case passes it.
   std::mt19937_64 rng(49);
   const float far = static_cast<float>(kMaxVoxelSpan - 1) + 0.5f;  // 1 m voxels: index 2^20 - 1
   for (int region_count : {2, 8}) {
-    for (std::size_t voxels : {std::size_t{3}, std::size_t{7}, std::size_t{8}, std::size_t{40}}) {
-      PointCloud cloud(4 * voxels + 2);
+    for (std::size_t points : {std::size_t{4}, std::size_t{7}, std::size_t{8}, std::size_t{9}, std::size_t{40}}) {
+      PointCloud cloud(points);
       std::vector<uint8_t> region;
       (void)cloud.push(0.5f, 0.5f, 0.5f, 1);  // the span's two corners, in the last region
       (void)cloud.push(far, far, far, 2);
       region.insert(region.end(), 2, static_cast<uint8_t>(region_count - 1));
-      while (cloud.size() < cloud.capacity()) {
+      while (cloud.size() < cloud.capacity()) {  // at most one voxel a point
         const auto at = [&] { return static_cast<float>(rng() % 4) * 0.25f * far + 0.5f; };
         (void)cloud.push(at(), at(), at(), static_cast<uint32_t>(rng()));
         region.push_back(static_cast<uint8_t>(1 + rng() % (region_count - 1)));

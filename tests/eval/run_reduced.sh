@@ -21,7 +21,8 @@ for f in report.md runs.csv table2.csv stages.csv quality.csv bandwidth.gp stage
   [ -s "$out/$f" ] || fail "no $f"
 done
 runs=$(($(wc -l < "$out/runs.csv") - 1))
-[ "$runs" -eq $((datasets * 5 * 2)) ] || fail "runs.csv has $runs runs, expected $((datasets * 5 * 2))"
+conditions=6  # F1, F2, F3, FREF, ACUITY, ACUITY-2MM
+[ "$runs" -eq $((datasets * conditions * 2)) ] || fail "runs.csv has $runs runs, expected $((datasets * conditions * 2))"
 # Every run's figures are numbers, every run decoded its 40 frames.
 awk -F, 'NR > 1 && ($4 != 40 || $7 + 0 <= 0 || $10 + 0 <= 0) { print "bad run: " $0; bad = 1 } END { exit bad }' \
   "$out/runs.csv" || fail "a run without its frames, bandwidth or latency"
@@ -32,7 +33,7 @@ awk -F, 'NR > 1 && !($12 + 0 > 0 && $13 != "" && $13 + 0 >= 0) { print "no datag
          NR > 1 { sent += $12; lost += $13 }
          END { printf "run_reduced: %d of %d datagrams lost\n", lost, sent + lost; exit bad }' \
   "$out/runs.csv" || fail "a run without its datagram counts"
-# F1, F2, F3 and ACUITY send less than FREF on every dataset (table2.csv column 7: reduction %).
+# F1, F2, F3, ACUITY and ACUITY-2MM send less than FREF on every dataset (table2.csv column 7: reduction %).
 awk -F, 'NR > 1 && $2 != "FREF" && !($7 + 0 > 20) { print "no bandwidth reduction: " $0; bad = 1 } END { exit bad }' \
   "$out/table2.csv" || fail "a condition that does not cut bandwidth against FREF"
 # Quality: FREF against itself is perfect; every other condition is measured and below it.
@@ -40,7 +41,8 @@ awk -F, 'NR > 1 && $2 == "FREF" && ($8 != "inf" || $9 != "1.00000") { print "FRE
          NR > 1 && $2 != "FREF" && !($7 + 0 > 0 && $7 + 0 < 1) { print "quality not measured: " $0; bad = 1 }
          END { exit bad }' "$out/quality.csv" || fail "quality rows wrong"
 images=$(ls "$out"/images/*.png 2>/dev/null | wc -l)
-[ "$images" -eq $((datasets * 4)) ] || fail "$images side-by-side images, expected $((datasets * 4))"
+[ "$images" -eq $((datasets * (conditions - 1))) ] ||
+  fail "$images side-by-side images, expected $((datasets * (conditions - 1)))"
 grep -q "Table II" "$out/report.md" || fail "report.md has no table"
 grep -q "not a user study" "$out/report.md" || fail "report.md does not say the quality figures are proxies"
 echo "run_reduced: $runs runs, $images images, report in $out"

@@ -74,7 +74,8 @@ const char* kHelp =
     "  --positions N          HMD positions per dataset (default 5, the paper's)\n"
     "  --seed S               the positions' and fixations' seed (default 1)\n"
     "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
-    "  --conditions LIST      F1, F2, F3, FREF, ACUITY (default: all)\n"
+    "  --conditions LIST      F1, F2, F3, FREF, ACUITY, ACUITY-2MM (ACUITY with a distance floor of\n"
+    "                         2 mm x s^2; default: all)\n"
     "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
     "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
     "  --quality-frame K      the frame (0-based) the images are made from (default 30)\n"
@@ -88,7 +89,7 @@ struct Options {
   int positions = 5;
   uint64_t seed = 1;
   std::string datasets;
-  std::string conditions = "F1,F2,F3,FREF,ACUITY";
+  std::string conditions = "F1,F2,F3,FREF,ACUITY,ACUITY-2MM";
   std::string tum = "../shared/data/tum-fr3-teddy";
   bool tum_given = false;
   int quality_positions = -1;
@@ -238,8 +239,11 @@ struct RunSpec {
 // other settings (frames, seed, positions) is not taken for this one on resume.
 // (The seed and the number of positions fix each position on a given scene.)
 std::string runSignature(const RunSpec& r, const Options& o) {
-  return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + "\nframes " + std::to_string(o.frames) +
-         "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
+  // The floor's line only where there is one: runs kept from before it existed still match.
+  const std::string floor =
+      r.condition.floor_per_m2 > 0.0 ? "\nfloor_per_m2 " + floorSetting(r.condition.floor_per_m2) : "";
+  return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + floor + "\nframes " +
+         std::to_string(o.frames) + "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
          std::to_string(r.position.index) + " of " + std::to_string(o.positions) + "\n";
 }
 
@@ -264,11 +268,15 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
   for (int attempt = 0; attempt < 3 && !g_stop; ++attempt) {
     const int port = freePort();
     const std::string listen = "127.0.0.1:" + std::to_string(port);
-    const pid_t robot = spawn({fovead, "serve", "--listen", listen, "--insecure", "--camera", run.dataset.camera_spec,
-                               "--preset", run.condition.preset, "--budget", kBudgetMbps, "--frames",
-                               std::to_string(captured), "--timing-log",
-                               run.dir + "/timing.csv", "--log-level", "warning", "--status-interval-ms", "600000"},
-                              run.dir + "/fovead.log");
+    std::vector<std::string> serve = {fovead, "serve", "--listen", listen, "--insecure", "--camera",
+                                      run.dataset.camera_spec, "--preset", run.condition.preset, "--budget",
+                                      kBudgetMbps, "--frames", std::to_string(captured), "--timing-log",
+                                      run.dir + "/timing.csv", "--log-level", "warning", "--status-interval-ms",
+                                      "600000"};
+    if (run.condition.floor_per_m2 > 0.0) {
+      serve.insert(serve.end(), {"--set", "foveation.floor_per_m2=" + floorSetting(run.condition.floor_per_m2)});
+    }
+    const pid_t robot = spawn(serve, run.dir + "/fovead.log");
     if (robot < 0) return R(ErrorCode::kNotFound, "cannot start " + fovead + " (--fovead PATH)");
     // The operator says hello until the service answers (3 s): the service may still
     // be opening its camera (TUM decodes every frame first).

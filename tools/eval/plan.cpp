@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -19,7 +20,17 @@ std::vector<Dataset> defaultDatasets(const std::string& tum_path) {
 }
 
 std::vector<Condition> defaultConditions() {
-  return {{"F1", "F1"}, {"F2", "F2"}, {"F3", "F3"}, {"FREF", "FREF"}, {"ACUITY", "ACUITY"}};
+  return {{"F1", "F1"},         {"F2", "F2"},         {"F3", "F3"},
+          {"FREF", "FREF"},     {"ACUITY", "ACUITY"}, {"ACUITY-2MM", "ACUITY", 0.002}};
+}
+
+std::string floorSetting(double floor_per_m2) {
+  char text[32];
+  for (int digits = 1; digits <= 17; ++digits) {
+    std::snprintf(text, sizeof text, "%.*g", digits, floor_per_m2);
+    if (std::strtod(text, nullptr) == floor_per_m2) break;
+  }
+  return text;
 }
 
 namespace {
@@ -38,7 +49,7 @@ Result<std::vector<Condition>> selectConditions(const std::string& names) {
   std::vector<Condition> out;
   for (const std::string& n : splitComma(names)) {
     auto it = std::find_if(all.begin(), all.end(), [&](const Condition& c) { return c.name == n; });
-    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY)");
+    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM)");
     out.push_back(*it);
   }
   if (out.empty()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: none given");

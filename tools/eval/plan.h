@@ -24,11 +24,17 @@ struct Dataset {
 std::vector<Dataset> defaultDatasets(const std::string& tum_path);
 
 struct Condition {
-  std::string name;    // F1, F2, F3, FREF, ACUITY
+  std::string name;    // F1, F2, F3, FREF, ACUITY, ACUITY-2MM
   std::string preset;  // fovead --preset
+  // ACUITY's distance floor (foveation.floor_per_m2, m per m^2 of distance); 0: none.
+  double floor_per_m2 = 0.0;
 };
-// The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper).
+// The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper), also with a
+// distance floor of 2 mm x s^2: as fast as F1 on the mock room (docs/acuity-levels.md).
 std::vector<Condition> defaultConditions();
+// A condition's floor as `fovead --set foveation.floor_per_m2=` takes it: the shortest
+// decimal that reads back as the same double (0.002, not 0.0020000000000000000416).
+std::string floorSetting(double floor_per_m2);
 // Picks names out of defaultConditions() (comma list); errors name the unknown one.
 Result<std::vector<Condition>> selectConditions(const std::string& names);
 Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, const std::string& names);

@@ -96,6 +96,7 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     if (!preset) return preset.status();
     config.acuity.preset = preset.value();
     config.acuity.slope = options.slope;
+    config.acuity.floor_per_m2 = c.floor_per_m2;
     pipeline::Foveator* foveator = &s.foveator;
     if (Status st = foveator->setConfig(config); !st) return st;
     pipeline::FoveationStats stats;

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -76,6 +77,27 @@ TEST(EvalPlan, SelectionsNameWhatIsUnknown) {
   EXPECT_FALSE(selectDatasets(mock, "tum"));  // not there without a path
   EXPECT_TRUE(selectDatasets(mock, "balloon"));
   EXPECT_EQ(runName(mock[1], defaultConditions()[3], makePositions(livingRoom(), 2, 1)[1]), "balloon_FREF_p2");
+}
+
+TEST(EvalPlan, AcuityWithItsFloorIsAConditionOfItsOwn) {
+  Result<std::vector<Condition>> both = selectConditions("ACUITY,ACUITY-2MM");
+  ASSERT_TRUE(both);
+  ASSERT_EQ(both->size(), 2u);
+  EXPECT_EQ((*both)[0].preset, "ACUITY");
+  EXPECT_EQ((*both)[0].floor_per_m2, 0.0);
+  EXPECT_EQ((*both)[1].preset, "ACUITY");
+  EXPECT_EQ((*both)[1].floor_per_m2, 0.002);
+  for (const Condition& c : defaultConditions()) {
+    if (c.name != "ACUITY-2MM") {
+      EXPECT_EQ(c.floor_per_m2, 0.0) << c.name;
+    }
+  }
+  EXPECT_EQ(runName(defaultDatasets("")[0], (*both)[1], makePositions(livingRoom(), 2, 1)[0]),
+            "living-room_ACUITY-2MM_p1");
+  // fovead reads the floor back as the same number.
+  EXPECT_EQ(floorSetting(0.002), "0.002");
+  EXPECT_EQ(floorSetting(0.1 + 0.2), "0.30000000000000004");
+  EXPECT_EQ(std::strtod(floorSetting(1.0 / 3.0).c_str(), nullptr), 1.0 / 3.0);
 }
 
 // A run directory written by hand: the service logged frames 10..14, the operator
