@@ -116,8 +116,8 @@ Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view tex
   return Eigen::Vector3d((*values)[0], (*values)[1], (*values)[2]);
 }
 
-Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args) {
-  pipeline::FoveationConfig config;
+Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipeline::FoveationConfig base) {
+  pipeline::FoveationConfig config = std::move(base);
   if (const std::string* preset = args.get("--preset")) {
     Result<pipeline::Preset> p = pipeline::parsePreset(*preset);
     if (!p) return p.status();
@@ -132,7 +132,7 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args) {
     if (!list) return list.status();
     config.acuity.preset = pipeline::Preset::kCustom;
     config.acuity.custom_bounds_deg = list.value();
-  } else if (config.acuity.preset == pipeline::Preset::kCustom) {
+  } else if (config.acuity.preset == pipeline::Preset::kCustom && config.acuity.custom_bounds_deg.empty()) {
     return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument, "--preset custom: needs --bounds E1,E2,...");
   }
   if (const std::string* m = args.get("--m")) {
@@ -184,6 +184,19 @@ std::string describeFoveation(const pipeline::FoveationConfig& config) {
                 std::string(pipeline::presetName(config.acuity.preset)).c_str(), config.acuity.slope,
                 config.acuity.far_ecc_deg, std::string(pipeline::fixationModeName(config.fixation.mode)).c_str());
   std::string text = buffer;
+  if (config.acuity.preset == pipeline::Preset::kAcuity) {
+    // Floors change what ACUITY sends several-fold (docs/acuity-levels.md): say them.
+    std::string floors;
+    if (config.acuity.floor_m > 0.0) {
+      std::snprintf(buffer, sizeof buffer, " floor %g mm", config.acuity.floor_m * 1e3);
+      floors += buffer;
+    }
+    if (config.acuity.floor_per_m2 > 0.0) {
+      std::snprintf(buffer, sizeof buffer, " floor %g mm x s^2", config.acuity.floor_per_m2 * 1e3);
+      floors += buffer;
+    }
+    text.insert(pipeline::presetName(config.acuity.preset).size(), floors);
+  }
   if (config.fixation.mode == pipeline::FixationMode::kFixed) text += " " + std::to_string(config.fixation.fixed_m) + " m";
   return text;
 }

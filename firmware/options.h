@@ -41,10 +41,14 @@ Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_v
 // The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
 // --fixation hit|centroid|fixed:D0.
 inline const std::vector<std::string> kFoveationFlags = {"--preset", "--bounds", "--m", "--far-ecc", "--fixation"};
-Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args);
+// Starts from `base` (for fovead serve: the board profile, the configuration file and
+// --set) and changes only what the flags name, so that --preset ACUITY keeps a floor
+// or a level margin set there.
+Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipeline::FoveationConfig base = {});
 std::string foveationFlagsHelp();
 
-// One-line description: "F1 (m 0.022, far periphery at 90 deg), fixation hit".
+// One-line description: "F1 (m 0.022, far periphery at 90 deg), fixation hit"; ACUITY's
+// distance floors follow its name when set ("ACUITY floor 2 mm x s^2 (m 0.022, ...").
 std::string describeFoveation(const pipeline::FoveationConfig& config);
 
 }  // namespace fovea::firmware

@@ -46,7 +46,7 @@ Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base
   bool foveation_flags = false;
   for (const std::string& flag : kFoveationFlags) foveation_flags = foveation_flags || args.has(flag);
   if (foveation_flags) {
-    Result<pipeline::FoveationConfig> foveation = foveationConfigFromArgs(args);
+    Result<pipeline::FoveationConfig> foveation = foveationConfigFromArgs(args, config.foveation);
     if (!foveation) return foveation.status();
     config.foveation = foveation.value();
   }

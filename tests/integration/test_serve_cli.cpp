@@ -93,6 +93,17 @@ TEST(FoveadServe, BoardProfileAndSetApply) {
   EXPECT_NE(unknown.output.find("unknown board 'no-such-board'"), std::string::npos) << unknown.output;
 }
 
+TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
+  // --preset names the mode; the floor comes from --set and must survive it.
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
+                                " --set foveation.floor_per_m2=0.002 --preset ACUITY --m 0.028");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  EXPECT_NE(serve.output().find("foveation ACUITY floor 2 mm x s^2 (m 0.028"), std::string::npos) << serve.output();
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+}
+
 std::string foveaOperator() {
   const std::string emulator = FOVEA_EMULATOR;
   return emulator.empty() ? std::string(FOVEA_OPERATOR_PATH) : emulator + " " + FOVEA_OPERATOR_PATH;

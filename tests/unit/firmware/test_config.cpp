@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "firmware/options.h"
 #include "hal/camera.h"
 #include "tests/support/process.h"
 
@@ -401,6 +402,66 @@ std::vector<std::filesystem::path> boardProfiles() {
   }
   std::sort(profiles.begin(), profiles.end());
   return profiles;
+}
+
+// The foveation flags change only what they name: a floor, a level margin or a view
+// cull from the configuration file or --set survive --preset ACUITY (fovead serve
+// once replaced the whole section, so --set foveation.floor_per_m2 did nothing there).
+Result<pipeline::FoveationConfig> flagsOver(const pipeline::FoveationConfig& base, std::vector<std::string> words) {
+  words.insert(words.begin(), {"fovead", "serve"});
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  Result<Args> args = Args::parse(static_cast<int>(argv.size()), argv.data(), 2, kFoveationFlags, {});
+  if (!args) return args.status();
+  return foveationConfigFromArgs(args.value(), base);
+}
+
+TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
+  pipeline::FoveationConfig base;
+  base.acuity.slope = 0.028;
+  base.acuity.floor_m = 0.003;
+  base.acuity.floor_per_m2 = 0.002;
+  base.acuity.level_margin = 0.7;
+  base.acuity.view_cull = pipeline::ViewCull::kDrop;
+  base.fixation.fixed_m = 2.5;
+  Result<pipeline::FoveationConfig> acuity = flagsOver(base, {"--preset", "ACUITY"});
+  ASSERT_TRUE(acuity) << acuity.status().toString();
+  EXPECT_EQ(acuity->acuity.preset, pipeline::Preset::kAcuity);
+  EXPECT_EQ(acuity->acuity.slope, 0.028);
+  EXPECT_EQ(acuity->acuity.floor_m, 0.003);
+  EXPECT_EQ(acuity->acuity.floor_per_m2, 0.002);
+  EXPECT_EQ(acuity->acuity.level_margin, 0.7);
+  EXPECT_EQ(acuity->acuity.view_cull, pipeline::ViewCull::kDrop);
+  EXPECT_EQ(describeFoveation(acuity.value()).rfind("ACUITY floor 3 mm floor 2 mm x s^2 (m 0.028, ", 0), 0u)
+      << describeFoveation(acuity.value());
+  Result<pipeline::FoveationConfig> slope = flagsOver(acuity.value(), {"--m", "0.034"});
+  ASSERT_TRUE(slope);
+  EXPECT_EQ(slope->acuity.slope, 0.034);
+  EXPECT_EQ(slope->acuity.preset, pipeline::Preset::kAcuity);
+  EXPECT_EQ(slope->acuity.floor_per_m2, 0.002);
+  Result<pipeline::FoveationConfig> fixed = flagsOver(base, {"--fixation", "centroid"});
+  ASSERT_TRUE(fixed);
+  EXPECT_EQ(fixed->fixation.mode, pipeline::FixationMode::kCentroid);
+  EXPECT_EQ(fixed->fixation.fixed_m, 2.5);
+  // The paper's presets say no floor, whatever the base holds (they ignore it).
+  Result<pipeline::FoveationConfig> f1 = flagsOver(base, {"--preset", "F1"});
+  ASSERT_TRUE(f1);
+  EXPECT_EQ(describeFoveation(f1.value()).rfind("F1 (m 0.028, ", 0), 0u) << describeFoveation(f1.value());
+}
+
+TEST(FoveationFlags, CustomRegionsFromTheBaseNeedNoBoundsFlag) {
+  pipeline::FoveationConfig base;
+  base.acuity.preset = pipeline::Preset::kCustom;
+  base.acuity.custom_bounds_deg = {5, 20};
+  Result<pipeline::FoveationConfig> slope = flagsOver(base, {"--m", "0.03"});
+  ASSERT_TRUE(slope) << slope.status().toString();
+  EXPECT_EQ(slope->acuity.custom_bounds_deg, (std::vector<double>{5, 20}));
+  Result<pipeline::FoveationConfig> bare = flagsOver(pipeline::FoveationConfig{}, {"--preset", "custom"});
+  ASSERT_FALSE(bare);
+  EXPECT_NE(bare.status().message().find("needs --bounds"), std::string::npos) << bare.status().message();
+  Result<pipeline::FoveationConfig> both = flagsOver(base, {"--preset", "F2", "--bounds", "3,9"});
+  ASSERT_FALSE(both);
+  EXPECT_NE(both.status().message().find("--bounds"), std::string::npos) << both.status().message();
 }
 
 TEST(BoardProfiles, EveryProfileLoadsAndValidates) {
