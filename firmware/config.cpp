@@ -161,6 +161,7 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("foveation.floor_m", foveation.acuity.floor_m, 0.0, 1.0),
       FOVEA_FLOAT("foveation.floor_per_m2", foveation.acuity.floor_per_m2, 0.0, 1.0),
       FOVEA_FLOAT("foveation.level_margin", foveation.acuity.level_margin, 0.1, 10.0),
+      FOVEA_INT("foveation.refine_passes", foveation.acuity.refine_passes, 0, pipeline::kMaxRefinePasses),
       Field{"foveation.view_cull", Kind::kChoice, 0, 0, {"off", "coarsest", "drop"},
             [](const ServiceConfig& c) -> Value {
               return std::string(pipeline::viewCullName(c.foveation.acuity.view_cull));

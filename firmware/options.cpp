@@ -195,6 +195,15 @@ std::string describeFoveation(const pipeline::FoveationConfig& config) {
       std::snprintf(buffer, sizeof buffer, " floor %g mm x s^2", config.acuity.floor_per_m2 * 1e3);
       floors += buffer;
     }
+    if (config.acuity.level_margin != pipeline::AcuityConfig{}.level_margin) {
+      std::snprintf(buffer, sizeof buffer, " margin %g", config.acuity.level_margin);
+      floors += buffer;
+    }
+    if (config.acuity.refine_passes > 0) {
+      std::snprintf(buffer, sizeof buffer, " refined %d pass%s", config.acuity.refine_passes,
+                    config.acuity.refine_passes == 1 ? "" : "es");
+      floors += buffer;
+    }
     text.insert(pipeline::presetName(config.acuity.preset).size(), floors);
   }
   if (config.fixation.mode == pipeline::FixationMode::kFixed) text += " " + std::to_string(config.fixation.fixed_m) + " m";

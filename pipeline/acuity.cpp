@@ -113,6 +113,11 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
     }
     model.floor_per_m2_ = q;
     model.level_margin_ = k;
+    if (config.refine_passes < 0 || config.refine_passes > kMaxRefinePasses) {
+      return invalid("refine_passes", std::to_string(config.refine_passes) + " is outside [0, " +
+                                          std::to_string(kMaxRefinePasses) + "]");
+    }
+    model.refine_passes_ = config.refine_passes;
     const double c = config.view_cull_deg;
     if (!std::isfinite(c) || !(c > 0.0 && c <= 180.0)) {
       return invalid("view_cull_deg", formatDouble(c) + " is outside (0, 180] degrees");

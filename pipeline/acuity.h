@@ -20,6 +20,7 @@ inline constexpr double kMar0Deg = 1.0 / 60.0;  // 1 arcmin: 20/20 acuity
 inline constexpr int kMaxRegions = 8;            // region index fits 3 bits of a voxel key
 inline constexpr double kDefaultSlope = 0.022;   // the paper's range is 0.022 .. 0.034
 inline constexpr double kDefaultFarEccDeg = 90.0;
+inline constexpr int kMaxRefinePasses = kMaxRegions - 1;
 
 // Eq. 1: minimum angle of resolution at eccentricity ecc_deg, in degrees.
 inline double marDeg(double slope, double ecc_deg) { return slope * ecc_deg + kMar0Deg; }
@@ -66,6 +67,13 @@ struct AcuityConfig {
   // smaller values trade a measured share above the MAR for bytes. 0.5: about
   // F3's bytes at half its share above the MAR (docs/acuity-levels.md).
   double level_margin = 0.5;
+  // Preset::kAcuity: passes of error-driven refinement after the first sampling
+  // (acuity_levels.h, refineTestRef and moveRefinedVoxels): each moves every voxel
+  // with a point its centroid displaces, seen from the eye, by more than the
+  // point's MAR one level down, and samples again. 0: none (the levels come from
+  // the margin alone); at most kMaxRefinePasses, which brings every point under its
+  // MAR (a point can go down at most kMaxRegions - 1 levels).
+  int refine_passes = 0;
   // Preset::kAcuity, when the gaze carries the head's pose (Gaze::view_known): a
   // point further than view_cull_deg from the head's forward axis (the HMD's field
   // of view plus a margin for head motion within the loop's latency) goes to the
@@ -98,6 +106,7 @@ class RegionModel {
   }
   double levelVoxelM() const { return level_voxel_m_; }
   double levelMargin() const { return level_margin_; }
+  int refinePasses() const { return refine_passes_; }
   double floorM() const { return floor_m_; }
   double floorPerM2() const { return floor_per_m2_; }
   ViewCull viewCull() const { return view_cull_; }
@@ -119,6 +128,7 @@ class RegionModel {
   double floor_m_ = 0.0;
   double floor_per_m2_ = 0.0;
   double level_margin_ = 0.0;
+  int refine_passes_ = 0;
   ViewCull view_cull_ = ViewCull::kOff;
   double view_cull_deg_ = 0.0;
 };

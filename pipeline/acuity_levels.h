@@ -40,6 +40,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 #include "pipeline/acuity.h"
@@ -93,6 +94,26 @@ inline float sinSpec(float x) {
   return p * y;
 }
 
+// How the eye sees a point at v = P - H (float, the specification's order): its
+// distance r and its eccentricity less the fovea's growth, clamped at 0.
+struct EyeView {
+  float r_m = 0.0f;
+  float ecc_deg = 0.0f;
+};
+inline EyeView eyeViewSpec(float vx, float vy, float vz, const Eigen::Vector3f& l, float growth_deg) {
+  // t along the gaze, d from its axis (axialRadial's expressions, in float).
+  const float t = vx * l.x() + vy * l.y() + vz * l.z();
+  const float rx = vx - t * l.x();
+  const float ry = vy - t * l.y();
+  const float rz = vz - t * l.z();
+  const float d = std::sqrt(rx * rx + ry * ry + rz * rz);
+  EyeView view;
+  view.r_m = std::sqrt(vx * vx + vy * vy + vz * vz);
+  const float ecc = eccentricitySpecDeg(t, d) - growth_deg;
+  view.ecc_deg = ecc < 0.0f ? 0.0f : ecc;
+  return view;
+}
+
 struct LevelBounds {
   float slope = static_cast<float>(kDefaultSlope);
   // k * v_n for n = 1 .. kMaxRegions - 1 (index 0 unused).
@@ -113,14 +134,55 @@ struct LevelBounds {
   // number of levels n >= 1 whose k v_n fits under r sin(MAR) (they grow with n),
   // lifted to the floor.
   uint8_t classify(float r_m, float ecc_deg) const;
+  // r sin(MAR(E)): how far a point may move, seen from the eye, unresolved.
+  float allowedM(float r_m, float ecc_deg) const {
+    return r_m * sinSpec((slope * ecc_deg + kLevelsMar0Deg) * kLevelsDegToRad);
+  }
   // The distance-dependent floor's level for a point at s2_m2 = s^2 from the sensor
   // (0 when floor_b_per_m2 is 0).
   uint8_t noiseFloorLevel(float s2_m2) const;
+  // The lowest level a point at s2_m2 from the sensor may have: floor_level or the
+  // distance floor's, whichever is higher.
+  uint8_t lowestLevel(float s2_m2) const;
 };
 
 // Scalar reference. gaze must come from normalizeGaze(). Writes cloud.size()
 // levels to region_out.
 void assignLevelsRef(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
                      PartitionCounts& counts);
+
+// Error-driven refinement (AcuityConfig::refine_passes; docs/acuity-levels.md):
+// the margin k sizes a level from the worst case (a centroid at its voxel's far
+// corner), which most voxels are far from, so at a low share above the MAR a small
+// k with refinement keeps fewer points than a large k alone. A pass has two steps,
+// after a sampling of `cloud` into `out` (representative[i]: point i's output point):
+//
+// 1. refineTestRef gives every point a state. kRefineStay: it cannot leave its
+//    level (raw, invalid or culled, no representative, on its floor's level -
+//    floor_level or the distance floor - or put on the coarsest level by the view
+//    cull). Otherwise kRefineBeyond when its representative R is seen from the eye
+//    more than MAR(E) away from it, else kRefineWithin: sin(alpha) = |e x a| /
+//    (|a| |b|) with a = P - H, e = P - R, b = a - e (float, formed as P - H is; the
+//    growth taken as in assignLevelsRef), and alpha <= MAR when a.b > 0 and
+//    |e x a|^2 <= |b|^2 allowedM(r, E)^2. A move along the eye's ray is not seen,
+//    so only the across part counts: the error report's measure. Returns the
+//    points beyond. refineTestSimd (pipeline/kernels/foveation_simd.h) gives the
+//    same states.
+// 2. moveRefinedVoxels moves every point that can move one level down (level 1:
+//    raw) when any point of its voxel is beyond: the whole voxel, not only the
+//    points beyond, so that a voxel kept at a level holds all its points (moving
+//    only those left small clusters in coarse voxels, which a viewer draws at the
+//    voxel's size: blocks in fovea-eval's images). Sample again when it moved any.
+//
+// Once no point is beyond, none is above its MAR.
+inline constexpr uint8_t kRefineStay = 0;
+inline constexpr uint8_t kRefineWithin = 1;
+inline constexpr uint8_t kRefineBeyond = 2;
+std::size_t refineTestRef(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, const PointCloud& out,
+                          const uint32_t* representative, const uint8_t* region, uint8_t* state);
+// voxel_beyond: scratch of out_size bytes. Updates region and counts.per_region;
+// returns the points moved.
+std::size_t moveRefinedVoxels(const uint8_t* state, const uint32_t* representative, std::size_t n,
+                              std::size_t out_size, uint8_t* voxel_beyond, uint8_t* region, PartitionCounts& counts);
 
 }  // namespace fovea::pipeline

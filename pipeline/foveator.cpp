@@ -41,6 +41,9 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
       levels_(LevelBounds::fromModel(model)),
       region_(capacity.max_points),
       t_scratch_(capacity.max_points),
+      representative_(capacity.max_points),
+      refine_state_(capacity.max_points),
+      voxel_beyond_(capacity.max_points),
       sampler_(capacity.kernels == KernelSet::kRef ? VoxelSampler(capacity.max_points, capacity.max_voxels)
                                                    : VoxelSampler()),
       hash_sampler_(capacity.kernels == KernelSet::kSimd ? HashVoxelSampler(capacity.max_points, capacity.max_voxels)
@@ -90,7 +93,36 @@ void levelPart(void* ctx, int part, int parts) {
                       WorkerPool::rangeBegin(n, part + 1, parts), job->region, histogram);
 }
 
+struct RefineJob {
+  const PointCloud* cloud;
+  const kernels::LevelParams* params;
+  const kernels::RefineInputs* inputs;
+  const uint8_t* region;
+  uint8_t* state;
+  uint32_t* histograms;  // per part (256 each): [0] gets the points beyond
+};
+
+void refinePart(void* ctx, int part, int parts) {
+  auto* job = static_cast<RefineJob*>(ctx);
+  const std::size_t n = job->cloud->size();
+  job->histograms[256 * static_cast<std::size_t>(part)] = static_cast<uint32_t>(
+      kernels::refineTestRange(*job->cloud, *job->params, *job->inputs, job->region,
+                               WorkerPool::rangeBegin(n, part, parts), WorkerPool::rangeBegin(n, part + 1, parts),
+                               job->state));
+}
+
 }  // namespace
+
+std::size_t Foveator::refineTestParallel(const PointCloud& in, const Gaze& gaze, const PointCloud& out,
+                                         const uint32_t* representative) {
+  const kernels::LevelParams params = kernels::prepareLevels(in, gaze, levels_);
+  const kernels::RefineInputs inputs = kernels::prepareRefine(in, out, representative);
+  RefineJob job{&in, &params, &inputs, region_.data(), refine_state_.data(), part_histograms_.data()};
+  pool_->run(refinePart, &job);
+  std::size_t beyond = 0;
+  for (int part = 0; part < pool_->parts(); ++part) beyond += part_histograms_[256 * static_cast<std::size_t>(part)];
+  return beyond;
+}
 
 void Foveator::sumHistograms(PartitionCounts& counts) const {
   counts = {};
@@ -172,11 +204,30 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
   const int64_t t2 = nowNs();
   SampleCounts sample_counts;
-  Status sampled = capacity_.kernels == KernelSet::kSimd
-                       ? hash_sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out,
-                                              sample_counts, representative)
-                       : sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts,
-                                         representative);
+  // ACUITY's refinement needs every point's representative, asked for or not.
+  const bool refine = model_.levels() && model_.refinePasses() > 0;
+  uint32_t* rep = representative != nullptr || !refine ? representative : representative_.data();
+  const auto sample = [&] {
+    return capacity_.kernels == KernelSet::kSimd
+               ? hash_sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts, rep)
+               : sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts, rep);
+  };
+  Status sampled = sample();
+  // Move the points the eye would see displaced one level down and sample again,
+  // until none moves or the passes are spent.
+  for (int pass = 0; refine && sampled && pass < model_.refinePasses(); ++pass) {
+    const std::size_t beyond =
+        pool_ ? refineTestParallel(in, unit_gaze.value(), out.points, rep)
+        : capacity_.kernels == KernelSet::kSimd
+            ? refineTestSimd(in, unit_gaze.value(), levels_, out.points, rep, region_.data(), refine_state_.data())
+            : refineTestRef(in, unit_gaze.value(), levels_, out.points, rep, region_.data(), refine_state_.data());
+    if (beyond == 0) break;
+    const std::size_t moved = moveRefinedVoxels(refine_state_.data(), rep, in.size(), out.size(),
+                                                voxel_beyond_.data(), region_.data(), partition_counts);
+    stats.refined += static_cast<uint32_t>(moved);
+    ++stats.refine_passes;
+    sampled = sample();
+  }
   const int64_t t3 = nowNs();
 
   stats.partition_ns = t1 - t0;

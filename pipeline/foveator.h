@@ -52,10 +52,12 @@ struct FoveationStats {
   uint32_t points_out = 0;
   uint32_t dropped_nonfinite = 0;  // input points with NaN/Inf coordinates
   uint32_t culled = 0;             // ACUITY's view cull (drop): outside the field of view, not sent
+  uint32_t refined = 0;            // ACUITY's refinement: level changes over all passes
+  int refine_passes = 0;           // ... and the passes that moved a point
   Fixation fixation;
   int64_t partition_ns = 0;
   int64_t fixation_ns = 0;
-  int64_t sample_ns = 0;
+  int64_t sample_ns = 0;           // the sampling, with ACUITY's refinement passes
 };
 
 class Foveator {
@@ -84,6 +86,9 @@ class Foveator {
   Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
   void partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
   void levelsParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
+  // ACUITY's refinement test split over the pool; returns the points beyond their MAR.
+  std::size_t refineTestParallel(const PointCloud& in, const Gaze& gaze, const PointCloud& out,
+                                 const uint32_t* representative);
   void sumHistograms(PartitionCounts& counts) const;  // the pool's parts' histograms
 
   PipelineCapacity capacity_;
@@ -93,6 +98,9 @@ class Foveator {
   LevelBounds levels_;  // Preset::kAcuity
   std::vector<uint8_t> region_;
   std::vector<double> t_scratch_;
+  std::vector<uint32_t> representative_;  // ACUITY's refinement, when foveate() gets none
+  std::vector<uint8_t> refine_state_;      // ... each point's state (acuity_levels.h)
+  std::vector<uint8_t> voxel_beyond_;      // ... per output point (the output never exceeds the input)
   VoxelSampler sampler_;           // kernels == kRef (only the one in use is allocated)
   HashVoxelSampler hash_sampler_;  // kernels == kSimd
   std::unique_ptr<WorkerPool> pool_;        // threads > 1 and kernels == kSimd

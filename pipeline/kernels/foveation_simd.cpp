@@ -25,6 +25,7 @@ HWY_EXPORT(BackprojectCountRowsT);
 HWY_EXPORT(BackprojectRowsT);
 HWY_EXPORT(PartitionRangeT);
 HWY_EXPORT(LevelRangeT);
+HWY_EXPORT(RefineTestRangeT);
 HWY_EXPORT(VoxelIndexRangeT);
 HWY_EXPORT(VoxelKeyRangeT);
 HWY_EXPORT(HitConeRangeT);
@@ -107,6 +108,24 @@ LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const Level
   p.cull = bounds.cull_region != 0 && gaze.view_known;
   for (int a = 0; a < 3; ++a) p.f[a] = static_cast<float>(gaze.view_forward[a]);
   return p;
+}
+
+RefineInputs prepareRefine(const PointCloud& cloud, const PointCloud& out, const uint32_t* representative) {
+  RefineInputs inputs;
+  inputs.representative = representative;
+  inputs.out_size = out.size();
+  inputs.ox = out.x();
+  inputs.oy = out.y();
+  inputs.oz = out.z();
+  const Eigen::Vector3f offset = (cloud.origin_m - out.origin_m).cast<float>();
+  for (int a = 0; a < 3; ++a) inputs.out_offset[a] = offset[a];
+  return inputs;
+}
+
+std::size_t refineTestRange(const PointCloud& cloud, const LevelParams& params, const RefineInputs& inputs,
+                            const uint8_t* region, std::size_t begin, std::size_t end, uint8_t* state) {
+  return HWY_DYNAMIC_DISPATCH(RefineTestRangeT)(cloud.x(), cloud.y(), cloud.z(), params, inputs, region, begin, end,
+                                                state);
 }
 
 void levelRange(const PointCloud& cloud, const LevelParams& params, std::size_t begin, std::size_t end,
@@ -206,6 +225,12 @@ void assignLevelsSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBoun
   for (int r = 0; r < kMaxRegions; ++r) counts.per_region[r] = histogram[r];
   counts.invalid = histogram[kRegionInvalid];
   counts.culled = histogram[kRegionCulled];
+}
+
+std::size_t refineTestSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, const PointCloud& out,
+                           const uint32_t* representative, const uint8_t* region, uint8_t* state) {
+  return kernels::refineTestRange(cloud, kernels::prepareLevels(cloud, gaze, bounds),
+                                  kernels::prepareRefine(cloud, out, representative), region, 0, cloud.size(), state);
 }
 
 void voxelIndexSimd(const float* coord, const uint8_t* region, std::size_t n, double origin_m,

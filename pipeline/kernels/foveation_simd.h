@@ -44,6 +44,9 @@ void partitionSimd(const PointCloud& cloud, const Gaze& gaze, const ConeBounds& 
 // Same contract as assignLevelsRef.
 void assignLevelsSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, uint8_t* region_out,
                       PartitionCounts& counts);
+// Same contract and states as refineTestRef.
+std::size_t refineTestSimd(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds, const PointCloud& out,
+                           const uint32_t* representative, const uint8_t* region, uint8_t* state);
 
 // index_out[i] = voxelIndex(origin_m, coord[i], inv_voxel_by_region[region[i]]) for i in [0, n).
 // inv_voxel_by_region has 256 entries (any region byte, kRegionInvalid included).
@@ -117,6 +120,20 @@ struct LevelParams {
   float f[3] = {};          // Gaze::view_forward
 };
 LevelParams prepareLevels(const PointCloud& cloud, const Gaze& gaze, const LevelBounds& bounds);
+// What the refinement reads besides the points: each point's representative in the
+// sampled cloud (its coordinates and size) and cloud.origin_m - out.origin_m as float.
+struct RefineInputs {
+  const uint32_t* representative = nullptr;
+  std::size_t out_size = 0;
+  const float* ox = nullptr;
+  const float* oy = nullptr;
+  const float* oz = nullptr;
+  float out_offset[3] = {};
+};
+RefineInputs prepareRefine(const PointCloud& cloud, const PointCloud& out, const uint32_t* representative);
+// refineTestRef's states of points [begin, end); returns the points beyond their MAR.
+std::size_t refineTestRange(const PointCloud& cloud, const LevelParams& params, const RefineInputs& inputs,
+                            const uint8_t* region, std::size_t begin, std::size_t end, uint8_t* state);
 // Levels of points [begin, end); histogram[r] += points of level r (r = kRegionInvalid too).
 void levelRange(const PointCloud& cloud, const LevelParams& params, std::size_t begin, std::size_t end,
                 uint8_t* region_out, uint32_t* histogram256);

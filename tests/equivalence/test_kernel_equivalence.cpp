@@ -349,28 +349,123 @@ TEST_P(TargetTest, LevelsRandomClouds) {
   }
 }
 
-TEST_P(TargetTest, LevelsGazeAlongAxesSpecialsAndFarPoints) {
-  std::mt19937_64 rng(42);
-  const PointCloud cloud = test::randomCloud(5003, Eigen::Vector3d::Zero(), 20.0f, 43);
-  const Eigen::Vector3d axes[] = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
-                                  -Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
-  PointCloud specials(4000);
+// The hard clouds of ACUITY's kernels: a random one 20 m across, NaN, Inf, denormals and
+// 3e38 in every combination, points on the gaze axis ahead and behind, at the eye and at
+// exactly 90 degrees, and a cloud 10 km out; and the six axes.
+struct HardClouds {
+  PointCloud cloud, specials, axis_points, far;
+  std::array<Eigen::Vector3d, 6> axes = {Eigen::Vector3d::UnitX(),  -Eigen::Vector3d::UnitX(),
+                                         Eigen::Vector3d::UnitY(),  -Eigen::Vector3d::UnitY(),
+                                         Eigen::Vector3d::UnitZ(),  -Eigen::Vector3d::UnitZ()};
+};
+
+HardClouds hardClouds(std::mt19937_64& rng, uint64_t seed) {
+  HardClouds h{test::randomCloud(5003, Eigen::Vector3d::Zero(), 20.0f, seed), PointCloud(4000), PointCloud(64),
+               test::randomCloud(3001, Eigen::Vector3d(1e4, 1e4, -1e4), 50.0f, seed + 1)};
   const float values[] = {kNaNf, -kNaNf, kInff, -kInff, kDenormf, -kDenormf, 1e-38f, 0.0f, -0.0f,
                           3e38f, -3e38f, 1.0f, -2.5f, 1e4f, -1e4f};
   std::uniform_int_distribution<int> pick(0, 14);
-  for (int i = 0; i < 4000; ++i) (void)specials.push(values[pick(rng)], values[pick(rng)], values[pick(rng)], 0);
-  // On the gaze axis ahead and behind, at the eye, and at exactly 90 degrees.
-  PointCloud axis_points(64);
-  for (float z : {0.0f, -0.0f, 0.001f, 1.0f, 3.0f, 1e3f, -0.001f, -1.0f, -3.0f}) (void)axis_points.push(0.0f, 0.0f, z, 0);
-  for (float x : {0.001f, 1.0f, 100.0f}) (void)axis_points.push(x, 0.0f, 0.0f, 0);
-  const PointCloud far = test::randomCloud(3001, Eigen::Vector3d(1e4, 1e4, -1e4), 50.0f, 44);
+  for (int i = 0; i < 4000; ++i) (void)h.specials.push(values[pick(rng)], values[pick(rng)], values[pick(rng)], 0);
+  for (float z : {0.0f, -0.0f, 0.001f, 1.0f, 3.0f, 1e3f, -0.001f, -1.0f, -3.0f}) (void)h.axis_points.push(0.0f, 0.0f, z, 0);
+  for (float x : {0.001f, 1.0f, 100.0f}) (void)h.axis_points.push(x, 0.0f, 0.0f, 0);
+  return h;
+}
+
+TEST_P(TargetTest, LevelsGazeAlongAxesSpecialsAndFarPoints) {
+  std::mt19937_64 rng(42);
+  const HardClouds h = hardClouds(rng, 43);
   for (const LevelBounds& b : allLevelBounds()) {
-    for (const auto& axis : axes) expectSameLevels(cloud, gazeAlong(axis), b, "axis");
-    expectSameLevels(specials, gazeAlong(Eigen::Vector3d(1, 2, 3)), b, "specials");
-    expectSameLevels(specials, gazeAlong(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(0, 0, 1e4)), b, "specials far");
-    expectSameLevels(axis_points, gazeAlong(Eigen::Vector3d::UnitZ()), b, "on the axis");
-    expectSameLevels(far, gazeAlong(Eigen::Vector3d(1, 1, -1), Eigen::Vector3d::Zero()), b, "far");
-    expectSameLevels(far, gazeAlong(test::randomUnit(rng), Eigen::Vector3d(1e4, 1e4, -1e4)), b, "far, eye inside");
+    for (const auto& axis : h.axes) expectSameLevels(h.cloud, gazeAlong(axis), b, "axis");
+    expectSameLevels(h.specials, gazeAlong(Eigen::Vector3d(1, 2, 3)), b, "specials");
+    expectSameLevels(h.specials, gazeAlong(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(0, 0, 1e4)), b, "specials far");
+    expectSameLevels(h.axis_points, gazeAlong(Eigen::Vector3d::UnitZ()), b, "on the axis");
+    expectSameLevels(h.far, gazeAlong(Eigen::Vector3d(1, 1, -1), Eigen::Vector3d::Zero()), b, "far");
+    expectSameLevels(h.far, gazeAlong(test::randomUnit(rng), Eigen::Vector3d(1e4, 1e4, -1e4)), b, "far, eye inside");
+  }
+}
+
+// ---- ACUITY's refinement ---------------------------------------------------------
+
+// refineTestSimd against refineTestRef on the levels of `cloud`, with
+// representatives that are the points themselves moved by 10 um to 1 m (across the
+// MAR's threshold for every level), none, one past the output's end or another
+// point's; the output cloud has an origin of its own.
+void expectSameRefinement(const PointCloud& cloud, const Gaze& raw_gaze, const LevelBounds& bounds, uint64_t seed,
+                          const char* what) {
+  const Gaze gaze = normalizeGaze(withHead(raw_gaze, seed)).value();
+  std::mt19937_64 rng(seed);
+  std::vector<uint8_t> levels(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, gaze, bounds, levels.data(), counts);
+  PointCloud out(cloud.size() + 1);
+  out.origin_m = cloud.origin_m + Eigen::Vector3d(0.25, -3.0, 1e3 * static_cast<double>(seed % 2));
+  const Eigen::Vector3f shift = (cloud.origin_m - out.origin_m).cast<float>();
+  std::uniform_real_distribution<float> log_size(-5.0f, 0.0f);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3f e = std::pow(10.0f, log_size(rng)) * test::randomUnit(rng).cast<float>();
+    (void)out.push(cloud.x()[i] + shift.x() + e.x(), cloud.y()[i] + shift.y() + e.y(), cloud.z()[i] + shift.z() + e.z(), 0);
+  }
+  std::vector<uint32_t> rep(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const uint64_t pick = rng() % 20;
+    rep[i] = pick == 0   ? kNoRepresentative
+             : pick == 1 ? static_cast<uint32_t>(out.size())
+             : pick == 2 ? static_cast<uint32_t>(rng() % std::max<std::size_t>(1, out.size()))
+                         : static_cast<uint32_t>(i);
+  }
+  std::vector<uint8_t> ref(cloud.size() + 1, 0xAB), simd(cloud.size() + 1, 0xAB);
+  const std::size_t br = refineTestRef(cloud, gaze, bounds, out, rep.data(), levels.data(), ref.data());
+  const std::size_t bs = refineTestSimd(cloud, gaze, bounds, out, rep.data(), levels.data(), simd.data());
+  for (std::size_t i = 0; i < ref.size(); ++i) {  // [size] checks nothing is overrun
+    ASSERT_EQ(ref[i], simd[i]) << what << ": point " << i << " of " << cloud.size() << " level " << int(levels[i]);
+  }
+  EXPECT_EQ(br, bs) << what;
+}
+
+TEST_P(TargetTest, RefinementRandomClouds) {
+  std::mt19937_64 rng(51);
+  const std::vector<LevelBounds> all = allLevelBounds();
+  std::size_t moved = 0, kept = 0;
+  for (std::size_t n : {0, 1, 2, 3, 5, 7, 9, 15, 17, 33, 1000, 20011}) {
+    for (const Eigen::Vector3d& origin : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e4, -1e4, 1e4)}) {
+      for (float extent : {3.0f, 300.0f}) {
+        const PointCloud cloud = test::randomCloud(n, origin, extent, rng());
+        for (const LevelBounds& b : all) {
+          expectSameRefinement(cloud, gazeAlong(test::randomUnit(rng), origin + 0.5 * test::randomUnit(rng)), b, rng(),
+                               "random");
+        }
+      }
+    }
+  }
+  // Not vacuous: on one cloud, the test finds points beyond their MAR and within it.
+  const PointCloud cloud = test::randomCloud(20011, Eigen::Vector3d::Zero(), 3.0f, 52);
+  const Gaze gaze = normalizeGaze(gazeAlong(Eigen::Vector3d::UnitZ())).value();
+  std::vector<uint8_t> levels(cloud.size());
+  PartitionCounts counts;
+  const LevelBounds& b = all.front();
+  assignLevelsRef(cloud, gaze, b, levels.data(), counts);
+  PointCloud out(cloud.size());
+  out.origin_m = cloud.origin_m;
+  for (std::size_t i = 0; i < cloud.size(); ++i) (void)out.push(cloud.x()[i] + 0.004f * static_cast<float>(i % 7), cloud.y()[i], cloud.z()[i], 0);
+  std::vector<uint32_t> rep(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) rep[i] = static_cast<uint32_t>(i);
+  std::vector<uint8_t> state(cloud.size());
+  moved = refineTestSimd(cloud, gaze, b, out, rep.data(), levels.data(), state.data());
+  for (std::size_t i = 0; i < cloud.size(); ++i) kept += state[i] == kRefineWithin;
+  EXPECT_GT(moved, 100u);
+  EXPECT_GT(kept, 100u);
+}
+
+TEST_P(TargetTest, RefinementGazeAlongAxesSpecialsAndFarPoints) {
+  std::mt19937_64 rng(53);
+  const HardClouds h = hardClouds(rng, 54);
+  for (const LevelBounds& b : allLevelBounds()) {
+    for (const auto& axis : h.axes) expectSameRefinement(h.cloud, gazeAlong(axis), b, rng(), "axis");
+    expectSameRefinement(h.specials, gazeAlong(Eigen::Vector3d(1, 2, 3)), b, rng(), "specials");
+    expectSameRefinement(h.axis_points, gazeAlong(Eigen::Vector3d::UnitZ()), b, rng(), "on the axis");
+    expectSameRefinement(h.far, gazeAlong(Eigen::Vector3d(1, 1, -1), Eigen::Vector3d::Zero()), b, rng(), "far");
+    expectSameRefinement(h.far, gazeAlong(test::randomUnit(rng), Eigen::Vector3d(1e4, 1e4, -1e4)), b, rng(),
+                         "far, eye inside");
   }
 }
 

@@ -106,12 +106,22 @@ TEST(Threads, BackprojectionIsIdenticalForOneToFourThreads) {
 
 TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
   std::mt19937_64 rng(62);
-  // ACUITY twice: plain, and with a grown fovea and a view cull that drops points.
-  for (int variant = 0; variant < 4; ++variant) {
+  // ACUITY four times: plain; with a grown fovea and a view cull that drops points;
+  // refined; refined with a distance floor and a view cull to the coarsest level.
+  for (int variant = 0; variant < 6; ++variant) {
     FoveationConfig config;
     config.acuity.preset = variant == 0 ? Preset::kF1 : variant == 1 ? Preset::kF3 : Preset::kAcuity;
     if (variant == 3) {
       config.acuity.view_cull = ViewCull::kDrop;
+      config.acuity.view_cull_deg = 30.0;
+    }
+    if (variant >= 4) {
+      config.acuity.level_margin = 0.15;
+      config.acuity.refine_passes = variant == 4 ? kMaxRefinePasses : 2;
+    }
+    if (variant == 5) {
+      config.acuity.floor_per_m2 = 0.002;
+      config.acuity.view_cull = ViewCull::kCoarsest;
       config.acuity.view_cull_deg = 30.0;
     }
     for (std::size_t n : {std::size_t{3}, std::size_t{50001}}) {
@@ -120,7 +130,7 @@ TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
       Gaze gaze;
       gaze.origin_m = cloud.origin_m + Eigen::Vector3d(0, 0, -4);
       gaze.direction = Eigen::Vector3d(0.1, 0, 1);
-      if (variant == 3) {
+      if (variant == 3 || variant == 5) {
         gaze.fovea_growth_deg = 6.0;
         gaze.view_known = true;
         gaze.view_forward = Eigen::Vector3d(0.4, 0.1, 1);
@@ -143,7 +153,16 @@ TEST(Threads, FoveatorIsIdenticalForOneToFourThreads) {
         if (variant == 3 && n > 3) {
           EXPECT_GT(st.culled, 0u);
         }
+        EXPECT_EQ(es.refined, st.refined);
+        EXPECT_EQ(es.refine_passes, st.refine_passes);
+        if (variant >= 4 && n > 3) {
+          EXPECT_GT(st.refined, 0u);
+        }
         for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(es.regions[r].points_in, st.regions[r].points_in);
+        // The refinement keeps its own representatives when the caller asks for none.
+        FoveatedCloud unasked(n);
+        ASSERT_TRUE(f.foveate(cloud, gaze, unasked, st).isOk());
+        EXPECT_TRUE(sameFoveated(expected, unasked)) << threads << " threads, no representative asked";
       }
     }
   }

@@ -140,7 +140,7 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
   pipeline::FoveatedCloud out(50000);
   pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam().kernels, GetParam().threads}, {}).value();
-  std::vector<pipeline::FoveationConfig> configs(6);
+  std::vector<pipeline::FoveationConfig> configs(7);
   configs[0].acuity.preset = pipeline::Preset::kF1;
   configs[1].acuity.preset = pipeline::Preset::kF2;
   configs[2].acuity.preset = pipeline::Preset::kF3;
@@ -156,6 +156,10 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   head.fovea_growth_deg = 5.0;
   head.view_known = true;
   head.view_forward = Eigen::Vector3d(0.5, 0.0, 1.0);
+  // ACUITY refined: every pass samples again, with the Foveator's own representatives.
+  configs[6].acuity.preset = pipeline::Preset::kAcuity;
+  configs[6].acuity.level_margin = 0.15;
+  configs[6].acuity.refine_passes = pipeline::kMaxRefinePasses;
   configs[1].fixation.mode = pipeline::FixationMode::kCentroid;
   pipeline::FoveationStats stats;
   ASSERT_TRUE(foveator.foveate(clouds[0], pipeline::Gaze{}, out, stats).isOk());
@@ -163,8 +167,8 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   test::AllocationScope scope;
   bool all_ok = true;
   for (int i = 0; i < 120; ++i) {
-    all_ok = foveator.setConfig(configs[i % 6]).isOk() && all_ok;
-    all_ok = foveator.foveate(clouds[i % 4], i % 6 == 5 ? head : pipeline::Gaze{}, out, stats).isOk() && all_ok;
+    all_ok = foveator.setConfig(configs[i % 7]).isOk() && all_ok;
+    all_ok = foveator.foveate(clouds[i % 4], i % 7 == 5 ? head : pipeline::Gaze{}, out, stats).isOk() && all_ok;
   }
   const uint64_t allocations = scope.allocations();
   EXPECT_TRUE(all_ok);

@@ -242,6 +242,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "foveation.floor_m=0.016",
     "foveation.floor_per_m2=0.0025",
     "foveation.level_margin=0.7",
+    "foveation.refine_passes=3",
     "foveation.view_cull=\"drop\"",
     "foveation.view_cull_deg=65.0",
     "foveation.fixation.mode=fixed",
@@ -422,6 +423,7 @@ TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
   base.acuity.floor_m = 0.003;
   base.acuity.floor_per_m2 = 0.002;
   base.acuity.level_margin = 0.7;
+  base.acuity.refine_passes = 3;
   base.acuity.view_cull = pipeline::ViewCull::kDrop;
   base.fixation.fixed_m = 2.5;
   Result<pipeline::FoveationConfig> acuity = flagsOver(base, {"--preset", "ACUITY"});
@@ -431,8 +433,9 @@ TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
   EXPECT_EQ(acuity->acuity.floor_m, 0.003);
   EXPECT_EQ(acuity->acuity.floor_per_m2, 0.002);
   EXPECT_EQ(acuity->acuity.level_margin, 0.7);
+  EXPECT_EQ(acuity->acuity.refine_passes, 3);
   EXPECT_EQ(acuity->acuity.view_cull, pipeline::ViewCull::kDrop);
-  EXPECT_EQ(describeFoveation(acuity.value()).rfind("ACUITY floor 3 mm floor 2 mm x s^2 (m 0.028, ", 0), 0u)
+  EXPECT_EQ(describeFoveation(acuity.value()).rfind("ACUITY floor 3 mm floor 2 mm x s^2 margin 0.7 refined 3 passes (m 0.028, ", 0), 0u)
       << describeFoveation(acuity.value());
   Result<pipeline::FoveationConfig> slope = flagsOver(acuity.value(), {"--m", "0.034"});
   ASSERT_TRUE(slope);

@@ -387,6 +387,253 @@ TEST(AcuityLevels, HardCases) {
   }
 }
 
+// ---- error-driven refinement (AcuityConfig::refine_passes, refineTestRef, moveRefinedVoxels) ----
+
+// A wall 4 m in front of the eye with depth noise along the camera's rays (the
+// camera 0.3 m beside the eye, so the noise is partly seen across), and a scatter.
+PointCloud noisyWall(uint64_t seed) {
+  const Eigen::Vector3d origin(40.0, 12.0, 1.5);
+  PointCloud scatter = test::randomCloud(5000, origin, 3.0f, seed);
+  PointCloud in(5000 + 600 * 300);
+  in.origin_m = origin;
+  for (std::size_t i = 0; i < scatter.size(); ++i) {
+    EXPECT_TRUE(in.push(scatter.x()[i], scatter.y()[i], scatter.z()[i], scatter.rgb()[i]));
+  }
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> noise(0.0f, 0.02f);
+  for (int u = 0; u < 600; ++u) {
+    for (int v = 0; v < 300; ++v) {
+      const Eigen::Vector3f p(-3.0f + 0.01f * static_cast<float>(u), 3.0f, -1.5f + 0.01f * static_cast<float>(v));
+      const Eigen::Vector3f ray = (p - Eigen::Vector3f(0.3f, -1.0f, 0.2f)).normalized();
+      const Eigen::Vector3f q = p + noise(rng) * ray;
+      EXPECT_TRUE(in.push(q.x(), q.y(), q.z(), 0x808080));
+    }
+  }
+  return in;
+}
+
+struct Foveated {
+  FoveatedCloud out;
+  FoveationStats stats;
+  std::vector<uint32_t> rep;
+  std::vector<uint8_t> region;
+  ErrorMetrics metrics;
+};
+
+Foveated foveateAndMeasure(const PointCloud& in, const Gaze& gaze, const AcuityConfig& acuity) {
+  Foveated f{FoveatedCloud(in.size()), {}, std::vector<uint32_t>(in.size()), {}, {}};
+  FoveationConfig config;
+  config.acuity = acuity;
+  Foveator foveator = Foveator::create({in.size(), in.size()}, config).value();
+  EXPECT_TRUE(foveator.foveate(in, gaze, f.out, f.stats, f.rep.data()).isOk());
+  f.region.assign(foveator.lastRegions(), foveator.lastRegions() + in.size());
+  ErrorModel error_model{&foveator.model(), {}};
+  for (int r = 0; r < f.stats.region_count; ++r) error_model.voxel_size_m[r] = f.stats.regions[r].voxel_size_m;
+  ErrorEvaluator evaluator = ErrorEvaluator::create(in.size()).value();
+  EXPECT_TRUE(evaluator.evaluate(in, f.region.data(), f.rep.data(), f.out.points, gaze, error_model, f.metrics).isOk());
+  return f;
+}
+
+// A small margin alone leaves points visibly displaced; refined to convergence, none
+// is above its MAR (measured by the error metrics, in double), with far fewer points
+// than the margin that guarantees it (sqrt(3)) keeps.
+TEST(AcuityRefinement, ConvergedRefinementLeavesNoPointAboveItsMar) {
+  const PointCloud in = noisyWall(7);
+  for (double growth : {0.0, 3.0}) {
+    Gaze gaze;
+    gaze.origin_m = in.origin_m + Eigen::Vector3d(0.0, -1.0, 0.2);
+    gaze.direction = Eigen::Vector3d(0.1, 1.0, -0.05).normalized();
+    gaze.fovea_growth_deg = growth;
+    AcuityConfig coarse = acuityConfig(0.15);
+    const Foveated plain = foveateAndMeasure(in, gaze, coarse);
+    EXPECT_GT(plain.metrics.all.above_mar, plain.metrics.all.seen / 20) << "growth " << growth;
+    EXPECT_EQ(plain.stats.refined, 0u);
+    AcuityConfig refined = coarse;
+    refined.refine_passes = kMaxRefinePasses;
+    const Foveated f = foveateAndMeasure(in, gaze, refined);
+    EXPECT_EQ(f.metrics.all.above_mar, 0u) << "growth " << growth;
+    EXPECT_LE(f.metrics.all.ratio_max, 1.0 + 1e-5);
+    EXPECT_GT(f.stats.refined, 0u);
+    EXPECT_GE(f.stats.refine_passes, 2);
+    EXPECT_LE(f.stats.refine_passes, kMaxRefinePasses);
+    // The stats count the levels after refinement.
+    std::array<uint32_t, kMaxRegions> per_level{};
+    for (uint8_t r : f.region) {
+      if (r < kMaxRegions) ++per_level[r];
+    }
+    for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(f.stats.regions[r].points_in, per_level[r]) << r;
+    const Foveated guaranteed = foveateAndMeasure(in, gaze, acuityConfig());
+    EXPECT_EQ(guaranteed.metrics.all.above_mar, 0u);
+    EXPECT_LT(f.out.size(), guaranteed.out.size() * 3 / 4) << "growth " << growth;
+    EXPECT_GT(f.out.size(), plain.out.size());
+  }
+}
+
+// One pass against a brute force written here in long double: a point is beyond when
+// the angle between P - H and R - H exceeds the MAR at its eccentricity (less the
+// growth), and it stays when its floor or the view cull holds it; then every point that
+// can move goes one level down with its voxel when any point of the voxel is beyond.
+TEST(AcuityRefinement, OnePassMatchesAnIndependentReference) {
+  std::mt19937_64 rng(11);
+  int moved_total = 0, held_by_floor = 0, held_by_cull = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(trial % 3 == 2 ? 1e4 : 3.0, -2.0, 1.0), 4.0f, rng());
+    // A constant floor of 32 mm (level 5) holds many points that would move.
+    AcuityConfig a = acuityConfig(trial % 2 ? 0.12 : 0.4, trial % 4 == 1 ? 0.032 : 0.0, trial % 5 == 3 ? 0.1 : kDefaultSlope);
+    a.floor_per_m2 = trial % 3 == 1 ? 0.002 : 0.0;
+    a.view_cull = trial % 4 == 3 ? ViewCull::kCoarsest : ViewCull::kOff;
+    a.view_cull_deg = 40.0;
+    const RegionModel model = RegionModel::create(a).value();
+    const LevelBounds bounds = LevelBounds::fromModel(model);
+    Gaze raw;
+    raw.origin_m = cloud.origin_m + Eigen::Vector3d(0.5, 0.2, -3.0);
+    raw.direction = Eigen::Vector3d(0.05, -0.1, 1.0) + 0.2 * test::randomUnit(rng);
+    raw.fovea_growth_deg = trial % 3 == 0 ? 4.0 : 0.0;
+    raw.view_known = true;
+    raw.view_forward = raw.direction + 0.5 * test::randomUnit(rng);
+    const Gaze gaze = normalizeGaze(raw).value();
+    std::vector<uint8_t> level(cloud.size());
+    PartitionCounts counts;
+    assignLevelsRef(cloud, gaze, bounds, level.data(), counts);
+    std::array<double, kMaxRegions> voxel{};
+    for (int n = 1; n < kMaxRegions; ++n) voxel[n] = model.voxelSizeM(n, 0.0);
+    VoxelSampler sampler(cloud.size(), cloud.size());
+    FoveatedCloud out(cloud.size());
+    SampleCounts sc;
+    std::vector<uint32_t> rep(cloud.size());
+    ASSERT_TRUE(sampler.sample(cloud, level.data(), kMaxRegions, voxel, out, sc, rep.data()).isOk());
+    std::vector<uint8_t> state(cloud.size());
+    const std::size_t beyond = refineTestRef(cloud, gaze, bounds, out.points, rep.data(), level.data(), state.data());
+    std::size_t expected_beyond = 0, judged_beyond = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const int n = level[i];
+      if (n == 0 || n >= kMaxRegions) {
+        EXPECT_EQ(state[i], kRefineStay);
+        continue;
+      }
+      const Eigen::Vector3d p = cloud.world(i);
+      const Eigen::Vector3d a3 = p - gaze.origin_m, b3 = out.points.world(rep[i]) - gaze.origin_m;
+      const LD ax = a3.x(), ay = a3.y(), az = a3.z(), bx = b3.x(), by = b3.y(), bz = b3.z();
+      const LD cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+      const LD alpha = std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz) * 180 /
+                       std::numbers::pi_v<LD>;
+      const LD r = std::sqrt(ax * ax + ay * ay + az * az);
+      const LD cosine = (ax * gaze.direction.x() + ay * gaze.direction.y() + az * gaze.direction.z()) / r;
+      LD ecc = std::acos(std::max<LD>(-1, std::min<LD>(1, cosine))) * 180 / std::numbers::pi_v<LD>;
+      ecc = std::max<LD>(0, ecc - static_cast<LD>(gaze.fovea_growth_deg));
+      const LD mar = static_cast<LD>(a.slope) * ecc + static_cast<LD>(1.0 / 60.0);
+      const LD head = (ax * gaze.view_forward.x() + ay * gaze.view_forward.y() + az * gaze.view_forward.z()) / r;
+      const LD head_deg = std::acos(std::max<LD>(-1, std::min<LD>(1, head))) * 180 / std::numbers::pi_v<LD>;
+      const bool outside = a.view_cull != ViewCull::kOff && head_deg > static_cast<LD>(a.view_cull_deg);
+      // The floors: the level of the first voxel that reaches each.
+      int lowest = 0;
+      const LD floor_b = a.floor_m + a.floor_per_m2 * static_cast<LD>(cloud.x()[i] * cloud.x()[i] + cloud.y()[i] * cloud.y()[i] + cloud.z()[i] * cloud.z()[i]);
+      for (int k = 1; k < kMaxRegions; ++k) {
+        if (a.floor_m > 0 && lowest == 0 && voxel[k] >= a.floor_m) lowest = k;
+      }
+      if (a.floor_m > 0 && lowest == 0) lowest = kMaxRegions - 1;
+      if (a.floor_per_m2 > 0) {
+        int lift = 1;
+        for (int k = 1; k < kMaxRegions; ++k) lift += voxel[k] < floor_b ? 1 : 0;
+        lowest = std::max(lowest, std::min(lift, kMaxRegions - 1));
+      }
+      // Decisions within float's reach of a tie, or of the cull's cone, are not judged.
+      if (std::fabs(alpha / mar - 1) < 1e-3 || std::fabs(head_deg - static_cast<LD>(a.view_cull_deg)) < 1e-3) continue;
+      const bool movable = n > lowest && !outside;
+      if (alpha > mar && n <= lowest) ++held_by_floor;
+      if (alpha > mar && n > lowest && outside) ++held_by_cull;
+      const uint8_t expected = !movable ? kRefineStay : alpha > mar ? kRefineBeyond : kRefineWithin;
+      expected_beyond += expected == kRefineBeyond;
+      judged_beyond += state[i] == kRefineBeyond;
+      EXPECT_EQ(state[i], expected) << "trial " << trial << " point " << i << " alpha/MAR " << static_cast<double>(alpha / mar);
+    }
+    std::size_t counted = 0;
+    for (uint8_t st : state) counted += st == kRefineBeyond;
+    EXPECT_EQ(beyond, counted) << trial;
+    EXPECT_GE(beyond, expected_beyond) << trial;
+    // The move: every point that can move goes one level down when any point of its
+    // voxel (its representative) is beyond; the others stay.
+    std::vector<bool> voxel_beyond(out.size(), false);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      if (state[i] == kRefineBeyond) voxel_beyond[rep[i]] = true;
+    }
+    std::vector<uint8_t> refined = level;
+    std::vector<uint8_t> scratch(out.size(), 0xCD);
+    PartitionCounts after = counts;
+    const std::size_t moved =
+        moveRefinedVoxels(state.data(), rep.data(), cloud.size(), out.size(), scratch.data(), refined.data(), after);
+    std::size_t expected_moves = 0, whole_voxel_moves = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const bool move = state[i] != kRefineStay && voxel_beyond[rep[i]];
+      expected_moves += move;
+      whole_voxel_moves += move && state[i] == kRefineWithin;
+      EXPECT_EQ(refined[i], move ? level[i] - 1 : level[i]) << "trial " << trial << " point " << i;
+    }
+    EXPECT_EQ(moved, expected_moves) << trial;
+    moved_total += static_cast<int>(moved);
+    if (judged_beyond > 100) {
+      EXPECT_GT(whole_voxel_moves, 0u) << trial;  // points within their MAR moved with their voxel
+    }
+    // The counts follow the moves.
+    std::array<uint32_t, kMaxRegions> per_level{};
+    for (uint8_t r : refined) {
+      if (r < kMaxRegions) ++per_level[r];
+    }
+    for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(after.per_region[r], per_level[r]) << r;
+  }
+  // Not vacuous: points moved, and the floor and the cull held some.
+  EXPECT_GT(moved_total, 300);
+  EXPECT_GT(held_by_floor, 0);
+  EXPECT_GT(held_by_cull, 0);
+}
+
+// Points at the eye, non-finite ones, ones without a representative and a far
+// origin: refinement skips what has no level or no representative, never crashes.
+TEST(AcuityRefinement, HardCases) {
+  const LevelBounds b = LevelBounds::fromModel(RegionModel::create(acuityConfig(0.12, 0.004)).value());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  PointCloud cloud(8);
+  cloud.origin_m = Eigen::Vector3d(1e4, -1e4, 1e4);
+  ASSERT_TRUE(cloud.push(0, 0, 0, 0));  // at the eye, held by the floor (level 2)
+  ASSERT_TRUE(cloud.push(0, 0, 5, 0));
+  ASSERT_TRUE(cloud.push(1, 0, 5, 0));
+  ASSERT_TRUE(cloud.push(nan, 0, 5, 0));
+  ASSERT_TRUE(cloud.push(0, 0, -5, 0));  // behind the eye
+  ASSERT_TRUE(cloud.push(0.01f, 0, 5, 0));
+  Gaze gaze;
+  gaze.origin_m = cloud.origin_m;
+  std::vector<uint8_t> level(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, gaze, b, level.data(), counts);
+  EXPECT_EQ(level[0], 2);
+  EXPECT_EQ(level[1], 3);  // 5 m on the axis: r sin(1 arcmin) = 1.45 mm, 0.12 x 8 mm fits
+  EXPECT_EQ(level[3], kRegionInvalid);
+  EXPECT_EQ(level[5], 3);
+  // Representatives far off, one missing; points 1 and 5 share one, on point 5.
+  PointCloud out(8);
+  out.origin_m = cloud.origin_m;
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(out.push(0.5f, 0.5f, 0.0f, 0));
+  ASSERT_TRUE(out.push(0.01f, 0.0f, 5.0f, 0));
+  std::vector<uint32_t> rep = {0, 5, kNoRepresentative, kNoRepresentative, 4, 5};
+  std::vector<uint8_t> state(cloud.size());
+  EXPECT_EQ(refineTestRef(cloud, gaze, b, out, rep.data(), level.data(), state.data()), 2u);
+  EXPECT_EQ(state[0], kRefineStay);  // held by the floor
+  EXPECT_EQ(state[1], kRefineBeyond);  // 10 mm across at 5 m: 6.9 arcmin
+  EXPECT_EQ(state[2], kRefineStay);  // no representative
+  EXPECT_EQ(state[3], kRefineStay);  // invalid
+  EXPECT_EQ(state[4], kRefineBeyond);  // its representative is ahead of the eye, it is behind
+  EXPECT_EQ(state[5], kRefineWithin);  // exactly on its representative
+  std::vector<uint8_t> scratch(out.size());
+  std::vector<uint8_t> refined = level;
+  EXPECT_EQ(moveRefinedVoxels(state.data(), rep.data(), cloud.size(), out.size(), scratch.data(), refined.data(), counts),
+            3u);
+  EXPECT_EQ(refined[1], level[1] - 1);
+  EXPECT_EQ(refined[5], level[5] - 1);  // within, but its voxel has a point beyond
+  EXPECT_EQ(refined[4], level[4] - 1);
+  EXPECT_EQ(refined[0], level[0]);
+  EXPECT_EQ(refined[2], level[2]);
+}
+
 TEST(AcuityLevels, ModelValidatesItsFields) {
   EXPECT_EQ(parsePreset("acuity").value(), Preset::kAcuity);
   EXPECT_EQ(presetName(Preset::kAcuity), "ACUITY");
@@ -404,6 +651,14 @@ TEST(AcuityLevels, ModelValidatesItsFields) {
   EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.floor_m"), std::string::npos);
   bad = acuityConfig(std::nan(""));
   EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.level_margin"), std::string::npos);
+  for (int passes : {-1, kMaxRefinePasses + 1}) {
+    AcuityConfig refine = acuityConfig();
+    refine.refine_passes = passes;
+    EXPECT_NE(RegionModel::create(refine).status().message().find("acuity.refine_passes"), std::string::npos) << passes;
+  }
+  AcuityConfig refine = acuityConfig();
+  refine.refine_passes = kMaxRefinePasses;
+  EXPECT_EQ(RegionModel::create(refine).value().refinePasses(), kMaxRefinePasses);
   bad = acuityConfig();
   bad.view_cull_deg = 0.0;
   EXPECT_NE(RegionModel::create(bad).status().message().find("acuity.view_cull_deg"), std::string::npos);
