@@ -68,10 +68,18 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
     ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
   }
   // Regions per preset, plus one "all" row: F1 4, F2 5, F3 6, FREF 1; ACUITY's 8
-  // levels once per default level margin.
-  const std::map<std::string, int> regions = {{"F1", 4},           {"F2", 5},           {"F3", 6},
-                                              {"FREF", 1},         {"ACUITY k=1.73", 8}, {"ACUITY k=0.70", 8},
-                                              {"ACUITY k=0.50", 8}, {"ACUITY k=0.42", 8}};
+  // levels once per default level margin and per default refined row.
+  const std::map<std::string, int> regions = {{"F1", 4},
+                                              {"F2", 5},
+                                              {"F3", 6},
+                                              {"FREF", 1},
+                                              {"ACUITY k=1.73", 8},
+                                              {"ACUITY k=0.70", 8},
+                                              {"ACUITY k=0.50", 8},
+                                              {"ACUITY k=0.42", 8},
+                                              {"ACUITY k=0.30 refined 1", 8},
+                                              {"ACUITY k=0.12 refined 2", 8},
+                                              {"ACUITY k=0.15 refined 7", 8}};
   std::set<std::string> seen;
   std::map<std::string, double> fref_rms, f1_points, fref_points;
   std::map<std::string, double> all_bytes, region_bytes_sum;  // per preset/m
@@ -106,8 +114,8 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
         EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
       }
       if (f[column["preset"]] == "F1") f1_points[f[column["m"]]] = points;
-      // The diagonal margin keeps every point under its MAR.
-      if (f[column["preset"]] == "ACUITY k=1.73") {
+      // The diagonal margin keeps every point under its MAR, and so does refinement to the end.
+      if (f[column["preset"]] == "ACUITY k=1.73" || f[column["preset"]] == "ACUITY k=0.15 refined 7") {
         EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
       }
     } else {
@@ -159,6 +167,9 @@ TEST(ErrorReportCli, HelpAndBadArguments) {
   EXPECT_EQ(run(kTool + " --eye-offset 1,2").exit_code, 2);
   EXPECT_EQ(run(kTool + " --dynamics-frames -1").exit_code, 2);
   EXPECT_EQ(run(kTool + " --acuity-noise-floors 0").exit_code, 2);
+  for (const char* refined : {"0.15", "0.15:0", "0.15:8", "0.05:2", "0.15:2x", "x:2", "0.15:"}) {
+    EXPECT_EQ(run(kTool + " --acuity-refined " + refined).exit_code, 2) << refined;
+  }
   EXPECT_EQ(run(kTool + " --growth-lead-ms -5").exit_code, 2);
   EXPECT_EQ(run(kTool + " --growth-lead-ms 2000").exit_code, 2);
 }

@@ -84,7 +84,8 @@ std::string point(const Eigen::Vector3d& p) {
 
 }  // namespace
 
-std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors) {
+std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors,
+                                            const std::vector<std::pair<double, int>>& refined) {
   std::vector<DynamicsConfig> configs;
   for (pipeline::Preset preset : {pipeline::Preset::kF1, pipeline::Preset::kF2, pipeline::Preset::kF3}) {
     DynamicsConfig c;
@@ -103,6 +104,16 @@ std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<Acui
     c.config.acuity.floor_m = floor.m;
     c.config.acuity.floor_per_m2 = floor.per_m2;
     c.growth = growth;
+    configs.push_back(c);
+  }
+  // Refined (margin, passes), with growth: what the service would run.
+  for (const auto& [margin, passes] : refined) {
+    DynamicsConfig c;
+    c.config.acuity.preset = pipeline::Preset::kAcuity;
+    c.config.acuity.slope = slope;
+    c.config.acuity.level_margin = margin;
+    c.config.acuity.refine_passes = passes;
+    c.growth = true;
     configs.push_back(c);
   }
   for (DynamicsConfig& c : configs) c.name = configName(c.config.acuity, c.growth ? " growth" : "");

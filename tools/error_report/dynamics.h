@@ -21,6 +21,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -82,7 +83,8 @@ struct DynamicsReport {
 // The configurations the figures compare: the paper's presets at m and ACUITY
 // at the service's defaults, without and with growth, and with growth at each of
 // `floors` that has a floor.
-std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors);
+std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<AcuityFloor>& floors,
+                                            const std::vector<std::pair<double, int>>& refined = {});
 
 // Runs both figures on `camera` (open and started), from its next frames.
 Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<DynamicsConfig>& configs,

@@ -65,6 +65,8 @@ const char* kHelp =
     "  --slopes LIST     comma-separated slopes m of MAR = m E + 1 arcmin (default 0.022,0.028,0.034)\n"
     "  --acuity-margins LIST  ACUITY's level margins k, a row each (default 1.732,0.7,0.5,0.42;\n"
     "                    docs/acuity-levels.md)\n"
+    "  --acuity-refined LIST  ACUITY's refined rows, K:PASSES each (level margin, refinement passes;\n"
+    "                    default 0.3:1,0.12:2,0.15:7; none for none)\n"
     "  --acuity-floors LIST  ACUITY's sensor floors in mm, 0 for none (default 0); a row each margin x floor\n"
     "  --acuity-noise-floors LIST  ACUITY's distance-dependent floors, mm per square metre of distance\n"
     "                    (foveation.floor_per_m2 x 1000); a row each margin x floor besides (default none)\n"
@@ -99,6 +101,8 @@ struct Options {
   // ACUITY's level margins k (AcuityConfig::level_margin): sqrt(3) guarantees
   // every point under its MAR; smaller ones trade a share above it for bytes.
   std::vector<double> acuity_margins = {1.7320508075688772, 0.7, 0.5, 0.42};
+  // ... and refined rows: margin k and refinement passes (AcuityConfig::refine_passes).
+  std::vector<std::pair<double, int>> acuity_refined = {{0.3, 1}, {0.12, 2}, {0.15, 7}};
   // ... and sensor floors in mm (0: none), a row each margin x floor.
   std::vector<double> acuity_floors_mm = {0.0};
   std::vector<double> acuity_noise_floors_mm = {};  // per m^2 of distance
@@ -179,6 +183,23 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
         if (!k) return k.status();
         if (*k < 0.1 || *k > 10.0) return Result<Options>(ErrorCode::kInvalidArgument, "--acuity-margins: '" + text + "' is outside [0.1, 10]");
         options.acuity_margins.push_back(*k);
+      }
+    } else if (flag == "--acuity-refined") {
+      options.acuity_refined.clear();
+      for (const std::string& text : splitCommas(value)) {
+        if (text == "none") continue;
+        const std::size_t colon = text.find(':');
+        Result<double> k = parseNumber(flag, text.substr(0, colon));
+        if (!k) return k.status();
+        if (*k < 0.1 || *k > 10.0) return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + text + "': k is outside [0.1, 10]");
+        char* end = nullptr;
+        const std::string passes = colon == std::string::npos ? "" : text.substr(colon + 1);
+        const long p = std::strtol(passes.c_str(), &end, 10);
+        if (passes.empty() || end != passes.c_str() + passes.size() || p < 1 || p > pipeline::kMaxRefinePasses) {
+          return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + text + "' is not K:PASSES with PASSES in [1, " +
+                                                                  std::to_string(pipeline::kMaxRefinePasses) + "]");
+        }
+        options.acuity_refined.emplace_back(*k, static_cast<int>(p));
       }
     } else if (flag == "--view-culls") {
       options.view_culls.clear();
@@ -396,10 +417,14 @@ int run(int argc, char** argv) {
     for (double slope : options.slopes) {
       // The acuity mode once per level margin (its rows say which).
       const bool acuity = preset == pipeline::Preset::kAcuity;
-      for (double margin : acuity ? options.acuity_margins : std::vector<double>{0.0}) {
+      std::vector<std::pair<double, int>> margins;  // (k, refinement passes)
+      for (double margin : acuity ? options.acuity_margins : std::vector<double>{0.0}) margins.emplace_back(margin, 0);
+      if (acuity) margins.insert(margins.end(), options.acuity_refined.begin(), options.acuity_refined.end());
+      for (const auto& [margin, passes] : margins) {
+        // Refined rows without floors: refinement already keeps only what the eye resolves.
         const std::vector<AcuityFloor> floors =
-            acuity ? acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm)
-                   : std::vector<AcuityFloor>{AcuityFloor{}};
+            acuity && passes == 0 ? acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm)
+                                  : std::vector<AcuityFloor>{AcuityFloor{}};
         for (const AcuityFloor& floor : floors) {
           for (pipeline::ViewCull cull : acuity ? options.view_culls : std::vector<pipeline::ViewCull>{pipeline::ViewCull::kOff}) {
             ConfigRun r;
@@ -407,6 +432,7 @@ int run(int argc, char** argv) {
             r.config.acuity.slope = slope;
             if (acuity) {
               r.config.acuity.level_margin = margin;
+              r.config.acuity.refine_passes = passes;
               r.config.acuity.floor_m = floor.m;
               r.config.acuity.floor_per_m2 = floor.per_m2;
               r.config.acuity.view_cull = cull;
@@ -587,7 +613,8 @@ int run(int argc, char** argv) {
     DynamicsOptions d = options.dynamics;
     if (info.fps > 0) d.fps = info.fps;
     d.eye_offset_cam = options.eye_offset_cam;
-    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm)), d);
+    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm),
+                                                                   options.acuity_refined), d);
     if (!measured) {
       std::fprintf(stderr, "fovea-error-report: temporal figures: %s\n", measured.status().toString().c_str());
       return kExitFailure;

@@ -21,6 +21,10 @@ std::string configName(const pipeline::AcuityConfig& a, std::string_view after_m
     char part[48];
     std::snprintf(part, sizeof part, " k=%.2f", a.level_margin);
     name += part;
+    if (a.refine_passes > 0) {
+      std::snprintf(part, sizeof part, " refined %d", a.refine_passes);
+      name += part;
+    }
     name += after_margin;
     if (a.floor_m > 0.0) {
       std::snprintf(part, sizeof part, " floor %gmm", a.floor_m * 1e3);
