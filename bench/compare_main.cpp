@@ -114,7 +114,7 @@ class FoveaMethod final : public Method {
   // fovea growth and the view cull (drop, the head along the gaze), to time what they
   // cost when on; kFloor only the floor: at 1 mm/m^2, ACUITY at F1's bytes
   // (docs/acuity-levels.md).
-  enum class Acuity { kNo, kDefault, kFloor, kEveryFeature };
+  enum class Acuity { kNo, kDefault, kFloor, kEveryFeature, kRefined };
   FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
       : input_(input),
         acuity_(acuity != Acuity::kNo),
@@ -160,6 +160,11 @@ class FoveaMethod final : public Method {
     }
     if (acuity == Acuity::kEveryFeature) {
       config.acuity.view_cull = pipeline::ViewCull::kDrop;
+    }
+    if (acuity == Acuity::kRefined) {
+      // fovea-eval's ACUITY-REFINED (docs/acuity-levels.md): margin 0.3, one pass.
+      config.acuity.level_margin = 0.3;
+      config.acuity.refine_passes = 1;
     }
     return config;
   }
@@ -261,6 +266,11 @@ const MethodEntry kMethods[] = {
      "ACUITY with the distance floor (--acuity-floor), a 5-degree fovea growth and the view cull (drop), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kEveryFeature);
+     }},
+    {"acuity-refined-simd-1t",
+     "ACUITY refined (margin 0.3, one refinement pass: fovea-eval's ACUITY-REFINED), one thread",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kRefined);
      }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
