@@ -21,7 +21,7 @@ for f in report.md runs.csv table2.csv stages.csv quality.csv bandwidth.gp stage
   [ -s "$out/$f" ] || fail "no $f"
 done
 runs=$(($(wc -l < "$out/runs.csv") - 1))
-conditions=6  # F1, F2, F3, FREF, ACUITY, ACUITY-2MM
+conditions=7  # F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED
 [ "$runs" -eq $((datasets * conditions * 2)) ] || fail "runs.csv has $runs runs, expected $((datasets * conditions * 2))"
 # Every run's figures are numbers, every run decoded its 40 frames.
 awk -F, 'NR > 1 && ($4 != 40 || $7 + 0 <= 0 || $10 + 0 <= 0) { print "bad run: " $0; bad = 1 } END { exit bad }' \
@@ -33,7 +33,7 @@ awk -F, 'NR > 1 && !($12 + 0 > 0 && $13 != "" && $13 + 0 >= 0) { print "no datag
          NR > 1 { sent += $12; lost += $13 }
          END { printf "run_reduced: %d of %d datagrams lost\n", lost, sent + lost; exit bad }' \
   "$out/runs.csv" || fail "a run without its datagram counts"
-# F1, F2, F3, ACUITY and ACUITY-2MM send less than FREF on every dataset (table2.csv column 7: reduction %).
+# F1, F2, F3, ACUITY, ACUITY-2MM and ACUITY-REFINED send less than FREF on every dataset (table2.csv column 7: reduction %).
 awk -F, 'NR > 1 && $2 != "FREF" && !($7 + 0 > 20) { print "no bandwidth reduction: " $0; bad = 1 } END { exit bad }' \
   "$out/table2.csv" || fail "a condition that does not cut bandwidth against FREF"
 # Quality: FREF against itself is perfect; every other condition is measured and below it.

@@ -75,7 +75,8 @@ const char* kHelp =
     "  --seed S               the positions' and fixations' seed (default 1)\n"
     "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
     "  --conditions LIST      F1, F2, F3, FREF, ACUITY, ACUITY-2MM (ACUITY with a distance floor of\n"
-    "                         2 mm x s^2; default: all)\n"
+    "                         2 mm x s^2), ACUITY-REFINED (ACUITY, margin 0.3, one refinement pass;\n"
+    "                         default: all)\n"
     "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
     "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
     "  --quality-frame K      the frame (0-based) the images are made from (default 30)\n"
@@ -89,7 +90,7 @@ struct Options {
   int positions = 5;
   uint64_t seed = 1;
   std::string datasets;
-  std::string conditions = "F1,F2,F3,FREF,ACUITY,ACUITY-2MM";
+  std::string conditions = "F1,F2,F3,FREF,ACUITY,ACUITY-2MM,ACUITY-REFINED";
   std::string tum = "../shared/data/tum-fr3-teddy";
   bool tum_given = false;
   int quality_positions = -1;
@@ -239,10 +240,13 @@ struct RunSpec {
 // other settings (frames, seed, positions) is not taken for this one on resume.
 // (The seed and the number of positions fix each position on a given scene.)
 std::string runSignature(const RunSpec& r, const Options& o) {
-  // The floor's line only where there is one: runs kept from before it existed still match.
-  const std::string floor =
-      r.condition.floor_per_m2 > 0.0 ? "\nfloor_per_m2 " + floorSetting(r.condition.floor_per_m2) : "";
-  return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + floor + "\nframes " +
+  // The floor's, margin's and passes' lines only where there are: runs kept from before
+  // they existed still match.
+  std::string settings =
+      r.condition.floor_per_m2 > 0.0 ? "\nfloor_per_m2 " + shortestDecimal(r.condition.floor_per_m2) : "";
+  if (r.condition.level_margin > 0.0) settings += "\nlevel_margin " + shortestDecimal(r.condition.level_margin);
+  if (r.condition.refine_passes > 0) settings += "\nrefine_passes " + std::to_string(r.condition.refine_passes);
+  return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + settings + "\nframes " +
          std::to_string(o.frames) + "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
          std::to_string(r.position.index) + " of " + std::to_string(o.positions) + "\n";
 }
@@ -273,9 +277,7 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
                                       kBudgetMbps, "--frames", std::to_string(captured), "--timing-log",
                                       run.dir + "/timing.csv", "--log-level", "warning", "--status-interval-ms",
                                       "600000"};
-    if (run.condition.floor_per_m2 > 0.0) {
-      serve.insert(serve.end(), {"--set", "foveation.floor_per_m2=" + floorSetting(run.condition.floor_per_m2)});
-    }
+    for (const std::string& setting : conditionSettings(run.condition)) serve.insert(serve.end(), {"--set", setting});
     const pid_t robot = spawn(serve, run.dir + "/fovead.log");
     if (robot < 0) return R(ErrorCode::kNotFound, "cannot start " + fovead + " (--fovead PATH)");
     // The operator says hello until the service answers (3 s): the service may still

@@ -21,14 +21,23 @@ std::vector<Dataset> defaultDatasets(const std::string& tum_path) {
 
 std::vector<Condition> defaultConditions() {
   return {{"F1", "F1"},         {"F2", "F2"},         {"F3", "F3"},
-          {"FREF", "FREF"},     {"ACUITY", "ACUITY"}, {"ACUITY-2MM", "ACUITY", 0.002}};
+          {"FREF", "FREF"},     {"ACUITY", "ACUITY"}, {"ACUITY-2MM", "ACUITY", 0.002},
+          {"ACUITY-REFINED", "ACUITY", 0.0, 0.3, 1}};
 }
 
-std::string floorSetting(double floor_per_m2) {
+std::vector<std::string> conditionSettings(const Condition& c) {
+  std::vector<std::string> out;
+  if (c.floor_per_m2 > 0.0) out.push_back("foveation.floor_per_m2=" + shortestDecimal(c.floor_per_m2));
+  if (c.level_margin > 0.0) out.push_back("foveation.level_margin=" + shortestDecimal(c.level_margin));
+  if (c.refine_passes > 0) out.push_back("foveation.refine_passes=" + std::to_string(c.refine_passes));
+  return out;
+}
+
+std::string shortestDecimal(double value) {
   char text[32];
   for (int digits = 1; digits <= 17; ++digits) {
-    std::snprintf(text, sizeof text, "%.*g", digits, floor_per_m2);
-    if (std::strtod(text, nullptr) == floor_per_m2) break;
+    std::snprintf(text, sizeof text, "%.*g", digits, value);
+    if (std::strtod(text, nullptr) == value) break;
   }
   return text;
 }
@@ -49,7 +58,7 @@ Result<std::vector<Condition>> selectConditions(const std::string& names) {
   std::vector<Condition> out;
   for (const std::string& n : splitComma(names)) {
     auto it = std::find_if(all.begin(), all.end(), [&](const Condition& c) { return c.name == n; });
-    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM)");
+    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED)");
     out.push_back(*it);
   }
   if (out.empty()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: none given");

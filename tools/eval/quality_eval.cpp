@@ -97,6 +97,8 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     config.acuity.preset = preset.value();
     config.acuity.slope = options.slope;
     config.acuity.floor_per_m2 = c.floor_per_m2;
+    if (c.level_margin > 0.0) config.acuity.level_margin = c.level_margin;
+    config.acuity.refine_passes = c.refine_passes;
     pipeline::Foveator* foveator = &s.foveator;
     if (Status st = foveator->setConfig(config); !st) return st;
     pipeline::FoveationStats stats;

@@ -87,14 +87,16 @@ Status writeFile(const std::string& path, const std::string& text) {
   return Status::ok();
 }
 
-// "NAME is `--preset P --set foveation.floor_per_m2=X` (...); " for each condition with a floor.
-std::string floorConditions(const std::vector<Condition>& conditions) {
+// "NAME is `--preset P --set KEY=VALUE ...`; " for each condition with settings of its own
+// (docs/acuity-levels.md says what they do).
+std::string conditionSettingsText(const std::vector<Condition>& conditions) {
   std::string out;
   for (const Condition& c : conditions) {
-    if (c.floor_per_m2 <= 0.0) continue;
-    out += c.name + " is `--preset " + c.preset + " --set foveation.floor_per_m2=" + floorSetting(c.floor_per_m2) +
-           "` (a distance floor of " + floorSetting(c.floor_per_m2 * 1e3) +
-           " mm x s^2; at 2 mm x s^2 ACUITY is as fast as F1 on the mock room: docs/acuity-levels.md); ";
+    const std::vector<std::string> settings = conditionSettings(c);
+    if (settings.empty()) continue;
+    out += c.name + " is `--preset " + c.preset;
+    for (const std::string& setting : settings) out += " --set " + setting;
+    out += "` (docs/acuity-levels.md); ";
   }
   return out;
 }
@@ -242,7 +244,7 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
      << "- " << in.frames << " frames per HMD position, " << in.runs.size() << " runs" << (in.failed_runs ? ", " + std::to_string(in.failed_runs) + " failed (missing from the tables)" : std::string()) << "; seed " << in.seed << "\n"
      << "- each run: `fovead serve --preset P --camera SPEC --timing-log` and `fovea-operator --gaze scan:... --frame-log` "
         "as two processes over loopback (127.0.0.1), the camera paced at 30 fps; "
-     << floorConditions(in.conditions) << "the frames measured are the first "
+     << conditionSettingsText(in.conditions) << "the frames measured are the first "
      << in.frames << " the operator decoded; the link's budget is 125 MB/s (a gigabit link: no condition is cut to "
         "fit) and the operator asks for a 4 MiB receive buffer (so that a frame's datagrams arriving faster than they "
         "are decoded are not dropped); the datagrams lost are counted per condition\n"

@@ -91,13 +91,25 @@ TEST(EvalPlan, AcuityWithItsFloorIsAConditionOfItsOwn) {
     if (c.name != "ACUITY-2MM") {
       EXPECT_EQ(c.floor_per_m2, 0.0) << c.name;
     }
+    if (c.name != "ACUITY-REFINED") {
+      EXPECT_EQ(c.level_margin, 0.0) << c.name;
+      EXPECT_EQ(c.refine_passes, 0) << c.name;
+    }
   }
+  // What fovead is told beyond the preset.
+  EXPECT_EQ(conditionSettings((*both)[0]), std::vector<std::string>{});
+  EXPECT_EQ(conditionSettings((*both)[1]), std::vector<std::string>{"foveation.floor_per_m2=0.002"});
+  Result<std::vector<Condition>> refined = selectConditions("ACUITY-REFINED");
+  ASSERT_TRUE(refined);
+  EXPECT_EQ((*refined)[0].preset, "ACUITY");
+  EXPECT_EQ(conditionSettings((*refined)[0]),
+            (std::vector<std::string>{"foveation.level_margin=0.3", "foveation.refine_passes=1"}));
   EXPECT_EQ(runName(defaultDatasets("")[0], (*both)[1], makePositions(livingRoom(), 2, 1)[0]),
             "living-room_ACUITY-2MM_p1");
   // fovead reads the floor back as the same number.
-  EXPECT_EQ(floorSetting(0.002), "0.002");
-  EXPECT_EQ(floorSetting(0.1 + 0.2), "0.30000000000000004");
-  EXPECT_EQ(std::strtod(floorSetting(1.0 / 3.0).c_str(), nullptr), 1.0 / 3.0);
+  EXPECT_EQ(shortestDecimal(0.002), "0.002");
+  EXPECT_EQ(shortestDecimal(0.1 + 0.2), "0.30000000000000004");
+  EXPECT_EQ(std::strtod(shortestDecimal(1.0 / 3.0).c_str(), nullptr), 1.0 / 3.0);
 }
 
 // A run directory written by hand: the service logged frames 10..14, the operator
