@@ -160,6 +160,39 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
       config.fixation.mode = mode.value();
     }
   }
+  // ACUITY's own settings (the configuration keys of the same names); with
+  // another preset they would silently do nothing, so they are refused.
+  bool acuity_flag = false;
+  const auto acuityDouble = [&](const char* flag, double& field) -> Status {
+    const std::string* text = args.get(flag);
+    if (text == nullptr) return Status();
+    acuity_flag = true;
+    Result<double> v = parseDouble(flag, *text);
+    if (!v) return v.status();
+    field = v.value();
+    return Status();
+  };
+  if (Status s = acuityDouble("--floor-m", config.acuity.floor_m); !s) return s;
+  if (Status s = acuityDouble("--floor-per-m2", config.acuity.floor_per_m2); !s) return s;
+  if (Status s = acuityDouble("--level-margin", config.acuity.level_margin); !s) return s;
+  if (const std::string* passes = args.get("--refine-passes")) {
+    acuity_flag = true;
+    Result<long> v = parseInteger("--refine-passes", *passes, 0, pipeline::kMaxRefinePasses);
+    if (!v) return v.status();
+    config.acuity.refine_passes = static_cast<int>(v.value());
+  }
+  if (const std::string* cull = args.get("--view-cull")) {
+    acuity_flag = true;
+    Result<pipeline::ViewCull> v = pipeline::parseViewCull(*cull);
+    if (!v) return v.status();
+    config.acuity.view_cull = v.value();
+  }
+  if (acuity_flag && config.acuity.preset != pipeline::Preset::kAcuity) {
+    return Result<pipeline::FoveationConfig>(
+        ErrorCode::kInvalidArgument, "--floor-m, --floor-per-m2, --level-margin, --refine-passes and --view-cull set ACUITY's "
+                                     "lattice: say --preset ACUITY (the foveation is " +
+                                         std::string(pipeline::presetName(config.acuity.preset)) + ")");
+  }
   // Validate here so that the error names the flags, before any work starts.
   Result<pipeline::RegionModel> model = pipeline::RegionModel::create(config.acuity);
   if (!model) return model.status();
@@ -169,13 +202,18 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
 
 std::string foveationFlagsHelp() {
   return "  --preset F1|F2|F3|FREF   regions of the paper's section III (default F1); ACUITY: each point on\n"
-         "                           the coarsest lattice level its own acuity allows (docs/acuity-levels.md;\n"
-         "                           configuration keys foveation.level_voxel_m, floor_m, level_margin)\n"
+         "                           the coarsest lattice level its own acuity allows (docs/acuity-levels.md)\n"
          "  --bounds E1,E2,...       custom region bounds in degrees, strictly increasing in (0, 180)\n"
          "  --m SLOPE                slope of MAR(E) = m E + 1 arcmin (default 0.022; the paper: 0.022..0.034)\n"
          "  --far-ecc DEG            eccentricity whose MAR sizes the outermost region (default 90)\n"
          "  --fixation MODE          d0: hit (first surface along the gaze, default), centroid (the paper's\n"
-         "                           fovea centroid) or fixed:D0 (metres)\n";
+         "                           fovea centroid) or fixed:D0 (metres)\n"
+         "  ACUITY only (the configuration keys foveation.floor_m and so on; docs/acuity-levels.md):\n"
+         "  --floor-m M              no voxel finer than M metres (default 0)\n"
+         "  --floor-per-m2 Q         no voxel finer than Q x distance^2 (the depth noise's floor; default 0)\n"
+         "  --level-margin K         a level's voxel may displace a point by K x its MAR (default 0.5)\n"
+         "  --refine-passes N        error-driven refinement passes, 0 to 7 (default 0)\n"
+         "  --view-cull MODE         points outside the HMD's view: off (default), coarsest or drop\n";
 }
 
 std::string describeFoveation(const pipeline::FoveationConfig& config) {

@@ -40,7 +40,10 @@ Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_v
 
 // The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
 // --fixation hit|centroid|fixed:D0.
-inline const std::vector<std::string> kFoveationFlags = {"--preset", "--bounds", "--m", "--far-ecc", "--fixation"};
+inline const std::vector<std::string> kFoveationFlags = {"--preset",       "--bounds",      "--m",
+                                                         "--far-ecc",      "--fixation",    "--floor-m",
+                                                         "--floor-per-m2", "--level-margin", "--refine-passes",
+                                                         "--view-cull"};
 // Starts from `base` (for fovead serve: the board profile, the configuration file and
 // --set) and changes only what the flags name, so that --preset ACUITY keeps a floor
 // or a level margin set there.

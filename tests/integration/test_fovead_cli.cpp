@@ -169,7 +169,9 @@ TEST(FoveadCli, UnreadableAndMalformedFilesFailCleanly) {
 
 // fovead foveate on a recorded cloud gives exactly what the library gives, and
 // keeps double coordinates double far from the world origin.
-TEST(FoveadCli, FoveatePlyRoundTripMatchesTheLibrary) {
+// fovead foveate on a PLY file (10 km from the origin) against the library with
+// the configuration the flags name.
+void expectFoveateMatchesTheLibrary(const std::string& flags, const pipeline::FoveationConfig& config) {
   TempDir dir;
   const Eigen::Vector3d origin(10000.0, -2500.0, 3.0);
   pipeline::PointCloud cloud = test::randomCloud(30000, origin, 3.0f, 31);
@@ -178,17 +180,14 @@ TEST(FoveadCli, FoveatePlyRoundTripMatchesTheLibrary) {
   ASSERT_TRUE(pipeline::writePly(dir.file("in.ply"), cloud, nullptr, write).isOk());
 
   const ProcessResult r = run(fovead() + " foveate --in " + dir.file("in.ply") + " --out " + dir.file("out.ply") +
-                    " --gaze-origin 10000,-2500,3 --gaze-dir 0.3,0.1,1 --preset F2 --m 0.028 --fixation centroid");
+                              " --gaze-origin 10000,-2500,3 --gaze-dir 0.3,0.1,1 " + flags);
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("centroid"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(std::string(pipeline::fixationModeName(config.fixation.mode))), std::string::npos)
+      << r.output;
 
   // The same through the library, from the cloud as the PLY reader sees it.
   Result<pipeline::PlyCloud> input = pipeline::readPly(dir.file("in.ply"));
   ASSERT_TRUE(input.isOk());
-  pipeline::FoveationConfig config;
-  config.acuity.preset = pipeline::Preset::kF2;
-  config.acuity.slope = 0.028;
-  config.fixation.mode = pipeline::FixationMode::kCentroid;
   pipeline::Foveator foveator = pipeline::Foveator::create({30000, 30000}, config).value();
   pipeline::FoveatedCloud expected(30000);
   pipeline::FoveationStats stats;
@@ -210,6 +209,46 @@ TEST(FoveadCli, FoveatePlyRoundTripMatchesTheLibrary) {
     EXPECT_NEAR((output->points.world(i) - expected.points.world(i)).norm(), 0.0, 1e-6) << i;
     EXPECT_EQ(output->points.rgb()[i], expected.points.rgb()[i]) << i;
   }
+}
+
+TEST(FoveadCli, FoveatePlyRoundTripMatchesTheLibrary) {
+  pipeline::FoveationConfig config;
+  config.acuity.preset = pipeline::Preset::kF2;
+  config.acuity.slope = 0.028;
+  config.fixation.mode = pipeline::FixationMode::kCentroid;
+  expectFoveateMatchesTheLibrary("--preset F2 --m 0.028 --fixation centroid", config);
+}
+
+// ACUITY's own flags reach the foveation (the refinement changes the output:
+// checked below, so that a flag dropped on the way would fail).
+TEST(FoveadCli, FoveateTakesAcuitysFlags) {
+  pipeline::FoveationConfig config;
+  config.acuity.preset = pipeline::Preset::kAcuity;
+  config.acuity.level_margin = 0.3;
+  config.acuity.refine_passes = 1;
+  config.acuity.floor_m = 0.004;
+  expectFoveateMatchesTheLibrary("--preset ACUITY --level-margin 0.3 --refine-passes 1 --floor-m 0.004", config);
+
+  pipeline::FoveationConfig unrefined = config;
+  unrefined.acuity.refine_passes = 0;
+  pipeline::PointCloud cloud = test::randomCloud(30000, Eigen::Vector3d(10000.0, -2500.0, 3.0), 3.0f, 31);
+  pipeline::Gaze gaze;
+  gaze.origin_m = Eigen::Vector3d(10000.0, -2500.0, 3.0);
+  gaze.direction = Eigen::Vector3d(0.3, 0.1, 1);
+  std::size_t sizes[2];
+  int i = 0;
+  for (const pipeline::FoveationConfig& c : {config, unrefined}) {
+    pipeline::Foveator foveator = pipeline::Foveator::create({30000, 30000}, c).value();
+    pipeline::FoveatedCloud out(30000);
+    pipeline::FoveationStats stats;
+    ASSERT_TRUE(foveator.foveate(cloud, gaze, out, stats).isOk());
+    sizes[i++] = out.size();
+  }
+  EXPECT_NE(sizes[0], sizes[1]) << "one refinement pass changed nothing on this cloud";
+
+  const ProcessResult refused = run(fovead() + " run --frames 1 --refine-passes 1");
+  EXPECT_EQ(refused.exit_code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("--preset ACUITY"), std::string::npos) << refused.output;
 }
 
 }  // namespace

@@ -437,6 +437,9 @@ TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
   EXPECT_EQ(acuity->acuity.view_cull, pipeline::ViewCull::kDrop);
   EXPECT_EQ(describeFoveation(acuity.value()).rfind("ACUITY floor 3 mm floor 2 mm x s^2 margin 0.7 refined 3 passes (m 0.028, ", 0), 0u)
       << describeFoveation(acuity.value());
+  pipeline::FoveationConfig one_pass = acuity.value();
+  one_pass.acuity.refine_passes = 1;
+  EXPECT_NE(describeFoveation(one_pass).find(" refined 1 pass ("), std::string::npos) << describeFoveation(one_pass);
   Result<pipeline::FoveationConfig> slope = flagsOver(acuity.value(), {"--m", "0.034"});
   ASSERT_TRUE(slope);
   EXPECT_EQ(slope->acuity.slope, 0.034);
@@ -450,6 +453,39 @@ TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
   Result<pipeline::FoveationConfig> f1 = flagsOver(base, {"--preset", "F1"});
   ASSERT_TRUE(f1);
   EXPECT_EQ(describeFoveation(f1.value()).rfind("F1 (m 0.028, ", 0), 0u) << describeFoveation(f1.value());
+}
+
+// ACUITY's own settings have flags too (fovead run and foveate read no
+// configuration file), and they are refused where they would do nothing.
+TEST(FoveationFlags, AcuitySettingsHaveFlags) {
+  Result<pipeline::FoveationConfig> set =
+      flagsOver(pipeline::FoveationConfig{}, {"--preset", "ACUITY", "--floor-m", "0.004", "--floor-per-m2", "0.001",
+                                              "--level-margin", "0.3", "--refine-passes", "2", "--view-cull", "drop"});
+  ASSERT_TRUE(set) << set.status().toString();
+  EXPECT_EQ(set->acuity.floor_m, 0.004);
+  EXPECT_EQ(set->acuity.floor_per_m2, 0.001);
+  EXPECT_EQ(set->acuity.level_margin, 0.3);
+  EXPECT_EQ(set->acuity.refine_passes, 2);
+  EXPECT_EQ(set->acuity.view_cull, pipeline::ViewCull::kDrop);
+  // Over a base that is already ACUITY, no --preset is needed.
+  Result<pipeline::FoveationConfig> over = flagsOver(set.value(), {"--refine-passes", "0"});
+  ASSERT_TRUE(over) << over.status().toString();
+  EXPECT_EQ(over->acuity.refine_passes, 0);
+  EXPECT_EQ(over->acuity.level_margin, 0.3);
+
+  Result<pipeline::FoveationConfig> f1 = flagsOver(pipeline::FoveationConfig{}, {"--refine-passes", "1"});
+  ASSERT_FALSE(f1);
+  EXPECT_NE(f1.status().message().find("say --preset ACUITY (the foveation is F1)"), std::string::npos)
+      << f1.status().message();
+  for (const std::vector<std::string>& bad :
+       {std::vector<std::string>{"--refine-passes", "8"}, {"--refine-passes", "1.5"}, {"--level-margin", "0.01"},
+        {"--floor-m", "nan"}, {"--floor-per-m2", "-1"}, {"--view-cull", "sideways"}, {"--level-margin", "x"}}) {
+    std::vector<std::string> words = {"--preset", "ACUITY"};
+    words.insert(words.end(), bad.begin(), bad.end());
+    Result<pipeline::FoveationConfig> refused = flagsOver(pipeline::FoveationConfig{}, words);
+    ASSERT_FALSE(refused) << bad[0] << " " << bad[1];
+    EXPECT_EQ(refused.status().code(), ErrorCode::kInvalidArgument) << refused.status().toString();
+  }
 }
 
 TEST(FoveationFlags, CustomRegionsFromTheBaseNeedNoBoundsFlag) {
