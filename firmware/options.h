@@ -39,7 +39,8 @@ Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view tex
 Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_view text);
 
 // The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
-// --fixation hit|centroid|fixed:D0.
+// --fixation hit|centroid|fixed:D0, and ACUITY's --floor-m, --floor-per-m2,
+// --level-margin, --refine-passes, --view-cull.
 inline const std::vector<std::string> kFoveationFlags = {"--preset",       "--bounds",      "--m",
                                                          "--far-ecc",      "--fixation",    "--floor-m",
                                                          "--floor-per-m2", "--level-margin", "--refine-passes",
