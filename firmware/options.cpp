@@ -172,6 +172,7 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
     field = v.value();
     return Status();
   };
+  if (Status s = acuityDouble("--level-voxel-m", config.acuity.level_voxel_m); !s) return s;
   if (Status s = acuityDouble("--floor-m", config.acuity.floor_m); !s) return s;
   if (Status s = acuityDouble("--floor-per-m2", config.acuity.floor_per_m2); !s) return s;
   if (Status s = acuityDouble("--level-margin", config.acuity.level_margin); !s) return s;
@@ -187,10 +188,12 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
     if (!v) return v.status();
     config.acuity.view_cull = v.value();
   }
+  if (Status s = acuityDouble("--view-cull-deg", config.acuity.view_cull_deg); !s) return s;
   if (acuity_flag && config.acuity.preset != pipeline::Preset::kAcuity) {
     return Result<pipeline::FoveationConfig>(
-        ErrorCode::kInvalidArgument, "--floor-m, --floor-per-m2, --level-margin, --refine-passes and --view-cull set ACUITY's "
-                                     "lattice: say --preset ACUITY (the foveation is " +
+        ErrorCode::kInvalidArgument, "--level-voxel-m, --floor-m, --floor-per-m2, --level-margin, --refine-passes, "
+                                     "--view-cull and --view-cull-deg set ACUITY's lattice: say --preset ACUITY (the "
+                                     "foveation is " +
                                          std::string(pipeline::presetName(config.acuity.preset)) + ")");
   }
   // Validate here so that the error names the flags, before any work starts.
@@ -209,11 +212,13 @@ std::string foveationFlagsHelp() {
          "  --fixation MODE          d0: hit (first surface along the gaze, default), centroid (the paper's\n"
          "                           fovea centroid) or fixed:D0 (metres)\n"
          "  ACUITY only (the configuration keys foveation.floor_m and so on; docs/acuity-levels.md):\n"
+         "  --level-voxel-m V        the finest level's voxel edge in metres (default 0.002)\n"
          "  --floor-m M              no voxel finer than M metres (default 0)\n"
          "  --floor-per-m2 Q         no voxel finer than Q x distance^2 (the depth noise's floor; default 0)\n"
          "  --level-margin K         a level's voxel may displace a point by K x its MAR (default 0.5)\n"
          "  --refine-passes N        error-driven refinement passes, 0 to 7 (default 0)\n"
-         "  --view-cull MODE         points outside the HMD's view: off (default), coarsest or drop\n";
+         "  --view-cull MODE         points outside the HMD's view: off (default), coarsest or drop\n"
+         "  --view-cull-deg D        the view's half angle around the head's forward axis (default 70)\n";
 }
 
 std::string describeFoveation(const pipeline::FoveationConfig& config) {

@@ -39,12 +39,12 @@ Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view tex
 Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_view text);
 
 // The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
-// --fixation hit|centroid|fixed:D0, and ACUITY's --floor-m, --floor-per-m2,
-// --level-margin, --refine-passes, --view-cull.
-inline const std::vector<std::string> kFoveationFlags = {"--preset",       "--bounds",      "--m",
-                                                         "--far-ecc",      "--fixation",    "--floor-m",
-                                                         "--floor-per-m2", "--level-margin", "--refine-passes",
-                                                         "--view-cull"};
+// --fixation hit|centroid|fixed:D0, and ACUITY's --level-voxel-m, --floor-m,
+// --floor-per-m2, --level-margin, --refine-passes, --view-cull, --view-cull-deg.
+inline const std::vector<std::string> kFoveationFlags = {
+    "--preset",        "--bounds",       "--m",           "--far-ecc",   "--fixation",
+    "--level-voxel-m", "--floor-m",      "--floor-per-m2", "--level-margin", "--refine-passes",
+    "--view-cull",     "--view-cull-deg"};
 // Starts from `base` (for fovead serve: the board profile, the configuration file and
 // --set) and changes only what the flags name, so that --preset ACUITY keeps a floor
 // or a level margin set there.

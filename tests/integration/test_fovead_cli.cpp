@@ -227,7 +227,9 @@ TEST(FoveadCli, FoveateTakesAcuitysFlags) {
   config.acuity.level_margin = 0.3;
   config.acuity.refine_passes = 1;
   config.acuity.floor_m = 0.004;
-  expectFoveateMatchesTheLibrary("--preset ACUITY --level-margin 0.3 --refine-passes 1 --floor-m 0.004", config);
+  config.acuity.level_voxel_m = 0.0025;
+  expectFoveateMatchesTheLibrary(
+      "--preset ACUITY --level-margin 0.3 --refine-passes 1 --floor-m 0.004 --level-voxel-m 0.0025", config);
 
   pipeline::FoveationConfig unrefined = config;
   unrefined.acuity.refine_passes = 0;
@@ -245,6 +247,14 @@ TEST(FoveadCli, FoveateTakesAcuitysFlags) {
     sizes[i++] = out.size();
   }
   EXPECT_NE(sizes[0], sizes[1]) << "one refinement pass changed nothing on this cloud";
+  // ... and so does the finest voxel (a dropped --level-voxel-m would compare 2 mm's output).
+  pipeline::FoveationConfig finer = config;
+  finer.acuity.level_voxel_m = 0.002;
+  pipeline::Foveator foveator = pipeline::Foveator::create({30000, 30000}, finer).value();
+  pipeline::FoveatedCloud out(30000);
+  pipeline::FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(cloud, gaze, out, stats).isOk());
+  EXPECT_NE(out.size(), sizes[0]) << "the level voxel changed nothing on this cloud";
 
   const ProcessResult refused = run(fovead() + " run --frames 1 --refine-passes 1");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;

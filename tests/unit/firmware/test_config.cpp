@@ -460,8 +460,11 @@ TEST(FoveationFlags, ChangeOnlyWhatTheyName) {
 TEST(FoveationFlags, AcuitySettingsHaveFlags) {
   Result<pipeline::FoveationConfig> set =
       flagsOver(pipeline::FoveationConfig{}, {"--preset", "ACUITY", "--floor-m", "0.004", "--floor-per-m2", "0.001",
-                                              "--level-margin", "0.3", "--refine-passes", "2", "--view-cull", "drop"});
+                                              "--level-margin", "0.3", "--refine-passes", "2", "--view-cull", "drop",
+                                              "--level-voxel-m", "0.003", "--view-cull-deg", "55"});
   ASSERT_TRUE(set) << set.status().toString();
+  EXPECT_EQ(set->acuity.level_voxel_m, 0.003);
+  EXPECT_EQ(set->acuity.view_cull_deg, 55.0);
   EXPECT_EQ(set->acuity.floor_m, 0.004);
   EXPECT_EQ(set->acuity.floor_per_m2, 0.001);
   EXPECT_EQ(set->acuity.level_margin, 0.3);
@@ -473,13 +476,20 @@ TEST(FoveationFlags, AcuitySettingsHaveFlags) {
   EXPECT_EQ(over->acuity.refine_passes, 0);
   EXPECT_EQ(over->acuity.level_margin, 0.3);
 
-  Result<pipeline::FoveationConfig> f1 = flagsOver(pipeline::FoveationConfig{}, {"--refine-passes", "1"});
-  ASSERT_FALSE(f1);
-  EXPECT_NE(f1.status().message().find("say --preset ACUITY (the foveation is F1)"), std::string::npos)
-      << f1.status().message();
+  // Every ACUITY flag is refused with another preset (it would silently do nothing).
+  for (const char* flag : {"--level-voxel-m", "--floor-m", "--floor-per-m2", "--level-margin", "--refine-passes",
+                           "--view-cull", "--view-cull-deg"}) {
+    const char* value = std::string_view(flag) == "--view-cull" ? "drop" : "1";
+    Result<pipeline::FoveationConfig> f1 = flagsOver(pipeline::FoveationConfig{}, {flag, value});
+    ASSERT_FALSE(f1) << flag;
+    EXPECT_NE(f1.status().message().find("say --preset ACUITY (the foveation is F1)"), std::string::npos)
+        << f1.status().message();
+  }
   for (const std::vector<std::string>& bad :
        {std::vector<std::string>{"--refine-passes", "8"}, {"--refine-passes", "1.5"}, {"--level-margin", "0.01"},
-        {"--floor-m", "nan"}, {"--floor-per-m2", "-1"}, {"--view-cull", "sideways"}, {"--level-margin", "x"}}) {
+        {"--floor-m", "nan"}, {"--floor-per-m2", "-1"}, {"--view-cull", "sideways"}, {"--level-margin", "x"},
+        {"--level-voxel-m", "0"}, {"--level-voxel-m", "2"}, {"--view-cull-deg", "0"}, {"--view-cull-deg", "181"},
+        {"--view-cull-deg", "inf"}}) {
     std::vector<std::string> words = {"--preset", "ACUITY"};
     words.insert(words.end(), bad.begin(), bad.end());
     Result<pipeline::FoveationConfig> refused = flagsOver(pipeline::FoveationConfig{}, words);
