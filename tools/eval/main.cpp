@@ -220,6 +220,23 @@ int waitFor(pid_t pid, std::chrono::steady_clock::time_point deadline) {
   return -1;
 }
 
+// Waits until the file at log_path has a line starting with `prefix`, pid exits or
+// `limit` passes (then the caller goes on: a run that fails says why).
+void waitForLine(const std::string& log_path, const std::string& prefix, pid_t pid, std::chrono::seconds limit) {
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (!g_stop && std::chrono::steady_clock::now() < deadline) {
+    std::ifstream in(log_path);
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.rfind(prefix, 0) == 0) return;
+    }
+    // Exited (or not a child): go on. WNOWAIT leaves its status for waitFor().
+    siginfo_t info{};
+    if (::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOHANG | WNOWAIT) != 0 || info.si_pid != 0) return;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
 std::string tail(const std::string& path) {
   std::ifstream in(path);
   std::string line, last;
@@ -264,12 +281,15 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
   fs::create_directories(run.dir, ec);
   if (ec) return R(ErrorCode::kIoError, run.dir + ": " + ec.message());
   // The camera runs at 30 fps; frames before the operator's hello are not sent,
-  // so the service captures a second and a half more than are measured.
+  // so the service captures a second and a half more than are measured. A retry
+  // captures twice and three times that: on a loaded machine (CI runs three stages
+  // on two cores) the service drops frames it cannot foveate in time, and the first
+  // o.frames decoded are measured whatever was captured.
   const int fps = 30;
-  const int captured = o.frames + 45;
-  const double seconds = static_cast<double>(captured) / fps;
   std::string last_error;
   for (int attempt = 0; attempt < 3 && !g_stop; ++attempt) {
+    const int captured = (o.frames + 45) * (attempt + 1);
+    const double seconds = static_cast<double>(captured) / fps;
     const int port = freePort();
     const std::string listen = "127.0.0.1:" + std::to_string(port);
     std::vector<std::string> serve = {fovead, "serve", "--listen", listen, "--insecure", "--camera",
@@ -280,9 +300,10 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
     for (const std::string& setting : conditionSettings(run.condition)) serve.insert(serve.end(), {"--set", setting});
     const pid_t robot = spawn(serve, run.dir + "/fovead.log");
     if (robot < 0) return R(ErrorCode::kNotFound, "cannot start " + fovead + " (--fovead PATH)");
-    // The operator says hello until the service answers (3 s): the service may still
-    // be opening its camera (TUM decodes every frame first).
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    // The operator says hello for 3 s until the service answers: start it once the
+    // service says it runs (opening the camera can take longer: TUM decodes every frame
+    // first, slower on a loaded machine), or after 60 s or the service's exit.
+    waitForLine(run.dir + "/fovead.log", "fovead serve: running", robot, std::chrono::seconds(60));
     const pid_t operator_pid =
         spawn({op, "--connect", listen, "--insecure", "--gaze", gazeScript(run.position, 400, 50), "--frame-log",
                run.dir + "/frames.csv", "--summary", run.dir + "/summary.json", "--budget", kBudgetMbps, "--quiet", "--duration",
