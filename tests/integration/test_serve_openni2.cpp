@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/process.h"
+#include "tests/support/test_time.h"
 
 namespace fovea {
 namespace {
@@ -64,10 +65,11 @@ TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
   EXPECT_NE(summary.find("\"datagrams_invalid\": 0"), std::string::npos) << summary;
 
   ASSERT_TRUE(serve.waitFor("out ", 5.0)) << serve.output();
-  // 30 s, not 5: under ASan the OPENNI2 tests unwind slowly (tests/CMakeLists.txt), and
-  // LeakSanitizer's check at exit then takes 1.5 s on an idle 2-core host; CI runs three
-  // stages at once, where it took over 5 s. A hang still fails.
-  const int exit_code = serve.stop(SIGTERM, 30.0);
+  // Scaled as test_time.h's waits: under ASan the OPENNI2 tests unwind slowly
+  // (tests/CMakeLists.txt), and LeakSanitizer's check at exit then takes 1.5 s on an
+  // idle 2-core host; CI runs three stages at once, where it took over 5 s. A hang
+  // still fails.
+  const int exit_code = serve.stop(SIGTERM, 5.0 * test::timeScale() * test::kWaitMargin);
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
 }
