@@ -33,9 +33,16 @@ awk -F, 'NR > 1 && !($12 + 0 > 0 && $13 != "" && $13 + 0 >= 0) { print "no datag
          NR > 1 { sent += $12; lost += $13 }
          END { printf "run_reduced: %d of %d datagrams lost\n", lost, sent + lost; exit bad }' \
   "$out/runs.csv" || fail "a run without its datagram counts"
-# F1, F2, F3, ACUITY, ACUITY-2MM and ACUITY-REFINED send less than FREF on every dataset (table2.csv column 7: reduction %).
-awk -F, 'NR > 1 && $2 != "FREF" && !($7 + 0 > 20) { print "no bandwidth reduction: " $0; bad = 1 } END { exit bad }' \
-  "$out/table2.csv" || fail "a condition that does not cut bandwidth against FREF"
+# F1, F2, F3, ACUITY, ACUITY-2MM and ACUITY-REFINED send fewer points than FREF on every
+# dataset: at most 80 % of FREF's points per frame (table2.csv column 14, counted by the
+# service). Not the MB/s of column 7: on a loaded machine FREF's frames arrive incomplete
+# (a local CI run measured FREF on TUM at 9.2 MB/s, below F3), and that is timing again.
+awk -F, 'NR > 1 && $2 == "FREF" { fref[$1] = $14 }
+         NR > 1 && $2 != "FREF" { row[NR] = $0; dataset[NR] = $1; points[NR] = $14 }
+         END { for (k in row) if (!(fref[dataset[k]] > 0 && points[k] + 0 > 0 && points[k] < 0.8 * fref[dataset[k]])) {
+                 print "no reduction against FREF: " row[k]; bad = 1 }
+               exit bad }' \
+  "$out/table2.csv" || fail "a condition that does not send fewer points than FREF"
 # Quality: FREF against itself is perfect; every other condition is measured and below it.
 awk -F, 'NR > 1 && $2 == "FREF" && ($8 != "inf" || $9 != "1.00000") { print "FREF not identical: " $0; bad = 1 }
          NR > 1 && $2 != "FREF" && !($7 + 0 > 0 && $7 + 0 < 1) { print "quality not measured: " $0; bad = 1 }
