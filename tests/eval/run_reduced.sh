@@ -2,7 +2,7 @@
 # fovea-eval's reduced run (tests/eval/CMakeLists.txt): every dataset there is and
 # every condition, 40 frames at 2 HMD positions, then the report's files and the
 # figures that must hold whatever the machine: every run present, foveation
-# cutting bandwidth against FREF, FREF's images identical to themselves.
+# sending fewer points than FREF, FREF's images identical to themselves.
 # usage: run_reduced.sh FOVEA_EVAL OUT_DIR TUM_DIR
 set -euo pipefail
 eval_bin="$1" out="$2" tum="$3"
