@@ -162,11 +162,9 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
   }
   // ACUITY's own settings (the configuration keys of the same names); with
   // another preset they would silently do nothing, so they are refused.
-  bool acuity_flag = false;
   const auto acuityDouble = [&](const char* flag, double& field) -> Status {
     const std::string* text = args.get(flag);
     if (text == nullptr) return Status();
-    acuity_flag = true;
     Result<double> v = parseDouble(flag, *text);
     if (!v) return v.status();
     field = v.value();
@@ -177,23 +175,23 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
   if (Status s = acuityDouble("--floor-per-m2", config.acuity.floor_per_m2); !s) return s;
   if (Status s = acuityDouble("--level-margin", config.acuity.level_margin); !s) return s;
   if (const std::string* passes = args.get("--refine-passes")) {
-    acuity_flag = true;
     Result<long> v = parseInteger("--refine-passes", *passes, 0, pipeline::kMaxRefinePasses);
     if (!v) return v.status();
     config.acuity.refine_passes = static_cast<int>(v.value());
   }
   if (const std::string* cull = args.get("--view-cull")) {
-    acuity_flag = true;
     Result<pipeline::ViewCull> v = pipeline::parseViewCull(*cull);
     if (!v) return v.status();
     config.acuity.view_cull = v.value();
   }
   if (Status s = acuityDouble("--view-cull-deg", config.acuity.view_cull_deg); !s) return s;
-  if (acuity_flag && config.acuity.preset != pipeline::Preset::kAcuity) {
+  std::string named;  // the ACUITY flags given
+  for (const std::string& flag : kAcuityFlags) {
+    if (args.get(flag) != nullptr) named += (named.empty() ? "" : ", ") + flag;
+  }
+  if (!named.empty() && config.acuity.preset != pipeline::Preset::kAcuity) {
     return Result<pipeline::FoveationConfig>(
-        ErrorCode::kInvalidArgument, "--level-voxel-m, --floor-m, --floor-per-m2, --level-margin, --refine-passes, "
-                                     "--view-cull and --view-cull-deg set ACUITY's lattice: say --preset ACUITY (the "
-                                     "foveation is " +
+        ErrorCode::kInvalidArgument, named + ": ACUITY's settings: say --preset ACUITY (the foveation is " +
                                          std::string(pipeline::presetName(config.acuity.preset)) + ")");
   }
   // Validate here so that the error names the flags, before any work starts.

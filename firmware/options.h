@@ -38,13 +38,18 @@ Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view tex
 // "a,b,c" of finite numbers.
 Result<std::vector<double>> parseDoubleList(std::string_view flag, std::string_view text);
 
+// ACUITY's own flags (the configuration keys of the same names), refused with
+// another preset.
+inline const std::vector<std::string> kAcuityFlags = {"--level-voxel-m", "--floor-m",      "--floor-per-m2",
+                                                      "--level-margin",  "--refine-passes", "--view-cull",
+                                                      "--view-cull-deg"};
 // The foveation flags every command shares: --preset, --bounds, --m, --far-ecc,
-// --fixation hit|centroid|fixed:D0, and ACUITY's --level-voxel-m, --floor-m,
-// --floor-per-m2, --level-margin, --refine-passes, --view-cull, --view-cull-deg.
-inline const std::vector<std::string> kFoveationFlags = {
-    "--preset",        "--bounds",       "--m",           "--far-ecc",   "--fixation",
-    "--level-voxel-m", "--floor-m",      "--floor-per-m2", "--level-margin", "--refine-passes",
-    "--view-cull",     "--view-cull-deg"};
+// --fixation hit|centroid|fixed:D0, and kAcuityFlags.
+inline const std::vector<std::string> kFoveationFlags = [] {
+  std::vector<std::string> flags = {"--preset", "--bounds", "--m", "--far-ecc", "--fixation"};
+  flags.insert(flags.end(), kAcuityFlags.begin(), kAcuityFlags.end());
+  return flags;
+}();
 // Starts from `base` (for fovead serve: the board profile, the configuration file and
 // --set) and changes only what the flags name, so that --preset ACUITY keeps a floor
 // or a level margin set there.

@@ -24,8 +24,8 @@ std::string program(const char* path) {
   return emulator.empty() ? std::string(path) : emulator + " " + path;
 }
 
-// The seconds a process wait allows (test_time.h's scale, three times over).
-int waitSeconds(int seconds) { return static_cast<int>(seconds * test::timeScale() * 3); }
+// The seconds a process wait allows (test_time.h's limit).
+int waitSeconds(int seconds) { return static_cast<int>(test::waitLimitSeconds(seconds)); }
 
 // The port in "viewer: open http://127.0.0.1:PORT/".
 int viewerPort(test::BackgroundProcess& op) {

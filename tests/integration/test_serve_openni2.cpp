@@ -69,7 +69,7 @@ TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
   // (tests/CMakeLists.txt), and LeakSanitizer's check at exit then takes 1.5 s on an
   // idle 2-core host; CI runs three stages at once, where it took over 5 s. A hang
   // still fails.
-  const int exit_code = serve.stop(SIGTERM, 5.0 * test::timeScale() * test::kWaitMargin);
+  const int exit_code = serve.stop(SIGTERM, test::waitLimitSeconds(5.0));
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
 }

@@ -36,6 +36,11 @@ std::chrono::milliseconds scaled(std::chrono::duration<Rep, Period> timeout) {
 
 inline constexpr int kWaitMargin = 3;
 
+// The longest a wait for something expected within `seconds` may take: scaled, times
+// kWaitMargin (what waitUntil allows; for waits that take a time in seconds, such as
+// a process's exit).
+inline double waitLimitSeconds(double seconds) { return seconds * timeScale() * kWaitMargin; }
+
 // Polls `done` every few milliseconds until it holds (true) or the scaled
 // timeout, times kWaitMargin, passes (false).
 template <class Predicate, class Rep, class Period>

@@ -484,6 +484,7 @@ TEST(FoveationFlags, AcuitySettingsHaveFlags) {
     ASSERT_FALSE(f1) << flag;
     EXPECT_NE(f1.status().message().find("say --preset ACUITY (the foveation is F1)"), std::string::npos)
         << f1.status().message();
+    EXPECT_EQ(f1.status().message().rfind(std::string(flag) + ": ", 0), 0u) << f1.status().message();
   }
   for (const std::vector<std::string>& bad :
        {std::vector<std::string>{"--refine-passes", "8"}, {"--refine-passes", "1.5"}, {"--level-margin", "0.01"},
