@@ -19,6 +19,7 @@
 #include "firmware/sanitizer.h"
 #include "pipeline/io/ply.h"
 #include "tests/support/process.h"
+#include "tests/support/test_time.h"
 
 namespace fovea {
 namespace {
@@ -230,8 +231,18 @@ TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
   GTEST_SKIP() << "not under ThreadSanitizer: the demo's full-size mock camera foveates about 1 frame/s there, so "
                   "the status it checks (streaming 1, fault 0) cannot hold; the other StreamLoopback cases run";
 #endif
-  const test::ProcessResult r = test::runCommand(std::string("FOVEA_DEMO_SECONDS=3 FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR +
-                                                 " " + FOVEA_SOURCE_DIR + "/toolchain/run-demo");
+  // host-mock's mock camera runs at 30 fps, so the stall timeout is 100 ms (three frame
+  // periods), and the gaze's is 100 ms. A sanitizer build on a loaded machine renders
+  // the 640x480 room slower than that: a local run under ASan beside two busy loops
+  // raised the fault every other frame and its one status line said "fault 1". Such
+  // builds widen both timeouts by the waits' scale and run two status intervals.
+  std::string settings = "FOVEA_DEMO_SECONDS=3";
+  if (test::timeScale() > 1) {
+    const std::string ms = std::to_string(static_cast<int>(100 * test::waitLimitSeconds(1)));
+    settings = "FOVEA_DEMO_SECONDS=5 FOVEA_DEMO_SET='camera.stall_timeout_ms=" + ms + " stream.gaze_timeout_ms=" + ms + "'";
+  }
+  const test::ProcessResult r = test::runCommand(settings + " FOVEA_BUILD_DIR=" + FOVEA_BUILD_DIR + " " +
+                                                 FOVEA_SOURCE_DIR + "/toolchain/run-demo");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* expected : {"[robot]    fovead serve: board host-mock", "info: memory: ",
                                "[robot]    streaming: listening on 127.0.0.1:", "[operator] connected to 127.0.0.1:",
