@@ -233,7 +233,7 @@ TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
 #endif
   // host-mock's mock camera runs at 30 fps, so the stall timeout is 100 ms (three frame
   // periods), and the gaze's is 100 ms. A sanitizer build on a loaded machine renders
-  // the 640x480 room slower than that: a local run under ASan beside two busy loops
+  // the 640x480 room slower than that: a local run under ASan beside three busy loops
   // raised the fault every other frame and its one status line said "fault 1". Such
   // builds widen both timeouts by the waits' scale and run two status intervals.
   std::string settings = "FOVEA_DEMO_SECONDS=3";
