@@ -17,10 +17,10 @@
 
 #include <Eigen/Geometry>
 
+#include "hal/camera/registration/registration.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
-#include "pipeline/kernels/registration.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"

@@ -17,9 +17,9 @@
 
 #include <gtest/gtest.h>
 
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 
-namespace fovea::pipeline {
+namespace fovea::io {
 namespace {
 
 // --- byte builders with explicit byte order (independent of the host's) -------
@@ -918,4 +918,4 @@ TEST(PlyNeverCrashes, RandomByteCorruption) {
 }
 
 }  // namespace
-}  // namespace fovea::pipeline
+}  // namespace fovea::io

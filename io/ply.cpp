@@ -1,4 +1,4 @@
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 
 #include <algorithm>
 #include <array>
@@ -15,7 +15,7 @@
 #include <type_traits>
 #include <utility>
 
-namespace fovea::pipeline {
+namespace fovea::io {
 namespace {
 
 // ---------------------------------------------------------------------------
@@ -987,4 +987,4 @@ Status writePly(const std::string& path, const PointCloud& cloud, const uint8_t*
   return Status::ok();
 }
 
-}  // namespace fovea::pipeline
+}  // namespace fovea::io
