@@ -222,7 +222,6 @@ struct ColourStream::Impl {
   std::map<const libcamera::FrameBuffer*, const uint8_t*> plane0;  // built at open, read-only after
   std::string id;
   std::string model;
-  std::string format_name;
   PackedRgbLayout layout;
   int width = 0;
   int height = 0;
@@ -257,7 +256,6 @@ const std::string& ColourStream::id() const { return impl_->id; }
 const std::string& ColourStream::model() const { return impl_->model; }
 int ColourStream::width() const { return impl_->width; }
 int ColourStream::height() const { return impl_->height; }
-const std::string& ColourStream::formatName() const { return impl_->format_name; }
 const PackedRgbLayout& ColourStream::layout() const { return impl_->layout; }
 uint64_t ColourStream::failedFrames() const { return impl_->failed; }
 std::size_t ColourStream::mappedBytes() const { return impl_->mapped_bytes; }
@@ -345,7 +343,6 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
     close();
     return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " refused the configuration " + sc.toString()};
   }
-  d.format_name = wanted;
   d.layout = *packedRgbLayout(wanted);
   d.width = static_cast<int>(sc.size.width);
   d.height = static_cast<int>(sc.size.height);

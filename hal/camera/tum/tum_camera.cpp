@@ -229,7 +229,6 @@ Status TumCamera::open() {
     }
     Frame frame;
     frame.depth_stamp_ns = e.depth_ns;
-    frame.depth_file = e.depth;
     frame.pose = pose;
     frame.depth.resize(static_cast<std::size_t>(kWidth) * kHeight);
     frame.rgb.resize(static_cast<std::size_t>(kWidth) * kHeight * 3);
