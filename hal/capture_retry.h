@@ -96,13 +96,10 @@ class CaptureRetry {
   // The fault flag: up from the first failure until a frame arrives.
   bool faulted() const { return state_ == CaptureState::kFailing; }
   CaptureState state() const { return state_; }
-  int consecutiveFailures() const { return consecutive_failures_; }
-  bool reopenPending() const { return reopen_pending_; }
   // The pending reopen follows a stall: it resets the device first.
   bool resetPending() const { return reset_pending_; }
   // The delay the next failure will schedule.
   int64_t backoffNs() const { return backoff_ns_; }
-  int64_t nextNs() const { return next_ns_; }
   const CaptureRetryStats& stats() const { return stats_; }
   const CaptureRetryConfig& config() const { return config_; }
 

@@ -40,7 +40,6 @@ class RgbdFrame {
   int width() const { return width_; }
   int height() const { return height_; }
   std::size_t pixelCount() const { return static_cast<std::size_t>(width_) * height_; }
-  std::size_t capacityPixels() const { return depth_.size(); }
 
   // Row-major, width() x height(); 0 means "no measurement".
   uint16_t* depth() { return depth_.data(); }

@@ -34,15 +34,6 @@ bool parseNumber(std::string_view field, double& out) {
 
 }  // namespace
 
-std::string_view poseSourceKindName(PoseSourceConfig::Kind kind) {
-  switch (kind) {
-    case PoseSourceConfig::Kind::kNone: return "none";
-    case PoseSourceConfig::Kind::kFixed: return "fixed";
-    case PoseSourceConfig::Kind::kSocket: return "socket";
-  }
-  return "?";
-}
-
 bool parsePoseDatagram(std::string_view text, StampedPose& out) {
   std::size_t pos = 0;
   const std::string_view stamp = nextField(text, pos);

@@ -51,8 +51,6 @@ struct PoseSourceConfig {
   std::size_t capacity = 256;           // poses kept (at 200 Hz: 1.3 s)
 };
 
-std::string_view poseSourceKindName(PoseSourceConfig::Kind kind);
-
 struct PoseCounters {
   uint64_t received = 0;      // poses accepted into the ring
   uint64_t malformed = 0;     // datagrams that were no pose

@@ -1,5 +1,6 @@
 #include "hal/spec_options.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <string>
@@ -21,6 +22,42 @@ Status invalid(std::string_view backend, std::string_view key, std::string_view 
 }
 
 }  // namespace
+
+SpecTokens tokenizeSpec(std::string_view spec, const SpecTokenRules& rules) {
+  SpecTokens tokens;
+  // Where the last item's value starts while bare pieces may still continue it.
+  std::optional<std::size_t> open_value_at;
+  for (std::size_t start = 0; start <= spec.size();) {
+    const std::size_t end = std::min(spec.find(',', start), spec.size());
+    const std::string_view piece = spec.substr(start, end - start);
+    const std::size_t piece_at = start;
+    start = end + 1;
+    const std::size_t eq = piece.find('=');
+    const bool bare = eq == std::string_view::npos;
+    if (piece_at == 0 && (rules.head == SpecTokenRules::Head::kFirstItem || bare)) {
+      tokens.head = piece;
+      continue;
+    }
+    if (bare) {
+      if (rules.bare_continues_value && open_value_at) {
+        tokens.items.back().value = spec.substr(*open_value_at, end - *open_value_at);
+      } else {
+        tokens.items.push_back({piece, {}, false});
+        open_value_at.reset();
+      }
+      continue;
+    }
+    const std::string_view key = piece.substr(0, eq);
+    const std::size_t value_at = piece_at + eq + 1;
+    if (!rules.rest_key.empty() && key == rules.rest_key) {
+      tokens.items.push_back({key, spec.substr(value_at), true});
+      break;
+    }
+    tokens.items.push_back({key, spec.substr(value_at, end - value_at), true});
+    open_value_at = value_at;
+  }
+  return tokens;
+}
 
 bool parseSpecInt(std::string_view text, int& out) { return parseWhole(text, out); }
 

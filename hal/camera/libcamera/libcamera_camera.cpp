@@ -87,36 +87,26 @@ std::string cameraModel(const libcamera::Camera& camera) {
 
 Result<LibcameraCameraOptions> parseLibcameraCameraOptions(std::string_view args) {
   LibcameraCameraOptions options;
-  const std::size_t depth_at = args.find(",depth=");
-  std::string_view head = args;
-  if (depth_at != std::string_view::npos) {
-    options.depth_spec = std::string(args.substr(depth_at + 7));
-    head = args.substr(0, depth_at);
-  } else if (args.substr(0, 6) == "depth=") {
+  // depth=SPEC is another backend's whole spec, commas and all: it ends the options.
+  const SpecTokens tokens = tokenizeSpec(args, {.rest_key = "depth"});
+  const bool depth_given =
+      !tokens.items.empty() && tokens.items.back().has_value && tokens.items.back().key == "depth";
+  const std::string_view camera = tokens.head.value_or("");
+  if (!depth_given && camera.substr(0, 6) == "depth=") {
     return invalid("name the colour camera first: libcamera:N|ID[,...],depth=SPEC");
   }
-  std::size_t pos = 0;
-  bool first = true;
-  while (pos <= head.size()) {
-    const std::size_t comma = std::min(head.find(',', pos), head.size());
-    const std::string_view piece = head.substr(pos, comma - pos);
-    pos = comma + 1;
-    if (first) {
-      first = false;
-      if (piece.empty() || piece.find('=') != std::string_view::npos) {
-        return invalid("expected libcamera:N|ID[,size=WxH,format=F,buffers=N],depth=SPEC (N: index from `fovead "
-                       "cameras`)");
-      }
-      options.camera = std::string(piece);
-      continue;
+  if (camera.empty() || camera.find('=') != std::string_view::npos) {
+    return invalid("expected libcamera:N|ID[,size=WxH,format=F,buffers=N],depth=SPEC (N: index from `fovead "
+                   "cameras`)");
+  }
+  options.camera = std::string(camera);
+  for (const auto& [key, value, has_value] : tokens.items) {
+    if (!has_value) {
+      return invalid("option '" + std::string(key) + "' is not key=value (keys: size, format, buffers, depth)");
     }
-    const std::size_t eq = piece.find('=');
-    if (eq == std::string_view::npos) {
-      return invalid("option '" + std::string(piece) + "' is not key=value (keys: size, format, buffers, depth)");
-    }
-    const std::string_view key = piece.substr(0, eq);
-    const std::string_view value = piece.substr(eq + 1);
-    if (key == "size") {
+    if (key == "depth") {
+      options.depth_spec = std::string(value);
+    } else if (key == "size") {
       if (Status s = parseSpecSize("libcamera", key, value, 1, 16384, options.width, options.height); !s) return s;
     } else if (key == "format") {
       if (!packedRgbLayout(value)) {
@@ -232,7 +222,6 @@ struct ColourStream::Impl {
   std::map<const libcamera::FrameBuffer*, const uint8_t*> plane0;  // built at open, read-only after
   std::string id;
   std::string model;
-  std::string format_name;
   PackedRgbLayout layout;
   int width = 0;
   int height = 0;
@@ -267,7 +256,6 @@ const std::string& ColourStream::id() const { return impl_->id; }
 const std::string& ColourStream::model() const { return impl_->model; }
 int ColourStream::width() const { return impl_->width; }
 int ColourStream::height() const { return impl_->height; }
-const std::string& ColourStream::formatName() const { return impl_->format_name; }
 const PackedRgbLayout& ColourStream::layout() const { return impl_->layout; }
 uint64_t ColourStream::failedFrames() const { return impl_->failed; }
 std::size_t ColourStream::mappedBytes() const { return impl_->mapped_bytes; }
@@ -355,7 +343,6 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
     close();
     return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " refused the configuration " + sc.toString()};
   }
-  d.format_name = wanted;
   d.layout = *packedRgbLayout(wanted);
   d.width = static_cast<int>(sc.size.width);
   d.height = static_cast<int>(sc.size.height);

@@ -122,7 +122,6 @@ class ColourStream final : public ColourSource {
   const std::string& model() const override;
   int width() const override;
   int height() const override;
-  const std::string& formatName() const;
   const PackedRgbLayout& layout() const override;
   uint64_t failedFrames() const override;
   std::size_t mappedBytes() const override;

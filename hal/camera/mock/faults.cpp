@@ -103,16 +103,6 @@ class SteadyClock final : public MockClock {
 
 }  // namespace
 
-const char* faultKindName(FaultKind kind) {
-  switch (kind) {
-    case FaultKind::kStall: return "stall";
-    case FaultKind::kDisconnect: return "disconnect";
-    case FaultKind::kWrongSize: return "wrong-size";
-    case FaultKind::kGarbage: return "garbage";
-  }
-  return "?";
-}
-
 Result<std::vector<FaultSpec>> parseFaults(std::string_view value) {
   std::vector<FaultSpec> faults;
   if (value == "none") return faults;

@@ -42,8 +42,6 @@ namespace fovea::hal::mock {
 
 enum class FaultKind : uint8_t { kStall, kDisconnect, kWrongSize, kGarbage };
 
-const char* faultKindName(FaultKind kind);
-
 struct FaultSpec {
   FaultKind kind = FaultKind::kStall;
   uint64_t at_frame = 0;

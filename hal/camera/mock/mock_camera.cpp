@@ -202,8 +202,9 @@ Pose cameraPoseAt(const CameraPath& path, const SceneInfo& scene, double time_s)
 
 Result<MockCameraOptions> parseMockCameraOptions(std::string_view args) {
   MockCameraOptions options;
-  const std::size_t first_comma = std::min(args.find(','), args.size());
-  const std::string_view scene = args.substr(0, first_comma);
+  // A piece without '=' continues the previous value (keyframe lists hold commas).
+  const SpecTokens tokens = tokenizeSpec(args, {.bare_continues_value = true});
+  const std::string_view scene = tokens.head.value_or("");
   if (scene.empty()) {
     return invalid("missing scene: expected mock:SCENE[,key=value...] with SCENE one of " +
                    Scene::names());
@@ -212,33 +213,20 @@ Result<MockCameraOptions> parseMockCameraOptions(std::string_view args) {
     return invalid("unknown scene '" + std::string(scene) + "'; accepted: " + Scene::names());
   }
   options.scene = std::string(scene);
-
-  // key=value pieces; a piece without '=' continues the previous value.
-  std::vector<std::pair<std::string, std::string>> pairs;
-  std::size_t pos = first_comma;
-  while (pos < args.size()) {
-    const std::size_t next = std::min(args.find(',', pos + 1), args.size());
-    const std::string_view piece = args.substr(pos + 1, next - pos - 1);
-    pos = next;
-    const std::size_t eq = piece.find('=');
-    if (eq == std::string_view::npos) {
-      if (pairs.empty()) {
-        return invalid("expected key=value after the scene, got '" + std::string(piece) +
-                       "'; keys: " + std::string(kKeyList));
-      }
-      pairs.back().second += ',';
-      pairs.back().second += piece;
-      continue;
-    }
-    pairs.emplace_back(std::string(piece.substr(0, eq)), std::string(piece.substr(eq + 1)));
+  // A bare item can only come first: after a key=value, bare pieces continue its value.
+  if (!tokens.items.empty() && !tokens.items.front().has_value) {
+    return invalid("expected key=value after the scene, got '" + std::string(tokens.items.front().key) +
+                   "'; keys: " + std::string(kKeyList));
   }
 
-  std::vector<std::string> seen;
-  for (const auto& [key, value] : pairs) {
-    if (std::find(seen.begin(), seen.end(), key) != seen.end()) {
+  std::vector<std::string_view> seen;
+  for (const SpecItem& item : tokens.items) {
+    const std::string key(item.key);
+    const std::string value(item.value);
+    if (std::find(seen.begin(), seen.end(), item.key) != seen.end()) {
       return invalid("key '" + key + "' given twice");
     }
-    seen.push_back(key);
+    seen.push_back(item.key);
     Status status;
     if (key == "seed") {
       if (!parseSpecUint(value, options.seed)) {

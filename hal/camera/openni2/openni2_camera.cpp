@@ -193,30 +193,19 @@ struct OpenNI2Camera::Impl {
 
 Result<OpenNI2CameraOptions> parseOpenNI2CameraOptions(std::string_view args) {
   OpenNI2CameraOptions options;
-  std::size_t pos = 0;
-  bool first = true;
-  while (pos <= args.size()) {
-    const std::size_t comma = std::min(args.find(',', pos), args.size());
-    const std::string_view piece = args.substr(pos, comma - pos);
-    pos = comma + 1;
-    if (first) {
-      first = false;
-      if (piece.find('=') == std::string_view::npos) {
-        options.uri = std::string(piece);
-        continue;
-      }
-    }
-    if (piece.empty()) {
-      if (pos > args.size()) break;  // a trailing comma
+  // The URI is optional: a first item with '=' is already an option.
+  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItemIfBare});
+  options.uri = std::string(tokens.head.value_or(""));
+  for (std::size_t i = 0; i < tokens.items.size(); ++i) {
+    const auto& [key, value, has_value] = tokens.items[i];
+    if (!has_value && key.empty()) {
+      if (i + 1 == tokens.items.size()) break;  // a trailing comma
       return invalid("empty option in '" + std::string(args) + "'");
     }
-    const std::size_t eq = piece.find('=');
-    if (eq == std::string_view::npos) {
-      return invalid("option '" + std::string(piece) +
+    if (!has_value) {
+      return invalid("option '" + std::string(key) +
                      "' is not key=value (keys: size, fps, colour, registration, sync)");
     }
-    const std::string_view key = piece.substr(0, eq);
-    const std::string_view value = piece.substr(eq + 1);
     if (key == "size") {
       if (Status s = parseSpecSize("openni2", key, value, 1, 8192, options.width, options.height); !s) return s;
     } else if (key == "fps") {

@@ -124,24 +124,14 @@ Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const s
 
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
   TumCameraOptions options;
-  std::size_t pos = 0;
-  bool first = true;
-  while (pos <= args.size()) {
-    const std::size_t comma = std::min(args.find(',', pos), args.size());
-    const std::string_view piece = args.substr(pos, comma - pos);
-    pos = comma + 1;
-    if (first) {
-      first = false;
-      if (piece.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N]");
-      options.path = std::string(piece);
-      continue;
+  const SpecTokens tokens = tokenizeSpec(args);
+  const std::string_view path = tokens.head.value_or("");
+  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N]");
+  options.path = std::string(path);
+  for (const auto& [key, value, has_value] : tokens.items) {
+    if (!has_value) {
+      return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames)");
     }
-    const std::size_t eq = piece.find('=');
-    if (eq == std::string_view::npos) {
-      return invalid("option '" + std::string(piece) + "' is not key=value (keys: loop, realtime, frames)");
-    }
-    const std::string_view key = piece.substr(0, eq);
-    const std::string_view value = piece.substr(eq + 1);
     if (key == "loop") {
       if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) return s;
     } else if (key == "realtime") {
@@ -239,7 +229,6 @@ Status TumCamera::open() {
     }
     Frame frame;
     frame.depth_stamp_ns = e.depth_ns;
-    frame.depth_file = e.depth;
     frame.pose = pose;
     frame.depth.resize(static_cast<std::size_t>(kWidth) * kHeight);
     frame.rgb.resize(static_cast<std::size_t>(kWidth) * kHeight * 3);

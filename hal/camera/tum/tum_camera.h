@@ -84,14 +84,10 @@ class TumCamera final : public Camera {
   std::size_t frameCount() const { return frames_.size(); }
   std::size_t framesWithoutPose() const { return frames_without_pose_; }
   bool finished() const { return finished_; }
-  // The i-th frame's recorded depth and RGB stamps (ns), after open().
-  int64_t depthStampNs(std::size_t i) const { return frames_[i].depth_stamp_ns; }
-  const std::string& depthFile(std::size_t i) const { return frames_[i].depth_file; }
 
  private:
   struct Frame {
     int64_t depth_stamp_ns = 0;
-    std::string depth_file;  // relative to the folder, for messages
     Pose pose;
     std::vector<uint16_t> depth;
     std::vector<uint8_t> rgb;

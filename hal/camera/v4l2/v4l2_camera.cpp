@@ -577,7 +577,6 @@ int V4l2Camera::drainColour() {
       latest_colour_stamp_ns_ = f.stamp_ns;
       have_colour_ = true;
     } else {
-      ++colour_bad_frames_;
       counters_.badFrame();
     }
     if (const int q = colour_.requeue(f.index); q != 0) return q;

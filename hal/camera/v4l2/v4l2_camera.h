@@ -96,20 +96,14 @@ class V4l2Camera final : public Camera {
   const CameraInfo& info() const override { return info_; }
   CameraCounters counters() const override { return counters_.snapshot(); }
 
-  // After open(): the nodes in use and the USB device they belong to (port,
-  // vendor:product, serial), what a USB reset looks for.
+  // After open(): the nodes in use.
   const std::string& depthNodePath() const { return depth_.path(); }
-  const std::string& colourNodePath() const { return colour_.path(); }
-  const UsbIdentity& usbIdentity() const { return usb_; }
-  const V4l2Node& depthNode() const { return depth_; }
   const V4l2Node& colourNode() const { return colour_; }
   bool hasColour() const { return options_.colour.kind != NodeSelector::Kind::kNone; }
   // Pairing of depth with colour since open() (zero without colour).
   PairingCounts pairingCounts() const;
-  uint64_t colourBadFrames() const { return colour_bad_frames_; }
 
  private:
-  Status openNodes();
   Status negotiateDepth();
   Status negotiateColour();
   Status prepareCalibration();
@@ -138,7 +132,6 @@ class V4l2Camera final : public Camera {
   int64_t colour_period_ns_ = 0;
   bool have_colour_ = false;
   int64_t latest_colour_stamp_ns_ = 0;
-  uint64_t colour_bad_frames_ = 0;
 
   bool opened_ = false;
   bool started_ = false;

@@ -168,7 +168,6 @@ Status V4l2Node::setFormat(uint32_t fourcc, int width, int height) {
   width_ = width;
   height_ = height;
   bytes_per_line_ = fmt.fmt.pix.bytesperline;
-  size_image_ = fmt.fmt.pix.sizeimage;
   if (bytes_per_line_ == 0) {
     // Compressed formats and some drivers leave it 0; packed formats are tight then.
     const std::size_t bpp = fourcc == V4L2_PIX_FMT_RGB24 || fourcc == V4L2_PIX_FMT_BGR24 ? 3 : 2;

@@ -65,7 +65,6 @@ class V4l2Node {
   int width() const { return width_; }
   int height() const { return height_; }
   std::size_t bytesPerLine() const { return bytes_per_line_; }
-  std::size_t sizeImage() const { return size_image_; }
 
   // REQBUFS (MMAP), QUERYBUF and mmap of each; the bytes mapped are mappedBytes().
   Status allocateBuffers(int count);
@@ -113,7 +112,6 @@ class V4l2Node {
   int width_ = 0;
   int height_ = 0;
   std::size_t bytes_per_line_ = 0;
-  std::size_t size_image_ = 0;
   double fps_ = 0.0;
   struct Buffer {
     void* start = nullptr;

@@ -96,24 +96,13 @@ std::string selectorText(const NodeSelector& selector) {
 Result<V4l2CameraOptions> parseV4l2CameraOptions(std::string_view args) {
   V4l2CameraOptions options;
   if (args.empty()) return invalid("expected " + std::string(kForms));
-  // The depth selector is the first piece; "serial=" and "bus=" contain '=' too.
-  std::size_t pos = 0;
-  bool first = true;
-  while (pos <= args.size()) {
-    const std::size_t comma = std::min(args.find(',', pos), args.size());
-    const std::string_view piece = args.substr(pos, comma - pos);
-    pos = comma + 1;
-    if (first) {
-      first = false;
-      if (Status s = parseSelector("depth node", piece, false, options.depth); !s) return s;
-      continue;
+  // The depth selector is the first item; "serial=" and "bus=" contain '=' too.
+  const SpecTokens tokens = tokenizeSpec(args);
+  if (Status s = parseSelector("depth node", tokens.head.value_or(""), false, options.depth); !s) return s;
+  for (const auto& [key, value, has_value] : tokens.items) {
+    if (!has_value) {
+      return invalid("option '" + std::string(key) + "' is not key=value (keys: " + std::string(kKeys) + ")");
     }
-    const std::size_t eq = piece.find('=');
-    if (eq == std::string_view::npos) {
-      return invalid("option '" + std::string(piece) + "' is not key=value (keys: " + std::string(kKeys) + ")");
-    }
-    const std::string_view key = piece.substr(0, eq);
-    const std::string_view value = piece.substr(eq + 1);
     if (key == "colour" || key == "color") {
       if (Status s = parseSelector("colour", value, true, options.colour); !s) return s;
     } else if (key == "size") {
