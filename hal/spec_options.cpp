@@ -25,8 +25,10 @@ Status invalid(std::string_view backend, std::string_view key, std::string_view 
 
 SpecTokens tokenizeSpec(std::string_view spec, const SpecTokenRules& rules) {
   SpecTokens tokens;
-  // Where the last item's value starts while bare pieces may still continue it.
-  std::optional<std::size_t> open_value_at;
+  // Where the last item's value starts while bare pieces may still continue it
+  // (npos: none open). Not std::optional: GCC 12 warns maybe-uninitialized on it here.
+  constexpr std::size_t kNone = std::string_view::npos;
+  std::size_t open_value_at = kNone;
   for (std::size_t start = 0; start <= spec.size();) {
     const std::size_t end = std::min(spec.find(',', start), spec.size());
     const std::string_view piece = spec.substr(start, end - start);
@@ -39,11 +41,11 @@ SpecTokens tokenizeSpec(std::string_view spec, const SpecTokenRules& rules) {
       continue;
     }
     if (bare) {
-      if (rules.bare_continues_value && open_value_at) {
-        tokens.items.back().value = spec.substr(*open_value_at, end - *open_value_at);
+      if (rules.bare_continues_value && open_value_at != kNone) {
+        tokens.items.back().value = spec.substr(open_value_at, end - open_value_at);
       } else {
         tokens.items.push_back({piece, {}, false});
-        open_value_at.reset();
+        open_value_at = kNone;
       }
       continue;
     }

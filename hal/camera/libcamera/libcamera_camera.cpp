@@ -88,7 +88,7 @@ std::string cameraModel(const libcamera::Camera& camera) {
 Result<LibcameraCameraOptions> parseLibcameraCameraOptions(std::string_view args) {
   LibcameraCameraOptions options;
   // depth=SPEC is another backend's whole spec, commas and all: it ends the options.
-  const SpecTokens tokens = tokenizeSpec(args, {.rest_key = "depth"});
+  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItem, .rest_key = "depth", .bare_continues_value = false});
   const bool depth_given =
       !tokens.items.empty() && tokens.items.back().has_value && tokens.items.back().key == "depth";
   const std::string_view camera = tokens.head.value_or("");

@@ -203,7 +203,7 @@ Pose cameraPoseAt(const CameraPath& path, const SceneInfo& scene, double time_s)
 Result<MockCameraOptions> parseMockCameraOptions(std::string_view args) {
   MockCameraOptions options;
   // A piece without '=' continues the previous value (keyframe lists hold commas).
-  const SpecTokens tokens = tokenizeSpec(args, {.bare_continues_value = true});
+  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItem, .rest_key = {}, .bare_continues_value = true});
   const std::string_view scene = tokens.head.value_or("");
   if (scene.empty()) {
     return invalid("missing scene: expected mock:SCENE[,key=value...] with SCENE one of " +

@@ -194,7 +194,7 @@ struct OpenNI2Camera::Impl {
 Result<OpenNI2CameraOptions> parseOpenNI2CameraOptions(std::string_view args) {
   OpenNI2CameraOptions options;
   // The URI is optional: a first item with '=' is already an option.
-  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItemIfBare});
+  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
   options.uri = std::string(tokens.head.value_or(""));
   for (std::size_t i = 0; i < tokens.items.size(); ++i) {
     const auto& [key, value, has_value] = tokens.items[i];

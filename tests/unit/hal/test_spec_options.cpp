@@ -64,41 +64,41 @@ TEST(SpecTokens, BareAndEmptyItemsAreKeptForTheBackendToJudge) {
 
 TEST(SpecTokens, EmptyAndOnlyCommas) {
   for (const Head head : {Head::kFirstItem, Head::kFirstItemIfBare}) {
-    const SpecTokens empty = tokenizeSpec("", {.head = head});
+    const SpecTokens empty = tokenizeSpec("", {.head = head, .rest_key = {}, .bare_continues_value = false});
     ASSERT_TRUE(empty.head.has_value());  // "" is one empty item, bare
     EXPECT_EQ(*empty.head, "");
     EXPECT_TRUE(empty.items.empty());
 
-    const SpecTokens commas = tokenizeSpec(",,,", {.head = head});
+    const SpecTokens commas = tokenizeSpec(",,,", {.head = head, .rest_key = {}, .bare_continues_value = false});
     EXPECT_EQ(*commas.head, "");
     EXPECT_EQ(itemsText(commas), (Items{"", "", ""}));
 
-    const SpecTokens defaulted = tokenizeSpec(std::string_view(), {.head = head});
+    const SpecTokens defaulted = tokenizeSpec(std::string_view(), {.head = head, .rest_key = {}, .bare_continues_value = false});
     EXPECT_EQ(*defaulted.head, "");
     EXPECT_TRUE(defaulted.items.empty());
   }
 }
 
 TEST(SpecTokens, AnOptionalHeadIsAbsentWhenTheFirstItemIsKeyValue) {
-  const SpecTokens with_uri = tokenizeSpec("dev/1,fps=30", {.head = Head::kFirstItemIfBare});
+  const SpecTokens with_uri = tokenizeSpec("dev/1,fps=30", {.head = Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
   EXPECT_EQ(with_uri.head, std::optional<std::string_view>("dev/1"));
   EXPECT_EQ(itemsText(with_uri), (Items{"fps=30"}));
 
-  const SpecTokens without = tokenizeSpec("fps=30,sync=off", {.head = Head::kFirstItemIfBare});
+  const SpecTokens without = tokenizeSpec("fps=30,sync=off", {.head = Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
   EXPECT_FALSE(without.head.has_value());
   EXPECT_EQ(itemsText(without), (Items{"fps=30", "sync=off"}));
 
-  const SpecTokens empty_head = tokenizeSpec(",fps=30", {.head = Head::kFirstItemIfBare});
+  const SpecTokens empty_head = tokenizeSpec(",fps=30", {.head = Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
   EXPECT_EQ(empty_head.head, std::optional<std::string_view>(""));
   EXPECT_EQ(itemsText(empty_head), (Items{"fps=30"}));
 
-  const SpecTokens equals_only = tokenizeSpec("=", {.head = Head::kFirstItemIfBare});
+  const SpecTokens equals_only = tokenizeSpec("=", {.head = Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
   EXPECT_FALSE(equals_only.head.has_value());
   EXPECT_EQ(itemsText(equals_only), (Items{"="}));
 }
 
 TEST(SpecTokens, TheRestKeyTakesTheRestOfTheSpecCommasIncluded) {
-  const SpecTokenRules rules{.rest_key = "depth"};
+  const SpecTokenRules rules{.head = Head::kFirstItem, .rest_key = "depth", .bare_continues_value = false};
   const SpecTokens tokens = tokenizeSpec("0,size=8x8,depth=v4l2:serial=1,colour=none,depth=x,", rules);
   EXPECT_EQ(*tokens.head, "0");
   EXPECT_EQ(itemsText(tokens), (Items{"size=8x8", "depth=v4l2:serial=1,colour=none,depth=x,"}));
@@ -115,7 +115,7 @@ TEST(SpecTokens, TheRestKeyTakesTheRestOfTheSpecCommasIncluded) {
 }
 
 TEST(SpecTokens, BarePiecesContinueThePreviousValueWhenAsked) {
-  const SpecTokenRules rules{.bare_continues_value = true};
+  const SpecTokenRules rules{.head = Head::kFirstItem, .rest_key = {}, .bare_continues_value = true};
   const SpecTokens tokens = tokenizeSpec("s,path=keyframes:0,1,2,3;1,4,5,6,seed=2,,x", rules);
   EXPECT_EQ(*tokens.head, "s");
   EXPECT_EQ(itemsText(tokens), (Items{"path=keyframes:0,1,2,3;1,4,5,6", "seed=2,,x"}));
@@ -155,9 +155,9 @@ TEST(SpecTokens, VeryLongSpecsSplitWhole) {
   EXPECT_EQ(tokens.items.back().value, long_value);
 
   const std::string commas(100'000, ',');
-  EXPECT_EQ(tokenizeSpec(commas, {.bare_continues_value = true}).items.size(), commas.size());
+  EXPECT_EQ(tokenizeSpec(commas, {.head = Head::kFirstItem, .rest_key = {}, .bare_continues_value = true}).items.size(), commas.size());
   const std::string depth_of_commas = "0,depth=" + commas;  // outlives the views into it
-  const SpecTokens rest = tokenizeSpec(depth_of_commas, {.rest_key = "depth"});
+  const SpecTokens rest = tokenizeSpec(depth_of_commas, {.head = Head::kFirstItem, .rest_key = "depth", .bare_continues_value = false});
   ASSERT_EQ(rest.items.size(), 1u);
   EXPECT_EQ(rest.items[0].value.size(), commas.size());
 }
