@@ -352,14 +352,6 @@ std::string withoutMargin(const std::string& name) {
   return name.substr(0, tag) + (end == std::string::npos ? "" : name.substr(end));
 }
 
-// "k=0.50" of "ACUITY k=0.50 floor ..."; the name itself when it has no margin.
-std::string marginOf(const std::string& name) {
-  const std::size_t tag = name.find(kMarginTag);
-  if (tag == std::string::npos) return name;
-  const std::size_t end = name.find(' ', tag + 1);
-  return name.substr(tag + 1, end == std::string::npos ? std::string::npos : end - tag - 1);
-}
-
 // A gnuplot index block of the plot data: a comment and one line per configuration.
 struct PlotBlock {
   std::string comment;
