@@ -399,12 +399,12 @@ const char* const kTimeAxis = "unset logscale x\nset xtics autofreq\n"
                               "set xlabel 'CPU time per frame [ms], median: back-projection through sampled output'\n"
                               "set ylabel 'RMS distance from each input point to its representative [mm]'\n";
 
-std::string scriptHeader(const PlotFiles& files, const std::string& what, int rows, int height,
+std::string scriptHeader(const PlotFiles& files, const std::string& what, int rows, int width, int height,
                          const ReportContext& context) {
   std::ostringstream gp;
   gp << "# Draws " << files.png << " from " << files.data << "; written by fovea-error-report. Run: gnuplot "
      << files.script << "\n"
-     << "set terminal pngcairo size 1500," << height << " font 'sans,11'\n"
+     << "set terminal pngcairo size " << width << ',' << height << " font 'sans,11'\n"
      << "set output '" << files.png << "'\n"
      << "set multiplot layout " << rows << ",2 title \"fovea: " << what << ", " << context.camera << ", "
      << context.frames << " frames (scalar reference)\"\n"
@@ -510,7 +510,7 @@ std::pair<std::string, std::string> mainPlot(const ReportContext& context, const
   };
 
   std::ostringstream gp;
-  gp << scriptHeader(kMainPlot, "bytes and time against error", 1, 620, context)
+  gp << scriptHeader(kMainPlot, "bytes and time against error", 1, 1500, 620, context)
      << "set key top right box opaque\n"
      << "set yrange [-2:*]\n"
      << bytesAxis(plotted) << "set title 'perceptual error against size (a colour per slope m)'\n"
@@ -527,7 +527,7 @@ std::pair<std::string, std::string> mainPlot(const ReportContext& context, const
 // hollow shape of its own. Only the first line with several margins has its
 // points labelled (k=...), below left: it is the lowest and rightmost, the
 // others share its order, and their labels covered it. The legend stands right
-// of the time panel, outside the data.
+// of the time panel, outside the data (hence the wider picture).
 std::pair<std::string, std::string> acuityPlot(const ReportContext& context, const std::vector<ConfigSummary>& configs) {
   std::vector<std::string> lines;  // withoutMargin of each ACUITY row, in the order of the run
   for (const ConfigSummary& c : configs) {
@@ -599,7 +599,8 @@ std::pair<std::string, std::string> acuityPlot(const ReportContext& context, con
   }
   const int rows = static_cast<int>(slopes.size());
   std::ostringstream gp;
-  gp << scriptHeader(kAcuityPlot, "every ACUITY setting, bytes and time against error", rows, 60 + 640 * rows, context)
+  gp << scriptHeader(kAcuityPlot, "every ACUITY setting, bytes and time against error", rows,
+                     1800, 60 + 640 * rows, context)
      << panels.str() << "unset multiplot\n";
   return {plotData(blocks, slopesOf(configs)), gp.str()};
 }
