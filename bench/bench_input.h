@@ -5,8 +5,8 @@
 
 #include <string>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/partition.h"
 
 namespace fovea::bench {

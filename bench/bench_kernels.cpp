@@ -18,6 +18,7 @@
 #include <Eigen/Geometry>
 
 #include "bench/bench_input.h"
+#include "hal/camera/registration/registration.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
@@ -25,7 +26,6 @@
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
-#include "pipeline/kernels/registration.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -82,7 +82,7 @@ struct Fixture {
     }
     f->points = f->cloud.size();
     pipeline::Foveator foveator =
-        pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f->config).value();
+        pipeline::Foveator::create({pixels, pixels, fovea::KernelSet::kRef, 1}, f->config).value();
     pipeline::FoveatedCloud out(pixels);
     pipeline::FoveationStats stats;
     if (Status s = foveator.foveate(f->cloud, f->gaze, out, stats); !s) {
@@ -98,7 +98,7 @@ struct Fixture {
       a->config.acuity.preset = pipeline::Preset::kAcuity;
       if (a == &f->acuity_floor) a->config.acuity.floor_per_m2 = 0.001;
       pipeline::Foveator levels =
-          pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, a->config).value();
+          pipeline::Foveator::create({pixels, pixels, fovea::KernelSet::kRef, 1}, a->config).value();
       if (Status s = levels.foveate(f->cloud, f->gaze, out, stats); !s) {
         std::fprintf(stderr, "fovea-bench-kernels: %s\n", s.toString().c_str());
         std::exit(1);
@@ -197,7 +197,7 @@ template <auto Register>
 void bmRegister(benchmark::State& state) {
   Fixture& f = Fixture::get();
   const hal::RgbdFrame& frame = f.input.frame;
-  pipeline::RegistrationParams p;
+  hal::RegistrationParams p;
   p.depth.intrinsics = frame.intrinsics;
   p.depth_scale_m = frame.depth_scale_m;
   p.colour.intrinsics = {1280, 720, 910.0, 910.0, 641.3, 359.2};
@@ -206,7 +206,7 @@ void bmRegister(benchmark::State& state) {
   p.T_colour_depth.R_world_cam =
       Eigen::AngleAxisd(0.017, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
   p.T_colour_depth.t_world_cam = Eigen::Vector3d(0.015, 0.0002, -0.0004);
-  Result<pipeline::DepthToColourRegistration> reg = pipeline::DepthToColourRegistration::create(p);
+  Result<hal::DepthToColourRegistration> reg = hal::DepthToColourRegistration::create(p);
   if (!reg) {
     state.SkipWithError(reg.status().toString().c_str());
     return;
@@ -214,7 +214,7 @@ void bmRegister(benchmark::State& state) {
   std::vector<uint8_t> colour(1280 * 720 * 3);
   for (std::size_t i = 0; i < colour.size(); ++i) colour[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
   std::vector<uint8_t> out(frame.pixelCount() * 3);
-  pipeline::RegistrationCounts counts;
+  hal::RegistrationCounts counts;
   for (auto _ : state) {
     counts = ((*reg).*Register)(frame.depth(), colour.data(), out.data());
     benchmark::DoNotOptimize(counts);
@@ -230,7 +230,7 @@ void bmRegister(benchmark::State& state) {
 void bmFoveatorRef(benchmark::State& state) {
   Fixture& f = Fixture::get();
   pipeline::Foveator foveator =
-      pipeline::Foveator::create({f.cloud.size(), f.cloud.size(), pipeline::KernelSet::kRef, 1}, f.config).value();
+      pipeline::Foveator::create({f.cloud.size(), f.cloud.size(), fovea::KernelSet::kRef, 1}, f.config).value();
   pipeline::FoveatedCloud out(f.cloud.size());
   pipeline::FoveationStats stats;
   for (auto _ : state) {
@@ -246,7 +246,7 @@ void bmPipelineRef(benchmark::State& state) {
   Fixture& f = Fixture::get();
   const std::size_t pixels = f.input.frame.pixelCount();
   pipeline::Foveator foveator =
-      pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kRef, 1}, f.config).value();
+      pipeline::Foveator::create({pixels, pixels, fovea::KernelSet::kRef, 1}, f.config).value();
   PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
   pipeline::BackprojectCounts bc;
@@ -267,10 +267,10 @@ void bmPipelineRef(benchmark::State& state) {
 void pipelineSimd(benchmark::State& state, int threads, const pipeline::FoveationConfig* acuity = nullptr) {
   Fixture& f = Fixture::get();
   const std::size_t pixels = f.input.frame.pixelCount();
-  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, pipeline::KernelSet::kSimd, threads},
+  pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels, fovea::KernelSet::kSimd, threads},
                                                            acuity ? *acuity : f.config)
                                     .value();
-  pipeline::Backprojector backprojector(threads, pipeline::KernelSet::kSimd);
+  pipeline::Backprojector backprojector(threads, fovea::KernelSet::kSimd);
   PointCloud cloud(pixels);
   pipeline::FoveatedCloud out(pixels);
   pipeline::BackprojectCounts bc;
@@ -303,11 +303,11 @@ const KernelBench kKernels[] = {
     {"voxel_sample/ref", &bmVoxelSample<pipeline::VoxelSampler>},
     {"foveate/ref", &bmFoveatorRef},    // partition + fixation + voxel sampling
     {"pipeline/ref", &bmPipelineRef},   // back-projection + foveate
-    {"registration/ref", &bmRegister<&pipeline::DepthToColourRegistration::registerRef>},
+    {"registration/ref", &bmRegister<&hal::DepthToColourRegistration::registerRef>},
     {"backproject/simd", &bmBackproject<pipeline::backprojectSimd>},
     {"partition/simd", &bmPartition<pipeline::partitionSimd>},
     {"voxel_sample/hash", &bmVoxelSample<pipeline::HashVoxelSampler>},
-    {"registration/simd", &bmRegister<&pipeline::DepthToColourRegistration::registerSimd>},
+    {"registration/simd", &bmRegister<&hal::DepthToColourRegistration::registerSimd>},
     {"pipeline/simd-1t", &bmPipelineSimd1},
     {"pipeline/simd-all-cores", &bmPipelineSimdAll},
     // ACUITY (docs/acuity-levels.md): its levels, and the hash sampler on them

@@ -24,11 +24,11 @@
 #include <vector>
 
 #include "bench/bench_input.h"
+#include "io/ply.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
-#include "pipeline/io/ply.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 #ifdef FOVEA_HAVE_PCL
@@ -115,7 +115,7 @@ class FoveaMethod final : public Method {
   // cost when on; kFloor only the floor: at 1 mm/m^2, ACUITY at F1's bytes
   // (docs/acuity-levels.md).
   enum class Acuity { kNo, kDefault, kFloor, kEveryFeature, kRefined };
-  FoveaMethod(const Input& input, pipeline::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
+  FoveaMethod(const Input& input, fovea::KernelSet kernels, int threads, Acuity acuity = Acuity::kNo)
       : input_(input),
         acuity_(acuity != Acuity::kNo),
         gaze_(gazeFor(input, acuity)),
@@ -243,34 +243,34 @@ const MethodEntry kMethods[] = {
 #endif
     {"fovea-ref", "fovea scalar reference kernels: backprojectRef, partitionRef, radix-sort sampler",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kRef, 1);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kRef, 1);
      }},
     {"fovea-simd-1t", "fovea SIMD kernels (Highway) and hash sampler, one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1);
      }},
     {"fovea-simd-mt", "fovea SIMD kernels and hash sampler, one thread per core",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, allCores());
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, allCores());
      }},
     {"acuity-simd-1t", "ACUITY (docs/acuity-levels.md): SIMD levels and hash sampler, one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kDefault);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1, FoveaMethod::Acuity::kDefault);
      }},
     {"acuity-floor-simd-1t",
      "ACUITY with the distance floor (--acuity-floor; 1 mm/m^2: F1's bytes on the mock room), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kFloor);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1, FoveaMethod::Acuity::kFloor);
      }},
     {"acuity-features-simd-1t",
      "ACUITY with the distance floor (--acuity-floor), a 5-degree fovea growth and the view cull (drop), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kEveryFeature);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1, FoveaMethod::Acuity::kEveryFeature);
      }},
     {"acuity-refined-simd-1t",
      "ACUITY refined (margin 0.3, one refinement pass: fovea-eval's ACUITY-REFINED), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
-       return std::make_unique<FoveaMethod>(in, pipeline::KernelSet::kSimd, 1, FoveaMethod::Acuity::kRefined);
+       return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1, FoveaMethod::Acuity::kRefined);
      }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
@@ -479,7 +479,7 @@ int run(int argc, char** argv) {
   input.acuity_floor_per_m2 = acuity_floor_mm * 1e-3;
   pipeline::Gaze gaze;
   if (!ply_path.empty()) {
-    Result<pipeline::PlyCloud> ply = pipeline::readPly(ply_path);
+    Result<io::PlyCloud> ply = io::readPly(ply_path);
     if (!ply) {
       std::fprintf(stderr, "fovea-compare: %s\n", ply.status().toString().c_str());
       return 1;

@@ -11,7 +11,7 @@
 #include <memory>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/foveator.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"

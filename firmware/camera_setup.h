@@ -6,11 +6,11 @@
 #include <memory>
 #include <string>
 
+#include "core/result.h"
 #include "firmware/service_config.h"
 #include "hal/calibration.h"
 #include "hal/camera.h"
 #include "hal/pose_source.h"
-#include "hal/result.h"
 
 namespace fovea::firmware {
 

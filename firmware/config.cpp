@@ -17,6 +17,7 @@
 
 #include <toml.hpp>
 
+#include "core/kernel_set.h"
 #include "firmware/camera_setup.h"
 #include "hal/camera.h"
 #include "hal/gpio.h"
@@ -25,7 +26,6 @@
 #include "net/wire.h"
 #include "pipeline/acuity.h"
 #include "pipeline/fixation.h"
-#include "pipeline/kernels/kernel_set.h"
 
 #ifndef FOVEA_BOARD_DIR
 #define FOVEA_BOARD_DIR "board"
@@ -136,9 +136,9 @@ const std::vector<Field>& fields() {
       FOVEA_INT("pipeline.max_points", pipeline.max_points, 1, 50'000'000),
       FOVEA_INT("pipeline.max_voxels", pipeline.max_voxels, 1, 50'000'000),
       Field{"pipeline.kernels", Kind::kChoice, 0, 0, {"ref", "simd"},
-            [](const ServiceConfig& c) -> Value { return std::string(pipeline::kernelSetName(c.pipeline.kernels)); },
+            [](const ServiceConfig& c) -> Value { return std::string(fovea::kernelSetName(c.pipeline.kernels)); },
             [](ServiceConfig& c, const Value& v) {
-              c.pipeline.kernels = *pipeline::parseKernelSet(std::get<std::string>(v));
+              c.pipeline.kernels = *fovea::parseKernelSet(std::get<std::string>(v));
             }},
       FOVEA_INT("pipeline.threads", pipeline.threads, 1, 64),
       // [foveation]
@@ -838,9 +838,9 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
     if (assignment.rfind("board=", 0) == 0) return invalid("--set: board: pick a profile with --board NAME");
     if (Status s = applyOverrideTracked(config, assignment, origins); !s) return s;
   }
-  // FOVEA_FORCE_KERNEL beats any file, as everywhere (pipeline/kernels/kernel_set.h).
+  // FOVEA_FORCE_KERNEL beats any file, as everywhere (core/kernel_set.h).
   if (const char* force = std::getenv("FOVEA_FORCE_KERNEL"); force && *force) {
-    config.pipeline.kernels = pipeline::defaultKernelSet();
+    config.pipeline.kernels = fovea::defaultKernelSet();
   }
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;

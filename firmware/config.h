@@ -17,8 +17,8 @@
 #include <string_view>
 #include <vector>
 
+#include "core/result.h"
 #include "firmware/service_config.h"
-#include "hal/result.h"
 
 namespace fovea::firmware {
 

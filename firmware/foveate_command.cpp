@@ -6,8 +6,8 @@
 #include "firmware/commands.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
+#include "io/ply.h"
 #include "pipeline/foveator.h"
-#include "pipeline/io/ply.h"
 
 namespace fovea::firmware {
 
@@ -62,7 +62,7 @@ int foveateCommand(int argc, char** argv) {
   }
 
   const std::string& in_path = *args->get("--in");
-  Result<pipeline::PlyCloud> input = pipeline::readPly(in_path);
+  Result<io::PlyCloud> input = io::readPly(in_path);
   if (!input) {
     std::fprintf(stderr, "fovead foveate: %s\n", input.status().message().c_str());
     return kExitFailure;
@@ -77,12 +77,12 @@ int foveateCommand(int argc, char** argv) {
     std::fprintf(stderr, "fovead foveate: %s\n", s.message().c_str());
     return kExitFailure;
   }
-  pipeline::PlyWriteOptions options;
+  io::PlyWriteOptions options;
   options.binary = !args->has("--ascii");
   options.double_coords = input->coords_were_double;
   options.write_color = input->has_color;
   const std::string& out_path = *args->get("--out");
-  if (Status s = pipeline::writePly(out_path, out.points, out.region.data(), options); !s) {
+  if (Status s = io::writePly(out_path, out.points, out.region.data(), options); !s) {
     std::fprintf(stderr, "fovead foveate: %s\n", s.message().c_str());
     return kExitFailure;
   }

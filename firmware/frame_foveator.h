@@ -6,22 +6,16 @@
 #pragma once
 
 #include <cstdint>
-#include <ctime>
 
+#include "core/clock.h"
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::firmware {
-
-inline int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 class FrameFoveator {
  public:

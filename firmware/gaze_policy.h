@@ -18,8 +18,8 @@
 #include <cstdint>
 #include <string_view>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/eye_speed.h"
 #include "pipeline/foveator.h"
 

@@ -33,7 +33,7 @@
 #include <string_view>
 #include <utility>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::firmware {
 

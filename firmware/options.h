@@ -9,7 +9,7 @@
 
 #include <Eigen/Core>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 
+#include "core/clock.h"
 #include "firmware/camera_setup.h"
 #include "firmware/commands.h"
 #include "firmware/frame_foveator.h"
@@ -18,9 +19,9 @@
 #include "firmware/stream_options.h"
 #include "firmware/streamer.h"
 #include "hal/camera.h"
+#include "io/ply.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
-#include "pipeline/io/ply.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/quantile.h"
@@ -273,7 +274,7 @@ int runCommand(int argc, char** argv) {
   const std::size_t max_points = static_cast<std::size_t>(width) * height;
   hal::RgbdFrame frame(width, height);
   pipeline::FoveatedCloud out(max_points);
-  const pipeline::KernelSet kernels = pipeline::defaultKernelSet();
+  const fovea::KernelSet kernels = fovea::defaultKernelSet();
   const int thread_count = static_cast<int>(threads.value());
   Result<FrameFoveator> stage =
       FrameFoveator::create({max_points, max_points, kernels, thread_count}, config.value(), range);
@@ -288,7 +289,7 @@ int runCommand(int argc, char** argv) {
   std::printf("foveation: %s\n", describeFoveation(config.value()).c_str());
   if (!calibrated->empty()) std::printf("camera: %s\n", calibrated->c_str());
   std::printf("pose: %s\n", pose_source.value()->describe().c_str());
-  if (kernels == pipeline::KernelSet::kSimd) {
+  if (kernels == fovea::KernelSet::kSimd) {
     std::printf("kernels: simd, target %s, %d thread%s (FOVEA_FORCE_KERNEL=ref for the references)\n",
                 pipeline::simdTargetName(pipeline::activeSimdTarget()), thread_count, thread_count == 1 ? "" : "s");
   } else {
@@ -511,18 +512,18 @@ int runCommand(int argc, char** argv) {
   row("foveation total (no capture)", foveate_ms);
 
   if (const std::string* path = args->get("--save-ply"); path && !keep_streamed && out.size() > 0) {
-    pipeline::PlyWriteOptions options;
+    io::PlyWriteOptions options;
     options.double_coords = true;
-    if (Status s = pipeline::writePly(*path, out.points, out.region.data(), options); !s) {
+    if (Status s = io::writePly(*path, out.points, out.region.data(), options); !s) {
       std::fprintf(stderr, "fovead run: %s\n", s.message().c_str());
       return kExitFailure;
     }
     std::printf("wrote the last foveated frame (%zu points) to %s\n", out.size(), path->c_str());
   }
   if (const std::string* path = args->get("--save-ply"); path && keep_streamed && last_streamed.size() > 0) {
-    pipeline::PlyWriteOptions options;
+    io::PlyWriteOptions options;
     options.double_coords = true;
-    if (Status s = pipeline::writePly(*path, last_streamed.points, last_streamed.region.data(), options); !s) {
+    if (Status s = io::writePly(*path, last_streamed.points, last_streamed.region.data(), options); !s) {
       std::fprintf(stderr, "fovead run: %s\n", s.message().c_str());
       return kExitFailure;
     }

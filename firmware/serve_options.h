@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "core/result.h"
 #include "firmware/options.h"
 #include "firmware/service_config.h"
-#include "hal/result.h"
 
 namespace fovea::firmware {
 

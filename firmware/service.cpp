@@ -14,9 +14,10 @@
 #include <ctime>
 #include <utility>
 
+#include "core/clock.h"
+#include "firmware/camera_setup.h"
 #include "firmware/options.h"
 #include "firmware/sanitizer.h"
-#include "firmware/camera_setup.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
 #include "net/key.h"
@@ -179,7 +180,7 @@ Status Service::allocate() {
   std::size_t before = heapInUse();
   {
     CapturedFrame prototype{hal::RgbdFrame(k.width, k.height), 0};
-    frames_ = std::make_unique<pipeline::SlotPoolRing<CapturedFrame>>(depth, 1, prototype);
+    frames_ = std::make_unique<fovea::SlotPoolRing<CapturedFrame>>(depth, 1, prototype);
   }
   memory_.add("frame slots (RGB-D, capture -> foveation)", frames_->slotCount(), delta(before, heapInUse()));
 
@@ -187,7 +188,7 @@ Status Service::allocate() {
   {
     FoveatedFrame prototype;
     prototype.cloud = pipeline::FoveatedCloud(pixels);
-    foveated_ = std::make_unique<pipeline::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
+    foveated_ = std::make_unique<fovea::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
   }
   memory_.add("foveated cloud slots (foveation -> send)", foveated_->slotCount(), delta(before, heapInUse()));
 
@@ -330,11 +331,11 @@ void Service::captureLoop() {
   retry_config.max_backoff_ns = config_.camera.retry_max_ms * 1'000'000;
   hal::CaptureRetry retry(*camera_, retry_config);
   hal::CaptureRetryStats failing_since;  // the counts when the current failure began
-  pipeline::SlotRing& ring = frames_->ring();
+  fovea::SlotRing& ring = frames_->ring();
   while (running_.load(std::memory_order_acquire)) {
     const uint64_t limit = max_frames_.load(std::memory_order_relaxed);
     if (limit > 0 && ring.counters().published >= limit) break;  // run()'s frame limit: drain and stop
-    pipeline::SlotIndex slot;
+    fovea::SlotIndex slot;
     if (!ring.tryAcquire(slot)) {
       sleepNs(kIdleSleepNs);
       continue;
@@ -392,8 +393,8 @@ void Service::captureLoop() {
 void Service::foveationLoop() {
   placeThread("fovea-foveate", config_.runtime.foveation_thread);
   static LogRateLimit foveate_site;
-  pipeline::SlotRing& in_ring = frames_->ring();
-  pipeline::SlotRing& out_ring = foveated_->ring();
+  fovea::SlotRing& in_ring = frames_->ring();
+  fovea::SlotRing& out_ring = foveated_->ring();
   for (;;) {
     // Read before tryTake: once the capture stage is seen done, every frame it
     // published is visible, so an empty ring means drained.
@@ -405,13 +406,13 @@ void Service::foveationLoop() {
       reloads_applied_.fetch_add(1, std::memory_order_relaxed);
     }
     (void)gaze_box_.update();
-    pipeline::SlotIndex in;
+    fovea::SlotIndex in;
     if (!in_ring.tryTake(in)) {
       if (capture_done) break;
       sleepNs(kIdleSleepNs);
       continue;
     }
-    pipeline::SlotIndex out;
+    fovea::SlotIndex out;
     if (!out_ring.tryAcquire(out)) {  // only if the send stage held more than it promised (a bug)
       (void)in_ring.release(in);
       foveate_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -455,7 +456,7 @@ void Service::foveationLoop() {
 void Service::sendLoop() {
   placeThread("fovea-send", config_.runtime.send_thread);
   static LogRateLimit send_site;
-  pipeline::SlotRing& ring = foveated_->ring();
+  fovea::SlotRing& ring = foveated_->ring();
   bool gaze_valid = false;
   int64_t gaze_received_ns = -1;
   // Hands the operator's newest gaze to the foveation stage when it changes.
@@ -485,7 +486,7 @@ void Service::sendLoop() {
       streamer_->poll();
       publishGaze();
     }
-    pipeline::SlotIndex slot;
+    fovea::SlotIndex slot;
     if (!ring.tryTake(slot)) {
       if (foveation_done) break;  // drained
       if (streamer_) {
@@ -640,8 +641,8 @@ void Service::supervise(int64_t now_ns) {
 std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   const int64_t now = monotonicNs();
   const double dt_s = std::max(1e-9, static_cast<double>(now - window_.at_ns) * 1e-9);
-  const pipeline::RingCounters capture_ring = frames_->ring().counters();
-  const pipeline::RingCounters foveation_ring = foveated_->ring().counters();
+  const fovea::RingCounters capture_ring = frames_->ring().counters();
+  const fovea::RingCounters foveation_ring = foveated_->ring().counters();
   Window w;
   w.at_ns = now;
   w.captured = capture_ring.published;
@@ -728,7 +729,7 @@ void Service::applyReload() {
               model.status().message().c_str());
     return;
   }
-  for (pipeline::LatestValue<ReloadedParameters>* box : {&reload_to_foveation_, &reload_to_send_}) {
+  for (fovea::LatestValue<ReloadedParameters>* box : {&reload_to_foveation_, &reload_to_send_}) {
     ReloadedParameters& p = box->writeBuffer();
     p.foveation = loaded->foveation;
     p.budget_bytes_per_s = loaded->stream.link.max_budget_bytes_per_s;

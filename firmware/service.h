@@ -37,6 +37,9 @@
 #include <thread>
 #include <vector>
 
+#include "core/latest_value.h"
+#include "core/result.h"
+#include "core/ring.h"
 #include "firmware/frame_foveator.h"
 #include "firmware/gaze_policy.h"
 #include "firmware/log.h"
@@ -47,10 +50,7 @@
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "hal/pose_source.h"
-#include "hal/result.h"
 #include "hal/usb/usb_monitor.h"
-#include "pipeline/latest_value.h"
-#include "pipeline/ring.h"
 
 namespace fovea::firmware {
 
@@ -120,8 +120,8 @@ struct ServiceStats {
   uint64_t frames_sent = 0;      // went out to an operator (a session stood)
   uint64_t frames_withheld = 0;  // taken by the send stage while privacy paused streaming
   uint64_t frames_unsent = 0;    // taken by the send stage with no operator (or not streaming)
-  pipeline::RingCounters capture_ring;    // capture -> foveation: dropped = frames the foveation stage never saw
-  pipeline::RingCounters foveation_ring;  // foveation -> send
+  fovea::RingCounters capture_ring;    // capture -> foveation: dropped = frames the foveation stage never saw
+  fovea::RingCounters foveation_ring;  // foveation -> send
   uint64_t reloads_requested = 0;
   uint64_t reloads_applied = 0;  // by the foveation stage
   uint64_t reload_failures = 0;
@@ -237,17 +237,17 @@ class Service {
   int64_t stall_timeout_ns_;
   MemoryBudget memory_;
 
-  std::unique_ptr<pipeline::SlotPoolRing<CapturedFrame>> frames_;
-  std::unique_ptr<pipeline::SlotPoolRing<FoveatedFrame>> foveated_;
+  std::unique_ptr<fovea::SlotPoolRing<CapturedFrame>> frames_;
+  std::unique_ptr<fovea::SlotPoolRing<FoveatedFrame>> foveated_;
   std::unique_ptr<FrameFoveator> stage_;
   std::unique_ptr<GazePolicy> policy_;  // the foveation thread's
   std::unique_ptr<Streamer> streamer_;  // the send thread's only
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;
-  pipeline::LatestValue<OperatorGaze> gaze_box_;
-  pipeline::LatestValue<ReloadedParameters> reload_to_foveation_;
-  pipeline::LatestValue<ReloadedParameters> reload_to_send_;
+  fovea::LatestValue<OperatorGaze> gaze_box_;
+  fovea::LatestValue<ReloadedParameters> reload_to_foveation_;
+  fovea::LatestValue<ReloadedParameters> reload_to_send_;
 
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> reload_requested_{false};

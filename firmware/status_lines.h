@@ -18,8 +18,8 @@
 #include <cstdint>
 #include <string>
 
+#include "core/result.h"
 #include "hal/gpio.h"
-#include "hal/result.h"
 
 namespace fovea::firmware {
 

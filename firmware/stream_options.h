@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
+#include "core/result.h"
 #include "firmware/options.h"
 #include "firmware/streamer.h"
-#include "hal/result.h"
 
 namespace fovea::firmware {
 

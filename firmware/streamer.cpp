@@ -6,6 +6,8 @@
 
 #include <Eigen/Geometry>
 
+#include "core/clock.h"
+
 namespace fovea::firmware {
 
 namespace {

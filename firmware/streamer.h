@@ -11,9 +11,9 @@
 #include <optional>
 #include <string>
 
+#include "core/result.h"
 #include "firmware/gaze_policy.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "net/codec.h"
 #include "net/key.h"
 #include "net/robot_link.h"

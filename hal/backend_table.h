@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal {
 

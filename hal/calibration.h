@@ -11,8 +11,8 @@
 #include <string>
 #include <string_view>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

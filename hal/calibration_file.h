@@ -37,8 +37,8 @@
 #include <string>
 #include <string_view>
 
+#include "core/result.h"
 #include "hal/calibration.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

@@ -33,7 +33,8 @@ const Backend<Camera> kBackends[] = {
     {"v4l2", &v4l2::V4l2Camera::create, &v4l2::v4l2CameraHelp, &v4l2::discoverV4l2Cameras},
 #endif
 #ifdef FOVEA_HAVE_LIBCAMERA
-    {"libcamera", &libcam::LibcameraCamera::create, &libcam::libcameraCameraHelp, &libcam::discoverLibcameraCameras},
+    {"libcamera", [](std::string_view args) { return libcam::LibcameraCamera::create(args, &createCamera); },
+     &libcam::libcameraCameraHelp, &libcam::discoverLibcameraCameras},
 #endif
 };
 

@@ -11,10 +11,10 @@
 #include <string_view>
 #include <vector>
 
+#include "core/result.h"
 #include "hal/backend_table.h"
 #include "hal/calibration.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

@@ -28,9 +28,9 @@
 #include <chrono>
 #include <cstdint>
 
+#include "core/result.h"
 #include "hal/camera.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

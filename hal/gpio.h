@@ -13,7 +13,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal {
 

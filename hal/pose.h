@@ -12,8 +12,8 @@
 
 #include <Eigen/Geometry>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

@@ -35,9 +35,9 @@
 #include <string_view>
 #include <vector>
 
+#include "core/result.h"
 #include "hal/frame.h"
 #include "hal/pose.h"
-#include "hal/result.h"
 
 namespace fovea::hal {
 

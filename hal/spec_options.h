@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal {
 

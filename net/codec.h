@@ -14,7 +14,7 @@
 #include <span>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "net/wire.h"
 #include "pipeline/acuity.h"
 #include "pipeline/point_cloud.h"

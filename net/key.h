@@ -11,7 +11,7 @@
 #include <string>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::net {
 

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "core/clock.h"
+
 namespace fovea::net {
 
 Result<std::unique_ptr<OperatorLink>> OperatorLink::connect(std::string_view address,

@@ -12,7 +12,7 @@
 #include <string>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "net/messages.h"
 #include "net/secure_channel.h"
 #include "net/udp_socket.h"

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "core/clock.h"
+
 namespace fovea::net {
 
 Result<std::unique_ptr<RobotLink>> RobotLink::create(const RobotLinkConfig& config) {

@@ -216,10 +216,4 @@ Endpoint UdpSocket::localEndpoint() const {
   return Endpoint(reinterpret_cast<const sockaddr*>(&addr), len);
 }
 
-int64_t monotonicNs() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
-}
-
 }  // namespace fovea::net

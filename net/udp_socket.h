@@ -11,7 +11,7 @@
 #include <string>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::net {
 
@@ -73,8 +73,5 @@ class UdpSocket {
   explicit UdpSocket(int fd) : fd_(fd) {}
   int fd_ = -1;
 };
-
-// CLOCK_MONOTONIC in nanoseconds (the timestamps of the protocol).
-int64_t monotonicNs();
 
 }  // namespace fovea::net

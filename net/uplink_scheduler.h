@@ -19,7 +19,7 @@
 #include <span>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "net/token_bucket.h"
 #include "pipeline/acuity.h"
 

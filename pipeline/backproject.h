@@ -12,8 +12,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::pipeline {

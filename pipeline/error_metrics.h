@@ -36,7 +36,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"

@@ -17,7 +17,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 

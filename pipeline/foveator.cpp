@@ -1,21 +1,12 @@
 #include "pipeline/foveator.h"
 
 #include <algorithm>
-#include <chrono>
 
+#include "core/clock.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::pipeline {
-
-namespace {
-
-int64_t nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
-}  // namespace
 
 Result<Foveator> Foveator::create(const PipelineCapacity& capacity, const FoveationConfig& config) {
   if (capacity.max_points == 0 || capacity.max_points > UINT32_MAX) {
@@ -172,7 +163,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   Result<Gaze> unit_gaze = normalizeGaze(gaze);
   if (!unit_gaze) return unit_gaze.status();
 
-  const int64_t t0 = nowNs();
+  const int64_t t0 = monotonicNs();
   PartitionCounts partition_counts;
   if (model_.levels()) {
     // The acuity mode's levels in place of the cones; the samplers below are shared.
@@ -190,7 +181,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   } else {
     partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
   }
-  const int64_t t1 = nowNs();
+  const int64_t t1 = monotonicNs();
   // The levels need no fixation distance: each point's own distance sizes its voxel.
   if (model_.levels()) {
     stats.fixation.source = FixationSource::kNone;
@@ -202,7 +193,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   }
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
-  const int64_t t2 = nowNs();
+  const int64_t t2 = monotonicNs();
   SampleCounts sample_counts;
   // ACUITY's refinement needs every point's representative, asked for or not.
   const bool refine = model_.levels() && model_.refinePasses() > 0;
@@ -228,7 +219,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
     ++stats.refine_passes;
     sampled = sample();
   }
-  const int64_t t3 = nowNs();
+  const int64_t t3 = monotonicNs();
 
   stats.partition_ns = t1 - t0;
   stats.fixation_ns = t2 - t1;

@@ -9,12 +9,12 @@
 #include <memory>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/kernel_set.h"
+#include "core/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/fixation.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
-#include "pipeline/kernels/kernel_set.h"
 #include "pipeline/kernels/worker_pool.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"

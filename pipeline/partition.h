@@ -21,7 +21,7 @@
 
 #include <Eigen/Core>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/point_cloud.h"
 

@@ -1,11 +1,9 @@
 # The USB side of USB cameras (hal/usb/): the table of known RGB-D camera ids
 # and the udev rules made from it (pure, always built), and with libusb 1.0
 # (pkg-config libusb-1.0, Debian 12: 1.0.26) enumeration, hot-plug and the port
-# reset. FOVEA_WITH_LIBUSB AUTO/ON/OFF; with libusb, fovea::hal_usb exports
+# reset. FOVEA_WITH_LIBUSB (toolchain/optional_package.cmake); with libusb, fovea::hal_usb exports
 # FOVEA_HAVE_LIBUSB, without it the same functions return kUnavailable saying
 # why, so callers (the V4L2 and OpenNI2 backends, the service) need no #ifdef.
-set(FOVEA_WITH_LIBUSB AUTO CACHE STRING "libusb: USB camera enumeration, hot-plug and port reset: AUTO, ON or OFF")
-set_property(CACHE FOVEA_WITH_LIBUSB PROPERTY STRINGS AUTO ON OFF)
 
 # fovea::hal_usb_ids: the id table and the udev rules, no libusb.
 add_library(fovea_hal_usb_ids usb/usb_ids.cpp)
@@ -13,17 +11,12 @@ add_library(fovea::hal_usb_ids ALIAS fovea_hal_usb_ids)
 target_link_libraries(fovea_hal_usb_ids PUBLIC fovea_build_flags)
 
 set(LIBUSB_FOUND FALSE)
-if(NOT FOVEA_WITH_LIBUSB STREQUAL "OFF")
-  find_package(PkgConfig QUIET)
+fovea_optional(LIBUSB "libusb USB camera enumeration, hot-plug and port reset" BACKEND)
+if(FOVEA_WANT_LIBUSB)
   if(PkgConfig_FOUND)
-    if(FOVEA_WITH_LIBUSB STREQUAL "ON")
-      pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)
-    else()
-      pkg_check_modules(LIBUSB QUIET IMPORTED_TARGET libusb-1.0)
-    endif()
-  elseif(FOVEA_WITH_LIBUSB STREQUAL "ON")
-    message(FATAL_ERROR "fovea: FOVEA_WITH_LIBUSB=ON needs pkg-config (apt-get install pkg-config)")
+    pkg_check_modules(LIBUSB QUIET IMPORTED_TARGET libusb-1.0)
   endif()
+  fovea_optional_found(LIBUSB "${LIBUSB_FOUND}" "libusb-1.0 through pkg-config (apt-get install libusb-1.0-0-dev pkg-config)")
 endif()
 
 # fovea::hal_usb: enumeration, hot-plug monitor, port reset (stubs without libusb).
@@ -35,13 +28,8 @@ if(LIBUSB_FOUND)
   target_sources(fovea_hal_usb PRIVATE usb/usb_libusb.cpp usb/usb_monitor.cpp)
   target_link_libraries(fovea_hal_usb PRIVATE PkgConfig::LIBUSB Threads::Threads)
   target_compile_definitions(fovea_hal_usb PUBLIC FOVEA_HAVE_LIBUSB=1)
-  message(STATUS "fovea: libusb USB camera enumeration, hot-plug and reset (libusb-1.0 ${LIBUSB_VERSION})")
-elseif(FOVEA_WITH_LIBUSB STREQUAL "OFF")
-  target_sources(fovea_hal_usb PRIVATE usb/usb_unavailable.cpp)
-  message(STATUS "fovea: libusb support off (FOVEA_WITH_LIBUSB=OFF): no USB enumeration, hot-plug or reset")
 else()
   target_sources(fovea_hal_usb PRIVATE usb/usb_unavailable.cpp)
-  message(STATUS "fovea: libusb-1.0 not found, no USB enumeration, hot-plug or reset (apt-get install libusb-1.0-0-dev)")
 endif()
 list(APPEND fovea_hal_backends fovea::hal_usb)
 

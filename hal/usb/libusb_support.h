@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <string>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "hal/usb/usb_devices.h"
 
 namespace fovea::hal::usb::detail {

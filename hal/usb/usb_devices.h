@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "hal/usb/usb_ids.h"
 
 namespace fovea::hal::usb {

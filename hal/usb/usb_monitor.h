@@ -21,7 +21,7 @@
 #include <memory>
 #include <string>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "hal/usb/usb_ids.h"
 
 namespace fovea::hal::usb {

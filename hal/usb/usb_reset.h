@@ -18,7 +18,7 @@
 #include <string>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::usb {
 

@@ -10,10 +10,10 @@
 #include <memory>
 #include <vector>
 
+#include "core/kernel_set.h"
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/backproject.h"
-#include "pipeline/kernels/kernel_set.h"
 #include "pipeline/kernels/worker_pool.h"
 #include "pipeline/point_cloud.h"
 

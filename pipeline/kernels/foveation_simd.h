@@ -16,12 +16,12 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/kernel_set.h"
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/backproject.h"
 #include "pipeline/fixation.h"
-#include "pipeline/kernels/kernel_set.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 #include "pipeline/voxel_sampler.h"

@@ -37,7 +37,7 @@
 #include <memory>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/acuity.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/worker_pool.h"

@@ -17,16 +17,20 @@
 
 #include <Eigen/Geometry>
 
+#include "hal/camera/registration/registration.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
-#include "pipeline/kernels/registration.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"
 
 namespace fovea::pipeline {
 namespace {
+
+using hal::DepthToColourRegistration;
+using hal::RegistrationCounts;
+using hal::RegistrationParams;
 
 constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
 constexpr float kInff = std::numeric_limits<float>::infinity();

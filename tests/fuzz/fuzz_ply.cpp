@@ -1,4 +1,4 @@
-// Fuzz target for the PLY reader (pipeline/io/ply.h): the bytes are a file's
+// Fuzz target for the PLY reader (io/ply.h): the bytes are a file's
 // contents, read by parsePly as readPly does after reading the file. Oracles:
 // a cloud that reads has as many regions as points when it has regions, and
 // what serializePly writes of it (double coordinates) reads back to as many
@@ -7,13 +7,14 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 #include "tests/fuzz/fuzz_target.h"
 
 namespace {
 
 using namespace fovea;
 using namespace fovea::pipeline;
+using namespace fovea::io;
 
 [[noreturn]] void fail(const char* what) {
   std::fprintf(stderr, "fuzz_ply: %s\n", what);

@@ -5,13 +5,17 @@
 
 #include <gtest/gtest.h>
 
+#include "hal/camera/registration/registration.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
-#include "pipeline/kernels/registration.h"
 #include "tests/support/clouds.h"
 
 namespace fovea::pipeline {
 namespace {
+
+using hal::DepthToColourRegistration;
+using hal::RegistrationCounts;
+using hal::RegistrationParams;
 
 using test::regionModel;
 

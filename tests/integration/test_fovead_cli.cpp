@@ -11,8 +11,8 @@
 
 #include "tests/support/process.h"
 
+#include "io/ply.h"
 #include "pipeline/foveator.h"
-#include "pipeline/io/ply.h"
 #include "tests/support/clouds.h"
 
 namespace fovea {
@@ -44,7 +44,7 @@ TEST(FoveadCli, RunReducesThePointCountAndSavesAPly) {
   const std::string ply = dir.file("last.ply");
   const ProcessResult r = run(fovead() + " run --camera mock:balloon --preset F3 --frames 2 --every 0 --save-ply " + ply);
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  Result<pipeline::PlyCloud> saved = pipeline::readPly(ply);
+  Result<io::PlyCloud> saved = io::readPly(ply);
   ASSERT_TRUE(saved.isOk()) << saved.status().toString();
   EXPECT_TRUE(saved->has_region);
   EXPECT_GT(saved->points.size(), 1000u);
@@ -175,9 +175,9 @@ void expectFoveateMatchesTheLibrary(const std::string& flags, const pipeline::Fo
   TempDir dir;
   const Eigen::Vector3d origin(10000.0, -2500.0, 3.0);
   pipeline::PointCloud cloud = test::randomCloud(30000, origin, 3.0f, 31);
-  pipeline::PlyWriteOptions write;
+  io::PlyWriteOptions write;
   write.double_coords = true;
-  ASSERT_TRUE(pipeline::writePly(dir.file("in.ply"), cloud, nullptr, write).isOk());
+  ASSERT_TRUE(io::writePly(dir.file("in.ply"), cloud, nullptr, write).isOk());
 
   const ProcessResult r = run(fovead() + " foveate --in " + dir.file("in.ply") + " --out " + dir.file("out.ply") +
                               " --gaze-origin 10000,-2500,3 --gaze-dir 0.3,0.1,1 " + flags);
@@ -186,7 +186,7 @@ void expectFoveateMatchesTheLibrary(const std::string& flags, const pipeline::Fo
       << r.output;
 
   // The same through the library, from the cloud as the PLY reader sees it.
-  Result<pipeline::PlyCloud> input = pipeline::readPly(dir.file("in.ply"));
+  Result<io::PlyCloud> input = io::readPly(dir.file("in.ply"));
   ASSERT_TRUE(input.isOk());
   pipeline::Foveator foveator = pipeline::Foveator::create({30000, 30000}, config).value();
   pipeline::FoveatedCloud expected(30000);
@@ -196,7 +196,7 @@ void expectFoveateMatchesTheLibrary(const std::string& flags, const pipeline::Fo
   gaze.direction = Eigen::Vector3d(0.3, 0.1, 1);
   ASSERT_TRUE(foveator.foveate(input->points, gaze, expected, stats).isOk());
 
-  Result<pipeline::PlyCloud> output = pipeline::readPly(dir.file("out.ply"));
+  Result<io::PlyCloud> output = io::readPly(dir.file("out.ply"));
   ASSERT_TRUE(output.isOk()) << output.status().toString();
   EXPECT_TRUE(output->coords_were_double);
   EXPECT_TRUE(output->has_color);

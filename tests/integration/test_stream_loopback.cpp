@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "firmware/sanitizer.h"
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 #include "tests/support/process.h"
 #include "tests/support/test_time.h"
 
@@ -137,9 +137,9 @@ TEST_F(StreamLoopback, OperatorDecodesTheServiceFramesForItsOwnGaze) {
     double v;
     while (sizes >> v) voxel_m.push_back(v);
   }
-  Result<pipeline::PlyCloud> robot = pipeline::readPly(dir_.file("robot.ply"));
+  Result<io::PlyCloud> robot = io::readPly(dir_.file("robot.ply"));
   ASSERT_TRUE(robot.isOk()) << robot.status().message();
-  Result<pipeline::PlyCloud> decoded = pipeline::readPly(dir_.file("frames/frame_" + frame_id + ".ply"));
+  Result<io::PlyCloud> decoded = io::readPly(dir_.file("frames/frame_" + frame_id + ".ply"));
   ASSERT_TRUE(decoded.isOk()) << decoded.status().message() << "\n" << run.operator_output;
   ASSERT_TRUE(robot->has_region && decoded->has_region);
   ASSERT_EQ(robot->points.size(), decoded->points.size());

@@ -38,16 +38,16 @@ TEST(ZeroAllocation, CounterSeesAllocations) {
 // Both kernel sets: the scalar references, and the SIMD kernels with the hash
 // sampler on one and on three threads.
 struct KernelChoice {
-  pipeline::KernelSet kernels;
+  fovea::KernelSet kernels;
   int threads;
 };
 void PrintTo(const KernelChoice& c, std::ostream* os) {
-  *os << pipeline::kernelSetName(c.kernels) << " on " << c.threads << " threads";
+  *os << fovea::kernelSetName(c.kernels) << " on " << c.threads << " threads";
 }
 class ZeroAllocationKernels : public ::testing::TestWithParam<KernelChoice> {};
 
 TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
-  const pipeline::KernelSet kernels = GetParam().kernels;
+  const fovea::KernelSet kernels = GetParam().kernels;
   const int threads = GetParam().threads;
   Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit");
   ASSERT_TRUE(camera.isOk()) << camera.status().toString();
@@ -95,7 +95,7 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
 // The same on real frames: the 60 TUM frames of shared/data, looped (open()
 // decodes them all; acquire() must only copy).
 TEST_P(ZeroAllocationKernels, HundredTumFramesAfterWarmUp) {
-  const pipeline::KernelSet kernels = GetParam().kernels;
+  const fovea::KernelSet kernels = GetParam().kernels;
   const int threads = GetParam().threads;
   const char* shared = std::getenv("FOVEA_SHARED_DIR");
   const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
@@ -176,11 +176,11 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
 }
 
 INSTANTIATE_TEST_SUITE_P(KernelSets, ZeroAllocationKernels,
-                         ::testing::Values(KernelChoice{pipeline::KernelSet::kRef, 1},
-                                           KernelChoice{pipeline::KernelSet::kSimd, 1},
-                                           KernelChoice{pipeline::KernelSet::kSimd, 3}),
+                         ::testing::Values(KernelChoice{fovea::KernelSet::kRef, 1},
+                                           KernelChoice{fovea::KernelSet::kSimd, 1},
+                                           KernelChoice{fovea::KernelSet::kSimd, 3}),
                          [](const ::testing::TestParamInfo<KernelChoice>& info) {
-                           return std::string(pipeline::kernelSetName(info.param.kernels)) + "_" +
+                           return std::string(fovea::kernelSetName(info.param.kernels)) + "_" +
                                   std::to_string(info.param.threads) + "_threads";
                          });
 

@@ -16,12 +16,12 @@
 #include <thread>
 #include <vector>
 
+#include "core/result.h"
 #include "firmware/service.h"
 #include "firmware/service_config.h"
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "hal/gpio/mock/mock_gpio.h"
-#include "hal/result.h"
 
 namespace fovea::test {
 

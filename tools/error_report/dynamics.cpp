@@ -130,7 +130,7 @@ Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<Dy
   // The SIMD kernels: their output is the reference's (docs/kernels.md), and the
   // coverage figure foveates twice per simulated frame.
   Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, pipeline::KernelSet::kSimd, 1}, configs.front().config);
+      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kSimd, 1}, configs.front().config);
   if (!foveator) return foveator.status();
   Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
   if (!encoder) return encoder.status();

@@ -26,8 +26,8 @@
 
 #include <Eigen/Core>
 
+#include "core/result.h"
 #include "hal/camera.h"
-#include "hal/result.h"
 #include "pipeline/foveator.h"
 #include "tools/error_report/report.h"
 

@@ -491,7 +491,7 @@ int run(int argc, char** argv) {
   }
   // The scalar reference kernels: the report's time column says so.
   Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, pipeline::KernelSet::kRef, 1}, runs.front().config);
+      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kRef, 1}, runs.front().config);
   if (!foveator) {
     std::fprintf(stderr, "fovea-error-report: %s\n", foveator.status().message().c_str());
     return kExitUsage;

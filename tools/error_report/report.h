@@ -7,7 +7,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/acuity.h"
 
 namespace fovea::tools {

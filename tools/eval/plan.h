@@ -10,7 +10,7 @@
 
 #include <Eigen/Core>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::tools::eval {
 

@@ -40,7 +40,7 @@ Result<std::unique_ptr<QualityEvaluator>> QualityEvaluator::create(std::size_t m
   Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
   if (!encoder) return encoder.status();
   Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, pipeline::KernelSet::kSimd, 1}, pipeline::FoveationConfig{});
+      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kSimd, 1}, pipeline::FoveationConfig{});
   if (!foveator) return foveator.status();
   auto state = std::unique_ptr<State>(new State{max_points, pipeline::PointCloud(max_points),
                                                 pipeline::FoveatedCloud(max_points), pipeline::FoveatedCloud(max_points),

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 #include "tools/eval/plan.h"
 #include "tools/eval/quality/image_quality.h"
 

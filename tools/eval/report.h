@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "tools/eval/plan.h"
 #include "tools/eval/quality_eval.h"
 #include "tools/eval/results.h"

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::tools::eval {
 

@@ -8,6 +8,8 @@
 #include <string>
 #include <utility>
 
+#include "core/clock.h"
+
 namespace fovea::tools {
 namespace {
 
@@ -105,7 +107,7 @@ void LossyRelay::relay(Direction& d, std::span<const uint8_t> datagram, net::Udp
       if (!d.holding) {
         d.held.assign(datagram.begin(), datagram.end());
         d.holding = true;
-        d.held_since_ns = net::monotonicNs();
+        d.held_since_ns = monotonicNs();
         d.counters.reordered += 1;
         return;
       }
@@ -137,7 +139,7 @@ void LossyRelay::pump(int timeout_ms) {
     if (!(from == config_.server) || !client_.valid()) continue;  // not the server's, or nobody to send to yet
     relay(down_, std::span<const uint8_t>(buffer_.data(), std::min(buffer_.size(), static_cast<std::size_t>(n))), client_side_, client_);
   }
-  const int64_t now = net::monotonicNs();
+  const int64_t now = monotonicNs();
   if (up_.holding && now - up_.held_since_ns >= config_.hold_timeout_ns) releaseHeld(up_, server_side_, config_.server);
   if (down_.holding && now - down_.held_since_ns >= config_.hold_timeout_ns) releaseHeld(down_, client_side_, client_);
 }

@@ -9,7 +9,7 @@
 #include <span>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "net/udp_socket.h"
 
 namespace fovea::tools {

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <string>
 
+#include "core/clock.h"
 #include "tools/lossy_relay/lossy_relay.h"
 
 namespace {
@@ -141,10 +142,10 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
 
   const int64_t interval_ns = static_cast<int64_t>(stats_interval_s * 1e9);
-  int64_t next_stats_ns = net::monotonicNs() + interval_ns;
+  int64_t next_stats_ns = monotonicNs() + interval_ns;
   while (!g_stop) {
     relay.pump(100);
-    if (interval_ns > 0 && net::monotonicNs() >= next_stats_ns) {
+    if (interval_ns > 0 && monotonicNs() >= next_stats_ns) {
       printCounters("counters", relay);
       next_stats_ns += interval_ns;
     }

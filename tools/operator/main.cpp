@@ -19,11 +19,12 @@
 
 #include <Eigen/Geometry>
 
+#include "core/clock.h"
+#include "io/ply.h"
 #include "net/codec.h"
 #include "net/key.h"
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
-#include "pipeline/io/ply.h"
 #include "tools/operator/gaze_script.h"
 #include "tools/operator/operator_stats.h"
 #include "tools/operator/view_frame.h"
@@ -76,7 +77,6 @@ const char* kHelp =
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void onStopSignal(int) { g_stop = 1; }
 
-using net::monotonicNs;
 
 struct Options {
   std::string connect;
@@ -434,10 +434,10 @@ int main(int argc, char** argv) {
         last_frame_id = f.frame_id;
         if (view) view->publishFrame(tools::packViewFrame(f, splat_sizer.sizes(f), view->frameBuffer()));
         if (!opt.ply_dir.empty() && f.cloud != nullptr) {
-          pipeline::PlyWriteOptions ply;
+          io::PlyWriteOptions ply;
           ply.double_coords = true;
           const std::string path = opt.ply_dir + "/frame_" + std::to_string(f.frame_id) + ".ply";
-          if (pipeline::writePly(path, f.cloud->points, f.cloud->region.data(), ply).isOk()) {
+          if (io::writePly(path, f.cloud->points, f.cloud->region.data(), ply).isOk()) {
             ++ply_written;
           } else {
             ++ply_failed;

@@ -11,7 +11,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::tools {
 

@@ -5,6 +5,7 @@
 
 #include <civetweb.h>
 
+#include "core/clock.h"
 #include "net/udp_socket.h"
 #include "tools/operator/view_assets.h"
 #include "tools/operator/view_frame.h"
@@ -289,7 +290,7 @@ int ViewServer::onWsData(mg_connection* conn, int bits, char* data, std::size_t 
     return 1;
   }
   if (m->kind == ViewerMessage::Kind::kGaze) {
-    self->gaze_ = TabGaze{m->gaze, tab->id, net::monotonicNs()};
+    self->gaze_ = TabGaze{m->gaze, tab->id, monotonicNs()};
     ++self->counters_.gaze_received;
   } else {
     self->mode_ = m->mode;

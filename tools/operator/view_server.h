@@ -23,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "tools/operator/view_messages.h"
 
 struct mg_context;

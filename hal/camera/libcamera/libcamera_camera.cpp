@@ -14,7 +14,7 @@
 
 #include <libcamera/libcamera.h>
 
-#include "pipeline/kernels/registration.h"
+#include "hal/camera/registration/registration.h"
 
 namespace fovea::hal::libcam {
 
@@ -493,12 +493,12 @@ void ColourStream::close() {
 // LibcameraCamera
 
 struct LibcameraCamera::Registration {
-  explicit Registration(pipeline::DepthToColourRegistration r) : kernel(std::move(r)) {}
-  pipeline::DepthToColourRegistration kernel;
+  explicit Registration(hal::DepthToColourRegistration r) : kernel(std::move(r)) {}
+  hal::DepthToColourRegistration kernel;
 };
 
-LibcameraCamera::LibcameraCamera(LibcameraCameraOptions options)
-    : options_(std::move(options)), colour_(std::make_unique<ColourStream>()) {
+LibcameraCamera::LibcameraCamera(LibcameraCameraOptions options, DepthCameraFactory make_depth)
+    : options_(std::move(options)), make_depth_(make_depth), colour_(std::make_unique<ColourStream>()) {
   info_.name = "libcamera:" + options_.camera;
 }
 
@@ -513,14 +513,14 @@ LibcameraCamera::~LibcameraCamera() {
   colour_->close();
 }
 
-Result<std::unique_ptr<Camera>> LibcameraCamera::create(std::string_view args) {
+Result<std::unique_ptr<Camera>> LibcameraCamera::create(std::string_view args, DepthCameraFactory make_depth) {
   Result<LibcameraCameraOptions> options = parseLibcameraCameraOptions(args);
   if (!options) return options.status();
   // The depth camera's spec is checked now, so a bad one fails with the rest.
-  Result<std::unique_ptr<Camera>> depth = createCamera(options->depth_spec);
+  Result<std::unique_ptr<Camera>> depth = make_depth(options->depth_spec);
   if (!depth) return Status(depth.status().code(), "libcamera: depth=" + options->depth_spec + ": " +
                                                         depth.status().message());
-  auto camera = std::make_unique<LibcameraCamera>(std::move(options).value());
+  auto camera = std::make_unique<LibcameraCamera>(std::move(options).value(), make_depth);
   camera->depth_ = std::move(depth).value();
   return std::unique_ptr<Camera>(std::move(camera));
 }
@@ -549,7 +549,8 @@ Status LibcameraCamera::open() {
   opened_ = false;
   registration_.reset();
   if (!depth_) {
-    Result<std::unique_ptr<Camera>> depth = createCamera(options_.depth_spec);
+    if (make_depth_ == nullptr) return {ErrorCode::kInvalidArgument, "libcamera: no depth camera was given"};
+    Result<std::unique_ptr<Camera>> depth = make_depth_(options_.depth_spec);
     if (!depth) return depth.status();
     depth_ = std::move(depth).value();
   }
@@ -580,12 +581,12 @@ Status LibcameraCamera::open() {
                 ", camera " + colour_->id() + " streams " + size + ": set size= to the calibrated size"};
   }
   const CameraInfo& depth_info = depth_->info();
-  pipeline::RegistrationParams params;
+  hal::RegistrationParams params;
   params.depth.intrinsics = depth_info.intrinsics;
   params.colour = colour_cal;
   params.T_colour_depth = *calibration_->T_colour_depth;
   params.depth_scale_m = depth_info.depth_scale_m;
-  Result<pipeline::DepthToColourRegistration> registration = pipeline::DepthToColourRegistration::create(params);
+  Result<hal::DepthToColourRegistration> registration = hal::DepthToColourRegistration::create(params);
   if (!registration) {
     colour_->close();
     return {registration.status().code(), "libcamera: calibration from " + calibration_->source + ": " +

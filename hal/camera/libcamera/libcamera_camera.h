@@ -10,7 +10,7 @@
 // - Registration: the colour image is registered to the depth image through
 //   the calibration (setCalibration(): the colour camera's intrinsics and
 //   distortion, T_colour_depth; depth intrinsics from the depth camera unless
-//   the calibration gives them) with pipeline::DepthToColourRegistration. No
+//   the calibration gives them) with hal::DepthToColourRegistration. No
 //   calibration: open() says what to give.
 // - Pairing: colour frames (libcamera stamps them on CLOCK_MONOTONIC, from the
 //   V4L2 buffers) are paired with depth frames by capture time through
@@ -134,11 +134,16 @@ class ColourStream final : public ColourSource {
 
 class LibcameraCamera final : public Camera {
  public:
-  explicit LibcameraCamera(LibcameraCameraOptions options);
+  // Makes the depth camera from its spec. The backend table (hal/camera.cpp)
+  // hands in hal::createCamera, so this library does not link the table that
+  // links it (no cycle of static libraries).
+  using DepthCameraFactory = Result<std::unique_ptr<Camera>> (*)(std::string_view spec);
+
+  LibcameraCamera(LibcameraCameraOptions options, DepthCameraFactory make_depth);
   // With a given depth camera and colour source (tests).
   LibcameraCamera(LibcameraCameraOptions options, std::unique_ptr<Camera> depth, std::unique_ptr<ColourSource> colour);
   ~LibcameraCamera() override;
-  static Result<std::unique_ptr<Camera>> create(std::string_view args);
+  static Result<std::unique_ptr<Camera>> create(std::string_view args, DepthCameraFactory make_depth);
 
   Status open() override;
   Status start() override;
@@ -155,6 +160,7 @@ class LibcameraCamera final : public Camera {
   void drainColour(std::chrono::nanoseconds wait);
 
   LibcameraCameraOptions options_;
+  DepthCameraFactory make_depth_ = nullptr;  // null: the depth camera was given
   CameraInfo info_;
   std::optional<CameraCalibration> calibration_;
   std::unique_ptr<Camera> depth_;

@@ -36,7 +36,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::mock {
 

@@ -15,8 +15,8 @@
 
 #include <Eigen/Core>
 
+#include "core/result.h"
 #include "hal/frame.h"
-#include "hal/result.h"
 
 namespace fovea::hal::mock {
 

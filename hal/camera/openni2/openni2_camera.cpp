@@ -1,4 +1,5 @@
 #include "hal/spec_options.h"
+#include "core/clock.h"
 #include "hal/camera/openni2/openni2_camera.h"
 
 #include <time.h>
@@ -37,12 +38,6 @@ constexpr const char* kNoDeviceHint =
     "group the rules name (video; plugdev on some distributions) (docs/cameras-openni2.md)";
 
 Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "openni2: " + std::move(message)); }
-
-int64_t monotonicNowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 const char* pixelFormatName(int format) {
   switch (format) {
@@ -378,7 +373,7 @@ Result<std::unique_ptr<Camera>> OpenNI2Camera::create(std::string_view args) {
 
 Status OpenNI2Camera::setCalibration(const CameraCalibration& calibration) {
   if (calibration.colour || calibration.T_colour_depth) {
-    // Software registration (pipeline::DepthToColourRegistration) is not wired
+    // Software registration (hal::DepthToColourRegistration) is not wired
     // into this backend yet; refusing beats silently ignoring half of it.
     return {ErrorCode::kInvalidArgument,
             "openni2: a colour calibration or T_colour_depth (from " + calibration.source +
@@ -684,7 +679,7 @@ Status OpenNI2Camera::readDepth(RgbdFrame& slot, bool& delivered) {
     return Status(ErrorCode::kInvalidInput, "depth size");
   }
   const uint64_t device_us = frame.getTimestamp();
-  const int64_t host_ns = clock_.toHostNs(device_us, monotonicNowNs());
+  const int64_t host_ns = clock_.toHostNs(device_us, monotonicNs());
   if (!colour_enabled_) {
     copyRows(static_cast<const uint8_t*>(frame.getData()), frame.getStrideInBytes(), depth_mode_.width,
              depth_mode_.height, 2, reinterpret_cast<uint8_t*>(slot.depth()));

@@ -10,7 +10,7 @@
 #include <cstdint>
 #include <string>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::tum {
 

@@ -23,7 +23,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::v4l2 {
 

@@ -10,9 +10,10 @@
 #include <ctime>
 #include <utility>
 
+#include "core/clock.h"
 #include "hal/calibration_file.h"
+#include "hal/camera/registration/registration.h"
 #include "hal/usb/usb_reset.h"
-#include "pipeline/kernels/registration.h"
 
 namespace fovea::hal::v4l2 {
 
@@ -73,12 +74,6 @@ bool chooseSize(const std::vector<FrameSize>& sizes, int requested_w, int reques
     return true;
   }
   return sizes.empty() || sizeOffered(sizes, w, h);
-}
-
-int64_t monotonicNowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 Status deniedError(const std::vector<std::string>& denied) {
@@ -420,7 +415,7 @@ Status V4l2Camera::prepareCalibration() {
                                                    : calibration.depth_scale_m.value_or(options_.depth_scale_m);
   if (!hasColour()) return Status::ok();
 
-  pipeline::RegistrationParams params;
+  hal::RegistrationParams params;
   params.depth = depth_cal;
   params.depth_scale_m = info_.depth_scale_m;
   const int cw = colour_.width();
@@ -444,11 +439,11 @@ Status V4l2Camera::prepareCalibration() {
             "v4l2: no depth-to-colour extrinsics: give them in a calibration file (calib=FILE) or the board "
             "profile, or extrinsics=identity to accept colour shifted by the distance between the two lenses"};
   }
-  Result<pipeline::DepthToColourRegistration> registration = pipeline::DepthToColourRegistration::create(params);
+  Result<hal::DepthToColourRegistration> registration = hal::DepthToColourRegistration::create(params);
   if (!registration) {
     return {registration.status().code(), "v4l2: colour registration: " + registration.status().message()};
   }
-  registration_ = std::make_unique<pipeline::DepthToColourRegistration>(std::move(registration).value());
+  registration_ = std::make_unique<hal::DepthToColourRegistration>(std::move(registration).value());
   return Status::ok();
 }
 
@@ -640,7 +635,7 @@ Status V4l2Camera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
         // A colour frame later than the depth frame means no later one can be
         // nearer; otherwise wait for the colour that may still be in flight.
         const int64_t give_up_ns = pending_depth_.stamp_ns + pairer_->toleranceNs() + 2 * colour_period_ns_;
-        const int64_t now_ns = monotonicNowNs();
+        const int64_t now_ns = monotonicNs();
         if ((!have_colour_ || latest_colour_stamp_ns_ < pending_depth_.stamp_ns) && now_ns < give_up_ns) {
           wait_for_colour_ns = give_up_ns - now_ns;
         } else {

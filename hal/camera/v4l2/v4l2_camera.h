@@ -12,7 +12,7 @@
 //   converted to RGB into a few slots allocated at open, paired with each
 //   depth frame by timestamp (hal::TimestampPairer; tolerance
 //   pair_tolerance_ms, default half the depth frame period) and registered to
-//   the depth image (pipeline::DepthToColourRegistration). A depth frame
+//   the depth image (hal::DepthToColourRegistration). A depth frame
 //   without colour in time is dropped and counted; kMaxUnpairedDepth in a row
 //   fail acquire() with kInvalidInput (a counted error) so the capture retry
 //   sees the fault.
@@ -55,7 +55,7 @@
 #include "hal/camera/v4l2/v4l2_node.h"
 #include "hal/camera/v4l2/v4l2_options.h"
 
-namespace fovea::pipeline {
+namespace fovea::hal {
 class DepthToColourRegistration;
 }
 
@@ -133,7 +133,7 @@ class V4l2Camera final : public Camera {
 
   MjpegDecoder mjpeg_;
   std::optional<TimestampPairer> pairer_;
-  std::unique_ptr<pipeline::DepthToColourRegistration> registration_;
+  std::unique_ptr<hal::DepthToColourRegistration> registration_;
   std::vector<std::vector<uint8_t>> colour_rgb_;  // kColourSlots converted colour images
   int64_t colour_period_ns_ = 0;
   bool have_colour_ = false;

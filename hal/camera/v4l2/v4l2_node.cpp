@@ -12,6 +12,7 @@
 #include <cstring>
 #include <ctime>
 
+#include "core/clock.h"
 #include "hal/camera/v4l2/v4l2_options.h"
 
 namespace fovea::hal::v4l2 {
@@ -22,12 +23,6 @@ std::string cString(const uint8_t* text, std::size_t size) {
   std::size_t n = 0;
   while (n < size && text[n] != 0) ++n;
   return std::string(reinterpret_cast<const char*>(text), n);
-}
-
-int64_t monotonicNowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 }  // namespace
@@ -308,7 +303,7 @@ int V4l2Node::dequeue(Frame& frame) {
   frame.stamp_from_driver = (buf.flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
   frame.stamp_ns = frame.stamp_from_driver
                        ? static_cast<int64_t>(buf.timestamp.tv_sec) * 1'000'000'000 + buf.timestamp.tv_usec * 1000
-                       : monotonicNowNs();
+                       : monotonicNs();
   return 0;
 }
 

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::v4l2 {
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <string_view>
 
-#include "hal/result.h"
+#include "core/result.h"
 
 namespace fovea::hal::v4l2 {
 

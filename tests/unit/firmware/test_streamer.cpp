@@ -2,6 +2,7 @@
 // the eye from the gaze sample, and the head's forward axis from the HMD
 // orientation (its z axis turned into the world, docs/protocol.md), which
 // ACUITY's view cull uses. An operator over loopback sends the samples.
+#include "core/clock.h"
 #include "firmware/streamer.h"
 
 #include <atomic>
@@ -35,7 +36,7 @@ TEST(Streamer, OperatorGazeCarriesTheEyeAndTheHeadsForwardAxis) {
   // The robot answers the hello while the operator connects.
   std::atomic<bool> stop{false};
   std::thread robot([&] {
-    while (!stop.load()) streamer.idleUntil(net::monotonicNs() + 2'000'000);
+    while (!stop.load()) streamer.idleUntil(monotonicNs() + 2'000'000);
   });
   net::OperatorLinkConfig op_config;
   op_config.insecure = true;

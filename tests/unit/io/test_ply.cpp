@@ -17,10 +17,12 @@
 
 #include <gtest/gtest.h>
 
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 
-namespace fovea::pipeline {
+namespace fovea::io {
 namespace {
+
+using pipeline::packRgb;
 
 // --- byte builders with explicit byte order (independent of the host's) -------
 
@@ -918,4 +920,4 @@ TEST(PlyNeverCrashes, RandomByteCorruption) {
 }
 
 }  // namespace
-}  // namespace fovea::pipeline
+}  // namespace fovea::io

@@ -8,7 +8,7 @@
 
 #include <Eigen/Core>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "tools/eval/quality/splat_renderer.h"
 
 namespace fovea::tools::eval {

@@ -1,9 +1,9 @@
-#include "pipeline/kernels/kernel_set.h"
+#include "core/kernel_set.h"
 
 #include <cstdio>
 #include <cstdlib>
 
-namespace fovea::pipeline {
+namespace fovea {
 
 std::optional<KernelSet> parseKernelSet(std::string_view text) {
   if (text == "ref") return KernelSet::kRef;
@@ -23,4 +23,4 @@ KernelSet defaultKernelSet() {
   return chosen;
 }
 
-}  // namespace fovea::pipeline
+}  // namespace fovea

@@ -1,5 +1,5 @@
 // The latest-value mailbox (triple buffer): newest wins, never torn, under contention.
-#include "pipeline/latest_value.h"
+#include "core/latest_value.h"
 
 #include <array>
 #include <atomic>
@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-namespace fovea::pipeline {
+namespace fovea {
 namespace {
 
 TEST(LatestValue, InitialValueUntilTheFirstWrite) {
@@ -81,4 +81,4 @@ TEST(LatestValue, TwoThreadsNeverTornAndNeverBackwards) {
 }
 
 }  // namespace
-}  // namespace fovea::pipeline
+}  // namespace fovea

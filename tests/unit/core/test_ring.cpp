@@ -1,6 +1,6 @@
 // The latest-wins SPSC ring: unit cases, a property test against a brute-force
 // model (one thread, random interleavings), and a two-thread stress test.
-#include "pipeline/ring.h"
+#include "core/ring.h"
 
 #include <gtest/gtest.h>
 
@@ -13,7 +13,7 @@
 #include <thread>
 #include <vector>
 
-namespace fovea::pipeline {
+namespace fovea {
 namespace {
 
 TEST(SlotRing, CacheLineSizeIsPinnedAndIndicesDoNotShareALine) {
@@ -332,4 +332,4 @@ TEST(SlotRingStress, TwoThreadsDepthFourSlowConsumer) { runStress(4, 1'000'000, 
 TEST(SlotRingStress, TwoThreadsDepthFourFastConsumer) { runStress(4, 1'000'000, 32, 0); }
 
 }  // namespace
-}  // namespace fovea::pipeline
+}  // namespace fovea

@@ -11,7 +11,7 @@
 #include <optional>
 #include <string_view>
 
-namespace fovea::pipeline {
+namespace fovea {
 
 enum class KernelSet : uint8_t { kRef, kSimd };
 
@@ -22,4 +22,4 @@ std::optional<KernelSet> parseKernelSet(std::string_view text);
 // reported once on stderr and ignored (kSimd).
 KernelSet defaultKernelSet();
 
-}  // namespace fovea::pipeline
+}  // namespace fovea

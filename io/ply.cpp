@@ -1,4 +1,4 @@
-#include "pipeline/io/ply.h"
+#include "io/ply.h"
 
 #include <algorithm>
 #include <array>
@@ -15,7 +15,13 @@
 #include <type_traits>
 #include <utility>
 
-namespace fovea::pipeline {
+namespace fovea::io {
+
+using pipeline::packRgb;
+using pipeline::rgbBlue;
+using pipeline::rgbGreen;
+using pipeline::rgbRed;
+
 namespace {
 
 // ---------------------------------------------------------------------------
@@ -987,4 +993,4 @@ Status writePly(const std::string& path, const PointCloud& cloud, const uint8_t*
   return Status::ok();
 }
 
-}  // namespace fovea::pipeline
+}  // namespace fovea::io

@@ -4,15 +4,15 @@
 // supported target (forceSimdTarget() in foveation_simd.h restricts it for
 // tests: Highway's target choice is global).
 #undef HWY_TARGET_INCLUDE
-#define HWY_TARGET_INCLUDE "pipeline/kernels/registration_simd.cpp"
+#define HWY_TARGET_INCLUDE "hal/camera/registration/registration_simd.cpp"
 #include "hwy/foreach_target.h"  // IWYU pragma: keep
 
 #include "hwy/highway.h"
-#include "pipeline/kernels/registration_simd-inl.h"
+#include "hal/camera/registration/registration_simd-inl.h"
 
 #if HWY_ONCE
 
-namespace fovea::pipeline::kernels {
+namespace fovea::hal::kernels {
 
 HWY_EXPORT(RegisterT);
 
@@ -21,6 +21,6 @@ RegistrationCounts registerSimdDispatch(const DepthToColourRegistration::Kernel&
   return HWY_DYNAMIC_DISPATCH(RegisterT)(k, depth, colour_rgb, out_rgb);
 }
 
-}  // namespace fovea::pipeline::kernels
+}  // namespace fovea::hal::kernels
 
 #endif  // HWY_ONCE

@@ -38,12 +38,12 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/kernel_set.h"
+#include "core/result.h"
 #include "hal/calibration.h"
 #include "hal/frame.h"
-#include "hal/result.h"
-#include "pipeline/kernels/kernel_set.h"
 
-namespace fovea::pipeline {
+namespace fovea::hal {
 
 struct RegistrationParams {
   hal::StreamCalibration depth;   // depth images are taken as undistorted
@@ -106,4 +106,4 @@ RegistrationCounts registerSimdDispatch(const DepthToColourRegistration::Kernel&
                                         const uint8_t* colour_rgb, uint8_t* out_rgb);
 }  // namespace kernels
 
-}  // namespace fovea::pipeline
+}  // namespace fovea::hal

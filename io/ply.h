@@ -17,10 +17,12 @@
 #include <string_view>
 #include <vector>
 
-#include "hal/result.h"
+#include "core/result.h"
 #include "pipeline/point_cloud.h"
 
-namespace fovea::pipeline {
+namespace fovea::io {
+
+using pipeline::PointCloud;
 
 enum class PlyFormat { kAscii, kBinaryLittleEndian, kBinaryBigEndian };
 
@@ -72,4 +74,4 @@ Status writePly(const std::string& path, const PointCloud& cloud, const uint8_t*
 std::string serializePly(const PointCloud& cloud, const uint8_t* region,
                          const PlyWriteOptions& options);
 
-}  // namespace fovea::pipeline
+}  // namespace fovea::io

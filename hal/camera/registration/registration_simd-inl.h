@@ -21,10 +21,10 @@
 #include <cstring>
 
 #include "hwy/highway.h"
-#include "pipeline/kernels/registration.h"
+#include "hal/camera/registration/registration.h"
 
 HWY_BEFORE_NAMESPACE();
-namespace fovea::pipeline::kernels {
+namespace fovea::hal::kernels {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
@@ -128,7 +128,7 @@ inline RegistrationCounts RegisterT(const RegistrationKernel& k, const uint16_t*
 }
 
 }  // namespace HWY_NAMESPACE
-}  // namespace fovea::pipeline::kernels
+}  // namespace fovea::hal::kernels
 HWY_AFTER_NAMESPACE();
 
 #endif  // per-target include guard

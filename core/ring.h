@@ -39,7 +39,7 @@
 #include <cstdint>
 #include <memory>
 
-namespace fovea::pipeline {
+namespace fovea {
 
 // Pinned rather than std::hardware_destructive_interference_size (which GCC 12
 // gives as 256 on aarch64 and warns about when used in headers).
@@ -238,4 +238,4 @@ class SlotPoolRing {
   std::unique_ptr<T[]> slots_;
 };
 
-}  // namespace fovea::pipeline
+}  // namespace fovea

@@ -1,4 +1,4 @@
-#include "pipeline/kernels/registration.h"
+#include "hal/camera/registration/registration.h"
 
 #include <cmath>
 #include <cstdio>
@@ -8,7 +8,7 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 
-namespace fovea::pipeline {
+namespace fovea::hal {
 
 namespace {
 
@@ -217,4 +217,4 @@ RegistrationCounts DepthToColourRegistration::apply(const uint16_t* depth, const
                                     : registerSimd(depth, colour_rgb, out_rgb);
 }
 
-}  // namespace fovea::pipeline
+}  // namespace fovea::hal

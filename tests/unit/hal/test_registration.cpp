@@ -3,7 +3,7 @@
 // distortion and rounding). Colour images carry each pixel's index in its RGB
 // bytes (plus one, so black is "no colour"), so an output pixel says exactly
 // which colour pixel it came from.
-#include "pipeline/kernels/registration.h"
+#include "hal/camera/registration/registration.h"
 
 #include <cmath>
 #include <cstdint>
@@ -21,7 +21,7 @@
 
 #include "tests/support/alloc_counter.h"
 
-namespace fovea::pipeline {
+namespace fovea::hal {
 namespace {
 
 constexpr double kBoundaryPx = 1e-3;  // closer than this to a rounding boundary: either pixel is right
@@ -463,4 +463,4 @@ TEST(Registration, CopiesKeepTheirOwnTables) {
 }
 
 }  // namespace
-}  // namespace fovea::pipeline
+}  // namespace fovea::hal

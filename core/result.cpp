@@ -1,4 +1,4 @@
-#include "hal/result.h"
+#include "core/result.h"
 
 #include <cstdio>
 #include <cstdlib>

@@ -12,9 +12,9 @@
 #include <atomic>
 #include <cstdint>
 
-#include "pipeline/ring.h"
+#include "core/ring.h"
 
-namespace fovea::pipeline {
+namespace fovea {
 
 template <typename T>
 class LatestValue {
@@ -64,4 +64,4 @@ class LatestValue {
   std::atomic<uint64_t> writes_{0};
 };
 
-}  // namespace fovea::pipeline
+}  // namespace fovea

@@ -1,0 +1,19 @@
+// The one monotonic clock: CLOCK_MONOTONIC in nanoseconds. Frames are stamped
+// on it (V4L2 and libcamera buffers, OpenNI2 through a measured offset), the
+// protocol's timestamps and the service's deadlines use it, and so do the
+// foveator's stage timings. (std::chrono::steady_clock reads the same clock on
+// Linux; this is its integer form, which crosses threads and the wire as is.)
+#pragma once
+
+#include <cstdint>
+#include <ctime>
+
+namespace fovea {
+
+inline int64_t monotonicNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+}  // namespace fovea
