@@ -136,6 +136,20 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
     EXPECT_GT(fref_points[m], 1000.0);
     EXPECT_LT(f1_points[m], fref_points[m]);
   }
+  // --replot-from writes the same plot files again from report.csv and report.md alone.
+  const std::vector<std::string> plot_files = {"report.gp", "report_plot.dat", "report_acuity.gp", "report_acuity_plot.dat"};
+  std::string plots_before;
+  for (const std::string& name : plot_files) {
+    plots_before += readAll(dir.file(name));
+    std::filesystem::remove(dir.file(name));
+  }
+  const ProcessResult replot = run(kTool + " --replot-from " + dir.path() + " --no-plot");
+  ASSERT_EQ(replot.exit_code, 0) << replot.output;
+  std::string plots_after;
+  for (const std::string& name : plot_files) plots_after += readAll(dir.file(name));
+  EXPECT_EQ(plots_after, plots_before);
+  EXPECT_EQ(run(kTool + " --replot-from " + dir.path() + "/nowhere --no-plot").exit_code, 1);
+
   const std::string md = readAll(dir.file("report.md"));
   for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "fovea's chunk codec", "15 bytes per output point",
                                "Steps at region borders", "--frames 1"}) {

@@ -47,7 +47,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 const char* kHelp =
     "usage: fovea-error-report [--camera SPEC] [--frames N] [--out-dir DIR] [--presets LIST] [--slopes LIST]\n"
-    "                          [--reference-m M] [--no-plot]\n"
+    "                          [--reference-m M] [--no-plot] [--replot-from DIR]\n"
     "\n"
     "Foveates the same camera frames with every preset and slope m, side by side, and reports per\n"
     "configuration the output points, bytes on the wire (fovea's chunk codec), median time per frame (back-projection\n"
@@ -85,7 +85,9 @@ const char* kHelp =
     "  --coverage-seconds S  length of the scripted scan the coverage figure replays (default 3.6: two rounds)\n"
     "  --growth-max-deg D  ACUITY's fovea growth bound in the coverage figure (default 10, the service's)\n"
     "  --growth-lead-ms T  ACUITY's fovea growth lead in the coverage figure (default 30, the service's)\n"
-    "  --no-plot         do not run gnuplot (report.gp is still written)\n"
+    "  --no-plot         do not run gnuplot (report.gp and report_acuity.gp are still written)\n"
+    "  --replot-from DIR  measure nothing: rewrite DIR's plot data and scripts from the report.csv and\n"
+    "                    report.md an earlier run wrote there, and draw them (unless --no-plot)\n"
     "\n"
     "With a mock camera, the same scene without sensor noise (noise=off, same seed and path) is the true\n"
     "surface: every configuration is also judged against it (the columns 'true surface'), so that noise the\n"
@@ -112,6 +114,7 @@ struct Options {
   double head_turn_deg = 0.0;
   double reference_slope = pipeline::kDefaultSlope;
   bool plot = true;
+  std::string replot_from;  // non-empty: redraw this directory's plots, measure nothing
   Eigen::Vector3d eye_offset_cam = Eigen::Vector3d::Zero();
   DynamicsOptions dynamics;
 };
@@ -155,6 +158,9 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
       help = true;
     } else if (flag == "--no-plot") {
       options.plot = false;
+    } else if (flag == "--replot-from") {
+      if (value.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--replot-from: must not be empty");
+      options.replot_from = value;
     } else if (flag == "--camera") {
       options.camera = value;
     } else if (flag == "--out-dir") {
@@ -384,6 +390,43 @@ std::string utcNow() {
   return buffer;
 }
 
+// Writes the plot files into dir and, when `draw`, has gnuplot draw each: true
+// when every plot was drawn.
+Result<bool> writeAndDrawPlots(const std::string& dir, const ReportContext& context,
+                               const std::vector<ConfigSummary>& summaries, bool draw) {
+  Result<std::vector<PlotFiles>> written = writePlotFiles(dir, context, summaries);
+  if (!written) return written.status();
+  bool drawn = draw;
+  for (const PlotFiles& files : *written) drawn = drawn && drawWithGnuplot(dir, files.script, files.png);
+  return drawn;
+}
+
+// --replot-from: the plots of an earlier run from its report.csv, and the title's
+// camera from its report.md, so that a change to the plots does not cost a new
+// measurement. The plot files come out as that run would write them now.
+int replot(const Options& options) {
+  const std::filesystem::path dir(options.replot_from);
+  Result<std::vector<ConfigSummary>> summaries = readCsvSummaries((dir / "report.csv").string());
+  Result<std::string> camera = readMarkdownCamera((dir / "report.md").string());
+  for (const Status& s : {summaries.status(), camera.status()}) {
+    if (!s.isOk()) {
+      std::fprintf(stderr, "fovea-error-report: --replot-from: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+  }
+  ReportContext context;
+  context.camera = *camera;
+  context.reference_slope = options.reference_slope;
+  for (const ConfigSummary& c : *summaries) context.frames = std::max(context.frames, c.frames);
+  Result<bool> drawn = writeAndDrawPlots(dir.string(), context, *summaries, options.plot);
+  if (!drawn) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", drawn.status().message().c_str());
+    return kExitFailure;
+  }
+  std::printf("rewrote the plot scripts and data%s in %s\n", *drawn ? ", drew the plots" : "", dir.string().c_str());
+  return kExitOk;
+}
+
 int run(int argc, char** argv) {
   bool help = false;
   Result<Options> parsed = parseArgs(argc, argv, help);
@@ -396,6 +439,7 @@ int run(int argc, char** argv) {
     return kExitOk;
   }
   const Options& options = parsed.value();
+  if (!options.replot_from.empty()) return replot(options);
 
   Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(options.camera);
   if (!created) {
@@ -701,17 +745,15 @@ int run(int argc, char** argv) {
     return kExitFailure;
   }
   const std::filesystem::path dir(options.out_dir);
-  bool have_plot = false;
-  if (Status s = writePlotFiles((dir / "report_plot.dat").string(), (dir / "report.gp").string(), context, summaries);
-      !s) {
-    std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+  Result<bool> have_plot = writeAndDrawPlots(dir.string(), context, summaries, options.plot);
+  if (!have_plot) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", have_plot.status().message().c_str());
     return kExitFailure;
   }
-  if (options.plot) have_plot = drawWithGnuplot(dir.string(), "report.gp", "report.png");
   for (const auto& [writer, name] :
        {std::pair{0, "report.csv"}, std::pair{1, "report.md"}}) {
     const std::string path = (dir / name).string();
-    Status s = writer == 0 ? writeCsv(path, summaries) : writeMarkdown(path, context, summaries, have_plot);
+    Status s = writer == 0 ? writeCsv(path, summaries) : writeMarkdown(path, context, summaries, *have_plot);
     if (!s) {
       std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
       return kExitFailure;
@@ -738,7 +780,7 @@ int run(int argc, char** argv) {
                   100.0 * s.changed_drift, 100.0 * r.coverage_all, 100.0 * r.coverage_moving, r.bytes_per_frame / 1e6);
     }
   }
-  std::printf("wrote report.md, report.csv, report.gp, report_plot.dat%s%s to %s\n", have_plot ? ", report.png" : "",
+  std::printf("wrote report.md, report.csv, the plot scripts and data%s%s to %s\n", *have_plot ? ", the plots" : "",
               dynamics ? ", dynamics.csv" : "", options.out_dir.c_str());
   return kExitOk;
 }

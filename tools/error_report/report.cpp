@@ -2,9 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <sstream>
+#include <utility>
 
 namespace fovea::tools {
 
@@ -49,6 +54,8 @@ std::string formatFixed(double v, int precision, const char* missing) {
 namespace {
 
 std::string fixed(double v, int precision, const char* missing = "-") { return formatFixed(v, precision, missing); }
+
+bool isAcuity(const ConfigSummary& c) { return c.preset.rfind("ACUITY", 0) == 0; }
 
 // Shortest round-trip-ish form for the CSV; empty for NaN.
 std::string csvNumber(double v) {
@@ -117,6 +124,72 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
   return writeFile(path, out.str());
 }
 
+Result<std::vector<ConfigSummary>> readCsvSummaries(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Result<std::vector<ConfigSummary>>(ErrorCode::kIoError, path + ": cannot open");
+  const auto split = [](const std::string& line) {
+    std::vector<std::string> fields;
+    std::size_t start = 0;
+    for (std::size_t comma; (comma = line.find(',', start)) != std::string::npos; start = comma + 1) {
+      fields.push_back(line.substr(start, comma - start));
+    }
+    fields.push_back(line.substr(start));
+    return fields;
+  };
+  std::string line;
+  std::getline(in, line);
+  const std::vector<std::string> header = split(line);
+  std::map<std::string, std::size_t> column;
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  for (const char* name : {"preset", "m", "region", "frames", "points_out", "bytes_per_frame", "time_ms_median", "rms_mm",
+                           "share_above_mar", "share_above_reference_mar"}) {
+    if (!column.count(name)) return Result<std::vector<ConfigSummary>>(ErrorCode::kParseError, path + ": no column " + name);
+  }
+  std::vector<ConfigSummary> configs;
+  for (int number = 2; std::getline(in, line); ++number) {
+    const std::vector<std::string> f = split(line);
+    const std::string where = path + ":" + std::to_string(number) + ": ";
+    if (f.size() != header.size()) {
+      return Result<std::vector<ConfigSummary>>(ErrorCode::kParseError, where + "not " + std::to_string(header.size()) + " fields");
+    }
+    if (f[column["region"]] != "all") continue;
+    bool ok = true;
+    const auto number_at = [&](const char* name) {
+      const std::string& text = f[column[name]];
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      if (text.empty() || end != text.c_str() + text.size()) ok = false;
+      return v;
+    };
+    ConfigSummary c;
+    c.preset = f[column["preset"]];
+    c.slope = number_at("m");
+    c.frames = static_cast<int>(number_at("frames"));
+    c.time_ms_median = number_at("time_ms_median");
+    c.all.name = "all";
+    c.all.points_out = number_at("points_out");
+    c.all.wire_bytes = number_at("bytes_per_frame");
+    c.all.rms_mm = number_at("rms_mm");
+    c.all.share_above_mar = number_at("share_above_mar");
+    c.all.share_above_reference_mar = number_at("share_above_reference_mar");
+    if (!ok) return Result<std::vector<ConfigSummary>>(ErrorCode::kParseError, where + "a plotted field is not a number");
+    configs.push_back(std::move(c));
+  }
+  return configs;
+}
+
+Result<std::string> readMarkdownCamera(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Result<std::string>(ErrorCode::kIoError, path + ": cannot open");
+  constexpr std::string_view kStart = "- camera: ", kEnd = "; gaze: ";
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind(kStart, 0) != 0) continue;
+    const std::size_t end = line.find(kEnd);
+    if (end != std::string::npos) return line.substr(kStart.size(), end - kStart.size());
+  }
+  return Result<std::string>(ErrorCode::kParseError, path + ": no '- camera: ...; gaze: ' line");
+}
+
 Status writeMarkdown(const std::string& path, const ReportContext& context, const std::vector<ConfigSummary>& configs,
                      bool have_plot) {
   std::ostringstream md;
@@ -149,10 +222,16 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
         "configuration's own (its m); *m = " << fixed(context.reference_slope, 3) << " eye* judges every "
         "configuration by one fixed observer instead\n\n";
 
+  const bool any_acuity = std::any_of(configs.begin(), configs.end(), isAcuity);
   if (have_plot) {
-    md << "![bytes and time against error](report.png)\n\n";
+    md << "![bytes and time against error](" << kMainPlot.png << ")\n\n";
+    if (any_acuity) {
+      md << "The plot names at most " << kMainPlotAcuitySettings << " ACUITY settings; every one is in the tables "
+         << "below and here:\n\n![every ACUITY setting](" << kAcuityPlot.png << ")\n\n";
+    }
   } else {
-    md << "(No plot: gnuplot was not found. `cd` here and run `gnuplot report.gp` to draw report.png.)\n\n";
+    md << "(No plot: gnuplot was not found. `cd` here and run `gnuplot " << kMainPlot.script << "`"
+       << (any_acuity ? std::string(" and `gnuplot ") + kAcuityPlot.script + "`" : std::string()) << ".)\n\n";
   }
 
   const bool any_truth = std::any_of(configs.begin(), configs.end(), [](const ConfigSummary& c) { return c.have_truth; });
@@ -250,91 +329,322 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
   return writeFile(path, md.str());
 }
 
-Status writePlotFiles(const std::string& data_path, const std::string& script_path, const ReportContext& context,
-                      const std::vector<ConfigSummary>& configs) {
+namespace {
+
+// The slopes of the run, in its order.
+std::vector<double> slopesOf(const std::vector<ConfigSummary>& configs) {
   std::vector<double> slopes;
   for (const ConfigSummary& c : configs) {
     if (std::find(slopes.begin(), slopes.end(), c.slope) == slopes.end()) slopes.push_back(c.slope);
   }
-  // A gnuplot index block per slope for the paper's presets and, when there are
-  // any, one for the ACUITY rows (labelled by their margin): each joined by its own line.
-  const auto is_acuity = [](const ConfigSummary& c) { return c.preset.rfind("ACUITY", 0) == 0; };
-  const bool any_acuity = std::any_of(configs.begin(), configs.end(), is_acuity);
-  const int families = any_acuity ? 2 : 1;
+  return slopes;
+}
+
+// configName puts ACUITY's margin right after the preset: "ACUITY k=0.50 floor ...".
+constexpr std::string_view kMarginTag = " k=";
+
+// The name without its margin: the rows one line of report_acuity.png joins, which
+// differ only in k ("ACUITY floor 1mm*r^2").
+std::string withoutMargin(const std::string& name) {
+  const std::size_t tag = name.find(kMarginTag);
+  if (tag == std::string::npos) return name;
+  const std::size_t end = name.find(' ', tag + 1);
+  return name.substr(0, tag) + (end == std::string::npos ? "" : name.substr(end));
+}
+
+// A gnuplot index block of the plot data: a comment and one line per configuration.
+struct PlotBlock {
+  std::string comment;
+  std::vector<const ConfigSummary*> rows;
+};
+
+// The blocks as gnuplot's data file: the columns' header, then each block, two
+// blank lines between blocks. `slopes` numbers each row's slope (1, 2, ...: the
+// colour of that slope on report.png).
+std::string plotData(const std::vector<PlotBlock>& blocks, const std::vector<double>& slopes) {
   std::ostringstream data;
   data << "# label m bytes_per_frame_MB cpu_time_ms_median rms_mm share_above_mar_percent points_out "
-          "share_above_reference_mar_percent\n";
-  for (std::size_t s = 0; s < slopes.size(); ++s) {
-    for (int family = 0; family < families; ++family) {
-      if (s > 0 || family > 0) data << "\n\n";  // a new gnuplot index block
-      data << "# m " << csvNumber(slopes[s]) << (family == 0 ? ", the paper's presets" : ", ACUITY") << "\n";
-      for (const ConfigSummary& c : configs) {
-        if (c.slope != slopes[s] || is_acuity(c) != (family == 1)) continue;
-        const std::string label = family == 1 ? c.preset.substr(std::string("ACUITY ").size()) : c.preset;
-        data << '"' << label << "\" " << csvNumber(c.slope) << ' ' << csvNumber(c.bytesPerFrame() / 1e6) << ' '
-             << csvNumber(c.time_ms_median) << ' ' << csvNumber(c.all.rms_mm) << ' '
-             << csvNumber(100.0 * c.all.share_above_mar) << ' ' << csvNumber(c.all.points_out) << ' '
-             << csvNumber(100.0 * c.all.share_above_reference_mar) << "\n";
-      }
+          "share_above_reference_mar_percent slope_number\n";
+  for (std::size_t b = 0; b < blocks.size(); ++b) {
+    if (b > 0) data << "\n\n";
+    data << "# " << blocks[b].comment << "\n";
+    for (const ConfigSummary* c : blocks[b].rows) {
+      const std::string label = isAcuity(*c) ? c->preset.substr(std::string("ACUITY ").size()) : c->preset;
+      const auto slope = std::find(slopes.begin(), slopes.end(), c->slope);
+      data << '"' << label << "\" " << csvNumber(c->slope) << ' ' << csvNumber(c->bytesPerFrame() / 1e6) << ' '
+           << csvNumber(c->time_ms_median) << ' ' << csvNumber(c->all.rms_mm) << ' '
+           << csvNumber(100.0 * c->all.share_above_mar) << ' ' << csvNumber(c->all.points_out) << ' '
+           << csvNumber(100.0 * c->all.share_above_reference_mar) << ' ' << (slope - slopes.begin()) + 1 << "\n";
     }
   }
-  if (Status s = writeFile(data_path, data.str()); !s) return s;
+  return data.str();
+}
 
-  std::string data_name = data_path.substr(data_path.find_last_of('/') + 1);
+// The bytes axis: logarithmic when the bytes span a decade or more (FREF against
+// F1), with ticks at 1, 2 and 5 of each decade; linear when they span less, where
+// gnuplot's logarithmic axis draws no tick at all.
+std::string bytesAxis(const std::vector<const ConfigSummary*>& rows) {
+  double lo = 0.0, hi = 0.0;
+  for (const ConfigSummary* c : rows) {
+    if (c->bytesPerFrame() <= 0.0) continue;
+    lo = lo > 0.0 ? std::min(lo, c->bytesPerFrame()) : c->bytesPerFrame();
+    hi = std::max(hi, c->bytesPerFrame());
+  }
+  const bool log = lo > 0.0 && hi >= 10.0 * lo;
+  return std::string(log ? "set logscale x\nset xtics add (0.02, 0.05, 0.2, 0.5, 2, 5)\n" : "unset logscale x\n") +
+         "set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams" + (log ? "; log scale" : "") +
+         ")'\nset ylabel 'input points displaced by more than the MAR at their eccentricity [%]'\n";
+}
+const char* const kTimeAxis = "unset logscale x\nset xtics autofreq\n"
+                              "set xlabel 'CPU time per frame [ms], median: back-projection through sampled output'\n"
+                              "set ylabel 'RMS distance from each input point to its representative [mm]'\n";
+
+std::string scriptHeader(const PlotFiles& files, const std::string& what, int rows, int width, int height,
+                         const ReportContext& context) {
   std::ostringstream gp;
-  gp << "# Draws report.png from " << data_name << "; written by fovea-error-report. Run: gnuplot report.gp\n"
-     << "set terminal pngcairo size 1500,620 font 'sans,11'\n"
-     << "set output 'report.png'\n"
-     << "set multiplot layout 1,2 title \"fovea: bytes and time against error, " << context.camera << ", "
+  gp << "# Draws " << files.png << " from " << files.data << "; written by fovea-error-report. Run: gnuplot "
+     << files.script << "\n"
+     << "set terminal pngcairo size " << width << ',' << height << " font 'sans,11'\n"
+     << "set output '" << files.png << "'\n"
+     << "set multiplot layout " << rows << ",2 title \"fovea: " << what << ", " << context.camera << ", "
      << context.frames << " frames (scalar reference)\"\n"
      << "set grid\n"
-     << "set key top right box opaque\n"
-     << "set offsets graph 0.05, graph 0.05, graph 0.05, graph 0.05\n"
-     << "set logscale x\n"
-     << "set yrange [-2:*]\n"
-     << "set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams; log scale)'\n"
-     << "set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'\n"
-     << "set title 'perceptual error against size'\n"
-     << "plot ";
-  // Lines join the presets of one slope in the left panel (sizes fall from FREF to
-  // F1); in the right panel the times do not order them, so points only. ACUITY's
-  // many rows (margin x floor) are labelled for the first slope only: repeated for
-  // every slope, their labels covered each other and the points.
-  auto series = [&](int x_col, int y_col, bool lines) {
-    std::ostringstream p;
+     // The data's own x range, not the next decade; room on the right for FREF's label.
+     << "set autoscale xfix\n"
+     << "set offsets graph 0.05, graph 0.1, graph 0.05, graph 0.05\n";
+  return gp.str();
+}
+
+// One plot command's clauses, joined as gnuplot continues a line.
+std::string joinClauses(const std::vector<std::string>& clauses) {
+  std::string joined;
+  for (std::size_t i = 0; i < clauses.size(); ++i) joined += (i > 0 ? ", \\\n     " : "") + clauses[i];
+  return joined;
+}
+
+// The labels of a block of the paper's presets in a bytes panel: F1 and F3 above
+// right of their point, F2 and FREF below right, so that two presets at the same
+// point (F2 and F3 on TUM, where nothing lies beyond 30 degrees) stay apart.
+void presetLabels(std::vector<std::string>& clauses, std::size_t index, const PlotBlock& block, const std::string& colour) {
+  const std::string source = "'' index " + std::to_string(index);
+  clauses.push_back(source + " every 2 using 3:6:1 with labels left offset char 1,0.7 tc " + colour + " notitle");
+  if (block.rows.size() > 1) {
+    clauses.push_back(source + " every 2::1 using 3:6:1 with labels left offset char 1,-0.7 tc " + colour + " notitle");
+  }
+}
+
+// "F1, F2, F3, FREF": the presets of a block.
+std::string presetNames(const PlotBlock& block) {
+  std::string names;
+  for (const ConfigSummary* c : block.rows) names += (names.empty() ? "" : ", ") + c->preset;
+  return names;
+}
+
+// report.png: per slope, the paper's presets joined by a line (a colour per slope,
+// labelled at the first slope only: the other slopes' lines have the same order
+// and their labels covered the first's); the chosen ACUITY settings as points, a
+// hollow shape per setting, coloured by slope and named once in the legend; no
+// ACUITY labels.
+std::pair<std::string, std::string> mainPlot(const ReportContext& context, const std::vector<ConfigSummary>& configs) {
+  const std::vector<double> slopes = slopesOf(configs);
+  std::vector<PlotBlock> blocks;
+  std::vector<std::size_t> preset_block(slopes.size(), SIZE_MAX);
+  for (std::size_t s = 0; s < slopes.size(); ++s) {
+    PlotBlock block{"m " + csvNumber(slopes[s]) + ", the paper's presets", {}};
+    for (const ConfigSummary& c : configs) {
+      if (c.slope == slopes[s] && !isAcuity(c)) block.rows.push_back(&c);
+    }
+    if (block.rows.empty()) continue;
+    preset_block[s] = blocks.size();
+    blocks.push_back(std::move(block));
+  }
+  const std::vector<std::string> acuity = mainPlotAcuitySettings(configs);
+  std::vector<const ConfigSummary*> plotted;
+  for (const std::string& name : acuity) {
+    PlotBlock block{name + ", a row per slope", {}};
+    for (const ConfigSummary& c : configs) {
+      if (c.preset == name) block.rows.push_back(&c);
+    }
+    blocks.push_back(std::move(block));
+  }
+  for (const PlotBlock& block : blocks) plotted.insert(plotted.end(), block.rows.begin(), block.rows.end());
+  const std::size_t first_acuity_block = blocks.size() - acuity.size();
+  // Hollow shapes no preset line uses (those are 4 + 2s hollow and 5 + 2s filled).
+  constexpr int kAcuityPointTypes[kMainPlotAcuitySettings] = {12, 10, 14};
+
+  const std::string data = kMainPlot.data;
+  const auto clauses = [&](int x_col, int y_col, bool bytes) {
+    const std::string columns = " using " + std::to_string(x_col) + ':' + std::to_string(y_col);
+    std::vector<std::string> out;
     for (std::size_t s = 0; s < slopes.size(); ++s) {
-      for (int family = 0; family < families; ++family) {
-        if (s > 0 || family > 0) p << ", \\\n     ";
-        const std::size_t index = static_cast<std::size_t>(families) * s + static_cast<std::size_t>(family);
-        p << "'" << data_name << "' index " << index << " using " << x_col << ':' << y_col
-          << (lines ? " with linespoints lw 1.5 pt " : " with points pt ") << (5 + 2 * static_cast<int>(s) + family)
-          << (family == 1 && lines ? " dt 4" : "") << " ps 1.6 lc " << s + 1 << " title '"
-          << (family == 1 ? "ACUITY, " : "") << "m = " << csvNumber(slopes[s]) << "'";
-        if (family == 1 && s > 0) continue;
-        p << ", \\\n     '' index " << index << " using " << x_col << ':' << y_col
-          << ":1 with labels offset char " << (s == 0 ? "1.2,0.8" : s == 1 ? "1.2,-0.8" : "-2.5,0.8") << " tc lt "
-          << s + 1 << " notitle";
+      if (preset_block[s] == SIZE_MAX) continue;
+      const PlotBlock& block = blocks[preset_block[s]];
+      const std::string style = " pt " + std::to_string(5 + 2 * static_cast<int>(s)) + " ps 1.6 lc " + std::to_string(s + 1);
+      out.push_back("'" + data + "' index " + std::to_string(preset_block[s]) + columns +
+                    (bytes ? " with linespoints lw 1.5" : " with points") + style + " title '" +
+                    (s == 0 ? presetNames(block) + ", " : "") + "m = " + csvNumber(slopes[s]) + "'");
+      if (s > 0) continue;
+      if (bytes) {
+        presetLabels(out, preset_block[s], block, "lt 1");
+      } else {
+        out.push_back("'' index " + std::to_string(preset_block[s]) + columns +
+                      ":1 with labels offset char 1.5,0.9 tc lt 1 notitle");
       }
     }
-    return p.str();
+    if (bytes) {
+      for (std::size_t s = 0; s < slopes.size(); ++s) {
+        if (preset_block[s] == SIZE_MAX || slopes[s] == context.reference_slope) continue;  // the same as its solid line
+        out.push_back("'" + data + "' index " + std::to_string(preset_block[s]) +
+                      " using 3:8 with linespoints dt 2 lw 1 pt " + std::to_string(4 + 2 * static_cast<int>(s)) +
+                      " ps 1.3 lc " + std::to_string(s + 1) + " title 'm = " + csvNumber(slopes[s]) +
+                      ", judged by an m = " + csvNumber(context.reference_slope) + " eye'");
+      }
+    }
+    for (std::size_t a = 0; a < acuity.size(); ++a) {
+      const std::string pt = std::to_string(kAcuityPointTypes[a]);
+      out.push_back("'" + data + "' index " + std::to_string(first_acuity_block + a) + columns +
+                    ":9 with points pt " + pt + " ps 1.8 lw 1.5 lc variable notitle");
+      if (bytes) out.push_back("keyentry with points pt " + pt + " ps 1.8 lw 1.5 lc 'black' title '" + acuity[a] + "'");
+    }
+    return joinClauses(out);
   };
-  gp << series(3, 6, true);
-  for (std::size_t s = 0; s < slopes.size(); ++s) {
-    if (slopes[s] == context.reference_slope) continue;  // the same as its solid line
-    gp << ", \\\n     '" << data_name << "' index " << static_cast<std::size_t>(families) * s
-       << " using 3:8 with linespoints dt 2 lw 1 pt "
-       << (4 + 2 * static_cast<int>(s)) << " ps 1.3 lc " << s + 1 << " title 'm = " << csvNumber(slopes[s])
-       << ", judged by an m = " << csvNumber(context.reference_slope) << " eye'";
-  }
-  gp << "\n"
-     << "unset logscale x\n"
-     << "set key top left box opaque\n"
-     << "set xlabel 'CPU time per frame [ms], median: back-projection through sampled output'\n"
-     << "set ylabel 'RMS distance from each input point to its representative [mm]'\n"
-     << "set title 'geometric error against time'\n"
-     << "plot " << series(4, 5, false) << "\n"
+
+  std::ostringstream gp;
+  gp << scriptHeader(kMainPlot, "bytes and time against error", 1, 1500, 620, context)
+     << "set key top right box opaque\n"
+     << "set yrange [-2:*]\n"
+     << bytesAxis(plotted) << "set title 'perceptual error against size (a colour per slope m)'\n"
+     << "plot " << clauses(3, 6, true) << "\n"
+     << "unset key\n"
+     << kTimeAxis << "set title 'geometric error against time (symbols as on the left)'\n"
+     << "plot " << clauses(4, 5, false) << "\n"
      << "unset multiplot\n";
-  return writeFile(script_path, gp.str());
+  return {plotData(blocks, slopes), gp.str()};
+}
+
+// report_acuity.png: a row of panels per slope; the paper's presets in black, and
+// a line per ACUITY setting but its margin (withoutMargin) in a colour and a
+// hollow shape of its own. Only the first line with several margins has its
+// points labelled (k=...), below left: it is the lowest and rightmost, the
+// others share its order, and their labels covered it. The legend stands right
+// of the time panel, outside the data (hence the wider picture).
+std::pair<std::string, std::string> acuityPlot(const ReportContext& context, const std::vector<ConfigSummary>& configs) {
+  std::vector<std::string> lines;  // withoutMargin of each ACUITY row, in the order of the run
+  for (const ConfigSummary& c : configs) {
+    if (isAcuity(c) && std::find(lines.begin(), lines.end(), withoutMargin(c.preset)) == lines.end()) {
+      lines.push_back(withoutMargin(c.preset));
+    }
+  }
+  constexpr int kPointTypes[] = {6, 8, 4, 10, 12, 14, 1, 2, 3};
+  std::vector<double> slopes;
+  for (double m : slopesOf(configs)) {
+    if (std::any_of(configs.begin(), configs.end(), [&](const ConfigSummary& c) { return isAcuity(c) && c.slope == m; })) {
+      slopes.push_back(m);
+    }
+  }
+  std::vector<PlotBlock> blocks;
+  std::ostringstream panels;
+  for (double m : slopes) {
+    std::vector<std::string> bytes_clauses, time_clauses;
+    std::vector<const ConfigSummary*> plotted;
+    // A block as a line in the bytes panel and as points, named, in the time panel.
+    const auto add = [&](PlotBlock block, const std::string& style, const std::string& title) {
+      const std::string index = "'" + std::string(kAcuityPlot.data) + "' index " + std::to_string(blocks.size());
+      bytes_clauses.push_back(index + " using 3:6 with linespoints " + style + " notitle");
+      time_clauses.push_back(index + " using 4:5 with points " + style + " title '" + title + "'");
+      plotted.insert(plotted.end(), block.rows.begin(), block.rows.end());
+      blocks.push_back(std::move(block));
+      return blocks.size() - 1;
+    };
+    PlotBlock presets{"m " + csvNumber(m) + ", the paper's presets", {}};
+    for (const ConfigSummary& c : configs) {
+      if (c.slope == m && !isAcuity(c)) presets.rows.push_back(&c);
+    }
+    if (!presets.rows.empty()) {
+      const std::string names = presetNames(presets);
+      const std::size_t index = add(std::move(presets), "lw 1.5 pt 5 ps 1.4 lc 'black'", names);
+      presetLabels(bytes_clauses, index, blocks[index], "'black'");
+      time_clauses.push_back("'' index " + std::to_string(index) +
+                             " using 4:5:1 with labels right offset char -0.8,0.9 tc 'black' notitle");
+    }
+    bool labelled = false;
+    for (std::size_t l = 0; l < lines.size(); ++l) {
+      PlotBlock block{"m " + csvNumber(m) + ", " + lines[l], {}};
+      for (const ConfigSummary& c : configs) {
+        if (c.slope == m && isAcuity(c) && withoutMargin(c.preset) == lines[l]) block.rows.push_back(&c);
+      }
+      if (block.rows.empty()) continue;
+      const bool label = block.rows.size() > 1 && !labelled;
+      const std::string title = block.rows.size() > 1 ? lines[l] : block.rows.front()->preset;
+      const std::string colour = std::to_string(l + 1);
+      const std::size_t index = add(std::move(block),
+                                    "lw 1.5 pt " + std::to_string(kPointTypes[l % std::size(kPointTypes)]) + " ps 1.6 lc " + colour,
+                                    title);
+      if (label) {
+        bytes_clauses.push_back("'' index " + std::to_string(index) +
+                                " using 3:6:1 with labels right offset char -0.6,-0.9 tc lt " + colour + " notitle");
+        labelled = true;
+      }
+    }
+    const std::string slope = "m = " + csvNumber(m);
+    panels << "unset key\n"
+           << "set yrange [-2:*]\n"
+           << bytesAxis(plotted) << "set title '" << slope
+           << ": perceptual error against size (a line per setting through its margins k)'\n"
+           << "plot " << joinClauses(bytes_clauses) << "\n"
+           << "set key outside right top vertical box\n"
+           << "set autoscale y\n"
+           << kTimeAxis << "set title '" << slope << ": geometric error against time'\n"
+           << "plot " << joinClauses(time_clauses) << "\n";
+  }
+  const int rows = static_cast<int>(slopes.size());
+  std::ostringstream gp;
+  gp << scriptHeader(kAcuityPlot, "every ACUITY setting, bytes and time against error", rows,
+                     1800, 60 + 640 * rows, context)
+     << panels.str() << "unset multiplot\n";
+  return {plotData(blocks, slopesOf(configs)), gp.str()};
+}
+
+}  // namespace
+
+std::vector<std::string> mainPlotAcuitySettings(const std::vector<ConfigSummary>& configs) {
+  pipeline::AcuityConfig standard;
+  standard.preset = pipeline::Preset::kAcuity;
+  pipeline::AcuityConfig floored = standard;
+  floored.floor_per_m2 = 0.001;
+  pipeline::AcuityConfig refined = standard;
+  refined.level_margin = 0.3;
+  refined.refine_passes = 1;
+  std::vector<std::string> run;  // the run's ACUITY settings, in its order
+  for (const ConfigSummary& c : configs) {
+    if (isAcuity(c) && std::find(run.begin(), run.end(), c.preset) == run.end()) run.push_back(c.preset);
+  }
+  std::vector<std::string> chosen;
+  for (const pipeline::AcuityConfig& quoted : {standard, floored, refined}) {
+    const std::string name = configName(quoted);
+    if (std::find(run.begin(), run.end(), name) != run.end()) chosen.push_back(name);
+  }
+  for (const std::string& name : run) {
+    if (chosen.size() == kMainPlotAcuitySettings) break;
+    if (std::find(chosen.begin(), chosen.end(), name) == chosen.end()) chosen.push_back(name);
+  }
+  return chosen;
+}
+
+Result<std::vector<PlotFiles>> writePlotFiles(const std::string& dir, const ReportContext& context,
+                                              const std::vector<ConfigSummary>& configs) {
+  std::vector<PlotFiles> written;
+  const auto write = [&](const PlotFiles& files, const std::pair<std::string, std::string>& data_and_script) {
+    if (Status s = writeFile(dir + "/" + files.data, data_and_script.first); !s) return s;
+    if (Status s = writeFile(dir + "/" + files.script, data_and_script.second); !s) return s;
+    written.push_back(files);
+    return Status::ok();
+  };
+  if (Status s = write(kMainPlot, mainPlot(context, configs)); !s) return s;
+  if (std::any_of(configs.begin(), configs.end(), isAcuity)) {
+    if (Status s = write(kAcuityPlot, acuityPlot(context, configs)); !s) return s;
+  }
+  return written;
 }
 
 }  // namespace fovea::tools

@@ -95,14 +95,46 @@ std::string configName(const pipeline::AcuityConfig& a, std::string_view after_m
 // "%.*f" of v, or `missing` for NaN (the tables' number format).
 std::string formatFixed(double v, int precision, const char* missing = "-");
 
-// Writes out_dir/report.csv, out_dir/report.md, out_dir/report_plot.dat and
-// out_dir/report.gp. kIoError naming the file on failure.
+// Writes out_dir/report.csv, out_dir/report.md and the plot files (writePlotFiles).
+// kIoError naming the file on failure.
 Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& configs);
+// have_plot: gnuplot drew the plots (report.png, and report_acuity.png when the run
+// has ACUITY rows), which the page then shows.
 Status writeMarkdown(const std::string& path, const ReportContext& context, const std::vector<ConfigSummary>& configs,
                      bool have_plot);
-// The plot data (one block per slope, one line per preset) and a script that
-// draws report.png from it when run in the same directory.
-Status writePlotFiles(const std::string& data_path, const std::string& script_path, const ReportContext& context,
-                      const std::vector<ConfigSummary>& configs);
+
+// What writeCsv wrote, read back: each configuration's `all` row, the fields the
+// plots use (--replot-from). kIoError when the file cannot be read, kParseError
+// naming the line when a row does not fit the header.
+Result<std::vector<ConfigSummary>> readCsvSummaries(const std::string& path);
+// The camera as writeMarkdown put it on report.md's "- camera: " line (the plots'
+// title). kParseError when the page has no such line.
+Result<std::string> readMarkdownCamera(const std::string& path);
+
+// A gnuplot script, the data it reads and the PNG it draws, all in one directory.
+struct PlotFiles {
+  const char* data;
+  const char* script;
+  const char* png;
+};
+// The paper's presets and at most kMainPlotAcuitySettings ACUITY settings, so that
+// a reader can tell every series and label apart.
+inline constexpr PlotFiles kMainPlot = {"report_plot.dat", "report.gp", "report.png"};
+// Every ACUITY setting of the run beside the paper's presets, a row of panels per slope.
+inline constexpr PlotFiles kAcuityPlot = {"report_acuity_plot.dat", "report_acuity.gp", "report_acuity.png"};
+inline constexpr std::size_t kMainPlotAcuitySettings = 3;
+
+// The ACUITY settings kMainPlot names, by configName, at most kMainPlotAcuitySettings:
+// first those docs/acuity-levels.md quotes, in this order, when the run has them (the
+// default; the default with the floor of 1 mm x s^2 recommended for a link that must
+// carry less than F1; one pass of refinement at k = 0.30, fovea-eval's
+// ACUITY-REFINED), then the run's other ACUITY settings in the order of the run.
+std::vector<std::string> mainPlotAcuitySettings(const std::vector<ConfigSummary>& configs);
+
+// Writes kMainPlot's data and script, and kAcuityPlot's when the run has ACUITY rows,
+// into dir; the scripts draw their PNG when gnuplot runs them in dir. Returns the
+// plots written.
+Result<std::vector<PlotFiles>> writePlotFiles(const std::string& dir, const ReportContext& context,
+                                              const std::vector<ConfigSummary>& configs);
 
 }  // namespace fovea::tools

@@ -3,24 +3,32 @@ set terminal pngcairo size 1500,620 font 'sans,11'
 set output 'report.png'
 set multiplot layout 1,2 title "fovea: bytes and time against error, tum:../shared/data/tum-fr3-teddy 640x480, 10 frames (scalar reference)"
 set grid
+set autoscale xfix
+set offsets graph 0.05, graph 0.1, graph 0.05, graph 0.05
 set key top right box opaque
-set offsets graph 0.05, graph 0.05, graph 0.05, graph 0.05
-set logscale x
 set yrange [-2:*]
-set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams; log scale)'
-set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'
-set title 'perceptual error against size'
-plot 'report_plot.dat' index 0 using 3:6 with linespoints lw 1.5 pt 5 ps 1.6 lc 1 title 'm = 0.022', \
-     '' index 0 using 3:6:1 with labels offset char 1.2,0.8 tc lt 1 notitle, \
-     'report_plot.dat' index 1 using 3:6 with linespoints lw 1.5 pt 6 dt 4 ps 1.6 lc 1 title 'ACUITY, m = 0.022', \
-     '' index 1 using 3:6:1 with labels offset char 1.2,0.8 tc lt 1 notitle
 unset logscale x
-set key top left box opaque
+set xlabel 'bytes per frame on the wire [MB] (fovea chunk codec, 1200-byte datagrams)'
+set ylabel 'input points displaced by more than the MAR at their eccentricity [%]'
+set title 'perceptual error against size (a colour per slope m)'
+plot 'report_plot.dat' index 0 using 3:6 with linespoints lw 1.5 pt 5 ps 1.6 lc 1 title 'F1, F2, F3, FREF, m = 0.022', \
+     '' index 0 every 2 using 3:6:1 with labels left offset char 1,0.7 tc lt 1 notitle, \
+     '' index 0 every 2::1 using 3:6:1 with labels left offset char 1,-0.7 tc lt 1 notitle, \
+     'report_plot.dat' index 1 using 3:6:9 with points pt 12 ps 1.8 lw 1.5 lc variable notitle, \
+     keyentry with points pt 12 ps 1.8 lw 1.5 lc 'black' title 'ACUITY k=0.50', \
+     'report_plot.dat' index 2 using 3:6:9 with points pt 10 ps 1.8 lw 1.5 lc variable notitle, \
+     keyentry with points pt 10 ps 1.8 lw 1.5 lc 'black' title 'ACUITY k=0.50 floor 1mm*r^2', \
+     'report_plot.dat' index 3 using 3:6:9 with points pt 14 ps 1.8 lw 1.5 lc variable notitle, \
+     keyentry with points pt 14 ps 1.8 lw 1.5 lc 'black' title 'ACUITY k=0.30 refined 1'
+unset key
+unset logscale x
+set xtics autofreq
 set xlabel 'CPU time per frame [ms], median: back-projection through sampled output'
 set ylabel 'RMS distance from each input point to its representative [mm]'
-set title 'geometric error against time'
-plot 'report_plot.dat' index 0 using 4:5 with points pt 5 ps 1.6 lc 1 title 'm = 0.022', \
-     '' index 0 using 4:5:1 with labels offset char 1.2,0.8 tc lt 1 notitle, \
-     'report_plot.dat' index 1 using 4:5 with points pt 6 ps 1.6 lc 1 title 'ACUITY, m = 0.022', \
-     '' index 1 using 4:5:1 with labels offset char 1.2,0.8 tc lt 1 notitle
+set title 'geometric error against time (symbols as on the left)'
+plot 'report_plot.dat' index 0 using 4:5 with points pt 5 ps 1.6 lc 1 title 'F1, F2, F3, FREF, m = 0.022', \
+     '' index 0 using 4:5:1 with labels offset char 1.5,0.9 tc lt 1 notitle, \
+     'report_plot.dat' index 1 using 4:5:9 with points pt 12 ps 1.8 lw 1.5 lc variable notitle, \
+     'report_plot.dat' index 2 using 4:5:9 with points pt 10 ps 1.8 lw 1.5 lc variable notitle, \
+     'report_plot.dat' index 3 using 4:5:9 with points pt 14 ps 1.8 lw 1.5 lc variable notitle
 unset multiplot
