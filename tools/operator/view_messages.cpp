@@ -1,5 +1,6 @@
 #include "tools/operator/view_messages.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <nlohmann/json.hpp>
@@ -31,13 +32,21 @@ Status readNumbers(const json& message, const char* key, std::array<double, N>& 
   return Status::ok();
 }
 
-// Scales v to unit length; false when its length is 0 or not finite.
+// Scales v (finite numbers) to unit length; false for the zero vector. It
+// divides by the largest component first, so that every non-zero finite length
+// works: the sum of squares of [1e200, 1e200, 0] would overflow, that of
+// [1e-200, 0, 0] underflow to zero.
 template <std::size_t N>
 bool normalise(std::array<double, N>& v) {
+  double largest = 0.0;
+  for (double x : v) largest = std::max(largest, std::fabs(x));
+  if (!(largest > 0.0)) return false;
   double n2 = 0.0;
-  for (double x : v) n2 += x * x;
-  const double n = std::sqrt(n2);
-  if (!(n > 1e-12) || !std::isfinite(n)) return false;
+  for (double& x : v) {
+    x /= largest;
+    n2 += x * x;
+  }
+  const double n = std::sqrt(n2);  // between 1 and sqrt(N)
   for (double& x : v) x /= n;
   return true;
 }

@@ -1,6 +1,8 @@
 // The viewer's messages: what a tab may send is parsed strictly (anything else
 // is an error the server counts), and what the operator sends is valid JSON.
+#include <array>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <string>
 
@@ -25,6 +27,36 @@ TEST(ViewMessages, GazeIsParsedAndItsDirectionNormalised) {
   m = parseViewerMessage(R"({"type":"gaze","origin":[0,0,0],"direction":[1,0,0]})");
   ASSERT_TRUE(m.isOk());
   EXPECT_DOUBLE_EQ(m->gaze.orientation[0], 1.0);
+}
+
+// Caught by fuzz_view_messages' reference oracle: the header promises that any
+// non-zero finite length is accepted, but the sum of squares overflowed for
+// long vectors and a 1e-12 floor refused short ones ("'direction' has no
+// length").
+TEST(ViewMessages, DirectionsAndOrientationsOfAnyNonZeroFiniteLengthAreNormalised) {
+  constexpr double kH = std::numbers::sqrt2 / 2;
+  const struct {
+    const char* text;
+    std::array<double, 3> direction;
+    std::array<double, 4> orientation;
+  } cases[] = {
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[1e200,1e200,0]})", {kH, kH, 0}, {1, 0, 0, 0}},
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[1.7976931348623157e308,0,-1.7976931348623157e308]})",
+       {kH, 0, -kH},
+       {1, 0, 0, 0}},
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[0,1e-13,0]})", {0, 1, 0}, {1, 0, 0, 0}},
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[0,0,-5e-324]})", {0, 0, -1}, {1, 0, 0, 0}},
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[1,0,0],"orientation":[1e-300,0,0,0]})", {1, 0, 0}, {1, 0, 0, 0}},
+      {R"({"type":"gaze","origin":[0,0,0],"direction":[1,0,0],"orientation":[0,1e300,0,1e300]})",
+       {1, 0, 0},
+       {0, kH, 0, kH}},
+  };
+  for (const auto& c : cases) {
+    Result<ViewerMessage> m = parseViewerMessage(c.text);
+    ASSERT_TRUE(m.isOk()) << c.text << ": " << m.status().message();
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(m->gaze.direction[i], c.direction[i], 1e-15) << c.text;
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(m->gaze.orientation[i], c.orientation[i], 1e-15) << c.text;
+  }
 }
 
 TEST(ViewMessages, ModeIsParsed) {
