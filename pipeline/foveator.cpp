@@ -48,6 +48,64 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
     part_histograms_.assign(static_cast<std::size_t>(capacity.threads) * 256, 0);
     hash_sampler_.setWorkerPool(pool_.get());
   }
+  table_ = chooseKernels(capacity.kernels, pool_ != nullptr);
+}
+
+Foveator::KernelTable Foveator::chooseKernels(KernelSet set, bool pooled) {
+  // The reference is the specification and always runs on the calling thread.
+  if (set == KernelSet::kRef) {
+    return {
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+          partitionRef(in, gaze, f.bounds_, f.region_.data(), counts);
+        },
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+          assignLevelsRef(in, gaze, f.levels_, f.region_.data(), counts);
+        },
+        computeFixation,
+        [](Foveator& f, const PointCloud& in, const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
+           SampleCounts& counts, uint32_t* rep) {
+          return f.sampler_.sample(in, f.region_.data(), f.model_.regionCount(), voxel_size_m, out, counts, rep);
+        },
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, const PointCloud& out, const uint32_t* rep) {
+          return refineTestRef(in, gaze, f.levels_, out, rep, f.region_.data(), f.refine_state_.data());
+        },
+        {"partitionRef", "assignLevelsRef", "computeFixation", "VoxelSampler", "refineTestRef"}};
+  }
+  // The hash sampler shares the pool through setWorkerPool(); the fixation has no
+  // threaded form (one percentile over the fovea's points).
+  const auto hash_sample = [](Foveator& f, const PointCloud& in, const std::array<double, kMaxRegions>& voxel_size_m,
+                              FoveatedCloud& out, SampleCounts& counts, uint32_t* rep) {
+    return f.hash_sampler_.sample(in, f.region_.data(), f.model_.regionCount(), voxel_size_m, out, counts, rep);
+  };
+  if (pooled) {
+    return {
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+          f.partitionParallel(in, gaze, counts);
+        },
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+          f.levelsParallel(in, gaze, counts);
+        },
+        computeFixationSimd,
+        hash_sample,
+        [](Foveator& f, const PointCloud& in, const Gaze& gaze, const PointCloud& out, const uint32_t* rep) {
+          return f.refineTestParallel(in, gaze, out, rep);
+        },
+        {"partitionRange/pool", "levelRange/pool", "computeFixationSimd", "HashVoxelSampler/pool",
+         "refineTestRange/pool"}};
+  }
+  return {
+      [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+        partitionSimd(in, gaze, f.bounds_, f.region_.data(), counts);
+      },
+      [](Foveator& f, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) {
+        assignLevelsSimd(in, gaze, f.levels_, f.region_.data(), counts);
+      },
+      computeFixationSimd,
+      hash_sample,
+      [](Foveator& f, const PointCloud& in, const Gaze& gaze, const PointCloud& out, const uint32_t* rep) {
+        return refineTestSimd(in, gaze, f.levels_, out, rep, f.region_.data(), f.refine_state_.data());
+      },
+      {"partitionSimd", "assignLevelsSimd", "computeFixationSimd", "HashVoxelSampler", "refineTestSimd"}};
 }
 
 namespace {
@@ -165,31 +223,14 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
 
   const int64_t t0 = monotonicNs();
   PartitionCounts partition_counts;
-  if (model_.levels()) {
-    // The acuity mode's levels in place of the cones; the samplers below are shared.
-    if (pool_) {
-      levelsParallel(in, unit_gaze.value(), partition_counts);
-    } else if (capacity_.kernels == KernelSet::kSimd) {
-      assignLevelsSimd(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
-    } else {
-      assignLevelsRef(in, unit_gaze.value(), levels_, region_.data(), partition_counts);
-    }
-  } else if (pool_) {
-    partitionParallel(in, unit_gaze.value(), partition_counts);
-  } else if (capacity_.kernels == KernelSet::kSimd) {
-    partitionSimd(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
-  } else {
-    partitionRef(in, unit_gaze.value(), bounds_, region_.data(), partition_counts);
-  }
+  // The acuity mode's levels in place of the cones; the samplers below are shared.
+  (model_.levels() ? table_.levels : table_.partition)(*this, in, unit_gaze.value(), partition_counts);
   const int64_t t1 = monotonicNs();
   // The levels need no fixation distance: each point's own distance sizes its voxel.
   if (model_.levels()) {
     stats.fixation.source = FixationSource::kNone;
   } else {
-    stats.fixation =
-        capacity_.kernels == KernelSet::kSimd
-            ? computeFixationSimd(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data())
-            : computeFixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+    stats.fixation = table_.fixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
   }
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
@@ -198,26 +239,17 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   // ACUITY's refinement needs every point's representative, asked for or not.
   const bool refine = model_.levels() && model_.refinePasses() > 0;
   uint32_t* rep = representative != nullptr || !refine ? representative : representative_.data();
-  const auto sample = [&] {
-    return capacity_.kernels == KernelSet::kSimd
-               ? hash_sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts, rep)
-               : sampler_.sample(in, region_.data(), model_.regionCount(), voxel_size_m, out, sample_counts, rep);
-  };
-  Status sampled = sample();
+  Status sampled = table_.sample(*this, in, voxel_size_m, out, sample_counts, rep);
   // Move the points the eye would see displaced one level down and sample again,
   // until none moves or the passes are spent.
   for (int pass = 0; refine && sampled && pass < model_.refinePasses(); ++pass) {
-    const std::size_t beyond =
-        pool_ ? refineTestParallel(in, unit_gaze.value(), out.points, rep)
-        : capacity_.kernels == KernelSet::kSimd
-            ? refineTestSimd(in, unit_gaze.value(), levels_, out.points, rep, region_.data(), refine_state_.data())
-            : refineTestRef(in, unit_gaze.value(), levels_, out.points, rep, region_.data(), refine_state_.data());
+    const std::size_t beyond = table_.refine_test(*this, in, unit_gaze.value(), out.points, rep);
     if (beyond == 0) break;
     const std::size_t moved = moveRefinedVoxels(refine_state_.data(), rep, in.size(), out.size(),
                                                 voxel_beyond_.data(), region_.data(), partition_counts);
     stats.refined += static_cast<uint32_t>(moved);
     ++stats.refine_passes;
-    sampled = sample();
+    sampled = table_.sample(*this, in, voxel_size_m, out, sample_counts, rep);
   }
   const int64_t t3 = monotonicNs();
 

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <string_view>
 #include <vector>
 
 #include "core/kernel_set.h"
@@ -60,6 +61,16 @@ struct FoveationStats {
   int64_t sample_ns = 0;           // the sampling, with ACUITY's refinement passes
 };
 
+// The kernel each stage of foveate() runs, chosen once by the constructor from
+// PipelineCapacity::kernels and ::threads (docs/kernels.md). For logs and tests.
+struct StageKernels {
+  std::string_view partition;    // the cones (Algorithm 1)
+  std::string_view levels;       // ACUITY's levels, in place of the cones
+  std::string_view fixation;     // d0 (not for the levels)
+  std::string_view sample;       // the voxel sampler
+  std::string_view refine_test;  // ACUITY's refinement test
+};
+
 class Foveator {
  public:
   static Result<Foveator> create(const PipelineCapacity& capacity, const FoveationConfig& config);
@@ -81,8 +92,27 @@ class Foveator {
   const PipelineCapacity& capacity() const { return capacity_; }
   // Region of each input point of the last foveate() call.
   const uint8_t* lastRegions() const { return region_.data(); }
+  const StageKernels& stageKernels() const { return table_.names; }
 
  private:
+  // One function per stage, filled by the constructor for the kernel set and the
+  // pool, so that foveate() runs the entries in order and never asks again. They
+  // take the Foveator as an argument rather than capturing it: a moved Foveator
+  // (create() returns one by value) keeps a valid table.
+  struct KernelTable {
+    void (*partition)(Foveator&, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) = nullptr;
+    void (*levels)(Foveator&, const PointCloud& in, const Gaze& gaze, PartitionCounts& counts) = nullptr;
+    Fixation (*fixation)(const PointCloud& in, const uint8_t* region, const Gaze& gaze, const FixationConfig& config,
+                         double* t_scratch) = nullptr;
+    Status (*sample)(Foveator&, const PointCloud& in, const std::array<double, kMaxRegions>& voxel_size_m,
+                     FoveatedCloud& out, SampleCounts& counts, uint32_t* representative) = nullptr;
+    // Returns the points beyond their MAR (refine_state_ gets every point's state).
+    std::size_t (*refine_test)(Foveator&, const PointCloud& in, const Gaze& gaze, const PointCloud& out,
+                               const uint32_t* representative) = nullptr;
+    StageKernels names;
+  };
+  static KernelTable chooseKernels(KernelSet set, bool pooled);
+
   Foveator(const PipelineCapacity& capacity, const FoveationConfig& config, RegionModel model);
   void partitionParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
   void levelsParallel(const PointCloud& in, const Gaze& gaze, PartitionCounts& counts);
@@ -105,6 +135,7 @@ class Foveator {
   HashVoxelSampler hash_sampler_;  // kernels == kSimd
   std::unique_ptr<WorkerPool> pool_;        // threads > 1 and kernels == kSimd
   std::vector<uint32_t> part_histograms_;  // 256 per thread
+  KernelTable table_;
 };
 
 }  // namespace fovea::pipeline

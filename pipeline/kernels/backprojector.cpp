@@ -17,16 +17,26 @@ struct BackprojectJob {
 
 }  // namespace
 
-Backprojector::Backprojector(int threads, KernelSet kernels)
-    : kernels_(kernels),
-      pool_(std::make_unique<WorkerPool>(std::clamp(threads, 1, kMaxPipelineThreads))),
-      parts_(static_cast<std::size_t>(pool_->parts())) {}
+Backprojector::Backprojector(int threads, KernelSet kernels) : kernels_(kernels) {
+  threads = std::clamp(threads, 1, kMaxPipelineThreads);
+  if (kernels == KernelSet::kRef) {
+    run_ = [](Backprojector&, const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
+              BackprojectCounts& counts) { return backprojectRef(frame, range, out, counts); };
+    kernel_name_ = "backprojectRef";
+  } else if (threads == 1) {
+    run_ = [](Backprojector&, const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
+              BackprojectCounts& counts) { return backprojectSimd(frame, range, out, counts); };
+    kernel_name_ = "backprojectSimd";
+  } else {
+    pool_ = std::make_unique<WorkerPool>(threads);
+    parts_.resize(static_cast<std::size_t>(threads));
+    run_ = runPooled;
+    kernel_name_ = "backprojectRows/pool";
+  }
+}
 
-Status Backprojector::run(const hal::RgbdFrame& frame, const DepthRange& range, PointCloud& out,
-                          BackprojectCounts& counts) {
-  if (kernels_ == KernelSet::kRef) return backprojectRef(frame, range, out, counts);
-  if (pool_->parts() == 1) return backprojectSimd(frame, range, out, counts);
-
+Status Backprojector::runPooled(Backprojector& self, const hal::RgbdFrame& frame, const DepthRange& range,
+                                PointCloud& out, BackprojectCounts& counts) {
   counts = {};
   out.clear();
   kernels::BackprojectParams p;
@@ -39,7 +49,7 @@ Status Backprojector::run(const hal::RgbdFrame& frame, const DepthRange& range, 
   p.out_z = out.z();
   p.out_rgb = out.rgb();
 
-  BackprojectJob job{&p, parts_.data(), false};
+  BackprojectJob job{&p, self.parts_.data(), false};
   auto task = [](void* ctx, int part, int parts) {
     auto* j = static_cast<BackprojectJob*>(ctx);
     auto* all = static_cast<Part*>(j->parts);
@@ -54,9 +64,9 @@ Status Backprojector::run(const hal::RgbdFrame& frame, const DepthRange& range, 
       kernels::backprojectRows(*j->params, row0, row1, mine.offset);
     }
   };
-  pool_->run(task, &job);
+  self.pool_->run(task, &job);
   std::size_t valid = 0;
-  for (Part& part : parts_) {
+  for (Part& part : self.parts_) {
     part.offset = valid;
     valid += part.valid;
     counts.no_depth += part.no_depth;
@@ -67,7 +77,7 @@ Status Backprojector::run(const hal::RgbdFrame& frame, const DepthRange& range, 
                                               std::to_string(out.capacity()) + ": raise pipeline.max_points"};
   }
   job.write = true;
-  pool_->run(task, &job);
+  self.pool_->run(task, &job);
   counts.valid = valid;
   (void)out.resize(valid);
   return Status::ok();

@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <string_view>
 #include <memory>
 #include <vector>
 
@@ -140,6 +141,11 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
   for (uint64_t seed = 1; seed <= 4; ++seed) clouds.push_back(test::randomCloud(50000, Eigen::Vector3d(seed, 0, 0), 4.0f, seed));
   pipeline::FoveatedCloud out(50000);
   pipeline::Foveator foveator = pipeline::Foveator::create({50000, 50000, GetParam().kernels, GetParam().threads}, {}).value();
+  // The stages this case means to count: the references, the SIMD kernels, or their pooled ranges.
+  const std::string_view partition = foveator.stageKernels().partition;
+  EXPECT_EQ(partition, GetParam().kernels == fovea::KernelSet::kRef ? "partitionRef"
+                       : GetParam().threads > 1                     ? "partitionRange/pool"
+                                                                    : "partitionSimd");
   std::vector<pipeline::FoveationConfig> configs(7);
   configs[0].acuity.preset = pipeline::Preset::kF1;
   configs[1].acuity.preset = pipeline::Preset::kF2;

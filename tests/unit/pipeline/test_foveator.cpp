@@ -1,10 +1,15 @@
 // The whole foveation of a cloud against the brute-force reference.
+#include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <random>
+#include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
 #include "pipeline/foveator.h"
+#include "pipeline/kernels/backprojector.h"
 #include "tests/support/clouds.h"
 
 namespace fovea::pipeline {
@@ -137,6 +142,107 @@ TEST(Foveator, RejectsCloudsOverCapacity) {
   FoveationStats stats;
   EXPECT_EQ(foveator.foveate(in, Gaze{}, out, stats).code(), ErrorCode::kCapacityExceeded);
   EXPECT_FALSE(Foveator::create({0, 10}, configFor(Preset::kF1)).isOk());
+}
+
+// ---- the kernel table: chosen once, from the kernel set and the thread count ----
+
+StageKernels stageKernelsFor(KernelSet set, int threads) {
+  // The names are string literals: they outlive the Foveator.
+  return Foveator::create({1000, 1000, set, threads}, FoveationConfig{}).value().stageKernels();
+}
+
+void expectReferences(const StageKernels& k) {
+  EXPECT_EQ(k.partition, "partitionRef");
+  EXPECT_EQ(k.levels, "assignLevelsRef");
+  EXPECT_EQ(k.fixation, "computeFixation");
+  EXPECT_EQ(k.sample, "VoxelSampler");
+  EXPECT_EQ(k.refine_test, "refineTestRef");
+}
+
+TEST(FoveatorKernels, RefPicksTheReferencesOnAnyThreadCount) {
+  // The reference is the specification: it never runs on the pool.
+  for (int threads : {1, 2, 4}) {
+    SCOPED_TRACE(threads);
+    expectReferences(stageKernelsFor(KernelSet::kRef, threads));
+    Backprojector bp(threads, KernelSet::kRef);
+    EXPECT_EQ(bp.kernelName(), "backprojectRef");
+    EXPECT_EQ(bp.threads(), 1);
+  }
+}
+
+TEST(FoveatorKernels, SimdOnOneThreadPicksTheSimdKernels) {
+  const StageKernels k = stageKernelsFor(KernelSet::kSimd, 1);
+  EXPECT_EQ(k.partition, "partitionSimd");
+  EXPECT_EQ(k.levels, "assignLevelsSimd");
+  EXPECT_EQ(k.fixation, "computeFixationSimd");
+  EXPECT_EQ(k.sample, "HashVoxelSampler");
+  EXPECT_EQ(k.refine_test, "refineTestSimd");
+  Backprojector bp(1, KernelSet::kSimd);
+  EXPECT_EQ(bp.kernelName(), "backprojectSimd");
+  EXPECT_EQ(bp.threads(), 1);
+}
+
+TEST(FoveatorKernels, SimdOnThreadsPicksThePool) {
+  for (int threads : {2, 3}) {
+    SCOPED_TRACE(threads);
+    const StageKernels k = stageKernelsFor(KernelSet::kSimd, threads);
+    EXPECT_EQ(k.partition, "partitionRange/pool");
+    EXPECT_EQ(k.levels, "levelRange/pool");
+    EXPECT_EQ(k.fixation, "computeFixationSimd");  // one percentile: no threaded form
+    EXPECT_EQ(k.sample, "HashVoxelSampler/pool");
+    EXPECT_EQ(k.refine_test, "refineTestRange/pool");
+    Backprojector bp(threads, KernelSet::kSimd);
+    EXPECT_EQ(bp.kernelName(), "backprojectRows/pool");
+    EXPECT_EQ(bp.threads(), threads);
+  }
+}
+
+// The default capacity follows FOVEA_FORCE_KERNEL; CTest runs this once more with
+// FOVEA_FORCE_KERNEL=ref and looks for the references in the printed line.
+TEST(FoveatorKernels, DefaultFollowsForceKernel) {
+  const char* env = std::getenv("FOVEA_FORCE_KERNEL");
+  const bool ref = env != nullptr && std::string(env) == "ref";
+  const StageKernels k = Foveator::create({1000, 1000}, FoveationConfig{}).value().stageKernels();
+  const Backprojector bp;
+  if (ref) {
+    expectReferences(k);
+    EXPECT_EQ(bp.kernelName(), "backprojectRef");
+  } else {
+    EXPECT_EQ(k.partition, "partitionSimd");
+    EXPECT_EQ(k.sample, "HashVoxelSampler");
+    EXPECT_EQ(bp.kernelName(), "backprojectSimd");
+  }
+  std::printf("default stage kernels: %.*s %.*s %.*s %.*s %.*s, %.*s\n", static_cast<int>(k.partition.size()),
+              k.partition.data(), static_cast<int>(k.levels.size()), k.levels.data(),
+              static_cast<int>(k.fixation.size()), k.fixation.data(), static_cast<int>(k.sample.size()),
+              k.sample.data(), static_cast<int>(k.refine_test.size()), k.refine_test.data(),
+              static_cast<int>(bp.kernelName().size()), bp.kernelName().data());
+}
+
+// The table's entries take the Foveator as an argument: a moved Foveator (and a
+// moved-to one) runs its own stages, on its own buffers, with the same output.
+TEST(FoveatorKernels, MovedFoveatorKeepsItsTable) {
+  PointCloud in = test::randomCloud(5000, Eigen::Vector3d::Zero(), 3.0f, 10);
+  FoveationConfig config = configFor(Preset::kAcuity);
+  config.acuity.level_margin = 0.15;
+  config.acuity.refine_passes = kMaxRefinePasses;
+  for (KernelSet set : {KernelSet::kRef, KernelSet::kSimd}) {
+    for (int threads : {1, 3}) {
+      SCOPED_TRACE(std::string(kernelSetName(set)) + " on " + std::to_string(threads));
+      Foveator first = Foveator::create({5000, 5000, set, threads}, config).value();
+      FoveatedCloud a(5000), b(5000);
+      FoveationStats sa, sb;
+      ASSERT_TRUE(first.foveate(in, Gaze{}, a, sa).isOk());
+      Foveator moved(std::move(first));
+      ASSERT_TRUE(moved.foveate(in, Gaze{}, b, sb).isOk());
+      ASSERT_EQ(a.size(), b.size());
+      for (std::size_t o = 0; o < a.size(); ++o) {
+        ASSERT_EQ(a.points.x()[o], b.points.x()[o]) << o;
+        ASSERT_EQ(a.weight[o], b.weight[o]) << o;
+      }
+      EXPECT_EQ(sa.refined, sb.refined);
+    }
+  }
 }
 
 }  // namespace
