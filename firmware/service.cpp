@@ -335,7 +335,7 @@ void Service::captureLoop() {
   while (running_.load(std::memory_order_acquire)) {
     const uint64_t limit = max_frames_.load(std::memory_order_relaxed);
     if (limit > 0 && ring.counters().published >= limit) break;  // run()'s frame limit: drain and stop
-    pipeline::SlotIndex slot;
+    fovea::SlotIndex slot;
     if (!ring.tryAcquire(slot)) {
       sleepNs(kIdleSleepNs);
       continue;
@@ -406,13 +406,13 @@ void Service::foveationLoop() {
       reloads_applied_.fetch_add(1, std::memory_order_relaxed);
     }
     (void)gaze_box_.update();
-    pipeline::SlotIndex in;
+    fovea::SlotIndex in;
     if (!in_ring.tryTake(in)) {
       if (capture_done) break;
       sleepNs(kIdleSleepNs);
       continue;
     }
-    pipeline::SlotIndex out;
+    fovea::SlotIndex out;
     if (!out_ring.tryAcquire(out)) {  // only if the send stage held more than it promised (a bug)
       (void)in_ring.release(in);
       foveate_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -486,7 +486,7 @@ void Service::sendLoop() {
       streamer_->poll();
       publishGaze();
     }
-    pipeline::SlotIndex slot;
+    fovea::SlotIndex slot;
     if (!ring.tryTake(slot)) {
       if (foveation_done) break;  // drained
       if (streamer_) {

@@ -16,6 +16,12 @@
 #include <utility>
 
 namespace fovea::io {
+
+using pipeline::packRgb;
+using pipeline::rgbBlue;
+using pipeline::rgbGreen;
+using pipeline::rgbRed;
+
 namespace {
 
 // ---------------------------------------------------------------------------

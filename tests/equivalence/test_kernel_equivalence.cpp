@@ -28,6 +28,10 @@
 namespace fovea::pipeline {
 namespace {
 
+using hal::DepthToColourRegistration;
+using hal::RegistrationCounts;
+using hal::RegistrationParams;
+
 constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
 constexpr float kInff = std::numeric_limits<float>::infinity();
 constexpr float kDenormf = std::numeric_limits<float>::denorm_min();

@@ -14,6 +14,7 @@ namespace {
 
 using namespace fovea;
 using namespace fovea::pipeline;
+using namespace fovea::io;
 
 [[noreturn]] void fail(const char* what) {
   std::fprintf(stderr, "fuzz_ply: %s\n", what);

@@ -13,6 +13,10 @@
 namespace fovea::pipeline {
 namespace {
 
+using hal::DepthToColourRegistration;
+using hal::RegistrationCounts;
+using hal::RegistrationParams;
+
 using test::regionModel;
 
 std::vector<uint8_t> partition(const PointCloud& cloud, const Gaze& gaze, const RegionModel& m,

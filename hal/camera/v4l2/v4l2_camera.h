@@ -55,7 +55,7 @@
 #include "hal/camera/v4l2/v4l2_node.h"
 #include "hal/camera/v4l2/v4l2_options.h"
 
-namespace fovea::pipeline {
+namespace fovea::hal {
 class DepthToColourRegistration;
 }
 

@@ -22,6 +22,8 @@
 namespace fovea::io {
 namespace {
 
+using pipeline::packRgb;
+
 // --- byte builders with explicit byte order (independent of the host's) -------
 
 void putBits(std::string& out, uint64_t bits, int bytes, bool big_endian) {
