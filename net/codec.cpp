@@ -2,10 +2,12 @@
 #include "net/codec.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <utility>
 
 #define ZSTD_STATIC_LINKING_ONLY  // ZSTD_initStaticCCtx/DCtx: contexts that never allocate
 #include <zstd.h>
@@ -245,6 +247,82 @@ constexpr std::size_t kDataHeader = 4;
 // Bits of the first Morton code: a 6-bit length, then that many bits.
 inline std::size_t firstCodeBits(uint64_t code) { return 6 + static_cast<std::size_t>(std::bit_width(code)); }
 
+// ---- encoder steps ----
+// The frame being encoded: what each of its chunks carries, and its points per region.
+struct FrameInProgress {
+  uint32_t frame_id = 0;
+  uint64_t capture_time_ns = 0;
+  std::size_t arena_used = 0;                                   // bytes of the arena holding chunks
+  std::array<uint32_t, pipeline::kMaxRegions + 1> start{};      // region r: order[start[r], start[r + 1])
+  std::array<std::array<int64_t, 3>, pipeline::kMaxRegions> qmin{}, qmax{};  // lattice bounds per region
+};
+
+// One region's points in Morton order, to be cut into chunks.
+struct RegionCut {
+  int region;
+  const uint64_t* keys;   // Morton keys, sorted
+  const uint32_t* order;  // the input index of each key
+  std::size_t points;
+  bool half;              // chroma shared by pairs of points
+  wire::Vec3d origin;     // the region's lattice origin, m
+  const uint32_t* rgb;    // of the input points
+};
+
+// A chunk's Exp-Golomb orders: of the position deltas, and of the three colour codes.
+struct Orders {
+  int position;
+  std::array<int, 3> colour;
+};
+
+// The colour coder's previous values (a point's are committed once it fits).
+struct ColourPrev {
+  uint8_t y = 0;           // previous Y
+  int fco = 0, fcg = 0;    // full colour: previous Co, Cg (-255..255)
+  uint8_t co = 0, cg = 0;  // halved chroma: the previous pair's Co, Cg
+};
+
+// A chunk's first Morton code: a 6-bit length, then that many bits.
+[[gnu::always_inline]] inline void putFirstCode(BitWriter& bw, uint64_t code) {
+  const std::size_t len = firstCodeBits(code) - 6;
+  bw.put(len, 6);
+  if (len > 32) {
+    bw.put(code & 0xffffffffu, 32);
+    bw.put(code >> 32, static_cast<int>(len - 32));
+  } else {
+    bw.put(code, static_cast<int>(len));
+  }
+}
+
+// Lossless YCoCg-R deltas of point j.
+[[gnu::always_inline]] inline void putFullColour(BitWriter& bw, uint32_t c, const Orders& orders, const ColourPrev& prev,
+                                                 ColourPrev& next) {
+  const Ycocg v = toYcocg(c);
+  next.y = static_cast<uint8_t>(v.y);
+  next.fco = v.co, next.fcg = v.cg;
+  bw.putEg(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0]);
+  bw.putEg(zigzag9(next.fco - prev.fco), orders.colour[1]);
+  bw.putEg(zigzag9(next.fcg - prev.fcg), orders.colour[2]);
+}
+
+// Point j's luma, and after the second point of a pair the pair's chroma. The
+// bits a first point's own chroma would take if it stays alone: they must fit too.
+[[gnu::always_inline]] inline std::size_t putHalfColour(BitWriter& bw, const RegionCut& cut, std::size_t j,
+                                                        std::size_t count, const Orders& orders, const ColourPrev& prev,
+                                                        ColourPrev& next) {
+  const uint32_t c = cut.rgb[cut.order[j]];
+  next.y = static_cast<uint8_t>(luma(c));
+  bw.putEg(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0]);
+  if (count % 2 == 1) {  // the pair's chroma, after its second point
+    const uint32_t c0 = cut.rgb[cut.order[j - 1]];
+    next.co = pairCo(c0, c), next.cg = pairCg(c0, c);
+    bw.putEg(zigzag8(static_cast<uint8_t>(next.co - prev.co)), orders.colour[1]);
+    bw.putEg(zigzag8(static_cast<uint8_t>(next.cg - prev.cg)), orders.colour[2]);
+    return 0;
+  }
+  return egBits(zigzag8(static_cast<uint8_t>(pairCo(c, c) - prev.co)), orders.colour[1]) +
+         egBits(zigzag8(static_cast<uint8_t>(pairCg(c, c) - prev.cg)), orders.colour[2]);
+}
+
 }  // namespace
 
 // ---- configuration ----
@@ -320,6 +398,18 @@ struct ChunkEncoder::State {
     b.add_chunk_count(kChunkCountPlaceholder);
     fbb.Finish(b.Finish());
   }
+
+  // encode()'s steps, in order.
+  Status countRegions(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
+                      FrameInProgress& frame);
+  Status quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame);
+  Status encodeRegion(const pipeline::FoveatedCloud& cloud, int r, FrameInProgress& frame);
+  std::pair<const uint64_t*, const uint32_t*> sortByMorton(std::size_t begin, std::size_t end,
+                                                           const std::array<int64_t, 3>& qmin, int64_t span);
+  Orders chooseOrders(const RegionCut& cut, std::size_t k);
+  std::size_t packChunk(const RegionCut& cut, std::size_t k, const Orders& orders, std::size_t& raw_size);
+  Status storeChunk(const RegionCut& cut, std::size_t points, std::size_t raw_size, FrameInProgress& frame);
+  Status patchChunkCount();
 
   // zstd of raw[0, size) into packed; 0 when it does not pay or fails.
   std::size_t compress(std::size_t size) {
@@ -408,9 +498,22 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
     return {ErrorCode::kCapacityExceeded, "codec: frame has " + std::to_string(n) + " points, max_points is " +
                                               std::to_string(s.max_points)};
   }
-  // Points per region, and the step of each region present.
-  std::array<uint32_t, pipeline::kMaxRegions + 1> start{};
-  for (std::size_t i = 0; i < n; ++i) {
+  FrameInProgress frame;
+  frame.frame_id = frame_id;
+  frame.capture_time_ns = capture_time_ns;
+  if (Status st = s.countRegions(cloud, region_voxel_size_m, frame); !st) return st;
+  if (Status st = s.quantize(cloud, frame); !st) return st;
+  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
+    if (Status st = s.encodeRegion(cloud, r, frame); !st) return st;
+  }
+  return s.patchChunkCount();
+}
+
+// Points per region (frame.start, as offsets), and the step of each region.
+Status ChunkEncoder::State::countRegions(const pipeline::FoveatedCloud& cloud,
+                                         std::span<const double> region_voxel_size_m, FrameInProgress& frame) {
+  std::array<uint32_t, pipeline::kMaxRegions + 1>& start = frame.start;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
     const uint8_t r = cloud.region[i];
     if (r >= pipeline::kMaxRegions || r >= region_voxel_size_m.size()) {
       return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " has region " + std::to_string(r) +
@@ -424,12 +527,17 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
     if (!std::isfinite(voxel) || voxel < 0.0) {
       return {ErrorCode::kInvalidInput, "codec: region " + std::to_string(r) + " voxel size is not finite and >= 0"};
     }
-    s.step[static_cast<std::size_t>(r)] = (r == 0 || voxel == 0.0) ? s.config.fovea_step_m : voxel * s.config.periphery_step_ratio;
+    step[static_cast<std::size_t>(r)] = (r == 0 || voxel == 0.0) ? config.fovea_step_m : voxel * config.periphery_step_ratio;
   }
+  return Status::ok();
+}
 
-  // Lattice coordinates, and the points grouped by region.
+// Lattice coordinates (qx, qy, qz) and their bounds per region; `order` gets the
+// points grouped by region.
+Status ChunkEncoder::State::quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame) {
   std::array<uint32_t, pipeline::kMaxRegions> fill{};
-  std::array<std::array<int64_t, 3>, pipeline::kMaxRegions> qmin, qmax;
+  auto& qmin = frame.qmin;
+  auto& qmax = frame.qmax;
   for (int r = 0; r < pipeline::kMaxRegions; ++r) {
     qmin[static_cast<std::size_t>(r)].fill(INT64_MAX);
     qmax[static_cast<std::size_t>(r)].fill(INT64_MIN);
@@ -439,8 +547,8 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
   const float* py = cloud.points.y();
   const float* pz = cloud.points.z();
   std::array<double, pipeline::kMaxRegions> inv_step;
-  for (std::size_t r = 0; r < inv_step.size(); ++r) inv_step[r] = 1.0 / s.step[r];
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t r = 0; r < inv_step.size(); ++r) inv_step[r] = 1.0 / step[r];
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
     const uint8_t r = cloud.region[i];
     const double inv = inv_step[r];
     const double w[3] = {(o.x() + double{px[i]}) * inv, (o.y() + double{py[i]}) * inv, (o.z() + double{pz[i]}) * inv};
@@ -451,197 +559,203 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
           return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
         }
         return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^50 steps of " +
-                                               std::to_string(s.step[r]) + " m from the world origin"};
+                                               std::to_string(step[r]) + " m from the world origin"};
       }
       q[a] = static_cast<int64_t>(w[a] >= 0.0 ? w[a] + 0.5 : w[a] - 0.5);  // round half away from zero
       qmin[r][static_cast<std::size_t>(a)] = std::min(qmin[r][static_cast<std::size_t>(a)], q[a]);
       qmax[r][static_cast<std::size_t>(a)] = std::max(qmax[r][static_cast<std::size_t>(a)], q[a]);
     }
-    s.qx[i] = q[0], s.qy[i] = q[1], s.qz[i] = q[2];
-    s.order[start[r] + fill[r]++] = static_cast<uint32_t>(i);
+    qx[i] = q[0], qy[i] = q[1], qz[i] = q[2];
+    order[frame.start[r] + fill[r]++] = static_cast<uint32_t>(i);
   }
+  return Status::ok();
+}
 
-  std::size_t arena_used = 0;
-  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
-    const std::size_t ru = static_cast<std::size_t>(r);
-    const std::size_t begin = start[ru], end = start[ru + 1];
-    if (begin == end) continue;
-    int64_t span = 0;
-    for (int a = 0; a < 3; ++a) span = std::max(span, qmax[ru][static_cast<std::size_t>(a)] - qmin[ru][static_cast<std::size_t>(a)]);
-    if (span > kMaxLatticeSpan) {
-      s.chunk_count = 0;
-      return {ErrorCode::kRangeExceeded, "codec: region " + std::to_string(r) + " spans " + std::to_string(span) +
-                                             " steps of " + std::to_string(s.step[ru]) + " m, more than " +
-                                             std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
+// Region r's points in Morton order, cut greedily into chunks.
+Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, int r, FrameInProgress& frame) {
+  const std::size_t ru = static_cast<std::size_t>(r);
+  const std::size_t begin = frame.start[ru], end = frame.start[ru + 1];
+  if (begin == end) return Status::ok();
+  const std::array<int64_t, 3>& qmin = frame.qmin[ru];
+  int64_t span = 0;
+  for (int a = 0; a < 3; ++a) span = std::max(span, frame.qmax[ru][static_cast<std::size_t>(a)] - qmin[static_cast<std::size_t>(a)]);
+  if (span > kMaxLatticeSpan) {
+    chunk_count = 0;
+    return {ErrorCode::kRangeExceeded, "codec: region " + std::to_string(r) + " spans " + std::to_string(span) +
+                                           " steps of " + std::to_string(step[ru]) + " m, more than " +
+                                           std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
+  }
+  const std::pair<const uint64_t*, const uint32_t*> sorted = sortByMorton(begin, end, qmin, span);
+  const RegionCut cut{r,
+                      sorted.first,
+                      sorted.second,
+                      end - begin,
+                      r > 0 && config.halve_peripheral_chroma,
+                      wire::Vec3d(static_cast<double>(qmin[0]) * step[ru], static_cast<double>(qmin[1]) * step[ru],
+                                  static_cast<double>(qmin[2]) * step[ru]),
+                      cloud.points.rgb()};
+  for (std::size_t k = 0; k < cut.points;) {
+    const Orders orders = chooseOrders(cut, k);
+    std::size_t raw_size = 0;
+    const std::size_t points = packChunk(cut, k, orders, raw_size);
+    if (points == 0) {
+      return {ErrorCode::kCapacityExceeded, "codec: a point does not fit a chunk (bug: budget " +
+                                                std::to_string(data_budget) + ")"};
     }
-    // Morton keys relative to the region's lattice origin, radix-sorted (stable).
-    for (std::size_t k = begin; k < end; ++k) {
-      const uint32_t i = s.order[k];
-      s.keys[k] = morton(static_cast<uint64_t>(s.qx[i] - qmin[ru][0]), static_cast<uint64_t>(s.qy[i] - qmin[ru][1]),
-                         static_cast<uint64_t>(s.qz[i] - qmin[ru][2]));
+    if (Status st = storeChunk(cut, points, raw_size, frame); !st) return st;
+    k += points;
+  }
+  return Status::ok();
+}
+
+// Morton keys of order[begin, end) relative to the region's lattice origin,
+// radix-sorted (stable); the keys and input indices in sorted order (in
+// keys/order or in keys_tmp/order_tmp, as the passes end).
+std::pair<const uint64_t*, const uint32_t*> ChunkEncoder::State::sortByMorton(std::size_t begin, std::size_t end,
+                                                                             const std::array<int64_t, 3>& qmin,
+                                                                             int64_t span) {
+  for (std::size_t k = begin; k < end; ++k) {
+    const uint32_t i = order[k];
+    keys[k] = morton(static_cast<uint64_t>(qx[i] - qmin[0]), static_cast<uint64_t>(qy[i] - qmin[1]),
+                     static_cast<uint64_t>(qz[i] - qmin[2]));
+  }
+  const int key_bits = 3 * std::bit_width(static_cast<uint64_t>(span));
+  uint64_t* k_in = keys.data() + begin;
+  uint64_t* k_out = keys_tmp.data() + begin;
+  uint32_t* o_in = order.data() + begin;
+  uint32_t* o_out = order_tmp.data() + begin;
+  const std::size_t m = end - begin;
+  for (int shift = 0; shift < key_bits; shift += kRadixBits) {
+    std::fill(histogram.begin(), histogram.end(), 0u);
+    const uint64_t mask = (uint64_t{1} << kRadixBits) - 1;
+    for (std::size_t k = 0; k < m; ++k) ++histogram[(k_in[k] >> shift) & mask];
+    uint32_t sum = 0;
+    for (uint32_t& h : histogram) {
+      const uint32_t c = h;
+      h = sum;
+      sum += c;
     }
-    const int key_bits = 3 * std::bit_width(static_cast<uint64_t>(span));
-    uint64_t* k_in = s.keys.data() + begin;
-    uint64_t* k_out = s.keys_tmp.data() + begin;
-    uint32_t* o_in = s.order.data() + begin;
-    uint32_t* o_out = s.order_tmp.data() + begin;
-    const std::size_t m = end - begin;
-    for (int shift = 0; shift < key_bits; shift += kRadixBits) {
-      std::fill(s.histogram.begin(), s.histogram.end(), 0u);
-      const uint64_t mask = (uint64_t{1} << kRadixBits) - 1;
-      for (std::size_t k = 0; k < m; ++k) ++s.histogram[(k_in[k] >> shift) & mask];
-      uint32_t sum = 0;
-      for (uint32_t& h : s.histogram) {
-        const uint32_t c = h;
-        h = sum;
-        sum += c;
-      }
-      for (std::size_t k = 0; k < m; ++k) {
-        const uint32_t dst = s.histogram[(k_in[k] >> shift) & mask]++;
-        k_out[dst] = k_in[k];
-        o_out[dst] = o_in[k];
-      }
-      std::swap(k_in, k_out);
-      std::swap(o_in, o_out);
+    for (std::size_t k = 0; k < m; ++k) {
+      const uint32_t dst = histogram[(k_in[k] >> shift) & mask]++;
+      k_out[dst] = k_in[k];
+      o_out[dst] = o_in[k];
     }
+    std::swap(k_in, k_out);
+    std::swap(o_in, o_out);
+  }
+  return {k_in, o_in};
+}
 
-    // Chunks: greedy along the Morton order.
-    const bool half = r > 0 && s.config.halve_peripheral_chroma;
-    const uint8_t base_flags = half ? kChunkFlagHalfChroma : 0;
-    const wire::Vec3d origin(static_cast<double>(qmin[ru][0]) * s.step[ru], static_cast<double>(qmin[ru][1]) * s.step[ru],
-                             static_cast<double>(qmin[ru][2]) * s.step[ru]);
-    const uint32_t* rgb = cloud.points.rgb();
-    std::size_t k = 0;
-    while (k < m) {
-      // Exp-Golomb orders from the next (up to) 64 points.
-      const std::size_t probe = std::min<std::size_t>(64, m - k);
-      uint64_t* sp = s.sample.data();
-      for (std::size_t j = 1; j < probe; ++j) sp[j - 1] = k_in[k + j] - k_in[k + j - 1];
-      if (half) {
-        uint32_t c0 = rgb[o_in[k]];
-        for (std::size_t j = 1; j < probe; ++j) {
-          const uint32_t c1 = rgb[o_in[k + j]];
-          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(luma(c1) - luma(c0)));
-          sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
-          sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
-          c0 = c1;
-        }
-      } else {
-        Ycocg a = toYcocg(rgb[o_in[k]]);
-        for (std::size_t j = 1; j < probe; ++j) {
-          const Ycocg b = toYcocg(rgb[o_in[k + j]]);
-          sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(b.y - a.y));
-          sp[128 + j - 1] = zigzag9(b.co - a.co);
-          sp[192 + j - 1] = zigzag9(b.cg - a.cg);
-          a = b;
-        }
-      }
-      const int kp = bestOrder(sp, probe - 1, 0, 62);
-      const int kc[3] = {bestOrder(sp + 64, probe - 1, 0, 7), bestOrder(sp + 128, probe - 1, 0, 8),
-                         bestOrder(sp + 192, probe - 1, 0, 8)};
-      uint8_t* raw = s.raw.data();
-      std::memset(raw, 0, s.raw.size());
-      raw[0] = static_cast<uint8_t>(kp);
-      raw[1] = static_cast<uint8_t>(kc[0]), raw[2] = static_cast<uint8_t>(kc[1]), raw[3] = static_cast<uint8_t>(kc[2]);
-      BitWriter bw(raw + kDataHeader);
-      const std::size_t budget_bits = 8 * (s.data_budget - kDataHeader);
-
-      // Greedy along the Morton order: write a point, take it back if it does not fit.
-      std::size_t count = 0;
-      uint8_t p0 = 0;          // previous Y
-      int pfco = 0, pfcg = 0;  // full colour: previous Co, Cg (-255..255)
-      uint8_t pco = 0, pcg = 0;  // halved chroma: the previous pair's Co, Cg
-      for (std::size_t j = k; j < m; ++j) {
-        const BitWriter::Mark before = bw.mark();
-        const uint32_t c = rgb[o_in[j]];
-        if (count == 0) {
-          const std::size_t len = firstCodeBits(k_in[j]) - 6;
-          bw.put(len, 6);
-          if (len > 32) {
-            bw.put(k_in[j] & 0xffffffffu, 32);
-            bw.put(k_in[j] >> 32, static_cast<int>(len - 32));
-          } else {
-            bw.put(k_in[j], static_cast<int>(len));
-          }
-        } else {
-          bw.putEg(k_in[j] - k_in[j - 1], kp);
-        }
-        std::size_t extra = 0;
-        uint8_t n0, nco = pco, ncg = pcg;
-        int nfco = pfco, nfcg = pfcg;
-        if (!half) {
-          const Ycocg v = toYcocg(c);
-          n0 = static_cast<uint8_t>(v.y);
-          nfco = v.co, nfcg = v.cg;
-          bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
-          bw.putEg(zigzag9(nfco - pfco), kc[1]);
-          bw.putEg(zigzag9(nfcg - pfcg), kc[2]);
-        } else {
-          n0 = static_cast<uint8_t>(luma(c));
-          bw.putEg(zigzag8(static_cast<uint8_t>(n0 - p0)), kc[0]);
-          if (count % 2 == 1) {  // the pair's chroma, after its second point
-            const uint32_t c0 = rgb[o_in[j - 1]];
-            nco = pairCo(c0, c), ncg = pairCg(c0, c);
-            bw.putEg(zigzag8(static_cast<uint8_t>(nco - pco)), kc[1]);
-            bw.putEg(zigzag8(static_cast<uint8_t>(ncg - pcg)), kc[2]);
-          } else {
-            extra = egBits(zigzag8(static_cast<uint8_t>(pairCo(c, c) - pco)), kc[1]) +
-                    egBits(zigzag8(static_cast<uint8_t>(pairCg(c, c) - pcg)), kc[2]);
-          }
-        }
-        if (bw.bits() + extra > budget_bits) {
-          bw.rewind(before);
-          break;
-        }
-        p0 = n0, pco = nco, pcg = ncg, pfco = nfco, pfcg = nfcg;
-        ++count;
-      }
-      if (count == 0) {
-        return {ErrorCode::kCapacityExceeded, "codec: a point does not fit a chunk (bug: budget " +
-                                                  std::to_string(s.data_budget) + ")"};
-      }
-      if (half && count % 2 == 1) {  // a lone last point: its own chroma
-        const uint32_t c = rgb[o_in[k + count - 1]];
-        bw.putEg(zigzag8(static_cast<uint8_t>(pairCo(c, c) - pco)), kc[1]);
-        bw.putEg(zigzag8(static_cast<uint8_t>(pairCg(c, c) - pcg)), kc[2]);
-      }
-      bw.finish();
-      const std::size_t raw_size = kDataHeader + (bw.bits() + 7) / 8;
-      const std::size_t points = count;
-      const uint8_t* data = raw;
-      std::size_t data_size = raw_size;
-      uint8_t flags = base_flags;
-      if (s.config.entropy_coding) {
-        const std::size_t z = s.compress(raw_size);
-        if (z != 0) data = s.packed.data(), data_size = z, flags |= kChunkFlagZstd;
-      }
-
-      if (s.chunk_count == s.max_chunks || s.chunk_count == 0xffff) {
-        s.chunk_count = 0;
-        return {ErrorCode::kCapacityExceeded, "codec: frame needs more than " +
-                                                  std::to_string(std::min<std::size_t>(s.max_chunks, 0xffff)) + " chunks"};
-      }
-      s.buildChunk(frame_id, static_cast<uint16_t>(s.chunk_count), static_cast<uint8_t>(r), capture_time_ns, origin,
-                   s.step[ru], static_cast<uint32_t>(points), flags, data, data_size);
-      const std::size_t size = s.fbb.GetSize();
-      if (size > s.config.max_payload) {
-        s.chunk_count = 0;
-        return {ErrorCode::kCapacityExceeded, "codec: chunk of " + std::to_string(size) + " bytes over max_payload (bug)"};
-      }
-      std::memcpy(s.arena.data() + arena_used, s.fbb.GetBufferPointer(), size);
-      s.chunks[s.chunk_count++] = {static_cast<uint32_t>(arena_used), static_cast<uint32_t>(size),
-                                   static_cast<uint32_t>(points), static_cast<uint8_t>(r)};
-      arena_used += alignUp(size, kPayloadAlignment);
-      k += points;
+// Exp-Golomb orders from the next (up to) 64 points.
+Orders ChunkEncoder::State::chooseOrders(const RegionCut& cut, std::size_t k) {
+  const std::size_t probe = std::min<std::size_t>(64, cut.points - k);
+  uint64_t* sp = sample.data();
+  for (std::size_t j = 1; j < probe; ++j) sp[j - 1] = cut.keys[k + j] - cut.keys[k + j - 1];
+  if (cut.half) {
+    uint32_t c0 = cut.rgb[cut.order[k]];
+    for (std::size_t j = 1; j < probe; ++j) {
+      const uint32_t c1 = cut.rgb[cut.order[k + j]];
+      sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(luma(c1) - luma(c0)));
+      sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
+      sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
+      c0 = c1;
+    }
+  } else {
+    Ycocg a = toYcocg(cut.rgb[cut.order[k]]);
+    for (std::size_t j = 1; j < probe; ++j) {
+      const Ycocg b = toYcocg(cut.rgb[cut.order[k + j]]);
+      sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(b.y - a.y));
+      sp[128 + j - 1] = zigzag9(b.co - a.co);
+      sp[192 + j - 1] = zigzag9(b.cg - a.cg);
+      a = b;
     }
   }
+  return {bestOrder(sp, probe - 1, 0, 62),
+          {bestOrder(sp + 64, probe - 1, 0, 7), bestOrder(sp + 128, probe - 1, 0, 8), bestOrder(sp + 192, probe - 1, 0, 8)}};
+}
 
-  // Every chunk now learns the frame's chunk count (the field is stored: placeholder).
-  for (std::size_t c = 0; c < s.chunk_count; ++c) {
-    uint8_t* buf = s.arena.data() + s.chunks[c].offset;
+// Writes a chunk's data into raw: its orders, then the points from k on, greedily
+// along the Morton order while they fit (a point that does not is taken back).
+// The points written, 0 when not even one fits; raw_size its bytes.
+std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, const Orders& orders,
+                                           std::size_t& raw_size) {
+  uint8_t* bytes = raw.data();
+  std::memset(bytes, 0, raw.size());
+  bytes[0] = static_cast<uint8_t>(orders.position);
+  for (std::size_t c = 0; c < 3; ++c) bytes[1 + c] = static_cast<uint8_t>(orders.colour[c]);
+  BitWriter bw(bytes + kDataHeader);
+  const std::size_t budget_bits = 8 * (data_budget - kDataHeader);
+  std::size_t count = 0;
+  ColourPrev prev;
+  for (std::size_t j = k; j < cut.points; ++j) {
+    const BitWriter::Mark before = bw.mark();
+    if (count == 0) {
+      putFirstCode(bw, cut.keys[j]);
+    } else {
+      bw.putEg(cut.keys[j] - cut.keys[j - 1], orders.position);
+    }
+    ColourPrev next = prev;
+    std::size_t extra = 0;
+    if (cut.half) {
+      extra = putHalfColour(bw, cut, j, count, orders, prev, next);
+    } else {
+      putFullColour(bw, cut.rgb[cut.order[j]], orders, prev, next);
+    }
+    if (bw.bits() + extra > budget_bits) {
+      bw.rewind(before);
+      break;
+    }
+    prev = next;
+    ++count;
+  }
+  if (count == 0) return 0;
+  if (cut.half && count % 2 == 1) {  // a lone last point: its own chroma
+    const uint32_t c = cut.rgb[cut.order[k + count - 1]];
+    bw.putEg(zigzag8(static_cast<uint8_t>(pairCo(c, c) - prev.co)), orders.colour[1]);
+    bw.putEg(zigzag8(static_cast<uint8_t>(pairCg(c, c) - prev.cg)), orders.colour[2]);
+  }
+  bw.finish();
+  raw_size = kDataHeader + (bw.bits() + 7) / 8;
+  return count;
+}
+
+// The packed chunk, compressed where that pays, as a PointChunk into the arena.
+Status ChunkEncoder::State::storeChunk(const RegionCut& cut, std::size_t points, std::size_t raw_size,
+                                       FrameInProgress& frame) {
+  const uint8_t* data = raw.data();
+  std::size_t data_size = raw_size;
+  uint8_t flags = cut.half ? kChunkFlagHalfChroma : 0;
+  if (config.entropy_coding) {
+    const std::size_t z = compress(raw_size);
+    if (z != 0) data = packed.data(), data_size = z, flags |= kChunkFlagZstd;
+  }
+  if (chunk_count == max_chunks || chunk_count == 0xffff) {
+    chunk_count = 0;
+    return {ErrorCode::kCapacityExceeded, "codec: frame needs more than " +
+                                              std::to_string(std::min<std::size_t>(max_chunks, 0xffff)) + " chunks"};
+  }
+  const uint8_t region = static_cast<uint8_t>(cut.region);
+  buildChunk(frame.frame_id, static_cast<uint16_t>(chunk_count), region, frame.capture_time_ns, cut.origin,
+             step[region], static_cast<uint32_t>(points), flags, data, data_size);
+  const std::size_t size = fbb.GetSize();
+  if (size > config.max_payload) {
+    chunk_count = 0;
+    return {ErrorCode::kCapacityExceeded, "codec: chunk of " + std::to_string(size) + " bytes over max_payload (bug)"};
+  }
+  std::memcpy(arena.data() + frame.arena_used, fbb.GetBufferPointer(), size);
+  chunks[chunk_count++] = {static_cast<uint32_t>(frame.arena_used), static_cast<uint32_t>(size),
+                           static_cast<uint32_t>(points), region};
+  frame.arena_used += alignUp(size, kPayloadAlignment);
+  return Status::ok();
+}
+
+// Every chunk now learns the frame's chunk count (the field is stored: placeholder).
+Status ChunkEncoder::State::patchChunkCount() {
+  for (std::size_t c = 0; c < chunk_count; ++c) {
+    uint8_t* buf = arena.data() + chunks[c].offset;
     auto* table = reinterpret_cast<flatbuffers::Table*>(flatbuffers::GetMutableRoot<wire::PointChunk>(buf));
-    if (!table->SetField<uint16_t>(wire::PointChunk::VT_CHUNK_COUNT, static_cast<uint16_t>(s.chunk_count), 0)) {
-      s.chunk_count = 0;
+    if (!table->SetField<uint16_t>(wire::PointChunk::VT_CHUNK_COUNT, static_cast<uint16_t>(chunk_count), 0)) {
+      chunk_count = 0;
       return {ErrorCode::kCapacityExceeded, "codec: chunk_count not patchable (bug)"};
     }
   }

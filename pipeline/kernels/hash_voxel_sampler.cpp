@@ -252,6 +252,40 @@ bool HashVoxelSampler::accumulateChunk(const PointCloud& in, std::size_t begin, 
   return true;
 }
 
+// What steps 1-2 found.
+struct HashVoxelSampler::KeyPass {
+  bool fits = true;               // no voxel beyond max_voxels
+  const BadPoint* bad = nullptr;  // the first bad point in point order
+};
+
+// How step 3's sort key packs a voxel: (region, i - lo, j - lo, k - lo), with the
+// voxel's slot below it where both fit one 64-bit word.
+struct HashVoxelSampler::VoxelOrder {
+  int region_shift = 0;  // of the region within the key
+  int key_shift = 0;     // of the key within sort_keys_: the slot's bits when packed, else 0
+  bool packed = false;
+  uint64_t slot_mask = 0;
+};
+
+namespace {
+
+// 1 / voxel size per region; regions outside [1, region_count) get 0: their
+// indices are computed and ignored.
+Status inverseVoxelSizes(int region_count, const std::array<double, kMaxRegions>& voxel_size_m,
+                         std::array<double, 256>& inv_voxel) {
+  for (int r = 1; r < region_count; ++r) {
+    const double v = voxel_size_m[r];
+    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
+      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) + " voxel size " +
+                                               std::to_string(v) + " m is not a positive number"};
+    }
+    inv_voxel[r] = 1.0 / v;
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
 Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                                 SampleCounts& counts, uint32_t* representative) {
@@ -267,17 +301,57 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   if (region_count < 1 || region_count > kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};
   }
-  // Regions outside [1, region_count) get 0: their indices are computed and ignored.
+  // Kept here: the key states point to it while the keys are computed.
   std::array<double, 256> inv_voxel{};
-  for (int r = 1; r < region_count; ++r) {
-    const double v = voxel_size_m[r];
-    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
-      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) + " voxel size " +
-                                               std::to_string(v) + " m is not a positive number"};
-    }
-    inv_voxel[r] = 1.0 / v;
+  if (Status s = inverseVoxelSizes(region_count, voxel_size_m, inv_voxel); !s) return s;
+  startFrame(in, region_count, inv_voxel);
+
+  // 1-2. Keys and checks, then accumulation in place. The first bad point in point
+  //      order wins over everything, then spans, then the voxel count (as the
+  //      reference), so a voxel overflow only stops the accumulation.
+  const int parts = (pool_ != nullptr && pool_->parts() > 1 && n >= 4 * kChunk) ? pool_->parts() : 1;
+  const bool with_representatives = representative != nullptr;
+  const KeyPass pass = parts > 1 ? keysThreaded(in, region, parts, with_representatives)
+                                 : keysInChunks(in, region, region_count, with_representatives);
+  const std::size_t voxels = voxels_;
+  clearTable(voxels);  // the table is empty again for the next frame
+  last_voxels_ = voxels;
+  if (const BadPoint* bad = pass.bad; bad != nullptr) {
+    return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(bad->region) + " point " +
+                                           std::to_string(bad->point) + " has voxel index " +
+                                           std::to_string(bad->value) + " along " + axisName(bad->axis) +
+                                           " (not a finite coordinate within range)"};
+  }
+  RegionLo lo_index{};
+  if (Status s = countAndCheckSpans(region_count, voxel_size_m, counts, lo_index); !s) return s;
+  if (!pass.fits) {
+    return {ErrorCode::kCapacityExceeded,
+            "voxel sampler: more than " + std::to_string(max_voxels_) + " occupied voxels: raise pipeline.max_voxels"};
+  }
+  const std::size_t fovea = counts.in[0];
+  if (fovea + voxels > out.points.capacity()) {
+    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
+                                              " points, capacity is " + std::to_string(out.points.capacity())};
   }
 
+  // 3. The occupied voxels in the reference's key order, after the fovea (untouched
+  //    and in input order).
+  const VoxelOrder order = sortVoxels(region_count, counts, lo_index, voxels);
+  copyFoveaFast(in, region, out, representative);
+  counts.out[0] = static_cast<uint32_t>(fovea);
+  writeVoxels(order, fovea, voxels, out, counts);
+  if (representative != nullptr) {
+    const uint32_t* point_slot = point_slot_.data();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (point_slot[i] != kNoSlot) representative[i] = rank_[point_slot[i]];
+    }
+  }
+  (void)out.points.resize(fovea + voxels);
+  return Status::ok();
+}
+
+// Sizes the table for this frame and resets the cache, the counters and the key states.
+void HashVoxelSampler::startFrame(const PointCloud& in, int region_count, const std::array<double, 256>& inv_voxel) {
   // Start where the previous frame ended (consecutive frames have similar voxel
   // counts), so the steady state does not rehash; the output does not depend on it.
   active_ = std::min(table_key_.size(), std::max(kInitialTableEntries, std::bit_ceil(2 * last_voxels_ + 1)));
@@ -298,78 +372,84 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     st.region_count = region_count;
   }
   for (BadPoint& b : part_bad_) b = BadPoint{};
+}
 
-  // 1-2. Keys and checks, then accumulation in place. The first bad point in point
-  //      order wins over everything, then spans, then the voxel count (as the
-  //      reference), so a voxel overflow only stops the accumulation.
-  const int parts = (pool_ != nullptr && pool_->parts() > 1 && n >= 4 * kChunk) ? pool_->parts() : 1;
-  bool fits = true;
-  const BadPoint* bad = nullptr;
-  if (parts > 1) {
-    KeyJob job{this, &in, region, point_key_.data(), &part_state_, &part_bad_};
-    pool_->run(
-        [](void* ctx, int part, int count) {
-          auto* j = static_cast<KeyJob*>(ctx);
-          const std::size_t n_points = j->in->size();
-          const std::size_t b = WorkerPool::rangeBegin(n_points, part, count);
-          const std::size_t e = WorkerPool::rangeBegin(n_points, part + 1, count);
-          const auto p = static_cast<std::size_t>(part);
-          j->self->computeKeys(*j->in, j->region, b, e, (*j->state)[p], j->keys + b, (*j->bad)[p]);
-        },
-        &job);
-    for (int part = 0; part < parts && bad == nullptr; ++part) {
-      if (part_bad_[static_cast<std::size_t>(part)].bad) bad = &part_bad_[static_cast<std::size_t>(part)];
-    }
-    if (bad == nullptr) {
-      kernels::VoxelKeyState& st = part_state_[0];
-      for (int part = 1; part < parts; ++part) {
-        const kernels::VoxelKeyState& other = part_state_[static_cast<std::size_t>(part)];
-        for (int r = 0; r < 256; ++r) st.histogram[r] += other.histogram[r];
-        for (int r = 0; r < kMaxRegions; ++r) {
-          for (int a = 0; a < 3; ++a) {
-            st.lo[r][a] = std::min(st.lo[r][a], other.lo[r][a]);
-            st.hi[r][a] = std::max(st.hi[r][a], other.hi[r][a]);
-          }
-        }
-      }
-      fits = representative ? accumulate<true>(in, 0, n, point_key_.data())
-                            : accumulate<false>(in, 0, n, point_key_.data());
-    }
-  } else {
-    const uint32_t* histogram = part_state_[0].histogram;
-    const auto sampledSoFar = [&] {
-      uint64_t total = 0;
-      for (int r = 1; r < region_count; ++r) total += histogram[r];
-      return total;
-    };
-    for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
-      const std::size_t c1 = std::min(n, c0 + kChunk);
-      const uint64_t sampled_before = sampledSoFar();
-      if (!computeKeys(in, region, c0, c1, part_state_[0], chunk_key_.data(), part_bad_[0])) {
-        bad = &part_bad_[0];
-        break;
-      }
-      if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
-        if (representative) std::fill(point_slot_.begin() + c0, point_slot_.begin() + c1, kNoSlot);
-        continue;
-      }
-      if (fits) {
-        fits = representative ? accumulate<true>(in, c0, c1, chunk_key_.data())
-                              : accumulate<false>(in, c0, c1, chunk_key_.data());
+// Step 1 on the pool's threads over contiguous ranges (keys kept for every point),
+// then step 2 over the whole cloud.
+HashVoxelSampler::KeyPass HashVoxelSampler::keysThreaded(const PointCloud& in, const uint8_t* region, int parts,
+                                                         bool with_representatives) {
+  KeyPass pass;
+  KeyJob job{this, &in, region, point_key_.data(), &part_state_, &part_bad_};
+  pool_->run(
+      [](void* ctx, int part, int count) {
+        auto* j = static_cast<KeyJob*>(ctx);
+        const std::size_t n_points = j->in->size();
+        const std::size_t b = WorkerPool::rangeBegin(n_points, part, count);
+        const std::size_t e = WorkerPool::rangeBegin(n_points, part + 1, count);
+        const auto p = static_cast<std::size_t>(part);
+        j->self->computeKeys(*j->in, j->region, b, e, (*j->state)[p], j->keys + b, (*j->bad)[p]);
+      },
+      &job);
+  for (int part = 0; part < parts && pass.bad == nullptr; ++part) {
+    if (part_bad_[static_cast<std::size_t>(part)].bad) pass.bad = &part_bad_[static_cast<std::size_t>(part)];
+  }
+  if (pass.bad != nullptr) return pass;
+  mergePartStates(parts);
+  pass.fits = with_representatives ? accumulate<true>(in, 0, in.size(), point_key_.data())
+                                   : accumulate<false>(in, 0, in.size(), point_key_.data());
+  return pass;
+}
+
+// The parts' region histograms and index ranges, into part_state_[0].
+void HashVoxelSampler::mergePartStates(int parts) {
+  kernels::VoxelKeyState& st = part_state_[0];
+  for (int part = 1; part < parts; ++part) {
+    const kernels::VoxelKeyState& other = part_state_[static_cast<std::size_t>(part)];
+    for (int r = 0; r < 256; ++r) st.histogram[r] += other.histogram[r];
+    for (int r = 0; r < kMaxRegions; ++r) {
+      for (int a = 0; a < 3; ++a) {
+        st.lo[r][a] = std::min(st.lo[r][a], other.lo[r][a]);
+        st.hi[r][a] = std::max(st.hi[r][a], other.hi[r][a]);
       }
     }
   }
-  const std::size_t voxels = voxels_;
-  clearTable(voxels);  // the table is empty again for the next frame
-  last_voxels_ = voxels;
-  if (bad != nullptr) {
-    return {ErrorCode::kRangeExceeded, "voxel sampler: region " + std::to_string(bad->region) + " point " +
-                                           std::to_string(bad->point) + " has voxel index " +
-                                           std::to_string(bad->value) + " along " + axisName(bad->axis) +
-                                           " (not a finite coordinate within range)"};
+}
+
+// Steps 1-2 a chunk of kChunk points at a time, on this thread.
+HashVoxelSampler::KeyPass HashVoxelSampler::keysInChunks(const PointCloud& in, const uint8_t* region,
+                                                         int region_count, bool with_representatives) {
+  KeyPass pass;
+  const std::size_t n = in.size();
+  const uint32_t* histogram = part_state_[0].histogram;
+  const auto sampledSoFar = [&] {
+    uint64_t total = 0;
+    for (int r = 1; r < region_count; ++r) total += histogram[r];
+    return total;
+  };
+  for (std::size_t c0 = 0; c0 < n; c0 += kChunk) {
+    const std::size_t c1 = std::min(n, c0 + kChunk);
+    const uint64_t sampled_before = sampledSoFar();
+    if (!computeKeys(in, region, c0, c1, part_state_[0], chunk_key_.data(), part_bad_[0])) {
+      pass.bad = &part_bad_[0];
+      break;
+    }
+    if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
+      if (with_representatives) std::fill(point_slot_.begin() + c0, point_slot_.begin() + c1, kNoSlot);
+      continue;
+    }
+    if (pass.fits) {
+      pass.fits = with_representatives ? accumulate<true>(in, c0, c1, chunk_key_.data())
+                                       : accumulate<false>(in, c0, c1, chunk_key_.data());
+    }
   }
+  return pass;
+}
+
+// The points per region (counts.in), and each sampled region's smallest voxel
+// index per axis; an error for a region wider than the reference allows.
+Status HashVoxelSampler::countAndCheckSpans(int region_count, const std::array<double, kMaxRegions>& voxel_size_m,
+                                            SampleCounts& counts, RegionLo& lo_index) const {
   const kernels::VoxelKeyState& st = part_state_[0];
-  int64_t lo_index[kMaxRegions][3] = {};
   for (int r = 0; r < region_count; ++r) counts.in[r] = st.histogram[r];
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
@@ -384,23 +464,19 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
       }
     }
   }
-  if (!fits) {
-    return {ErrorCode::kCapacityExceeded,
-            "voxel sampler: more than " + std::to_string(max_voxels_) + " occupied voxels: raise pipeline.max_voxels"};
-  }
-  const std::size_t fovea = counts.in[0];
-  if (fovea + voxels > out.points.capacity()) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
-                                              " points, capacity is " + std::to_string(out.points.capacity())};
-  }
+  return Status::ok();
+}
 
-  // 3. The occupied voxels in the reference's key order (keys are unique: no ties).
-  //    Within the span, k - lo is (wrapped k - wrapped lo) mod 2^20: no index is recomputed.
-  //    The sort key packs (region, i - lo, j - lo, k - lo) with as many bits per axis as
-  //    the widest region needs, which orders like the reference's 20-bit fields and
-  //    leaves the radix sort fewer bits that vary. Where the key and the slot fit one
-  //    64-bit word together (camera frames do), the slot rides below the key and
-  //    one array is sorted; otherwise (key, slot) pairs are.
+// Sorts the occupied voxels into the reference's key order (keys are unique: no ties).
+// Within the span, k - lo is (wrapped k - wrapped lo) mod 2^20: no index is recomputed.
+// The sort key packs (region, i - lo, j - lo, k - lo) with as many bits per axis as
+// the widest region needs, which orders like the reference's 20-bit fields and
+// leaves the radix sort fewer bits that vary. Where the key and the slot fit one
+// 64-bit word together (camera frames do), the slot rides below the key and
+// one array is sorted; otherwise (key, slot) pairs are.
+HashVoxelSampler::VoxelOrder HashVoxelSampler::sortVoxels(int region_count, const SampleCounts& counts,
+                                                          const RegionLo& lo_index, std::size_t voxels) {
+  const kernels::VoxelKeyState& st = part_state_[0];
   int width[3] = {0, 0, 0};
   for (int r = 1; r < region_count; ++r) {
     if (counts.in[r] == 0) continue;
@@ -410,42 +486,44 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     }
   }
   const int shift[3] = {width[1] + width[2], width[2], 0};
-  const int region_shift = width[0] + width[1] + width[2];
-  const int key_bits = region_shift + static_cast<int>(std::bit_width(static_cast<unsigned>(region_count - 1)));
+  VoxelOrder order;
+  order.region_shift = width[0] + width[1] + width[2];
+  const int key_bits = order.region_shift + static_cast<int>(std::bit_width(static_cast<unsigned>(region_count - 1)));
   const int slot_bits = std::max(1, static_cast<int>(std::bit_width(voxels)));
-  const bool packed = key_bits + slot_bits <= 64;
-  const int key_shift = packed ? slot_bits : 0;
+  order.packed = key_bits + slot_bits <= 64;
+  order.key_shift = order.packed ? slot_bits : 0;
+  order.slot_mask = (uint64_t{1} << slot_bits) - 1;
   for (std::size_t s = 0; s < voxels; ++s) {
     const uint64_t hash_key = voxel_key_[s];
     const auto r = static_cast<uint8_t>(hash_key >> (3 * kVoxelAxisBits));
-    uint64_t key = uint64_t{r} << region_shift;
+    uint64_t key = uint64_t{r} << order.region_shift;
     for (int a = 0; a < 3; ++a) {
       const uint64_t wrapped = (hash_key >> ((2 - a) * kVoxelAxisBits)) & kAxisMask;
       key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift[a];
     }
-    if (packed) {
-      sort_keys_[s] = (key << key_shift) | s;
+    if (order.packed) {
+      sort_keys_[s] = (key << order.key_shift) | s;
     } else {
       sort_keys_[s] = key;
       sort_slot_[s] = static_cast<uint32_t>(s);
     }
   }
-  if (packed) {
+  if (order.packed) {
     radixSortBits(sort_keys_.data(), sort_keys_scratch_.data(), voxels, slot_bits, key_bits);
   } else {
     radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(),
                    voxels);
   }
-  const uint64_t slot_mask = (uint64_t{1} << slot_bits) - 1;
+  return order;
+}
+
+// One point per voxel, in the sorted order after the fovea's, with reduceVoxel()'s
+// final expressions; rank_ keeps each slot's place for the representatives.
+void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, std::size_t voxels,
+                                   FoveatedCloud& out, SampleCounts& counts) {
   const auto slotAt = [&](std::size_t q) {
-    return packed ? static_cast<uint32_t>(sort_keys_[q] & slot_mask) : sort_slot_[q];
+    return order.packed ? static_cast<uint32_t>(sort_keys_[q] & order.slot_mask) : sort_slot_[q];
   };
-
-  // The fovea, untouched and in input order.
-  copyFoveaFast(in, region, out, representative);
-  counts.out[0] = static_cast<uint32_t>(fovea);
-
-  // One point per voxel, with reduceVoxel()'s final expressions.
   for (std::size_t q = 0; q < voxels; ++q) {
     const std::size_t o = fovea + q;
     const uint32_t slot = slotAt(q);
@@ -456,7 +534,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     }
     rank_[slot] = static_cast<uint32_t>(o);
     const Acc& a = acc_[slot];
-    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (key_shift + region_shift));
+    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (order.key_shift + order.region_shift));
     const auto cnt = static_cast<uint64_t>(a.n);
     const double inv_n = 1.0 / static_cast<double>(cnt);
     out.points.x()[o] = std::clamp(static_cast<float>(a.fx + a.sx * inv_n), a.lo[0], a.hi[0]);
@@ -469,14 +547,6 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
     out.weight[o] = a.n;
     ++counts.out[r];
   }
-  if (representative != nullptr) {
-    const uint32_t* point_slot = point_slot_.data();
-    for (std::size_t i = 0; i < n; ++i) {
-      if (point_slot[i] != kNoSlot) representative[i] = rank_[point_slot[i]];
-    }
-  }
-  (void)out.points.resize(fovea + voxels);
-  return Status::ok();
 }
 
 }  // namespace fovea::pipeline

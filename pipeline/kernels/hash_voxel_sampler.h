@@ -100,6 +100,20 @@ class HashVoxelSampler {
   static constexpr uint32_t kNoSlot = UINT32_MAX;
 
   struct KeyJob;
+  struct KeyPass;
+  struct VoxelOrder;
+  using RegionLo = std::array<std::array<int64_t, 3>, kMaxRegions>;  // smallest voxel index per region and axis
+
+  // sample()'s steps, in order.
+  void startFrame(const PointCloud& in, int region_count, const std::array<double, 256>& inv_voxel);
+  KeyPass keysThreaded(const PointCloud& in, const uint8_t* region, int parts, bool with_representatives);
+  void mergePartStates(int parts);
+  KeyPass keysInChunks(const PointCloud& in, const uint8_t* region, int region_count, bool with_representatives);
+  Status countAndCheckSpans(int region_count, const std::array<double, kMaxRegions>& voxel_size_m,
+                            SampleCounts& counts, RegionLo& lo_index) const;
+  VoxelOrder sortVoxels(int region_count, const SampleCounts& counts, const RegionLo& lo_index, std::size_t voxels);
+  void writeVoxels(const VoxelOrder& order, std::size_t fovea, std::size_t voxels, FoveatedCloud& out,
+                   SampleCounts& counts);
   // Keys of points [begin, end) into keys[0, end - begin), with the scalar code for
   // the points the SIMD kernel leaves. False at the first bad point (in `bad`).
   bool computeKeys(const PointCloud& in, const uint8_t* region, std::size_t begin, std::size_t end,

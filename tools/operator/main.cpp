@@ -238,14 +238,484 @@ std::optional<std::array<double, 3>> array3(const std::optional<net::Vec3>& v) {
   return std::array<double, 3>{v->x, v->y, v->z};
 }
 
+// A step that ends the program returns its exit code; nullopt: carry on.
+using Exit = std::optional<int>;
+
+int failure(const char* what, const Status& s) {
+  std::fprintf(stderr, "fovea-operator: %s%s\n", what, s.message().c_str());
+  return kExitFailure;
+}
+
+// Bad arguments are the user's (kExitUsage); anything else is the machine's.
+int startFailure(const Status& s) {
+  std::fprintf(stderr, "fovea-operator: %s\n", s.message().c_str());
+  return s.code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
+}
+
+bool wantsHelp(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) return true;
+  }
+  return false;
+}
+
+// What the operator sets up before its first hello. In this order, so that
+// they are torn down in the reverse one.
+struct Station {
+  std::optional<tools::GazeScript> script;
+  net::OperatorLinkConfig link_config;
+  std::optional<net::FrameAssembler> assembler;
+  std::unique_ptr<tools::ViewServer> view;
+  std::ofstream frame_log;
+};
+
+Exit loadGazeScript(const Options& opt, Station& station) {
+  if (opt.gaze.empty()) return std::nullopt;
+  Result<tools::GazeScript> parsed = tools::GazeScript::parse(opt.gaze);
+  if (!parsed) return startFailure(parsed.status());
+  station.script = std::move(parsed.value());
+  return std::nullopt;
+}
+
+Exit configureLink(const Options& opt, net::OperatorLinkConfig& config) {
+  if (opt.key_file) {
+    Result<net::LoadedKey> key = net::loadKeyFile(*opt.key_file);
+    if (!key) return failure("--key-file: ", key.status());
+    if (!key->warning.empty()) std::fprintf(stderr, "fovea-operator: warning: %s\n", key->warning.c_str());
+    config.key = key->key;
+  }
+  config.insecure = opt.insecure;
+  config.name = opt.name;
+  config.budget_bytes_per_s = static_cast<uint64_t>(opt.budget_mbps * 1e6);
+  config.mtu_bytes = static_cast<uint32_t>(opt.mtu);
+  return std::nullopt;
+}
+
+Exit createPlyDir(const Options& opt) {
+  if (opt.ply_dir.empty()) return std::nullopt;
+  std::error_code ec;
+  std::filesystem::create_directories(opt.ply_dir, ec);
+  if (ec) {
+    std::fprintf(stderr, "fovea-operator: --save-ply: cannot create '%s': %s\n", opt.ply_dir.c_str(), ec.message().c_str());
+    return kExitFailure;
+  }
+  return std::nullopt;
+}
+
+Exit startViewer(const Options& opt, Station& station) {
+  if (opt.view.empty()) return std::nullopt;
+  tools::ViewServerConfig vc;
+  vc.listen = opt.view;
+  vc.max_tabs = static_cast<std::size_t>(opt.view_tabs);
+  vc.max_points = static_cast<std::size_t>(opt.max_points);
+  vc.gaze_hz = opt.gaze_hz;
+  vc.script = opt.gaze;
+  if (station.script) {
+    const tools::GazePoint g = station.script->at(0);
+    const Eigen::Vector3d target = g.origin_m + 2.0 * g.direction;
+    vc.initial_eye = std::array<double, 6>{g.origin_m.x(), g.origin_m.y(), g.origin_m.z(), target.x(), target.y(), target.z()};
+  }
+  Result<std::unique_ptr<tools::ViewServer>> started = tools::ViewServer::start(vc);
+  if (!started) return startFailure(started.status());
+  station.view = std::move(started.value());
+  if (station.view->url().rfind("http://127.", 0) != 0 || opt.view.rfind("0.0.0.0", 0) == 0) {
+    std::fprintf(stderr, "fovea-operator: warning: the viewer listens on %s: whoever reaches it sees the stream and steers the gaze\n",
+                 opt.view.c_str());
+  }
+  std::printf("viewer: open %s\n", station.view->url().c_str());
+  std::fflush(stdout);
+  return std::nullopt;
+}
+
+Exit openFrameLog(const Options& opt, std::ofstream& frame_log) {
+  if (opt.frame_log_path.empty()) return std::nullopt;
+  frame_log.open(opt.frame_log_path);
+  frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received\n";
+  if (!frame_log) {
+    std::fprintf(stderr, "fovea-operator: --frame-log: cannot write '%s'\n", opt.frame_log_path.c_str());
+    return kExitFailure;
+  }
+  return std::nullopt;
+}
+
+// Everything the station sets up, in the order it always has (the first failure is the one reported).
+Exit setUp(const Options& opt, Station& station) {
+  if (Exit e = loadGazeScript(opt, station)) return e;
+  if (Exit e = configureLink(opt, station.link_config)) return e;
+  if (Exit e = createPlyDir(opt)) return e;
+  // Room for the largest frame: the assembler refuses what does not fit, and counts it.
+  Result<net::FrameAssembler> assembler = net::FrameAssembler::create(static_cast<std::size_t>(opt.max_points));
+  if (!assembler) return failure("", assembler.status());
+  station.assembler.emplace(std::move(assembler.value()));
+  if (Exit e = startViewer(opt, station)) return e;
+  return openFrameLog(opt, station.frame_log);
+}
+
+// One session with the robot: its link and its clocks.
+struct Session {
+  explicit Session(net::OperatorLink& l) : link(l) {}
+
+  net::OperatorLink& link;
+  bool shared_clock = false;
+  std::optional<int64_t> clock_offset_ns;  // robot minus local
+  // What a packet capture adds to each UDP payload: the IP and UDP headers.
+  std::size_t ip_udp_header_bytes = 0;
+  int64_t next_gaze_ns = 0;
+  int64_t next_live_ns = 0;
+  int64_t live_start_ns = 0;
+  uint64_t lost_reported = 0;
+  uint64_t last_frame_id = 0;
+};
+
+// The run over all sessions: the figures and what the steps share.
+class OperatorRun {
+ public:
+  OperatorRun(const Options& opt, Station& station)
+      : opt_(opt),
+        station_(station),
+        assembler_(*station.assembler),
+        view_(station.view.get()),
+        splat_sizer_(net::CodecConfig{}.periphery_step_ratio),
+        start_ns_(monotonicNs()),
+        end_ns_(opt.duration_s > 0 ? start_ns_ + static_cast<int64_t>(opt.duration_s * 1e9) : INT64_MAX),
+        gaze_period_ns_(static_cast<int64_t>(1e9 / opt.gaze_hz)),
+        robot_address_(opt.connect) {}
+
+  // Without the viewer: one session, as before. With it: the page stays up and
+  // the operator reconnects until it is stopped (a robot restarting, refusing
+  // while busy, or not yet up).
+  Exit runSessions();
+  // Prints the summary and writes --summary; the exit code.
+  int finish();
+
+ private:
+  Exit connectFailed(const Status& status);
+  void runSession(net::OperatorLink& link);
+  Session beginSession(net::OperatorLink& link);
+  void sendGaze(Session& s, int64_t now);
+  void reportLive(Session& s, int64_t now);
+  void publishFigures(const Session& s, const tools::LiveFigures& live);
+  void handleDatagram(Session& s, const net::Received& received);
+  void handleReady(Session& s);
+  void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs);
+  void saveFramePly(const net::AssembledFrame& f);
+  void endSession(Session& s);
+  std::string viewerSummary() const;
+  Exit writeSummaryJson(double seconds, const std::string& view_json) const;
+
+  void publishState(tools::LinkState state, const std::string& detail) {
+    if (view_) view_->publishState(tools::stateJson(state, detail, robot_address_));
+  }
+  // Waits up to ms, or less when stopped; false when stopped or out of time.
+  bool pause(int ms) const {
+    for (int i = 0; i < ms / 50 && g_stop == 0 && monotonicNs() < end_ns_; ++i) {
+      const timespec t{0, 50'000'000};
+      nanosleep(&t, nullptr);
+    }
+    return g_stop == 0 && monotonicNs() < end_ns_;
+  }
+
+  const Options& opt_;
+  Station& station_;
+  net::FrameAssembler& assembler_;
+  tools::ViewServer* view_;  // null without --view
+  tools::OperatorStats stats_;
+  tools::SplatSizer splat_sizer_;
+  const int64_t start_ns_;
+  const int64_t end_ns_;
+  const int64_t gaze_period_ns_;
+  uint64_t ply_written_ = 0, ply_failed_ = 0, gaze_sent_ = 0, sessions_ = 0;
+  std::optional<net::GazeSample> last_sent_;
+  std::optional<tools::ViewerGaze> last_shown_;
+  tools::GazePoint last_gaze_;
+  bool robot_said_bye_ = false;
+  std::string robot_address_;
+  std::optional<net::StatusReport> last_status_;
+  net::OperatorLinkCounters link_total_{};
+};
+
+Exit OperatorRun::runSessions() {
+  while (g_stop == 0 && monotonicNs() < end_ns_) {
+    publishState(tools::LinkState::kConnecting, "saying hello to " + opt_.connect);
+    Result<std::unique_ptr<net::OperatorLink>> connected = net::OperatorLink::connect(opt_.connect, station_.link_config);
+    if (!connected) {
+      if (Exit e = connectFailed(connected.status())) return e;
+      if (!pause(1000)) break;
+      continue;
+    }
+    runSession(*connected.value());
+    if (!view_ || g_stop != 0 || monotonicNs() >= end_ns_) break;
+    const std::string gone = robot_said_bye_ ? "the robot ended the session" : "the session ended (the robot went silent)";
+    std::fprintf(stderr, "fovea-operator: %s; reconnecting\n", gone.c_str());
+    publishState(tools::LinkState::kRobotGone, gone);
+    if (!pause(1000)) break;
+  }
+  return std::nullopt;
+}
+
+// Without the viewer a failed hello ends the run; with it, only bad arguments do.
+Exit OperatorRun::connectFailed(const Status& status) {
+  const std::string& why = status.message();
+  if (!view_) return startFailure(status);
+  if (status.code() == ErrorCode::kInvalidArgument) {
+    std::fprintf(stderr, "fovea-operator: %s\n", why.c_str());
+    return kExitUsage;
+  }
+  const bool refused = why.find(" refused (") != std::string::npos;
+  std::fprintf(stderr, "fovea-operator: %s; trying again in 1 s\n", why.c_str());
+  publishState(refused ? tools::LinkState::kRefused : tools::LinkState::kConnecting, why);
+  return std::nullopt;
+}
+
+void OperatorRun::runSession(net::OperatorLink& link) {
+  ++sessions_;
+  Session s = beginSession(link);
+  while (g_stop == 0 && !robot_said_bye_ && link.sessionActive()) {
+    const int64_t now = monotonicNs();
+    if (now >= end_ns_) break;
+    if (now >= s.next_gaze_ns) sendGaze(s, now);
+    if (now >= s.next_live_ns) reportLive(s, now);
+    const int64_t wake_ns = std::min({s.next_gaze_ns, s.next_live_ns, end_ns_});
+    const int timeout_ms = static_cast<int>(std::clamp<int64_t>((wake_ns - now + 999'999) / 1'000'000, 0, 1000));
+    const std::optional<net::Received> received = link.receive(timeout_ms);
+    if (received) handleDatagram(s, *received);
+  }
+  endSession(s);
+}
+
+Session OperatorRun::beginSession(net::OperatorLink& link) {
+  Session s(link);
+  if (!link.notice().empty()) std::fprintf(stderr, "fovea-operator: *** %s ***\n", link.notice().c_str());
+  // Latency compares the robot's capture stamp with this host's arrival time. On
+  // one host the clocks are one; across hosts the robot's clock is estimated from
+  // its status stamps: robot = local + offset, offset = stamp + RTT/2 - arrival.
+  robot_address_ = link.robot().toString();
+  s.shared_clock = opt_.clock == "shared" ||
+                   (opt_.clock == "auto" && (robot_address_.rfind("127.", 0) == 0 || robot_address_.rfind("[::1]", 0) == 0));
+  if (s.shared_clock) s.clock_offset_ns = 0;
+  std::printf("connected to %s: MTU %u, budget %.2f MB/s, receive buffer %d KiB; latency on %s\n",
+              robot_address_.c_str(), link.mtuBytes(), static_cast<double>(link.budgetBytesPerS()) / 1e6,
+              link.receiveBufferBytes() / 1024,
+              s.shared_clock ? "one clock" : "the robot's clock estimated from its status and round trip");
+  std::fflush(stdout);
+  publishState(tools::LinkState::kStreaming, "");
+  s.ip_udp_header_bytes = robot_address_.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
+  const int64_t session_start_ns = monotonicNs();
+  s.next_gaze_ns = session_start_ns;
+  s.next_live_ns = session_start_ns + 1'000'000'000;
+  s.live_start_ns = session_start_ns;
+  robot_said_bye_ = false;
+  return s;
+}
+
+void OperatorRun::sendGaze(Session& s, int64_t now) {
+  GazeChoice choice = chooseGaze(station_.script, view_, now - start_ns_, last_sent_);
+  choice.sample.feedback.last_frame_id = s.last_frame_id;
+  if (s.link.sendGaze(choice.sample)) {
+    ++gaze_sent_;
+    last_sent_ = choice.sample;
+    last_shown_ = choice.viewer;
+    if (choice.viewer) {
+      const net::GazeSample& g = choice.sample;
+      last_gaze_.origin_m = {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z};
+      last_gaze_.direction = {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z};
+    }
+  }
+  s.next_gaze_ns += gaze_period_ns_;
+  if (s.next_gaze_ns < now) s.next_gaze_ns = now + gaze_period_ns_;  // fell behind: no burst to catch up
+}
+
+// Once a second: the live line, and the viewer's figures.
+void OperatorRun::reportLive(Session& s, int64_t now) {
+  if (const uint64_t lost = s.link.counters().datagrams_lost; lost > s.lost_reported) {
+    stats_.lost(lost - s.lost_reported);
+    s.lost_reported = lost;
+  }
+  const tools::LiveFigures live = stats_.takeWindow(static_cast<double>(now - s.live_start_ns) * 1e-9);
+  if (!opt_.quiet) {
+    std::printf("%s\n", tools::liveLine(live).c_str());
+    std::fflush(stdout);
+  }
+  if (view_) publishFigures(s, live);
+  s.live_start_ns = now;
+  s.next_live_ns += 1'000'000'000;
+}
+
+void OperatorRun::publishFigures(const Session& s, const tools::LiveFigures& live) {
+  tools::ViewerFigures figures;
+  figures.fps = live.fps;
+  figures.wire_mb_per_s = live.wire_mb_per_s;
+  figures.latency_p50_ms = live.latency_p50_ms;
+  figures.latency_p99_ms = live.latency_p99_ms;
+  figures.datagrams_lost = live.lost;
+  std::size_t regions = live.points_per_region.size();
+  while (regions > 0 && live.points_per_region[regions - 1] == 0) --regions;
+  figures.points_per_region.assign(live.points_per_region.begin(), live.points_per_region.begin() + regions);
+  figures.gaze_mode = view_->gazeMode();
+  figures.gaze_sent = gaze_sent_;
+  figures.gaze_last = last_shown_;
+  if (const auto& status = s.link.lastStatus()) {
+    if (status->gaze_age_ns >= 0) figures.robot_gaze_age_ms = static_cast<double>(status->gaze_age_ns) * 1e-6;
+    if (status->rtt_ns >= 0) figures.robot_rtt_ms = static_cast<double>(status->rtt_ns) * 1e-6;
+    figures.robot_gaze_origin_m = array3(status->gaze_origin_m);
+    figures.robot_gaze_direction = array3(status->gaze_direction);
+  }
+  view_->publishFigures(std::move(figures));
+}
+
+void OperatorRun::handleDatagram(Session& s, const net::Received& received) {
+  stats_.datagram(received.payload.size() + net::kDatagramOverhead, s.ip_udp_header_bytes);
+  switch (received.type) {
+    // The assembler's ready frames are those of its last call: look at them
+    // right after a chunk or summary only (after any other datagram they
+    // would be counted again).
+    case net::MessageType::kChunk:
+      (void)assembler_.addChunk(received.payload, received.received_ns);  // failures are counted by the assembler
+      handleReady(s);
+      break;
+    case net::MessageType::kFrameSummary:
+      (void)assembler_.addSummary(received.payload);
+      handleReady(s);
+      break;
+    case net::MessageType::kBye:
+      robot_said_bye_ = true;
+      break;
+    case net::MessageType::kStatus:
+      // The link has decoded it (and echoes its stamp); the round trip the robot
+      // measured from earlier echoes dates the stamp.
+      if (!s.shared_clock) {
+        if (const auto& status = s.link.lastStatus(); status && status->rtt_ns >= 0) {
+          s.clock_offset_ns = tools::estimateClockOffsetNs(status->robot_stamp_ns, status->rtt_ns, received.received_ns);
+        }
+      }
+      break;
+    default:
+      break;
+  }
+}
+
+void OperatorRun::handleReady(Session& s) {
+  for (std::size_t i = 0; i < assembler_.readyCount(); ++i) {
+    const net::AssembledFrame& f = assembler_.ready(i);
+    tools::FrameObservation obs;
+    obs.frame_id = f.frame_id;
+    // Capture to the arrival of the frame's last chunk (decoding it takes
+    // microseconds); unknown (NaN, left out of the quantiles) until the
+    // robot's clock is estimated.
+    obs.latency_ms = s.clock_offset_ns ? static_cast<double>(f.last_chunk_received_ns + *s.clock_offset_ns -
+                                                             static_cast<int64_t>(f.capture_time_ns)) * 1e-6
+                                       : std::numeric_limits<double>::quiet_NaN();
+    for (std::size_t r = 0; r < obs.points_per_region.size(); ++r) {
+      obs.points_per_region[r] = f.points[r];
+      obs.chunks_received += f.chunks_received[r];
+      obs.chunks_expected += f.chunks_expected[r];
+    }
+    stats_.frame(obs);
+    if (station_.frame_log) logFrame(f, obs);
+    s.last_frame_id = f.frame_id;
+    if (view_) view_->publishFrame(tools::packViewFrame(f, splat_sizer_.sizes(f), view_->frameBuffer()));
+    if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
+  }
+}
+
+void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs) {
+  uint32_t points = 0;
+  for (uint32_t p : obs.points_per_region) points += p;
+  station_.frame_log << f.frame_id << ',' << f.capture_time_ns << ',' << f.last_chunk_received_ns << ','
+                     << (std::isnan(obs.latency_ms) ? std::string() : std::to_string(std::llround(obs.latency_ms * 1e3)))
+                     << ',' << points << ',' << obs.chunks_received << ',' << obs.chunks_expected << ','
+                     << (f.summary_received ? 1 : 0) << '\n';
+}
+
+void OperatorRun::saveFramePly(const net::AssembledFrame& f) {
+  io::PlyWriteOptions ply;
+  ply.double_coords = true;
+  const std::string path = opt_.ply_dir + "/frame_" + std::to_string(f.frame_id) + ".ply";
+  if (io::writePly(path, f.cloud->points, f.cloud->region.data(), ply).isOk()) {
+    ++ply_written_;
+  } else {
+    ++ply_failed_;
+  }
+}
+
+void OperatorRun::endSession(Session& s) {
+  net::OperatorLink& link = s.link;
+  assembler_.flush();
+  handleReady(s);
+  if (const uint64_t lost = link.counters().datagrams_lost; lost > s.lost_reported) stats_.lost(lost - s.lost_reported);
+  last_status_ = link.lastStatus();
+  const net::OperatorLinkCounters& lc = link.counters();
+  link_total_.datagrams_lost += lc.datagrams_lost;
+  link_total_.dropped.add(lc.dropped);
+  if (!robot_said_bye_ && link.sessionActive()) link.bye("operator done");
+}
+
+int OperatorRun::finish() {
+  const double seconds = static_cast<double>(monotonicNs() - start_ns_) * 1e-9;
+  const net::FrameAssembler::Counters& ac = assembler_.counters();
+  std::printf("\nsummary: %llu frames in %.1f s, %llu datagrams (%llu lost, %llu dropped as invalid), %llu gaze samples sent\n",
+              static_cast<unsigned long long>(stats_.frames()), seconds,
+              static_cast<unsigned long long>(stats_.datagrams()), static_cast<unsigned long long>(link_total_.datagrams_lost),
+              static_cast<unsigned long long>(link_total_.dropped.total()), static_cast<unsigned long long>(gaze_sent_));
+  std::printf("  chunks: %llu decoded, %llu bad, %llu late, %llu duplicate%s\n",
+              static_cast<unsigned long long>(ac.chunks), static_cast<unsigned long long>(ac.bad_chunks),
+              static_cast<unsigned long long>(ac.late_chunks), static_cast<unsigned long long>(ac.duplicate_chunks),
+              robot_said_bye_ ? "; the robot ended the session" : "");
+  if (!opt_.ply_dir.empty()) {
+    std::printf("  wrote %llu frames to %s%s\n", static_cast<unsigned long long>(ply_written_), opt_.ply_dir.c_str(),
+                ply_failed_ ? " (some failed)" : "");
+  }
+  const std::string view_json = viewerSummary();
+  if (Exit e = writeSummaryJson(seconds, view_json)) return *e;
+  return stats_.frames() > 0 ? kExitOk : kExitFailure;
+}
+
+// Prints the viewer's line of the summary; its part of --summary's JSON ("" without --view).
+std::string OperatorRun::viewerSummary() const {
+  if (!view_) return {};
+  const tools::ViewServerCounters vc = view_->counters();
+  std::printf("  viewer: %llu tabs served (%llu refused), %llu frames published, %llu sent to tabs, %llu dropped for slow tabs, "
+              "%llu malformed messages, %llu gaze samples from tabs\n",
+              static_cast<unsigned long long>(vc.tabs_served), static_cast<unsigned long long>(vc.tabs_refused),
+              static_cast<unsigned long long>(vc.frames_published), static_cast<unsigned long long>(vc.frames_sent),
+              static_cast<unsigned long long>(vc.frames_dropped), static_cast<unsigned long long>(vc.malformed),
+              static_cast<unsigned long long>(vc.gaze_received));
+  return ", \"sessions\": " + std::to_string(sessions_) + ", \"viewer\": {\"tabs_served\": " +
+         std::to_string(vc.tabs_served) + ", \"tabs_refused\": " + std::to_string(vc.tabs_refused) +
+         ", \"frames_published\": " + std::to_string(vc.frames_published) + ", \"frames_sent\": " +
+         std::to_string(vc.frames_sent) + ", \"frames_dropped\": " + std::to_string(vc.frames_dropped) +
+         ", \"malformed\": " + std::to_string(vc.malformed) + ", \"gaze_received\": " + std::to_string(vc.gaze_received) +
+         "}";
+}
+
+Exit OperatorRun::writeSummaryJson(double seconds, const std::string& view_json) const {
+  if (opt_.summary_path.empty()) return std::nullopt;
+  std::string robot_gaze;
+  if (last_status_ && last_status_->gaze_origin_m && last_status_->gaze_direction) {
+    const net::Vec3& o = *last_status_->gaze_origin_m;
+    const net::Vec3& d = *last_status_->gaze_direction;
+    robot_gaze = ", \"robot_gaze\": {\"origin_m\": " + vec3Json({o.x, o.y, o.z}) + ", \"direction\": " + vec3Json({d.x, d.y, d.z}) + "}";
+  }
+  const std::string extra =
+      "\"robot\": \"" + robot_address_ + "\", \"gaze_samples_sent\": " + std::to_string(gaze_sent_) +
+      ", \"last_gaze\": {\"origin_m\": " + vec3Json(last_gaze_.origin_m) + ", \"direction\": " +
+      vec3Json(last_gaze_.direction) + "}" + robot_gaze + ", \"chunks_bad\": " + std::to_string(assembler_.counters().bad_chunks) +
+      ", \"datagrams_invalid\": " + std::to_string(link_total_.dropped.total()) + view_json;
+  std::ofstream file(opt_.summary_path);
+  file << stats_.summaryJson(seconds, extra);
+  if (!file) {
+    std::fprintf(stderr, "fovea-operator: --summary: cannot write '%s'\n", opt_.summary_path.c_str());
+    return kExitFailure;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
-      std::fputs(kHelp, stdout);
-      return kExitOk;
-    }
+  if (wantsHelp(argc, argv)) {
+    std::fputs(kHelp, stdout);
+    return kExitOk;
   }
   Result<Options> parsed = parseOptions(argc, argv);
   if (!parsed) {
@@ -253,349 +723,11 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
   const Options& opt = parsed.value();
-  std::optional<tools::GazeScript> script;
-  if (!opt.gaze.empty()) {
-    Result<tools::GazeScript> parsed_script = tools::GazeScript::parse(opt.gaze);
-    if (!parsed_script) {
-      std::fprintf(stderr, "fovea-operator: %s\n", parsed_script.status().message().c_str());
-      return parsed_script.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
-    }
-    script = std::move(parsed_script.value());
-  }
-  net::OperatorLinkConfig link_config;
-  if (opt.key_file) {
-    Result<net::LoadedKey> key = net::loadKeyFile(*opt.key_file);
-    if (!key) {
-      std::fprintf(stderr, "fovea-operator: --key-file: %s\n", key.status().message().c_str());
-      return kExitFailure;
-    }
-    if (!key->warning.empty()) std::fprintf(stderr, "fovea-operator: warning: %s\n", key->warning.c_str());
-    link_config.key = key->key;
-  }
-  link_config.insecure = opt.insecure;
-  link_config.name = opt.name;
-  link_config.budget_bytes_per_s = static_cast<uint64_t>(opt.budget_mbps * 1e6);
-  link_config.mtu_bytes = static_cast<uint32_t>(opt.mtu);
-  if (!opt.ply_dir.empty()) {
-    std::error_code ec;
-    std::filesystem::create_directories(opt.ply_dir, ec);
-    if (ec) {
-      std::fprintf(stderr, "fovea-operator: --save-ply: cannot create '%s': %s\n", opt.ply_dir.c_str(), ec.message().c_str());
-      return kExitFailure;
-    }
-  }
-  // Room for the largest frame: the assembler refuses what does not fit, and counts it.
-  Result<net::FrameAssembler> assembler_created = net::FrameAssembler::create(static_cast<std::size_t>(opt.max_points));
-  if (!assembler_created) {
-    std::fprintf(stderr, "fovea-operator: %s\n", assembler_created.status().message().c_str());
-    return kExitFailure;
-  }
-  net::FrameAssembler& assembler = assembler_created.value();
-
-  std::unique_ptr<tools::ViewServer> view;
-  if (!opt.view.empty()) {
-    tools::ViewServerConfig vc;
-    vc.listen = opt.view;
-    vc.max_tabs = static_cast<std::size_t>(opt.view_tabs);
-    vc.max_points = static_cast<std::size_t>(opt.max_points);
-    vc.gaze_hz = opt.gaze_hz;
-    vc.script = opt.gaze;
-    if (script) {
-      const tools::GazePoint g = script->at(0);
-      const Eigen::Vector3d target = g.origin_m + 2.0 * g.direction;
-      vc.initial_eye = std::array<double, 6>{g.origin_m.x(), g.origin_m.y(), g.origin_m.z(), target.x(), target.y(), target.z()};
-    }
-    Result<std::unique_ptr<tools::ViewServer>> started = tools::ViewServer::start(vc);
-    if (!started) {
-      std::fprintf(stderr, "fovea-operator: %s\n", started.status().message().c_str());
-      return started.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
-    }
-    view = std::move(started.value());
-    if (view->url().rfind("http://127.", 0) != 0 || opt.view.rfind("0.0.0.0", 0) == 0) {
-      std::fprintf(stderr, "fovea-operator: warning: the viewer listens on %s: whoever reaches it sees the stream and steers the gaze\n",
-                   opt.view.c_str());
-    }
-    std::printf("viewer: open %s\n", view->url().c_str());
-    std::fflush(stdout);
-  }
-
-  std::ofstream frame_log;
-  if (!opt.frame_log_path.empty()) {
-    frame_log.open(opt.frame_log_path);
-    frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received\n";
-    if (!frame_log) {
-      std::fprintf(stderr, "fovea-operator: --frame-log: cannot write '%s'\n", opt.frame_log_path.c_str());
-      return kExitFailure;
-    }
-  }
-
+  Station station;
+  if (Exit e = setUp(opt, station)) return *e;
   std::signal(SIGINT, onStopSignal);
   std::signal(SIGTERM, onStopSignal);
-  tools::OperatorStats stats;
-  tools::SplatSizer splat_sizer(net::CodecConfig{}.periphery_step_ratio);
-  const int64_t start_ns = monotonicNs();
-  const int64_t end_ns = opt.duration_s > 0 ? start_ns + static_cast<int64_t>(opt.duration_s * 1e9) : INT64_MAX;
-  const auto gaze_period_ns = static_cast<int64_t>(1e9 / opt.gaze_hz);
-  uint64_t ply_written = 0, ply_failed = 0, gaze_sent = 0, sessions = 0;
-  std::optional<net::GazeSample> last_sent;
-  std::optional<tools::ViewerGaze> last_shown;
-  tools::GazePoint last_gaze;
-  bool robot_said_bye = false;
-  std::string robot_address = opt.connect;
-  std::optional<net::StatusReport> last_status;
-  net::FrameAssembler::Counters assembler_total{};
-  net::OperatorLinkCounters link_total{};
-  auto publishState = [&](tools::LinkState state, const std::string& detail) {
-    if (view) view->publishState(tools::stateJson(state, detail, robot_address));
-  };
-  // Waits up to ms, or less when stopped; false when stopped or out of time.
-  auto pause = [&](int ms) {
-    for (int i = 0; i < ms / 50 && g_stop == 0 && monotonicNs() < end_ns; ++i) {
-      const timespec t{0, 50'000'000};
-      nanosleep(&t, nullptr);
-    }
-    return g_stop == 0 && monotonicNs() < end_ns;
-  };
-
-  // Without the viewer: one session, as before. With it: the page stays up and
-  // the operator reconnects until it is stopped (a robot restarting, refusing
-  // while busy, or not yet up).
-  while (g_stop == 0 && monotonicNs() < end_ns) {
-    publishState(tools::LinkState::kConnecting, "saying hello to " + opt.connect);
-    Result<std::unique_ptr<net::OperatorLink>> connected = net::OperatorLink::connect(opt.connect, link_config);
-    if (!connected) {
-      const std::string& why = connected.status().message();
-      if (!view) {
-        std::fprintf(stderr, "fovea-operator: %s\n", why.c_str());
-        return connected.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
-      }
-      if (connected.status().code() == ErrorCode::kInvalidArgument) {
-        std::fprintf(stderr, "fovea-operator: %s\n", why.c_str());
-        return kExitUsage;
-      }
-      const bool refused = why.find(" refused (") != std::string::npos;
-      std::fprintf(stderr, "fovea-operator: %s; trying again in 1 s\n", why.c_str());
-      publishState(refused ? tools::LinkState::kRefused : tools::LinkState::kConnecting, why);
-      if (!pause(1000)) break;
-      continue;
-    }
-    net::OperatorLink& link = *connected.value();
-    ++sessions;
-    if (!link.notice().empty()) std::fprintf(stderr, "fovea-operator: *** %s ***\n", link.notice().c_str());
-    // Latency compares the robot's capture stamp with this host's arrival time. On
-    // one host the clocks are one; across hosts the robot's clock is estimated from
-    // its status stamps: robot = local + offset, offset = stamp + RTT/2 - arrival.
-    robot_address = link.robot().toString();
-    const bool shared_clock = opt.clock == "shared" ||
-                              (opt.clock == "auto" && (robot_address.rfind("127.", 0) == 0 || robot_address.rfind("[::1]", 0) == 0));
-    std::optional<int64_t> clock_offset_ns;  // robot minus local
-    if (shared_clock) clock_offset_ns = 0;
-    std::printf("connected to %s: MTU %u, budget %.2f MB/s, receive buffer %d KiB; latency on %s\n",
-                robot_address.c_str(), link.mtuBytes(), static_cast<double>(link.budgetBytesPerS()) / 1e6,
-                link.receiveBufferBytes() / 1024,
-                shared_clock ? "one clock" : "the robot's clock estimated from its status and round trip");
-    std::fflush(stdout);
-    publishState(tools::LinkState::kStreaming, "");
-
-    // What a packet capture adds to each UDP payload: the IP and UDP headers.
-    const std::size_t ip_udp_header_bytes = robot_address.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
-    const int64_t session_start_ns = monotonicNs();
-    int64_t next_gaze_ns = session_start_ns;
-    int64_t next_live_ns = session_start_ns + 1'000'000'000;
-    int64_t live_start_ns = session_start_ns;
-    uint64_t lost_reported = 0, last_frame_id = 0;
-    robot_said_bye = false;
-
-    auto handleReady = [&]() {
-      for (std::size_t i = 0; i < assembler.readyCount(); ++i) {
-        const net::AssembledFrame& f = assembler.ready(i);
-        tools::FrameObservation obs;
-        obs.frame_id = f.frame_id;
-        // Capture to the arrival of the frame's last chunk (decoding it takes
-        // microseconds); unknown (NaN, left out of the quantiles) until the
-        // robot's clock is estimated.
-        obs.latency_ms = clock_offset_ns ? static_cast<double>(f.last_chunk_received_ns + *clock_offset_ns -
-                                                               static_cast<int64_t>(f.capture_time_ns)) * 1e-6
-                                         : std::numeric_limits<double>::quiet_NaN();
-        for (std::size_t r = 0; r < obs.points_per_region.size(); ++r) {
-          obs.points_per_region[r] = f.points[r];
-          obs.chunks_received += f.chunks_received[r];
-          obs.chunks_expected += f.chunks_expected[r];
-        }
-        stats.frame(obs);
-        if (frame_log) {
-          uint32_t points = 0;
-          for (uint32_t p : obs.points_per_region) points += p;
-          frame_log << f.frame_id << ',' << f.capture_time_ns << ',' << f.last_chunk_received_ns << ','
-                    << (std::isnan(obs.latency_ms) ? std::string() : std::to_string(std::llround(obs.latency_ms * 1e3)))
-                    << ',' << points << ',' << obs.chunks_received << ',' << obs.chunks_expected << ','
-                    << (f.summary_received ? 1 : 0) << '\n';
-        }
-        last_frame_id = f.frame_id;
-        if (view) view->publishFrame(tools::packViewFrame(f, splat_sizer.sizes(f), view->frameBuffer()));
-        if (!opt.ply_dir.empty() && f.cloud != nullptr) {
-          io::PlyWriteOptions ply;
-          ply.double_coords = true;
-          const std::string path = opt.ply_dir + "/frame_" + std::to_string(f.frame_id) + ".ply";
-          if (io::writePly(path, f.cloud->points, f.cloud->region.data(), ply).isOk()) {
-            ++ply_written;
-          } else {
-            ++ply_failed;
-          }
-        }
-      }
-    };
-
-    while (g_stop == 0 && !robot_said_bye && link.sessionActive()) {
-      int64_t now = monotonicNs();
-      if (now >= end_ns) break;
-      if (now >= next_gaze_ns) {
-        GazeChoice choice = chooseGaze(script, view.get(), now - start_ns, last_sent);
-        choice.sample.feedback.last_frame_id = last_frame_id;
-        if (link.sendGaze(choice.sample)) {
-          ++gaze_sent;
-          last_sent = choice.sample;
-          last_shown = choice.viewer;
-          if (choice.viewer) {
-            const net::GazeSample& g = choice.sample;
-            last_gaze.origin_m = {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z};
-            last_gaze.direction = {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z};
-          }
-        }
-        next_gaze_ns += gaze_period_ns;
-        if (next_gaze_ns < now) next_gaze_ns = now + gaze_period_ns;  // fell behind: no burst to catch up
-      }
-      if (now >= next_live_ns) {
-        if (const uint64_t lost = link.counters().datagrams_lost; lost > lost_reported) {
-          stats.lost(lost - lost_reported);
-          lost_reported = lost;
-        }
-        const tools::LiveFigures live = stats.takeWindow(static_cast<double>(now - live_start_ns) * 1e-9);
-        if (!opt.quiet) {
-          std::printf("%s\n", tools::liveLine(live).c_str());
-          std::fflush(stdout);
-        }
-        if (view) {
-          tools::ViewerFigures figures;
-          figures.fps = live.fps;
-          figures.wire_mb_per_s = live.wire_mb_per_s;
-          figures.latency_p50_ms = live.latency_p50_ms;
-          figures.latency_p99_ms = live.latency_p99_ms;
-          figures.datagrams_lost = live.lost;
-          std::size_t regions = live.points_per_region.size();
-          while (regions > 0 && live.points_per_region[regions - 1] == 0) --regions;
-          figures.points_per_region.assign(live.points_per_region.begin(), live.points_per_region.begin() + regions);
-          figures.gaze_mode = view->gazeMode();
-          figures.gaze_sent = gaze_sent;
-          figures.gaze_last = last_shown;
-          if (const auto& status = link.lastStatus()) {
-            if (status->gaze_age_ns >= 0) figures.robot_gaze_age_ms = static_cast<double>(status->gaze_age_ns) * 1e-6;
-            if (status->rtt_ns >= 0) figures.robot_rtt_ms = static_cast<double>(status->rtt_ns) * 1e-6;
-            figures.robot_gaze_origin_m = array3(status->gaze_origin_m);
-            figures.robot_gaze_direction = array3(status->gaze_direction);
-          }
-          view->publishFigures(std::move(figures));
-        }
-        live_start_ns = now;
-        next_live_ns += 1'000'000'000;
-      }
-      const int64_t wake_ns = std::min({next_gaze_ns, next_live_ns, end_ns});
-      const int timeout_ms = static_cast<int>(std::clamp<int64_t>((wake_ns - now + 999'999) / 1'000'000, 0, 1000));
-      const std::optional<net::Received> received = link.receive(timeout_ms);
-      if (!received) continue;
-      stats.datagram(received->payload.size() + net::kDatagramOverhead, ip_udp_header_bytes);
-      switch (received->type) {
-        // The assembler's ready frames are those of its last call: look at them
-        // right after a chunk or summary only (after any other datagram they
-        // would be counted again).
-        case net::MessageType::kChunk:
-          (void)assembler.addChunk(received->payload, received->received_ns);  // failures are counted by the assembler
-          handleReady();
-          break;
-        case net::MessageType::kFrameSummary:
-          (void)assembler.addSummary(received->payload);
-          handleReady();
-          break;
-        case net::MessageType::kBye:
-          robot_said_bye = true;
-          break;
-        case net::MessageType::kStatus:
-          // The link has decoded it (and echoes its stamp); the round trip the robot
-          // measured from earlier echoes dates the stamp.
-          if (!shared_clock) {
-            if (const auto& status = link.lastStatus(); status && status->rtt_ns >= 0) {
-              clock_offset_ns = tools::estimateClockOffsetNs(status->robot_stamp_ns, status->rtt_ns, received->received_ns);
-            }
-          }
-          break;
-        default:
-          break;
-      }
-    }
-    assembler.flush();
-    handleReady();
-    if (const uint64_t lost = link.counters().datagrams_lost; lost > lost_reported) stats.lost(lost - lost_reported);
-    last_status = link.lastStatus();
-    const net::OperatorLinkCounters& lc = link.counters();
-    link_total.datagrams_lost += lc.datagrams_lost;
-    link_total.dropped.add(lc.dropped);
-    if (!robot_said_bye && link.sessionActive()) link.bye("operator done");
-    if (!view || g_stop != 0 || monotonicNs() >= end_ns) break;
-    const std::string gone = robot_said_bye ? "the robot ended the session" : "the session ended (the robot went silent)";
-    std::fprintf(stderr, "fovea-operator: %s; reconnecting\n", gone.c_str());
-    publishState(tools::LinkState::kRobotGone, gone);
-    if (!pause(1000)) break;
-  }
-  const double seconds = static_cast<double>(monotonicNs() - start_ns) * 1e-9;
-  assembler_total = assembler.counters();
-
-  const net::FrameAssembler::Counters& ac = assembler_total;
-  std::printf("\nsummary: %llu frames in %.1f s, %llu datagrams (%llu lost, %llu dropped as invalid), %llu gaze samples sent\n",
-              static_cast<unsigned long long>(stats.frames()), seconds,
-              static_cast<unsigned long long>(stats.datagrams()), static_cast<unsigned long long>(link_total.datagrams_lost),
-              static_cast<unsigned long long>(link_total.dropped.total()), static_cast<unsigned long long>(gaze_sent));
-  std::printf("  chunks: %llu decoded, %llu bad, %llu late, %llu duplicate%s\n",
-              static_cast<unsigned long long>(ac.chunks), static_cast<unsigned long long>(ac.bad_chunks),
-              static_cast<unsigned long long>(ac.late_chunks), static_cast<unsigned long long>(ac.duplicate_chunks),
-              robot_said_bye ? "; the robot ended the session" : "");
-  if (!opt.ply_dir.empty()) {
-    std::printf("  wrote %llu frames to %s%s\n", static_cast<unsigned long long>(ply_written), opt.ply_dir.c_str(),
-                ply_failed ? " (some failed)" : "");
-  }
-  std::string view_json;
-  if (view) {
-    const tools::ViewServerCounters vc = view->counters();
-    std::printf("  viewer: %llu tabs served (%llu refused), %llu frames published, %llu sent to tabs, %llu dropped for slow tabs, "
-                "%llu malformed messages, %llu gaze samples from tabs\n",
-                static_cast<unsigned long long>(vc.tabs_served), static_cast<unsigned long long>(vc.tabs_refused),
-                static_cast<unsigned long long>(vc.frames_published), static_cast<unsigned long long>(vc.frames_sent),
-                static_cast<unsigned long long>(vc.frames_dropped), static_cast<unsigned long long>(vc.malformed),
-                static_cast<unsigned long long>(vc.gaze_received));
-    view_json = ", \"sessions\": " + std::to_string(sessions) + ", \"viewer\": {\"tabs_served\": " +
-                std::to_string(vc.tabs_served) + ", \"tabs_refused\": " + std::to_string(vc.tabs_refused) +
-                ", \"frames_published\": " + std::to_string(vc.frames_published) + ", \"frames_sent\": " +
-                std::to_string(vc.frames_sent) + ", \"frames_dropped\": " + std::to_string(vc.frames_dropped) +
-                ", \"malformed\": " + std::to_string(vc.malformed) + ", \"gaze_received\": " + std::to_string(vc.gaze_received) +
-                "}";
-  }
-  if (!opt.summary_path.empty()) {
-    std::string robot_gaze;
-    if (last_status && last_status->gaze_origin_m && last_status->gaze_direction) {
-      const net::Vec3& o = *last_status->gaze_origin_m;
-      const net::Vec3& d = *last_status->gaze_direction;
-      robot_gaze = ", \"robot_gaze\": {\"origin_m\": " + vec3Json({o.x, o.y, o.z}) + ", \"direction\": " + vec3Json({d.x, d.y, d.z}) + "}";
-    }
-    const std::string extra =
-        "\"robot\": \"" + robot_address + "\", \"gaze_samples_sent\": " + std::to_string(gaze_sent) +
-        ", \"last_gaze\": {\"origin_m\": " + vec3Json(last_gaze.origin_m) + ", \"direction\": " +
-        vec3Json(last_gaze.direction) + "}" + robot_gaze + ", \"chunks_bad\": " + std::to_string(ac.bad_chunks) +
-        ", \"datagrams_invalid\": " + std::to_string(link_total.dropped.total()) + view_json;
-    std::ofstream file(opt.summary_path);
-    file << stats.summaryJson(seconds, extra);
-    if (!file) {
-      std::fprintf(stderr, "fovea-operator: --summary: cannot write '%s'\n", opt.summary_path.c_str());
-      return kExitFailure;
-    }
-  }
-  return stats.frames() > 0 ? kExitOk : kExitFailure;
+  OperatorRun run(opt, station);
+  if (Exit e = run.runSessions()) return *e;
+  return run.finish();
 }
