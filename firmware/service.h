@@ -283,7 +283,7 @@ class Service {
     int64_t at_ns = 0;
     uint64_t captured = 0, foveated = 0, sent = 0, wire_bytes = 0, capture_drops = 0, foveation_drops = 0;
   } window_;
-  std::unique_ptr<uint64_t[]> histogram_scratch_;  // 2 x kBuckets, for the quantiles
+  std::unique_ptr<uint64_t[]> histogram_scratch_;  // kBuckets: one stage's snapshot, for the quantiles
   std::array<std::unique_ptr<uint64_t[]>, 3> histogram_previous_;
   // --timing-log: the file and its buffer, both made at start-up (the send stage writes).
   struct FileCloser {

@@ -1,5 +1,5 @@
-// The camera interface every backend implements (mock, and later OpenNI2, V4L2,
-// libcamera, libusb). Errors are values; acquire() never allocates or throws.
+// The camera interface every backend implements (mock, TUM recordings, OpenNI2,
+// V4L2, libcamera). Errors are values; acquire() never allocates or throws.
 #pragma once
 
 #include <atomic>
