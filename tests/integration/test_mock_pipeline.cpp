@@ -9,6 +9,7 @@
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "tests/support/test_time.h"
 
 namespace fovea {
 namespace {
@@ -69,7 +70,7 @@ TEST(MockPipeline, TwoRunsGiveTheSameOutput) {
   for (const char* spec : {"mock:living-room", "mock:balloon", "mock:living-room,path=orbit"}) {
     MockPipeline a(spec, pipeline::Preset::kF3);
     MockPipeline b(spec, pipeline::Preset::kF3);
-    for (int i = 0; i < 3; ++i) {
+    for (int i = 0, n = test::repetitions(3, 2); i < n; ++i) {
       SCOPED_TRACE(std::string(spec) + " frame " + std::to_string(i));
       expectIdentical(a.next(), b.next());
     }

@@ -21,11 +21,11 @@
 namespace fovea {
 namespace {
 
-// Frames counted per test: 100 natively; 20 where a frame costs 10 to 40 times as
-// much (sanitizers, qemu: FOVEA_TEST_TIME_SCALE > 1), which is still enough, since
-// an allocation on the frame path shows on every frame. Under ASan the three
-// 100-frame mock runs alone took 6 of CI's 25 minutes.
-int framesCounted() { return test::timeScale() > 1.0 ? 20 : 100; }
+// Frames counted per test: 100 natively; 10 where a frame costs 10 to 40 times as
+// much (sanitizers, qemu), which is still enough, since an allocation on the
+// frame path shows on every frame. Under ASan the three mock runs took 6 of CI's
+// 25 minutes at 100 frames, and 5 of its 50 at 20.
+int framesCounted() { return test::repetitions(100, 10); }
 
 TEST(ZeroAllocation, CounterSeesAllocations) {
   // The test below means something only if the counter works.
@@ -172,7 +172,8 @@ TEST_P(ZeroAllocationKernels, FoveatingRandomCloudsWithEveryPreset) {
 
   test::AllocationScope scope;
   bool all_ok = true;
-  for (int i = 0; i < 120; ++i) {
+  // 28 = 4 clouds x 7 configurations: every pair once (in slow builds, once only).
+  for (int i = 0, n = test::repetitions(120, 28); i < n; ++i) {
     all_ok = foveator.setConfig(configs[i % 7]).isOk() && all_ok;
     all_ok = foveator.foveate(clouds[i % 4], i % 7 == 5 ? head : pipeline::Gaze{}, out, stats).isOk() && all_ok;
   }

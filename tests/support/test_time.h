@@ -28,6 +28,13 @@ inline double timeScale() {
   return scale;
 }
 
+// How many times a test repeats what each repetition shows on its own (frames
+// through a path that must not allocate, cameras that must agree frame by
+// frame): `native` in a native optimised build, `slow` where a repetition costs
+// 10 to 40 times as much (sanitizers, qemu: timeScale() > 1). The work, not a
+// wait: it keeps those trees' CI stages in their time (docs/ci.md).
+inline int repetitions(int native, int slow) { return timeScale() > 1.0 ? slow : native; }
+
 template <class Rep, class Period>
 std::chrono::milliseconds scaled(std::chrono::duration<Rep, Period> timeout) {
   const double ms = std::chrono::duration<double, std::milli>(timeout).count() * timeScale();

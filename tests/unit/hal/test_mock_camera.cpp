@@ -18,6 +18,7 @@
 #include "hal/camera/mock/mock_camera.h"
 #include "hal/camera/mock/scene.h"
 #include "tests/support/alloc_counter.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::hal::mock {
 namespace {
@@ -303,7 +304,7 @@ TEST(MockCamera, SameSeedGivesIdenticalFramesAndAnotherSeedDifferentNoise) {
     std::unique_ptr<MockCamera> b = makeStarted(args);
     std::unique_ptr<MockCamera> c = makeStarted(std::string(scene) + ",seed=6,path=pan");
     RgbdFrame fa = makeSlot(*a), fb = makeSlot(*b), fc = makeSlot(*c);
-    for (int i = 0; i < 4; ++i) {
+    for (int i = 0, n = test::repetitions(4, 2); i < n; ++i) {
       grab(*a, fa);
       grab(*b, fb);
       grab(*c, fc);
