@@ -28,14 +28,14 @@ expect() {  # expect pass|fail DESCRIPTION
 mkdir "$tmp/repo"
 git -C "$tmp/repo" init -q
 cp "$root/.gitignore" "$tmp/repo/.gitignore"
-while IFS= read -r path; do
-  top="${path%%/*}"
-  if [ "$top" = "$path" ]; then
-    [ -e "$tmp/repo/$top" ] || touch "$tmp/repo/$top"
-  else
-    mkdir -p "$tmp/repo/$top" && touch "$tmp/repo/$top/file"
-  fi
-done < <(git -C "$root" ls-files | sort -u)
+# One line per top-level entry (a folder: "NAME/"), not per tracked file: a
+# process or two per file of the repository took most of this test's minute.
+while IFS= read -r top; do
+  case "$top" in
+    */) mkdir -p "$tmp/repo/$top" && touch "$tmp/repo/${top}file" ;;
+    *) touch "$tmp/repo/$top" ;;
+  esac
+done < <(git -C "$root" ls-files | sed -E 's|^([^/]*/).*|\1|' | sort -u)
 git -C "$tmp/repo" add -A
 git -C "$tmp/repo" -c user.name=t -c user.email=t@t commit -qm layout
 expect pass "this repository's tracked layout"
