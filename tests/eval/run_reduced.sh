@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # fovea-eval's reduced run (tests/eval/CMakeLists.txt): every dataset there is and
-# every condition, 40 frames at 2 HMD positions, then the report's files and the
+# every condition, 20 frames at 2 HMD positions, then the report's files and the
 # figures that must hold whatever the machine: every run present, foveation
 # sending fewer points than FREF, FREF's images identical to themselves.
 # usage: run_reduced.sh FOVEA_EVAL OUT_DIR TUM_DIR
@@ -8,7 +8,7 @@ set -euo pipefail
 eval_bin="$1" out="$2" tum="$3"
 fail() { echo "run_reduced: $*" >&2; exit 1; }
 
-args=(--out-dir "$out" --frames 40 --positions 2 --quality-positions 1 --fresh)
+args=(--out-dir "$out" --frames 20 --positions 2 --quality-positions 1 --fresh)
 datasets=2
 if [ -f "$tum/associations.txt" ]; then
   args+=(--tum "$tum"); datasets=3
@@ -23,8 +23,8 @@ done
 runs=$(($(wc -l < "$out/runs.csv") - 1))
 conditions=7  # F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED
 [ "$runs" -eq $((datasets * conditions * 2)) ] || fail "runs.csv has $runs runs, expected $((datasets * conditions * 2))"
-# Every run's figures are numbers, every run decoded its 40 frames.
-awk -F, 'NR > 1 && ($4 != 40 || $7 + 0 <= 0 || $10 + 0 <= 0) { print "bad run: " $0; bad = 1 } END { exit bad }' \
+# Every run's figures are numbers, every run decoded its 20 frames.
+awk -F, 'NR > 1 && ($4 != 20 || $7 + 0 <= 0 || $10 + 0 <= 0) { print "bad run: " $0; bad = 1 } END { exit bad }' \
   "$out/runs.csv" || fail "a run without its frames, bandwidth or latency"
 # Every run counted its datagrams. How many were lost is reported, not asserted: on a
 # loaded machine (CI runs qemu beside this) the operator falls behind FREF's 39 MB/s,
