@@ -137,14 +137,19 @@ TEST(ViewServer, ASlowTabGetsTheNewestFramesWhileAFastOneGetsThemAll) {
   constexpr std::size_t kBytes = 1'000'000;
   auto server = startServer(4, kBytes / 16);
   ASSERT_TRUE(server);
+  // Both paces scaled (test_time.h): under ThreadSanitizer the fast tab's
+  // reading of 1 MB frames is itself 10 times slower, and on a loaded CI machine
+  // it fell behind an unscaled slow tab (8 frames against 11).
+  const auto slow_per_frame = test::scaled(100ms);
+  const auto publish_every = test::scaled(5ms);
   Tab fast(server->port());
-  Tab slow(server->port(), 100);
+  Tab slow(server->port(), static_cast<int>(slow_per_frame.count()));
   ASSERT_TRUE(fast.connected() && slow.connected());
   ASSERT_TRUE(waitUntil([&] { return server->counters().tabs_open == 2; }, 2000ms));
   constexpr int kFrames = 60;
   for (int i = 1; i <= kFrames; ++i) {
     publish(*server, kBytes, static_cast<uint8_t>(i));
-    std::this_thread::sleep_for(5ms);
+    std::this_thread::sleep_for(publish_every);
   }
   // Each tab ends on the newest frame.
   ASSERT_TRUE(waitUntil([&] { return !slow.lastFrame().empty() && slow.lastFrame()[0] == kFrames; }, 5000ms));
