@@ -17,7 +17,7 @@
 #include "core/clock.h"
 #include "firmware/camera_setup.h"
 #include "firmware/options.h"
-#include "firmware/sanitizer.h"
+#include "core/sanitizer.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
 #include "net/key.h"

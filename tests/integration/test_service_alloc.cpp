@@ -12,7 +12,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware/sanitizer.h"
+#include "core/sanitizer.h"
 
 #include "firmware/log.h"
 #include "firmware/service.h"
@@ -209,7 +209,7 @@ long residentPages() {
 TEST(ServiceMemory, ResidentSetStaysFlatOverAThousandFrames) {
 #ifdef FOVEA_THREAD_SANITIZER
   GTEST_SKIP() << "not under ThreadSanitizer: its shadow memory and tables grow with what the process touches "
-                  "(firmware/sanitizer.h), and 1100 frames take minutes there";
+                  "(core/sanitizer.h), and 1100 frames take minutes there";
 #endif
   Service::Environment environment;
   environment.gpio = std::make_unique<hal::mock::MockGpio>(8);

@@ -16,7 +16,7 @@
 #include <tuple>
 #include <vector>
 
-#include "firmware/sanitizer.h"
+#include "core/sanitizer.h"
 #include "io/ply.h"
 #include "tests/support/process.h"
 #include "tests/support/test_time.h"

@@ -1,6 +1,6 @@
 #include "tests/support/alloc_counter.h"
 
-#include "firmware/sanitizer.h"
+#include "core/sanitizer.h"
 
 #include <atomic>
 #include <cerrno>

@@ -23,7 +23,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware/sanitizer.h"
+#include "core/sanitizer.h"
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
 #include "tests/support/process.h"
@@ -344,7 +344,7 @@ TEST(Service, StoppedGazeFloodAndAVanishedOperatorLeaveItRunningWithFlatMemory) 
   const long rss_after = residentKiB();
 #ifdef FOVEA_THREAD_SANITIZER
   std::printf("resident set NOT checked under ThreadSanitizer (%ld KiB before, %ld KiB after): its shadow memory "
-              "and tables grow with what the process touches (firmware/sanitizer.h)\n", rss_before, rss_after);
+              "and tables grow with what the process touches (core/sanitizer.h)\n", rss_before, rss_after);
 #else
   EXPECT_LT(rss_after - rss_before, 2048) << rss_before << " KiB before, " << rss_after << " KiB after";
 #endif

@@ -17,6 +17,16 @@
 #endif
 #endif
 
+// AddressSanitizer (with LeakSanitizer): hal/camera/openni2 keeps OpenNI2's
+// drivers loaded so that LeakSanitizer can name them (toolchain/lsan.supp).
+#if defined(__SANITIZE_ADDRESS__)
+#define FOVEA_ADDRESS_SANITIZER 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define FOVEA_ADDRESS_SANITIZER 1
+#endif
+#endif
+
 // ThreadSanitizer keeps shadow memory, per-thread traces and a table of
 // synchronisation objects that grow with the addresses and history a program
 // touches: a bound on the resident set does not hold under it.
