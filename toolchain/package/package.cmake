@@ -1,7 +1,7 @@
 # The parts of an installation that are not programs (man pages, the Debian
 # copyright file and changelog, the GPIO udev rule) and the Debian package itself,
 # built by CPack's DEB generator from the same install() rules as `cmake --install`.
-# toolchain/build-packages drives it; the README's "Flash a board" says why CPack.
+# toolchain/build-packages drives it; docs/boards.md ("Flash a board") says why CPack.
 include(GNUInstallDirs)
 set(_fovea_pkg_dir ${CMAKE_CURRENT_LIST_DIR})
 
