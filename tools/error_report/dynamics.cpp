@@ -14,6 +14,7 @@
 #include "net/codec.h"
 #include "pipeline/backproject.h"
 #include "pipeline/eye_speed.h"
+#include "tools/common/nan.h"
 #include "tools/error_report/report.h"
 #include "tools/operator/gaze_script.h"
 
@@ -22,7 +23,6 @@ namespace fovea::tools {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // Key of one output point: region in the top 3 bits; a voxel's lattice cell
 // (20 bits per axis, wrapping: cells 2^20 apart never meet in one frame) or a raw

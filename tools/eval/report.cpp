@@ -10,13 +10,12 @@
 
 #include "tools/common/gnuplot.h"
 #include "tools/common/host.h"
+#include "tools/common/nan.h"
 #include "tools/eval/statistics.h"
 
 namespace fovea::tools::eval {
 
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string fixed(double v, int precision) {
   if (std::isnan(v)) return "-";

@@ -10,13 +10,12 @@
 #include <sstream>
 
 #include "pipeline/quantile.h"
+#include "tools/common/nan.h"
 #include "tools/eval/statistics.h"
 
 namespace fovea::tools::eval {
 
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 struct Csv {
   std::vector<std::string> header;

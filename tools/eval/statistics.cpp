@@ -3,10 +3,11 @@
 #include <cmath>
 #include <limits>
 
+#include "tools/common/nan.h"
+
 namespace fovea::tools::eval {
 
 namespace {
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // The continued fraction of I_x(a, b) / (x^a (1 - x)^b / (a B(a, b))), by modified
 // Lentz's method: the even and odd terms d_2m, d_2m+1 of DLMF 8.17.22.

@@ -10,11 +10,12 @@
 
 #include <Eigen/Geometry>
 
+#include "tools/common/nan.h"
+
 namespace fovea::tools::eval {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kSsimRadius = 5;  // the 11x11 window
 constexpr int kSsimSide = 2 * kSsimRadius + 1;
 
