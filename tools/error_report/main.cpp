@@ -30,6 +30,7 @@
 #include "pipeline/foveator.h"
 #include "tools/common/gnuplot.h"
 #include "tools/common/host.h"
+#include "tools/common/nan.h"
 #include "tools/error_report/dynamics.h"
 #include "tools/error_report/report.h"
 
@@ -43,7 +44,6 @@ namespace {
 constexpr int kExitOk = 0;
 constexpr int kExitFailure = 1;
 constexpr int kExitUsage = 2;
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 const char* kHelp =
     "usage: fovea-error-report [--camera SPEC] [--frames N] [--out-dir DIR] [--presets LIST] [--slopes LIST]\n"
@@ -427,35 +427,9 @@ int replot(const Options& options) {
   return kExitOk;
 }
 
-int run(int argc, char** argv) {
-  bool help = false;
-  Result<Options> parsed = parseArgs(argc, argv, help);
-  if (!parsed) {
-    std::fprintf(stderr, "fovea-error-report: %s\n", parsed.status().message().c_str());
-    return kExitUsage;
-  }
-  if (help) {
-    std::printf("%s\ncameras:\n%s\n", kHelp, hal::cameraSpecHelp().c_str());
-    return kExitOk;
-  }
-  const Options& options = parsed.value();
-  if (!options.replot_from.empty()) return replot(options);
-
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(options.camera);
-  if (!created) {
-    std::fprintf(stderr, "fovea-error-report: --camera: %s\n", created.status().message().c_str());
-    return kExitUsage;
-  }
-  hal::Camera& camera = *created.value();
-  if (Status s = camera.open(); !s) {
-    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", options.camera.c_str(), s.message().c_str());
-    return kExitFailure;
-  }
-  const hal::CameraInfo& info = camera.info();
-  const int width = info.intrinsics.width, height = info.intrinsics.height;
-  const std::size_t max_points = static_cast<std::size_t>(width) * height;
-
-  // Start-up: every buffer sized once; one Foveator reconfigured per configuration.
+// Every configuration the report measures, in the order presets x slopes (x
+// ACUITY's margins, floors and view culls), each with room for its frames.
+std::vector<ConfigRun> planRuns(const Options& options) {
   std::vector<ConfigRun> runs;
   for (pipeline::Preset preset : options.presets) {
     for (double slope : options.slopes) {
@@ -489,227 +463,166 @@ int run(int argc, char** argv) {
       }
     }
   }
-  // The scalar reference kernels: the report's time column says so.
-  Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kRef, 1}, runs.front().config);
-  if (!foveator) {
-    std::fprintf(stderr, "fovea-error-report: %s\n", foveator.status().message().c_str());
-    return kExitUsage;
-  }
-  for (const ConfigRun& r : runs) {
-    if (Status s = foveator->setConfig(r.config); !s) {
-      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
-      return kExitUsage;
-    }
-  }
-  Result<pipeline::ErrorEvaluator> evaluator = pipeline::ErrorEvaluator::create(max_points);
-  if (!evaluator) {
-    std::fprintf(stderr, "fovea-error-report: %s\n", evaluator.status().message().c_str());
-    return kExitFailure;
-  }
-  // The true surface: the mock scene without sensor noise, frame for frame.
-  std::unique_ptr<hal::Camera> truth_camera;
-  if (options.camera.rfind("mock:", 0) == 0 && options.camera.find("noise=off") == std::string::npos) {
-    Result<std::unique_ptr<hal::Camera>> t = hal::createCamera(options.camera + ",noise=off");
-    if (t && t.value()->open() && t.value()->start()) truth_camera = std::move(t.value());
-    if (!truth_camera) std::printf("fovea-error-report: no noiseless twin of %s: no true-surface columns\n", options.camera.c_str());
-  }
-  hal::RgbdFrame truth_frame(width, height);
-  pipeline::PointCloud truth_cloud(max_points);
-  const pipeline::RawDepthRange raw_range = pipeline::rawDepthRange(pipeline::DepthRange{}, info.depth_scale_m);
-  hal::RgbdFrame frame(width, height);
-  pipeline::PointCloud cloud(max_points);
-  pipeline::FoveatedCloud out(max_points);
-  std::vector<uint32_t> representative(max_points);
-  const pipeline::DepthRange range;  // the same as fovead's defaults
-  // The stream's codec at its defaults (1200-byte datagrams), for the bytes columns.
-  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
-  if (!encoder) {
-    std::fprintf(stderr, "fovea-error-report: %s\n", encoder.status().message().c_str());
-    return kExitFailure;
-  }
+  return runs;
+}
 
-  const bool have_focus = info.focus_point_m.has_value();
+// Where the eye is and where it looks, as the report states it.
+std::string describeGaze(const Options& options, const hal::CameraInfo& info) {
   char gaze_text[320];
   char eye_text[96] = "the camera";
   if (!options.eye_offset_cam.isZero()) {
     std::snprintf(eye_text, sizeof eye_text, "an eye at (%.2f, %.2f, %.2f) m from the camera (its x right, y down, z forward)",
                   options.eye_offset_cam.x(), options.eye_offset_cam.y(), options.eye_offset_cam.z());
   }
-  if (have_focus) {
+  if (info.focus_point_m.has_value()) {
     std::snprintf(gaze_text, sizeof gaze_text, "from %s towards the scene's focus point (%.2f, %.2f, %.2f) m", eye_text,
                   info.focus_point_m->x(), info.focus_point_m->y(), info.focus_point_m->z());
   } else {
     std::snprintf(gaze_text, sizeof gaze_text, "from %s along the camera's optical axis (the camera has no focus point)",
                   eye_text);
   }
-  std::printf("fovea-error-report: camera %s %dx%d, %ld frames, %zu configurations; gaze %s\n", info.name.c_str(),
-              width, height, options.frames, runs.size(), gaze_text);
+  return gaze_text;
+}
 
-  if (Status s = camera.start(); !s) {
-    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", info.name.c_str(), s.message().c_str());
-    return kExitFailure;
-  }
-  const double load_before = loadAverage();
-  long failed = 0;
-  const bool interactive = isatty(STDOUT_FILENO) != 0;  // progress only on a terminal
-  for (long f = 0; f < options.frames; ++f) {
-    if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
-      std::fprintf(stderr, "frame %ld: capture: %s\n", f, s.toString().c_str());
-      ++failed;
-      continue;
-    }
-    // The true position of every input point: the twin's frame (same pose and
-    // intrinsics) keeps its noiseless depth where both readings are valid and takes
-    // the noisy one elsewhere, so that its back-projection has the same points in
-    // the same order as the noisy frame's.
-    bool have_truth = false;
-    if (truth_camera && truth_camera->acquire(truth_frame, std::chrono::seconds(2))) {
-      const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
-      const uint16_t* noisy = frame.depth();
-      uint16_t* clean = truth_frame.depth();
-      for (std::size_t i = 0; i < frame.pixelCount(); ++i) {
-        if (!valid(noisy[i]) || !valid(clean[i])) clean[i] = noisy[i];
-      }
-      pipeline::BackprojectCounts truth_counts;
-      have_truth = pipeline::backprojectRef(truth_frame, range, truth_cloud, truth_counts).isOk();
-    }
-    pipeline::Gaze gaze;
-    gaze.origin_m = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
-    gaze.direction = have_focus ? Eigen::Vector3d(*info.focus_point_m - gaze.origin_m)
-                                : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
-    // The head (ACUITY's view cull): along the gaze, turned about the camera's up axis.
-    gaze.view_known = true;
-    gaze.view_forward = Eigen::AngleAxisd(-options.head_turn_deg * std::numbers::pi / 180.0,
-                                          Eigen::Vector3d(-frame.T_world_cam.R_world_cam.col(1))) *
-                        gaze.direction;
-    // Side by side: every configuration on this frame, starting with a different
-    // one each frame so that no configuration always runs first (cold caches).
-    for (std::size_t k = 0; k < runs.size(); ++k) {
-      ConfigRun& r = runs[(k + static_cast<std::size_t>(f)) % runs.size()];
-      if (Status s = foveator->setConfig(r.config); !s) return kExitFailure;  // validated above
-      pipeline::BackprojectCounts counts;
-      pipeline::FoveationStats stats;
-      // Timed: what the service does per frame (no representative output).
-      const double cpu0 = threadCpuMs();
-      const auto t0 = std::chrono::steady_clock::now();
-      Status s = pipeline::backprojectRef(frame, range, cloud, counts);
-      if (s) s = foveator->foveate(cloud, gaze, out, stats);
-      const auto t1 = std::chrono::steady_clock::now();
-      const double cpu1 = threadCpuMs();
-      // Untimed: the same foveation again, with each input point's representative.
-      if (s) s = foveator->foveate(cloud, gaze, out, stats, representative.data());
-      pipeline::ErrorModel error_model{&foveator->model(), {}, options.reference_slope};
-      for (int reg = 0; reg < stats.region_count; ++reg) error_model.voxel_size_m[reg] = stats.regions[reg].voxel_size_m;
-      pipeline::ErrorMetrics metrics;
-      if (s) {
-        s = evaluator->evaluate(cloud, foveator->lastRegions(), representative.data(), out.points, gaze, error_model,
-                                metrics);
-      }
-      // Untimed: the bytes the stream would send for this frame, per region.
-      std::array<uint64_t, pipeline::kMaxRegions> wire_bytes{};
-      uint64_t wire_total = 0;
-      if (s) {
-        std::array<double, pipeline::kMaxRegions> voxel_m{};
-        for (int reg = 0; reg < stats.region_count; ++reg) voxel_m[reg] = stats.regions[reg].voxel_size_m;
-        s = encoder->encode(out, std::span<const double>(voxel_m.data(), stats.region_count), 0, 0);
-        for (std::size_t i = 0; s && i < encoder->chunkCount(); ++i) {
-          wire_bytes[encoder->chunkRegion(i)] += encoder->chunk(i).size() + net::kDatagramOverhead;
-          wire_total += encoder->chunk(i).size() + net::kDatagramOverhead;
-        }
-      }
-      if (!s) {
-        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f, configName(r.config.acuity).c_str(), r.config.acuity.slope,
-                     s.toString().c_str());
-        return kExitFailure;
-      }
-      r.time_ms.push_back(cpu1 - cpu0);
-      r.wall_ms.push_back(msBetween(t0, t1));
-      // (ACUITY has no d0: its column says "-".)
-      if (stats.fixation.source != pipeline::FixationSource::kNone) r.d0_m.push_back(stats.fixation.d0_m);
-      for (int reg = 0; reg < stats.region_count; ++reg) {
-        r.regions[reg].add(metrics.regions[reg], stats.regions[reg].points_in, stats.regions[reg].points_out,
-                           stats.regions[reg].voxel_size_m, wire_bytes[reg]);
-      }
-      r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0, wire_total);
-      if (have_truth) {
-        pipeline::ErrorMetrics truth_metrics;
-        if (Status t = evaluator->evaluate(truth_cloud, foveator->lastRegions(), representative.data(), out.points, gaze,
-                                           error_model, truth_metrics);
-            t) {
-          r.truth.add(truth_metrics.all, 0, 0, 0.0, 0);
-        }
-      }
-      r.at_eye += metrics.at_eye;
-      r.no_representative += metrics.no_representative;
-      ++r.frames;
-    }
-    if (interactive) {
-      std::printf("\rframe %ld/%ld", f + 1, options.frames);
-      std::fflush(stdout);
-    }
-  }
-  if (interactive) std::printf("\n");
-  if (truth_camera) truth_camera->stop();
-  // The figures over time, on the camera's next frames.
-  std::optional<DynamicsReport> dynamics;
-  if (options.dynamics.stability_frames > 0 && failed < options.frames) {
-    DynamicsOptions d = options.dynamics;
-    if (info.fps > 0) d.fps = info.fps;
-    d.eye_offset_cam = options.eye_offset_cam;
-    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm),
-                                                                   options.acuity_refined), d);
-    if (!measured) {
-      std::fprintf(stderr, "fovea-error-report: temporal figures: %s\n", measured.status().toString().c_str());
-      return kExitFailure;
-    }
-    dynamics = std::move(measured.value());
-  }
-  camera.stop();
-  if (failed == options.frames) {
-    std::fprintf(stderr, "fovea-error-report: no frame could be captured\n");
-    return kExitFailure;
-  }
+// The gaze on a frame: from the eye towards the scene's focus point (or along the
+// optical axis), and the head along it, turned about the camera's up axis
+// (ACUITY's view cull).
+pipeline::Gaze gazeOn(const hal::RgbdFrame& frame, const Options& options, const hal::CameraInfo& info) {
+  pipeline::Gaze gaze;
+  gaze.origin_m = frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam * options.eye_offset_cam;
+  gaze.direction = info.focus_point_m.has_value() ? Eigen::Vector3d(*info.focus_point_m - gaze.origin_m)
+                                                  : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
+  gaze.view_known = true;
+  gaze.view_forward = Eigen::AngleAxisd(-options.head_turn_deg * std::numbers::pi / 180.0,
+                                        Eigen::Vector3d(-frame.T_world_cam.R_world_cam.col(1))) *
+                      gaze.direction;
+  return gaze;
+}
 
-  // Summaries, in the order presets x slopes.
-  std::vector<ConfigSummary> summaries;
-  for (const ConfigRun& r : runs) {
-    Result<pipeline::RegionModel> model = pipeline::RegionModel::create(r.config.acuity);
-    ConfigSummary c;
-    c.preset = configName(r.config.acuity);
-    c.slope = r.config.acuity.slope;
-    c.frames = r.frames;
-    c.time_ms_median = quantileOf(r.time_ms, 0.5);
-    c.time_ms_p90 = quantileOf(r.time_ms, 0.9);
-    c.wall_ms_median = quantileOf(r.wall_ms, 0.5);
-    c.d0_median_m = quantileOf(r.d0_m, 0.5);
-    c.at_eye = r.at_eye;
-    c.no_representative = r.no_representative;
-    for (int reg = 0; reg < model->regionCount(); ++reg) {
-      RegionSummary s = r.regions[reg].summarise(r.frames);
-      s.index = reg;
-      s.name = model->regionName(reg);
-      if (model->levels()) {
-        s.ecc_min_deg = s.ecc_max_deg = kNaN;  // no band: each point at its own eccentricity
-      } else {
-        s.ecc_min_deg = reg == 0 ? 0.0 : model->boundDeg(reg - 1);
-        s.ecc_max_deg = reg < model->boundCount() ? model->boundDeg(reg) : 180.0;
-      }
-      if (reg == 0) s.voxel_mm = 0.0, s.rms_over_voxel = kNaN, s.max_over_voxel = kNaN;
-      c.regions.push_back(s);
-    }
-    c.all = r.all.summarise(r.frames);
-    c.all.name = "all";
-    c.all.voxel_mm = 0.0;
-    c.all.ratio_first_deg = kNaN;
-    c.all.ratio_last_deg = kNaN;
-    if (r.truth.seen > 0) {
-      c.truth = r.truth.summarise(r.frames);
-      c.have_truth = true;
-    }
-    summaries.push_back(std::move(c));
+// The true position of every input point: the twin's frame (same pose and
+// intrinsics) keeps its noiseless depth where both readings are valid and takes
+// the noisy one elsewhere, so that its back-projection has the same points in
+// the same order as the noisy frame's. False when the twin gave no frame.
+bool backprojectTruth(hal::Camera& twin, const hal::RgbdFrame& frame, const pipeline::RawDepthRange& raw_range,
+                      const pipeline::DepthRange& range, hal::RgbdFrame& truth_frame, pipeline::PointCloud& truth_cloud) {
+  if (!twin.acquire(truth_frame, std::chrono::seconds(2))) return false;
+  const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
+  const uint16_t* noisy = frame.depth();
+  uint16_t* clean = truth_frame.depth();
+  for (std::size_t i = 0; i < frame.pixelCount(); ++i) {
+    if (!valid(noisy[i]) || !valid(clean[i])) clean[i] = noisy[i];
   }
+  pipeline::BackprojectCounts truth_counts;
+  return pipeline::backprojectRef(truth_frame, range, truth_cloud, truth_counts).isOk();
+}
 
+// What measuring a configuration on a frame uses: sized once at start-up.
+struct Measurer {
+  pipeline::Foveator& foveator;
+  pipeline::ErrorEvaluator& evaluator;
+  net::ChunkEncoder& encoder;
+  pipeline::PointCloud& cloud;
+  pipeline::FoveatedCloud& out;
+  std::vector<uint32_t>& representative;
+  pipeline::DepthRange range;
+  double reference_slope;
+
+  // One configuration on one frame, added to its run: back-projection and
+  // foveation timed (what the service does per frame), then, untimed, the same
+  // foveation with each input point's representative, its error (and against
+  // the true surface when `truth` is given) and the bytes the stream would send.
+  Status measure(const hal::RgbdFrame& frame, const pipeline::Gaze& gaze, const pipeline::PointCloud* truth,
+                 ConfigRun& r) {
+    if (Status s = foveator.setConfig(r.config); !s) return s;
+    pipeline::BackprojectCounts counts;
+    pipeline::FoveationStats stats;
+    const double cpu0 = threadCpuMs();
+    const auto t0 = std::chrono::steady_clock::now();
+    Status s = pipeline::backprojectRef(frame, range, cloud, counts);
+    if (s) s = foveator.foveate(cloud, gaze, out, stats);
+    const auto t1 = std::chrono::steady_clock::now();
+    const double cpu1 = threadCpuMs();
+    if (s) s = foveator.foveate(cloud, gaze, out, stats, representative.data());
+    pipeline::ErrorModel error_model{&foveator.model(), {}, reference_slope};
+    for (int reg = 0; reg < stats.region_count; ++reg) error_model.voxel_size_m[reg] = stats.regions[reg].voxel_size_m;
+    pipeline::ErrorMetrics metrics;
+    if (s) s = evaluator.evaluate(cloud, foveator.lastRegions(), representative.data(), out.points, gaze, error_model, metrics);
+    std::array<uint64_t, pipeline::kMaxRegions> wire_bytes{};
+    uint64_t wire_total = 0;
+    if (s) {
+      std::array<double, pipeline::kMaxRegions> voxel_m{};
+      for (int reg = 0; reg < stats.region_count; ++reg) voxel_m[reg] = stats.regions[reg].voxel_size_m;
+      s = encoder.encode(out, std::span<const double>(voxel_m.data(), stats.region_count), 0, 0);
+      for (std::size_t i = 0; s && i < encoder.chunkCount(); ++i) {
+        wire_bytes[encoder.chunkRegion(i)] += encoder.chunk(i).size() + net::kDatagramOverhead;
+        wire_total += encoder.chunk(i).size() + net::kDatagramOverhead;
+      }
+    }
+    if (!s) return s;
+    r.time_ms.push_back(cpu1 - cpu0);
+    r.wall_ms.push_back(msBetween(t0, t1));
+    // (ACUITY has no d0: its column says "-".)
+    if (stats.fixation.source != pipeline::FixationSource::kNone) r.d0_m.push_back(stats.fixation.d0_m);
+    for (int reg = 0; reg < stats.region_count; ++reg) {
+      r.regions[reg].add(metrics.regions[reg], stats.regions[reg].points_in, stats.regions[reg].points_out,
+                         stats.regions[reg].voxel_size_m, wire_bytes[reg]);
+    }
+    r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0, wire_total);
+    if (truth != nullptr) {
+      pipeline::ErrorMetrics truth_metrics;
+      if (evaluator.evaluate(*truth, foveator.lastRegions(), representative.data(), out.points, gaze, error_model,
+                             truth_metrics)) {
+        r.truth.add(truth_metrics.all, 0, 0, 0.0, 0);
+      }
+    }
+    r.at_eye += metrics.at_eye;
+    r.no_representative += metrics.no_representative;
+    ++r.frames;
+    return Status::ok();
+  }
+};
+
+// A run's figures over its frames, per region and in all.
+ConfigSummary summarise(const ConfigRun& r) {
+  Result<pipeline::RegionModel> model = pipeline::RegionModel::create(r.config.acuity);
+  ConfigSummary c;
+  c.preset = configName(r.config.acuity);
+  c.slope = r.config.acuity.slope;
+  c.frames = r.frames;
+  c.time_ms_median = quantileOf(r.time_ms, 0.5);
+  c.time_ms_p90 = quantileOf(r.time_ms, 0.9);
+  c.wall_ms_median = quantileOf(r.wall_ms, 0.5);
+  c.d0_median_m = quantileOf(r.d0_m, 0.5);
+  c.at_eye = r.at_eye;
+  c.no_representative = r.no_representative;
+  for (int reg = 0; reg < model->regionCount(); ++reg) {
+    RegionSummary s = r.regions[reg].summarise(r.frames);
+    s.index = reg;
+    s.name = model->regionName(reg);
+    if (model->levels()) {
+      s.ecc_min_deg = s.ecc_max_deg = kNaN;  // no band: each point at its own eccentricity
+    } else {
+      s.ecc_min_deg = reg == 0 ? 0.0 : model->boundDeg(reg - 1);
+      s.ecc_max_deg = reg < model->boundCount() ? model->boundDeg(reg) : 180.0;
+    }
+    if (reg == 0) s.voxel_mm = 0.0, s.rms_over_voxel = kNaN, s.max_over_voxel = kNaN;
+    c.regions.push_back(s);
+  }
+  c.all = r.all.summarise(r.frames);
+  c.all.name = "all";
+  c.all.voxel_mm = 0.0;
+  c.all.ratio_first_deg = kNaN;
+  c.all.ratio_last_deg = kNaN;
+  if (r.truth.seen > 0) {
+    c.truth = r.truth.summarise(r.frames);
+    c.have_truth = true;
+  }
+  return c;
+}
+
+// The report's header: the command, camera, gaze, host and load, date.
+ReportContext reportContext(int argc, char** argv, const Options& options, const hal::CameraInfo& info,
+                            const std::string& gaze_text, double load_before, long frames) {
   ReportContext context;
   for (int i = 0; i < argc; ++i) {
     if (i > 0) context.command_line += ' ';
@@ -717,7 +630,7 @@ int run(int argc, char** argv) {
     const std::filesystem::path self(argv[0]);
     context.command_line += i > 0 ? std::string(argv[i]) : self.is_relative() ? self.string() : self.filename().string();
   }
-  context.camera = info.name + " " + std::to_string(width) + "x" + std::to_string(height);
+  context.camera = info.name + " " + std::to_string(info.intrinsics.width) + "x" + std::to_string(info.intrinsics.height);
   context.gaze = gaze_text;
   if (options.head_turn_deg != 0.0) {
     char head[128];
@@ -734,10 +647,15 @@ int run(int argc, char** argv) {
   context.host = hostDescription() + "; " + load_text;
   context.reference_slope = options.reference_slope;
   context.pixel_pitch_arcmin = std::atan(1.0 / info.intrinsics.fx) * 180.0 / 3.14159265358979323846 * 60.0;
-  context.frames = static_cast<int>(options.frames - failed);
+  context.frames = static_cast<int>(frames);
   context.date_utc = utcNow();
-  if (dynamics) context.extra_markdown = dynamicsMarkdown(*dynamics);
+  return context;
+}
 
+// report.md, report.csv, the plots (and dynamics.csv) into --out-dir, and the
+// summary table on standard output.
+int writeReport(const Options& options, const ReportContext& context, const std::vector<ConfigSummary>& summaries,
+                const std::optional<DynamicsReport>& dynamics) {
   std::error_code ec;
   std::filesystem::create_directories(options.out_dir, ec);
   if (ec) {
@@ -783,6 +701,140 @@ int run(int argc, char** argv) {
   std::printf("wrote report.md, report.csv, the plot scripts and data%s%s to %s\n", *have_plot ? ", the plots" : "",
               dynamics ? ", dynamics.csv" : "", options.out_dir.c_str());
   return kExitOk;
+}
+
+int run(int argc, char** argv) {
+  bool help = false;
+  Result<Options> parsed = parseArgs(argc, argv, help);
+  if (!parsed) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", parsed.status().message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s\ncameras:\n%s\n", kHelp, hal::cameraSpecHelp().c_str());
+    return kExitOk;
+  }
+  const Options& options = parsed.value();
+  if (!options.replot_from.empty()) return replot(options);
+
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(options.camera);
+  if (!created) {
+    std::fprintf(stderr, "fovea-error-report: --camera: %s\n", created.status().message().c_str());
+    return kExitUsage;
+  }
+  hal::Camera& camera = *created.value();
+  if (Status s = camera.open(); !s) {
+    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", options.camera.c_str(), s.message().c_str());
+    return kExitFailure;
+  }
+  const hal::CameraInfo& info = camera.info();
+  const int width = info.intrinsics.width, height = info.intrinsics.height;
+  const std::size_t max_points = static_cast<std::size_t>(width) * height;
+
+  // Start-up: every buffer sized once; one Foveator reconfigured per configuration.
+  std::vector<ConfigRun> runs = planRuns(options);
+  // The scalar reference kernels: the report's time column says so.
+  Result<pipeline::Foveator> foveator =
+      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kRef, 1}, runs.front().config);
+  if (!foveator) {
+    std::fprintf(stderr, "fovea-error-report: %s\n", foveator.status().message().c_str());
+    return kExitUsage;
+  }
+  for (const ConfigRun& r : runs) {
+    if (Status s = foveator->setConfig(r.config); !s) {
+      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+      return kExitUsage;
+    }
+  }
+  Result<pipeline::ErrorEvaluator> evaluator = pipeline::ErrorEvaluator::create(max_points);
+  // The stream's codec at its defaults (1200-byte datagrams), for the bytes columns.
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
+  for (const Status& s : {evaluator.status(), encoder.status()}) {
+    if (!s) {
+      std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
+      return kExitFailure;
+    }
+  }
+  // The true surface: the mock scene without sensor noise, frame for frame.
+  std::unique_ptr<hal::Camera> truth_camera;
+  if (options.camera.rfind("mock:", 0) == 0 && options.camera.find("noise=off") == std::string::npos) {
+    Result<std::unique_ptr<hal::Camera>> t = hal::createCamera(options.camera + ",noise=off");
+    if (t && t.value()->open() && t.value()->start()) truth_camera = std::move(t.value());
+    if (!truth_camera) std::printf("fovea-error-report: no noiseless twin of %s: no true-surface columns\n", options.camera.c_str());
+  }
+  hal::RgbdFrame truth_frame(width, height);
+  pipeline::PointCloud truth_cloud(max_points);
+  const pipeline::RawDepthRange raw_range = pipeline::rawDepthRange(pipeline::DepthRange{}, info.depth_scale_m);
+  hal::RgbdFrame frame(width, height);
+  pipeline::PointCloud cloud(max_points);
+  pipeline::FoveatedCloud out(max_points);
+  std::vector<uint32_t> representative(max_points);
+  // The range: the same as fovead's defaults.
+  Measurer measurer{*foveator, *evaluator, *encoder, cloud, out, representative, pipeline::DepthRange{},
+                    options.reference_slope};
+
+  const std::string gaze_text = describeGaze(options, info);
+  std::printf("fovea-error-report: camera %s %dx%d, %ld frames, %zu configurations; gaze %s\n", info.name.c_str(),
+              width, height, options.frames, runs.size(), gaze_text.c_str());
+  if (Status s = camera.start(); !s) {
+    std::fprintf(stderr, "fovea-error-report: camera %s: %s\n", info.name.c_str(), s.message().c_str());
+    return kExitFailure;
+  }
+  const double load_before = loadAverage();
+  long failed = 0;
+  const bool interactive = isatty(STDOUT_FILENO) != 0;  // progress only on a terminal
+  for (long f = 0; f < options.frames; ++f) {
+    if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
+      std::fprintf(stderr, "frame %ld: capture: %s\n", f, s.toString().c_str());
+      ++failed;
+      continue;
+    }
+    const bool have_truth =
+        truth_camera && backprojectTruth(*truth_camera, frame, raw_range, measurer.range, truth_frame, truth_cloud);
+    const pipeline::Gaze gaze = gazeOn(frame, options, info);
+    // Side by side: every configuration on this frame, starting with a different
+    // one each frame so that no configuration always runs first (cold caches).
+    for (std::size_t k = 0; k < runs.size(); ++k) {
+      ConfigRun& r = runs[(k + static_cast<std::size_t>(f)) % runs.size()];
+      if (Status s = measurer.measure(frame, gaze, have_truth ? &truth_cloud : nullptr, r); !s) {
+        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f, configName(r.config.acuity).c_str(), r.config.acuity.slope,
+                     s.toString().c_str());
+        return kExitFailure;
+      }
+    }
+    if (interactive) {
+      std::printf("\rframe %ld/%ld", f + 1, options.frames);
+      std::fflush(stdout);
+    }
+  }
+  if (interactive) std::printf("\n");
+  if (truth_camera) truth_camera->stop();
+  // The figures over time, on the camera's next frames.
+  std::optional<DynamicsReport> dynamics;
+  if (options.dynamics.stability_frames > 0 && failed < options.frames) {
+    DynamicsOptions d = options.dynamics;
+    if (info.fps > 0) d.fps = info.fps;
+    d.eye_offset_cam = options.eye_offset_cam;
+    Result<DynamicsReport> measured = measureDynamics(camera, dynamicsConfigs(options.slopes.front(), acuityFloors(options.acuity_floors_mm, options.acuity_noise_floors_mm),
+                                                                   options.acuity_refined), d);
+    if (!measured) {
+      std::fprintf(stderr, "fovea-error-report: temporal figures: %s\n", measured.status().toString().c_str());
+      return kExitFailure;
+    }
+    dynamics = std::move(measured.value());
+  }
+  camera.stop();
+  if (failed == options.frames) {
+    std::fprintf(stderr, "fovea-error-report: no frame could be captured\n");
+    return kExitFailure;
+  }
+
+  // Summaries, in the order presets x slopes.
+  std::vector<ConfigSummary> summaries;
+  for (const ConfigRun& r : runs) summaries.push_back(summarise(r));
+  ReportContext context = reportContext(argc, argv, options, info, gaze_text, load_before, options.frames - failed);
+  if (dynamics) context.extra_markdown = dynamicsMarkdown(*dynamics);
+  return writeReport(options, context, summaries, dynamics);
 }
 
 }  // namespace
