@@ -5,21 +5,18 @@
 
 namespace fovea::hal::v4l2 {
 
-namespace {
-
-bool contains(const std::vector<uint32_t>& formats, uint32_t fourcc) {
+bool offersFormat(const std::vector<uint32_t>& formats, uint32_t fourcc) {
   return std::find(formats.begin(), formats.end(), fourcc) != formats.end();
 }
 
-}  // namespace
-
 bool offersDepth(const std::vector<uint32_t>& formats) {
-  return std::any_of(std::begin(kDepthFourccs), std::end(kDepthFourccs), [&](uint32_t f) { return contains(formats, f); });
+  return std::any_of(std::begin(kDepthFourccs), std::end(kDepthFourccs),
+                     [&](uint32_t f) { return offersFormat(formats, f); });
 }
 
 bool offersColour(const std::vector<uint32_t>& formats) {
   return std::any_of(std::begin(kColourFourccs), std::end(kColourFourccs),
-                     [&](uint32_t f) { return contains(formats, f); });
+                     [&](uint32_t f) { return offersFormat(formats, f); });
 }
 
 NodeScan scanNodes(const V4l2Paths& paths) {

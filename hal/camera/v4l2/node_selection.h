@@ -28,6 +28,8 @@ struct V4l2Paths {
 inline constexpr uint32_t kDepthFourccs[] = {V4L2_PIX_FMT_Z16, V4L2_PIX_FMT_Y16};
 inline constexpr uint32_t kColourFourccs[] = {V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_UYVY, V4L2_PIX_FMT_MJPEG,
                                               V4L2_PIX_FMT_RGB24, V4L2_PIX_FMT_BGR24};
+// Whether `formats` (a node's fourccs) holds `fourcc`.
+bool offersFormat(const std::vector<uint32_t>& formats, uint32_t fourcc);
 bool offersDepth(const std::vector<uint32_t>& formats);
 bool offersColour(const std::vector<uint32_t>& formats);
 

@@ -19,10 +19,6 @@ namespace fovea::hal::v4l2 {
 
 namespace {
 
-bool contains(const std::vector<uint32_t>& formats, uint32_t fourcc) {
-  return std::find(formats.begin(), formats.end(), fourcc) != formats.end();
-}
-
 std::string formatList(const std::vector<uint32_t>& formats) {
   std::string text;
   for (uint32_t f : formats) {
@@ -106,11 +102,11 @@ void appendNodeModes(const NodeInfo& info, bool depth, std::vector<std::string>&
   if (!node.open(info.path)) return;
   if (depth) {
     for (uint32_t f : kDepthFourccs) {
-      if (contains(info.formats, f)) appendModes(node, "depth", f, modes);
+      if (offersFormat(info.formats, f)) appendModes(node, "depth", f, modes);
     }
   } else {
     for (uint32_t f : kColourFourccs) {
-      if (contains(info.formats, f)) appendModes(node, "colour", f, modes);
+      if (offersFormat(info.formats, f)) appendModes(node, "colour", f, modes);
     }
   }
 }
@@ -304,10 +300,10 @@ Status V4l2Camera::negotiateDepth() {
   uint32_t fourcc = options_.depth_format;
   if (fourcc == 0) {
     for (uint32_t f : kDepthFourccs) {
-      if (fourcc == 0 && contains(formats, f)) fourcc = f;
+      if (fourcc == 0 && offersFormat(formats, f)) fourcc = f;
     }
   }
-  if (fourcc == 0 || !contains(formats, fourcc)) {
+  if (fourcc == 0 || !offersFormat(formats, fourcc)) {
     return {ErrorCode::kInvalidArgument,
             "v4l2: " + depth_.path() + " (" + depth_.caps().card + ") offers no " +
                 (fourcc == 0 ? std::string("Z16 or Y16") : fourccText(fourcc)) +
@@ -345,10 +341,10 @@ Status V4l2Camera::negotiateColour() {
   uint32_t fourcc = options_.colour_format;
   if (fourcc == 0) {
     for (uint32_t f : kColourFourccs) {
-      if (fourcc == 0 && contains(formats, f)) fourcc = f;
+      if (fourcc == 0 && offersFormat(formats, f)) fourcc = f;
     }
   }
-  if (fourcc == 0 || !contains(formats, fourcc)) {
+  if (fourcc == 0 || !offersFormat(formats, fourcc)) {
     return {ErrorCode::kInvalidArgument,
             "v4l2: colour node " + colour_.path() + " (" + colour_.caps().card + ") offers no " +
                 (fourcc == 0 ? std::string("YUYV, UYVY, MJPG, RGB3 or BGR3") : fourccText(fourcc)) +
