@@ -18,9 +18,6 @@ namespace {
 
 using Eigen::Vector3d;
 
-constexpr double kTwoPi = 2.0 * std::numbers::pi;
-constexpr double kInf = std::numeric_limits<double>::infinity();
-
 // Kinect v1 nominal focal length at 640 pixels wide.
 constexpr double kFocalAt640 = 525.0;
 constexpr double kDepthScaleM = 0.001;

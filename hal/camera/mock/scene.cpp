@@ -17,9 +17,6 @@ namespace {
 using Eigen::Vector3d;
 using Eigen::Vector3f;
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kTwoPi = 2.0 * std::numbers::pi;
-
 Vector3d v3(double x, double y, double z) { return Vector3d(x, y, z); }
 Vector3f rgb(float r, float g, float b) { return Vector3f(r, g, b); }
 

@@ -9,6 +9,8 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
+#include <numbers>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -19,6 +21,10 @@
 #include "hal/frame.h"
 
 namespace fovea::hal::mock {
+
+// The mock's constants, for scene.cpp and mock_camera.cpp alike.
+inline constexpr double kInf = std::numeric_limits<double>::infinity();
+inline constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
 enum class TextureKind {
   kSolid,    // color_a
