@@ -43,6 +43,9 @@ class [[nodiscard]] Status {
   std::string message_;
 };
 
+// The commonest error: a bad value in a configuration, a spec or a flag.
+inline Status invalidArgument(std::string message) { return {ErrorCode::kInvalidArgument, std::move(message)}; }
+
 // Prints the status and aborts (Result::value() of an error).
 [[noreturn]] void resultValueOfError(const Status& status);
 

@@ -7,8 +7,6 @@ namespace fovea::firmware {
 
 namespace {
 
-Status invalid(std::string message) { return {ErrorCode::kInvalidArgument, std::move(message)}; }
-
 // The inline extrinsics, when given.
 Result<std::optional<hal::Pose>> inlineExtrinsics(const CameraSettings& s) {
   using R = Result<std::optional<hal::Pose>>;
@@ -16,7 +14,7 @@ Result<std::optional<hal::Pose>> inlineExtrinsics(const CameraSettings& s) {
   const bool has_translation = !s.extrinsics_translation_m.empty();
   if (!has_rotation && !has_translation) return std::optional<hal::Pose>();
   if (has_rotation != has_translation) {
-    return R(invalid(std::string(has_rotation ? "camera.extrinsics.translation_m" : "camera.extrinsics.rotation_xyzw") +
+    return R(invalidArgument(std::string(has_rotation ? "camera.extrinsics.translation_m" : "camera.extrinsics.rotation_xyzw") +
                      ": give camera.extrinsics.rotation_xyzw and translation_m together (or neither)"));
   }
   Result<Eigen::Quaterniond> q = hal::quaternionFromXyzw(s.extrinsics_rotation_xyzw, "camera.extrinsics.rotation_xyzw");
@@ -40,7 +38,7 @@ Status checkCameraGeometry(const CameraSettings& settings) {
   if (Result<std::optional<hal::Pose>> e = inlineExtrinsics(settings); !e) return e.status();
   if (Result<hal::Pose> p = posePose(settings.pose); !p) return p.status();
   if (settings.pose.source == "socket" && settings.pose.socket.empty()) {
-    return invalid("camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
+    return invalidArgument("camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
   }
   return Status::ok();
 }

@@ -498,8 +498,6 @@ std::string suggestion(std::string_view name, bool section) {
   return best.empty() ? std::string() : " (did you mean '" + best + "'?)";
 }
 
-Status invalid(std::string message) { return {ErrorCode::kInvalidArgument, std::move(message)}; }
-
 // Where each field got its value ("board/rpi5.toml:12", "--set").
 using Origins = std::map<std::string, std::string>;
 
@@ -507,11 +505,11 @@ using Origins = std::map<std::string, std::string>;
 Status assign(ServiceConfig& config, const Field& field, const toml::value& v, const std::string& where) {
   std::variant<Value, std::string> converted = convert(field, v);
   if (const std::string* error = std::get_if<std::string>(&converted)) {
-    return invalid(where + ": " + field.path + ": " + *error);
+    return invalidArgument(where + ": " + field.path + ": " + *error);
   }
   const Value& value = std::get<Value>(converted);
   if (std::string error = checkValue(field, value); !error.empty()) {
-    return invalid(where + ": " + field.path + ": " + error);
+    return invalidArgument(where + ": " + field.path + ": " + error);
   }
   field.set(config, value);
   return Status::ok();
@@ -598,7 +596,7 @@ Status loadTextInto(const std::string& text, const std::string& path, ServiceCon
     if (Status s = assign(config, *findField(entry.path), *entry.value, where); !s) return s;
     origins[entry.path] = where;
   }
-  if (!errors.empty()) return invalid(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
+  if (!errors.empty()) return invalidArgument(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
   return Status::ok();
 }
 
@@ -693,20 +691,20 @@ Status validateWithOrigins(const ServiceConfig& config, const Origins& origins) 
   for (auto name = error->related.begin(); where.empty() && name != error->related.end(); ++name) {
     if (auto it = origins.find(*name); it != origins.end()) where = it->second;
   }
-  return invalid((where.empty() ? "" : where + ": ") + error->field + ": " + error->message);
+  return invalidArgument((where.empty() ? "" : where + ": ") + error->field + ": " + error->message);
 }
 
 Status applyOverrideTracked(ServiceConfig& config, std::string_view assignment, Origins& origins) {
   const std::size_t eq = assignment.find('=');
   if (eq == std::string_view::npos || eq == 0) {
-    return invalid("--set: '" + std::string(assignment) + "' is not section.key=value");
+    return invalidArgument("--set: '" + std::string(assignment) + "' is not section.key=value");
   }
   const std::string path(assignment.substr(0, eq));
   const std::string text(assignment.substr(eq + 1));
   const Field* field = findField(path);
   if (!field) {
-    if (sections().count(path)) return invalid("--set: '" + path + "' is a section; set one of its keys");
-    return invalid("--set: unknown key '" + path + "'" + suggestion(path, false));
+    if (sections().count(path)) return invalidArgument("--set: '" + path + "' is a section; set one of its keys");
+    return invalidArgument("--set: unknown key '" + path + "'" + suggestion(path, false));
   }
   const bool stringy = field->kind == Kind::kString || field->kind == Kind::kChoice;
   if (stringy && (text.empty() || (text.front() != '"' && text.front() != '\''))) {
@@ -715,7 +713,7 @@ Status applyOverrideTracked(ServiceConfig& config, std::string_view assignment, 
     if (Status s = assign(config, *field, value, "--set"); !s) return s;
   } else {
     Result<toml::value> root = parseToml("v = " + text + "\n", "--set");
-    if (!root) return invalid("--set: " + path + ": '" + text + "' is not a TOML value");
+    if (!root) return invalidArgument("--set: " + path + ": '" + text + "' is not a TOML value");
     if (Status s = assign(config, *field, root->as_table().at("v"), "--set"); !s) return s;
   }
   origins[path] = "--set";
@@ -799,13 +797,13 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
     if (Status s = loadInto(*config_file, peek, peek_origins); !s) return s;
     if (auto it = peek_origins.find("board"); it != peek_origins.end()) {
       if (board && *board != peek.board) {
-        return invalid(it->second + ": board: the file is for '" + peek.board + "', --board says '" + *board + "'");
+        return invalidArgument(it->second + ": board: the file is for '" + peek.board + "', --board says '" + *board + "'");
       }
       board_name = peek.board;
     }
   }
   if (board_name.empty() || board_name.find('/') != std::string::npos) {
-    return invalid("board: '" + board_name + "' is not a board name (use --config FILE for a file elsewhere)");
+    return invalidArgument("board: '" + board_name + "' is not a board name (use --config FILE for a file elsewhere)");
   }
   const std::string dir = boardDirectory();
   const std::string board_path = dir + "/" + board_name + ".toml";
@@ -828,14 +826,14 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
   config.board = board_name;
   if (Status s = loadInto(board_path, config, origins); !s) return s;
   if (config.board != board_name) {
-    return invalid(origins["board"] + ": board: '" + config.board + "' in " + board_name + ".toml (they must match)");
+    return invalidArgument(origins["board"] + ": board: '" + config.board + "' in " + board_name + ".toml (they must match)");
   }
   if (config_file) {
     if (Status s = loadInto(*config_file, config, origins); !s) return s;
   }
   for (const std::string& assignment : overrides) {
     // A profile is picked before anything else; renaming it afterwards would only mislabel the result.
-    if (assignment.rfind("board=", 0) == 0) return invalid("--set: board: pick a profile with --board NAME");
+    if (assignment.rfind("board=", 0) == 0) return invalidArgument("--set: board: pick a profile with --board NAME");
     if (Status s = applyOverrideTracked(config, assignment, origins); !s) return s;
   }
   // FOVEA_FORCE_KERNEL beats any file, as everywhere (core/kernel_set.h).
@@ -861,13 +859,13 @@ Result<ConfigSources> takeConfigSources(std::vector<std::string>& tokens) {
       continue;
     }
     if (!value) {
-      if (i + 1 >= tokens.size()) return invalid(flag + " needs a value");
+      if (i + 1 >= tokens.size()) return invalidArgument(flag + " needs a value");
       value = tokens[++i];
     }
     if (flag == "--set") {
       sources.overrides.push_back(*value);
     } else if (std::optional<std::string>& slot = flag == "--board" ? sources.board : sources.config_file; slot) {
-      return invalid(flag + " given twice");
+      return invalidArgument(flag + " given twice");
     } else {
       slot = *value;
     }
