@@ -4,7 +4,7 @@
 fovea_optional(OPENNI2 "OpenNI2 camera backend" BACKEND)
 if(FOVEA_WANT_OPENNI2)
   if(PkgConfig_FOUND)
-    pkg_check_modules(OPENNI2 QUIET IMPORTED_TARGET libopenni2)
+    pkg_check_modules(OPENNI2 QUIET IMPORTED_TARGET GLOBAL libopenni2)  # GLOBAL: tests/unit/hal's leak probe links it too
   endif()
   fovea_optional_found(OPENNI2 "${OPENNI2_FOUND}" "libopenni2 through pkg-config (apt-get install libopenni2-dev pkg-config)")
   if(OPENNI2_FOUND)
