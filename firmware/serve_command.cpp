@@ -71,7 +71,7 @@ Result<Args> parseServeFlags(std::vector<std::string> tokens, ConfigSources& sou
   sources = std::move(taken.value());
   std::vector<char*> argv;
   for (std::string& t : tokens) argv.push_back(t.data());
-  return Args::parse(static_cast<int>(argv.size()), argv.data(), 0, kServeFlags, kServeSwitches);
+  return Args::parse(static_cast<int>(argv.size()), argv.data(), 0, serveFlags(), kServeSwitches);
 }
 
 // The effective configuration: board, file and --set (firmware/config.h), then

@@ -6,20 +6,20 @@
 
 namespace fovea::firmware {
 
-namespace {
-
-std::vector<std::string> serveFlags() {
-  std::vector<std::string> flags = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
-                                    "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
-                                    "--depth-max",  "--log-level", "--timing-log"};
-  flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
-  flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
+const std::vector<std::string>& serveFlags() {
+  // Built on first use, not during static initialisation: it reads kFoveationFlags
+  // and kStreamFlags of other translation units, whose initialisation order is
+  // unspecified (ASan's check_initialization_order caught this one in a unity build).
+  static const std::vector<std::string> flags = [] {
+    std::vector<std::string> f = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
+                                  "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
+                                  "--depth-max",  "--log-level", "--timing-log"};
+    f.insert(f.end(), kFoveationFlags.begin(), kFoveationFlags.end());
+    f.insert(f.end(), kStreamFlags.begin(), kStreamFlags.end());
+    return f;
+  }();
   return flags;
 }
-
-}  // namespace
-
-const std::vector<std::string> kServeFlags = serveFlags();
 const std::vector<std::string> kServeSwitches = {"--insecure", "--memory-lock"};
 
 Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base) {

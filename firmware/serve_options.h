@@ -14,7 +14,7 @@
 namespace fovea::firmware {
 
 // Value flags and switches `fovead serve` accepts (foveation and stream flags included).
-extern const std::vector<std::string> kServeFlags;
+const std::vector<std::string>& serveFlags();
 extern const std::vector<std::string> kServeSwitches;
 
 Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base);
