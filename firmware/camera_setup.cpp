@@ -14,8 +14,9 @@ Result<std::optional<hal::Pose>> inlineExtrinsics(const CameraSettings& s) {
   const bool has_translation = !s.extrinsics_translation_m.empty();
   if (!has_rotation && !has_translation) return std::optional<hal::Pose>();
   if (has_rotation != has_translation) {
-    return R(invalidArgument(std::string(has_rotation ? "camera.extrinsics.translation_m" : "camera.extrinsics.rotation_xyzw") +
-                     ": give camera.extrinsics.rotation_xyzw and translation_m together (or neither)"));
+    return R(invalidArgument(
+        std::string(has_rotation ? "camera.extrinsics.translation_m" : "camera.extrinsics.rotation_xyzw") +
+        ": give camera.extrinsics.rotation_xyzw and translation_m together (or neither)"));
   }
   Result<Eigen::Quaterniond> q = hal::quaternionFromXyzw(s.extrinsics_rotation_xyzw, "camera.extrinsics.rotation_xyzw");
   if (!q) return q.status();

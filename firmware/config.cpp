@@ -596,7 +596,9 @@ Status loadTextInto(const std::string& text, const std::string& path, ServiceCon
     if (Status s = assign(config, *findField(entry.path), *entry.value, where); !s) return s;
     origins[entry.path] = where;
   }
-  if (!errors.empty()) return invalidArgument(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
+  if (!errors.empty()) {
+    return invalidArgument(path + ":" + std::to_string(errors.front().first) + ": " + errors.front().second);
+  }
   return Status::ok();
 }
 
@@ -797,7 +799,8 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
     if (Status s = loadInto(*config_file, peek, peek_origins); !s) return s;
     if (auto it = peek_origins.find("board"); it != peek_origins.end()) {
       if (board && *board != peek.board) {
-        return invalidArgument(it->second + ": board: the file is for '" + peek.board + "', --board says '" + *board + "'");
+        return invalidArgument(it->second + ": board: the file is for '" + peek.board + "', --board says '" + *board +
+                               "'");
       }
       board_name = peek.board;
     }
@@ -826,7 +829,8 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
   config.board = board_name;
   if (Status s = loadInto(board_path, config, origins); !s) return s;
   if (config.board != board_name) {
-    return invalidArgument(origins["board"] + ": board: '" + config.board + "' in " + board_name + ".toml (they must match)");
+    return invalidArgument(origins["board"] + ": board: '" + config.board + "' in " + board_name +
+                           ".toml (they must match)");
   }
   if (config_file) {
     if (Status s = loadInto(*config_file, config, origins); !s) return s;

@@ -15,9 +15,9 @@
 #include <utility>
 
 #include "core/clock.h"
+#include "core/sanitizer.h"
 #include "firmware/camera_setup.h"
 #include "firmware/options.h"
-#include "core/sanitizer.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
 #include "net/key.h"

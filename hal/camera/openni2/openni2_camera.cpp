@@ -84,7 +84,7 @@ bool sameMode(const VideoModeDesc& a, const VideoModeDesc& b) {
 // reference that is never released (RTLD_NODELETE), so it stays mapped to the
 // end and LeakSanitizer names it: toolchain/lsan.supp suppresses the drivers
 // only. A stream or device that fovea forgets to destroy is allocated by
-// libOpenNI2.so itself and is still reported (test_openni2_camera proves it).
+// libOpenNI2.so itself and is still reported (CTest openni2.leaks shows it).
 void keepDriversLoadedForLeakReports() {
 #ifdef FOVEA_ADDRESS_SANITIZER
   std::vector<std::string> drivers;
