@@ -1,7 +1,7 @@
 // The service's fixed-memory promise, in-process with a counting allocator
 // (this binary replaces malloc): after warm-up, 300 frames through all three
 // stage threads and the supervisor allocate nothing, streaming or not; and the
-// resident set stays flat over 1000 frames.
+// resident set stays flat over 1000 frames (300 in the slow trees).
 #include <unistd.h>
 
 #include <atomic>
@@ -206,11 +206,14 @@ long residentPages() {
   return resident;
 }
 
-TEST(ServiceMemory, ResidentSetStaysFlatOverAThousandFrames) {
+// Over 1000 frames natively, 300 in the slow trees (ASan, qemu: 47 s under qemu
+// for 1000), where the native tree of the same CI run counts the 1000.
+TEST(ServiceMemory, ResidentSetStaysFlatAfterWarmUp) {
 #ifdef FOVEA_THREAD_SANITIZER
   GTEST_SKIP() << "not under ThreadSanitizer: its shadow memory and tables grow with what the process touches "
                   "(core/sanitizer.h), and 1100 frames take minutes there";
 #endif
+  const int frames = test::repetitions(1000, 300);
   Service::Environment environment;
   environment.gpio = std::make_unique<hal::mock::MockGpio>(8);
   ServiceConfig config = allocConfig();
@@ -223,12 +226,12 @@ TEST(ServiceMemory, ResidentSetStaysFlatOverAThousandFrames) {
   Service& service = *running.service;
   ASSERT_TRUE(waitForFrames(service, 100, 10s));  // warm-up
   const long before = residentPages();
-  ASSERT_TRUE(waitForFrames(service, 1100, 30s));
+  ASSERT_TRUE(waitForFrames(service, 100 + frames, 30s));
   const long after = residentPages();
   running.stop();
   const long page_kib = sysconf(_SC_PAGESIZE) / 1024;
-  std::printf("resident set: %ld KiB after warm-up, %ld KiB after 1000 more frames\n", before * page_kib,
-              after * page_kib);
+  std::printf("resident set: %ld KiB after warm-up, %ld KiB after %d more frames\n", before * page_kib,
+              after * page_kib, frames);
   EXPECT_LE((after - before) * page_kib, 256) << "the resident set grew by more than 256 KiB";
 }
 
