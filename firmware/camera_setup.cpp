@@ -98,4 +98,56 @@ Result<std::unique_ptr<hal::PoseSource>> createPoseSource(const CameraSettings& 
   return source;
 }
 
+// [camera] settings from --camera, --calibration, --pose and --pose-max-age-ms.
+Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
+  CameraSettings settings;
+  settings.spec = args.getOr("--camera", "mock:living-room");
+  settings.calibration_file = args.getOr("--calibration", "");
+  const std::string pose = args.getOr("--pose", "none");
+  if (pose == "none") {
+    settings.pose.source = "none";
+  } else if (pose.rfind("fixed:", 0) == 0) {
+    Result<std::vector<double>> values = parseDoubleList("--pose fixed:", pose.substr(6));
+    if (!values) return values.status();
+    if (values->size() != 3 && values->size() != 7) {
+      return Result<CameraSettings>(ErrorCode::kInvalidArgument, "--pose fixed: expects X,Y,Z or X,Y,Z,QX,QY,QZ,QW");
+    }
+    settings.pose.source = "fixed";
+    settings.pose.translation_m.assign(values->begin(), values->begin() + 3);
+    if (values->size() == 7) settings.pose.rotation_xyzw.assign(values->begin() + 3, values->end());
+  } else if (pose.rfind("socket:", 0) == 0 && pose.size() > 7) {
+    settings.pose.source = "socket";
+    settings.pose.socket = pose.substr(7);
+  } else {
+    return Result<CameraSettings>(ErrorCode::kInvalidArgument,
+                                  "--pose: '" + pose + "' is not none, fixed:X,Y,Z[,QX,QY,QZ,QW] or socket:PATH");
+  }
+  if (const std::string* v = args.get("--pose-max-age-ms")) {
+    Result<long> ms = parseInteger("--pose-max-age-ms", *v, 1, 60'000);
+    if (!ms) return ms.status();
+    settings.pose.max_age_ms = ms.value();
+  }
+  if (Status s = checkCameraGeometry(settings); !s) return s;
+  return settings;
+}
+
+Result<OpenedCamera> openConfiguredCamera(const CameraSettings& settings) {
+  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(settings.spec);
+  if (!created) return Result<OpenedCamera>(invalidArgument(created.status().message()));
+  hal::Camera& camera = *created.value();
+  Result<std::string> calibrated = applyCameraCalibration(camera, settings);
+  if (!calibrated) return Result<OpenedCamera>(invalidArgument(calibrated.status().message()));
+  Result<std::unique_ptr<hal::PoseSource>> pose_source = createPoseSource(settings);
+  if (!pose_source) return pose_source.status();
+  if (Status s = camera.open(); !s) {
+    const ErrorCode code = s.code() == ErrorCode::kInvalidArgument ? ErrorCode::kUnavailable : s.code();
+    return Result<OpenedCamera>(code, "camera " + camera.info().name + ": " + s.message());
+  }
+  OpenedCamera out;
+  out.camera = std::move(created.value());
+  out.calibrated = std::move(calibrated.value());
+  out.pose_source = std::move(pose_source.value());
+  return out;
+}
+
 }  // namespace fovea::firmware

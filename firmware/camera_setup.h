@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/result.h"
+#include "firmware/options.h"
 #include "firmware/service_config.h"
 #include "hal/calibration.h"
 #include "hal/camera.h"
@@ -31,5 +32,24 @@ Result<std::string> applyCameraCalibration(hal::Camera& camera, const CameraSett
 Result<hal::PoseSourceConfig> poseSourceConfig(const CameraSettings& settings);
 // The pose source the configuration asks for (binds the socket for "socket").
 Result<std::unique_ptr<hal::PoseSource>> createPoseSource(const CameraSettings& settings);
+
+// [camera] settings from the command line: --camera SPEC (default the mock
+// living room), --calibration FILE, --pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH
+// and --pose-max-age-ms MS (fovead run and fovead map take these flags).
+inline const std::vector<std::string> kCameraFlags = {"--camera", "--calibration", "--pose", "--pose-max-age-ms"};
+Result<CameraSettings> cameraSettingsFromArgs(const Args& args);
+
+// A camera opened as the service opens one: calibration before open(), then
+// its pose source. Members in this order so that the pose source goes before
+// the camera it serves.
+struct OpenedCamera {
+  std::unique_ptr<hal::Camera> camera;
+  std::string calibrated;  // what the calibration set, "" for none
+  std::unique_ptr<hal::PoseSource> pose_source;
+};
+// kInvalidArgument for what was asked wrong (the spec, the calibration, the
+// pose settings); otherwise the failure of the machine, a device that would not
+// open ("camera NAME: why") never kInvalidArgument.
+Result<OpenedCamera> openConfiguredCamera(const CameraSettings& settings);
 
 }  // namespace fovea::firmware

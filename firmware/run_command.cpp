@@ -158,39 +158,6 @@ void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& 
   std::copy_n(from.weight.begin(), n, to.weight.begin());
 }
 
-// [camera] settings from --camera, --calibration, --pose and --pose-max-age-ms.
-Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
-  CameraSettings settings;
-  settings.spec = args.getOr("--camera", "mock:living-room");
-  settings.calibration_file = args.getOr("--calibration", "");
-  const std::string pose = args.getOr("--pose", "none");
-  if (pose == "none") {
-    settings.pose.source = "none";
-  } else if (pose.rfind("fixed:", 0) == 0) {
-    Result<std::vector<double>> values = parseDoubleList("--pose fixed:", pose.substr(6));
-    if (!values) return values.status();
-    if (values->size() != 3 && values->size() != 7) {
-      return Result<CameraSettings>(ErrorCode::kInvalidArgument, "--pose fixed: expects X,Y,Z or X,Y,Z,QX,QY,QZ,QW");
-    }
-    settings.pose.source = "fixed";
-    settings.pose.translation_m.assign(values->begin(), values->begin() + 3);
-    if (values->size() == 7) settings.pose.rotation_xyzw.assign(values->begin() + 3, values->end());
-  } else if (pose.rfind("socket:", 0) == 0 && pose.size() > 7) {
-    settings.pose.source = "socket";
-    settings.pose.socket = pose.substr(7);
-  } else {
-    return Result<CameraSettings>(ErrorCode::kInvalidArgument,
-                                  "--pose: '" + pose + "' is not none, fixed:X,Y,Z[,QX,QY,QZ,QW] or socket:PATH");
-  }
-  if (const std::string* v = args.get("--pose-max-age-ms")) {
-    Result<long> ms = parseInteger("--pose-max-age-ms", *v, 1, 60'000);
-    if (!ms) return ms.status();
-    settings.pose.max_age_ms = ms.value();
-  }
-  if (Status s = checkCameraGeometry(settings); !s) return s;
-  return settings;
-}
-
 // SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).
 volatile std::sig_atomic_t g_stop = 0;
 extern "C" void onStopSignal(int) { g_stop = 1; }
@@ -210,9 +177,9 @@ int startFailure(const Status& s) {
 }
 
 std::vector<std::string> runFlags() {
-  std::vector<std::string> flags = {"--camera", "--frames", "--duration", "--gaze", "--gaze-origin", "--gaze-dir",
-                                    "--depth-min", "--depth-max", "--every", "--save-ply", "--threads",
-                                    "--calibration", "--pose", "--pose-max-age-ms"};
+  std::vector<std::string> flags = {"--frames", "--duration", "--gaze", "--gaze-origin", "--gaze-dir",
+                                    "--depth-min", "--depth-max", "--every", "--save-ply", "--threads"};
+  flags.insert(flags.end(), kCameraFlags.begin(), kCameraFlags.end());
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
   flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
   return flags;
@@ -272,30 +239,14 @@ Result<RunOptions> runOptionsFromArgs(const Args& args) {
   return options;
 }
 
-// The camera, opened, with its pose source. Members in this order so that the
-// pose source goes before the camera it serves.
-struct RunCamera {
-  std::unique_ptr<hal::Camera> camera;
-  std::string calibrated;  // what the calibration set, "" for none
-  std::unique_ptr<hal::PoseSource> pose_source;
-};
-
 // The service's own set-up (firmware/camera_setup.h): calibration before open, then the pose source.
-Exit openCamera(const CameraSettings& settings, RunCamera& out) {
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(settings.spec);
-  if (!created) return usage(created.status());
-  hal::Camera& camera = *created.value();
-  Result<std::string> calibrated = applyCameraCalibration(camera, settings);
-  if (!calibrated) return usage(calibrated.status());
-  Result<std::unique_ptr<hal::PoseSource>> pose_source = createPoseSource(settings);
-  if (!pose_source) return startFailure(pose_source.status());
-  if (Status s = camera.open(); !s) {
-    std::fprintf(stderr, "fovead run: camera %s: %s\n", camera.info().name.c_str(), s.message().c_str());
-    return kExitFailure;
+Exit openCamera(const CameraSettings& settings, OpenedCamera& out) {
+  Result<OpenedCamera> opened = openConfiguredCamera(settings);
+  if (!opened) {
+    std::fprintf(stderr, "fovead run: %s\n", opened.status().message().c_str());
+    return opened.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
   }
-  out.camera = std::move(created.value());
-  out.calibrated = std::move(calibrated.value());
-  out.pose_source = std::move(pose_source.value());
+  out = std::move(opened.value());
   return std::nullopt;
 }
 
@@ -351,7 +302,7 @@ struct FrameFigures {
 // the figures the frame loop's steps share.
 class Run {
  public:
-  Run(const RunOptions& options, RunCamera& camera, const GazeChoice& gaze_choice, FrameFoveator& stage,
+  Run(const RunOptions& options, OpenedCamera& camera, const GazeChoice& gaze_choice, FrameFoveator& stage,
       fovea::KernelSet kernels)
       : options_(options),
         camera_(*camera.camera),
@@ -757,7 +708,7 @@ int runCommand(int argc, char** argv) {
   }
   Result<RunOptions> options = runOptionsFromArgs(args.value());
   if (!options) return usage(options.status());
-  RunCamera camera;
+  OpenedCamera camera;
   if (Exit e = openCamera(options->camera, camera)) return *e;
   Result<GazeChoice> gaze_choice = gazeChoiceForRun(args.value(), options.value(), camera.camera->info());
   if (!gaze_choice) return usage(gaze_choice.status());
