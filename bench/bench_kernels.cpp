@@ -26,6 +26,7 @@
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
+#include "pipeline/map/surfel_map.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -292,6 +293,36 @@ void bmPipelineSimdAll(benchmark::State& state) {
   pipelineSimd(state, std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
 }
 
+// --- The surfel map (pipeline/map/) -------------------------------------------
+
+// Fusing the frame into a map that already holds it, as a static camera does
+// frame after frame: every pixel with a normal associates and merges (the
+// scalar reference, one thread). per_point: per pixel of the frame.
+void bmMapFuseRef(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  hal::RgbdFrame frame = f.input.frame;
+  pipeline::map::SurfelMapConfig config;
+  config.max_width = frame.width();
+  config.max_height = frame.height();
+  pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(config).value();
+  pipeline::map::FuseStats stats;
+  for (int i = 0; i < 5; ++i) {  // the surfels become stable
+    ++frame.stamp_ns;
+    (void)map.fuse(frame, stats);
+  }
+  for (auto _ : state) {
+    ++frame.stamp_ns;
+    benchmark::DoNotOptimize(map.fuse(frame, stats));
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, frame.pixelCount());
+  state.counters["surfels"] = static_cast<double>(map.size());
+  state.counters["merged"] = static_cast<double>(stats.merged);
+  state.counters["added"] = static_cast<double>(stats.added);
+  state.counters["carved"] = static_cast<double>(stats.carved);
+  state.counters["valid"] = static_cast<double>(stats.pixels_valid);
+}
+
 struct KernelBench {
   const char* name;  // "<kernel>/<variant>"
   void (*run)(benchmark::State&);
@@ -319,6 +350,8 @@ const KernelBench kKernels[] = {
     {"levels/simd-floor", &bmLevels<pipeline::assignLevelsSimd, true>},
     {"voxel_sample/hash-acuity-floor", &bmVoxelSample<pipeline::HashVoxelSampler, true, true>},
     {"pipeline/acuity-floor-simd-1t", &bmPipelineAcuityFloorSimd1},
+    // The surfel map's fusion of one 640x480 frame (docs/map.md)
+    {"map/fuse-ref", &bmMapFuseRef},
 };
 
 }  // namespace

@@ -14,5 +14,6 @@ int keygenCommand(int argc, char** argv);   // fovead keygen FILE
 int printConfigCommand(int argc, char** argv);  // fovead print-config ... (also --print-config)
 int serveCommand(int argc, char** argv);    // fovead serve ...
 int camerasCommand(int argc, char** argv);  // fovead cameras
+int mapCommand(int argc, char** argv);      // fovead map ...
 
 }  // namespace fovea::firmware

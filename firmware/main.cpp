@@ -20,6 +20,8 @@ const char* kHelp =
     "  serve     run as a service: stage threads, fixed memory, status lines, systemd\n"
     "            notifications; until SIGTERM (SIGHUP reloads the foveation parameters)\n"
     "  foveate   foveate a recorded PLY cloud for a given gaze and write a PLY\n"
+    "  map       fuse posed frames of a camera (a recording, a mock path) into a surfel\n"
+    "            map and write it as PLY\n"
     "  keygen    write a new pre-shared key file for the stream\n"
     "  cameras   list the cameras this build can see, with the spec to use for each\n"
     "  print-config  print the effective configuration (board profile, --config FILE,\n"
@@ -45,6 +47,7 @@ int main(int argc, char** argv) {
   if (std::strcmp(argv[1], "foveate") == 0) return foveateCommand(argc, argv);
   if (std::strcmp(argv[1], "keygen") == 0) return keygenCommand(argc, argv);
   if (std::strcmp(argv[1], "cameras") == 0) return camerasCommand(argc, argv);
+  if (std::strcmp(argv[1], "map") == 0) return mapCommand(argc, argv);
   if (std::strcmp(argv[1], "print-config") == 0 || std::strcmp(argv[1], "--print-config") == 0) {
     return printConfigCommand(argc, argv);
   }

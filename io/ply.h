@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/result.h"
+#include "pipeline/map/surfel_map.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::io {
@@ -73,5 +74,13 @@ Status writePly(const std::string& path, const PointCloud& cloud, const uint8_t*
 // The same file contents, in memory.
 std::string serializePly(const PointCloud& cloud, const uint8_t* region,
                          const PlyWriteOptions& options);
+
+// A surfel map (pipeline/map/surfel_map.h) as binary little-endian PLY, one
+// vertex a surfel: x y z (double, world coordinates), nx ny nz (float), red
+// green blue (uchar), radius (float, metres), confidence (float), the columns
+// `fovead map` writes. stable_only: only the surfels the map shows (stable).
+// readPly reads it as a coloured cloud (the other columns skipped).
+std::string serializeSurfelPly(const pipeline::map::SurfelMap& map, bool stable_only);
+Status writeSurfelPly(const std::string& path, const pipeline::map::SurfelMap& map, bool stable_only);
 
 }  // namespace fovea::io

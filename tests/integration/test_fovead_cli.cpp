@@ -2,6 +2,7 @@
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -143,6 +144,10 @@ TEST(FoveadCli, HelpAndBadArguments) {
                      {"run --gaze-origin 1,2,3", "--gaze-dir"},
                      {"run --fixation fixed:abc", "--fixation"},
                      {"run --bogus 1", "--bogus"},
+                     {"map --frames 3", "--out"},
+                     {"map --out m.ply --max-surfels 0", "--max-surfels"},
+                     {"map --out m.ply --brick-size 100", "brick_size_m"},
+                     {"map --out m.ply --camera mock:kitchen", "kitchen"},
                      {"foveate --in a.ply", "required"},
                      {"foveate --in a.ply --out b.ply --gaze-origin 0,0,0 --gaze-dir 0,0,0", "zero length"},
                      {"foveate --in a.ply --out b.ply --gaze-origin 0,nan,0 --gaze-dir 0,0,1", "--gaze-origin"}};
@@ -151,6 +156,43 @@ TEST(FoveadCli, HelpAndBadArguments) {
     EXPECT_EQ(r.exit_code, 2) << b.args << "\n" << r.output;
     EXPECT_NE(r.output.find(b.message), std::string::npos) << b.args << "\n" << r.output;
   }
+}
+
+// fovead map on the mock camera's orbit: the map it writes is a PLY of stable
+// surfels that readPly reads back, with the figures the summary promises.
+TEST(FoveadCli, MapFusesAMockOrbitIntoAPly) {
+  TempDir dir;
+  const std::string ply = dir.file("map.ply");
+  const ProcessResult r =
+      run(fovead() + " map --camera mock:living-room,path=orbit,size=160x120 --frames 12 --out " + ply);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* expected : {"frames: 12 read, 12 fused", "surfels in", "32 bytes a surfel", "fusion time [ms]: median",
+                               "wrote the stable surfels"}) {
+    EXPECT_NE(r.output.find(expected), std::string::npos) << "missing '" << expected << "' in:\n" << r.output;
+  }
+  Result<io::PlyCloud> map = io::readPly(ply);
+  ASSERT_TRUE(map.isOk()) << map.status().toString();
+  EXPECT_TRUE(map->coords_were_double);
+  EXPECT_TRUE(map->has_color);
+  EXPECT_GT(map->points.size(), 5000u);
+  EXPECT_LT(map->points.size(), 12u * 160 * 120);
+}
+
+// The same on the TUM recording with its ground-truth poses (../shared/data).
+TEST(FoveadCli, MapFusesTheTumRecordingWithItsGroundTruth) {
+  const char* shared = std::getenv("FOVEA_SHARED_DIR");
+  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
+  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
+    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
+  }
+  TempDir dir;
+  const std::string ply = dir.file("teddy.ply");
+  const ProcessResult r = run(fovead() + " map --camera tum:" + path + ",loop=off --frames 6 --all-surfels --out " + ply);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("frames: 6 read, 6 fused"), std::string::npos) << r.output;
+  Result<io::PlyCloud> map = io::readPly(ply);
+  ASSERT_TRUE(map.isOk()) << map.status().toString();
+  EXPECT_GT(map->points.size(), 50000u);
 }
 
 TEST(FoveadCli, UnreadableAndMalformedFilesFailCleanly) {

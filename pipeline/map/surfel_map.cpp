@@ -1,0 +1,488 @@
+#include "pipeline/map/surfel_map.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+
+#include "core/clock.h"
+
+namespace fovea::pipeline::map {
+
+namespace {
+
+constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+constexpr int kMaxSplatPixels = 2;
+constexpr int kNormalReach = 2;  // pixels each side of the central differences
+constexpr uint8_t kGrey[3] = {128, 128, 128};  // the colour of a frame without one  // a surfel covers at most 2 pixels around its centre in the index map
+
+// The depth sensor's noise (standard deviation, metres) at depth z: Nguyen,
+// Izadi and Lovell 2012, measured on a Kinect; structured-light and ToF
+// cameras of that class are within a factor of two.
+float depthSigma(float z) { return 0.0012f + 0.0019f * (z - 0.4f) * (z - 0.4f); }
+
+std::size_t nextPowerOfTwo(std::size_t n) { return std::bit_ceil(std::max<std::size_t>(n, 2)); }
+
+std::size_t brickHash(int32_t x, int32_t y, int32_t z) {
+  // Three large primes (Teschner et al. 2003), as voxel hashing maps do.
+  const auto ux = static_cast<uint32_t>(x), uy = static_cast<uint32_t>(y), uz = static_cast<uint32_t>(z);
+  return static_cast<std::size_t>((ux * 73856093u) ^ (uy * 19349663u) ^ (uz * 83492791u));
+}
+
+}  // namespace
+
+Status SurfelMapConfig::validate() const {
+  auto bad = [](const char* what) { return Status(ErrorCode::kInvalidArgument, std::string("map.") + what); };
+  if (max_surfels == 0 || max_surfels > (std::size_t{1} << 31)) return bad("max_surfels: must be in [1, 2^31]");
+  if (max_bricks == 0 || max_bricks > 65535) return bad("max_bricks: must be in [1, 65535] (a surfel names its brick in 16 bits)");
+  if (!(std::isfinite(brick_size_m) && brick_size_m >= 0.05 && brick_size_m <= 16.0)) {
+    return bad("brick_size_m: must be in [0.05, 16] m");
+  }
+  if (Status s = depth.validate(); !s) return s;
+  if (!(std::isfinite(depth_tolerance_sigmas) && depth_tolerance_sigmas > 0.0)) {
+    return bad("depth_tolerance_sigmas: must be > 0");
+  }
+  if (!(normal_tolerance_deg > 0.0 && normal_tolerance_deg <= 180.0)) return bad("normal_tolerance_deg: must be in (0, 180]");
+  if (!(confidence_cap >= 1.0 && confidence_cap <= 255.0)) return bad("confidence_cap: must be in [1, 255]");
+  if (!(stable_confidence > 0.0 && stable_confidence <= confidence_cap)) {
+    return bad("stable_confidence: must be in (0, confidence_cap]");
+  }
+  if (!(std::isfinite(carve_weight) && carve_weight >= 0.0)) return bad("carve_weight: must be >= 0");
+  if (!(max_pose_jump_m > 0.0)) return bad("max_pose_jump_m: must be > 0");
+  if (max_width <= 2 || max_height <= 2 || max_width > 8192 || max_height > 8192) {
+    return bad("max_width, max_height: must be in [3, 8192]");
+  }
+  return Status::ok();
+}
+
+std::string_view fuseOutcomeName(FuseOutcome outcome) {
+  switch (outcome) {
+    case FuseOutcome::kFused: return "fused";
+    case FuseOutcome::kRefusedSize: return "refused: frame larger than the map's scratch, or bad intrinsics";
+    case FuseOutcome::kRefusedBadPose: return "refused: pose not finite or not a rotation";
+    case FuseOutcome::kRefusedPoseJump: return "refused: pose jumped farther than max_pose_jump_m";
+    case FuseOutcome::kRefusedClock: return "refused: stamp not after the last frame's";
+  }
+  return "?";
+}
+
+SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
+  const std::size_t pixels = static_cast<std::size_t>(config.max_width) * config.max_height;
+  surfels_.resize(config.max_surfels);
+  free_.resize(config.max_surfels);
+  eviction_.resize(config.max_surfels);
+  brick_keys_.resize(config.max_bricks);
+  brick_table_.assign(nextPowerOfTwo(2 * config.max_bricks), 0);
+  brick_cam_.resize(config.max_bricks);
+  brick_visible_.resize(config.max_bricks);
+  vertex_.resize(pixels);
+  normal_.resize(pixels);
+  radius_.resize(pixels);
+  weight_.resize(pixels);
+  index_depth_.resize(pixels);
+  index_.resize(pixels);
+  index_reach_.resize(pixels);
+}
+
+Result<SurfelMap> SurfelMap::create(const SurfelMapConfig& config) {
+  if (Status s = config.validate(); !s) return Result<SurfelMap>(s.code(), s.message());
+  return SurfelMap(config);
+}
+
+std::size_t SurfelMap::memoryBytes() const {
+  return surfels_.capacity() * sizeof(Surfel) + free_.capacity() * sizeof(uint32_t) +
+         eviction_.capacity() * sizeof(uint64_t) + brick_keys_.capacity() * sizeof(BrickKey) +
+         brick_table_.capacity() * sizeof(int32_t) + brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
+         brick_visible_.capacity() + vertex_.capacity() * sizeof(Eigen::Vector3f) * 2 +
+         (radius_.capacity() + weight_.capacity() + index_depth_.capacity()) * sizeof(float) +
+         index_.capacity() * sizeof(uint32_t) + index_reach_.capacity();
+}
+
+void SurfelMap::clear() {
+  std::fill(surfels_.begin(), surfels_.begin() + static_cast<std::ptrdiff_t>(high_water_), Surfel{});
+  std::fill(brick_table_.begin(), brick_table_.end(), 0);
+  free_count_ = high_water_ = live_ = brick_count_ = 0;
+  frame_ = 0;
+  have_last_ = false;
+  counters_ = {};
+}
+
+Eigen::Vector3d SurfelMap::brickOrigin(uint16_t brick) const {
+  const BrickKey& k = brick_keys_[brick];
+  return Eigen::Vector3d(k.x, k.y, k.z) * config_.brick_size_m;
+}
+
+Eigen::Vector3d SurfelMap::worldPosition(std::size_t slot) const {
+  const Surfel& s = surfels_[slot];
+  return brickOrigin(s.brick) + Eigen::Vector3d(s.x, s.y, s.z);
+}
+
+int SurfelMap::findOrAddBrick(const Eigen::Vector3d& p_world) {
+  const Eigen::Vector3d cell = (p_world / config_.brick_size_m).array().floor();
+  constexpr double kLimit = 2.0e9;  // inside int32
+  if (!(std::abs(cell.x()) < kLimit && std::abs(cell.y()) < kLimit && std::abs(cell.z()) < kLimit)) return -1;
+  const BrickKey key{static_cast<int32_t>(cell.x()), static_cast<int32_t>(cell.y()), static_cast<int32_t>(cell.z())};
+  const std::size_t mask = brick_table_.size() - 1;
+  for (std::size_t i = brickHash(key.x, key.y, key.z) & mask;; i = (i + 1) & mask) {
+    const int32_t entry = brick_table_[i];
+    if (entry == 0) {
+      if (brick_count_ == config_.max_bricks) return -1;
+      brick_keys_[brick_count_] = key;
+      brick_visible_[brick_count_] = 0;
+      brick_table_[i] = static_cast<int32_t>(++brick_count_);
+      return static_cast<int>(brick_count_ - 1);
+    }
+    if (brick_keys_[static_cast<std::size_t>(entry - 1)] == key) return entry - 1;
+  }
+}
+
+FuseOutcome SurfelMap::checkFrame(const hal::RgbdFrame& frame) {
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const bool size_ok = frame.width() >= 3 && frame.height() >= 3 && frame.width() <= config_.max_width &&
+                       frame.height() <= config_.max_height && k.width == frame.width() &&
+                       k.height == frame.height() && std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0.0 &&
+                       k.fy > 0.0 && std::isfinite(k.cx) && std::isfinite(k.cy) &&
+                       std::isfinite(frame.depth_scale_m) && frame.depth_scale_m > 0.0;
+  if (!size_ok) return FuseOutcome::kRefusedSize;
+  const Eigen::Matrix3d& R = frame.T_world_cam.R_world_cam;
+  const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
+  if (!R.allFinite() || !t.allFinite() || !((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() < 1e-3) ||
+      !(R.determinant() > 0.0)) {
+    return FuseOutcome::kRefusedBadPose;
+  }
+  if (have_last_ && frame.stamp_ns <= last_stamp_ns_) return FuseOutcome::kRefusedClock;
+  const bool jumped = have_last_ && !((t - last_position_).norm() <= config_.max_pose_jump_m);
+  // The next frame is measured against this one even when it is refused: a pose
+  // source that relocalises loses one frame, not every frame after it.
+  have_last_ = true;
+  last_stamp_ns_ = frame.stamp_ns;
+  last_position_ = t;
+  return jumped ? FuseOutcome::kRefusedPoseJump : FuseOutcome::kFused;
+}
+
+FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats) {
+  const int64_t start_ns = monotonicNs();
+  stats = {};
+  stats.outcome = checkFrame(frame);
+  switch (stats.outcome) {
+    case FuseOutcome::kFused: break;
+    case FuseOutcome::kRefusedSize: ++counters_.refused_size; return stats.outcome;
+    case FuseOutcome::kRefusedBadPose: ++counters_.refused_bad_pose; return stats.outcome;
+    case FuseOutcome::kRefusedPoseJump: ++counters_.refused_pose_jump; return stats.outcome;
+    case FuseOutcome::kRefusedClock: ++counters_.refused_clock; return stats.outcome;
+  }
+  ++frame_;
+  computeVertices(frame, stats);
+  if (stats.pixels_valid > 0) {
+    renderIndexMap(frame, stats);
+    const std::size_t to_add = associate(frame, stats);
+    makeRoom(to_add, stats);
+    addNew(frame, stats);
+  }
+  ++counters_.frames_fused;
+  counters_.added += stats.added;
+  counters_.evicted += stats.evicted;
+  counters_.removed_carved += stats.removed_carved;
+  counters_.removed_unstable += stats.removed_unstable;
+  counters_.dropped_full += stats.dropped_full;
+  stats.fuse_ns = monotonicNs() - start_ns;
+  return stats.outcome;
+}
+
+void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
+  const int w = frame.width(), h = frame.height();
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const RawDepthRange raw = rawDepthRange(config_.depth, frame.depth_scale_m);
+  const auto scale = static_cast<float>(frame.depth_scale_m);
+  const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
+  const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  const uint16_t* depth = frame.depth();
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const int64_t d = depth[i];
+      if (d < raw.min || d > raw.max) {
+        vertex_[i].setZero();
+        continue;
+      }
+      const float z = static_cast<float>(d) * scale;
+      vertex_[i] = Eigen::Vector3f((static_cast<float>(u) - cx) / fx * z, (static_cast<float>(v) - cy) / fy * z, z);
+    }
+  }
+  // Normals from central differences over kNormalReach pixels each side (over
+  // one, a Kinect-class sensor's noise turns most normals by more than the
+  // association's tolerance); none near the border, next to a missing
+  // measurement or across a depth step (more than 5 % of the depth a pixel: a
+  // surface seen at up to about 87 degrees keeps its normal, an occluding edge
+  // does not).
+  const float f = 0.5f * (fx + fy);
+  const float half_diagonal = std::sqrt(cx * cx + cy * cy);
+  const float two_sigma_sq = 2.0f * 0.6f * 0.6f;  // Keller's weight: sigma 0.6 of the half-diagonal
+  const std::size_t row = static_cast<std::size_t>(w) * kNormalReach;
+  uint32_t valid = 0;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      weight_[i] = 0.0f;
+      const float z = vertex_[i].z();
+      if (z == 0.0f || u < kNormalReach || v < kNormalReach || u >= w - kNormalReach || v >= h - kNormalReach) {
+        continue;
+      }
+      const Eigen::Vector3f& l = vertex_[i - kNormalReach];
+      const Eigen::Vector3f& r = vertex_[i + kNormalReach];
+      const Eigen::Vector3f& up = vertex_[i - row];
+      const Eigen::Vector3f& down = vertex_[i + row];
+      const float step = 0.05f * kNormalReach * z;
+      if (l.z() == 0.0f || r.z() == 0.0f || up.z() == 0.0f || down.z() == 0.0f || std::abs(l.z() - z) > step ||
+          std::abs(r.z() - z) > step || std::abs(up.z() - z) > step || std::abs(down.z() - z) > step) {
+        continue;
+      }
+      Eigen::Vector3f n = (r - l).cross(down - up);
+      const float norm = n.norm();
+      if (!(norm > 0.0f)) continue;
+      n /= norm;
+      const Eigen::Vector3f ray = vertex_[i] / vertex_[i].norm();
+      float facing = -n.dot(ray);
+      if (facing < 0.0f) {
+        n = -n;
+        facing = -facing;
+      }
+      normal_[i] = n;
+      // The pixel's footprint: sqrt(2) z / f, larger when the surface is slanted
+      // (the cosine held at 0.2 or more, so a grazing pixel stays a few pixels wide).
+      radius_[i] = std::clamp(1.41421356f * z / f / std::max(facing, 0.2f), kMinRadiusM, kMaxRadiusM);
+      const float du = static_cast<float>(u) - cx, dv = static_cast<float>(v) - cy;
+      const float gamma_sq = (du * du + dv * dv) / (half_diagonal * half_diagonal);
+      weight_[i] = std::exp(-gamma_sq / two_sigma_sq);
+      ++valid;
+    }
+  }
+  stats.pixels_valid = valid;
+}
+
+void SurfelMap::removeSurfel(uint32_t slot) {
+  surfels_[slot].flags = 0;
+  free_[free_count_++] = slot;
+  --live_;
+}
+
+void SurfelMap::makeRoom(std::size_t wanted, FuseStats& stats) {
+  const std::size_t available = free_count_ + (surfels_.size() - high_water_);
+  if (available >= wanted) return;
+  // Evict a sixteenth of the pool more than needed, so that a full map sorts
+  // its surfels once every several frames rather than every frame.
+  const std::size_t target = std::min(live_, wanted - available + surfels_.size() / 16);
+  // Usefulness: the confidence, halved for every 30 frames unseen; the score's
+  // float bits order like the float (it is >= 0), so slot and score share a word.
+  std::size_t n = 0;
+  for (std::size_t slot = 0; slot < high_water_; ++slot) {
+    const Surfel& s = surfels_[slot];
+    if (!(s.flags & kSurfelLive)) continue;
+    const float unseen = static_cast<float>(frame_ - s.last_seen);
+    const float score = decodeConfidence(s.confidence) * std::exp2(-unseen / 30.0f);
+    eviction_[n++] = (static_cast<uint64_t>(std::bit_cast<uint32_t>(score)) << 32) | slot;
+  }
+  const auto end = eviction_.begin() + static_cast<std::ptrdiff_t>(n);
+  const auto nth = eviction_.begin() + static_cast<std::ptrdiff_t>(target);
+  std::nth_element(eviction_.begin(), nth, end);
+  for (auto it = eviction_.begin(); it != nth; ++it) removeSurfel(static_cast<uint32_t>(*it & 0xffffffffu));
+  stats.evicted += static_cast<uint32_t>(target);
+}
+
+void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
+  const int w = frame.width(), h = frame.height();
+  const std::size_t pixels = frame.pixelCount();
+  std::fill(index_.begin(), index_.begin() + static_cast<std::ptrdiff_t>(pixels), kNone);
+  std::fill(index_depth_.begin(), index_depth_.begin() + static_cast<std::ptrdiff_t>(pixels),
+            std::numeric_limits<float>::infinity());
+  std::fill(index_reach_.begin(), index_reach_.begin() + static_cast<std::ptrdiff_t>(pixels), uint8_t{255});
+  const Eigen::Matrix3d R_cw = frame.T_world_cam.R_world_cam.transpose();
+  const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
+  const Eigen::Matrix3f R_cw_f = R_cw.cast<float>();
+  // Each brick's origin in camera coordinates, once (in double: the brick and
+  // the camera may both be kilometres from the world origin).
+  const double diagonal = std::sqrt(3.0) * config_.brick_size_m;
+  for (std::size_t b = 0; b < brick_count_; ++b) {
+    const Eigen::Vector3d o = R_cw * (brickOrigin(static_cast<uint16_t>(b)) - t);
+    brick_cam_[b] = o.cast<float>();
+    brick_visible_[b] = o.z() > -diagonal && o.z() < config_.depth.max_m + diagonal ? 1 : 0;
+  }
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
+  const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  const float f = 0.5f * (fx + fy);
+  const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
+  const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
+  for (std::size_t slot = 0; slot < high_water_; ++slot) {
+    const Surfel& s = surfels_[slot];
+    if (!(s.flags & kSurfelLive)) continue;
+    if (!(s.flags & kSurfelStable) && frame_ - s.first_seen > config_.unstable_max_frames) {
+      removeSurfel(static_cast<uint32_t>(slot));
+      ++stats.removed_unstable;
+      continue;
+    }
+    if (!brick_visible_[s.brick]) continue;
+    const Eigen::Vector3f p = brick_cam_[s.brick] + R_cw_f * Eigen::Vector3f(s.x, s.y, s.z);
+    if (!(p.z() >= min_z)) continue;
+    const float pu = fx * p.x() / p.z() + cx, pv = fy * p.y() / p.z() + cy;
+    if (!(pu > -0.5f - kMaxSplatPixels && pu < static_cast<float>(w) - 0.5f + kMaxSplatPixels &&
+          pv > -0.5f - kMaxSplatPixels && pv < static_cast<float>(h) - 0.5f + kMaxSplatPixels)) {
+      continue;
+    }
+    const int iu = static_cast<int>(std::lround(pu)), iv = static_cast<int>(std::lround(pv));
+    // The footprint in pixels, and the surfel's plane: the depth it has at a
+    // neighbouring pixel is where that pixel's ray meets the plane, so a slanted
+    // surface is not seen in front of itself.
+    const float footprint = f * surfelRadius(s) / p.z();
+    const int reach = std::min(kMaxSplatPixels, static_cast<int>(footprint));
+    const Eigen::Vector3f n = R_cw_f * surfelNormal(s);
+    const float plane = n.dot(p);
+    for (int dv = -reach; dv <= reach; ++dv) {
+      const int y = iv + dv;
+      if (y < 0 || y >= h) continue;
+      for (int du = -reach; du <= reach; ++du) {
+        const int x = iu + du;
+        if (x < 0 || x >= w || du * du + dv * dv > reach * reach) continue;
+        const Eigen::Vector3f ray((static_cast<float>(x) - cx) / fx, (static_cast<float>(y) - cy) / fy, 1.0f);
+        const float along = n.dot(ray);
+        // Near grazing the plane's depth is ill-conditioned: the centre depth then.
+        float z = std::abs(along) > 0.2f * ray.norm() ? plane / along : p.z();
+        if (!(z >= min_z)) z = p.z();
+        const std::size_t i = static_cast<std::size_t>(y) * w + x;
+        // Nearer wins; within the sensor's noise of each other (one surface),
+        // the surfel whose centre is nearer the pixel.
+        const auto reach_sq = static_cast<uint8_t>(du * du + dv * dv);
+        const float held = index_depth_[i];
+        const float same = sigmas * depthSigma(z);
+        if (z < held - same || (z <= held + same && reach_sq < index_reach_[i])) {
+          index_depth_[i] = z;
+          index_[i] = static_cast<uint32_t>(slot);
+          index_reach_[i] = reach_sq;
+        }
+      }
+    }
+  }
+}
+
+bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
+                          const uint8_t* rgb) {
+  if (free_count_ == 0 && high_water_ == surfels_.size()) return false;
+  const int brick = findOrAddBrick(p_world);
+  if (brick < 0) return false;
+  const uint32_t slot = free_count_ > 0 ? free_[--free_count_] : static_cast<uint32_t>(high_water_++);
+  Surfel& s = surfels_[slot];
+  const Eigen::Vector3d rel = p_world - brickOrigin(static_cast<uint16_t>(brick));
+  s.x = static_cast<float>(rel.x());
+  s.y = static_cast<float>(rel.y());
+  s.z = static_cast<float>(rel.z());
+  setNormalAndRadius(s, n_world, radius);
+  s.red = rgb[0];
+  s.green = rgb[1];
+  s.blue = rgb[2];
+  s.confidence = encodeConfidence(weight);
+  s.flags = kSurfelLive | (weight >= config_.stable_confidence ? kSurfelStable : 0);
+  s.brick = static_cast<uint16_t>(brick);
+  s.first_seen = s.last_seen = frame_;
+  ++live_;
+  return true;
+}
+
+std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) {
+  const int w = frame.width(), h = frame.height();
+  const Eigen::Matrix3d& R_wc = frame.T_world_cam.R_world_cam;
+  const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
+  const Eigen::Matrix3f R_wc_f = R_wc.cast<float>();
+  const float cos_tolerance = static_cast<float>(std::cos(config_.normal_tolerance_deg * std::numbers::pi / 180.0));
+  const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
+  const auto cap = static_cast<float>(config_.confidence_cap);
+  const auto stable = static_cast<float>(config_.stable_confidence);
+  const auto carve = static_cast<float>(config_.carve_weight);
+  // Surfels carved away stay out of the free list until every pixel is
+  // associated: the index map may still name them at other pixels.
+  std::size_t carved_away = 0;
+  std::size_t to_add = 0;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const float weight = weight_[i];
+      if (weight == 0.0f) continue;
+      const float z = vertex_[i].z();
+      const float tolerance = sigmas * depthSigma(z);
+      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+      const uint32_t slot = index_[i];
+      if (slot != kNone) {
+        Surfel& s = surfels_[slot];
+        if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
+        const float seen = index_depth_[i];
+        if (seen < z - tolerance) {
+          // The camera sees through the surfel: free space where it is.
+          ++stats.carved;
+          const float c = decodeConfidence(s.confidence) - carve * weight;
+          if (c <= 0.0f) {
+            s.flags = 0;
+            --live_;
+            eviction_[carved_away++] = slot;
+            ++stats.removed_carved;
+          } else {
+            s.confidence = encodeConfidence(c);
+          }
+          continue;
+        }
+        if (seen <= z + tolerance) {
+          const Eigen::Vector3f n_world = R_wc_f * normal_[i];
+          const Eigen::Vector3f n_surfel = surfelNormal(s);
+          if (n_surfel.dot(n_world) < cos_tolerance) continue;  // another orientation: not this surfel's
+          const Eigen::Vector3d p_world = R_wc * vertex_[i].cast<double>() + t;
+          const Eigen::Vector3f rel = (p_world - brickOrigin(s.brick)).cast<float>();
+          const float c = decodeConfidence(s.confidence);
+          const float sum = c + weight;
+          const float a = c / sum, b = weight / sum;
+          s.x = a * s.x + b * rel.x();
+          s.y = a * s.y + b * rel.y();
+          s.z = a * s.z + b * rel.z();
+          const Eigen::Vector3f n = (a * n_surfel + b * n_world).normalized();
+          setNormalAndRadius(s, n.allFinite() ? n : n_world, a * surfelRadius(s) + b * radius_[i]);
+          s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
+          s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
+          s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
+          const float capped = std::min(sum, cap);
+          s.confidence = encodeConfidence(capped);
+          if (capped >= stable) s.flags |= kSurfelStable;
+          s.last_seen = frame_;
+          ++stats.merged;
+          continue;
+        }
+        // The measurement lies in front of the surfel: a surface the map does not have.
+      }
+      weight_[i] = -weight;
+      ++to_add;
+    }
+  }
+  for (std::size_t k = 0; k < carved_away; ++k) free_[free_count_++] = static_cast<uint32_t>(eviction_[k]);
+  return to_add;
+}
+
+void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
+  const Eigen::Matrix3d& R_wc = frame.T_world_cam.R_world_cam;
+  const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
+  const Eigen::Matrix3f R_wc_f = R_wc.cast<float>();
+  const std::size_t pixels = frame.pixelCount();
+  for (std::size_t i = 0; i < pixels; ++i) {
+    if (!(weight_[i] < 0.0f)) continue;
+    const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+    const Eigen::Vector3d p_world = R_wc * vertex_[i].cast<double>() + t;
+    if (addSurfel(p_world, R_wc_f * normal_[i], radius_[i], -weight_[i], rgb)) {
+      ++stats.added;
+    } else {
+      ++stats.dropped_full;
+    }
+  }
+}
+
+}  // namespace fovea::pipeline::map

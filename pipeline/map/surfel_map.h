@@ -1,0 +1,178 @@
+// The fused scene map: surfels fused from posed RGB-D frames on the CPU, in
+// memory sized once from the configuration (point-based fusion, Keller et al.
+// 2013, the map under ElasticFusion; docs/map.md says what is taken and what
+// differs).
+//
+// Each fuse() call:
+//  1. checks the frame's pose (finite, a rotation, not a jump, a later stamp)
+//     and refuses the frame, counted, when it fails;
+//  2. computes each pixel's camera-frame vertex, normal (central differences,
+//     none across a depth step), radius (its footprint, Keller's sqrt(2) z/f
+//     over the normal's cosine) and weight (falling off from the image centre);
+//  3. renders the map into an index map from the camera (each surfel splatted
+//     over its footprint, up to 2 pixels around, z-buffered; of surfels at the
+//     same depth the one nearest the pixel wins), dropping on the way surfels
+//     that stayed unstable too long;
+//  4. for each pixel: merges the measurement into the surfel it sees when
+//     depth and normal agree (confidence-weighted averages, the confidence
+//     capped so that a changed surface still moves), carves a surfel the
+//     camera now sees through (it lies clearly in front of the measured depth:
+//     it loses confidence and goes, so a moving object leaves no ghost), and
+//     marks the pixel as new when nothing explains it;
+//  5. evicts the least useful surfels (lowest confidence, longest unseen) when
+//     the pool has no room for the new ones, then adds them, unstable.
+//
+// Memory: the pool of surfels (32 bytes each), the brick table and the per-
+// pixel scratch are allocated by create(); fuse() allocates nothing.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/result.h"
+#include "hal/frame.h"
+#include "pipeline/backproject.h"
+#include "pipeline/map/surfel.h"
+
+namespace fovea::pipeline::map {
+
+struct SurfelMapConfig {
+  std::size_t max_surfels = std::size_t{1} << 20;
+  // Bricks: cubes that hold a surfel's position origin (and will hold the
+  // changes the stream sends). 0.5 m: a room needs a few hundred, a float
+  // keeps 0.03 micrometres across one, and a brick is a useful unit of change.
+  std::size_t max_bricks = 16384;  // at most 65535: a surfel names its brick in 16 bits
+  double brick_size_m = 0.5;
+  DepthRange depth;
+  // Association: depth within depth_tolerance_sigmas times the sensor's noise
+  // at that depth (sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m, Nguyen et al. 2012:
+  // 2 mm at 1 m, 26 mm at 4 m), and normals within normal_tolerance_deg.
+  double depth_tolerance_sigmas = 3.0;
+  double normal_tolerance_deg = 30.0;
+  // Confidence: each observation adds its weight (at most 1); capped so that a
+  // surface that changes moves within a few dozen frames.
+  double confidence_cap = 20.0;
+  double stable_confidence = 4.0;     // a surfel is stable (and shown) from here on
+  uint32_t unstable_max_frames = 30;  // an unstable surfel older than this goes
+  // A surfel the camera sees through loses carve_weight times the pixel's weight.
+  double carve_weight = 2.0;
+  // A frame whose camera moved farther than this from the last frame's is refused.
+  double max_pose_jump_m = 1.0;
+  // Pixels of the largest frame fused (the scratch is sized for it).
+  int max_width = 640;
+  int max_height = 480;
+
+  Status validate() const;
+};
+
+// Why fuse() did not fuse a frame (each counted in SurfelMapCounters).
+enum class FuseOutcome : uint8_t {
+  kFused,
+  kRefusedSize,       // larger than max_width x max_height, or bad intrinsics
+  kRefusedBadPose,    // NaN/Inf, or R is not a rotation
+  kRefusedPoseJump,   // moved more than max_pose_jump_m since the last frame
+  kRefusedClock,      // stamp not after the last fused frame's
+};
+std::string_view fuseOutcomeName(FuseOutcome outcome);
+
+struct FuseStats {
+  FuseOutcome outcome = FuseOutcome::kFused;
+  uint32_t pixels_valid = 0;     // depth in range with a normal
+  uint32_t merged = 0;           // measurements merged into a surfel
+  uint32_t added = 0;            // new surfels
+  uint32_t carved = 0;           // surfels seen through (confidence lowered)
+  uint32_t removed_carved = 0;   // ... and removed for it
+  uint32_t removed_unstable = 0; // unstable for longer than unstable_max_frames
+  uint32_t evicted = 0;          // removed to make room in a full pool
+  uint32_t dropped_full = 0;     // measurements not added: no surfel or brick left
+  int64_t fuse_ns = 0;
+};
+
+struct SurfelMapCounters {
+  uint64_t frames_fused = 0;
+  uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0;
+  uint64_t added = 0, evicted = 0, removed_carved = 0, removed_unstable = 0, dropped_full = 0;
+};
+
+class SurfelMap {
+ public:
+  static Result<SurfelMap> create(const SurfelMapConfig& config);
+
+  // Fuses one posed frame (frame.T_world_cam: camera to world). Never allocates.
+  FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats);
+
+  // Live surfels. Slots [0, slotCount()) hold them and free slots (live() false).
+  std::size_t size() const { return live_; }
+  std::size_t slotCount() const { return high_water_; }
+  std::size_t capacity() const { return surfels_.size(); }
+  std::size_t brickCount() const { return brick_count_; }
+  bool live(std::size_t slot) const { return (surfels_[slot].flags & kSurfelLive) != 0; }
+  const Surfel& surfel(std::size_t slot) const { return surfels_[slot]; }
+  // World position, in double (the brick's origin plus the surfel's offset).
+  Eigen::Vector3d worldPosition(std::size_t slot) const;
+  Eigen::Vector3d brickOrigin(uint16_t brick) const;
+
+  const SurfelMapConfig& config() const { return config_; }
+  const SurfelMapCounters& counters() const { return counters_; }
+  uint32_t frameNumber() const { return frame_; }
+  // Bytes allocated by create(), all of it.
+  std::size_t memoryBytes() const;
+
+  // Empties the map (keeps the memory).
+  void clear();
+
+ private:
+  explicit SurfelMap(const SurfelMapConfig& config);
+
+  struct BrickKey {
+    int32_t x = 0, y = 0, z = 0;
+    bool operator==(const BrickKey&) const = default;
+  };
+  // The brick holding world position p (inserted if new); -1 when the table is full.
+  int findOrAddBrick(const Eigen::Vector3d& p_world);
+  FuseOutcome checkFrame(const hal::RgbdFrame& frame);
+  void computeVertices(const hal::RgbdFrame& frame, FuseStats& stats);
+  void makeRoom(std::size_t wanted, FuseStats& stats);
+  void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
+  // Merges and carves; returns the pixels left to add (marked by a negative weight).
+  std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
+  void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
+  bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
+                 const uint8_t* rgb);
+  void removeSurfel(uint32_t slot);
+
+  SurfelMapConfig config_;
+  std::vector<Surfel> surfels_;
+  std::vector<uint32_t> free_;        // a stack of free slots below high_water_
+  std::size_t free_count_ = 0;
+  std::size_t high_water_ = 0;
+  std::size_t live_ = 0;
+
+  std::vector<BrickKey> brick_keys_;      // by slot
+  std::vector<int32_t> brick_table_;      // open addressing: slot + 1, 0 = empty
+  std::size_t brick_count_ = 0;
+  std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
+  std::vector<uint8_t> brick_visible_;
+
+  // Per pixel, sized for max_width x max_height.
+  std::vector<Eigen::Vector3f> vertex_;   // camera frame; z = 0: no valid measurement
+  std::vector<Eigen::Vector3f> normal_;   // camera frame, towards the camera
+  std::vector<float> radius_;
+  std::vector<float> weight_;
+  std::vector<float> index_depth_;        // the index map's z-buffer
+  std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
+  std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
+  std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
+
+  uint32_t frame_ = 0;                    // frames fused so far
+  bool have_last_ = false;
+  int64_t last_stamp_ns_ = 0;
+  Eigen::Vector3d last_position_ = Eigen::Vector3d::Zero();
+  SurfelMapCounters counters_;
+};
+
+}  // namespace fovea::pipeline::map
