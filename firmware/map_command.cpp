@@ -35,12 +35,12 @@ const char* kMapHelp =
     "  --brick-size M      the bricks' edge in metres (default 0.5)\n"
     "  --depth-min M, --depth-max M  the depth range fused (default 0.1 .. 10 m)\n";
 
-int usage(const Status& s) {
+int mapUsage(const Status& s) {
   std::fprintf(stderr, "fovead map: %s\n", s.message().c_str());
   return kExitUsage;
 }
 
-int failure(const Status& s) {
+int mapFailure(const Status& s) {
   std::fprintf(stderr, "fovead map: %s\n", s.message().c_str());
   return kExitFailure;
 }
@@ -57,16 +57,9 @@ Result<pipeline::map::SurfelMapConfig> mapConfigFromArgs(const Args& args) {
     if (!d) return d.status();
     config.brick_size_m = d.value();
   }
-  if (const std::string* v = args.get("--depth-min")) {
-    Result<double> d = parseDouble("--depth-min", *v);
-    if (!d) return d.status();
-    config.depth.min_m = d.value();
-  }
-  if (const std::string* v = args.get("--depth-max")) {
-    Result<double> d = parseDouble("--depth-max", *v);
-    if (!d) return d.status();
-    config.depth.max_m = d.value();
-  }
+  Result<pipeline::DepthRange> range = depthRangeFromArgs(args);
+  if (!range) return range.status();
+  config.depth = range.value();
   return config;
 }
 
@@ -94,32 +87,32 @@ int mapCommand(int argc, char** argv) {
   std::vector<std::string> flags = {"--out", "--frames", "--max-surfels", "--brick-size", "--depth-min", "--depth-max"};
   flags.insert(flags.end(), kCameraFlags.begin(), kCameraFlags.end());
   Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h", "--all-surfels"});
-  if (!args) return usage(args.status());
+  if (!args) return mapUsage(args.status());
   if (args->has("--help") || args->has("-h")) {
     std::fputs(kMapHelp, stdout);
     return kExitOk;
   }
-  if (!args->has("--out")) return usage(invalidArgument("--out is required (see --help)"));
+  if (!args->has("--out")) return mapUsage(invalidArgument("--out is required (see --help)"));
   Result<long> frames = parseInteger("--frames", args->getOr("--frames", "100"), 1, 100000000);
-  if (!frames) return usage(frames.status());
+  if (!frames) return mapUsage(frames.status());
   Result<pipeline::map::SurfelMapConfig> config = mapConfigFromArgs(args.value());
-  if (!config) return usage(config.status());
+  if (!config) return mapUsage(config.status());
   Result<CameraSettings> settings = cameraSettingsFromArgs(args.value());
-  if (!settings) return usage(settings.status());
+  if (!settings) return mapUsage(settings.status());
   if (!args->has("--camera")) settings->spec = "mock:living-room,path=orbit";
 
   Result<OpenedCamera> opened = openConfiguredCamera(settings.value());
   if (!opened) {
-    return opened.status().code() == ErrorCode::kInvalidArgument ? usage(opened.status()) : failure(opened.status());
+    return opened.status().code() == ErrorCode::kInvalidArgument ? mapUsage(opened.status()) : mapFailure(opened.status());
   }
   hal::Camera& camera = *opened->camera;
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
   config->max_width = k.width;
   config->max_height = k.height;
   Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config.value());
-  if (!created) return usage(created.status());
+  if (!created) return mapUsage(created.status());
   pipeline::map::SurfelMap& map = created.value();
-  if (Status s = camera.start(); !s) return failure(s);
+  if (Status s = camera.start(); !s) return mapFailure(s);
 
   hal::RgbdFrame frame(k.width, k.height);
   Samples fuse_ms(static_cast<std::size_t>(frames.value()));
@@ -131,7 +124,7 @@ int mapCommand(int argc, char** argv) {
         break;
       }
       camera.stop();
-      return failure(Status(s.code(), "camera " + camera.info().name + ": " + s.message()));
+      return mapFailure(Status(s.code(), "camera " + camera.info().name + ": " + s.message()));
     }
     ++read;
     opened->pose_source->apply(frame);
@@ -141,11 +134,11 @@ int mapCommand(int argc, char** argv) {
   camera.stop();
 
   const std::string& out_path = *args->get("--out");
-  if (Status s = io::writeSurfelPly(out_path, map, !args->has("--all-surfels")); !s) return failure(s);
+  if (Status s = io::writeSurfelPly(out_path, map, !args->has("--all-surfels")); !s) return mapFailure(s);
   std::printf("camera: %s (%dx%d)\n", camera.info().name.c_str(), k.width, k.height);
   printSummary(map, fuse_ms, read);
   std::printf("wrote %s surfels to %s\n", args->has("--all-surfels") ? "all" : "the stable", out_path.c_str());
-  return map.counters().frames_fused > 0 ? kExitOk : failure(invalidArgument("no frame was fused (see the refusals above)"));
+  return map.counters().frames_fused > 0 ? kExitOk : mapFailure(invalidArgument("no frame was fused (see the refusals above)"));
 }
 
 }  // namespace fovea::firmware
