@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <utility>
 
 namespace fovea::firmware {
 
@@ -107,6 +108,18 @@ Result<double> durationFromArgs(const Args& args) {
     return Result<double>(ErrorCode::kInvalidArgument, "--duration: must be within 0 .. 3.2e7 s (a year)");
   }
   return d.value();
+}
+
+Result<pipeline::DepthRange> depthRangeFromArgs(const Args& args, pipeline::DepthRange range) {
+  for (const auto& [flag, value] : {std::pair{"--depth-min", &range.min_m}, std::pair{"--depth-max", &range.max_m}}) {
+    if (const std::string* v = args.get(flag)) {
+      Result<double> d = parseDouble(flag, *v);
+      if (!d) return d.status();
+      *value = d.value();
+    }
+  }
+  if (Status s = range.validate(); !s) return s;
+  return range;
 }
 
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text) {

@@ -33,6 +33,8 @@ Result<double> parseDouble(std::string_view flag, std::string_view text);
 Result<long> parseInteger(std::string_view flag, std::string_view text, long min, long max);
 // --duration S: seconds in (0, 3.2e7], or 0 when the flag is absent (no limit).
 Result<double> durationFromArgs(const Args& args);
+// --depth-min M and --depth-max M over `base` (each optional), validated.
+Result<pipeline::DepthRange> depthRangeFromArgs(const Args& args, pipeline::DepthRange base = {});
 // "X,Y,Z", each a finite number.
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text);
 // "a,b,c" of finite numbers.

@@ -221,17 +221,9 @@ Result<RunOptions> runOptionsFromArgs(const Args& args) {
   Result<long> threads = parseInteger("--threads", args.getOr("--threads", "1"), 1, 64);
   if (!threads) return threads.status();
   options.threads = static_cast<int>(threads.value());
-  if (const std::string* v = args.get("--depth-min")) {
-    Result<double> d = parseDouble("--depth-min", *v);
-    if (!d) return d.status();
-    options.range.min_m = d.value();
-  }
-  if (const std::string* v = args.get("--depth-max")) {
-    Result<double> d = parseDouble("--depth-max", *v);
-    if (!d) return d.status();
-    options.range.max_m = d.value();
-  }
-  if (Status s = options.range.validate(); !s) return s;
+  Result<pipeline::DepthRange> range = depthRangeFromArgs(args);
+  if (!range) return range.status();
+  options.range = range.value();
   Result<CameraSettings> camera = cameraSettingsFromArgs(args);
   if (!camera) return camera.status();
   options.camera = std::move(camera.value());
