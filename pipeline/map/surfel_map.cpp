@@ -230,10 +230,13 @@ void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
       weight_[i] = 0.0f;
+      normal_[i].setZero();  // none: the pixel can still carve, not merge or add
       const float z = vertex_[i].z();
-      if (z == 0.0f || u < kNormalReach || v < kNormalReach || u >= w - kNormalReach || v >= h - kNormalReach) {
-        continue;
-      }
+      if (z == 0.0f) continue;
+      const float du = static_cast<float>(u) - cx, dv = static_cast<float>(v) - cy;
+      const float gamma_sq = (du * du + dv * dv) / (half_diagonal * half_diagonal);
+      weight_[i] = std::exp(-gamma_sq / two_sigma_sq);
+      if (u < kNormalReach || v < kNormalReach || u >= w - kNormalReach || v >= h - kNormalReach) continue;
       const Eigen::Vector3f& l = vertex_[i - kNormalReach];
       const Eigen::Vector3f& r = vertex_[i + kNormalReach];
       const Eigen::Vector3f& up = vertex_[i - row];
@@ -257,9 +260,6 @@ void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
       // The pixel's footprint: sqrt(2) z / f, larger when the surface is slanted
       // (the cosine held at 0.2 or more, so a grazing pixel stays a few pixels wide).
       radius_[i] = std::clamp(1.41421356f * z / f / std::max(facing, 0.2f), kMinRadiusM, kMaxRadiusM);
-      const float du = static_cast<float>(u) - cx, dv = static_cast<float>(v) - cy;
-      const float gamma_sq = (du * du + dv * dv) / (half_diagonal * half_diagonal);
-      weight_[i] = std::exp(-gamma_sq / two_sigma_sq);
       ++valid;
     }
   }
@@ -319,6 +319,7 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
   const float f = 0.5f * (fx + fy);
   const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
   const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
+  const auto carve = static_cast<float>(config_.carve_weight);
   for (std::size_t slot = 0; slot < high_water_; ++slot) {
     const Surfel& s = surfels_[slot];
     if (!(s.flags & kSurfelLive)) continue;
@@ -336,6 +337,28 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
       continue;
     }
     const int iu = static_cast<int>(std::lround(pu)), iv = static_cast<int>(std::lround(pv));
+    // Free space: the camera measures a surface clearly behind the surfel at
+    // its centre's pixel, so it sees through it. Every such surfel is carved,
+    // not only the nearest along the ray: an object that moved towards the
+    // camera and away again leaves layers behind each other, and carving only
+    // the front one took a frame or more per layer (on the mock balloon scene,
+    // 4 % of the surfels in view were such ghosts).
+    if (iu >= 0 && iv >= 0 && iu < w && iv < h) {
+      const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
+      const float measured = vertex_[centre].z();
+      if (measured > 0.0f && p.z() < measured - sigmas * depthSigma(measured)) {
+        ++stats.carved;
+        Surfel& carved = surfels_[slot];
+        const float c = 0.5f * decodeConfidence(carved.confidence) - carve * weight_[centre];
+        if (c <= 0.0f) {
+          removeSurfel(static_cast<uint32_t>(slot));
+          ++stats.removed_carved;
+        } else {
+          carved.confidence = encodeConfidence(c);
+        }
+        continue;
+      }
+    }
     // The footprint in pixels, and the surfel's plane: the depth it has at a
     // neighbouring pixel is where that pixel's ray meets the plane, so a slanted
     // surface is not seen in front of itself.
@@ -416,6 +439,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
       const float tolerance = sigmas * depthSigma(z);
       const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
       const uint32_t slot = index_[i];
+      const bool has_normal = normal_[i].squaredNorm() > 0.0f;
       if (slot != kNone) {
         Surfel& s = surfels_[slot];
         if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
@@ -434,6 +458,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           }
           continue;
         }
+        if (!has_normal) continue;
         if (seen <= z + tolerance) {
           const Eigen::Vector3f n_world = R_wc_f * normal_[i];
           const Eigen::Vector3f n_surfel = surfelNormal(s);
@@ -460,6 +485,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         }
         // The measurement lies in front of the surfel: a surface the map does not have.
       }
+      if (!has_normal) continue;
       weight_[i] = -weight;
       ++to_add;
     }
