@@ -272,6 +272,16 @@ void SurfelMap::removeSurfel(uint32_t slot) {
   --live_;
 }
 
+bool SurfelMap::carveTo(uint32_t slot, float left, FuseStats& stats) {
+  ++stats.carved;
+  if (left > 0.0f) {
+    surfels_[slot].confidence = encodeConfidence(left);
+    return false;
+  }
+  ++stats.removed_carved;
+  return true;
+}
+
 void SurfelMap::makeRoom(std::size_t wanted, FuseStats& stats) {
   const std::size_t available = free_count_ + (surfels_.size() - high_water_);
   if (available >= wanted) return;
@@ -347,15 +357,8 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
       const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
       const float measured = vertex_[centre].z();
       if (measured > 0.0f && p.z() < measured - sigmas * depthSigma(measured)) {
-        ++stats.carved;
-        Surfel& carved = surfels_[slot];
-        const float c = 0.5f * decodeConfidence(carved.confidence) - carve * weight_[centre];
-        if (c <= 0.0f) {
-          removeSurfel(static_cast<uint32_t>(slot));
-          ++stats.removed_carved;
-        } else {
-          carved.confidence = encodeConfidence(c);
-        }
+        const float left = 0.5f * decodeConfidence(s.confidence) - carve * weight_[centre];
+        if (carveTo(static_cast<uint32_t>(slot), left, stats)) removeSurfel(static_cast<uint32_t>(slot));
         continue;
       }
     }
@@ -446,15 +449,10 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         const float seen = index_depth_[i];
         if (seen < z - tolerance) {
           // The camera sees through the surfel: free space where it is.
-          ++stats.carved;
-          const float c = decodeConfidence(s.confidence) - carve * weight;
-          if (c <= 0.0f) {
+          if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
             s.flags = 0;
             --live_;
             eviction_[carved_away++] = slot;
-            ++stats.removed_carved;
-          } else {
-            s.confidence = encodeConfidence(c);
           }
           continue;
         }

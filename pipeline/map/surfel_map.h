@@ -151,6 +151,10 @@ class SurfelMap {
   bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
                  const uint8_t* rgb);
   void removeSurfel(uint32_t slot);
+  // A surfel the camera saw through keeps `left` confidence; true when that is
+  // none and it must go (the caller removes it: at once, or after the frame's
+  // association while the index map may still name it). Counts both.
+  bool carveTo(uint32_t slot, float left, FuseStats& stats);
 
   SurfelMapConfig config_;
   std::vector<Surfel> surfels_;
