@@ -38,8 +38,14 @@
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
 #include "pipeline/map/surfel.h"
+#include "pipeline/point_cloud.h"
 
 namespace fovea::pipeline::map {
+
+// The depth sensor's noise (standard deviation, metres) at depth z: Nguyen,
+// Izadi and Lovell 2012, measured on a Kinect; structured-light and ToF
+// cameras of that class are within a factor of two.
+inline float depthSigma(float z) { return 0.0012f + 0.0019f * (z - 0.4f) * (z - 0.4f); }
 
 struct SurfelMapConfig {
   std::size_t max_surfels = std::size_t{1} << 20;
@@ -83,6 +89,7 @@ enum class FuseOutcome : uint8_t {
   kRefusedBadPose,    // NaN/Inf, or R is not a rotation
   kRefusedPoseJump,   // moved more than max_pose_jump_m since the last frame
   kRefusedClock,      // stamp not after the last fused frame's
+  kRefusedNoPose,     // the pose source had no pose for the frame (stale, none yet)
 };
 std::string_view fuseOutcomeName(FuseOutcome outcome);
 
@@ -101,7 +108,8 @@ struct FuseStats {
 
 struct SurfelMapCounters {
   uint64_t frames_fused = 0;
-  uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0;
+  uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0, refused_no_pose = 0;
+  uint64_t refused() const { return refused_size + refused_bad_pose + refused_pose_jump + refused_clock + refused_no_pose; }
   uint64_t added = 0, evicted = 0, removed_carved = 0, removed_unstable = 0, dropped_full = 0;
 };
 
@@ -109,8 +117,18 @@ class SurfelMap {
  public:
   static Result<SurfelMap> create(const SurfelMapConfig& config);
 
-  // Fuses one posed frame (frame.T_world_cam: camera to world). Never allocates.
-  FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats);
+  // Fuses one posed frame (frame.T_world_cam: camera to world). pose_valid
+  // false (the pose source had none for the frame's stamp) refuses it. Never
+  // allocates.
+  FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid = true);
+
+  // The pixels of the last fused frame (pass that frame) that no stable surfel
+  // explains: new surface, a moving object, an edge without a normal. Appends
+  // their world positions (relative to out.origin_m) and colours to out until
+  // it is full; returns how many it appended (0 when `frame` is not the last
+  // fused one: other size or stamp). The map's foveation sends them beside the
+  // map, so nothing dynamic is lost while the map learns it.
+  std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const;
 
   // Live surfels. Slots [0, slotCount()) hold them and free slots (live() false).
   std::size_t size() const { return live_; }
@@ -178,11 +196,17 @@ class SurfelMap {
   std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
   std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
+  std::vector<uint8_t> explained_;        // the last fused frame: 1 where a stable surfel took the pixel
+  std::vector<float> normal_cos_;         // per frame: the normal test's cosine by depth (associate())
 
   uint32_t frame_ = 0;                    // frames fused so far
   bool have_last_ = false;
   int64_t last_stamp_ns_ = 0;
   Eigen::Vector3d last_position_ = Eigen::Vector3d::Zero();
+  // The last fused frame (appendUnexplained): its pose, size and stamp.
+  hal::Pose fused_pose_;
+  int fused_width_ = 0, fused_height_ = 0;
+  int64_t fused_stamp_ns_ = 0;
   SurfelMapCounters counters_;
 };
 
