@@ -1,0 +1,153 @@
+#include "pipeline/map/eye_view.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "core/clock.h"
+
+namespace fovea::pipeline::map {
+
+namespace {
+
+constexpr int kMaxSplatCells = 2;
+constexpr float kMinEyeDistanceM = 1e-3f;  // nearer than this a surfel has no direction: sent, not splatted
+
+}  // namespace
+
+Status EyeViewConfig::validate() const {
+  if (face_cells < 8 || face_cells > 2048) {
+    return {ErrorCode::kInvalidArgument, "map.eye_face_cells: must be in [8, 2048]"};
+  }
+  if (!(std::isfinite(occlusion_margin) && occlusion_margin >= 0.0 && occlusion_margin <= 10.0)) {
+    return {ErrorCode::kInvalidArgument, "map.occlusion_margin: must be in [0, 10]"};
+  }
+  return Status::ok();
+}
+
+EyeView::EyeView(const EyeViewConfig& config, std::size_t max_bricks)
+    : config_(config),
+      face_cells_(config.face_cells),
+      nearest_(6 * static_cast<std::size_t>(config.face_cells) * static_cast<std::size_t>(config.face_cells)),
+      brick_rel_(max_bricks) {}
+
+Result<EyeView> EyeView::create(const EyeViewConfig& config, std::size_t max_bricks) {
+  if (Status s = config.validate(); !s) return Result<EyeView>(s.code(), s.message());
+  if (max_bricks == 0) return Result<EyeView>(ErrorCode::kInvalidArgument, "eye view: max_bricks is 0");
+  return EyeView(config, max_bricks);
+}
+
+EyeView::Cell EyeView::cellOf(const Eigen::Vector3f& d) const {
+  const float ax = std::abs(d.x()), ay = std::abs(d.y()), az = std::abs(d.z());
+  Cell c;
+  float a = 0.0f, b = 0.0f;
+  if (ax >= ay && ax >= az) {
+    c.face = d.x() >= 0.0f ? 0 : 1;
+    c.axis = ax;
+    a = d.y();
+    b = d.z();
+  } else if (ay >= az) {
+    c.face = d.y() >= 0.0f ? 2 : 3;
+    c.axis = ay;
+    a = d.x();
+    b = d.z();
+  } else {
+    c.face = d.z() >= 0.0f ? 4 : 5;
+    c.axis = az;
+    a = d.x();
+    b = d.y();
+  }
+  // Face coordinates in [-1, 1] to cells; the clamp catches the rounding at +1.
+  const float half = 0.5f * static_cast<float>(face_cells_);
+  c.u = std::clamp(static_cast<int>((a / c.axis + 1.0f) * half), 0, face_cells_ - 1);
+  c.v = std::clamp(static_cast<int>((b / c.axis + 1.0f) * half), 0, face_cells_ - 1);
+  return c;
+}
+
+float EyeView::nearestAt(const Eigen::Vector3f& dir) const {
+  if (!(dir.squaredNorm() > 0.0f) || !dir.allFinite()) return std::numeric_limits<float>::infinity();
+  const Cell c = cellOf(dir);
+  return nearest_[indexOf(c, c.u, c.v)];
+}
+
+void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, PointCloud& cloud,
+                            EyeViewStats& stats) {
+  const int64_t start_ns = monotonicNs();
+  stats = {};
+  std::fill(nearest_.begin(), nearest_.end(), std::numeric_limits<float>::infinity());
+  const std::size_t frame_points = cloud.size();
+  stats.frame_points = static_cast<uint32_t>(frame_points);
+  // Everything relative to the cloud's origin in float: a map spans metres to
+  // kilometres around it, and the differences below are taken in double first.
+  const Eigen::Vector3f eye = (eye_m - cloud.origin_m).cast<float>();
+  const std::size_t bricks = std::min(map.brickCount(), brick_rel_.size());
+  for (std::size_t b = 0; b < bricks; ++b) {
+    brick_rel_[b] = (map.brickOrigin(static_cast<uint16_t>(b)) - eye_m).cast<float>();
+  }
+  const float half = 0.5f * static_cast<float>(face_cells_);
+
+  // Pass one: the frame's points, each in its cell.
+  const float* px = cloud.x();
+  const float* py = cloud.y();
+  const float* pz = cloud.z();
+  for (std::size_t i = 0; i < frame_points; ++i) {
+    const Eigen::Vector3f d(px[i] - eye.x(), py[i] - eye.y(), pz[i] - eye.z());
+    const float dist = d.norm();
+    if (!(dist >= kMinEyeDistanceM) || !std::isfinite(dist)) continue;
+    const Cell c = cellOf(d);
+    float& held = nearest_[indexOf(c, c.u, c.v)];
+    held = std::min(held, dist);
+  }
+  // ... and the map's stable surfels over their footprints (on their own face:
+  // a footprint that crosses a cube edge leaves the other face's cells as they
+  // were, which can only show more, never hide).
+  const std::size_t slots = map.slotCount();
+  for (std::size_t slot = 0; slot < slots; ++slot) {
+    if (!map.live(slot)) continue;
+    const Surfel& s = map.surfel(slot);
+    if (!(s.flags & kSurfelStable) || s.brick >= bricks) continue;
+    ++stats.stable;
+    const Eigen::Vector3f d = brick_rel_[s.brick] + Eigen::Vector3f(s.x, s.y, s.z);
+    const float dist = d.norm();
+    if (!(dist >= kMinEyeDistanceM)) continue;
+    const Cell c = cellOf(d);
+    const int reach = std::min(kMaxSplatCells, static_cast<int>(surfelRadius(s) / c.axis * half));
+    for (int dv = -reach; dv <= reach; ++dv) {
+      const int v = c.v + dv;
+      if (v < 0 || v >= face_cells_) continue;
+      for (int du = -reach; du <= reach; ++du) {
+        const int u = c.u + du;
+        if (u < 0 || u >= face_cells_ || du * du + dv * dv > reach * reach) continue;
+        float& held = nearest_[indexOf(c, u, v)];
+        held = std::min(held, dist);
+      }
+    }
+  }
+
+  // Pass two: the surfels not behind their cell's nearest surface.
+  const auto margin = static_cast<float>(config_.occlusion_margin);
+  for (std::size_t slot = 0; slot < slots; ++slot) {
+    if (!map.live(slot)) continue;
+    const Surfel& s = map.surfel(slot);
+    if (!(s.flags & kSurfelStable) || s.brick >= bricks) continue;
+    const Eigen::Vector3f d = brick_rel_[s.brick] + Eigen::Vector3f(s.x, s.y, s.z);
+    const float dist = d.norm();
+    if (dist >= kMinEyeDistanceM) {
+      const Cell c = cellOf(d);
+      if (dist > nearest_[indexOf(c, c.u, c.v)] + margin * dist + 3.0f * depthSigma(dist)) {
+        ++stats.hidden;
+        continue;
+      }
+    }
+    const Eigen::Vector3f p = d + eye;
+    if (!cloud.push(p.x(), p.y(), p.z(), packRgb(s.red, s.green, s.blue))) {
+      ++stats.dropped_full;
+      continue;
+    }
+    ++stats.appended;
+  }
+  stats.ns = monotonicNs() - start_ns;
+}
+
+}  // namespace fovea::pipeline::map
