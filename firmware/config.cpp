@@ -170,6 +170,12 @@ const std::vector<Field>& fields() {
               c.foveation.acuity.view_cull = pipeline::parseViewCull(std::get<std::string>(v)).value();
             }},
       FOVEA_FLOAT("foveation.view_cull_deg", foveation.acuity.view_cull_deg, 0.001, 180.0),
+      // The map source (docs/map.md); not reloadable: it allocates the map.
+      Field{"foveation.source", Kind::kChoice, 0, 0, {"frame", "map"},
+            [](const ServiceConfig& c) -> Value { return std::string(foveationSourceName(c.map.source)); },
+            [](ServiceConfig& c, const Value& v) {
+              c.map.source = parseFoveationSource(std::get<std::string>(v)).value();
+            }},
       // [foveation.fixation]
       Field{"foveation.fixation.mode", Kind::kChoice, 0, 0, {"hit", "centroid", "fixed"},
             [](const ServiceConfig& c) -> Value {
@@ -183,6 +189,19 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("foveation.fixation.hit_percentile", foveation.fixation.hit_percentile, 0.0, 1.0),
       FOVEA_FLOAT("foveation.fixation.fallback_m", foveation.fixation.fallback_m, 0.001, 10'000.0),
       FOVEA_FLOAT("foveation.fixation.min_m", foveation.fixation.min_m, 0.001, 100.0),
+      // [map] (with foveation.source = "map"; pipeline/map/surfel_map.h says what each is)
+      FOVEA_INT("map.max_surfels", map.map.max_surfels, 1, 1 << 30),
+      FOVEA_INT("map.max_bricks", map.map.max_bricks, 1, 65535),
+      FOVEA_FLOAT("map.brick_size_m", map.map.brick_size_m, 0.05, 16.0),
+      FOVEA_FLOAT("map.depth_tolerance_sigmas", map.map.depth_tolerance_sigmas, 0.1, 100.0),
+      FOVEA_FLOAT("map.normal_tolerance_deg", map.map.normal_tolerance_deg, 1.0, 180.0),
+      FOVEA_FLOAT("map.confidence_cap", map.map.confidence_cap, 1.0, 255.0),
+      FOVEA_FLOAT("map.stable_confidence", map.map.stable_confidence, 0.01, 255.0),
+      FOVEA_INT("map.unstable_max_frames", map.map.unstable_max_frames, 1, 1'000'000),
+      FOVEA_FLOAT("map.carve_weight", map.map.carve_weight, 0.0, 100.0),
+      FOVEA_FLOAT("map.max_pose_jump_m", map.map.max_pose_jump_m, 0.001, 1000.0),
+      FOVEA_INT("map.eye_face_cells", map.eye.face_cells, 8, 2048),
+      FOVEA_FLOAT("map.occlusion_margin", map.eye.occlusion_margin, 0.0, 10.0),
       // [stream]
       FOVEA_STRING("stream.listen", stream.link.listen, &checkListen),
       FOVEA_STRING("stream.key_file", key_file, nullptr),
@@ -653,6 +672,12 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
   }
   if (Status s = c.foveation.fixation.validate(); !s) {
     return FieldError{"foveation.fixation", s.message(), {"foveation.fixation.mode"}};
+  }
+  if (c.map.map.stable_confidence > c.map.map.confidence_cap) {
+    return FieldError{"map.stable_confidence",
+                      "must be at most map.confidence_cap (got " + formatNumber(c.map.map.stable_confidence) + " > " +
+                          formatNumber(c.map.map.confidence_cap) + ")",
+                      {"map.confidence_cap"}};
   }
   // Status lines: distinct, whatever is used.
   const std::pair<const char*, int> lines[] = {{"gpio.heartbeat_line", c.gpio.lines.heartbeat_line},

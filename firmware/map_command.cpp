@@ -6,6 +6,7 @@
 
 #include "firmware/camera_setup.h"
 #include "firmware/commands.h"
+#include "firmware/frame_foveator.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
 #include "io/ply.h"
@@ -45,30 +46,13 @@ int mapFailure(const Status& s) {
   return kExitFailure;
 }
 
-Result<pipeline::map::SurfelMapConfig> mapConfigFromArgs(const Args& args) {
-  pipeline::map::SurfelMapConfig config;
-  if (const std::string* v = args.get("--max-surfels")) {
-    Result<long> n = parseInteger("--max-surfels", *v, 1, 1L << 31);
-    if (!n) return n.status();
-    config.max_surfels = static_cast<std::size_t>(n.value());
-  }
-  if (const std::string* v = args.get("--brick-size")) {
-    Result<double> d = parseDouble("--brick-size", *v);
-    if (!d) return d.status();
-    config.brick_size_m = d.value();
-  }
-  Result<pipeline::DepthRange> range = depthRangeFromArgs(args);
-  if (!range) return range.status();
-  config.depth = range.value();
-  return config;
-}
-
 void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, std::size_t frames_read) {
   const pipeline::map::SurfelMapCounters& c = map.counters();
   std::printf("frames: %zu read, %llu fused; refused: %llu without a usable pose, %llu pose jumps, "
               "%llu stamps not increasing, %llu too large\n",
               frames_read, static_cast<unsigned long long>(c.frames_fused),
-              static_cast<unsigned long long>(c.refused_bad_pose), static_cast<unsigned long long>(c.refused_pose_jump),
+              static_cast<unsigned long long>(c.refused_bad_pose + c.refused_no_pose),
+              static_cast<unsigned long long>(c.refused_pose_jump),
               static_cast<unsigned long long>(c.refused_clock), static_cast<unsigned long long>(c.refused_size));
   std::printf("map: %zu surfels in %zu bricks (pool %zu, %zu bytes a surfel, %.1f MiB in all)\n", map.size(),
               map.brickCount(), map.capacity(), sizeof(pipeline::map::Surfel),
@@ -84,8 +68,9 @@ void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, s
 }  // namespace
 
 int mapCommand(int argc, char** argv) {
-  std::vector<std::string> flags = {"--out", "--frames", "--max-surfels", "--brick-size", "--depth-min", "--depth-max"};
+  std::vector<std::string> flags = {"--out", "--frames", "--depth-min", "--depth-max"};
   flags.insert(flags.end(), kCameraFlags.begin(), kCameraFlags.end());
+  flags.insert(flags.end(), kMapFlags.begin(), kMapFlags.end());
   Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h", "--all-surfels"});
   if (!args) return mapUsage(args.status());
   if (args->has("--help") || args->has("-h")) {
@@ -95,8 +80,12 @@ int mapCommand(int argc, char** argv) {
   if (!args->has("--out")) return mapUsage(invalidArgument("--out is required (see --help)"));
   Result<long> frames = parseInteger("--frames", args->getOr("--frames", "100"), 1, 100000000);
   if (!frames) return mapUsage(frames.status());
-  Result<pipeline::map::SurfelMapConfig> config = mapConfigFromArgs(args.value());
-  if (!config) return mapUsage(config.status());
+  Result<MapSettings> settings_map = mapSettingsFromArgs(args.value());
+  if (!settings_map) return mapUsage(settings_map.status());
+  Result<pipeline::DepthRange> range = depthRangeFromArgs(args.value());
+  if (!range) return mapUsage(range.status());
+  pipeline::map::SurfelMapConfig config = settings_map->map;
+  config.depth = range.value();
   Result<CameraSettings> settings = cameraSettingsFromArgs(args.value());
   if (!settings) return mapUsage(settings.status());
   if (!args->has("--camera")) settings->spec = "mock:living-room,path=orbit";
@@ -107,9 +96,9 @@ int mapCommand(int argc, char** argv) {
   }
   hal::Camera& camera = *opened->camera;
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
-  config->max_width = k.width;
-  config->max_height = k.height;
-  Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config.value());
+  config.max_width = k.width;
+  config.max_height = k.height;
+  Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
   if (!created) return mapUsage(created.status());
   pipeline::map::SurfelMap& map = created.value();
   if (Status s = camera.start(); !s) return mapFailure(s);
@@ -127,9 +116,9 @@ int mapCommand(int argc, char** argv) {
       return mapFailure(Status(s.code(), "camera " + camera.info().name + ": " + s.message()));
     }
     ++read;
-    opened->pose_source->apply(frame);
+    const bool pose_fresh = opened->pose_source->apply(frame);
     pipeline::map::FuseStats stats;
-    if (map.fuse(frame, stats) == pipeline::map::FuseOutcome::kFused) fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
+    if (map.fuse(frame, stats, pose_fresh) == pipeline::map::FuseOutcome::kFused) fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
   }
   camera.stop();
 

@@ -1,5 +1,7 @@
 #include "firmware/options.h"
 
+#include "firmware/frame_foveator.h"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -120,6 +122,27 @@ Result<pipeline::DepthRange> depthRangeFromArgs(const Args& args, pipeline::Dept
   }
   if (Status s = range.validate(); !s) return s;
   return range;
+}
+
+Result<MapSettings> mapSettingsFromArgs(const Args& args) {
+  MapSettings settings;
+  if (const std::string* v = args.get("--source")) {
+    const std::optional<FoveationSource> source = parseFoveationSource(*v);
+    if (!source) return badValue("--source", *v, "frame or map");
+    settings.source = *source;
+  }
+  if (const std::string* v = args.get("--max-surfels")) {
+    Result<long> n = parseInteger("--max-surfels", *v, 1, 1L << 30);
+    if (!n) return n.status();
+    settings.map.max_surfels = static_cast<std::size_t>(n.value());
+  }
+  if (const std::string* v = args.get("--brick-size")) {
+    Result<double> d = parseDouble("--brick-size", *v);
+    if (!d) return d.status();
+    settings.map.brick_size_m = d.value();
+  }
+  if (Status s = settings.map.validate(); !s) return s;
+  return settings;
 }
 
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text) {

@@ -15,6 +15,8 @@
 
 namespace fovea::firmware {
 
+struct MapSettings;  // firmware/frame_foveator.h
+
 // "--name value" and "--name=value" pairs, plus bare "--flag" switches.
 class Args {
  public:
@@ -35,6 +37,10 @@ Result<long> parseInteger(std::string_view flag, std::string_view text, long min
 Result<double> durationFromArgs(const Args& args);
 // --depth-min M and --depth-max M over `base` (each optional), validated.
 Result<pipeline::DepthRange> depthRangeFromArgs(const Args& args, pipeline::DepthRange base = {});
+// The map's flags (fovead map, fovead run): --max-surfels N, --brick-size M; and
+// for run --source frame|map (foveation.source). The depth range is the caller's.
+inline const std::vector<std::string> kMapFlags = {"--max-surfels", "--brick-size"};
+Result<MapSettings> mapSettingsFromArgs(const Args& args);
 // "X,Y,Z", each a finite number.
 Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view text);
 // "a,b,c" of finite numbers.

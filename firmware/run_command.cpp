@@ -35,6 +35,7 @@ const char* kRunHelp =
     "                  [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
     "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
     "                  [--calibration FILE] [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH]\n"
+    "                  [--source frame|map [--max-surfels N] [--brick-size M]]\n"
     "                  [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "\n"
     "Runs the foveation pipeline on a camera and prints, per frame and for the run,\n"
@@ -61,6 +62,11 @@ const char* kRunHelp =
     "                           socket:PATH (the robot's poses as datagrams; --pose-max-age-ms MS, default 100)\n"
     "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
     "                           SIMD kernels only; the output does not depend on it)\n"
+    "  --source frame|map       what is foveated (foveation.source, docs/map.md): each frame's own points\n"
+    "                           (default), or the surfel map fused from the posed frames as the eye sees it,\n"
+    "                           with the frame's points the map does not explain yet\n"
+    "  --max-surfels N          the map's pool (default 1048576; 32 bytes a surfel)\n"
+    "  --brick-size M           the map's bricks' edge in metres (default 0.5)\n"
     "\n"
     "\n"
     "streaming (docs/protocol.md):\n"
@@ -182,6 +188,8 @@ std::vector<std::string> runFlags() {
   flags.insert(flags.end(), kCameraFlags.begin(), kCameraFlags.end());
   flags.insert(flags.end(), kFoveationFlags.begin(), kFoveationFlags.end());
   flags.insert(flags.end(), kStreamFlags.begin(), kStreamFlags.end());
+  flags.insert(flags.end(), kMapFlags.begin(), kMapFlags.end());
+  flags.push_back("--source");
   return flags;
 }
 
@@ -196,6 +204,7 @@ struct RunOptions {
   pipeline::DepthRange range;
   CameraSettings camera;
   std::optional<std::string> save_ply;
+  MapSettings map;  // --source, --max-surfels, --brick-size
 };
 
 // In the order the flags were always checked: the first bad one is the one reported.
@@ -228,6 +237,9 @@ Result<RunOptions> runOptionsFromArgs(const Args& args) {
   if (!camera) return camera.status();
   options.camera = std::move(camera.value());
   if (const std::string* path = args.get("--save-ply")) options.save_ply = *path;
+  Result<MapSettings> map = mapSettingsFromArgs(args);
+  if (!map) return map.status();
+  options.map = map.value();
   return options;
 }
 
@@ -254,11 +266,12 @@ struct RunStats {
   explicit RunStats(std::size_t capacity)
       : capture_ms(capacity), backproject_ms(capacity), partition_ms(capacity), fixation_ms(capacity),
         sample_ms(capacity), foveate_ms(capacity), points_in(capacity), points_out(capacity), d0_m(capacity),
-        encode_ms(capacity), send_ms(capacity) {}
+        encode_ms(capacity), send_ms(capacity), fuse_ms(capacity), eye_ms(capacity) {}
 
   Samples capture_ms, backproject_ms, partition_ms, fixation_ms, sample_ms, foveate_ms;
   Samples points_in, points_out, d0_m;
   Samples encode_ms, send_ms;
+  Samples fuse_ms, eye_ms;  // the map source: fusion, and the eye's view of the map
   RegionTotals totals;
   uint64_t failed_frames = 0, attempted_frames = 0, fallback_frames = 0, frames_streamed = 0, stale_pose_frames = 0;
 };
@@ -304,7 +317,7 @@ class Run {
         gaze_choice_(gaze_choice),
         stage_(stage),
         kernels_(kernels),
-        max_points_(static_cast<std::size_t>(info_.intrinsics.width) * info_.intrinsics.height),
+        max_points_(stage.cloud().capacity()),
         period_ns_(info_.fps > 0 ? static_cast<int64_t>(1e9 / info_.fps) : 33'333'333),
         keep_streamed_(options.stream && options.save_ply),
         frame_(info_.intrinsics.width, info_.intrinsics.height),
@@ -343,6 +356,7 @@ class Run {
   hal::PoseSource& pose_source_;
   const GazeChoice& gaze_choice_;
   FrameFoveator& stage_;
+  bool pose_fresh_ = true;  // the pose source had a pose for the current frame
   const fovea::KernelSet kernels_;
   const std::size_t max_points_;
   const int64_t period_ns_;
@@ -463,7 +477,8 @@ bool Run::capture(std::size_t i, int64_t slot_start_ns, FrameFigures& f) {
     }
     return false;
   }
-  if (!pose_source_.apply(frame_)) ++stats_.stale_pose_frames;
+  pose_fresh_ = pose_source_.apply(frame_);
+  if (!pose_fresh_) ++stats_.stale_pose_frames;
   f.capture_ms = msSince(t0);
   f.capture_ns = monotonicNs();
   return true;
@@ -472,12 +487,15 @@ bool Run::capture(std::size_t i, int64_t slot_start_ns, FrameFigures& f) {
 bool Run::backproject(std::size_t i, FrameFigures& f) {
   const auto t0 = std::chrono::steady_clock::now();
   pipeline::BackprojectCounts counts;
-  if (Status s = stage_.backproject(frame_, counts); !s) {
+  if (Status s = stage_.backproject(frame_, counts, pose_fresh_); !s) {
     std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
     ++stats_.failed_frames;
     return false;
   }
   f.backproject_ms = msSince(t0);
+  if (stage_.map() != nullptr && stage_.mapFigures().fuse.outcome == pipeline::map::FuseOutcome::kFused) {
+    stats_.fuse_ms.add(static_cast<double>(stage_.mapFigures().fuse.fuse_ns) * 1e-6);
+  }
   return true;
 }
 
@@ -510,6 +528,7 @@ bool Run::foveate(std::size_t i, FrameFigures& f) {
     ++stats_.failed_frames;
     return false;
   }
+  if (stage_.map() != nullptr) stats_.eye_ms.add(static_cast<double>(stage_.mapFigures().eye.ns) * 1e-6);
   return true;
 }
 
@@ -634,6 +653,18 @@ void Run::printSummary() const {
   row("fixation d0", s.fixation_ms);
   row("voxel sampling", s.sample_ms);
   row("foveation total (no capture)", s.foveate_ms);
+  if (const pipeline::map::SurfelMap* map = stage_.map()) {
+    row("map: fusion (in back-projection)", s.fuse_ms);
+    row("map: the eye's view (in total)", s.eye_ms);
+    const pipeline::map::SurfelMapCounters& c = map->counters();
+    const MapFrameFigures& last = stage_.mapFigures();
+    std::printf("map: %zu surfels (%llu evicted); %llu frames fused, refused %llu without a pose, %llu for another "
+                "reason; last frame: %u of the frame's points unexplained, %u map surfels sent, %u hidden from the eye\n",
+                map->size(), static_cast<unsigned long long>(c.evicted), static_cast<unsigned long long>(c.frames_fused),
+                static_cast<unsigned long long>(c.refused_no_pose),
+                static_cast<unsigned long long>(c.refused() - c.refused_no_pose), last.frame_points, last.eye.appended,
+                last.eye.hidden);
+  }
 }
 
 // --save-ply: the last foveated frame, or with --listen the last one streamed whole.
@@ -708,8 +739,9 @@ int runCommand(int argc, char** argv) {
   const hal::CameraInfo& info = camera.camera->info();
   const std::size_t max_points = static_cast<std::size_t>(info.intrinsics.width) * info.intrinsics.height;
   const fovea::KernelSet kernels = fovea::defaultKernelSet();
-  Result<FrameFoveator> stage = FrameFoveator::create({max_points, max_points, kernels, options->threads},
-                                                      options->foveation, options->range);
+  Result<FrameFoveator> stage =
+      FrameFoveator::create({max_points, max_points, kernels, options->threads}, options->foveation, options->range,
+                            options->map, info.intrinsics.width, info.intrinsics.height);
   if (!stage) return usage(stage.status());
   Run run(options.value(), camera, gaze_choice.value(), stage.value(), kernels);
   if (Exit e = run.start()) return *e;

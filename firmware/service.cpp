@@ -184,21 +184,29 @@ Status Service::allocate() {
   }
   memory_.add("frame slots (RGB-D, capture -> foveation)", frames_->slotCount(), delta(before, heapInUse()));
 
+  // The map source foveates the map's surfels too: the clouds hold them.
+  const std::size_t points = FrameFoveator::cloudCapacity(pixels, config_.map);
   before = heapInUse();
   {
     FoveatedFrame prototype;
-    prototype.cloud = pipeline::FoveatedCloud(pixels);
+    prototype.cloud = pipeline::FoveatedCloud(points);
     foveated_ = std::make_unique<fovea::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
   }
   memory_.add("foveated cloud slots (foveation -> send)", foveated_->slotCount(), delta(before, heapInUse()));
 
   before = heapInUse();
-  Result<FrameFoveator> stage = FrameFoveator::create(capacity, config_.foveation, config_.camera.depth);
+  Result<FrameFoveator> stage =
+      FrameFoveator::create(capacity, config_.foveation, config_.camera.depth, config_.map, k.width, k.height);
   if (!stage) return stage.status();
   stage_ = std::make_unique<FrameFoveator>(std::move(stage.value()));
+  const std::size_t map_bytes = stage_->mapMemoryBytes();
+  if (map_bytes > 0) {
+    memory_.add("surfel map (pool, bricks, scratch, eye depth buffer)", 1, map_bytes);
+    before += map_bytes;  // the foveator's line below is the rest
+  }
   if (Status s = config_.stream.gaze.validate(); !s) return s;
   policy_ = std::make_unique<GazePolicy>(config_.stream.gaze, config_.foveation);
-  const std::size_t cloud_bytes = pixels * (3 * sizeof(float) + sizeof(uint32_t));
+  const std::size_t cloud_bytes = points * (3 * sizeof(float) + sizeof(uint32_t));
   const std::size_t stage_bytes = delta(before, heapInUse());
   memory_.add("point cloud (back-projection)", 1, std::min(cloud_bytes, stage_bytes));
   memory_.add("foveator (partition, sampler, workers)", 1, stage_bytes - std::min(cloud_bytes, stage_bytes));
@@ -212,7 +220,7 @@ Status Service::allocate() {
       stream.link.key = key->key;
     }
     before = heapInUse();
-    Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, pixels);
+    Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, points);
     if (!streamer) return streamer.status();
     streamer_ = std::move(streamer.value());
     memory_.add("streamer (link, datagram pool, scheduler)", 1, delta(before, heapInUse()));
@@ -236,7 +244,7 @@ Status Service::allocate() {
   histogram_scratch_.reset(new uint64_t[LatencyHistogram::kBuckets]);
   for (auto& h : histogram_previous_) h.reset(new uint64_t[LatencyHistogram::kBuckets]());
   threads_.reserve(3);
-  memory_.add("status, latency histograms", 1, delta(before, heapInUse()) + 3 * sizeof(LatencyHistogram));
+  memory_.add("status, latency histograms", 1, delta(before, heapInUse()) + 4 * sizeof(LatencyHistogram));
 
   if (!config_.runtime.timing_log.empty()) {
     before = heapInUse();
@@ -358,7 +366,8 @@ void Service::captureLoop() {
       case hal::CaptureAction::kFrame:
         // The pose at the frame's capture stamp; a stale one keeps the frame
         // with the nearest pose and raises the fault (docs/pose.md).
-        pose_stale_.store(!pose_source_->apply(f.frame), std::memory_order_relaxed);
+        f.pose_fresh = pose_source_->apply(f.frame);
+        pose_stale_.store(!f.pose_fresh, std::memory_order_relaxed);
         f.captured_ns = monotonicNs();
         f.acquire_ns = f.captured_ns - t0;
         capture_latency_.add(f.acquire_ns);
@@ -422,8 +431,9 @@ void Service::foveationLoop() {
     FoveatedFrame& o = foveated_->slot(out);
     const int64_t t0 = monotonicNs();
     pipeline::BackprojectCounts counts;
-    Status s = stage_->backproject(f.frame, counts);
+    Status s = stage_->backproject(f.frame, counts, f.pose_fresh);
     o.backproject_ns = monotonicNs() - t0;
+    if (const pipeline::map::SurfelMap* map = stage_->map()) publishMapFigures(*map);
     GazePolicy::Decision decision;
     if (s) {
       decision = policy_->decide(gaze_box_.current(), monotonicNs(), f.frame.T_world_cam);
@@ -451,6 +461,17 @@ void Service::foveationLoop() {
     out_ring.publish(out);
   }
   foveation_alive_.store(false, std::memory_order_release);
+}
+
+void Service::publishMapFigures(const pipeline::map::SurfelMap& map) {
+  const MapFrameFigures& figures = stage_->mapFigures();
+  if (figures.fuse.outcome == pipeline::map::FuseOutcome::kFused) fuse_latency_.add(figures.fuse.fuse_ns);
+  const pipeline::map::SurfelMapCounters& c = map.counters();
+  map_surfels_.store(map.size(), std::memory_order_relaxed);
+  map_frames_fused_.store(c.frames_fused, std::memory_order_relaxed);
+  map_refused_no_pose_.store(c.refused_no_pose, std::memory_order_relaxed);
+  map_refused_other_.store(c.refused() - c.refused_no_pose, std::memory_order_relaxed);
+  map_evicted_.store(c.evicted, std::memory_order_relaxed);
 }
 
 void Service::sendLoop() {
@@ -651,9 +672,9 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   w.wire_bytes = wire_bytes_.load(std::memory_order_relaxed);
   w.capture_drops = capture_ring.dropped;
   w.foveation_drops = foveation_ring.dropped;
-  double p50[3], p99[3];
-  const LatencyHistogram* histograms[3] = {&capture_latency_, &foveate_latency_, &send_latency_};
-  for (int i = 0; i < 3; ++i) {
+  double p50[4], p99[4];
+  const LatencyHistogram* histograms[4] = {&capture_latency_, &foveate_latency_, &send_latency_, &fuse_latency_};
+  for (int i = 0; i < 4; ++i) {
     histograms[i]->snapshot(histogram_scratch_.get());
     uint64_t* previous = histogram_previous_[i].get();
     for (std::size_t b = 0; b < LatencyHistogram::kBuckets; ++b) {
@@ -664,8 +685,8 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
     p50[i] = histogramQuantileMs(histogram_scratch_.get(), LatencyHistogram::kBuckets, 0.5);
     p99[i] = histogramQuantileMs(histogram_scratch_.get(), LatencyHistogram::kBuckets, 0.99);
   }
-  char latency[3][24];
-  for (int i = 0; i < 3; ++i) {
+  char latency[4][24];
+  for (int i = 0; i < 4; ++i) {
     if (p50[i] < 0) {
       std::snprintf(latency[i], sizeof latency[i], "-");
     } else {
@@ -693,16 +714,28 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
     std::snprintf(pose, sizeof pose, " | pose %s, %" PRIu64 " stale frames", pose_stale_.load() ? "STALE" : "fresh",
                   pc.frames_stale);
   }
+  // The map: its size, this window's fusion time, and since start the surfels
+  // evicted and the frames refused (no pose; anything else).
+  char map[160] = "";
+  if (stage_->map() != nullptr) {
+    std::snprintf(map, sizeof map,
+                  " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64
+                  " other",
+                  map_surfels_.load(std::memory_order_relaxed), latency[3],
+                  map_evicted_.load(std::memory_order_relaxed), map_refused_no_pose_.load(std::memory_order_relaxed),
+                  map_refused_other_.load(std::memory_order_relaxed));
+  }
   const int n = std::snprintf(
       out, size,
       "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
-      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s%s | memory %.1f MiB"
+      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s%s%s | memory %.1f MiB"
       " | lines heartbeat %s streaming %d fault %d | usb %s",
       static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
       static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
       w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
       static_cast<double>(w.wire_bytes - window_.wire_bytes) / dt_s / 1e6, gaze_age,
-      status_lines_->state().privacy_active ? " | privacy pause" : "", pose, static_cast<double>(memory_.totalBytes()) / kMiB,
+      status_lines_->state().privacy_active ? " | privacy pause" : "", pose, map,
+      static_cast<double>(memory_.totalBytes()) / kMiB,
       // The heartbeat's level changes every half period: report whether it toggles.
       heartbeat_toggles_.load(std::memory_order_relaxed) != window_heartbeat_toggles_ ? "toggling" : "held",
       status_lines_->state().streaming ? 1 : 0, status_lines_->state().fault ? 1 : 0, usb);
@@ -759,6 +792,12 @@ void Service::stop() {
               " withheld (privacy); drops capture %" PRIu64 " foveation %" PRIu64 "; %" PRIu64 " reloads applied",
               s.frames_captured, s.frames_foveated, s.frames_sent, s.frames_withheld, s.capture_ring.dropped,
               s.foveation_ring.dropped, s.reloads_applied);
+    if (stage_->map() != nullptr) {
+      log().log(LogLevel::kInfo,
+                "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; refused %" PRIu64
+                " frames without a pose, %" PRIu64 " for another reason",
+                s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
+    }
   }
 }
 
@@ -787,6 +826,11 @@ ServiceStats Service::stats() const {
   if (usb_monitor_) s.usb = usb_monitor_->counters();
   s.pose = pose_source_->counters();
   s.pose_stale = pose_stale_.load(std::memory_order_relaxed);
+  s.map.surfels = map_surfels_.load(std::memory_order_relaxed);
+  s.map.frames_fused = map_frames_fused_.load(std::memory_order_relaxed);
+  s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);
+  s.map.refused_other = map_refused_other_.load(std::memory_order_relaxed);
+  s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
   return s;
 }
 

@@ -139,6 +139,14 @@ struct ServiceStats {
   // The pose source's counts (hal/pose_source.h) and whether the last frame's pose was stale.
   hal::PoseCounters pose;
   bool pose_stale = false;
+  // The map (foveation.source = map; zero otherwise).
+  struct Map {
+    uint64_t surfels = 0;            // live surfels after the last frame
+    uint64_t frames_fused = 0;
+    uint64_t refused_no_pose = 0;    // frames without a pose (stale, none yet)
+    uint64_t refused_other = 0;      // bad pose, pose jump, clock, size
+    uint64_t evicted = 0;            // surfels evicted from a full pool
+  } map;
 };
 
 class Service {
@@ -198,6 +206,7 @@ class Service {
     hal::RgbdFrame frame;
     int64_t captured_ns = 0;  // when acquire returned (CLOCK_MONOTONIC)
     int64_t acquire_ns = 0;   // how long acquire took (it waits for the camera's next frame)
+    bool pose_fresh = true;   // the pose source had a pose for the frame's stamp
   };
   struct FoveatedFrame {
     pipeline::FoveatedCloud cloud{0};
@@ -217,6 +226,8 @@ class Service {
 
   void captureLoop();
   void foveationLoop();
+  // The foveation stage's map figures to the atomics the status line reads.
+  void publishMapFigures(const pipeline::map::SurfelMap& map);
   void sendLoop();
   void supervise(int64_t now_ns);
   void applyReload();
@@ -273,6 +284,9 @@ class Service {
       heartbeat_toggles_{0};
   std::atomic<bool> streaming_line_{false}, fault_line_{false}, privacy_active_{false};
   LatencyHistogram capture_latency_, foveate_latency_, send_latency_;
+  LatencyHistogram fuse_latency_;  // the map's fusion (a part of foveate_latency_)
+  std::atomic<uint64_t> map_surfels_{0}, map_frames_fused_{0}, map_refused_no_pose_{0}, map_refused_other_{0},
+      map_evicted_{0};
   std::vector<std::thread> threads_;
 
   // Supervisor state (one thread).
@@ -284,7 +298,7 @@ class Service {
     uint64_t captured = 0, foveated = 0, sent = 0, wire_bytes = 0, capture_drops = 0, foveation_drops = 0;
   } window_;
   std::unique_ptr<uint64_t[]> histogram_scratch_;  // kBuckets: one stage's snapshot, for the quantiles
-  std::array<std::unique_ptr<uint64_t[]>, 3> histogram_previous_;
+  std::array<std::unique_ptr<uint64_t[]>, 4> histogram_previous_;  // capture, foveate, send, fuse
   // --timing-log: the file and its buffer, both made at start-up (the send stage writes).
   struct FileCloser {
     void operator()(std::FILE* f) const { std::fclose(f); }

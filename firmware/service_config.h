@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "firmware/frame_foveator.h"
 #include "firmware/gaze_policy.h"
 #include "firmware/log.h"
 #include "firmware/status_lines.h"
@@ -80,6 +81,7 @@ struct ServiceConfig {
   CameraSettings camera;
   pipeline::PipelineCapacity pipeline;  // max points and voxels, kernels, threads per frame
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
+  MapSettings map;                      // foveation.source and [map]: the fused scene map
   // listen, key, budget, MTU, gaze timeout, fallback, codec. stream.link.listen
   // "" (the default here): the service does not stream (host-mock's default).
   StreamConfig stream = [] {
