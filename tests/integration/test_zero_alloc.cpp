@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "firmware/frame_foveator.h"
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
@@ -129,6 +130,52 @@ TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
   EXPECT_EQ(allocations, 0u);
   EXPECT_GT(map.size(), 0u);
   EXPECT_GT(map.counters().evicted, evicted_before) << "no eviction among the counted frames";
+  cam.stop();
+}
+
+// The service's map source (firmware/frame_foveator.h): each frame fused, the
+// map's surfels the eye sees gathered with the frame's unexplained points and
+// foveated, the eye moving, the pool small enough that eviction runs too.
+TEST(ZeroAllocation, FoveatingTheMapAsTheEyeSeesIt) {
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit,size=160x120");
+  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
+  hal::Camera& cam = *camera.value();
+  ASSERT_TRUE(cam.open().isOk());
+  ASSERT_TRUE(cam.start().isOk());
+  const hal::CameraIntrinsics& k = cam.info().intrinsics;
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
+  firmware::MapSettings settings;
+  settings.source = firmware::FoveationSource::kMap;
+  settings.map.max_surfels = pixels / 2;
+  Result<firmware::FrameFoveator> created = firmware::FrameFoveator::create(
+      {pixels, pixels, fovea::defaultKernelSet(), 1}, pipeline::FoveationConfig{}, pipeline::DepthRange{}, settings,
+      k.width, k.height);
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  firmware::FrameFoveator& stage = created.value();
+  hal::RgbdFrame frame(k.width, k.height);
+  pipeline::FoveatedCloud out(firmware::FrameFoveator::cloudCapacity(pixels, settings));
+  auto runFrame = [&](int i) {
+    pipeline::BackprojectCounts counts;
+    pipeline::FoveationStats stats;
+    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!stage.backproject(frame, counts).isOk()) return false;
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam + Eigen::Vector3d(0.05 * (i % 5), 0.0, -0.1);
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2);
+    return stage.foveate(gaze, out, stats).isOk() && out.size() > 0;
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(runFrame(i));  // warm-up
+
+  const uint64_t evicted_before = stage.map()->counters().evicted;
+  test::AllocationScope scope;
+  bool all_ok = true;
+  const int frames = framesCounted();
+  for (int i = 0; i < frames; ++i) all_ok = runFrame(i) && all_ok;
+  const uint64_t allocations = scope.allocations();
+  EXPECT_TRUE(all_ok);
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_GT(stage.mapFigures().eye.appended, 0u) << "no map surfel reached the foveator";
+  EXPECT_GT(stage.map()->counters().evicted, evicted_before) << "no eviction among the counted frames";
   cam.stop();
 }
 

@@ -16,6 +16,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "pipeline/map/eye_view.h"
 #include "pipeline/map/surfel_map.h"
 #include "tests/support/test_time.h"
 
@@ -423,6 +424,172 @@ TEST(SurfelMap, ClearEmptiesTheMapAndItFusesAgain) {
   ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
   EXPECT_EQ(map.size(), size);
   EXPECT_GT(map.memoryBytes(), map.capacity() * sizeof(Surfel));
+}
+
+// ---- The map as the eye sees it (eye_view.h) -------------------------------
+
+// A wall at z = 3 and a box in front of it, fused until stable (noiseless
+// frames: a pixel's weight is at most 1, so a few frames) from 0.7 m left of the
+// origin, the origin and 0.7 m right, so that the map has the wall behind the
+// box too; offset by `offset` (the whole world, camera included).
+SurfelMap fusedWallAndBox(const Eigen::Vector3d& offset, const Box& box) {
+  const int w = 320, h = 240;
+  SurfelMapConfig config = smallConfig(w, h);
+  config.max_surfels = 1 << 18;
+  SurfelMap map = SurfelMap::create(config).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  Scene scene;
+  scene.wall_z = 3.0 + offset.z();
+  scene.boxes.push_back({box.lo + offset, box.hi + offset});
+  int64_t stamp = 0;
+  for (const double x : {-0.7, 0.0, 0.7}) {
+    for (int i = 0; i < 6; ++i) {
+      render(scene, poseAt(offset + Eigen::Vector3d(x, 0.0, 0.0)), ++stamp, frame);
+      FuseStats stats;
+      EXPECT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+    }
+  }
+  return map;
+}
+
+// Which stable surfels appendVisible() appended: it appends in slot order, so
+// the cloud's points after `first` are matched with the stable slots in order.
+std::vector<bool> sentBySlot(const SurfelMap& map, const PointCloud& cloud, std::size_t first) {
+  std::vector<bool> sent(map.slotCount(), false);
+  std::size_t j = first;
+  for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable) || j >= cloud.size()) continue;
+    if ((cloud.world(j) - map.worldPosition(slot)).norm() < 1e-3) {
+      sent[slot] = true;
+      ++j;
+    }
+  }
+  EXPECT_EQ(j, cloud.size()) << "appended points that are no stable surfel, or out of slot order";
+  return sent;
+}
+
+// The brute-force reference: the segment from the eye to p passes through the
+// box grown by `margin` (negative: shrunk), before p.
+bool segmentHitsBox(const Box& box, double margin, const Eigen::Vector3d& eye, const Eigen::Vector3d& p) {
+  const Box grown{box.lo.array() - margin, box.hi.array() + margin};
+  const Eigen::Vector3d d = p - eye;
+  const std::optional<double> t = hitBox(grown, eye, d);
+  return t && *t < 1.0 - 1e-6;
+}
+
+TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
+  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
+  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
+  EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
+  PointCloud cloud(map.capacity());
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> lateral(-0.4, 0.4), along(-0.5, 0.8);
+  // A cell is 2/256 of a face, at most 0.45 degrees: at the box's 2 m that is
+  // 16 mm; 6 cm of margin is several cells plus a surfel's own footprint.
+  const double margin = 0.06;
+  for (int trial = 0; trial < 12; ++trial) {
+    const Eigen::Vector3d eye(lateral(rng), lateral(rng), along(rng));
+    cloud.clear();
+    cloud.origin_m = eye + Eigen::Vector3d(0.5, -0.25, 1.0);  // any origin: positions are relative to it
+    EyeViewStats stats;
+    view.appendVisible(map, eye, cloud, stats);
+    const std::vector<bool> sent = sentBySlot(map, cloud, 0);
+    std::size_t wall_hidden = 0, wall_visible = 0, front = 0;
+    for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+      if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+      const Eigen::Vector3d p = map.worldPosition(slot);
+      if (std::abs(p.z() - 3.0) < 0.01) {  // the wall
+        if (segmentHitsBox(box, -margin, eye, p)) {
+          ++wall_hidden;
+          EXPECT_FALSE(sent[slot]) << "trial " << trial << ": a wall surfel well behind the box was sent";
+        } else if (!segmentHitsBox(box, margin, eye, p)) {
+          ++wall_visible;
+          EXPECT_TRUE(sent[slot]) << "trial " << trial << ": a wall surfel in plain view was hidden";
+        }
+      } else if (std::abs(p.z() - box.lo.z()) < 0.01 && std::abs(p.x()) < 0.3 - margin &&
+                 std::abs(p.y()) < 0.3 - margin) {
+        ++front;  // the box's face towards the eye
+        EXPECT_TRUE(sent[slot]) << "trial " << trial << ": the box's front face was hidden";
+      }
+    }
+    EXPECT_GT(wall_hidden, 1000u) << "trial " << trial;
+    EXPECT_GT(wall_visible, 10000u) << "trial " << trial;
+    EXPECT_GT(front, 1000u) << "trial " << trial;
+    EXPECT_EQ(stats.appended + stats.hidden, stats.stable);
+    EXPECT_EQ(stats.appended, cloud.size());
+  }
+}
+
+TEST(EyeView, TheFramesPointsOccludeTooAndStay) {
+  // A map of the wall alone; a plate of points already in the cloud (a moving
+  // object the map does not have) hides the wall behind it.
+  const Box nowhere{{50, 50, 50}, {51, 51, 51}};
+  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), nowhere);
+  EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
+  PointCloud cloud(map.capacity() + 100000);
+  const Eigen::Vector3d eye = Eigen::Vector3d::Zero();
+  std::size_t plate = 0;
+  for (double x = -0.4; x <= 0.4; x += 0.004) {
+    for (double y = -0.4; y <= 0.4; y += 0.004) {
+      ASSERT_TRUE(cloud.push(static_cast<float>(x), static_cast<float>(y), 1.5f, 0));
+      ++plate;
+    }
+  }
+  EyeViewStats stats;
+  view.appendVisible(map, eye, cloud, stats);
+  EXPECT_EQ(stats.frame_points, plate);
+  const std::vector<bool> sent = sentBySlot(map, cloud, plate);
+  const Box plate_box{{-0.4, -0.4, 1.49}, {0.4, 0.4, 1.51}};
+  std::size_t hidden = 0;
+  for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+    const Eigen::Vector3d p = map.worldPosition(slot);
+    if (segmentHitsBox(plate_box, -0.03, eye, p)) {
+      ++hidden;
+      EXPECT_FALSE(sent[slot]) << "a wall surfel behind the frame's points was sent";
+    } else if (!segmentHitsBox(plate_box, 0.03, eye, p)) {
+      EXPECT_TRUE(sent[slot]);
+    }
+  }
+  EXPECT_GT(hidden, 1000u);
+  // The frame's points are all still there, first.
+  EXPECT_EQ(cloud.z()[0], 1.5f);
+  EXPECT_EQ(cloud.size(), plate + stats.appended);
+}
+
+TEST(EyeView, TenKilometresFromTheOriginSeesWhatTheOriginSees) {
+  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
+  const Eigen::Vector3d far(10'000.0, -3'000.0, 7'000.0);
+  const SurfelMap near_map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
+  const SurfelMap far_map = fusedWallAndBox(far, box);
+  EyeView view = EyeView::create(EyeViewConfig{}, near_map.config().max_bricks).value();
+  PointCloud near_cloud(near_map.capacity()), far_cloud(far_map.capacity());
+  const Eigen::Vector3d eye(0.2, 0.1, 0.3);
+  near_cloud.origin_m = eye;
+  far_cloud.origin_m = eye + far;
+  EyeViewStats near_stats, far_stats;
+  view.appendVisible(near_map, eye, near_cloud, near_stats);
+  view.appendVisible(far_map, eye + far, far_cloud, far_stats);
+  EXPECT_EQ(near_stats.stable, far_stats.stable);
+  // The two maps fused the same frames but their surfels' float offsets differ
+  // by rounding: a surfel at a cell's edge may fall either way.
+  EXPECT_NEAR(static_cast<double>(far_stats.hidden), static_cast<double>(near_stats.hidden),
+              0.002 * near_stats.stable + 5);
+  EXPECT_GT(near_stats.hidden, 1000u);
+}
+
+TEST(EyeView, AFullCloudCountsWhatItCouldNotTake) {
+  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), Box{{50, 50, 50}, {51, 51, 51}});
+  EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
+  PointCloud cloud(1000);
+  EyeViewStats stats;
+  view.appendVisible(map, Eigen::Vector3d::Zero(), cloud, stats);
+  EXPECT_EQ(cloud.size(), 1000u);
+  EXPECT_EQ(stats.appended, 1000u);
+  EXPECT_EQ(stats.appended + stats.dropped_full + stats.hidden, stats.stable);
+  EXPECT_GT(stats.dropped_full, 0u);
+  EXPECT_FALSE(EyeView::create(EyeViewConfig{.face_cells = 4}, 16).isOk());
+  EXPECT_FALSE(EyeView::create(EyeViewConfig{.occlusion_margin = std::nan("")}, 16).isOk());
 }
 
 }  // namespace
