@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <regex>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -144,6 +145,8 @@ TEST(FoveadCli, HelpAndBadArguments) {
                      {"run --gaze-origin 1,2,3", "--gaze-dir"},
                      {"run --fixation fixed:abc", "--fixation"},
                      {"run --bogus 1", "--bogus"},
+                     {"run --source mesh", "--source"},
+                     {"run --source map --max-surfels 0", "--max-surfels"},
                      {"map --frames 3", "--out"},
                      {"map --out m.ply --max-surfels 0", "--max-surfels"},
                      {"map --out m.ply --brick-size 100", "brick_size_m"},
@@ -193,6 +196,54 @@ TEST(FoveadCli, MapFusesTheTumRecordingWithItsGroundTruth) {
   Result<io::PlyCloud> map = io::readPly(ply);
   ASSERT_TRUE(map.isOk()) << map.status().toString();
   EXPECT_GT(map->points.size(), 50000u);
+}
+
+// fovead run --source map: the frames fused into the map, the map foveated as
+// the eye sees it; the summary has the map's figures.
+TEST(FoveadCli, RunFoveatesTheMapOfAMockOrbit) {
+  const ProcessResult r = run(fovead() +
+                              " run --source map --max-surfels 65536 --camera mock:living-room,path=orbit,size=160x120"
+                              " --frames 12 --every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.output, m,
+                                std::regex("map: ([0-9]+) surfels \\(([0-9]+) evicted\\); 12 frames fused, refused 0 "
+                                           "without a pose, 0 for another reason; last frame: ([0-9]+) of the frame's "
+                                           "points unexplained, ([0-9]+) map surfels sent")))
+      << r.output;
+  EXPECT_GT(std::stoul(m[1].str()), 5000u) << r.output;
+  EXPECT_GT(std::stoul(m[4].str()), 5000u) << "the map reached the foveator:\n" << r.output;
+  // A 160x120 frame has 19200 pixels: most of the last one is explained by the map by now.
+  EXPECT_LT(std::stoul(m[3].str()), 19200u / 2) << r.output;
+  EXPECT_NE(r.output.find("map: fusion (in back-projection)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("summary: 12 frames foveated, 0 failed"), std::string::npos) << r.output;
+}
+
+// A pose source with no pose: every frame is refused by the map, counted, and
+// still foveated as it is (the operator keeps the live view).
+TEST(FoveadCli, RunWithTheMapCountsFramesWithoutAPose) {
+  TempDir dir;
+  const ProcessResult r = run(fovead() + " run --source map --max-surfels 65536 --camera mock:living-room,size=160x120" +
+                              " --pose socket:" + dir.file("pose.sock") + " --frames 5 --every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("map: 0 surfels (0 evicted); 0 frames fused, refused 5 without a pose"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("summary: 5 frames foveated, 0 failed"), std::string::npos) << r.output;
+}
+
+// The same on the TUM recording with its ground-truth poses (../shared/data).
+TEST(FoveadCli, RunFoveatesTheMapOfTheTumRecording) {
+  const char* shared = std::getenv("FOVEA_SHARED_DIR");
+  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
+  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
+    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
+  }
+  const ProcessResult r =
+      run(fovead() + " run --source map --max-surfels 262144 --camera tum:" + path + ",loop=off --frames 6 --every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("6 frames fused, refused 0 without a pose, 0 for another reason"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("summary: 6 frames foveated, 0 failed"), std::string::npos) << r.output;
 }
 
 TEST(FoveadCli, UnreadableAndMalformedFilesFailCleanly) {

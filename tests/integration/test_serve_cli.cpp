@@ -145,6 +145,40 @@ TEST(FoveadServe, StreamsToFoveaOperator) {
   EXPECT_LE(std::stoi(frames[1].str()), std::stoi(stopped[1].str())) << op.output << serve_out;
 }
 
+// foveation.source = map: the service fuses the mock orbit into its map and
+// streams the map as the operator's eye sees it; the status line and the stop
+// line carry the map's figures.
+TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
+  test::BackgroundProcess serve(fovead() +
+                                " serve --camera mock:living-room,path=orbit,size=160x120,realtime=on,fps=30"
+                                " --set foveation.source=map --set map.max_surfels=65536"
+                                " --listen 127.0.0.1:0 --insecure --status-interval-ms 500");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  std::smatch port;
+  const std::string out = serve.output();
+  ASSERT_TRUE(std::regex_search(out, port, std::regex("listening on 127\\.0\\.0\\.1:([0-9]+)"))) << out;
+  EXPECT_NE(out.find("surfel map (pool, bricks, scratch, eye depth buffer)"), std::string::npos) << out;
+  const test::ProcessResult op = test::runCommand(foveaOperator() + " --connect 127.0.0.1:" + port[1].str() +
+                                                  " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --duration 3");
+  EXPECT_EQ(op.exit_code, 0) << op.output;
+  std::smatch frames;
+  ASSERT_TRUE(std::regex_search(op.output, frames, std::regex("summary: ([0-9]+) frames"))) << op.output;
+  EXPECT_GE(std::stoi(frames[1].str()), 3) << op.output;
+  EXPECT_NE(op.output.find(" 0 bad"), std::string::npos) << op.output;
+  ASSERT_TRUE(serve.waitFor(" surfels, fuse ", 5.0)) << serve.output();
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+  std::smatch map;
+  const std::string serve_out = serve.output();
+  ASSERT_TRUE(std::regex_search(serve_out, map,
+                                std::regex("map: ([0-9]+) surfels from ([0-9]+) fused frames; [0-9]+ evicted; refused 0 "
+                                           "frames without a pose, 0 for another reason")))
+      << serve_out;
+  EXPECT_GT(std::stoul(map[1].str()), 5000u) << serve_out;
+  EXPECT_GT(std::stoul(map[2].str()), 3u) << serve_out;
+}
+
 TEST(FoveadServe, FrameLimitAndBadFlags) {
   const test::ProcessResult done = test::runCommand(fovead() + " serve" + kSmallCamera + " --frames 10");
   EXPECT_EQ(done.exit_code, 0) << done.output;
@@ -154,6 +188,9 @@ TEST(FoveadServe, FrameLimitAndBadFlags) {
   const test::ProcessResult bad = test::runCommand(fovead() + " serve --ring-depth 0");
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.output.find("--ring-depth"), std::string::npos) << bad.output;
+  const test::ProcessResult bad_source = test::runCommand(fovead() + " serve --set foveation.source=mesh");
+  EXPECT_EQ(bad_source.exit_code, 2) << bad_source.output;
+  EXPECT_NE(bad_source.output.find("foveation.source"), std::string::npos) << bad_source.output;
   const test::ProcessResult no_key = test::runCommand(fovead() + " serve --listen 127.0.0.1:0");
   EXPECT_EQ(no_key.exit_code, 2) << no_key.output;
   EXPECT_EQ(test::runCommand(fovead() + " serve --help").exit_code, 0);
