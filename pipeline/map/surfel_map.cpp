@@ -183,12 +183,20 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats) {
     case FuseOutcome::kRefusedClock: ++counters_.refused_clock; return stats.outcome;
   }
   ++frame_;
+  int64_t t0 = monotonicNs();
   computeVertices(frame, stats);
+  int64_t t1 = monotonicNs();
+  stats.vertices_ns = t1 - t0;
   if (stats.pixels_valid > 0) {
     renderIndexMap(frame, stats);
+    t0 = monotonicNs();
+    stats.index_map_ns = t0 - t1;
     const std::size_t to_add = associate(frame, stats);
+    t1 = monotonicNs();
+    stats.associate_ns = t1 - t0;
     makeRoom(to_add, stats);
     addNew(frame, stats);
+    stats.add_ns = monotonicNs() - t1;
   }
   ++counters_.frames_fused;
   counters_.added += stats.added;

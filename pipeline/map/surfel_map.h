@@ -104,6 +104,11 @@ struct FuseStats {
   uint32_t evicted = 0;          // removed to make room in a full pool
   uint32_t dropped_full = 0;     // measurements not added: no surfel or brick left
   int64_t fuse_ns = 0;
+  // fuse_ns by step (monotonic clock; the rest of fuse_ns is the frame's checks):
+  int64_t vertices_ns = 0;   // 2. vertices, normals, radii, weights
+  int64_t index_map_ns = 0;  // 3. the index map (and the unstable surfels' removal, the free-space carving)
+  int64_t associate_ns = 0;  // 4. merging and carving
+  int64_t add_ns = 0;        // 5. eviction (makeRoom) and the new surfels (addNew)
 };
 
 struct SurfelMapCounters {
