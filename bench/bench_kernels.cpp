@@ -26,6 +26,7 @@
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/kernels/hash_voxel_sampler.h"
+#include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/partition.h"
 #include "pipeline/voxel_sampler.h"
@@ -295,25 +296,58 @@ void bmPipelineSimdAll(benchmark::State& state) {
 
 // --- The surfel map (pipeline/map/) -------------------------------------------
 
+// The per-pixel kernel of fuse()'s step 2 (pipeline/map/map_kernels.h): vertices,
+// normals, radii and weights of the frame. per_point: per pixel of the frame.
+template <fovea::KernelSet kKernels>
+void bmMapVertices(benchmark::State& state) {
+  Fixture& f = Fixture::get();
+  const hal::RgbdFrame& frame = f.input.frame;
+  const std::size_t pixels = frame.pixelCount();
+  std::vector<float> maps[8];
+  for (auto& m : maps) m.resize(pixels);
+  const pipeline::map::PixelMaps out{maps[0].data(), maps[1].data(), maps[2].data(), maps[3].data(),
+                                     maps[4].data(), maps[5].data(), maps[6].data(), maps[7].data()};
+  std::vector<float> weight_u(static_cast<std::size_t>(frame.width())), weight_v(static_cast<std::size_t>(frame.height()));
+  const pipeline::RawDepthRange raw = pipeline::rawDepthRange(pipeline::map::SurfelMapConfig{}.depth, frame.depth_scale_m);
+  uint32_t valid = 0;
+  for (auto _ : state) {
+    // As fuse() does it: the parameters (and the weight's exp() per column and row) every frame.
+    const pipeline::map::VertexParams params =
+        pipeline::map::prepareVertices(frame, raw, weight_u.data(), weight_v.data());
+    valid = pipeline::map::computeVertices(params, out, kKernels);
+    benchmark::DoNotOptimize(valid);
+    benchmark::ClobberMemory();
+  }
+  setPointCounter(state, pixels);
+  state.counters["valid"] = static_cast<double>(valid);
+}
+
 // Fusing the frame into a map that already holds it, as a static camera does
-// frame after frame: every pixel with a normal associates and merges (the
-// scalar reference, one thread). per_point: per pixel of the frame.
-void bmMapFuseRef(benchmark::State& state) {
+// frame after frame: every pixel with a normal associates and merges (one
+// thread; the kernel set is step 2's). per_point: per pixel of the frame.
+template <fovea::KernelSet kKernels>
+void bmMapFuse(benchmark::State& state) {
   Fixture& f = Fixture::get();
   hal::RgbdFrame frame = f.input.frame;
   pipeline::map::SurfelMapConfig config;
   config.max_width = frame.width();
   config.max_height = frame.height();
+  config.kernels = kKernels;
   pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(config).value();
   pipeline::map::FuseStats stats;
   for (int i = 0; i < 5; ++i) {  // the surfels become stable
     ++frame.stamp_ns;
     (void)map.fuse(frame, stats);
   }
+  double vertices_ns = 0, index_map_ns = 0, associate_ns = 0, add_ns = 0;
   for (auto _ : state) {
     ++frame.stamp_ns;
     benchmark::DoNotOptimize(map.fuse(frame, stats));
     benchmark::ClobberMemory();
+    vertices_ns += static_cast<double>(stats.vertices_ns);
+    index_map_ns += static_cast<double>(stats.index_map_ns);
+    associate_ns += static_cast<double>(stats.associate_ns);
+    add_ns += static_cast<double>(stats.add_ns);
   }
   setPointCounter(state, frame.pixelCount());
   state.counters["surfels"] = static_cast<double>(map.size());
@@ -321,6 +355,12 @@ void bmMapFuseRef(benchmark::State& state) {
   state.counters["added"] = static_cast<double>(stats.added);
   state.counters["carved"] = static_cast<double>(stats.carved);
   state.counters["valid"] = static_cast<double>(stats.pixels_valid);
+  // Each step's mean time a frame, in microseconds (FuseStats' *_ns).
+  const double frames = static_cast<double>(std::max<benchmark::IterationCount>(state.iterations(), 1));
+  state.counters["vertices_us"] = vertices_ns / frames * 1e-3;
+  state.counters["index_map_us"] = index_map_ns / frames * 1e-3;
+  state.counters["associate_us"] = associate_ns / frames * 1e-3;
+  state.counters["add_us"] = add_ns / frames * 1e-3;
 }
 
 struct KernelBench {
@@ -351,7 +391,10 @@ const KernelBench kKernels[] = {
     {"voxel_sample/hash-acuity-floor", &bmVoxelSample<pipeline::HashVoxelSampler, true, true>},
     {"pipeline/acuity-floor-simd-1t", &bmPipelineAcuityFloorSimd1},
     // The surfel map's fusion of one 640x480 frame (docs/map.md)
-    {"map/fuse-ref", &bmMapFuseRef},
+    {"map/vertices-ref", &bmMapVertices<fovea::KernelSet::kRef>},
+    {"map/vertices-simd", &bmMapVertices<fovea::KernelSet::kSimd>},
+    {"map/fuse-ref", &bmMapFuse<fovea::KernelSet::kRef>},
+    {"map/fuse-simd", &bmMapFuse<fovea::KernelSet::kSimd>},
 };
 
 }  // namespace

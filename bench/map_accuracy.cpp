@@ -3,8 +3,12 @@
 // twin (noise=off, the same path and poses) gives the truth.
 //
 //   fovea-map-accuracy [--scene living-room] [--path orbit] [--frames 60] [--size 640x480] [--every 10]
-//                      [--stable C] [--cap C] [--unstable-frames N]
-//                      (SurfelMapConfig's stable_confidence, confidence_cap, unstable_max_frames)
+//                      [--stable C] [--cap C] [--unstable-frames N] [--kernels ref|simd]
+//                      (SurfelMapConfig's stable_confidence, confidence_cap, unstable_max_frames, kernels;
+//                      the kernels' default is defaultKernelSet(): simd unless FOVEA_FORCE_KERNEL=ref)
+//
+// It also prints the fusion time per frame, median over the frames, and its
+// steps' medians (FuseStats' *_ns).
 //
 // Every --every frames (and at the last) the map is compared with that frame's
 // noiseless view: the depth error along the ray through each stable surfel's
@@ -21,6 +25,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -176,6 +181,14 @@ int main(int argc, char** argv) {
   if (const std::string n = option(argc, argv, "--unstable-frames", ""); !n.empty()) {
     config.unstable_max_frames = static_cast<uint32_t>(std::atoi(n.c_str()));
   }
+  if (const std::string kernels = option(argc, argv, "--kernels", ""); !kernels.empty()) {
+    const std::optional<fovea::KernelSet> set = fovea::parseKernelSet(kernels);
+    if (!set) {
+      std::fprintf(stderr, "fovea-map-accuracy: --kernels must be ref or simd\n");
+      return 2;
+    }
+    config.kernels = *set;
+  }
   fovea::Result<SurfelMap> created = SurfelMap::create(config);
   if (!created) {
     std::fprintf(stderr, "fovea-map-accuracy: %s\n", created.status().message().c_str());
@@ -184,7 +197,7 @@ int main(int argc, char** argv) {
   SurfelMap& map = created.value();
   RgbdFrame noisy(k.width, k.height), truth(k.width, k.height);
   Totals totals;
-  std::vector<double> fuse_ms;
+  std::vector<double> fuse_ms, vertices_ms, index_map_ms, associate_ms, add_ms;
   for (int i = 0; i < frames; ++i) {
     if (!a.acquire(noisy, std::chrono::seconds(5)) || !b.acquire(truth, std::chrono::seconds(5))) {
       std::fprintf(stderr, "fovea-map-accuracy: frame %d did not arrive\n", i);
@@ -197,6 +210,10 @@ int main(int argc, char** argv) {
       return 1;
     }
     fuse_ms.push_back(static_cast<double>(stats.fuse_ns) * 1e-6);
+    vertices_ms.push_back(static_cast<double>(stats.vertices_ns) * 1e-6);
+    index_map_ms.push_back(static_cast<double>(stats.index_map_ns) * 1e-6);
+    associate_ms.push_back(static_cast<double>(stats.associate_ns) * 1e-6);
+    add_ms.push_back(static_cast<double>(stats.add_ns) * 1e-6);
     if ((i + 1) % every == 0 || i + 1 == frames) evaluate(map, noisy, truth, totals);
   }
   const double map_rms = totals.map_n ? std::sqrt(totals.map_sq / static_cast<double>(totals.map_n)) : 0.0;
@@ -221,7 +238,13 @@ int main(int argc, char** argv) {
   std::printf("stable surfels in the last view more than 5 cm in front of the true surface: %.3f %% (%zu of %zu)\n",
               totals.in_view ? 100.0 * static_cast<double>(totals.ghosts) / static_cast<double>(totals.in_view) : 0.0,
               totals.ghosts, totals.in_view);
-  std::sort(fuse_ms.begin(), fuse_ms.end());
-  std::printf("fusion time per frame [ms]: median %.2f (scalar reference, one thread)\n", fuse_ms[fuse_ms.size() / 2]);
+  auto middle = [](std::vector<double>& v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  std::printf("fusion time per frame [ms]: median %.2f (kernels %s, one thread); steps' medians: vertices %.2f, "
+              "index map %.2f, associate %.2f, evict and add %.2f\n",
+              middle(fuse_ms), std::string(fovea::kernelSetName(config.kernels)).c_str(), middle(vertices_ms),
+              middle(index_map_ms), middle(associate_ms), middle(add_ms));
   return 0;
 }

@@ -61,8 +61,9 @@ void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, s
               static_cast<unsigned long long>(c.added), static_cast<unsigned long long>(c.removed_carved),
               static_cast<unsigned long long>(c.removed_unstable), static_cast<unsigned long long>(c.evicted),
               static_cast<unsigned long long>(c.dropped_full));
-  std::printf("fusion time [ms]: median %.2f, p90 %.2f, max %.2f (scalar reference, one thread)\n", fuse_ms.median(),
-              fuse_ms.quantile(0.9), fuse_ms.max());
+  std::printf("fusion time [ms]: median %.2f, p90 %.2f, max %.2f (per-pixel kernels %s, one thread)\n",
+              fuse_ms.median(), fuse_ms.quantile(0.9), fuse_ms.max(),
+              std::string(kernelSetName(map.config().kernels)).c_str());
 }
 
 }  // namespace

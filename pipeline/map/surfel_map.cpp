@@ -19,7 +19,6 @@ namespace {
 
 constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
 constexpr int kMaxSplatPixels = 2;  // a surfel covers at most 2 pixels around its centre in the index map
-constexpr int kNormalReach = 2;     // pixels each side of the central differences
 constexpr uint8_t kGrey[3] = {128, 128, 128};  // the colour of a frame without one
 constexpr std::size_t kNormalCosBuckets = 1024;  // the normal tolerance's table over the depth range
 
@@ -78,10 +77,12 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_table_.assign(nextPowerOfTwo(2 * config.max_bricks), 0);
   brick_cam_.resize(config.max_bricks);
   brick_visible_.resize(config.max_bricks);
-  vertex_.resize(pixels);
-  normal_.resize(pixels);
-  radius_.resize(pixels);
-  weight_.resize(pixels);
+  for (std::vector<float>* map : {&vertex_x_, &vertex_y_, &vertex_z_, &normal_x_, &normal_y_, &normal_z_, &radius_,
+                                  &weight_}) {
+    map->resize(pixels);
+  }
+  weight_u_.resize(static_cast<std::size_t>(config.max_width));
+  weight_v_.resize(static_cast<std::size_t>(config.max_height));
   index_depth_.resize(pixels);
   index_.resize(pixels);
   index_reach_.resize(pixels);
@@ -98,10 +99,10 @@ std::size_t SurfelMap::memoryBytes() const {
   return surfels_.capacity() * sizeof(Surfel) + free_.capacity() * sizeof(uint32_t) +
          eviction_.capacity() * sizeof(uint64_t) + brick_keys_.capacity() * sizeof(BrickKey) +
          brick_table_.capacity() * sizeof(int32_t) + brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
-         brick_visible_.capacity() + vertex_.capacity() * sizeof(Eigen::Vector3f) * 2 +
-         (radius_.capacity() + weight_.capacity() + index_depth_.capacity()) * sizeof(float) +
-         index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity() +
-         normal_cos_.capacity() * sizeof(float);
+         brick_visible_.capacity() +
+         (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
+          weight_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
+         index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
 }
 
 void SurfelMap::clear() {
@@ -145,11 +146,14 @@ int SurfelMap::findOrAddBrick(const Eigen::Vector3d& p_world) {
 
 FuseOutcome SurfelMap::checkFrame(const hal::RgbdFrame& frame) {
   const hal::CameraIntrinsics& k = frame.intrinsics;
+  // The per-pixel kernels compute in float: finite and positive as floats too
+  // (1e39 is infinite as a float, 1e-300 zero).
+  auto positive = [](double x) { return std::isfinite(static_cast<float>(x)) && static_cast<float>(x) > 0.0f; };
+  auto finite = [](double x) { return std::isfinite(static_cast<float>(x)); };
   const bool size_ok = frame.width() >= 3 && frame.height() >= 3 && frame.width() <= config_.max_width &&
                        frame.height() <= config_.max_height && k.width == frame.width() &&
-                       k.height == frame.height() && std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0.0 &&
-                       k.fy > 0.0 && std::isfinite(k.cx) && std::isfinite(k.cy) &&
-                       std::isfinite(frame.depth_scale_m) && frame.depth_scale_m > 0.0;
+                       k.height == frame.height() && positive(k.fx) && positive(k.fy) && finite(k.cx) &&
+                       finite(k.cy) && positive(frame.depth_scale_m);
   if (!size_ok) return FuseOutcome::kRefusedSize;
   const Eigen::Matrix3d& R = frame.T_world_cam.R_world_cam;
   const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
@@ -185,12 +189,20 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   fused_height_ = frame.height();
   fused_stamp_ns_ = frame.stamp_ns;
   std::fill(explained_.begin(), explained_.begin() + static_cast<std::ptrdiff_t>(frame.pixelCount()), uint8_t{0});
+  int64_t t0 = monotonicNs();
   computeVertices(frame, stats);
+  int64_t t1 = monotonicNs();
+  stats.vertices_ns = t1 - t0;
   if (stats.pixels_valid > 0) {
     renderIndexMap(frame, stats);
+    t0 = monotonicNs();
+    stats.index_map_ns = t0 - t1;
     const std::size_t to_add = associate(frame, stats);
+    t1 = monotonicNs();
+    stats.associate_ns = t1 - t0;
     makeRoom(to_add, stats);
     addNew(frame, stats);
+    stats.add_ns = monotonicNs() - t1;
   }
   ++counters_.frames_fused;
   counters_.added += stats.added;
@@ -202,75 +214,15 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   return stats.outcome;
 }
 
+PixelMaps SurfelMap::pixelMaps() {
+  return {vertex_x_.data(), vertex_y_.data(), vertex_z_.data(), normal_x_.data(),
+          normal_y_.data(), normal_z_.data(), radius_.data(),   weight_.data()};
+}
+
 void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
-  const int w = frame.width(), h = frame.height();
-  const hal::CameraIntrinsics& k = frame.intrinsics;
-  const RawDepthRange raw = rawDepthRange(config_.depth, frame.depth_scale_m);
-  const auto scale = static_cast<float>(frame.depth_scale_m);
-  const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
-  const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
-  const uint16_t* depth = frame.depth();
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      const int64_t d = depth[i];
-      if (d < raw.min || d > raw.max) {
-        vertex_[i].setZero();
-        continue;
-      }
-      const float z = static_cast<float>(d) * scale;
-      vertex_[i] = Eigen::Vector3f((static_cast<float>(u) - cx) / fx * z, (static_cast<float>(v) - cy) / fy * z, z);
-    }
-  }
-  // Normals from central differences over kNormalReach pixels each side (over
-  // one, a Kinect-class sensor's noise turns most normals by more than the
-  // association's tolerance); none near the border, next to a missing
-  // measurement or across a depth step (more than 5 % of the depth a pixel: a
-  // surface seen at up to about 87 degrees keeps its normal, an occluding edge
-  // does not).
-  const float f = 0.5f * (fx + fy);
-  const float half_diagonal = std::sqrt(cx * cx + cy * cy);
-  const float two_sigma_sq = 2.0f * 0.6f * 0.6f;  // Keller's weight: sigma 0.6 of the half-diagonal
-  const std::size_t row = static_cast<std::size_t>(w) * kNormalReach;
-  uint32_t valid = 0;
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      weight_[i] = 0.0f;
-      normal_[i].setZero();  // none: the pixel can still carve, not merge or add
-      const float z = vertex_[i].z();
-      if (z == 0.0f) continue;
-      const float du = static_cast<float>(u) - cx, dv = static_cast<float>(v) - cy;
-      const float gamma_sq = (du * du + dv * dv) / (half_diagonal * half_diagonal);
-      weight_[i] = std::exp(-gamma_sq / two_sigma_sq);
-      if (u < kNormalReach || v < kNormalReach || u >= w - kNormalReach || v >= h - kNormalReach) continue;
-      const Eigen::Vector3f& l = vertex_[i - kNormalReach];
-      const Eigen::Vector3f& r = vertex_[i + kNormalReach];
-      const Eigen::Vector3f& up = vertex_[i - row];
-      const Eigen::Vector3f& down = vertex_[i + row];
-      const float step = 0.05f * kNormalReach * z;
-      if (l.z() == 0.0f || r.z() == 0.0f || up.z() == 0.0f || down.z() == 0.0f || std::abs(l.z() - z) > step ||
-          std::abs(r.z() - z) > step || std::abs(up.z() - z) > step || std::abs(down.z() - z) > step) {
-        continue;
-      }
-      Eigen::Vector3f n = (r - l).cross(down - up);
-      const float norm = n.norm();
-      if (!(norm > 0.0f)) continue;
-      n /= norm;
-      const Eigen::Vector3f ray = vertex_[i] / vertex_[i].norm();
-      float facing = -n.dot(ray);
-      if (facing < 0.0f) {
-        n = -n;
-        facing = -facing;
-      }
-      normal_[i] = n;
-      // The pixel's footprint: sqrt(2) z / f, larger when the surface is slanted
-      // (the cosine held at 0.2 or more, so a grazing pixel stays a few pixels wide).
-      radius_[i] = std::clamp(1.41421356f * z / f / std::max(facing, 0.2f), kMinRadiusM, kMaxRadiusM);
-      ++valid;
-    }
-  }
-  stats.pixels_valid = valid;
+  const VertexParams params =
+      prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
+  stats.pixels_valid = pipeline::map::computeVertices(params, pixelMaps(), config_.kernels);
 }
 
 void SurfelMap::removeSurfel(uint32_t slot) {
@@ -362,7 +314,7 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
     // 4 % of the surfels in view were such ghosts).
     if (iu >= 0 && iv >= 0 && iu < w && iv < h) {
       const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
-      const float measured = vertex_[centre].z();
+      const float measured = vertex_z_[centre];
       if (measured > 0.0f && p.z() < measured - sigmas * depthSigma(measured)) {
         const float left = 0.5f * decodeConfidence(s.confidence) - carve * weight_[centre];
         if (carveTo(static_cast<uint32_t>(slot), left, stats)) removeSurfel(static_cast<uint32_t>(slot));
@@ -471,11 +423,12 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
       const float weight = weight_[i];
       if (weight == 0.0f) continue;
-      const float z = vertex_[i].z();
+      const float z = vertex_z_[i];
       const float tolerance = sigmas * depthSigma(z);
       const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
       const uint32_t slot = index_[i];
-      const bool has_normal = normal_[i].squaredNorm() > 0.0f;
+      const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
+      const bool has_normal = normal.squaredNorm() > 0.0f;
       if (slot != kNone) {
         Surfel& s = surfels_[slot];
         if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
@@ -491,10 +444,10 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         }
         if (!has_normal) continue;
         if (seen <= z + tolerance) {
-          const Eigen::Vector3f n_world = R_wc_f * normal_[i];
+          const Eigen::Vector3f n_world = R_wc_f * normal;
           const Eigen::Vector3f n_surfel = surfelNormal(s);
           if (n_surfel.dot(n_world) < normalCosTolerance(z)) continue;  // another orientation: not this surfel's
-          const Eigen::Vector3d p_world = R_wc * vertex_[i].cast<double>() + t;
+          const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
           const Eigen::Vector3f rel = (p_world - brickOrigin(s.brick)).cast<float>();
           const float c = decodeConfidence(s.confidence);
           const float sum = c + weight;
@@ -534,8 +487,9 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
   for (std::size_t i = 0; i < pixels; ++i) {
     if (!(weight_[i] < 0.0f)) continue;
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
-    const Eigen::Vector3d p_world = R_wc * vertex_[i].cast<double>() + t;
-    if (addSurfel(p_world, R_wc_f * normal_[i], radius_[i], -weight_[i], rgb)) {
+    const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
+    const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
+    if (addSurfel(p_world, R_wc_f * normal, radius_[i], -weight_[i], rgb)) {
       ++stats.added;
     } else {
       ++stats.dropped_full;
@@ -555,8 +509,8 @@ std::size_t SurfelMap::appendUnexplained(const hal::RgbdFrame& frame, PointCloud
   const std::size_t pixels = frame.pixelCount();
   std::size_t appended = 0;
   for (std::size_t i = 0; i < pixels; ++i) {
-    if (explained_[i] || vertex_[i].z() == 0.0f) continue;
-    const Eigen::Vector3f p = R_f * vertex_[i] + t;
+    if (explained_[i] || vertex_z_[i] == 0.0f) continue;
+    const Eigen::Vector3f p = R_f * Eigen::Vector3f(vertex_x_[i], vertex_y_[i], vertex_z_[i]) + t;
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
     if (!out.push(p.x(), p.y(), p.z(), packRgb(rgb[0], rgb[1], rgb[2]))) break;
     ++appended;

@@ -9,7 +9,9 @@
 //  2. computes each pixel's camera-frame vertex, normal (central differences,
 //     none across a depth step), radius (its footprint, Keller's sqrt(2) z/f
 //     over the normal's cosine) and weight (falling off from the image centre);
-//     a pixel without a normal (an edge) can carve, not merge or add;
+//     a pixel without a normal (an edge) can carve, not merge or add
+//     (map_kernels.h: the scalar reference or the Highway kernel, as
+//     SurfelMapConfig::kernels says; the same bits either way);
 //  3. renders the map into an index map from the camera (each surfel splatted
 //     over its footprint, up to 2 pixels around, z-buffered; of surfels at the
 //     same depth the one nearest the pixel wins), dropping on the way surfels
@@ -34,9 +36,11 @@
 
 #include <Eigen/Core>
 
+#include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
+#include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/point_cloud.h"
 
@@ -78,6 +82,9 @@ struct SurfelMapConfig {
   // Pixels of the largest frame fused (the scratch is sized for it).
   int max_width = 640;
   int max_height = 480;
+  // Step 2's per-pixel kernel (map_kernels.h): the scalar reference or Highway's,
+  // the same bits either way.
+  KernelSet kernels = defaultKernelSet();
 
   Status validate() const;
 };
@@ -104,6 +111,11 @@ struct FuseStats {
   uint32_t evicted = 0;          // removed to make room in a full pool
   uint32_t dropped_full = 0;     // measurements not added: no surfel or brick left
   int64_t fuse_ns = 0;
+  // fuse_ns by step (monotonic clock; the rest of fuse_ns is the frame's checks):
+  int64_t vertices_ns = 0;   // 2. vertices, normals, radii, weights
+  int64_t index_map_ns = 0;  // 3. the index map (and the unstable surfels' removal, the free-space carving)
+  int64_t associate_ns = 0;  // 4. merging and carving
+  int64_t add_ns = 0;        // 5. eviction (makeRoom) and the new surfels (addNew)
 };
 
 struct SurfelMapCounters {
@@ -161,6 +173,10 @@ class SurfelMap {
   int findOrAddBrick(const Eigen::Vector3d& p_world);
   FuseOutcome checkFrame(const hal::RgbdFrame& frame);
   void computeVertices(const hal::RgbdFrame& frame, FuseStats& stats);
+  PixelMaps pixelMaps();  // step 2's output: pointers into the per-pixel scratch
+  Eigen::Vector3d vertexAt(std::size_t pixel) const {
+    return {vertex_x_[pixel], vertex_y_[pixel], vertex_z_[pixel]};
+  }
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
@@ -187,11 +203,14 @@ class SurfelMap {
   std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
   std::vector<uint8_t> brick_visible_;
 
-  // Per pixel, sized for max_width x max_height.
-  std::vector<Eigen::Vector3f> vertex_;   // camera frame; z = 0: no valid measurement
-  std::vector<Eigen::Vector3f> normal_;   // camera frame, towards the camera; zero: none
+  // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
+  // map_kernels.h), structure of arrays; weight is negated by associate() for a
+  // pixel to add.
+  std::vector<float> vertex_x_, vertex_y_, vertex_z_;  // camera frame; z = 0: no valid measurement
+  std::vector<float> normal_x_, normal_y_, normal_z_;  // camera frame, towards the camera; zero: none
   std::vector<float> radius_;
   std::vector<float> weight_;
+  std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
   std::vector<float> index_depth_;        // the index map's z-buffer
   std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre

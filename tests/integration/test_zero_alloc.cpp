@@ -97,40 +97,44 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
 }
 
 // Fusing posed mock frames into the surfel map, with the pool full enough that
-// eviction runs inside the counted frames.
+// eviction runs inside the counted frames; with either per-pixel kernel set.
 TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit,size=160x120");
-  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
-  hal::Camera& cam = *camera.value();
-  ASSERT_TRUE(cam.open().isOk());
-  ASSERT_TRUE(cam.start().isOk());
-  const hal::CameraIntrinsics& k = cam.info().intrinsics;
-  hal::RgbdFrame frame(k.width, k.height);
-  pipeline::map::SurfelMapConfig config;
-  config.max_width = k.width;
-  config.max_height = k.height;
-  config.max_surfels = static_cast<std::size_t>(k.width) * k.height / 4;  // less than a frame: eviction every frame
-  Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
-  ASSERT_TRUE(created.isOk()) << created.status().toString();
-  pipeline::map::SurfelMap& map = created.value();
-  auto fuseFrame = [&] {
-    pipeline::map::FuseStats stats;
-    return cam.acquire(frame, std::chrono::milliseconds(100)).isOk() &&
-           map.fuse(frame, stats) == pipeline::map::FuseOutcome::kFused;
-  };
-  for (int i = 0; i < 3; ++i) ASSERT_TRUE(fuseFrame());  // warm-up
+  for (KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
+    SCOPED_TRACE(std::string("kernels ") + std::string(kernelSetName(kernels)));
+    Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit,size=160x120");
+    ASSERT_TRUE(camera.isOk()) << camera.status().toString();
+    hal::Camera& cam = *camera.value();
+    ASSERT_TRUE(cam.open().isOk());
+    ASSERT_TRUE(cam.start().isOk());
+    const hal::CameraIntrinsics& k = cam.info().intrinsics;
+    hal::RgbdFrame frame(k.width, k.height);
+    pipeline::map::SurfelMapConfig config;
+    config.max_width = k.width;
+    config.max_height = k.height;
+    config.max_surfels = static_cast<std::size_t>(k.width) * k.height / 4;  // less than a frame: eviction every frame
+    config.kernels = kernels;
+    Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
+    ASSERT_TRUE(created.isOk()) << created.status().toString();
+    pipeline::map::SurfelMap& map = created.value();
+    auto fuseFrame = [&] {
+      pipeline::map::FuseStats stats;
+      return cam.acquire(frame, std::chrono::milliseconds(100)).isOk() &&
+             map.fuse(frame, stats) == pipeline::map::FuseOutcome::kFused;
+    };
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(fuseFrame());  // warm-up
 
-  const uint64_t evicted_before = map.counters().evicted;
-  test::AllocationScope scope;
-  bool all_ok = true;
-  const int frames = framesCounted();
-  for (int i = 0; i < frames; ++i) all_ok = fuseFrame() && all_ok;
-  const uint64_t allocations = scope.allocations();
-  EXPECT_TRUE(all_ok);
-  EXPECT_EQ(allocations, 0u);
-  EXPECT_GT(map.size(), 0u);
-  EXPECT_GT(map.counters().evicted, evicted_before) << "no eviction among the counted frames";
-  cam.stop();
+    const uint64_t evicted_before = map.counters().evicted;
+    test::AllocationScope scope;
+    bool all_ok = true;
+    const int frames = framesCounted();
+    for (int i = 0; i < frames; ++i) all_ok = fuseFrame() && all_ok;
+    const uint64_t allocations = scope.allocations();
+    EXPECT_TRUE(all_ok);
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_GT(map.size(), 0u);
+    EXPECT_GT(map.counters().evicted, evicted_before) << "no eviction among the counted frames";
+    cam.stop();
+  }
 }
 
 // The service's map source (firmware/frame_foveator.h): each frame fused, the

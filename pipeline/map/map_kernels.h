@@ -1,0 +1,81 @@
+// The surfel map's per-pixel work (SurfelMap::fuse() step 2): each depth pixel's
+// camera-frame vertex, normal, radius and weight, written as structure-of-arrays
+// maps. Two kernels, one output, BIT FOR BIT (docs/kernels.md, docs/map.md):
+//   computeVerticesRef  the scalar reference, the specification (map_kernels.cpp);
+//   computeVerticesSimd Highway, dynamic dispatch (vertices_simd.cpp).
+//
+// The arithmetic is defined so that SIMD can reproduce it (only Add, Sub, Mul, Div,
+// Sqrt, comparisons and selects, in the order written below, never a fused
+// multiply-add), and the one transcendental, the weight's exp(), is taken per
+// column and per row by prepareVertices(), not per pixel:
+//   vertex:  z = float(raw) * scale; x = (float(u) - cx) / fx * z; y = (float(v) - cy) / fy * z;
+//            zero (z = 0: no measurement) when raw is outside [raw_min, raw_max].
+//   weight:  weight_u[u] * weight_v[v] for a pixel with a vertex, else 0, where
+//            weight_u[u] = exp(-(du * du) / (half_diagonal * half_diagonal) / (2 * 0.6^2)),
+//            du = float(u) - cx (weight_v likewise with dv = float(v) - cy) and
+//            half_diagonal = sqrt(cx * cx + cy * cy): Keller et al.'s Gaussian fall-off
+//            from the image centre, exp(-gamma^2 / (2 sigma^2)) with sigma 0.6, split
+//            into its two factors (equal up to float rounding).
+//   normal:  from central differences over kNormalReach pixels, a = r - l, b = down - up,
+//            n = a x b; none (zero) at a pixel without a vertex, within kNormalReach of
+//            the border, next to a neighbour without a vertex, across a step
+//            |z' - z| > (0.05 * kNormalReach) * z, or when |n| is not > 0. Then
+//            n = n / |n| with |n| = sqrt((nx nx + ny ny) + nz nz), the ray
+//            p / |p| (same norm), facing = -((nx rx + ny ry) + nz rz), and n and facing
+//            negated when facing < 0 (the normal looks towards the camera).
+//   radius:  for a pixel with a normal, clamp(sqrt(2) * z / f / max(facing, 0.2),
+//            kMinRadiusM, kMaxRadiusM) with f = 0.5 * (fx + fy) (left to right; max and
+//            clamp as std::max and std::clamp); 0 without a normal.
+// Both return the number of pixels with a normal.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "core/kernel_set.h"
+#include "hal/frame.h"
+#include "pipeline/backproject.h"
+
+namespace fovea::pipeline::map {
+
+// Pixels each side of the central differences: over one, a Kinect-class sensor's
+// noise turns most normals by more than the association's tolerance.
+inline constexpr int kNormalReach = 2;
+
+// Per-pixel maps, each of at least width x height floats.
+struct PixelMaps {
+  float* x = nullptr;  // camera-frame vertex [m]; z = 0: no valid measurement
+  float* y = nullptr;
+  float* z = nullptr;
+  float* nx = nullptr;  // unit normal towards the camera; zero: none (the pixel can carve, not merge or add)
+  float* ny = nullptr;
+  float* nz = nullptr;
+  float* radius = nullptr;  // [m]; 0 without a normal
+  float* weight = nullptr;  // Keller's weight in (0, 1]; 0 without a vertex
+};
+
+struct VertexParams {
+  const uint16_t* depth = nullptr;
+  int width = 0;
+  int height = 0;
+  int32_t raw_min = 1;  // valid raw depth: raw_min <= raw <= raw_max (raw_min >= 1)
+  int32_t raw_max = 0;
+  float scale = 0.0f, fx = 0.0f, fy = 0.0f, cx = 0.0f, cy = 0.0f;
+  float f = 0.0f;                     // 0.5 * (fx + fy)
+  const float* weight_u = nullptr;    // width entries
+  const float* weight_v = nullptr;    // height entries
+};
+
+// The parameters of a frame that SurfelMap::checkFrame() accepted (at least 3x3,
+// finite positive fx, fy and depth scale, finite cx, cy), with the weight's factors
+// written to weight_u (width entries) and weight_v (height entries).
+VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, float* weight_u,
+                             float* weight_v);
+
+uint32_t computeVerticesRef(const VertexParams& params, const PixelMaps& out);
+uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out);
+inline uint32_t computeVertices(const VertexParams& params, const PixelMaps& out, KernelSet kernels) {
+  return kernels == KernelSet::kSimd ? computeVerticesSimd(params, out) : computeVerticesRef(params, out);
+}
+
+}  // namespace fovea::pipeline::map

@@ -1,0 +1,319 @@
+// The surfel map's per-pixel kernel (pipeline/map/map_kernels.h): Highway's
+// computeVerticesSimd against the scalar reference computeVerticesRef, bit for bit
+// in all eight maps and the count, on random and adversarial frames and on every
+// Highway target compiled in and supported here (TargetTest/<Case>/<TARGET>);
+// then whole maps fused with either kernel set, which must be the same map.
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include "hal/camera.h"
+#include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/map/map_kernels.h"
+#include "pipeline/map/surfel_map.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+// Restricts Highway's dispatch to one target for the test's duration.
+class TargetTest : public ::testing::TestWithParam<int64_t> {
+ protected:
+  void SetUp() override { forceSimdTarget(GetParam()); }
+  void TearDown() override { forceSimdTarget(0); }
+};
+
+std::vector<int64_t> targetsHere() {
+  forceSimdTarget(0);
+  return simdTargets();
+}
+
+// The eight maps of one kernel's run, pre-filled with a marker that no kernel
+// writes, so a pixel left unwritten shows.
+struct Maps {
+  static constexpr uint32_t kUnwritten = 0x7fa5a5a5u;  // a NaN with a payload
+  std::vector<float> m[8];
+  explicit Maps(std::size_t pixels) {
+    for (auto& v : m) v.assign(pixels, std::bit_cast<float>(kUnwritten));
+  }
+  PixelMaps view() {
+    return {m[0].data(), m[1].data(), m[2].data(), m[3].data(), m[4].data(), m[5].data(), m[6].data(), m[7].data()};
+  }
+};
+constexpr const char* kMapNames[8] = {"x", "y", "z", "nx", "ny", "nz", "radius", "weight"};
+
+struct Result2 {
+  uint32_t ref = 0, simd = 0;
+};
+
+// Runs both kernels on the frame; expects the same bits in every map and the same
+// count; returns the counts.
+Result2 expectSameVertices(const hal::RgbdFrame& frame, const DepthRange& range, const std::string& what) {
+  const std::size_t pixels = frame.pixelCount();
+  std::vector<float> wu(static_cast<std::size_t>(frame.width())), wv(static_cast<std::size_t>(frame.height()));
+  const VertexParams params = prepareVertices(frame, rawDepthRange(range, frame.depth_scale_m), wu.data(), wv.data());
+  Maps ref(pixels), simd(pixels);
+  Result2 n;
+  n.ref = computeVerticesRef(params, ref.view());
+  n.simd = computeVerticesSimd(params, simd.view());
+  EXPECT_EQ(n.ref, n.simd) << what;
+  int reported = 0;
+  for (int k = 0; k < 8; ++k) {
+    for (std::size_t i = 0; i < pixels; ++i) {
+      const uint32_t a = std::bit_cast<uint32_t>(ref.m[k][i]), b = std::bit_cast<uint32_t>(simd.m[k][i]);
+      EXPECT_NE(a, Maps::kUnwritten) << what << ": the reference left " << kMapNames[k] << " of pixel " << i;
+      if (a != b && reported++ < 5) {
+        ADD_FAILURE() << what << " (" << frame.width() << "x" << frame.height() << "): " << kMapNames[k]
+                      << " of pixel " << i << " (u " << i % frame.width() << ", v " << i / frame.width()
+                      << "): ref " << ref.m[k][i] << " (0x" << std::hex << a << "), simd " << simd.m[k][i]
+                      << " (0x" << b << std::dec << ")";
+      }
+    }
+  }
+  return n;
+}
+
+hal::RgbdFrame frameOf(int w, int h, double fx, double fy, double cx, double cy, double scale) {
+  hal::RgbdFrame frame(w, h);
+  frame.intrinsics = {w, h, fx, fy, cx, cy};
+  frame.depth_scale_m = scale;
+  std::fill(frame.depth(), frame.depth() + frame.pixelCount(), uint16_t{0});
+  return frame;
+}
+
+// Smooth slanted surfaces (most pixels get a normal), noise, holes and steps; or,
+// one frame in four, uniformly random raw depth (mostly edges).
+hal::RgbdFrame randomFrame(int w, int h, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> f(200.0, 700.0), c(-10.0, 10.0), unit(0.0, 1.0);
+  const double scales[] = {0.001, 1.0 / 5000.0, 0.0001, 0.00025};
+  hal::RgbdFrame frame = frameOf(w, h, f(rng), f(rng), w / 2.0 + c(rng), h / 2.0 + c(rng), scales[rng() % 4]);
+  const bool uniform = rng() % 4 == 0;
+  const double z0 = 0.5 + 3.0 * unit(rng), gu = (unit(rng) - 0.5) * 0.02, gv = (unit(rng) - 0.5) * 0.02;
+  const double noise = 0.002 * unit(rng);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const uint64_t r = rng();
+      uint16_t raw;
+      if (uniform) {
+        raw = static_cast<uint16_t>(r >> 16);
+      } else {
+        double z = z0 + gu * u + gv * v + noise * gauss(rng);
+        if (u > w / 3 && u < w / 2) z *= 0.7;  // a step (an occluding edge)
+        raw = static_cast<uint16_t>(std::clamp(z / frame.depth_scale_m, 0.0, 65535.0));
+      }
+      if (r % 11 == 0) raw = 0;  // holes
+      frame.depth()[static_cast<std::size_t>(v) * w + u] = raw;
+    }
+  }
+  return frame;
+}
+
+TEST_P(TargetTest, RandomFrames) {
+  std::mt19937_64 rng(23);
+  // Widths around every vector width (1..64 lanes) exercise the tails; 3x3 is the smallest frame fused.
+  const int sizes[][2] = {{640, 480}, {3, 3}, {4, 3}, {5, 5}, {7, 5}, {15, 6}, {17, 5}, {31, 6}, {33, 7},
+                          {63, 5}, {65, 9}, {67, 5}, {129, 5}, {1000, 5}, {3, 37}, {6, 40}, {320, 240}};
+  uint32_t with_normal = 0;
+  for (const auto& s : sizes) {
+    for (int rep = 0; rep < 4; ++rep) {
+      const hal::RgbdFrame frame = randomFrame(s[0], s[1], rng);
+      const DepthRange ranges[] = {{}, {0.5, 3.0}, {0.0, 1e9}};
+      for (const DepthRange& range : ranges) {
+        with_normal += expectSameVertices(frame, range, std::to_string(s[0]) + "x" + std::to_string(s[1])).ref;
+      }
+    }
+  }
+  EXPECT_GT(with_normal, 100000u) << "the random frames should give most pixels a normal";
+}
+
+TEST_P(TargetTest, NoValidDepthAndTheExtremes) {
+  for (const auto& s : {std::pair{3, 3}, std::pair{17, 9}, std::pair{640, 480}}) {
+    hal::RgbdFrame frame = frameOf(s.first, s.second, 525.0, 525.0, s.first / 2.0, s.second / 2.0, 0.001);
+    EXPECT_EQ(expectSameVertices(frame, {}, "all zero").ref, 0u);
+    std::fill(frame.depth(), frame.depth() + frame.pixelCount(), uint16_t{65535});
+    EXPECT_EQ(expectSameVertices(frame, {}, "all 65535, beyond the range").ref, 0u);
+    const Result2 n = expectSameVertices(frame, {0.0, 1e9}, "all 65535, in range");
+    EXPECT_EQ(n.ref, s.first >= 5 && s.second >= 5 ? static_cast<uint32_t>((s.first - 4) * (s.second - 4)) : 0u);
+    for (std::size_t i = 0; i < frame.pixelCount(); ++i) frame.depth()[i] = (i * 7919u) % 3 == 0 ? 0 : 65535;
+    expectSameVertices(frame, {0.0, 1e9}, "0 and 65535 mixed");
+    for (std::size_t i = 0; i < frame.pixelCount(); ++i) frame.depth()[i] = i % 2 == 0 ? 1 : 65535;
+    expectSameVertices(frame, {0.0, 1e9}, "1 and 65535 alternating");
+  }
+}
+
+TEST_P(TargetTest, SingleValidPixels) {
+  for (const auto& s : {std::pair{7, 5}, std::pair{19, 6}, std::pair{3, 3}}) {
+    for (int at = 0; at < s.first * s.second; ++at) {
+      hal::RgbdFrame frame = frameOf(s.first, s.second, 300.0, 310.0, s.first / 2.0, s.second / 2.0, 0.001);
+      frame.depth()[at] = 1234;
+      EXPECT_EQ(expectSameVertices(frame, {}, "single pixel " + std::to_string(at)).ref, 0u);
+    }
+  }
+}
+
+// Depth steps exactly at the threshold |z' - z| > (0.05 * kNormalReach) * z in the
+// kernels' float arithmetic, and one raw unit either side of it: a neighbour
+// at the threshold keeps the normal, one beyond it takes it away.
+TEST_P(TargetTest, StepsAtTheThreshold) {
+  const float scale = 0.001f;
+  struct Step {
+    uint16_t centre, neighbour;
+  };
+  std::vector<Step> ties;
+  for (int d = 100; d < 60000 && ties.size() < 40; ++d) {
+    const float z = static_cast<float>(d) * scale;
+    const float step = (0.05f * kNormalReach) * z;
+    for (int dn : {static_cast<int>(std::lround(d * 1.1)), static_cast<int>(std::lround(d * 0.9))}) {
+      if (dn > 65535) continue;
+      if (std::abs(static_cast<float>(dn) * scale - z) == step) ties.push_back({static_cast<uint16_t>(d), static_cast<uint16_t>(dn)});
+    }
+  }
+  ASSERT_GE(ties.size(), 10u) << "no raw depths whose step is exactly the threshold";
+  constexpr int w = 23, h = 7;  // not a multiple of any vector width
+  int kept = 0, lost = 0;
+  for (const Step& t : ties) {
+    for (int delta : {0, -1, 1}) {
+      const int dn = t.neighbour + delta;
+      for (int which = 0; which < 4; ++which) {  // left, right, up, down
+        for (int u : {2, 5, 11, 17, 20}) {
+          hal::RgbdFrame frame = frameOf(w, h, 400.0, 400.0, 11.0, 3.0, scale);
+          std::fill(frame.depth(), frame.depth() + frame.pixelCount(), t.centre);
+          const int nu = u + (which == 0 ? -kNormalReach : which == 1 ? kNormalReach : 0);
+          const int nv = 3 + (which == 2 ? -kNormalReach : which == 3 ? kNormalReach : 0);
+          frame.depth()[nv * w + nu] = static_cast<uint16_t>(dn);
+          std::vector<float> wu(w), wv(h);
+          const DepthRange all{0.0, 1e9};
+          const VertexParams p = prepareVertices(frame, rawDepthRange(all, frame.depth_scale_m), wu.data(), wv.data());
+          Maps ref(frame.pixelCount());
+          (void)computeVerticesRef(p, ref.view());
+          const bool has_normal = ref.m[6][3 * w + u] > 0.0f;  // a radius
+          (has_normal ? kept : lost) += 1;
+          if (delta == 0) {
+            EXPECT_TRUE(has_normal) << "a step at the threshold keeps the normal";
+          }
+          expectSameVertices(frame, all, "step " + std::to_string(t.centre) + " -> " + std::to_string(dn));
+        }
+      }
+    }
+  }
+  EXPECT_GT(kept, 0);
+  EXPECT_GT(lost, 0) << "one raw unit beyond the threshold should take some normals away";
+}
+
+// The map refuses, before any kernel runs, intrinsics and depth scales that are
+// not finite or not positive, as double or once converted to the kernels' float.
+TEST_P(TargetTest, BadIntrinsicsAreRefusedBeforeTheKernel) {
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
+    SurfelMapConfig config;
+    config.max_width = 32;
+    config.max_height = 24;
+    config.max_surfels = 4096;
+    config.max_bricks = 64;
+    config.kernels = kernels;
+    SurfelMap map = SurfelMap::create(config).value();
+    hal::RgbdFrame good = frameOf(32, 24, 30.0, 30.0, 16.0, 12.0, 0.001);
+    std::fill(good.depth(), good.depth() + good.pixelCount(), uint16_t{1500});
+    int64_t stamp = 0;
+    for (int field = 0; field < 5; ++field) {
+      for (double bad : {kNaN, kInf, -kInf, 1e39 /* infinite as float */, 1e-300 /* zero as float */, 0.0, -1.0}) {
+        const bool may_be_fine = (field == 2 || field == 3) && (bad == 1e-300 || bad == 0.0 || bad == -1.0);
+        if (may_be_fine) continue;  // any finite principal point is a principal point
+        hal::RgbdFrame frame = good;
+        double* fields[] = {&frame.intrinsics.fx, &frame.intrinsics.fy, &frame.intrinsics.cx, &frame.intrinsics.cy,
+                            &frame.depth_scale_m};
+        *fields[field] = bad;
+        frame.stamp_ns = ++stamp;
+        FuseStats stats;
+        EXPECT_EQ(map.fuse(frame, stats), FuseOutcome::kRefusedSize)
+            << kernelSetName(kernels) << ": field #" << field << " = " << bad;
+      }
+    }
+    EXPECT_EQ(map.size(), 0u);
+    EXPECT_EQ(map.counters().frames_fused, 0u);
+    good.stamp_ns = ++stamp;
+    FuseStats stats;
+    EXPECT_EQ(map.fuse(good, stats), FuseOutcome::kFused);
+    EXPECT_GT(map.size(), 0u);
+  }
+}
+
+// ---- whole maps --------------------------------------------------------------
+
+::testing::AssertionResult sameMap(const SurfelMap& a, const SurfelMap& b) {
+  if (a.size() != b.size() || a.slotCount() != b.slotCount() || a.brickCount() != b.brickCount()) {
+    return ::testing::AssertionFailure() << "surfels " << a.size() << " vs " << b.size() << ", slots "
+                                         << a.slotCount() << " vs " << b.slotCount() << ", bricks "
+                                         << a.brickCount() << " vs " << b.brickCount();
+  }
+  for (std::size_t slot = 0; slot < a.slotCount(); ++slot) {
+    if (std::memcmp(&a.surfel(slot), &b.surfel(slot), sizeof(Surfel)) != 0) {
+      return ::testing::AssertionFailure() << "slot " << slot << " differs: position " << a.worldPosition(slot).transpose()
+                                           << " vs " << b.worldPosition(slot).transpose();
+    }
+  }
+  for (std::size_t brick = 0; brick < a.brickCount(); ++brick) {
+    if (a.brickOrigin(static_cast<uint16_t>(brick)) != b.brickOrigin(static_cast<uint16_t>(brick))) {
+      return ::testing::AssertionFailure() << "brick " << brick << " differs";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// The mock camera's living room (orbit) and balloon scenes, fused with either kernel
+// set: the same surfels in the same slots, bit for bit, and the same statistics.
+TEST_P(TargetTest, MapsFusedWithEitherKernelSetAreTheSame) {
+  for (const char* spec : {"mock:living-room,path=orbit,size=160x120", "mock:balloon,size=96x72"}) {
+    auto camera = hal::createCamera(spec);
+    ASSERT_TRUE(camera.isOk()) << camera.status().toString();
+    hal::Camera& cam = *camera.value();
+    ASSERT_TRUE(cam.open().isOk());
+    ASSERT_TRUE(cam.start().isOk());
+    const hal::CameraIntrinsics& k = cam.info().intrinsics;
+    SurfelMapConfig config;
+    config.max_width = k.width;
+    config.max_height = k.height;
+    config.max_surfels = static_cast<std::size_t>(k.width) * k.height;  // eviction too
+    config.kernels = KernelSet::kRef;
+    SurfelMap ref = SurfelMap::create(config).value();
+    config.kernels = KernelSet::kSimd;
+    SurfelMap simd = SurfelMap::create(config).value();
+    hal::RgbdFrame frame(k.width, k.height);
+    uint64_t merged = 0;
+    for (int i = 0; i < 12; ++i) {
+      ASSERT_TRUE(cam.acquire(frame, std::chrono::seconds(5)).isOk());
+      FuseStats sr, ss;
+      ASSERT_EQ(ref.fuse(frame, sr), FuseOutcome::kFused) << spec << " frame " << i;
+      ASSERT_EQ(simd.fuse(frame, ss), FuseOutcome::kFused) << spec << " frame " << i;
+      EXPECT_EQ(sr.pixels_valid, ss.pixels_valid) << spec << " frame " << i;
+      EXPECT_EQ(sr.merged, ss.merged);
+      EXPECT_EQ(sr.added, ss.added);
+      EXPECT_EQ(sr.carved, ss.carved);
+      EXPECT_EQ(sr.evicted, ss.evicted);
+      ASSERT_TRUE(sameMap(ref, simd)) << spec << " frame " << i;
+      merged += sr.merged;
+    }
+    EXPECT_GT(ref.size(), 0u) << spec;
+    EXPECT_GT(merged, 0u) << spec;
+    cam.stop();
+  }
+}
+
+std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
+
+INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(targetsHere()), targetName);
+
+}  // namespace
+}  // namespace fovea::pipeline::map
