@@ -282,13 +282,17 @@ Pose lookAtPose(const Vector3d& eye_m, const Vector3d& target_m) {
 Result<Scene> Scene::create(std::string_view name) {
   if (name == "living-room") return livingRoom();
   if (name == "balloon") return balloon();
+  // The balloon leaves after 2 s (frame 60 at 30 fps): what the map keeps of it after.
+  if (name == "balloon-leaves") return balloon(2.0);
   return Result<Scene>(ErrorCode::kInvalidArgument,
                        "scene: unknown name '" + std::string(name) + "'; accepted: " + names());
 }
 
-std::string Scene::names() { return "living-room|balloon"; }
+std::string Scene::names() { return "living-room|balloon|balloon-leaves"; }
 
-bool Scene::isKnown(std::string_view name) { return name == "living-room" || name == "balloon"; }
+bool Scene::isKnown(std::string_view name) {
+  return name == "living-room" || name == "balloon" || name == "balloon-leaves";
+}
 
 Pose Scene::defaultPose() const { return lookAtPose(info_.default_eye_m, info_.default_target_m); }
 
@@ -419,6 +423,7 @@ bool Scene::intersect(const Vector3d& origin, const Vector3d& dir, double time_s
   if (layer != SceneLayer::kStatic) {
     for (const Shape& s : dynamic_shapes_) {
       // Only spheres move (addMovingSphere).
+      if (!s.motion.presentAt(time_s)) continue;
       found |= intersectSphere(s, s.center_m + s.motion.offsetAt(time_s), origin, dir, t_best, hit);
     }
   }
@@ -447,12 +452,15 @@ bool Scene::dynamicBounds(double time_s, Vector3d& min_m, Vector3d& max_m) const
   if (dynamic_shapes_.empty()) return false;
   min_m = Vector3d::Constant(kInf);
   max_m = Vector3d::Constant(-kInf);
+  bool any = false;
   for (const Shape& s : dynamic_shapes_) {
+    if (!s.motion.presentAt(time_s)) continue;
     const Vector3d c = s.center_m + s.motion.offsetAt(time_s);
     min_m = min_m.cwiseMin(c - Vector3d::Constant(s.radius_m));
     max_m = max_m.cwiseMax(c + Vector3d::Constant(s.radius_m));
+    any = true;
   }
-  return true;
+  return any;
 }
 
 Vector3f Scene::albedo(const Material& m, double u, double v) const {
@@ -715,10 +723,10 @@ Scene Scene::livingRoom() {
 // 0.3 m drifting on a Lissajous path (periods 4 s, 8 s and 2 s along x, y, z;
 // 8 s in all) in front of a plastered wall (the plane y = 3.5) over a tiled floor
 // (z = 0). Its mean position, the focus point, is its rest position.
-Scene Scene::balloon() {
+Scene Scene::balloon(double gone_from_s) {
   Scene scene;
   SceneInfo& info = scene.info_;
-  info.name = "balloon";
+  info.name = std::isinf(gone_from_s) ? "balloon" : "balloon-leaves";
   const Vector3d rest_m = v3(0.0, 2.0, 1.15);
   info.focus_point_m = rest_m;
   info.default_eye_m = v3(0.0, 0.0, 1.2);
@@ -761,6 +769,7 @@ Scene Scene::balloon() {
   motion.amplitude_m = v3(0.6, 0.3, 0.25);
   motion.frequency_hz = v3(0.25, 0.125, 0.5);
   motion.phase_rad = v3(0.0, std::numbers::pi / 2.0, 0.0);
+  motion.gone_from_s = gone_from_s;
   scene.addMovingSphere(rest_m, kRadius, motion, balloon);
   return scene;
 }

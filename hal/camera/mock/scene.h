@@ -54,8 +54,11 @@ struct Motion {
   Eigen::Vector3d amplitude_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d frequency_hz = Eigen::Vector3d::Zero();
   Eigen::Vector3d phase_rad = Eigen::Vector3d::Zero();
+  // From this time on the shape is gone: it left the scene (the map's ghost test).
+  double gone_from_s = std::numeric_limits<double>::infinity();
 
   Eigen::Vector3d offsetAt(double time_s) const;
+  bool presentAt(double time_s) const { return time_s < gone_from_s; }
 };
 
 enum class ShapeKind {
@@ -179,7 +182,7 @@ class Scene {
   bool intersectShape(const Shape& shape, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
                       const Eigen::Vector3d& inv_dir, double& t_best, Hit& hit) const;
   static Scene livingRoom();
-  static Scene balloon();
+  static Scene balloon(double gone_from_s = std::numeric_limits<double>::infinity());
 
   int addMaterial(const Material& material);
   // Static shapes are added to the open group; groups are culled by their bounds.

@@ -616,6 +616,27 @@ TEST(MockScene, FocusPointsAreTheRoomCentreAndTheBalloonsMeanPosition) {
   EXPECT_TRUE((sum / samples).isApprox(balloon.value().info().focus_point_m, 1e-9));
 
   EXPECT_EQ(Scene::create("kitchen").status().code(), ErrorCode::kInvalidArgument);
+
+  // balloon-leaves: the same balloon until 2 s, then gone (the wall behind it is seen).
+  Result<Scene> leaves = Scene::create("balloon-leaves");
+  ASSERT_TRUE(leaves.isOk());
+  EXPECT_EQ(leaves.value().info().name, "balloon-leaves");
+  const Eigen::Vector3d eye = leaves.value().info().default_eye_m;
+  auto hitAt = [&](double time_s) {
+    Eigen::Vector3d lo, hi;
+    const Eigen::Vector3d centre = leaves.value().dynamicBounds(time_s, lo, hi) ? Eigen::Vector3d(0.5 * (lo + hi))
+                                                                               : Eigen::Vector3d(0.0, 2.0, 1.15);
+    Hit hit;
+    EXPECT_TRUE(leaves.value().intersect(eye, centre - eye, time_s, SceneLayer::kAll, 1e9, hit));
+    return hit.shape;
+  };
+  Eigen::Vector3d lo, hi;
+  EXPECT_TRUE(leaves.value().dynamicBounds(1.9, lo, hi));
+  EXPECT_FALSE(leaves.value().dynamicBounds(2.0, lo, hi));
+  ASSERT_NE(hitAt(1.9), nullptr);
+  EXPECT_EQ(hitAt(1.9)->kind, ShapeKind::kSphere);
+  ASSERT_NE(hitAt(2.5), nullptr);
+  EXPECT_EQ(hitAt(2.5)->kind, ShapeKind::kPlane);  // the wall where the balloon was
 }
 
 }  // namespace
