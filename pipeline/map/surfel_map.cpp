@@ -276,15 +276,33 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
   const Eigen::Matrix3f R_cw_f = R_cw.cast<float>();
   // Each brick's origin in camera coordinates, once (in double: the brick and
   // the camera may both be kilometres from the world origin).
-  const double diagonal = std::sqrt(3.0) * config_.brick_size_m;
-  for (std::size_t b = 0; b < brick_count_; ++b) {
-    const Eigen::Vector3d o = R_cw * (brickOrigin(static_cast<uint16_t>(b)) - t);
-    brick_cam_[b] = o.cast<float>();
-    brick_visible_[b] = o.z() > -diagonal && o.z() < config_.depth.max_m + diagonal ? 1 : 0;
-  }
+  // A brick is visible when its bounding sphere reaches into the view: in the
+  // depth range and inside each of the frustum's four side planes (widened by
+  // the splat's reach), so that a map larger than the view costs little more
+  // than the view.
   const hal::CameraIntrinsics& k = frame.intrinsics;
   const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
   const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  const double half = 0.5 * config_.brick_size_m;
+  const double radius = std::sqrt(3.0) * half;
+  // Side planes through the camera: x = a z (left, right) and y = b z (top, bottom).
+  const double a_left = (-0.5 - kMaxSplatPixels - k.cx) / k.fx, a_right = (w - 0.5 + kMaxSplatPixels - k.cx) / k.fx;
+  const double b_top = (-0.5 - kMaxSplatPixels - k.cy) / k.fy, b_bottom = (h - 0.5 + kMaxSplatPixels - k.cy) / k.fy;
+  const double n_left = std::sqrt(1.0 + a_left * a_left), n_right = std::sqrt(1.0 + a_right * a_right);
+  const double n_top = std::sqrt(1.0 + b_top * b_top), n_bottom = std::sqrt(1.0 + b_bottom * b_bottom);
+  for (std::size_t b = 0; b < brick_count_; ++b) {
+    const Eigen::Vector3d o = R_cw * (brickOrigin(static_cast<uint16_t>(b)) - t);
+    brick_cam_[b] = o.cast<float>();
+    const Eigen::Vector3d c = o + R_cw * Eigen::Vector3d::Constant(half);  // the brick's centre
+    brick_visible_[b] = c.z() > -radius && c.z() < config_.depth.max_m + radius &&
+                                (c.x() - a_left * c.z()) / n_left >= -radius &&
+                                (a_right * c.z() - c.x()) / n_right >= -radius &&
+                                (c.y() - b_top * c.z()) / n_top >= -radius &&
+                                (b_bottom * c.z() - c.y()) / n_bottom >= -radius
+                            ? 1
+                            : 0;
+  }
+  const float inv_fx = 1.0f / fx, inv_fy = 1.0f / fy;
   const float f = 0.5f * (fx + fy);
   const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
   const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
@@ -328,23 +346,28 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
     const int reach = std::min(kMaxSplatPixels, static_cast<int>(footprint));
     const Eigen::Vector3f n = R_cw_f * surfelNormal(s);
     const float plane = n.dot(p);
+    // Surfels within the sensor's noise at this depth are one surface (the
+    // tolerance at the centre's depth: the splat spans a few millimetres of it).
+    const float same = sigmas * depthSigma(p.z());
     for (int dv = -reach; dv <= reach; ++dv) {
       const int y = iv + dv;
       if (y < 0 || y >= h) continue;
+      const float ry = (static_cast<float>(y) - cy) * inv_fy;
+      const float along_y = n.y() * ry + n.z();
       for (int du = -reach; du <= reach; ++du) {
         const int x = iu + du;
         if (x < 0 || x >= w || du * du + dv * dv > reach * reach) continue;
-        const Eigen::Vector3f ray((static_cast<float>(x) - cx) / fx, (static_cast<float>(y) - cy) / fy, 1.0f);
-        const float along = n.dot(ray);
-        // Near grazing the plane's depth is ill-conditioned: the centre depth then.
-        float z = std::abs(along) > 0.2f * ray.norm() ? plane / along : p.z();
+        const float rx = (static_cast<float>(x) - cx) * inv_fx;
+        const float along = n.x() * rx + along_y;
+        // Near grazing the plane's depth is ill-conditioned: the centre depth then
+        // (|along| > 0.2 |ray|, squared: no root).
+        float z = along * along > 0.04f * (rx * rx + ry * ry + 1.0f) ? plane / along : p.z();
         if (!(z >= min_z)) z = p.z();
         const std::size_t i = static_cast<std::size_t>(y) * w + x;
         // Nearer wins; within the sensor's noise of each other (one surface),
         // the surfel whose centre is nearer the pixel.
         const auto reach_sq = static_cast<uint8_t>(du * du + dv * dv);
         const float held = index_depth_[i];
-        const float same = sigmas * depthSigma(z);
         if (z < held - same || (z <= held + same && reach_sq < index_reach_[i])) {
           index_depth_[i] = z;
           index_[i] = static_cast<uint32_t>(slot);
@@ -380,9 +403,7 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
 
 std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) {
   const int w = frame.width(), h = frame.height();
-  const Eigen::Matrix3d& R_wc = frame.T_world_cam.R_world_cam;
-  const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
-  const Eigen::Matrix3f R_wc_f = R_wc.cast<float>();
+  const Eigen::Matrix3f R_wc_f = frame.T_world_cam.R_world_cam.cast<float>();
   // The pixel's normal is noisy: its two differences span 2 kNormalReach pixels,
   // z 2 kNormalReach / f metres, against the sensor's sigma(z) at each end, so its
   // direction wanders by about atan(sigma(z) f / (kNormalReach z)) (26 degrees at
@@ -447,16 +468,19 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           const Eigen::Vector3f n_world = R_wc_f * normal;
           const Eigen::Vector3f n_surfel = surfelNormal(s);
           if (n_surfel.dot(n_world) < normalCosTolerance(z)) continue;  // another orientation: not this surfel's
-          const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
-          const Eigen::Vector3f rel = (p_world - brickOrigin(s.brick)).cast<float>();
+          // Relative to the surfel's brick: its origin is in camera coordinates
+          // already (renderIndexMap, from double), a few metres from the vertex.
+          const Eigen::Vector3f rel =
+              R_wc_f * (Eigen::Vector3f(vertex_x_[i], vertex_y_[i], vertex_z_[i]) - brick_cam_[s.brick]);
           const float c = decodeConfidence(s.confidence);
           const float sum = c + weight;
           const float a = c / sum, b = weight / sum;
           s.x = a * s.x + b * rel.x();
           s.y = a * s.y + b * rel.y();
           s.z = a * s.z + b * rel.z();
-          const Eigen::Vector3f n = (a * n_surfel + b * n_world).normalized();
-          setNormalAndRadius(s, n.allFinite() ? n : n_world, a * surfelRadius(s) + b * radius_[i]);
+          // Not normalised: the octahedral encoding divides by the L1 norm itself.
+          const Eigen::Vector3f n = a * n_surfel + b * n_world;
+          setNormalAndRadius(s, n.squaredNorm() > 0.0f ? n : n_world, a * surfelRadius(s) + b * radius_[i]);
           s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
           s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
           s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
