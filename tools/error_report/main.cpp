@@ -796,9 +796,9 @@ int writeReport(const Options& options, const ReportContext& context, const std:
     std::printf("%-6s %-22s %6s %9s %10s %12s %9s %9s\n", "source", "preset", "m", "points", "B/frame",
                 ">MAR surface", "ms/frame", "fuse ms");
     for (const ConfigSummary& c : summaries) {
-      std::printf("%-6s %-22s %6.3f %9.0f %10.0f %11s%% %9.2f %9s\n", c.source.c_str(), c.preset.c_str(), c.slope,
+      std::printf("%-6s %-22s %6.3f %9.0f %10.0f %12s %9.2f %9s\n", c.source.c_str(), c.preset.c_str(), c.slope,
                   c.all.points_out, c.bytesPerFrame(),
-                  c.have_surface ? formatFixed(100.0 * c.surface_share_above_mar, 2).c_str() : "-", c.time_ms_median,
+                  c.have_surface ? (formatFixed(100.0 * c.surface_share_above_mar, 2) + "%").c_str() : "-", c.time_ms_median,
                   c.isMap() ? formatFixed(c.fuse_ms_median, 2).c_str() : "-");
     }
   }
