@@ -155,6 +155,92 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
                                "Steps at region borders", "--frames 1"}) {
     EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
   }
+  // The frame is the only source by default: no map section, no nearest-point columns.
+  EXPECT_EQ(md.find("Frame against map"), std::string::npos);
+  std::ifstream again(dir.file("report.csv"));
+  ASSERT_TRUE(std::getline(again, line));
+  ASSERT_TRUE(column.count("source") && column.count("share_above_mar_surface")) << line;
+  while (std::getline(again, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    ASSERT_EQ(f.size(), header.size()) << line;
+    EXPECT_EQ(f[column["source"]], "frame") << line;
+    EXPECT_EQ(f[column["share_above_mar_surface"]], "") << line;
+  }
+}
+
+// --sources frame,map on a tiny orbit: the map's rows beside the frame's, both
+// judged against the true surface by the nearest sent point.
+TEST(ErrorReportCli, MapSourceRowsBesideTheFrame) {
+  TempDir dir;
+  const ProcessResult r = run(kTool + " --camera mock:living-room,size=160x120,path=orbit --frames 3 --map-warmup 10 "
+                                      "--sources frame,map --presets F1,ACUITY --slopes 0.022 --acuity-margins 0.5 "
+                                      "--acuity-refined none --dynamics-frames 0 --no-plot --out-dir " + dir.path());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("map warmed up over 10 frames: 10 fused, 0 refused"), std::string::npos) << r.output;
+  std::ifstream csv(dir.file("report.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  const std::vector<std::string> header = splitCsvLine(line);
+  std::map<std::string, std::size_t> column;
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  for (const char* name : {"source", "share_above_mar_surface", "share_above_reference_mar_surface", "rms_mm_surface",
+                           "fuse_ms_median", "map_frame_points", "map_surfels"}) {
+    ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
+  }
+  std::map<std::string, std::vector<std::string>> all;  // "source/preset" -> its all row
+  std::set<std::string> keys;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    ASSERT_EQ(f.size(), header.size()) << line;
+    EXPECT_TRUE(keys.insert(f[column["source"]] + "/" + f[column["preset"]] + "/" + f[column["region"]]).second) << line;
+    if (f[column["region"]] == "all") all[f[column["source"]] + "/" + f[column["preset"]]] = f;
+  }
+  ASSERT_EQ(all.size(), 4u);
+  const auto value = [&](const std::string& row, const char* name) {
+    const std::string& text = all.at(row)[column.at(name)];
+    EXPECT_FALSE(text.empty()) << row << " " << name;
+    return text.empty() ? -1.0 : std::stod(text);
+  };
+  for (const char* source : {"frame", "map"}) {
+    for (const char* preset : {"F1", "ACUITY k=0.50"}) {
+      const std::string row = std::string(source) + "/" + preset;
+      ASSERT_TRUE(all.count(row)) << row;
+      const double points = value(row, "points_out"), bytes = value(row, "bytes_per_frame");
+      EXPECT_GT(points, 1000.0) << row;
+      EXPECT_GT(bytes, points) << row;
+      EXPECT_LT(bytes, 15.0 * points + 200.0) << row;
+      // Against the true surface, every row: a share, some of it above (the sensor's
+      // noise, F1's coarse periphery), and F1's coarse periphery worse than ACUITY's levels.
+      const double share = value(row, "share_above_mar_surface");
+      EXPECT_GT(share, 0.0) << row;
+      EXPECT_LT(share, 1.0) << row;
+      EXPECT_GT(value(row, "rms_mm_surface"), 0.0) << row;
+      EXPECT_GT(value(row, "time_ms_median"), 0.0) << row;
+    }
+    EXPECT_GT(value(std::string(source) + "/F1", "share_above_mar_surface"),
+              2.0 * value(std::string(source) + "/ACUITY k=0.50", "share_above_mar_surface"))
+        << source;
+  }
+  for (const char* preset : {"F1", "ACUITY k=0.50"}) {
+    const std::string row = std::string("map/") + preset;
+    // The map's cloud is its surfels the eye sees and the frame's unexplained points.
+    const double surfels = value(row, "map_surfels"), unexplained = value(row, "map_frame_points");
+    EXPECT_GT(surfels, 1000.0) << row;
+    EXPECT_GE(unexplained, 0.0) << row;
+    EXPECT_NEAR(value(row, "points_in"), surfels + unexplained, 0.01) << row;
+    // Its time includes the frame's fusion (each frame's time is its fusion's and more).
+    const double fuse = value(row, "fuse_ms_median");
+    EXPECT_GT(fuse, 0.0) << row;
+    EXPECT_GE(value(row, "time_ms_median"), fuse) << row;
+    // The frame's rows have no map columns.
+    EXPECT_EQ(all.at(std::string("frame/") + preset)[column.at("fuse_ms_median")], "") << preset;
+    EXPECT_EQ(all.at(std::string("frame/") + preset)[column.at("map_surfels")], "") << preset;
+  }
+  const std::string md = readAll(dir.file("report.md"));
+  for (const char* expected : {"## Frame against map", "warmed up over 10 frames", "| map | F1 | 0.022 |",
+                               "| frame | ACUITY k=0.50 | 0.022 |"}) {
+    EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
+  }
 }
 
 TEST(ErrorReportCli, SubsetOfPresetsAndSlopes) {
@@ -186,6 +272,12 @@ TEST(ErrorReportCli, HelpAndBadArguments) {
   }
   EXPECT_EQ(run(kTool + " --growth-lead-ms -5").exit_code, 2);
   EXPECT_EQ(run(kTool + " --growth-lead-ms 2000").exit_code, 2);
+  for (const char* sources : {"frame,frame", "map,map", "fram", "frame,", "''"}) {
+    EXPECT_EQ(run(kTool + " --sources " + sources).exit_code, 2) << sources;
+  }
+  for (const char* warmup : {"-1", "1.5", "x", "100001"}) {
+    EXPECT_EQ(run(kTool + " --map-warmup " + warmup).exit_code, 2) << warmup;
+  }
 }
 
 // The figures over time on a scene with nothing moving and no sensor noise: a

@@ -22,6 +22,7 @@
 
 #include <Eigen/Geometry>
 
+#include "firmware/frame_foveator.h"
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "net/codec.h"
@@ -33,6 +34,7 @@
 #include "tools/common/nan.h"
 #include "tools/error_report/dynamics.h"
 #include "tools/error_report/report.h"
+#include "tools/error_report/surface_error.h"
 
 #ifndef FOVEA_BUILD_TYPE
 #define FOVEA_BUILD_TYPE "unknown"
@@ -47,7 +49,7 @@ constexpr int kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-error-report [--camera SPEC] [--frames N] [--out-dir DIR] [--presets LIST] [--slopes LIST]\n"
-    "                          [--reference-m M] [--no-plot] [--replot-from DIR]\n"
+    "                          [--reference-m M] [--sources LIST] [--map-warmup N] [--no-plot] [--replot-from DIR]\n"
     "\n"
     "Foveates the same camera frames with every preset and slope m, side by side, and reports per\n"
     "configuration the output points, bytes on the wire (fovea's chunk codec), median time per frame (back-projection\n"
@@ -78,6 +80,12 @@ const char* kHelp =
     "                    z forward; default 0,0,0): an operator's head is rarely where the camera is, and\n"
     "                    depth noise along the camera's rays is visible only from elsewhere\n"
     "  --reference-m M   slope of a fixed observer every configuration is also judged by (default 0.022)\n"
+    "  --sources LIST    what is foveated, comma-separated: frame (each frame's own cloud) and map (the\n"
+    "                    frame fused into the surfel map, the map's stable surfels the eye sees and the\n"
+    "                    frame's unexplained points: foveation.source = map, docs/map.md); default frame.\n"
+    "                    With map, every row (frame's too) is also judged against the true surface by the\n"
+    "                    nearest sent point (docs/report/README.md), and the report compares the sources\n"
+    "  --map-warmup N    frames fused into the map before the measured frames (default 60; with map only)\n"
     "  --dynamics-frames N  frames of the temporal-stability figure, after the measured ones (default 30;\n"
     "                    0 skips it and the latency-corrected coverage; both use the first slope)\n"
     "  --down-ms MS      capture to display for the coverage figure (default 13: the stream's p50 on loopback)\n"
@@ -117,6 +125,12 @@ struct Options {
   std::string replot_from;  // non-empty: redraw this directory's plots, measure nothing
   Eigen::Vector3d eye_offset_cam = Eigen::Vector3d::Zero();
   DynamicsOptions dynamics;
+  // What is foveated (--sources), and the frames fused into the map first.
+  std::vector<firmware::FoveationSource> sources = {firmware::FoveationSource::kFrame};
+  long map_warmup = 60;
+  bool hasMap() const {
+    return std::find(sources.begin(), sources.end(), firmware::FoveationSource::kMap) != sources.end();
+  }
 };
 
 std::vector<std::string> splitCommas(std::string_view text) {
@@ -276,6 +290,23 @@ Result<Options> parseArgs(int argc, char** argv, bool& help) {
       if (!m) return m.status();
       if (*m < 0.0) return Result<Options>(ErrorCode::kInvalidArgument, "--reference-m: '" + value + "' is negative");
       options.reference_slope = *m;
+    } else if (flag == "--sources") {
+      options.sources.clear();
+      for (const std::string& name : splitCommas(value)) {
+        const std::optional<firmware::FoveationSource> source = firmware::parseFoveationSource(name);
+        if (!source) return Result<Options>(ErrorCode::kInvalidArgument, "--sources: '" + name + "' is not frame or map");
+        if (std::find(options.sources.begin(), options.sources.end(), *source) != options.sources.end()) {
+          return Result<Options>(ErrorCode::kInvalidArgument, "--sources: '" + name + "' is named twice");
+        }
+        options.sources.push_back(*source);
+      }
+    } else if (flag == "--map-warmup") {
+      Result<double> n = parseNumber(flag, value);
+      if (!n) return n.status();
+      if (*n < 0 || *n > 100000 || std::floor(*n) != *n) {
+        return Result<Options>(ErrorCode::kInvalidArgument, flag + ": '" + value + "' is not an integer in [0, 100000]");
+      }
+      options.map_warmup = static_cast<long>(*n);
     } else if (flag == "--slopes") {
       options.slopes.clear();
       for (const std::string& text : splitCommas(value)) {
@@ -350,12 +381,17 @@ struct RegionAccumulator {
 
 struct ConfigRun {
   pipeline::FoveationConfig config;
-  std::vector<double> time_ms;  // thread CPU time
+  firmware::FoveationSource source = firmware::FoveationSource::kFrame;
+  std::vector<double> time_ms;  // thread CPU time (map source: the frame's fusion included)
   std::vector<double> wall_ms;  // wall clock
   std::vector<double> d0_m;
   std::array<RegionAccumulator, pipeline::kMaxRegions> regions;
   RegionAccumulator all;
   RegionAccumulator truth;  // all points, against the noiseless surface (mock cameras)
+  SurfaceError surface;     // the true surface against its nearest sent points (surface_error.h)
+  uint64_t surface_frames = 0;
+  std::vector<double> fuse_ms;  // map source: the frame's fusion (thread CPU time), part of time_ms
+  uint64_t map_frame_points = 0, map_surfels = 0;  // map source: the frame's unexplained points, the map's surfels sent
   uint64_t at_eye = 0, no_representative = 0;
   int frames = 0;
 };
@@ -394,7 +430,11 @@ std::string utcNow() {
 // when every plot was drawn.
 Result<bool> writeAndDrawPlots(const std::string& dir, const ReportContext& context,
                                const std::vector<ConfigSummary>& summaries, bool draw) {
-  Result<std::vector<PlotFiles>> written = writePlotFiles(dir, context, summaries);
+  // The plots show the frame source (the map's rows are in report.md's own section).
+  std::vector<ConfigSummary> plotted;
+  std::copy_if(summaries.begin(), summaries.end(), std::back_inserter(plotted),
+               [](const ConfigSummary& c) { return !c.isMap(); });
+  Result<std::vector<PlotFiles>> written = writePlotFiles(dir, context, plotted);
   if (!written) return written.status();
   bool drawn = draw;
   for (const PlotFiles& files : *written) drawn = drawn && drawWithGnuplot(dir, files.script, files.png);
@@ -431,6 +471,7 @@ int replot(const Options& options) {
 // ACUITY's margins, floors and view culls), each with room for its frames.
 std::vector<ConfigRun> planRuns(const Options& options) {
   std::vector<ConfigRun> runs;
+  for (firmware::FoveationSource source : options.sources) {
   for (pipeline::Preset preset : options.presets) {
     for (double slope : options.slopes) {
       // The acuity mode once per level margin (its rows say which).
@@ -446,6 +487,7 @@ std::vector<ConfigRun> planRuns(const Options& options) {
         for (const AcuityFloor& floor : floors) {
           for (pipeline::ViewCull cull : acuity ? options.view_culls : std::vector<pipeline::ViewCull>{pipeline::ViewCull::kOff}) {
             ConfigRun r;
+            r.source = source;
             r.config.acuity.preset = preset;
             r.config.acuity.slope = slope;
             if (acuity) {
@@ -462,6 +504,7 @@ std::vector<ConfigRun> planRuns(const Options& options) {
         }
       }
     }
+  }
   }
   return runs;
 }
@@ -502,10 +545,17 @@ pipeline::Gaze gazeOn(const hal::RgbdFrame& frame, const Options& options, const
 // The true position of every input point: the twin's frame (same pose and
 // intrinsics) keeps its noiseless depth where both readings are valid and takes
 // the noisy one elsewhere, so that its back-projection has the same points in
-// the same order as the noisy frame's. False when the twin gave no frame.
+// the same order as the noisy frame's. `surface`, when given, receives the
+// twin's own frame back-projected first: the true surface, every pixel in range
+// (surface_error.h). False when the twin gave no frame.
 bool backprojectTruth(hal::Camera& twin, const hal::RgbdFrame& frame, const pipeline::RawDepthRange& raw_range,
-                      const pipeline::DepthRange& range, hal::RgbdFrame& truth_frame, pipeline::PointCloud& truth_cloud) {
+                      const pipeline::DepthRange& range, hal::RgbdFrame& truth_frame, pipeline::PointCloud& truth_cloud,
+                      pipeline::PointCloud* surface) {
   if (!twin.acquire(truth_frame, std::chrono::seconds(2))) return false;
+  if (surface != nullptr) {
+    pipeline::BackprojectCounts surface_counts;
+    if (!pipeline::backprojectRef(truth_frame, range, *surface, surface_counts)) return false;
+  }
   const auto valid = [&](uint16_t raw) { return raw >= raw_range.min && raw <= raw_range.max; };
   const uint16_t* noisy = frame.depth();
   uint16_t* clean = truth_frame.depth();
@@ -521,6 +571,7 @@ struct Measurer {
   pipeline::Foveator& foveator;
   pipeline::ErrorEvaluator& evaluator;
   net::ChunkEncoder& encoder;
+  SurfaceErrorEvaluator& surface_evaluator;
   pipeline::PointCloud& cloud;
   pipeline::FoveatedCloud& out;
   std::vector<uint32_t>& representative;
@@ -532,7 +583,7 @@ struct Measurer {
   // foveation with each input point's representative, its error (and against
   // the true surface when `truth` is given) and the bytes the stream would send.
   Status measure(const hal::RgbdFrame& frame, const pipeline::Gaze& gaze, const pipeline::PointCloud* truth,
-                 ConfigRun& r) {
+                 const pipeline::PointCloud* surface, ConfigRun& r) {
     if (Status s = foveator.setConfig(r.config); !s) return s;
     pipeline::BackprojectCounts counts;
     pipeline::FoveationStats stats;
@@ -543,10 +594,43 @@ struct Measurer {
     const auto t1 = std::chrono::steady_clock::now();
     const double cpu1 = threadCpuMs();
     if (s) s = foveator.foveate(cloud, gaze, out, stats, representative.data());
-    pipeline::ErrorModel error_model{&foveator.model(), {}, reference_slope};
+    if (!s) return s;
+    return record(foveator, cloud, gaze, stats, truth, surface, cpu1 - cpu0, msBetween(t0, t1), r);
+  }
+
+  // The same for the map source, on the frame `map` fused last (fuse_cpu_ms and
+  // fuse_wall_ms: that fusion's times, which every configuration's time
+  // includes): the eye's view of the map and the foveation timed, then the
+  // foveation again with representatives, untimed. The map's rows have no
+  // per-pixel truth (their input is surfels, not the frame's pixels): `surface`
+  // judges them.
+  Status measureMap(firmware::FrameFoveator& map, const pipeline::Gaze& gaze, const pipeline::PointCloud* surface,
+                    double fuse_cpu_ms, double fuse_wall_ms, ConfigRun& r) {
+    if (Status s = map.use(&r.config); !s) return s;
+    pipeline::FoveationStats stats;
+    const double cpu0 = threadCpuMs();
+    const auto t0 = std::chrono::steady_clock::now();
+    Status s = map.foveate(gaze, out, stats);
+    const auto t1 = std::chrono::steady_clock::now();
+    const double cpu1 = threadCpuMs();
+    if (s) s = map.foveator().foveate(map.cloud(), gaze, out, stats, representative.data());
+    if (!s) return s;
+    r.fuse_ms.push_back(fuse_cpu_ms);
+    r.map_frame_points += map.mapFigures().frame_points;
+    r.map_surfels += map.mapFigures().eye.appended;
+    return record(map.foveator(), map.cloud(), gaze, stats, nullptr, surface, fuse_cpu_ms + cpu1 - cpu0,
+                  fuse_wall_ms + msBetween(t0, t1), r);
+  }
+
+  // The untimed part: the error of `out` against its input `in`, against the
+  // true surface, and the bytes.
+  Status record(pipeline::Foveator& used, const pipeline::PointCloud& in, const pipeline::Gaze& gaze,
+                const pipeline::FoveationStats& stats, const pipeline::PointCloud* truth,
+                const pipeline::PointCloud* surface, double cpu_ms, double wall_ms, ConfigRun& r) {
+    pipeline::ErrorModel error_model{&used.model(), {}, reference_slope};
     for (int reg = 0; reg < stats.region_count; ++reg) error_model.voxel_size_m[reg] = stats.regions[reg].voxel_size_m;
     pipeline::ErrorMetrics metrics;
-    if (s) s = evaluator.evaluate(cloud, foveator.lastRegions(), representative.data(), out.points, gaze, error_model, metrics);
+    Status s = evaluator.evaluate(in, used.lastRegions(), representative.data(), out.points, gaze, error_model, metrics);
     std::array<uint64_t, pipeline::kMaxRegions> wire_bytes{};
     uint64_t wire_total = 0;
     if (s) {
@@ -558,9 +642,13 @@ struct Measurer {
         wire_total += encoder.chunk(i).size() + net::kDatagramOverhead;
       }
     }
+    SurfaceError surface_error;
+    if (s && surface != nullptr) {
+      s = surface_evaluator.evaluate(*surface, out.points, gaze, used.model().slope(), reference_slope, surface_error);
+    }
     if (!s) return s;
-    r.time_ms.push_back(cpu1 - cpu0);
-    r.wall_ms.push_back(msBetween(t0, t1));
+    r.time_ms.push_back(cpu_ms);
+    r.wall_ms.push_back(wall_ms);
     // (ACUITY has no d0: its column says "-".)
     if (stats.fixation.source != pipeline::FixationSource::kNone) r.d0_m.push_back(stats.fixation.d0_m);
     for (int reg = 0; reg < stats.region_count; ++reg) {
@@ -570,10 +658,14 @@ struct Measurer {
     r.all.add(metrics.all, stats.points_in, stats.points_out, 0.0, wire_total);
     if (truth != nullptr) {
       pipeline::ErrorMetrics truth_metrics;
-      if (evaluator.evaluate(*truth, foveator.lastRegions(), representative.data(), out.points, gaze, error_model,
+      if (evaluator.evaluate(*truth, used.lastRegions(), representative.data(), out.points, gaze, error_model,
                              truth_metrics)) {
         r.truth.add(truth_metrics.all, 0, 0, 0.0, 0);
       }
+    }
+    if (surface != nullptr) {
+      r.surface.add(surface_error);
+      ++r.surface_frames;
     }
     r.at_eye += metrics.at_eye;
     r.no_representative += metrics.no_representative;
@@ -587,6 +679,7 @@ ConfigSummary summarise(const ConfigRun& r) {
   Result<pipeline::RegionModel> model = pipeline::RegionModel::create(r.config.acuity);
   ConfigSummary c;
   c.preset = configName(r.config.acuity);
+  c.source = std::string(firmware::foveationSourceName(r.source));
   c.slope = r.config.acuity.slope;
   c.frames = r.frames;
   c.time_ms_median = quantileOf(r.time_ms, 0.5);
@@ -616,6 +709,19 @@ ConfigSummary summarise(const ConfigRun& r) {
   if (r.truth.seen > 0) {
     c.truth = r.truth.summarise(r.frames);
     c.have_truth = true;
+  }
+  if (r.surface_frames > 0) {
+    c.have_surface = true;
+    c.surface_share_above_mar = r.surface.shareAboveMar();
+    c.surface_share_above_reference_mar = r.surface.shareAboveReferenceMar();
+    c.surface_rms_mm = r.surface.with_nearest ? 1e3 * std::sqrt(r.surface.sum_sq_m2 / static_cast<double>(r.surface.with_nearest)) : kNaN;
+    c.surface_points = static_cast<double>(r.surface.points) / static_cast<double>(r.surface_frames);
+  }
+  if (r.source == firmware::FoveationSource::kMap) {
+    const double n = std::max(r.frames, 1);
+    c.fuse_ms_median = quantileOf(r.fuse_ms, 0.5);
+    c.map_frame_points = static_cast<double>(r.map_frame_points) / n;
+    c.map_surfels = static_cast<double>(r.map_surfels) / n;
   }
   return c;
 }
@@ -681,8 +787,20 @@ int writeReport(const Options& options, const ReportContext& context, const std:
   std::printf("%-5s %6s %9s %10s %9s %9s %8s %9s\n", "preset", "m", "points", "MB/frame", "ms/frame", "RMS[mm]",
               "max[mm]", ">MAR");
   for (const ConfigSummary& c : summaries) {
+    if (c.isMap()) continue;
     std::printf("%-5s %6.3f %9.0f %10.3f %9.2f %9.2f %8.1f %8.1f%%\n", c.preset.c_str(), c.slope, c.all.points_out,
                 c.bytesPerFrame() / 1e6, c.time_ms_median, c.all.rms_mm, c.all.max_mm, 100.0 * c.all.share_above_mar);
+  }
+  if (options.hasMap()) {
+    // The sources side by side, judged against the true surface (surface_error.h).
+    std::printf("%-6s %-22s %6s %9s %10s %12s %9s %9s\n", "source", "preset", "m", "points", "B/frame",
+                ">MAR surface", "ms/frame", "fuse ms");
+    for (const ConfigSummary& c : summaries) {
+      std::printf("%-6s %-22s %6.3f %9.0f %10.0f %12s %9.2f %9s\n", c.source.c_str(), c.preset.c_str(), c.slope,
+                  c.all.points_out, c.bytesPerFrame(),
+                  c.have_surface ? (formatFixed(100.0 * c.surface_share_above_mar, 2) + "%").c_str() : "-", c.time_ms_median,
+                  c.isMap() ? formatFixed(c.fuse_ms_median, 2).c_str() : "-");
+    }
   }
   if (dynamics) {
     if (Status s = writeDynamicsCsv((dir / "dynamics.csv").string(), *dynamics); !s) {
@@ -746,9 +864,35 @@ int run(int argc, char** argv) {
       return kExitUsage;
     }
   }
-  Result<pipeline::ErrorEvaluator> evaluator = pipeline::ErrorEvaluator::create(max_points);
+  // The map source (--sources with map): the service's map at its defaults, fed
+  // the same frames; its cloud (and so the output) holds the map's surfels too.
+  firmware::MapSettings map_settings;
+  map_settings.source = firmware::FoveationSource::kMap;
+  const std::size_t cloud_points =
+      options.hasMap() ? firmware::FrameFoveator::cloudCapacity(max_points, map_settings) : max_points;
+  std::unique_ptr<firmware::FrameFoveator> map;
+  if (options.hasMap()) {
+    const auto first = std::find_if(runs.begin(), runs.end(),
+                                    [](const ConfigRun& r) { return r.source == firmware::FoveationSource::kMap; });
+    Result<firmware::FrameFoveator> created_map = firmware::FrameFoveator::create(
+        {max_points, max_points, fovea::KernelSet::kRef, 1}, first->config, pipeline::DepthRange{}, map_settings, width,
+        height);
+    if (!created_map) {
+      std::fprintf(stderr, "fovea-error-report: map: %s\n", created_map.status().message().c_str());
+      return kExitFailure;
+    }
+    map = std::make_unique<firmware::FrameFoveator>(std::move(created_map.value()));
+    for (const ConfigRun& r : runs) {
+      if (r.source != firmware::FoveationSource::kMap) continue;
+      if (Status s = map->use(&r.config); !s) {
+        std::fprintf(stderr, "fovea-error-report: map: %s\n", s.message().c_str());
+        return kExitUsage;
+      }
+    }
+  }
+  Result<pipeline::ErrorEvaluator> evaluator = pipeline::ErrorEvaluator::create(cloud_points);
   // The stream's codec at its defaults (1200-byte datagrams), for the bytes columns.
-  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, cloud_points);
   for (const Status& s : {evaluator.status(), encoder.status()}) {
     if (!s) {
       std::fprintf(stderr, "fovea-error-report: %s\n", s.message().c_str());
@@ -764,14 +908,19 @@ int run(int argc, char** argv) {
   }
   hal::RgbdFrame truth_frame(width, height);
   pipeline::PointCloud truth_cloud(max_points);
+  // The true surface for the nearest-point measure (only with the map source: it
+  // costs a nearest-neighbour search per true point and configuration).
+  pipeline::PointCloud surface_cloud(options.hasMap() ? max_points : 0);
+  pipeline::PointCloud* surface = truth_camera && options.hasMap() ? &surface_cloud : nullptr;
+  SurfaceErrorEvaluator surface_evaluator(options.hasMap() ? cloud_points : 0);
   const pipeline::RawDepthRange raw_range = pipeline::rawDepthRange(pipeline::DepthRange{}, info.depth_scale_m);
   hal::RgbdFrame frame(width, height);
   pipeline::PointCloud cloud(max_points);
-  pipeline::FoveatedCloud out(max_points);
-  std::vector<uint32_t> representative(max_points);
+  pipeline::FoveatedCloud out(cloud_points);
+  std::vector<uint32_t> representative(cloud_points);
   // The range: the same as fovead's defaults.
-  Measurer measurer{*foveator, *evaluator, *encoder, cloud, out, representative, pipeline::DepthRange{},
-                    options.reference_slope};
+  Measurer measurer{*foveator, *evaluator, *encoder, surface_evaluator, cloud, out, representative,
+                    pipeline::DepthRange{}, options.reference_slope};
 
   const std::string gaze_text = describeGaze(options, info);
   std::printf("fovea-error-report: camera %s %dx%d, %ld frames, %zu configurations; gaze %s\n", info.name.c_str(),
@@ -783,22 +932,68 @@ int run(int argc, char** argv) {
   const double load_before = loadAverage();
   long failed = 0;
   const bool interactive = isatty(STDOUT_FILENO) != 0;  // progress only on a terminal
+  // The map's warm-up: the camera's first frames fused into it (the twin kept in
+  // step), none measured.
+  for (long f = 0; map && f < options.map_warmup; ++f) {
+    if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
+      std::fprintf(stderr, "fovea-error-report: map warm-up frame %ld: capture: %s\n", f, s.toString().c_str());
+      return kExitFailure;
+    }
+    if (truth_camera && !truth_camera->acquire(truth_frame, std::chrono::seconds(2))) {
+      std::fprintf(stderr, "fovea-error-report: map warm-up frame %ld: the noiseless twin gave no frame\n", f);
+      return kExitFailure;
+    }
+    pipeline::BackprojectCounts counts;
+    if (Status s = map->backproject(frame, counts); !s) {
+      std::fprintf(stderr, "fovea-error-report: map warm-up frame %ld: %s\n", f, s.toString().c_str());
+      return kExitFailure;
+    }
+    if (interactive) {
+      std::printf("\rmap warm-up %ld/%ld", f + 1, options.map_warmup);
+      std::fflush(stdout);
+    }
+  }
+  if (map) {
+    if (interactive) std::printf("\n");
+    const pipeline::map::SurfelMapCounters& counters = map->map()->counters();
+    std::printf("fovea-error-report: map warmed up over %ld frames: %llu fused, %llu refused\n", options.map_warmup,
+                static_cast<unsigned long long>(counters.frames_fused),
+                static_cast<unsigned long long>(counters.refused()));
+  }
   for (long f = 0; f < options.frames; ++f) {
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) {
       std::fprintf(stderr, "frame %ld: capture: %s\n", f, s.toString().c_str());
       ++failed;
       continue;
     }
-    const bool have_truth =
-        truth_camera && backprojectTruth(*truth_camera, frame, raw_range, measurer.range, truth_frame, truth_cloud);
+    const bool have_truth = truth_camera && backprojectTruth(*truth_camera, frame, raw_range, measurer.range,
+                                                             truth_frame, truth_cloud, surface);
     const pipeline::Gaze gaze = gazeOn(frame, options, info);
+    // The map source: this frame fused into the map once, timed, for all its rows.
+    double fuse_cpu_ms = 0.0, fuse_wall_ms = 0.0;
+    if (map) {
+      pipeline::BackprojectCounts counts;
+      const double cpu0 = threadCpuMs();
+      const auto t0 = std::chrono::steady_clock::now();
+      const Status s = map->backproject(frame, counts);
+      fuse_wall_ms = msBetween(t0, std::chrono::steady_clock::now());
+      fuse_cpu_ms = threadCpuMs() - cpu0;
+      if (!s) {
+        std::fprintf(stderr, "frame %ld, map: %s\n", f, s.toString().c_str());
+        return kExitFailure;
+      }
+    }
     // Side by side: every configuration on this frame, starting with a different
     // one each frame so that no configuration always runs first (cold caches).
     for (std::size_t k = 0; k < runs.size(); ++k) {
       ConfigRun& r = runs[(k + static_cast<std::size_t>(f)) % runs.size()];
-      if (Status s = measurer.measure(frame, gaze, have_truth ? &truth_cloud : nullptr, r); !s) {
-        std::fprintf(stderr, "frame %ld, %s m %.3f: %s\n", f, configName(r.config.acuity).c_str(), r.config.acuity.slope,
-                     s.toString().c_str());
+      const Status s =
+          r.source == firmware::FoveationSource::kMap
+              ? measurer.measureMap(*map, gaze, have_truth ? surface : nullptr, fuse_cpu_ms, fuse_wall_ms, r)
+              : measurer.measure(frame, gaze, have_truth ? &truth_cloud : nullptr, have_truth ? surface : nullptr, r);
+      if (!s) {
+        std::fprintf(stderr, "frame %ld, %s %s m %.3f: %s\n", f, firmware::foveationSourceName(r.source).data(),
+                     configName(r.config.acuity).c_str(), r.config.acuity.slope, s.toString().c_str());
         return kExitFailure;
       }
     }
@@ -834,6 +1029,7 @@ int run(int argc, char** argv) {
   for (const ConfigRun& r : runs) summaries.push_back(summarise(r));
   ReportContext context = reportContext(argc, argv, options, info, gaze_text, load_before, options.frames - failed);
   if (dynamics) context.extra_markdown = dynamicsMarkdown(*dynamics);
+  context.map_warmup_frames = options.map_warmup;
   return writeReport(options, context, summaries, dynamics);
 }
 

@@ -101,7 +101,8 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
   out << "preset,m,region,region_name,ecc_min_deg,ecc_max_deg,frames,voxel_mm,points_in,points_out,bytes_per_frame,raw_bytes_per_frame,"
          "time_ms_median,time_ms_p90,wall_ms_median,rms_mm,max_mm,rms_over_voxel,max_over_voxel,points_seen,share_above_mar,share_above_reference_mar,"
          "ratio_median,ratio_p95,ratio_max,ratio_median_first_deg,ratio_median_last_deg,share_above_mar_true_surface,"
-         "ratio_p95_true_surface\n";
+         "ratio_p95_true_surface,source,share_above_mar_surface,share_above_reference_mar_surface,rms_mm_surface,"
+         "fuse_ms_median,map_frame_points,map_surfels\n";
   for (const ConfigSummary& c : configs) {
     auto row = [&](const RegionSummary& r) {
       const bool all = r.index < 0;
@@ -116,7 +117,13 @@ Status writeCsv(const std::string& path, const std::vector<ConfigSummary>& confi
           << csvNumber(r.ratio_median) << ',' << csvNumber(r.ratio_p95) << ','
           << csvNumber(r.ratio_max) << ',' << csvNumber(r.ratio_first_deg) << ',' << csvNumber(r.ratio_last_deg) << ','
           << (all && c.have_truth ? csvNumber(c.truth.share_above_mar) : "") << ','
-          << (all && c.have_truth ? csvNumber(c.truth.ratio_p95) : "") << '\n';
+          << (all && c.have_truth ? csvNumber(c.truth.ratio_p95) : "") << ',' << c.source << ','
+          << (all && c.have_surface ? csvNumber(c.surface_share_above_mar) : "") << ','
+          << (all && c.have_surface ? csvNumber(c.surface_share_above_reference_mar) : "") << ','
+          << (all && c.have_surface ? csvNumber(c.surface_rms_mm) : "") << ','
+          << (all && c.isMap() ? csvNumber(c.fuse_ms_median) : "") << ','
+          << (all && c.isMap() ? csvNumber(c.map_frame_points) : "") << ','
+          << (all && c.isMap() ? csvNumber(c.map_surfels) : "") << '\n';
     };
     for (const RegionSummary& r : c.regions) row(r);
     row(c.all);
@@ -163,6 +170,7 @@ Result<std::vector<ConfigSummary>> readCsvSummaries(const std::string& path) {
     };
     ConfigSummary c;
     c.preset = f[column["preset"]];
+    if (column.count("source")) c.source = f[column["source"]];  // (older reports: the frame only)
     c.slope = number_at("m");
     c.frames = static_cast<int>(number_at("frames"));
     c.time_ms_median = number_at("time_ms_median");
@@ -190,8 +198,52 @@ Result<std::string> readMarkdownCamera(const std::string& path) {
   return Result<std::string>(ErrorCode::kParseError, path + ": no '- camera: ...; gaze: ' line");
 }
 
-Status writeMarkdown(const std::string& path, const ReportContext& context, const std::vector<ConfigSummary>& configs,
+namespace {
+
+// The sources side by side (--sources with map): every row, each judged against
+// the true surface by the nearest sent point.
+std::string sourcesMarkdown(const ReportContext& context, const std::vector<ConfigSummary>& configs) {
+  std::ostringstream md;
+  md << "\n## Frame against map\n\n"
+     << "The same measured frames foveated from the frame's own cloud (*frame*) and from the fused surfel map "
+        "(*map*, foveation.source = map: the frame fused into the map, then the map's stable surfels the eye sees "
+        "and the frame's points the map does not explain, foveated together; docs/map.md), the map warmed up over "
+     << context.map_warmup_frames << " frames of the same camera before the first measured frame. "
+     << "*above MAR, true surface (nearest)*: the share of the true surface's points (the noiseless twin's frame, "
+        "every pixel in range) whose nearest sent point, seen from the eye, is displaced by more than MAR(ecc) "
+        "(docs/report/README.md): holes and displaced points both count, for both sources the same way. "
+        "*RMS to nearest*: the distance from each true point to its nearest sent point. *time*: thread CPU time per "
+        "frame, median: the frame source's back-projection and foveation (scalar reference kernels); the map "
+        "source's fusion (scalar reference, one thread) + the eye's view of the map + foveation; *of which fusion* "
+        "is the fusion's median alone. The map's other columns in report.csv (rms_mm, share_above_mar) measure "
+        "its output against its own input (the surfels and unexplained points), not against the frame.\n\n"
+     << "| source | preset | m | points out | bytes / frame | above MAR, true surface (nearest) | above MAR of the m = "
+     << fixed(context.reference_slope, 3) << " eye (nearest) | RMS to nearest [mm] | CPU time / frame [ms] | of which "
+        "fusion [ms] | map surfels sent | frame points unexplained |\n"
+     << "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const ConfigSummary& c : configs) {
+    md << "| " << c.source << " | " << c.preset << " | " << fixed(c.slope, 3) << " | " << fixed(c.all.points_out, 0)
+       << " | " << fixed(c.bytesPerFrame() / 1e6, 3) << " MB | "
+       << (c.have_surface ? percent(c.surface_share_above_mar) : std::string("-")) << " | "
+       << (c.have_surface ? percent(c.surface_share_above_reference_mar) : std::string("-")) << " | "
+       << (c.have_surface ? fixed(c.surface_rms_mm, 1) : std::string("-")) << " | " << fixed(c.time_ms_median, 2)
+       << " | " << (c.isMap() ? fixed(c.fuse_ms_median, 2) : std::string("-")) << " | "
+       << (c.isMap() ? fixed(c.map_surfels, 0) : std::string("-")) << " | "
+       << (c.isMap() ? fixed(c.map_frame_points, 0) : std::string("-")) << " |\n";
+  }
+  return md.str();
+}
+
+}  // namespace
+
+Status writeMarkdown(const std::string& path, const ReportContext& context, const std::vector<ConfigSummary>& every_config,
                      bool have_plot) {
+  // The tables below are the frame source's (their error is against each input
+  // point); the map's rows are compared with them in their own section.
+  std::vector<ConfigSummary> configs;
+  std::copy_if(every_config.begin(), every_config.end(), std::back_inserter(configs),
+               [](const ConfigSummary& c) { return !c.isMap(); });
+  const bool any_map = configs.size() != every_config.size();
   std::ostringstream md;
   md << "# Speed against error of the foveation (issue 3)\n\n"
      << "Generated by `fovea-error-report` (" << context.date_utc << "):\n\n"
@@ -324,6 +376,7 @@ Status writeMarkdown(const std::string& path, const ReportContext& context, cons
     }
     md << "\n";
   }
+  if (any_map) md << sourcesMarkdown(context, every_config);
   md << context.extra_markdown;
   if (!context.date_utc.empty()) md << "\n";
   return writeFile(path, md.str());

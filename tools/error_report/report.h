@@ -60,6 +60,22 @@ struct ConfigSummary {
   // All points against the true (noiseless) surface, when the camera has one.
   bool have_truth = false;
   RegionSummary truth;
+  // What was foveated: "frame" or "map" (--sources).
+  std::string source = "frame";
+  // The true surface against its nearest sent points (surface_error.h), when
+  // the run measured it (--sources with map, a camera with a noiseless twin).
+  bool have_surface = false;
+  double surface_share_above_mar = 0.0;
+  double surface_share_above_reference_mar = 0.0;
+  double surface_rms_mm = 0.0;     // distance from each true point to its nearest sent point, RMS
+  double surface_points = 0.0;     // true surface points per frame
+  // Map source: the frame's fusion per frame (thread CPU time, median; part of
+  // time_ms_median), and per frame on average the frame's unexplained points and
+  // the map's surfels in the foveated cloud. NaN / 0 for the frame source.
+  double fuse_ms_median = 0.0;
+  double map_frame_points = 0.0;
+  double map_surfels = 0.0;
+  bool isMap() const { return source == "map"; }
   // What the frame costs on the wire: fovea's chunk codec (default settings,
   // 1200-byte datagrams, framing and authentication tag included).
   double bytesPerFrame() const { return all.wire_bytes; }
@@ -76,6 +92,7 @@ struct ReportContext {
   double reference_slope = 0.022;   // the fixed observer's m
   std::string date_utc;
   std::string extra_markdown;  // sections appended to report.md (dynamics.h)
+  long map_warmup_frames = 0;  // frames fused into the map before the measured ones (--sources with map)
 };
 
 // ACUITY's sensor floor of one row: constant (AcuityConfig::floor_m) and growing

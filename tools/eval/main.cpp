@@ -75,8 +75,9 @@ const char* kHelp =
     "  --seed S               the positions' and fixations' seed (default 1)\n"
     "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
     "  --conditions LIST      F1, F2, F3, FREF, ACUITY, ACUITY-2MM (ACUITY with a distance floor of\n"
-    "                         2 mm x s^2), ACUITY-REFINED (ACUITY, margin 0.3, one refinement pass;\n"
-    "                         default: all)\n"
+    "                         2 mm x s^2), ACUITY-REFINED (ACUITY, margin 0.3, one refinement pass),\n"
+    "                         MAP (ACUITY on the fused surfel map, foveation.source = map; docs/map.md)\n"
+    "                         (default: all but MAP)\n"
     "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
     "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
     "  --quality-frame K      the frame (0-based) the images are made from (default 30)\n"
@@ -263,6 +264,7 @@ std::string runSignature(const RunSpec& r, const Options& o) {
       r.condition.floor_per_m2 > 0.0 ? "\nfloor_per_m2 " + shortestDecimal(r.condition.floor_per_m2) : "";
   if (r.condition.level_margin > 0.0) settings += "\nlevel_margin " + shortestDecimal(r.condition.level_margin);
   if (r.condition.refine_passes > 0) settings += "\nrefine_passes " + std::to_string(r.condition.refine_passes);
+  if (!r.condition.source.empty()) settings += "\nsource " + r.condition.source;
   return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + settings + "\nframes " +
          std::to_string(o.frames) + "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
          std::to_string(r.position.index) + " of " + std::to_string(o.positions) + "\n";
@@ -338,9 +340,12 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
 struct DatasetScene {
   SceneGeometry geometry;
   hal::RgbdFrame quality_frame;
+  // With a MAP condition: the map source's stage, every frame up to and
+  // including the quality frame fused into it (as the service would have).
+  std::unique_ptr<firmware::FrameFoveator> map;
 };
 
-Result<DatasetScene> openScene(const Dataset& d, int quality_frame) {
+Result<DatasetScene> openScene(const Dataset& d, int quality_frame, bool with_map) {
   using R = Result<DatasetScene>;
   std::string spec = d.camera_spec;
   if (const auto at = spec.find(",realtime=on"); at != std::string::npos) spec.erase(at, 12);  // as fast as it decodes
@@ -350,10 +355,27 @@ Result<DatasetScene> openScene(const Dataset& d, int quality_frame) {
   if (Status s = camera.open(); !s) return s;
   if (Status s = camera.start(); !s) return s;
   const hal::CameraInfo& info = camera.info();
-  DatasetScene scene{{}, hal::RgbdFrame(info.intrinsics.width, info.intrinsics.height)};
+  DatasetScene scene{{}, hal::RgbdFrame(info.intrinsics.width, info.intrinsics.height), nullptr};
+  if (with_map) {
+    // The service's map at its defaults ([map], foveation.source = map).
+    firmware::MapSettings settings;
+    settings.source = firmware::FoveationSource::kMap;
+    const std::size_t pixels = scene.quality_frame.pixelCount();
+    Result<firmware::FrameFoveator> map =
+        firmware::FrameFoveator::create({pixels, pixels, fovea::KernelSet::kSimd, 1}, pipeline::FoveationConfig{},
+                                        pipeline::DepthRange{}, settings, info.intrinsics.width, info.intrinsics.height);
+    if (!map) return R(map.status().code(), d.name + ": map: " + map.status().message());
+    scene.map = std::make_unique<firmware::FrameFoveator>(std::move(map.value()));
+  }
   for (int k = 0; k <= quality_frame; ++k) {
     if (Status s = camera.acquire(scene.quality_frame, std::chrono::seconds(5)); !s) {
       return R(s.code(), d.name + ": frame " + std::to_string(k) + ": " + s.message());
+    }
+    if (scene.map) {
+      pipeline::BackprojectCounts counts;
+      if (Status s = scene.map->backproject(scene.quality_frame, counts); !s) {
+        return R(s.code(), d.name + ": frame " + std::to_string(k) + ": map: " + s.message());
+      }
     }
     if (k == 0) {
       const hal::RgbdFrame& f = scene.quality_frame;
@@ -451,7 +473,9 @@ int run(int argc, char** argv) {
   std::vector<RunSpec> plan;
   std::map<std::string, DatasetScene> scenes;
   for (const Dataset& d : datasets) {
-    Result<DatasetScene> scene = openScene(d, o.quality_frame);
+    const bool with_map = std::any_of(conditions->begin(), conditions->end(),
+                                      [](const Condition& c) { return c.source == "map"; });
+    Result<DatasetScene> scene = openScene(d, o.quality_frame, with_map);
     if (!scene) {
       std::fprintf(stderr, "fovea-eval: %s: %s\n", d.name.c_str(), scene.status().message().c_str());
       return kExitFailure;
@@ -520,7 +544,9 @@ int run(int argc, char** argv) {
   // Quality: the images of each dataset's first positions.
   Result<std::unique_ptr<QualityEvaluator>> evaluator = [&]() -> Result<std::unique_ptr<QualityEvaluator>> {
     std::size_t max_points = 0;
-    for (const auto& [name, s] : scenes) max_points = std::max(max_points, s.quality_frame.pixelCount());
+    for (const auto& [name, s] : scenes) {
+      max_points = std::max(max_points, s.map ? s.map->cloud().capacity() : s.quality_frame.pixelCount());
+    }
     return QualityEvaluator::create(max_points);
   }();
   if (!evaluator) {
@@ -540,7 +566,8 @@ int run(int argc, char** argv) {
       std::printf("quality: %s position %d\n", d.dataset.name.c_str(), d.positions[k].index);
       std::fflush(stdout);
       Result<std::vector<QualityRow>> rows =
-          (*evaluator)->evaluate(scenes.at(d.dataset.name).quality_frame, d.dataset, d.positions[k], report.conditions, q);
+          (*evaluator)->evaluate(scenes.at(d.dataset.name).quality_frame, d.dataset, d.positions[k], report.conditions, q,
+                                 scenes.at(d.dataset.name).map.get());
       if (!rows) {
         std::fprintf(stderr, "fovea-eval: quality %s position %d: %s\n", d.dataset.name.c_str(), d.positions[k].index,
                      rows.status().message().c_str());

@@ -25,11 +25,18 @@ std::vector<Condition> defaultConditions() {
           {"ACUITY-REFINED", "ACUITY", 0.0, 0.3, 1}};
 }
 
+std::vector<Condition> allConditions() {
+  std::vector<Condition> all = defaultConditions();
+  all.push_back({"MAP", "ACUITY", 0.0, 0.0, 0, "map"});
+  return all;
+}
+
 std::vector<std::string> conditionSettings(const Condition& c) {
   std::vector<std::string> out;
   if (c.floor_per_m2 > 0.0) out.push_back("foveation.floor_per_m2=" + shortestDecimal(c.floor_per_m2));
   if (c.level_margin > 0.0) out.push_back("foveation.level_margin=" + shortestDecimal(c.level_margin));
   if (c.refine_passes > 0) out.push_back("foveation.refine_passes=" + std::to_string(c.refine_passes));
+  if (!c.source.empty()) out.push_back("foveation.source=" + c.source);
   return out;
 }
 
@@ -54,11 +61,11 @@ std::vector<std::string> splitComma(const std::string& s) {
 }  // namespace
 
 Result<std::vector<Condition>> selectConditions(const std::string& names) {
-  const std::vector<Condition> all = defaultConditions();
+  const std::vector<Condition> all = allConditions();
   std::vector<Condition> out;
   for (const std::string& n : splitComma(names)) {
     auto it = std::find_if(all.begin(), all.end(), [&](const Condition& c) { return c.name == n; });
-    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED)");
+    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP)");
     out.push_back(*it);
   }
   if (out.empty()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: none given");

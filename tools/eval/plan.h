@@ -24,7 +24,7 @@ struct Dataset {
 std::vector<Dataset> defaultDatasets(const std::string& tum_path);
 
 struct Condition {
-  std::string name;    // F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED
+  std::string name;    // F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP
   std::string preset;  // fovead --preset
   // ACUITY's distance floor (foveation.floor_per_m2, m per m^2 of distance); 0: none.
   double floor_per_m2 = 0.0;
@@ -32,18 +32,27 @@ struct Condition {
   // passes (foveation.refine_passes).
   double level_margin = 0.0;
   int refine_passes = 0;
+  // What is foveated (foveation.source): "" the frame (fovead's default), "map"
+  // the fused surfel map (docs/map.md).
+  std::string source = {};
 };
 // The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper), also with a
 // distance floor of 2 mm x s^2 (as fast as F1 on the mock room) and refined (margin
 // 0.3, one pass; docs/acuity-levels.md).
 std::vector<Condition> defaultConditions();
+// Every condition --conditions may name: the default ones, then MAP (ACUITY
+// foveating the fused surfel map, foveation.source = map; not a default: it
+// fuses every frame with the scalar reference, about 54 ms a 640x480 frame,
+// docs/eval.md).
+std::vector<Condition> allConditions();
 // What a condition sets beyond its preset, as `fovead --set` takes it, in this order:
-// foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes (those set).
+// foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes,
+// foveation.source (those set).
 std::vector<std::string> conditionSettings(const Condition& c);
 // A setting's number as `fovead --set` takes it: the shortest decimal that reads back
 // as the same double (0.002, not 0.0020000000000000000416).
 std::string shortestDecimal(double value);
-// Picks names out of defaultConditions() (comma list); errors name the unknown one.
+// Picks names out of allConditions() (comma list); errors name the unknown one.
 Result<std::vector<Condition>> selectConditions(const std::string& names);
 Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, const std::string& names);
 

@@ -69,7 +69,7 @@ EyeCamera eyeCamera(const HmdPosition& position, const Eigen::Vector3d& up, cons
 Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame& frame, const Dataset& dataset,
                                                            const HmdPosition& position,
                                                            const std::vector<Condition>& conditions,
-                                                           const QualityOptions& options) {
+                                                           const QualityOptions& options, firmware::FrameFoveator* map) {
   using R = Result<std::vector<QualityRow>>;
   State& s = *s_;
   pipeline::BackprojectCounts counts;
@@ -100,9 +100,31 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     if (c.level_margin > 0.0) config.acuity.level_margin = c.level_margin;
     config.acuity.refine_passes = c.refine_passes;
     pipeline::Foveator* foveator = &s.foveator;
-    if (Status st = foveator->setConfig(config); !st) return st;
+    const pipeline::PointCloud* input = &s.cloud;
+    if (c.source == "map") {
+      // The service's map source: the map's stable surfels this eye sees and the
+      // frame's unexplained points, foveated together (its representatives from
+      // the same foveation run again on that cloud).
+      if (map == nullptr || map->source() != firmware::FoveationSource::kMap) {
+        return R(ErrorCode::kInvalidArgument, c.name + ": the quality frame has no map");
+      }
+      map->invalidate();
+      if (Status st = map->use(&config); !st) return st;
+      pipeline::FoveationStats map_stats;
+      const Status st = map->foveate(gaze, s.out, map_stats);
+      map->invalidate();  // (config is this iteration's)
+      if (!st) return st;
+      foveator = &map->foveator();
+      input = &map->cloud();
+    } else if (Status st = foveator->setConfig(config); !st) {
+      return st;
+    }
+    if (input->size() > s.max_points) {
+      return R(ErrorCode::kCapacityExceeded, c.name + ": " + std::to_string(input->size()) + " points, room for " +
+                                                 std::to_string(s.max_points));
+    }
     pipeline::FoveationStats stats;
-    if (Status st = foveator->foveate(s.cloud, gaze, s.out, stats, s.representative.data()); !st) return st;
+    if (Status st = foveator->foveate(*input, gaze, s.out, stats, s.representative.data()); !st) return st;
     QualityRow row;
     row.dataset = dataset.name;
     row.condition = c.name;
@@ -110,7 +132,7 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     pipeline::ErrorModel model{&foveator->model(), {}, options.slope};
     for (int r = 0; r < stats.region_count; ++r) model.voxel_size_m[r] = stats.regions[r].voxel_size_m;
     pipeline::ErrorMetrics metrics;
-    if (Status st = s.errors.evaluate(s.cloud, foveator->lastRegions(), s.representative.data(), s.out.points, gaze,
+    if (Status st = s.errors.evaluate(*input, foveator->lastRegions(), s.representative.data(), s.out.points, gaze,
                                       model, metrics);
         !st) {
       return st;

@@ -12,6 +12,7 @@
 
 #include "core/result.h"
 #include "hal/frame.h"
+#include "firmware/frame_foveator.h"
 #include "tools/eval/plan.h"
 #include "tools/eval/quality/image_quality.h"
 
@@ -41,9 +42,13 @@ class QualityEvaluator {
   ~QualityEvaluator();
 
   // FREF is always drawn as the reference (and reported as a row: PSNR +inf, SSIM 1).
+  // A condition with source "map" foveates `map` instead of the frame: the map
+  // source's stage that fused the dataset's frames up to and including `frame`
+  // (its cloud the frame's unexplained points); kInvalidArgument without one.
+  // max_points (create) must then hold FrameFoveator::cloudCapacity.
   Result<std::vector<QualityRow>> evaluate(const hal::RgbdFrame& frame, const Dataset& dataset,
                                            const HmdPosition& position, const std::vector<Condition>& conditions,
-                                           const QualityOptions& options);
+                                           const QualityOptions& options, firmware::FrameFoveator* map = nullptr);
 
  private:
   struct State;

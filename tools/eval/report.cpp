@@ -95,7 +95,7 @@ std::string conditionSettingsText(const std::vector<Condition>& conditions) {
     if (settings.empty()) continue;
     out += c.name + " is `--preset " + c.preset;
     for (const std::string& setting : settings) out += " --set " + setting;
-    out += "` (docs/acuity-levels.md); ";
+    out += c.source.empty() ? "` (docs/acuity-levels.md); " : "` (docs/map.md); ";
   }
   return out;
 }

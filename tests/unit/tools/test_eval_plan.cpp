@@ -112,6 +112,31 @@ TEST(EvalPlan, AcuityWithItsFloorIsAConditionOfItsOwn) {
   EXPECT_EQ(std::strtod(shortestDecimal(1.0 / 3.0).c_str(), nullptr), 1.0 / 3.0);
 }
 
+// MAP is ACUITY told to foveate the fused map; it can be named but is not run by
+// default (its fusion makes every run slower, docs/eval.md).
+TEST(EvalPlan, MapIsAcuityOnTheMapAndNotADefault) {
+  Result<std::vector<Condition>> map = selectConditions("ACUITY,MAP");
+  ASSERT_TRUE(map);
+  ASSERT_EQ(map->size(), 2u);
+  EXPECT_EQ((*map)[1].name, "MAP");
+  EXPECT_EQ((*map)[1].preset, "ACUITY");
+  EXPECT_EQ((*map)[1].source, "map");
+  EXPECT_EQ(conditionSettings((*map)[1]), std::vector<std::string>{"foveation.source=map"});
+  // ACUITY itself stays on the frame, and no default condition is on the map.
+  EXPECT_EQ((*map)[0].source, "");
+  EXPECT_EQ(conditionSettings((*map)[0]), std::vector<std::string>{});
+  for (const Condition& c : defaultConditions()) {
+    EXPECT_NE(c.name, "MAP");
+    EXPECT_EQ(c.source, "") << c.name;
+    for (const std::string& setting : conditionSettings(c)) EXPECT_EQ(setting.find("foveation.source"), std::string::npos) << c.name;
+  }
+  EXPECT_EQ(allConditions().size(), defaultConditions().size() + 1);
+  EXPECT_EQ(runName(defaultDatasets("")[0], (*map)[1], makePositions(livingRoom(), 2, 1)[0]), "living-room_MAP_p1");
+  Result<std::vector<Condition>> bad = selectConditions("map");  // names are upper case
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.status().message().find("MAP"), std::string::npos);
+}
+
 // A run directory written by hand: the service logged frames 10..14, the operator
 // decoded 9 (not logged: before the session), 10, 11 (latency unknown), 12, 13;
 // the timing log's last line is cut short.
