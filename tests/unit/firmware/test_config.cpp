@@ -179,6 +179,9 @@ TEST(Config, RulesBetweenFields) {
   EXPECT_EQ(loadError("[foveation]\ncustom_bounds_deg = [5, 8]\n"),
             "fovea.toml:2: foveation.custom_bounds_deg: only with foveation.preset = \"custom\" (clear it, or set the "
             "preset)");
+  EXPECT_EQ(loadError("[map]\nconfidence_cap = 10\nstable_confidence = 12\n"),
+            "fovea.toml:3: map.stable_confidence: must be at most map.confidence_cap (got 12 > 10)");
+  EXPECT_EQ(loadError("[foveation]\nsource = \"mesh\"\n").rfind("fovea.toml:2: foveation.source: ", 0), 0u);
   const std::string decreasing = loadError("[foveation]\npreset = \"custom\"\ncustom_bounds_deg = [8, 5]\n");
   EXPECT_EQ(decreasing.rfind("fovea.toml:3: foveation.custom_bounds_deg: ", 0), 0u) << decreasing;
 
@@ -245,12 +248,25 @@ const std::vector<std::string> kEveryKeyChanged = {
     "foveation.refine_passes=3",
     "foveation.view_cull=\"drop\"",
     "foveation.view_cull_deg=65.0",
+    "foveation.source=map",
     "foveation.fixation.mode=fixed",
     "foveation.fixation.fixed_m=1.75",
     "foveation.fixation.hit_cone_deg=0.5",
     "foveation.fixation.hit_percentile=0.1",
     "foveation.fixation.fallback_m=3",
     "foveation.fixation.min_m=0.1",
+    "map.max_surfels=250000",
+    "map.max_bricks=4096",
+    "map.brick_size_m=0.25",
+    "map.depth_tolerance_sigmas=2.5",
+    "map.normal_tolerance_deg=20.0",
+    "map.confidence_cap=12.0",
+    "map.stable_confidence=2.5",
+    "map.unstable_max_frames=45",
+    "map.carve_weight=1.5",
+    "map.max_pose_jump_m=0.5",
+    "map.eye_face_cells=192",
+    "map.occlusion_margin=0.08",
     "stream.listen=[::1]:7001",
     "stream.key_file=\"/etc/fovea/robot key\\\"quoted\\\".key\"",
     "stream.insecure=false",
