@@ -868,6 +868,7 @@ int run(int argc, char** argv) {
   // the same frames; its cloud (and so the output) holds the map's surfels too.
   firmware::MapSettings map_settings;
   map_settings.source = firmware::FoveationSource::kMap;
+  map_settings.map.kernels = fovea::KernelSet::kRef;  // the report times the scalar references throughout
   const std::size_t cloud_points =
       options.hasMap() ? firmware::FrameFoveator::cloudCapacity(max_points, map_settings) : max_points;
   std::unique_ptr<firmware::FrameFoveator> map;
