@@ -17,6 +17,7 @@
 
 #include <Eigen/Geometry>
 
+#include "tests/support/simd_targets.h"
 #include "hal/camera/registration/registration.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
@@ -36,20 +37,11 @@ constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
 constexpr float kInff = std::numeric_limits<float>::infinity();
 constexpr float kDenormf = std::numeric_limits<float>::denorm_min();
 
-// Restricts Highway's dispatch to one target for the test's duration.
-class TargetTest : public ::testing::TestWithParam<int64_t> {
- protected:
-  void SetUp() override { forceSimdTarget(GetParam()); }
-  void TearDown() override { forceSimdTarget(0); }
-};
-
-std::vector<int64_t> targetsHere() {
-  forceSimdTarget(0);
-  return simdTargets();
-}
+using test::TargetTest;
+using test::simdTargetsHere;
 
 TEST(SimdTargets, ListWhichTargetsRun) {
-  const std::vector<int64_t> targets = targetsHere();
+  const std::vector<int64_t> targets = simdTargetsHere();
   ASSERT_FALSE(targets.empty());
   std::string names;
   for (int64_t t : targets) names += std::string(names.empty() ? "" : " ") + simdTargetName(t);
@@ -768,9 +760,8 @@ TEST(Registration, NaNProducingParametersAreRefused) {
   }
 }
 
-std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
 
-INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(targetsHere()), targetName);
+INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(simdTargetsHere()), test::simdTargetName);
 
 }  // namespace
 }  // namespace fovea::pipeline

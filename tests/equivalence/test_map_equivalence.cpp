@@ -18,6 +18,7 @@
 
 #include <Eigen/Geometry>
 
+#include "tests/support/simd_targets.h"
 #include "hal/camera.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/map/map_kernels.h"
@@ -26,17 +27,8 @@
 namespace fovea::pipeline::map {
 namespace {
 
-// Restricts Highway's dispatch to one target for the test's duration.
-class TargetTest : public ::testing::TestWithParam<int64_t> {
- protected:
-  void SetUp() override { forceSimdTarget(GetParam()); }
-  void TearDown() override { forceSimdTarget(0); }
-};
-
-std::vector<int64_t> targetsHere() {
-  forceSimdTarget(0);
-  return simdTargets();
-}
+using test::TargetTest;
+using test::simdTargetsHere;
 
 // The eight maps of one kernel's run, pre-filled with a marker that no kernel
 // writes, so a pixel left unwritten shows.
@@ -311,9 +303,8 @@ TEST_P(TargetTest, MapsFusedWithEitherKernelSetAreTheSame) {
   }
 }
 
-std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
 
-INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(targetsHere()), targetName);
+INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(simdTargetsHere()), test::simdTargetName);
 
 }  // namespace
 }  // namespace fovea::pipeline::map

@@ -18,15 +18,12 @@
 #include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"
+#include "tests/support/simd_targets.h"
 
 namespace fovea::pipeline {
 namespace {
 
-class SamplerTarget : public ::testing::TestWithParam<int64_t> {
- protected:
-  void SetUp() override { forceSimdTarget(GetParam()); }
-  void TearDown() override { forceSimdTarget(0); }
-};
+using SamplerTarget = test::TargetTest;  // tests/support/simd_targets.h
 
 ::testing::AssertionResult sameFoveated(const FoveatedCloud& a, const FoveatedCloud& b) {
   if (a.size() != b.size()) return ::testing::AssertionFailure() << "size " << a.size() << " vs " << b.size();
@@ -355,12 +352,7 @@ TEST_P(SamplerTarget, FixationMatchesTheReference) {
   }
 }
 
-std::string targetName(const ::testing::TestParamInfo<int64_t>& info) { return simdTargetName(info.param); }
-std::vector<int64_t> targetsHere() {
-  forceSimdTarget(0);
-  return simdTargets();
-}
-INSTANTIATE_TEST_SUITE_P(Targets, SamplerTarget, ::testing::ValuesIn(targetsHere()), targetName);
+INSTANTIATE_TEST_SUITE_P(Targets, SamplerTarget, ::testing::ValuesIn(test::simdTargetsHere()), test::simdTargetName);
 
 // ---- the whole Foveator, kernel set simd against ref ----------------------------
 

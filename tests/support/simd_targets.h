@@ -1,0 +1,36 @@
+// The equivalence tests' fixture: each TEST_P(TargetTest, ...) runs once per
+// Highway target compiled into the binary and supported by this CPU, with the
+// dispatch restricted to that target, and is named after it
+// (Targets/TargetTest.<Case>/<TARGET>), so CTest shows which targets ran.
+//   INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(fovea::test::simdTargetsHere()),
+//                            fovea::test::simdTargetName);
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/kernels/foveation_simd.h"
+
+namespace fovea::test {
+
+// Restricts Highway's dispatch to one target for the test's duration.
+class TargetTest : public ::testing::TestWithParam<int64_t> {
+ protected:
+  void SetUp() override { pipeline::forceSimdTarget(GetParam()); }
+  void TearDown() override { pipeline::forceSimdTarget(0); }
+};
+
+// The targets compiled in and supported here, best first.
+inline std::vector<int64_t> simdTargetsHere() {
+  pipeline::forceSimdTarget(0);
+  return pipeline::simdTargets();
+}
+
+inline std::string simdTargetName(const ::testing::TestParamInfo<int64_t>& info) {
+  return pipeline::simdTargetName(info.param);
+}
+
+}  // namespace fovea::test
