@@ -29,6 +29,22 @@ namespace {
 // 25 minutes at 100 frames, and 5 of its 50 at 20.
 int framesCounted() { return test::repetitions(100, 10); }
 
+// A camera opened and started, or null with the reason added as a failure.
+std::unique_ptr<hal::Camera> startedCamera(const std::string& spec) {
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(spec);
+  if (!camera.isOk()) {
+    ADD_FAILURE() << spec << ": " << camera.status().toString();
+    return nullptr;
+  }
+  Status s = camera.value()->open();
+  if (s.isOk()) s = camera.value()->start();
+  if (!s.isOk()) {
+    ADD_FAILURE() << spec << ": " << s.toString();
+    return nullptr;
+  }
+  return std::move(camera.value());
+}
+
 TEST(ZeroAllocation, CounterSeesAllocations) {
   // The test below means something only if the counter works.
   test::AllocationScope scope;
@@ -53,12 +69,10 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
   const fovea::KernelSet kernels = GetParam().kernels;
   const int threads = GetParam().threads;
   // 320x240 where a mock frame's ray cast costs 20 times as much (the frame path is the same code).
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(
+  const std::unique_ptr<hal::Camera> camera = startedCamera(
       test::timeScale() > 1.0 ? "mock:living-room,path=orbit,size=320x240" : "mock:living-room,path=orbit");
-  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
-  hal::Camera& cam = *camera.value();
-  ASSERT_TRUE(cam.open().isOk());
-  ASSERT_TRUE(cam.start().isOk());
+  ASSERT_TRUE(camera);
+  hal::Camera& cam = *camera;
   const hal::CameraIntrinsics& k = cam.info().intrinsics;
   const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
 
@@ -101,11 +115,9 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
 TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
   for (KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
     SCOPED_TRACE(std::string("kernels ") + std::string(kernelSetName(kernels)));
-    Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit,size=160x120");
-    ASSERT_TRUE(camera.isOk()) << camera.status().toString();
-    hal::Camera& cam = *camera.value();
-    ASSERT_TRUE(cam.open().isOk());
-    ASSERT_TRUE(cam.start().isOk());
+    const std::unique_ptr<hal::Camera> camera = startedCamera("mock:living-room,path=orbit,size=160x120");
+    ASSERT_TRUE(camera);
+    hal::Camera& cam = *camera;
     const hal::CameraIntrinsics& k = cam.info().intrinsics;
     hal::RgbdFrame frame(k.width, k.height);
     pipeline::map::SurfelMapConfig config;
@@ -141,11 +153,9 @@ TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
 // map's surfels the eye sees gathered with the frame's unexplained points and
 // foveated, the eye moving, the pool small enough that eviction runs too.
 TEST(ZeroAllocation, FoveatingTheMapAsTheEyeSeesIt) {
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("mock:living-room,path=orbit,size=160x120");
-  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
-  hal::Camera& cam = *camera.value();
-  ASSERT_TRUE(cam.open().isOk());
-  ASSERT_TRUE(cam.start().isOk());
+  const std::unique_ptr<hal::Camera> camera = startedCamera("mock:living-room,path=orbit,size=160x120");
+  ASSERT_TRUE(camera);
+  hal::Camera& cam = *camera;
   const hal::CameraIntrinsics& k = cam.info().intrinsics;
   const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
   firmware::MapSettings settings;
@@ -194,11 +204,9 @@ TEST_P(ZeroAllocationKernels, HundredTumFramesAfterWarmUp) {
   if (path.empty() || !std::ifstream(path + "/associations.txt")) {
     GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
   }
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera("tum:" + path + ",loop=on");
-  ASSERT_TRUE(camera.isOk()) << camera.status().toString();
-  hal::Camera& cam = *camera.value();
-  ASSERT_TRUE(cam.open().isOk());
-  ASSERT_TRUE(cam.start().isOk());
+  const std::unique_ptr<hal::Camera> camera = startedCamera("tum:" + path + ",loop=on");
+  ASSERT_TRUE(camera);
+  hal::Camera& cam = *camera;
   const std::size_t pixels = 640 * 480;
   hal::RgbdFrame frame(640, 480);
   pipeline::PointCloud cloud(pixels);
