@@ -520,6 +520,33 @@ TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
   }
 }
 
+// An eye close to a surface sees its surfels far apart (the box's front face,
+// 6.9 mm a pixel from the camera, is 1.3 degrees a surfel from 0.3 m, three cube
+// cells): only their footprints, splatted over the cells between them, keep the
+// wall behind from showing through.
+TEST(EyeView, CloseToASurfaceItsFootprintsCoverTheCellsBetweenItsSurfels) {
+  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
+  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
+  EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
+  PointCloud cloud(map.capacity());
+  const Eigen::Vector3d eye(0.05, -0.03, 1.5);
+  cloud.origin_m = eye;
+  EyeViewStats stats;
+  view.appendVisible(map, eye, cloud, stats);
+  const std::vector<bool> sent = sentBySlot(map, cloud, 0);
+  std::size_t behind = 0, leaked = 0;
+  for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+    const Eigen::Vector3d p = map.worldPosition(slot);
+    if (std::abs(p.z() - 3.0) < 0.01 && segmentHitsBox(box, -0.06, eye, p)) {
+      ++behind;
+      if (sent[slot]) ++leaked;
+    }
+  }
+  EXPECT_GT(behind, 1000u);
+  EXPECT_EQ(leaked, 0u) << "of " << behind << " wall surfels behind the box, seen through its face";
+}
+
 TEST(EyeView, TheFramesPointsOccludeTooAndStay) {
   // A map of the wall alone; a plate of points already in the cloud (a moving
   // object the map does not have) hides the wall behind it.
