@@ -1,0 +1,181 @@
+// The service's foveation stage (firmware/frame_foveator.h) with each source:
+// the frame source is exactly back-projection and foveation; the map source
+// fuses, gathers what the eye sees of the map and the frame's unexplained
+// points, and foveates them with every preset; a frame without a pose or a bad
+// gaze is a counted refusal or an error, never a crash.
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "firmware/frame_foveator.h"
+#include "hal/camera.h"
+#include "pipeline/kernels/backprojector.h"
+
+namespace fovea::firmware {
+namespace {
+
+constexpr const char* kCamera = "mock:living-room,path=orbit,size=160x120";
+
+struct Rig {
+  std::unique_ptr<hal::Camera> camera;
+  hal::RgbdFrame frame;
+  std::size_t pixels = 0;
+  int width = 0, height = 0;
+};
+
+Rig openRig() {
+  Rig rig;
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(kCamera);
+  EXPECT_TRUE(camera.isOk()) << camera.status().toString();
+  if (!camera.isOk()) return rig;
+  rig.camera = std::move(camera.value());
+  EXPECT_TRUE(rig.camera->open().isOk());
+  EXPECT_TRUE(rig.camera->start().isOk());
+  const hal::CameraIntrinsics& k = rig.camera->info().intrinsics;
+  rig.width = k.width;
+  rig.height = k.height;
+  rig.pixels = static_cast<std::size_t>(k.width) * k.height;
+  rig.frame = hal::RgbdFrame(k.width, k.height);
+  return rig;
+}
+
+MapSettings mapSource(std::size_t max_surfels = 1 << 16) {
+  MapSettings settings;
+  settings.source = FoveationSource::kMap;
+  settings.map.max_surfels = max_surfels;
+  return settings;
+}
+
+pipeline::Gaze gazeFor(const hal::RgbdFrame& frame) {
+  pipeline::Gaze gaze;
+  gaze.origin_m = frame.T_world_cam.t_world_cam;
+  gaze.direction = frame.T_world_cam.R_world_cam.col(2);
+  return gaze;
+}
+
+TEST(FrameFoveator, SourceNamesParse) {
+  EXPECT_EQ(parseFoveationSource("frame"), FoveationSource::kFrame);
+  EXPECT_EQ(parseFoveationSource("map"), FoveationSource::kMap);
+  EXPECT_FALSE(parseFoveationSource("Map").has_value());
+  EXPECT_FALSE(parseFoveationSource("").has_value());
+  EXPECT_EQ(foveationSourceName(FoveationSource::kMap), "map");
+  EXPECT_EQ(FrameFoveator::cloudCapacity(100, MapSettings{}), 100u);
+  EXPECT_EQ(FrameFoveator::cloudCapacity(100, mapSource(50)), 150u);
+}
+
+// The frame source is the plain pipeline: the same points out as a
+// Backprojector and a Foveator of its own.
+TEST(FrameFoveator, TheFrameSourceIsBackProjectionAndFoveation) {
+  Rig rig = openRig();
+  ASSERT_TRUE(rig.camera);
+  const pipeline::PipelineCapacity capacity{rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1};
+  Result<FrameFoveator> stage = FrameFoveator::create(capacity, {}, {}, {}, rig.width, rig.height);
+  ASSERT_TRUE(stage.isOk()) << stage.status().toString();
+  EXPECT_EQ(stage->map(), nullptr);
+  EXPECT_EQ(stage->mapMemoryBytes(), 0u);
+  pipeline::Backprojector backprojector(1, capacity.kernels);
+  pipeline::PointCloud cloud(rig.pixels);
+  pipeline::Foveator foveator = pipeline::Foveator::create(capacity, {}).value();
+  pipeline::FoveatedCloud a(rig.pixels), b(rig.pixels);
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+    pipeline::BackprojectCounts counts;
+    pipeline::FoveationStats sa, sb;
+    ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
+    ASSERT_TRUE(stage->foveate(gazeFor(rig.frame), a, sa).isOk());
+    ASSERT_TRUE(backprojector.run(rig.frame, {}, cloud, counts).isOk());
+    ASSERT_TRUE(foveator.foveate(cloud, gazeFor(rig.frame), b, sb).isOk());
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t p = 0; p < a.size(); ++p) {
+      ASSERT_EQ(a.points.world(p), b.points.world(p)) << "point " << p;
+    }
+  }
+}
+
+// Every preset foveates the map: the map's surfels reach the output, and the
+// cloud is the frame's unexplained points followed by them.
+TEST(FrameFoveator, EveryPresetFoveatesTheMap) {
+  for (pipeline::Preset preset : {pipeline::Preset::kF1, pipeline::Preset::kF2, pipeline::Preset::kF3,
+                                  pipeline::Preset::kFRef, pipeline::Preset::kAcuity}) {
+    SCOPED_TRACE(std::string(pipeline::presetName(preset)));
+    Rig rig = openRig();
+    ASSERT_TRUE(rig.camera);
+    const MapSettings settings = mapSource();
+    pipeline::FoveationConfig config;
+    config.acuity.preset = preset;
+    Result<FrameFoveator> stage = FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1},
+                                                        config, {}, settings, rig.width, rig.height);
+    ASSERT_TRUE(stage.isOk()) << stage.status().toString();
+    ASSERT_NE(stage->map(), nullptr);
+    EXPECT_GT(stage->mapMemoryBytes(), settings.map.max_surfels * sizeof(pipeline::map::Surfel));
+    pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
+    for (int i = 0; i < 8; ++i) {
+      ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+      pipeline::BackprojectCounts counts;
+      pipeline::FoveationStats stats;
+      ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
+      ASSERT_TRUE(stage->foveate(gazeFor(rig.frame), out, stats).isOk());
+      const MapFrameFigures& figures = stage->mapFigures();
+      EXPECT_EQ(figures.fuse.outcome, pipeline::map::FuseOutcome::kFused);
+      EXPECT_EQ(stage->cloud().size(), figures.frame_points + figures.eye.appended);
+      EXPECT_LE(figures.frame_points, rig.pixels);
+      EXPECT_GT(out.size(), 0u);
+      if (i == 7) {
+        EXPECT_GT(figures.eye.appended, rig.pixels / 2) << "the map's surfels reached the foveator";
+        EXPECT_LT(figures.frame_points, rig.pixels / 2) << "the map explains most of the frame by now";
+      }
+    }
+    // foveate() again (another gaze) gathers afresh: the cloud does not grow.
+    const std::size_t size = stage->cloud().size();
+    pipeline::Gaze other = gazeFor(rig.frame);
+    other.origin_m += Eigen::Vector3d(0.3, 0.0, 0.0);
+    pipeline::FoveationStats stats;
+    ASSERT_TRUE(stage->foveate(other, out, stats).isOk());
+    EXPECT_NEAR(static_cast<double>(stage->cloud().size()), static_cast<double>(size), 0.2 * size);
+    EXPECT_EQ(stage->cloud().size(), stage->mapFigures().frame_points + stage->mapFigures().eye.appended);
+  }
+}
+
+// A frame the pose source had no pose for: refused by the map and counted, and
+// back-projected whole so the operator keeps the live view; a gaze without a
+// finite origin is an error.
+TEST(FrameFoveator, AFrameWithoutAPoseIsCountedAndStillShown) {
+  Rig rig = openRig();
+  ASSERT_TRUE(rig.camera);
+  const MapSettings settings = mapSource();
+  Result<FrameFoveator> stage = FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1}, {}, {},
+                                                      settings, rig.width, rig.height);
+  ASSERT_TRUE(stage.isOk());
+  pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
+  pipeline::BackprojectCounts counts;
+  pipeline::FoveationStats stats;
+  ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+  ASSERT_TRUE(stage->backproject(rig.frame, counts, /*pose_valid=*/false).isOk());
+  EXPECT_EQ(stage->mapFigures().fuse.outcome, pipeline::map::FuseOutcome::kRefusedNoPose);
+  EXPECT_EQ(stage->map()->counters().refused_no_pose, 1u);
+  EXPECT_EQ(stage->map()->size(), 0u);
+  EXPECT_EQ(stage->mapFigures().frame_points, counts.valid);
+  EXPECT_GT(counts.valid, rig.pixels / 2);
+  ASSERT_TRUE(stage->foveate(gazeFor(rig.frame), out, stats).isOk());
+  EXPECT_GT(out.size(), 0u);
+
+  pipeline::Gaze bad = gazeFor(rig.frame);
+  bad.origin_m.x() = std::numeric_limits<double>::quiet_NaN();
+  const Status s = stage->foveate(bad, out, stats);
+  EXPECT_FALSE(s.isOk());
+  EXPECT_EQ(s.code(), ErrorCode::kInvalidInput);
+
+  // A frame with a NaN pose: refused (bad pose), and not back-projectable either: an error.
+  ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+  rig.frame.T_world_cam.t_world_cam.y() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(stage->backproject(rig.frame, counts).isOk());
+  EXPECT_EQ(stage->map()->counters().refused_bad_pose, 1u);
+  EXPECT_EQ(stage->cloud().size(), 0u);
+}
+
+}  // namespace
+}  // namespace fovea::firmware
