@@ -411,11 +411,13 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   // that, at most 85 degrees: at depth the test only tells a surface's front from
   // its back. (With the configured 30 degrees alone, two thirds of the pixels of
   // a static mock scene never merged: measured, frames 2 to 12.) A table over the
-  // depth range, per frame: no trigonometry per pixel.
-  {
+  // depth range, made again only when the focal length changes: no trigonometry
+  // per pixel, none per frame.
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const auto f_px = static_cast<float>(0.5 * (k.fx + k.fy));
+  if (f_px != normal_cos_f_px_) {
+    normal_cos_f_px_ = f_px;
     const auto tolerance_rad = static_cast<float>(config_.normal_tolerance_deg * std::numbers::pi / 180.0);
-    const hal::CameraIntrinsics& k = frame.intrinsics;
-    const auto f_px = static_cast<float>(0.5 * (k.fx + k.fy));
     const auto z0 = static_cast<float>(config_.depth.min_m), z1 = static_cast<float>(config_.depth.max_m);
     const std::size_t n = normal_cos_.size();
     for (std::size_t b = 0; b < n; ++b) {

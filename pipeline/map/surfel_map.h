@@ -216,7 +216,8 @@ class SurfelMap {
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
   std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a stable surfel took the pixel
-  std::vector<float> normal_cos_;         // per frame: the normal test's cosine by depth (associate())
+  std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
+  float normal_cos_f_px_ = 0.0f;          // ... for this focal length (0: not made yet)
 
   uint32_t frame_ = 0;                    // frames fused so far
   bool have_last_ = false;

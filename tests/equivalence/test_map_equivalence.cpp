@@ -19,6 +19,7 @@
 #include <Eigen/Geometry>
 
 #include "tests/support/simd_targets.h"
+#include "tests/support/test_time.h"
 #include "hal/camera.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/map/map_kernels.h"
@@ -117,8 +118,11 @@ TEST_P(TargetTest, RandomFrames) {
   const int sizes[][2] = {{640, 480}, {3, 3}, {4, 3}, {5, 5}, {7, 5}, {15, 6}, {17, 5}, {31, 6}, {33, 7},
                           {63, 5}, {65, 9}, {67, 5}, {129, 5}, {1000, 5}, {3, 37}, {6, 40}, {320, 240}};
   uint32_t with_normal = 0;
+  // Four frames of each size natively, two where a frame costs ten times as much
+  // (sanitizers, qemu): every size and tail is still covered.
+  const int reps = test::repetitions(4, 2);
   for (const auto& s : sizes) {
-    for (int rep = 0; rep < 4; ++rep) {
+    for (int rep = 0; rep < reps; ++rep) {
       const hal::RgbdFrame frame = randomFrame(s[0], s[1], rng);
       const DepthRange ranges[] = {{}, {0.5, 3.0}, {0.0, 1e9}};
       for (const DepthRange& range : ranges) {
@@ -126,7 +130,7 @@ TEST_P(TargetTest, RandomFrames) {
       }
     }
   }
-  EXPECT_GT(with_normal, 100000u) << "the random frames should give most pixels a normal";
+  EXPECT_GT(with_normal, 50000u * static_cast<uint32_t>(reps)) << "the random frames should give most pixels a normal";
 }
 
 TEST_P(TargetTest, NoValidDepthAndTheExtremes) {
@@ -284,7 +288,8 @@ TEST_P(TargetTest, MapsFusedWithEitherKernelSetAreTheSame) {
     SurfelMap simd = SurfelMap::create(config).value();
     hal::RgbdFrame frame(k.width, k.height);
     uint64_t merged = 0;
-    for (int i = 0; i < 12; ++i) {
+    const int frames = test::repetitions(12, 6);  // six where a frame costs ten times as much (sanitizers, qemu)
+    for (int i = 0; i < frames; ++i) {
       ASSERT_TRUE(cam.acquire(frame, std::chrono::seconds(5)).isOk());
       FuseStats sr, ss;
       ASSERT_EQ(ref.fuse(frame, sr), FuseOutcome::kFused) << spec << " frame " << i;

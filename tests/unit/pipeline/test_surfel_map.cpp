@@ -452,6 +452,18 @@ SurfelMap fusedWallAndBox(const Eigen::Vector3d& offset, const Box& box) {
   return map;
 }
 
+// The box in front of the wall, and the maps the EyeView tests share (each made
+// once: fusing them is most of these tests' time under the sanitizers and qemu).
+const Box kBoxBeforeWall{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
+const SurfelMap& wallAndBoxMap() {
+  static const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), kBoxBeforeWall);
+  return map;
+}
+const SurfelMap& wallAloneMap() {
+  static const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), Box{{50, 50, 50}, {51, 51, 51}});
+  return map;
+}
+
 // Which stable surfels appendVisible() appended: it appends in slot order, so
 // the cloud's points after `first` are matched with the stable slots in order.
 std::vector<bool> sentBySlot(const SurfelMap& map, const PointCloud& cloud, std::size_t first) {
@@ -478,8 +490,8 @@ bool segmentHitsBox(const Box& box, double margin, const Eigen::Vector3d& eye, c
 }
 
 TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
-  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
-  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
+  const Box& box = kBoxBeforeWall;
+  const SurfelMap& map = wallAndBoxMap();
   EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
   PointCloud cloud(map.capacity());
   std::mt19937_64 rng(11);
@@ -525,8 +537,8 @@ TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
 // cells): only their footprints, splatted over the cells between them, keep the
 // wall behind from showing through.
 TEST(EyeView, CloseToASurfaceItsFootprintsCoverTheCellsBetweenItsSurfels) {
-  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
-  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
+  const Box& box = kBoxBeforeWall;
+  const SurfelMap& map = wallAndBoxMap();
   EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
   PointCloud cloud(map.capacity());
   const Eigen::Vector3d eye(0.05, -0.03, 1.5);
@@ -550,8 +562,7 @@ TEST(EyeView, CloseToASurfaceItsFootprintsCoverTheCellsBetweenItsSurfels) {
 TEST(EyeView, TheFramesPointsOccludeTooAndStay) {
   // A map of the wall alone; a plate of points already in the cloud (a moving
   // object the map does not have) hides the wall behind it.
-  const Box nowhere{{50, 50, 50}, {51, 51, 51}};
-  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), nowhere);
+  const SurfelMap& map = wallAloneMap();
   EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
   PointCloud cloud(map.capacity() + 100000);
   const Eigen::Vector3d eye = Eigen::Vector3d::Zero();
@@ -585,10 +596,9 @@ TEST(EyeView, TheFramesPointsOccludeTooAndStay) {
 }
 
 TEST(EyeView, TenKilometresFromTheOriginSeesWhatTheOriginSees) {
-  const Box box{{-0.3, -0.3, 1.8}, {0.3, 0.3, 2.2}};
   const Eigen::Vector3d far(10'000.0, -3'000.0, 7'000.0);
-  const SurfelMap near_map = fusedWallAndBox(Eigen::Vector3d::Zero(), box);
-  const SurfelMap far_map = fusedWallAndBox(far, box);
+  const SurfelMap& near_map = wallAndBoxMap();
+  const SurfelMap far_map = fusedWallAndBox(far, kBoxBeforeWall);
   EyeView view = EyeView::create(EyeViewConfig{}, near_map.config().max_bricks).value();
   PointCloud near_cloud(near_map.capacity()), far_cloud(far_map.capacity());
   const Eigen::Vector3d eye(0.2, 0.1, 0.3);
@@ -606,7 +616,7 @@ TEST(EyeView, TenKilometresFromTheOriginSeesWhatTheOriginSees) {
 }
 
 TEST(EyeView, AFullCloudCountsWhatItCouldNotTake) {
-  const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), Box{{50, 50, 50}, {51, 51, 51}});
+  const SurfelMap& map = wallAloneMap();
   EyeView view = EyeView::create(EyeViewConfig{}, map.config().max_bricks).value();
   PointCloud cloud(1000);
   EyeViewStats stats;
