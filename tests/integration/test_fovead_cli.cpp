@@ -239,11 +239,12 @@ TEST(FoveadCli, RunFoveatesTheMapOfTheTumRecording) {
     GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
   }
   const ProcessResult r =
-      run(fovead() + " run --source map --max-surfels 262144 --camera tum:" + path + ",loop=off --frames 6 --every 0");
+      run(fovead() + " run --source map --max-surfels 65536 --camera tum:" + path + ",loop=off --frames 3 --every 0");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("6 frames fused, refused 0 without a pose, 0 for another reason"), std::string::npos)
+  // A pool smaller than a frame: eviction on every frame, as on a small board.
+  EXPECT_NE(r.output.find("3 frames fused, refused 0 without a pose, 0 for another reason"), std::string::npos)
       << r.output;
-  EXPECT_NE(r.output.find("summary: 6 frames foveated, 0 failed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("summary: 3 frames foveated, 0 failed"), std::string::npos) << r.output;
 }
 
 TEST(FoveadCli, UnreadableAndMalformedFilesFailCleanly) {
