@@ -24,12 +24,9 @@ std::string program(const char* path) {
   return emulator.empty() ? std::string(path) : emulator + " " + path;
 }
 
-// The seconds a process wait allows (test_time.h's limit).
-int waitSeconds(int seconds) { return static_cast<int>(test::waitLimitSeconds(seconds)); }
-
 // The port in "viewer: open http://127.0.0.1:PORT/".
 int viewerPort(test::BackgroundProcess& op) {
-  if (!op.waitFor("viewer: open http://127.0.0.1:", waitSeconds(10)) || !op.waitFor("/\n", waitSeconds(2))) return -1;
+  if (!op.waitFor("viewer: open http://127.0.0.1:", 10) || !op.waitFor("/\n", 2)) return -1;
   std::smatch m;
   const std::string out = op.output();
   return std::regex_search(out, m, std::regex("viewer: open http://127\\.0\\.0\\.1:(\\d+)/")) ? std::stoi(m[1].str()) : -1;
@@ -51,7 +48,7 @@ class OperatorView : public ::testing::Test {
 TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
   test::BackgroundProcess robot(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120,fps=15 --every 0 " +
                                 "--listen 127.0.0.1:0 --key-file " + dir_.file("key"));
-  ASSERT_TRUE(robot.waitFor("streaming: listening on ", waitSeconds(10)) && robot.waitFor(" (", waitSeconds(2)))
+  ASSERT_TRUE(robot.waitFor("streaming: listening on ", 10) && robot.waitFor(" (", 2))
       << robot.output();
   std::smatch m;
   const std::string robot_out = robot.output();
@@ -60,7 +57,7 @@ TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
 
   // Another operator holds the robot: the viewer's operator is refused, and says why.
   test::BackgroundProcess first(operatorCommand(address, "--name alice --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --quiet"));
-  ASSERT_TRUE(first.waitFor("connected to", waitSeconds(10))) << first.output();
+  ASSERT_TRUE(first.waitFor("connected to", 10)) << first.output();
   test::BackgroundProcess op(operatorCommand(address, "--name viewer --view 127.0.0.1:0 --quiet --summary " +
                                                           dir_.file("summary.json")));
   const int port = viewerPort(op);
@@ -72,7 +69,7 @@ TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
 
   // The first operator leaves: the viewer's operator gets in and frames flow to the tab.
   // (Its exit status says whether a frame reached it before it left: not the point here.)
-  EXPECT_NE(first.stop(SIGTERM, waitSeconds(10)), -1) << first.output();
+  EXPECT_NE(first.stop(SIGTERM, 10), -1) << first.output();
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"state\":\"streaming\""); }, 10s)) << op.output();
   ASSERT_TRUE(waitUntil([&] { return tab.frames() >= 3; }, 10s)) << op.output();
   const std::vector<uint8_t> frame = tab.lastFrame();
@@ -80,13 +77,13 @@ TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
   EXPECT_EQ(std::string(frame.begin(), frame.begin() + 4), "FVF1");
 
   // The robot stops (it says Bye): the page shows it gone, the operator keeps trying.
-  EXPECT_EQ(robot.stop(SIGTERM, waitSeconds(10)), 0) << robot.output();
+  EXPECT_EQ(robot.stop(SIGTERM, 10), 0) << robot.output();
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"state\":\"robot-gone\""); }, 10s)) << op.output();
-  ASSERT_TRUE(op.waitFor("reconnecting", waitSeconds(5))) << op.output();
+  ASSERT_TRUE(op.waitFor("reconnecting", 5)) << op.output();
   EXPECT_FALSE(tab.closedByServer());
 
   tab.close();
-  EXPECT_EQ(op.stop(SIGTERM, waitSeconds(20)), 0) << op.output();  // it received frames: success
+  EXPECT_EQ(op.stop(SIGTERM, 20), 0) << op.output();  // it received frames: success
   const std::string out = op.output();
   EXPECT_NE(out.find("viewer: 1 tabs served"), std::string::npos) << out;
 }
@@ -99,10 +96,10 @@ TEST_F(OperatorView, WithoutARobotThePageStaysUpAndSaysSo) {
   test::Tab tab(port);
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"type\":\"hello\""); }, 10s));
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"state\":\"connecting\""); }, 10s));
-  ASSERT_TRUE(op.waitFor("trying again in 1 s", waitSeconds(10))) << op.output();
+  ASSERT_TRUE(op.waitFor("trying again in 1 s", 10)) << op.output();
   // Still serving after a failed attempt; SIGTERM ends it, with no frames: exit 1.
   tab.send(R"({"type":"gaze","origin":[0,0,1],"direction":[0,1,0]})");
-  EXPECT_EQ(op.stop(SIGTERM, waitSeconds(20)), 1) << op.output();
+  EXPECT_EQ(op.stop(SIGTERM, 20), 1) << op.output();
   EXPECT_NE(op.output().find("viewer: 1 tabs served (0 refused)"), std::string::npos) << op.output();
 }
 

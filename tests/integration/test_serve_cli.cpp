@@ -32,7 +32,7 @@ void writeFile(const std::string& path, const std::string& text) {
 // loaded CI); how long the stop took is what the tests bound.
 double stopSeconds(test::BackgroundProcess& process, int signal_number, int& exit_code) {
   const auto t0 = std::chrono::steady_clock::now();
-  exit_code = process.stop(signal_number, test::waitLimitSeconds(5.0));
+  exit_code = process.stop(signal_number, 5.0);
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 

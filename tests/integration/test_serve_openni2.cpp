@@ -48,7 +48,9 @@ TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
   EXPECT_EQ(op.exit_code, 0) << op.output << "\n--- service:\n" << serve.output();
   std::smatch m;
   ASSERT_TRUE(std::regex_search(op.output, m, std::regex("summary: ([0-9]+) frames"))) << op.output;
-  EXPECT_GE(std::stoi(m[1].str()), 10) << op.output;  // 30 fps for 3 s, fewer on a loaded machine
+  // 30 fps for 3 s natively. A sanitized service on a loaded 2-core machine
+  // managed 4; three frames still show the stream decodes end to end.
+  EXPECT_GE(std::stoi(m[1].str()), test::repetitions(10, 3)) << op.output;
   EXPECT_NE(op.output.find(" 0 bad"), std::string::npos) << op.output;
 
   // Points decoded: the summary's per-region points per frame add up to more than 0.
@@ -65,11 +67,10 @@ TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
   EXPECT_NE(summary.find("\"datagrams_invalid\": 0"), std::string::npos) << summary;
 
   ASSERT_TRUE(serve.waitFor("out ", 5.0)) << serve.output();
-  // Scaled as test_time.h's waits: under ASan the OPENNI2 tests unwind slowly
-  // (tests/CMakeLists.txt), and LeakSanitizer's check at exit then takes 1.5 s on an
-  // idle 2-core host; CI runs three stages at once, where it took over 5 s. A hang
-  // still fails.
-  const int exit_code = serve.stop(SIGTERM, test::waitLimitSeconds(5.0));
+  // Under ASan the OPENNI2 tests unwind slowly (tests/CMakeLists.txt), and
+  // LeakSanitizer's check at exit then takes 1.5 s on an idle 2-core host; stop()
+  // scales the wait for that build and a loaded machine. A hang still fails.
+  const int exit_code = serve.stop(SIGTERM, 5.0);
   EXPECT_EQ(exit_code, 0) << serve.output();
   EXPECT_NE(serve.output().find("gaze: operator"), std::string::npos) << serve.output();
 }

@@ -59,7 +59,7 @@ StreamRun runStream(const test::TempDir& dir, const std::string& listen, const s
                                   service_flags);
   EXPECT_TRUE(service.started());
   // The whole "listening on ADDR:PORT (" line.
-  if (!service.waitFor("streaming: listening on ", 30) || !service.waitFor(" (", 5)) {
+  if (!service.waitFor("streaming: listening on ", 10) || !service.waitFor(" (", 2)) {
     run.service_output = service.output();
     ADD_FAILURE() << "the service did not start listening:\n" << run.service_output;
     return run;
@@ -72,11 +72,11 @@ StreamRun runStream(const test::TempDir& dir, const std::string& listen, const s
                              dir.file("key") + " --gaze " + kGazeScript + " --duration " + std::to_string(seconds + 60) +
                              " --summary " + dir.file("summary.json") + " --save-ply " + dir.file("frames") + " " +
                              operator_flags);
-  EXPECT_TRUE(op.waitFor("connected to", 30)) << op.output();
+  EXPECT_TRUE(op.waitFor("connected to", 10)) << op.output();
   std::this_thread::sleep_for(std::chrono::duration<double>(streamSeconds(seconds)));
-  run.service_exit = service.stop(SIGTERM, 20);
+  run.service_exit = service.stop(SIGTERM, 5);
   run.service_output = service.output();
-  run.operator_exit = op.stop(0, 20);  // signal 0: only waits for the exit the Bye causes
+  run.operator_exit = op.stop(0, 5);  // signal 0: only waits for the exit the Bye causes
   run.operator_output = op.output();
   return run;
 }
@@ -212,7 +212,7 @@ TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
   ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
   test::BackgroundProcess service(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --every 0 --listen 127.0.0.1:0 --key-file " +
                                   dir_.file("key"));
-  ASSERT_TRUE(service.waitFor(" (", 30)) << service.output();
+  ASSERT_TRUE(service.waitFor(" (", 10)) << service.output();
   std::smatch m;
   const std::string out = service.output();
   ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
@@ -220,7 +220,7 @@ TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
                                                   " --key-file " + dir_.file("other") + " --gaze " + kGazeScript +
                                                   " --duration 1");
   EXPECT_EQ(op.exit_code, 1) << op.output;
-  EXPECT_EQ(service.stop(SIGTERM, 10), 0) << service.output();
+  EXPECT_EQ(service.stop(SIGTERM, 5), 0) << service.output();
   EXPECT_NE(service.output().find("0 sessions"), std::string::npos) << service.output();
   EXPECT_TRUE(std::regex_search(service.output(), std::regex("dropped \\S*auth\\S*\\s+[1-9]"))) << service.output();
 }

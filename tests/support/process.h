@@ -13,6 +13,8 @@
 #include <random>
 #include <string>
 
+#include "tests/support/test_time.h"
+
 namespace fovea::test {
 
 struct ProcessResult {
@@ -65,10 +67,11 @@ class BackgroundProcess {
   bool started() const { return pid_ > 0 && fd_ >= 0; }
   const std::string& output() const { return output_; }
 
-  // Reads output until it contains `text` (true) or timeout_s passes or the
-  // program closes its output (false).
-  bool waitFor(const std::string& text, double timeout_s) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  // Reads output until it contains `text` (true) or the program closes its
+  // output (false), giving up after waitLimitSeconds(expected_s): the time the
+  // text takes natively, scaled for this build and a loaded machine (test_time.h).
+  bool waitFor(const std::string& text, double expected_s) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitLimitSeconds(expected_s));
     while (output_.find(text) == std::string::npos) {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
       if (left.count() <= 0 || !readSome(static_cast<int>(left.count()))) return false;
@@ -79,12 +82,13 @@ class BackgroundProcess {
   // Sends a signal without waiting (SIGHUP to a service).
   bool signal(int signal_number) { return pid_ > 0 && !exited_ && kill(pid_, signal_number) == 0; }
 
-  // Sends `signal`, waits up to timeout_s for the exit, collects the rest of the
-  // output. Returns the exit code (-1: killed by a signal or did not exit in time).
-  int stop(int signal_number, double timeout_s) {
+  // Sends `signal`, waits for the exit (expected_s natively, scaled as waitFor),
+  // collects the rest of the output. Returns the exit code (-1: killed by a
+  // signal or did not exit in time).
+  int stop(int signal_number, double expected_s) {
     if (pid_ <= 0) return -1;
     kill(pid_, signal_number);
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitLimitSeconds(expected_s));
     int status = 0;
     while (waitpid(pid_, &status, WNOHANG) == 0) {
       if (std::chrono::steady_clock::now() > end) return -1;
