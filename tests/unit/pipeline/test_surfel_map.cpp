@@ -500,7 +500,9 @@ TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
   // A cell is 2/256 of a face, at most 0.45 degrees: at the box's 2 m that is
   // 16 mm; 6 cm of margin is several cells plus a surfel's own footprint.
   const double margin = 0.06;
-  for (int trial = 0; trial < 12; ++trial) {
+  // Three eyes where a check costs 10 to 40 times as much (sanitizers, qemu).
+  const int trials = test::repetitions(12, 3);
+  for (int trial = 0; trial < trials; ++trial) {
     const Eigen::Vector3d eye(lateral(rng), lateral(rng), along(rng));
     cloud.clear();
     cloud.origin_m = eye + Eigen::Vector3d(0.5, -0.25, 1.0);  // any origin: positions are relative to it
