@@ -290,7 +290,7 @@ TEST_P(TargetTest, MapsFusedWithEitherKernelSetAreTheSame) {
     uint64_t merged = 0;
     const int frames = test::repetitions(12, 6);  // six where a frame costs ten times as much (sanitizers, qemu)
     for (int i = 0; i < frames; ++i) {
-      ASSERT_TRUE(cam.acquire(frame, std::chrono::seconds(5)).isOk());
+      ASSERT_TRUE(cam.acquire(frame, test::scaled(std::chrono::seconds(5))).isOk());
       FuseStats sr, ss;
       ASSERT_EQ(ref.fuse(frame, sr), FuseOutcome::kFused) << spec << " frame " << i;
       ASSERT_EQ(simd.fuse(frame, ss), FuseOutcome::kFused) << spec << " frame " << i;

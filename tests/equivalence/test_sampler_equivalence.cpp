@@ -108,7 +108,7 @@ TEST_P(SamplerTarget, ImageCoherentCloud) {
   ASSERT_TRUE(camera.value()->open().isOk());
   ASSERT_TRUE(camera.value()->start().isOk());
   hal::RgbdFrame frame(320, 240);
-  ASSERT_TRUE(camera.value()->acquire(frame, std::chrono::seconds(2)).isOk());
+  ASSERT_TRUE(camera.value()->acquire(frame, test::scaled(std::chrono::seconds(2))).isOk());
   PointCloud cloud(frame.pixelCount());
   BackprojectCounts bc;
   ASSERT_TRUE(backprojectSimd(frame, DepthRange{}, cloud, bc).isOk());

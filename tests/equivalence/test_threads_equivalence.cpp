@@ -15,6 +15,7 @@
 #include "pipeline/kernels/hash_voxel_sampler.h"
 #include "pipeline/kernels/worker_pool.h"
 #include "tests/support/clouds.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::pipeline {
 namespace {
@@ -176,7 +177,7 @@ TEST(Threads, MockCameraPipelineIsIdenticalForOneToFourThreads) {
   ASSERT_TRUE(cam.start().isOk());
   const std::size_t pixels = static_cast<std::size_t>(cam.info().intrinsics.width) * cam.info().intrinsics.height;
   hal::RgbdFrame frame(cam.info().intrinsics.width, cam.info().intrinsics.height);
-  ASSERT_TRUE(cam.acquire(frame, std::chrono::seconds(2)).isOk());
+  ASSERT_TRUE(cam.acquire(frame, test::scaled(std::chrono::seconds(2))).isOk());
   Gaze gaze;
   gaze.origin_m = frame.T_world_cam.t_world_cam;
   gaze.direction = frame.T_world_cam.R_world_cam.col(2);

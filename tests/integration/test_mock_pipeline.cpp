@@ -28,7 +28,7 @@ class MockPipeline {
 
   // The next frame, foveated for a gaze from the camera towards the scene centre.
   const pipeline::FoveatedCloud& next() {
-    EXPECT_TRUE(camera_->acquire(frame_, std::chrono::seconds(1)).isOk());
+    EXPECT_TRUE(camera_->acquire(frame_, test::scaled(std::chrono::seconds(1))).isOk());
     pipeline::BackprojectCounts counts;
     EXPECT_TRUE(pipeline::backprojectRef(frame_, pipeline::DepthRange{}, cloud_, counts).isOk());
     pipeline::Gaze gaze;

@@ -88,7 +88,7 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
   auto runFrame = [&](int i) {
     pipeline::BackprojectCounts bc;
     pipeline::FoveationStats stats;
-    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk()) return false;
     if (!backprojector.run(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;
@@ -130,7 +130,7 @@ TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
     pipeline::map::SurfelMap& map = created.value();
     auto fuseFrame = [&] {
       pipeline::map::FuseStats stats;
-      return cam.acquire(frame, std::chrono::milliseconds(100)).isOk() &&
+      return cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk() &&
              map.fuse(frame, stats) == pipeline::map::FuseOutcome::kFused;
     };
     for (int i = 0; i < 3; ++i) ASSERT_TRUE(fuseFrame());  // warm-up
@@ -171,7 +171,7 @@ TEST(ZeroAllocation, FoveatingTheMapAsTheEyeSeesIt) {
   auto runFrame = [&](int i) {
     pipeline::BackprojectCounts counts;
     pipeline::FoveationStats stats;
-    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk()) return false;
     if (!stage.backproject(frame, counts).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam + Eigen::Vector3d(0.05 * (i % 5), 0.0, -0.1);
@@ -216,7 +216,7 @@ TEST_P(ZeroAllocationKernels, HundredTumFramesAfterWarmUp) {
   auto runFrame = [&] {
     pipeline::BackprojectCounts bc;
     pipeline::FoveationStats stats;
-    if (!cam.acquire(frame, std::chrono::milliseconds(100)).isOk()) return false;
+    if (!cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk()) return false;
     if (!backprojector.run(frame, pipeline::DepthRange{}, cloud, bc).isOk()) return false;
     pipeline::Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;

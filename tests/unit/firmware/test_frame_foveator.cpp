@@ -14,6 +14,7 @@
 #include "firmware/frame_foveator.h"
 #include "hal/camera.h"
 #include "pipeline/kernels/backprojector.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::firmware {
 namespace {
@@ -82,7 +83,7 @@ TEST(FrameFoveator, TheFrameSourceIsBackProjectionAndFoveation) {
   pipeline::Foveator foveator = pipeline::Foveator::create(capacity, {}).value();
   pipeline::FoveatedCloud a(rig.pixels), b(rig.pixels);
   for (int i = 0; i < 3; ++i) {
-    ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+    ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
     pipeline::BackprojectCounts counts;
     pipeline::FoveationStats sa, sb;
     ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
@@ -114,7 +115,7 @@ TEST(FrameFoveator, EveryPresetFoveatesTheMap) {
     EXPECT_GT(stage->mapMemoryBytes(), settings.map.max_surfels * sizeof(pipeline::map::Surfel));
     pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
     for (int i = 0; i < 8; ++i) {
-      ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+      ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
       pipeline::BackprojectCounts counts;
       pipeline::FoveationStats stats;
       ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
@@ -153,7 +154,7 @@ TEST(FrameFoveator, AFrameWithoutAPoseIsCountedAndStillShown) {
   pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
   pipeline::BackprojectCounts counts;
   pipeline::FoveationStats stats;
-  ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+  ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
   ASSERT_TRUE(stage->backproject(rig.frame, counts, /*pose_valid=*/false).isOk());
   EXPECT_EQ(stage->mapFigures().fuse.outcome, pipeline::map::FuseOutcome::kRefusedNoPose);
   EXPECT_EQ(stage->map()->counters().refused_no_pose, 1u);
@@ -170,7 +171,7 @@ TEST(FrameFoveator, AFrameWithoutAPoseIsCountedAndStillShown) {
   EXPECT_EQ(s.code(), ErrorCode::kInvalidInput);
 
   // A frame with a NaN pose: refused (bad pose), and not back-projectable either: an error.
-  ASSERT_TRUE(rig.camera->acquire(rig.frame, std::chrono::seconds(1)).isOk());
+  ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
   rig.frame.T_world_cam.t_world_cam.y() = std::numeric_limits<double>::quiet_NaN();
   EXPECT_FALSE(stage->backproject(rig.frame, counts).isOk());
   EXPECT_EQ(stage->map()->counters().refused_bad_pose, 1u);

@@ -12,6 +12,7 @@
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::test {
 
@@ -38,7 +39,7 @@ inline MockFoveatedFrame mockFoveatedFrame(const std::string& spec = "mock:livin
   pipeline::Foveator foveator = pipeline::Foveator::create({pixels, pixels}, config).value();
   pipeline::FoveationStats stats;
   for (int f = 0; f < frames; ++f) {
-    EXPECT_TRUE(camera->acquire(frame, std::chrono::seconds(1)).isOk());
+    EXPECT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
     pipeline::BackprojectCounts counts;
     EXPECT_TRUE(pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, counts).isOk());
     pipeline::Gaze gaze;

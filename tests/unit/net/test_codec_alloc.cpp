@@ -4,6 +4,7 @@
 
 #include "net/codec.h"
 #include "tests/support/alloc_counter.h"
+#include "tests/support/test_time.h"
 #include "tests/unit/net/mock_frame.h"
 
 namespace fovea::net {
@@ -20,7 +21,9 @@ TEST(CodecZeroAllocation, EncodeAndSummaryAfterCreate) {
     ChunkEncoder enc = ChunkEncoder::create(config, 640 * 480).value();
     const uint16_t sent[] = {1, 2, 3, 4};
     test::AllocationScope scope;
-    for (uint32_t frame = 0; frame < 20; ++frame) {
+    // Both frames twice where an encode costs 10 to 40 times as much (sanitizers, qemu).
+    const uint32_t frames = static_cast<uint32_t>(test::repetitions(20, 4));
+    for (uint32_t frame = 0; frame < frames; ++frame) {
       const test::MockFoveatedFrame& f = frame % 2 ? a : b;
       ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, frame, 0).isOk());
       ASSERT_GT(enc.chunkCount(), 10u);
