@@ -75,7 +75,8 @@ class EyeView {
   struct Cell {
     uint32_t face = 0;  // 0..5: +x, -x, +y, -y, +z, -z
     int u = 0, v = 0;
-    float axis = 0.0f;  // |d| along the face's axis
+    float fu = 0.0f, fv = 0.0f;  // the direction's position in cell units (u <= fu < u + 1)
+    float axis = 0.0f;           // |d| along the face's axis
   };
   Cell cellOf(const Eigen::Vector3f& d) const;
   std::size_t indexOf(const Cell& c, int u, int v) const {
