@@ -129,6 +129,11 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     const float radius = std::min(kMaxSplatCells, surfelRadius(s) / c.axis * half);
     float& own = nearest_[indexOf(c, c.u, c.v)];
     own = std::min(own, dist);
+    // Fusion gives a surfel sqrt(2) times its pixel's footprint (map_kernels.cpp),
+    // so a radius under one cell means surfels at most 0.71 cells apart: every
+    // cell of the surface then holds a surfel of its own (a disc of radius 0.5,
+    // the lattice's covering radius, fits in a cell). Most surfels take this path.
+    if (radius < 1.0f) continue;
     // Only the cells whose centre (u + 0.5) can lie within the radius.
     const int u0 = std::max(0, -floorCell(radius + 0.5f - c.fu));
     const int u1 = std::min(face_cells_ - 1, floorCell(c.fu + radius - 0.5f));
