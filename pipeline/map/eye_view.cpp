@@ -124,9 +124,9 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     // The footprint covers its own cell and every cell whose centre lies within
     // its radius of the surfel's exact position. Neighbouring surfels' discs
     // overlap, so their union covers every cell between them. (Rounding the
-    // radius down to whole cells around the surfel's cell instead left a grid of
-    // holes wherever surfels were more than a cell apart and their radius under
-    // one: from 1.4 m at 160x120, the wall showed through a box.)
+    // radius down to whole cells around the surfel's cell instead turned 1.8
+    // cells into a cross of 5 and left a grid of holes between surfels 1.4 cells
+    // apart: from 1.4 m at 160x120, the wall showed through a box.)
     const float radius = std::min(kMaxSplatCells, surfelRadius(s) / c.axis * half);
     float& own = nearest_[indexOf(c, c.u, c.v)];
     own = std::min(own, dist);

@@ -244,8 +244,8 @@ TEST(SurfelMap, AnObjectThatLeftLeavesNoGhost) {
 }
 
 TEST(SurfelMap, OneObservationFusedOverAndOverStaysWhereItWas) {
-  // The figure is 100 000 frames; the sanitizers and qemu fuse 300 (the
-  // map's library is unoptimised under ASan: 2 000 took 37 s there).
+  // The figure is 100 000 frames; the sanitizers and qemu fuse 300 (a
+  // fusion costs 10 to 40 times as much there: 2 000 took 37 s under ASan).
   const int frames = test::repetitions(100000, 300);
   const int w = 16, h = 12;
   SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
@@ -461,7 +461,7 @@ const SurfelMap& wallAndBoxMap() {
   return map;
 }
 // At 160x120 the box's surfels lie 15 mm apart: from the eyes below, more than
-// one cube cell, with footprints under one cell.
+// one cube cell (1.4 from 1.4 m), with footprints of under two cells.
 const SurfelMap& sparseWallAndBoxMap() {
   static const SurfelMap map = fusedWallAndBox(Eigen::Vector3d::Zero(), kBoxBeforeWall, 160, 120);
   return map;
@@ -548,8 +548,8 @@ TEST(EyeView, HidesWhatTheBoxCoversFromTheEyeAndSendsTheRest) {
   expectTheBoxHidesTheWall(wallAndBoxMap(), test::repetitions(12, 3), 1000, 10000, 1000);
 }
 
-// Surfels more than a cell apart, each footprint under a cell: the footprints
-// cover the cells between them (rounding a footprint down to whole cells left a
+// Surfels more than a cell apart: their footprints cover the cells between them
+// (rounding a footprint's radius down to whole cells around its cell left a
 // grid of holes, 5 cm apart on the box's face, through which 54 wall surfels
 // were sent from one of these eyes).
 TEST(EyeView, SurfelsMoreThanACellApartLeaveNoHoles) {
