@@ -77,6 +77,11 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_table_.assign(nextPowerOfTwo(2 * config.max_bricks), 0);
   brick_cam_.resize(config.max_bricks);
   brick_visible_.resize(config.max_bricks);
+  brick_head_.assign(config.max_bricks, kNoSurfel);
+  brick_stable_.assign(config.max_bricks, 0);
+  brick_changes_.assign(config.max_bricks, 0);
+  link_next_.resize(config.max_surfels);
+  link_prev_.resize(config.max_surfels);
   for (std::vector<float>* map : {&vertex_x_, &vertex_y_, &vertex_z_, &normal_x_, &normal_y_, &normal_z_, &radius_,
                                   &weight_}) {
     map->resize(pixels);
@@ -100,6 +105,8 @@ std::size_t SurfelMap::memoryBytes() const {
          eviction_.capacity() * sizeof(uint64_t) + brick_keys_.capacity() * sizeof(BrickKey) +
          brick_table_.capacity() * sizeof(int32_t) + brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
          brick_visible_.capacity() +
+         (brick_head_.capacity() + brick_stable_.capacity() + brick_changes_.capacity() + link_next_.capacity() +
+          link_prev_.capacity()) * sizeof(uint32_t) +
          (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
           weight_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
          index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
@@ -108,6 +115,9 @@ std::size_t SurfelMap::memoryBytes() const {
 void SurfelMap::clear() {
   std::fill(surfels_.begin(), surfels_.begin() + static_cast<std::ptrdiff_t>(high_water_), Surfel{});
   std::fill(brick_table_.begin(), brick_table_.end(), 0);
+  std::fill(brick_head_.begin(), brick_head_.end(), kNoSurfel);
+  std::fill(brick_stable_.begin(), brick_stable_.end(), 0);
+  std::fill(brick_changes_.begin(), brick_changes_.end(), 0);
   free_count_ = high_water_ = live_ = brick_count_ = 0;
   frame_ = 0;
   have_last_ = false;
@@ -225,10 +235,33 @@ void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
   stats.pixels_valid = pipeline::map::computeVertices(params, pixelMaps(), config_.kernels);
 }
 
-void SurfelMap::removeSurfel(uint32_t slot) {
-  surfels_[slot].flags = 0;
-  free_[free_count_++] = slot;
+void SurfelMap::detachSurfel(uint32_t slot) {
+  Surfel& s = surfels_[slot];
+  if (s.flags & kSurfelStable) {
+    --brick_stable_[s.brick];
+    ++brick_changes_[s.brick];
+  }
+  const uint32_t next = link_next_[slot], prev = link_prev_[slot];
+  if (prev == kNoSurfel) {
+    brick_head_[s.brick] = next;
+  } else {
+    link_next_[prev] = next;
+  }
+  if (next != kNoSurfel) link_prev_[next] = prev;
+  s.flags = 0;
   --live_;
+}
+
+void SurfelMap::removeSurfel(uint32_t slot) {
+  detachSurfel(slot);
+  free_[free_count_++] = slot;
+}
+
+void SurfelMap::markStable(Surfel& s) {
+  if (s.flags & kSurfelStable) return;
+  s.flags |= kSurfelStable;
+  ++brick_stable_[s.brick];
+  ++brick_changes_[s.brick];
 }
 
 bool SurfelMap::carveTo(uint32_t slot, float left, FuseStats& stats) {
@@ -394,9 +427,15 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
   s.green = rgb[1];
   s.blue = rgb[2];
   s.confidence = encodeConfidence(weight);
-  s.flags = kSurfelLive | (weight >= config_.stable_confidence ? kSurfelStable : 0);
+  s.flags = kSurfelLive;
   s.brick = static_cast<uint16_t>(brick);
   s.first_seen = s.last_seen = frame_;
+  const uint32_t head = brick_head_[s.brick];
+  link_next_[slot] = head;
+  link_prev_[slot] = kNoSurfel;
+  if (head != kNoSurfel) link_prev_[head] = slot;
+  brick_head_[s.brick] = slot;
+  if (weight >= config_.stable_confidence) markStable(s);
   ++live_;
   return true;
 }
@@ -459,8 +498,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         if (seen < z - tolerance) {
           // The camera sees through the surfel: free space where it is.
           if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
-            s.flags = 0;
-            --live_;
+            detachSurfel(slot);
             eviction_[carved_away++] = slot;
           }
           continue;
@@ -488,7 +526,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
           const float capped = std::min(sum, cap);
           s.confidence = encodeConfidence(capped);
-          if (capped >= stable) s.flags |= kSurfelStable;
+          if (capped >= stable) markStable(s);
           explained_[i] = (s.flags & kSurfelStable) ? 1 : 0;
           s.last_seen = frame_;
           ++stats.merged;

@@ -153,6 +153,24 @@ class SurfelMap {
   Eigen::Vector3d worldPosition(std::size_t slot) const;
   Eigen::Vector3d brickOrigin(uint16_t brick) const;
 
+  // A brick's place on the grid: its origin is key * brick_size_m.
+  struct BrickKey {
+    int32_t x = 0, y = 0, z = 0;
+    bool operator==(const BrickKey&) const = default;
+  };
+  const BrickKey& brickKey(uint16_t brick) const { return brick_keys_[brick]; }
+
+  // Per brick, for the stream of changes (issue 26): the live surfels as a
+  // list (firstInBrick, then nextInBrick until kNoSurfel; any order), the
+  // stable ones among them, and a counter of changes to the stable set (a
+  // surfel became stable, or a stable one went) that only grows (wrapping):
+  // a reader keeps the value it last saw and compares.
+  static constexpr uint32_t kNoSurfel = 0xffffffffu;
+  uint32_t firstInBrick(uint16_t brick) const { return brick_head_[brick]; }
+  uint32_t nextInBrick(uint32_t slot) const { return link_next_[slot]; }
+  uint32_t brickStableCount(uint16_t brick) const { return brick_stable_[brick]; }
+  uint32_t brickChanges(uint16_t brick) const { return brick_changes_[brick]; }
+
   const SurfelMapConfig& config() const { return config_; }
   const SurfelMapCounters& counters() const { return counters_; }
   uint32_t frameNumber() const { return frame_; }
@@ -165,10 +183,6 @@ class SurfelMap {
  private:
   explicit SurfelMap(const SurfelMapConfig& config);
 
-  struct BrickKey {
-    int32_t x = 0, y = 0, z = 0;
-    bool operator==(const BrickKey&) const = default;
-  };
   // The brick holding world position p (inserted if new); -1 when the table is full.
   int findOrAddBrick(const Eigen::Vector3d& p_world);
   FuseOutcome checkFrame(const hal::RgbdFrame& frame);
@@ -185,6 +199,10 @@ class SurfelMap {
   bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
                  const uint8_t* rgb);
   void removeSurfel(uint32_t slot);
+  // Takes a surfel out of the map's bookkeeping (flags, brick list, counts) but
+  // not into the free list: removeSurfel() does both.
+  void detachSurfel(uint32_t slot);
+  void markStable(Surfel& s);
   // A surfel the camera saw through keeps `left` confidence; true when that is
   // none and it must go (the caller removes it: at once, or after the frame's
   // association while the index map may still name it). Counts both.
@@ -202,6 +220,10 @@ class SurfelMap {
   std::size_t brick_count_ = 0;
   std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
   std::vector<uint8_t> brick_visible_;
+  std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
+  std::vector<uint32_t> brick_stable_;    // ... its stable surfels
+  std::vector<uint32_t> brick_changes_;   // ... changes to its stable set (wrapping)
+  std::vector<uint32_t> link_next_, link_prev_;  // per slot: the brick list's neighbours
 
   // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
   // map_kernels.h), structure of arrays; weight is negated by associate() for a

@@ -118,9 +118,12 @@ SurfelMapConfig smallConfig(int w, int h) {
 }
 
 // What must hold after any fuse(): the live count is the live flags', each
-// live surfel names a brick the map has and has finite, normalised fields.
+// live surfel names a brick the map has and has finite, normalised fields, and
+// each brick's list holds exactly its live surfels, once each, with its stable
+// count (checked against a scan of every slot).
 void expectConsistent(const SurfelMap& map) {
   std::size_t live = 0;
+  std::vector<uint32_t> in_brick(map.brickCount()), stable_in_brick(map.brickCount());
   for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
     if (!map.live(slot)) continue;
     ++live;
@@ -129,9 +132,26 @@ void expectConsistent(const SurfelMap& map) {
     ASSERT_TRUE(std::isfinite(s.x) && std::isfinite(s.y) && std::isfinite(s.z)) << "slot " << slot;
     ASSERT_NEAR(surfelNormal(s).norm(), 1.0f, 1e-4f);
     ASSERT_LE(s.first_seen, s.last_seen);
+    ++in_brick[s.brick];
+    stable_in_brick[s.brick] += (s.flags & kSurfelStable) ? 1 : 0;
   }
   EXPECT_EQ(live, map.size());
   EXPECT_LE(map.size(), map.capacity());
+  std::vector<uint8_t> listed(map.slotCount(), 0);
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    uint32_t n = 0;
+    for (uint32_t slot = map.firstInBrick(brick); slot != SurfelMap::kNoSurfel; slot = map.nextInBrick(slot)) {
+      ASSERT_LT(slot, map.slotCount()) << "brick " << b;
+      ASSERT_TRUE(map.live(slot)) << "brick " << b << " lists a free slot " << slot;
+      ASSERT_EQ(map.surfel(slot).brick, brick) << "slot " << slot << " is in another brick's list";
+      ASSERT_EQ(listed[slot]++, 0) << "slot " << slot << " listed twice";
+      ++n;
+    }
+    EXPECT_EQ(n, in_brick[b]) << "brick " << b;
+    EXPECT_EQ(map.brickStableCount(brick), stable_in_brick[b]) << "brick " << b;
+    EXPECT_GE(map.brickChanges(brick), map.brickStableCount(brick)) << "brick " << b;
+  }
 }
 
 TEST(Surfel, Is32BytesAndItsEncodingsKeepWhatTheyPromise) {
@@ -224,6 +244,10 @@ TEST(SurfelMap, AnObjectThatLeftLeavesNoGhost) {
     return n;
   };
   ASSERT_GT(inBox(), 500u) << "the box was never mapped";
+  expectConsistent(map);
+  // The bricks' change counters: what the stream of changes watches.
+  std::vector<uint32_t> changes_before(map.brickCount());
+  for (std::size_t b = 0; b < map.brickCount(); ++b) changes_before[b] = map.brickChanges(static_cast<uint16_t>(b));
   Scene empty;
   uint64_t carved = 0;
   for (int i = 0; i < 30; ++i) {
@@ -233,6 +257,11 @@ TEST(SurfelMap, AnObjectThatLeftLeavesNoGhost) {
   }
   expectConsistent(map);
   EXPECT_GT(carved, 0u);
+  uint64_t changed = 0;
+  for (std::size_t b = 0; b < changes_before.size(); ++b) {
+    changed += map.brickChanges(static_cast<uint16_t>(b)) - changes_before[b];
+  }
+  EXPECT_GT(changed, 500u) << "the box went and the wall behind it appeared: both change the stable sets";
   EXPECT_LE(inBox(), map.size() / 500) << "ghost surfels where the box was, 30 frames after it left (0.2 % allowed)";
   // The wall behind the box is mapped now.
   std::size_t wall_behind = 0;
@@ -368,6 +397,37 @@ TEST(SurfelMap, BadFramesAreCountedRefusalsAndTheMapStaysIntact) {
   EXPECT_EQ(c.refused_pose_jump, 1u);
   EXPECT_EQ(c.frames_fused, 4u);
   expectConsistent(map);
+}
+
+TEST(SurfelMap, AStaticWallSettlesAndStopsCountingChanges) {
+  const int w = 80, h = 60;
+  SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  Scene scene;
+  scene.boxes.push_back(Box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}});
+  FuseStats stats;
+  auto totals = [&] {
+    uint64_t changes = 0, stable = 0;
+    for (std::size_t b = 0; b < map.brickCount(); ++b) {
+      changes += map.brickChanges(static_cast<uint16_t>(b));
+      stable += map.brickStableCount(static_cast<uint16_t>(b));
+    }
+    return std::pair{changes, stable};
+  };
+  for (int i = 0; i < 10; ++i) {
+    render(scene, poseAt({0.002 * (i % 3), 0, 0}), i + 1, frame);
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+  }
+  const auto [changes_settled, stable_settled] = totals();
+  ASSERT_GT(stable_settled, 2000u);
+  for (int i = 10; i < 30; ++i) {
+    render(scene, poseAt({0.002 * (i % 3), 0, 0}), i + 1, frame);
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+  }
+  expectConsistent(map);
+  const auto [changes, stable] = totals();
+  // Nothing moved: at most 1 % of the stable surfels changed in 20 more frames.
+  EXPECT_LE(changes - changes_settled, stable / 100) << stable << " stable surfels";
 }
 
 TEST(SurfelMap, AFullPoolEvictsTheLeastUsefulAndCountsIt) {
