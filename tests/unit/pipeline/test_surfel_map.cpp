@@ -2,7 +2,9 @@
 // posed frames of scenes ray-cast here (a wall, a box in front of it), the
 // refusals of bad frames, eviction from a full pool, and the two precision
 // promises: a surfel fused from one observation many times stays on it, and a
-// map 10 km from the origin matches the map at the origin.
+// map 10 km from the origin matches the map at the origin. Then the eye's
+// view of the map (eye_view.h) and what an operator who keeps the map needs
+// next (map_delta.h).
 #include <algorithm>
 #include <cstdio>
 #include <cmath>
@@ -16,7 +18,9 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "pipeline/acuity_levels.h"
 #include "pipeline/map/eye_view.h"
+#include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
 #include "tests/support/test_time.h"
 
@@ -711,6 +715,179 @@ TEST(EyeView, AFullCloudCountsWhatItCouldNotTake) {
   EXPECT_GT(stats.dropped_full, 0u);
   EXPECT_FALSE(EyeView::create(EyeViewConfig{.face_cells = 4}, 16).isOk());
   EXPECT_FALSE(EyeView::create(EyeViewConfig{.occlusion_margin = std::nan("")}, 16).isOk());
+}
+
+// ---- What an operator who keeps the map needs next (map_delta.h) -----------
+
+MapDelta makeDelta(std::size_t max_bricks = 16384) {
+  return MapDelta::create(MapDeltaConfig{}, max_bricks).value();
+}
+
+Gaze gazeFrom(const Eigen::Vector3d& eye, const Eigen::Vector3d& at) {
+  Gaze g;
+  g.origin_m = eye;
+  g.direction = (at - eye).normalized();
+  return g;
+}
+
+// Property: a brick's level is never coarser than the level ACUITY's per-point
+// rule gives any point inside it (brute force over a grid of points in the
+// cube, each classified from its own distance and eccentricity).
+TEST(MapDelta, ABricksLevelIsNeverCoarserThanAnyOfItsPoints) {
+  const MapDelta delta = makeDelta();
+  const RegionModel model = RegionModel::create(delta.config().acuity).value();
+  const LevelBounds bounds = LevelBounds::fromModel(model);
+  std::mt19937 rng(26);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  int coarser_somewhere = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const Eigen::Vector3d origin(u(rng), u(rng), u(rng));
+    const double size = trial % 3 == 0 ? 0.1 : 0.5;
+    const Eigen::Vector3d eye(u(rng), u(rng), u(rng));
+    const Gaze gaze = gazeFrom(eye, Eigen::Vector3d(u(rng), u(rng), u(rng)));
+    const MapDelta::Need need = delta.need(origin, size, gaze);
+    int finest_point = kMaxRegions;
+    constexpr int kSteps = 8;
+    for (int i = 0; i <= kSteps; ++i) {
+      for (int j = 0; j <= kSteps; ++j) {
+        for (int k = 0; k <= kSteps; ++k) {
+          const Eigen::Vector3d p = origin + size * Eigen::Vector3d(i, j, k) / kSteps;
+          const Eigen::Vector3d a = p - eye;
+          const double ecc = std::atan2(a.cross(gaze.direction).norm(), a.dot(gaze.direction)) * 180.0 / M_PI;
+          finest_point = std::min<int>(finest_point, bounds.classify(static_cast<float>(a.norm()),
+                                                                      static_cast<float>(ecc)));
+        }
+      }
+    }
+    ASSERT_LE(need.level, finest_point) << "trial " << trial;
+    coarser_somewhere += finest_point > 0 ? 1 : 0;
+  }
+  // The trials reach coarse levels, so the comparison means something.
+  EXPECT_GT(coarser_somewhere, 100);
+}
+
+TEST(MapDelta, TheFoveasBrickIsRawAndABrickBehindTheEyeIsCoarsest) {
+  const MapDelta delta = makeDelta();
+  const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 2});
+  EXPECT_EQ(delta.need({-0.25, -0.25, 1.75}, 0.5, gaze).level, 0);  // under the gaze, 1.75 m away
+  const MapDelta::Need behind = delta.need({-0.25, -0.25, -3.0}, 0.5, gaze);
+  EXPECT_GT(behind.ecc_deg, 150.0f);
+  EXPECT_EQ(behind.level, kMaxRegions - 1);
+  // The eye inside a brick: raw.
+  EXPECT_EQ(delta.need({-0.25, -0.25, -0.25}, 0.5, gaze).level, 0);
+}
+
+TEST(MapDelta, SendsWhatTheOperatorLacksThenNothingUntilTheGazeOrTheMapChanges) {
+  const SurfelMap& map = wallAndBoxMap();
+  MapDelta delta = makeDelta();
+  MapDeltaStats stats;
+  const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
+  auto plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  ASSERT_GT(plan.value().size(), 2u);
+  EXPECT_EQ(stats.missing, plan.value().size());
+  EXPECT_EQ(stats.bricks, plan.value().size());
+  // The fovea's bricks first.
+  const std::span<const BrickDue> first = plan.value();
+  EXPECT_TRUE(first.front().fovea);
+  for (std::size_t i = 1; i < first.size(); ++i) EXPECT_FALSE(!first[i - 1].fovea && first[i].fovea) << i;
+  for (const BrickDue& due : first) EXPECT_EQ(delta.markSent(map, due.brick, due.level), 1u);
+  // Held at the level it needs: nothing is due.
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  EXPECT_EQ(plan.value().size(), 0u);
+  // The gaze moves to the wall's corner: the bricks there need more detail; the
+  // bricks the gaze left keep what they hold (coarsening is not sent).
+  const Gaze away = gazeFrom({0, 0, 0}, {1.0, 1.0, 3.0});
+  plan = delta.plan(map, away, stats);
+  ASSERT_TRUE(plan);
+  EXPECT_GT(stats.refine, 0u);
+  EXPECT_EQ(stats.missing + stats.changed, 0u);
+  for (const BrickDue& due : plan.value()) {
+    EXPECT_EQ(due.need, BrickNeed::kRefine);
+    EXPECT_LT(due.level, delta.heldLevel(due.brick));
+  }
+  // An operator that restarts lacks everything again.
+  delta.forgetAll();
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  EXPECT_EQ(stats.missing, stats.bricks);
+}
+
+TEST(MapDelta, ABrickWhoseStableSetChangedIsDueAgainAndWaitingBricksGoOldestFirst) {
+  const int w = 80, h = 60;
+  SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  Scene with_box;
+  const Box box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}};
+  with_box.boxes.push_back(box);
+  FuseStats fuse;
+  int64_t stamp = 0;
+  for (int i = 0; i < 10; ++i) {
+    render(with_box, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
+    ASSERT_EQ(map.fuse(frame, fuse), FuseOutcome::kFused);
+  }
+  MapDelta delta = makeDelta();
+  MapDeltaStats stats;
+  const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
+  auto plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  for (const BrickDue& due : plan.value()) delta.markSent(map, due.brick, due.level);
+  // The box goes: its bricks lose their stable surfels and the wall appears behind it.
+  Scene empty;
+  for (int i = 0; i < 10; ++i) {
+    render(empty, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
+    ASSERT_EQ(map.fuse(frame, fuse), FuseOutcome::kFused);
+  }
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  EXPECT_GT(stats.changed, 0u);
+  std::size_t changed_where_the_box_was = 0;
+  std::set<uint16_t> due_first;
+  for (const BrickDue& due : plan.value()) {
+    due_first.insert(due.brick);
+    if (due.need != BrickNeed::kChanged) continue;
+    const Eigen::Vector3d o = map.brickOrigin(due.brick);
+    // The brick overlaps the box, or its shadow on the wall (the wall behind
+    // it, +-0.64 m at 3 m, appeared when it went).
+    changed_where_the_box_was += o.x() < 0.65 && o.x() + 0.5 > -0.65 && o.y() < 0.65 && o.y() + 0.5 > -0.65 ? 1 : 0;
+  }
+  EXPECT_EQ(changed_where_the_box_was, stats.changed) << "only bricks where the box was, or behind it, changed";
+  // Nothing was sent: those bricks wait. With a new gaze more are due, and in
+  // each rank of the budget order those waiting since the last plan lead.
+  const auto second = delta.plan(map, gazeFrom({0, 0, 0}, {1.0, 1.0, 3.0}), stats);
+  ASSERT_TRUE(second);
+  ASSERT_GT(second.value().size(), due_first.size()) << "the new gaze makes more bricks due";
+  auto rank = [](const BrickDue& d) { return d.fovea ? 0 : d.need == BrickNeed::kChanged ? 1 : 2; };
+  std::size_t older_after_newer = 0, checked = 0;
+  for (std::size_t i = 0; i < second.value().size(); ++i) {
+    const BrickDue& later = second.value()[i];
+    if (!due_first.count(later.brick)) continue;
+    for (std::size_t j = 0; j < i; ++j) {
+      const BrickDue& earlier = second.value()[j];
+      if (rank(earlier) != rank(later)) continue;
+      ++checked;
+      older_after_newer += due_first.count(earlier.brick) ? 0 : 1;
+    }
+  }
+  EXPECT_GT(checked, 0u) << "no rank holds both old and new due bricks: the order is not exercised";
+  EXPECT_EQ(older_after_newer, 0u);
+}
+
+TEST(MapDelta, BadGazeAndBadConfigurationsAreRefused) {
+  MapDelta delta = makeDelta();
+  MapDeltaStats stats;
+  Gaze bad;
+  bad.direction = Eigen::Vector3d::Zero();
+  EXPECT_FALSE(delta.plan(wallAloneMap(), bad, stats));
+  MapDeltaConfig config;
+  config.acuity.preset = Preset::kF1;
+  EXPECT_FALSE(MapDelta::create(config, 100));
+  config = {};
+  config.change_fraction = -1.0;
+  EXPECT_FALSE(MapDelta::create(config, 100));
+  EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 0));
+  EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 70000));
 }
 
 }  // namespace

@@ -1,0 +1,157 @@
+#include "pipeline/map/map_delta.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "core/clock.h"
+
+namespace fovea::pipeline::map {
+
+namespace {
+
+constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+// The brick's eccentricity is taken this much smaller than computed: the
+// per-point rule's atan is a polynomial (acuity_levels.h, under 1e-5 rad off),
+// and the brick must never come out coarser than any of its points.
+constexpr double kEccSafetyDeg = 0.01;
+
+}  // namespace
+
+Status MapDeltaConfig::validate() const {
+  if (acuity.preset != Preset::kAcuity) {
+    return {ErrorCode::kInvalidArgument, "map_delta.acuity: the levels need preset acuity"};
+  }
+  if (Result<RegionModel> model = RegionModel::create(acuity); !model) return model.status();
+  if (!(fovea_ecc_deg >= 0.0 && fovea_ecc_deg <= 180.0)) {
+    return {ErrorCode::kInvalidArgument, "map_delta.fovea_ecc_deg: must be in [0, 180]"};
+  }
+  if (!(change_fraction >= 0.0 && change_fraction <= 1.0)) {
+    return {ErrorCode::kInvalidArgument, "map_delta.change_fraction: must be in [0, 1]"};
+  }
+  return Status::ok();
+}
+
+Result<MapDelta> MapDelta::create(const MapDeltaConfig& config, std::size_t max_bricks) {
+  if (Status s = config.validate(); !s) return Result<MapDelta>(s.code(), s.message());
+  if (max_bricks == 0 || max_bricks > 65535) {
+    return Result<MapDelta>(ErrorCode::kInvalidArgument, "map_delta: max_bricks must be in [1, 65535]");
+  }
+  const RegionModel model = RegionModel::create(config.acuity).value();
+  return MapDelta(config, LevelBounds::fromModel(model), max_bricks);
+}
+
+MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std::size_t max_bricks)
+    : config_(config), bounds_(bounds) {
+  held_level_.assign(max_bricks, kNotHeld);
+  held_changes_.assign(max_bricks, 0);
+  held_stable_.assign(max_bricks, 0);
+  version_.assign(max_bricks, 0);
+  due_since_.assign(max_bricks, 0);
+  order_.resize(max_bricks);
+  due_.resize(max_bricks);
+  plan_.resize(max_bricks);
+}
+
+std::size_t MapDelta::memoryBytes() const {
+  return held_level_.capacity() +
+         (held_changes_.capacity() + held_stable_.capacity() + version_.capacity() + due_since_.capacity()) *
+             sizeof(uint32_t) +
+         order_.capacity() * sizeof(uint64_t) + (due_.capacity() + plan_.capacity()) * sizeof(BrickDue);
+}
+
+MapDelta::Need MapDelta::need(const Eigen::Vector3d& origin_m, double size_m, const Gaze& gaze) const {
+  const Eigen::Vector3d& eye = gaze.origin_m;
+  // The nearest point of the cube to the eye.
+  const Eigen::Vector3d below = (origin_m - eye).cwiseMax(0.0);
+  const Eigen::Vector3d above = (eye - (origin_m + Eigen::Vector3d::Constant(size_m))).cwiseMax(0.0);
+  const double r_min = (below + above).norm();
+  const Eigen::Vector3d a = origin_m + Eigen::Vector3d::Constant(0.5 * size_m) - eye;
+  const double dist = a.norm();
+  const double sphere = 0.5 * std::sqrt(3.0) * size_m;
+  double ecc = 0.0;
+  if (dist > sphere) {
+    const double theta = std::atan2(a.cross(gaze.direction).norm(), a.dot(gaze.direction)) * kRadToDeg;
+    ecc = std::max(0.0, theta - std::asin(sphere / dist) * kRadToDeg - gaze.fovea_growth_deg - kEccSafetyDeg);
+  }
+  Need n;
+  n.ecc_deg = static_cast<float>(ecc);
+  // r is rounded down to float so that it never exceeds a point's r.
+  n.level = bounds_.classify(std::nextafter(static_cast<float>(r_min), 0.0f), n.ecc_deg);
+  return n;
+}
+
+Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaze& raw_gaze, MapDeltaStats& stats) {
+  const int64_t start = monotonicNs();
+  stats = {};
+  Result<Gaze> normal = normalizeGaze(raw_gaze);
+  if (!normal) return Result<std::span<const BrickDue>>(normal.status().code(), normal.status().message());
+  const Gaze& gaze = normal.value();
+  ++plan_number_;
+  if (plan_number_ == 0) plan_number_ = 1;  // 0 means "not due"
+  const double size = map.config().brick_size_m;
+  const std::size_t bricks = std::min(map.brickCount(), held_level_.size());
+  std::size_t n_due = 0;
+  for (std::size_t b = 0; b < bricks; ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    const uint32_t stable = map.brickStableCount(brick);
+    const uint8_t held = held_level_[b];
+    stats.bricks += stable > 0 ? 1 : 0;
+    if (held == kNotHeld && stable == 0) {
+      due_since_[b] = 0;
+      continue;
+    }
+    const Need need = this->need(map.brickOrigin(brick), size, gaze);
+    BrickDue due{brick, need.level, BrickNeed::kMissing, need.ecc_deg <= config_.fovea_ecc_deg};
+    bool is_due = false;
+    if (held == kNotHeld) {
+      is_due = true;
+      ++stats.missing;
+    } else if (need.level < held) {
+      due.need = BrickNeed::kRefine;
+      is_due = true;
+      ++stats.refine;
+    } else {
+      const uint32_t changes = map.brickChanges(brick) - held_changes_[b];
+      const double allowed = config_.change_fraction * std::ldexp(static_cast<double>(held_stable_[b]), held);
+      if (changes > 0 && static_cast<double>(changes) > allowed) {
+        due.need = BrickNeed::kChanged;
+        is_due = true;
+        ++stats.changed;
+      }
+    }
+    if (!is_due) {
+      due_since_[b] = 0;
+      continue;
+    }
+    if (due_since_[b] == 0) due_since_[b] = plan_number_;
+    stats.fovea += due.fovea ? 1 : 0;
+    const uint64_t rank = due.fovea ? 0 : due.need == BrickNeed::kChanged ? 1 : 2;
+    const uint64_t waited = std::min<uint64_t>(plan_number_ - due_since_[b], (uint64_t{1} << 30) - 1);
+    const auto ecc = static_cast<uint64_t>(std::min(need.ecc_deg, 180.0f) * (65535.0f / 180.0f));
+    // Ascending: the rank, then the longest waiting, then the nearest to the gaze, then the brick.
+    order_[n_due++] = rank << 62 | (((uint64_t{1} << 30) - 1 - waited) << 32) | ecc << 16 | b;
+    due_[b] = due;
+  }
+  std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_due));
+  for (std::size_t i = 0; i < n_due; ++i) plan_[i] = due_[order_[i] & 0xffffu];
+  stats.ns = monotonicNs() - start;
+  return std::span<const BrickDue>(plan_.data(), n_due);
+}
+
+uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level) {
+  held_level_[brick] = level;
+  held_changes_[brick] = map.brickChanges(brick);
+  held_stable_[brick] = map.brickStableCount(brick);
+  due_since_[brick] = 0;
+  if (++version_[brick] == 0) version_[brick] = 1;
+  return version_[brick];
+}
+
+void MapDelta::forgetAll() {
+  std::fill(held_level_.begin(), held_level_.end(), kNotHeld);
+  std::fill(due_since_.begin(), due_since_.end(), 0);
+}
+
+}  // namespace fovea::pipeline::map

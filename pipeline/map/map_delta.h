@@ -1,0 +1,119 @@
+// What of the map an operator who keeps it needs next: the robot's side of the
+// stream of changes (issue 26, docs/map-delta.md).
+//
+// The operator holds the map's bricks, each at a level of detail. Every frame
+// plan() gives each brick the level the operator's eye needs now, ACUITY's rule
+// (acuity_levels.h: level n when k v_n <= r sin(MAR(E))) taken at the brick's
+// most demanding point: r the distance from the eye to the nearest point of the
+// brick's cube, E the smallest eccentricity over the sphere around it. Both
+// bound the per-point values from below, so the brick's level is never coarser
+// than any of its surfels' (a test checks it against every point). A brick is
+// then due when:
+//  - the operator lacks it (kMissing), or needs it finer than it holds it
+//    (kRefine; coarsening is never sent: the operator draws what it has);
+//  - its stable set changed (SurfelMap::brickChanges: surfels became stable or
+//    went) by more than change_fraction * 2^h of the stable surfels it held when
+//    sent at level h (kChanged): a coarse level hides more.
+// The plan lists the due bricks in budget order: the fovea's first (the brick
+// comes within fovea_ecc_deg of the gaze), then changes, then the periphery's;
+// in each, the longest waiting first, then the nearest to the gaze. The caller
+// sends from the front while its budget lasts and calls markSent() for what
+// went; the rest stays due and ages.
+//
+// Memory: the per-brick state and the plan, allocated by create(); plan()
+// allocates nothing.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/result.h"
+#include "pipeline/acuity.h"
+#include "pipeline/acuity_levels.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/partition.h"
+
+namespace fovea::pipeline::map {
+
+struct MapDeltaConfig {
+  // The level rule: ACUITY's (preset kAcuity: level_voxel_m, level_margin,
+  // slope, the floors). The refinement passes and the view cull do not apply.
+  AcuityConfig acuity = [] {
+    AcuityConfig c;
+    c.preset = Preset::kAcuity;
+    return c;
+  }();
+  // A brick that comes within this of the gaze is the fovea's: sent first.
+  double fovea_ecc_deg = 5.0;
+  // Changes to a brick's stable set (fraction of its stable surfels when sent,
+  // times 2^level) that make it due again.
+  double change_fraction = 0.01;
+
+  Status validate() const;
+};
+
+enum class BrickNeed : uint8_t { kMissing, kRefine, kChanged };
+
+struct BrickDue {
+  uint16_t brick = 0;
+  uint8_t level = 0;  // to send it at
+  BrickNeed need = BrickNeed::kMissing;
+  bool fovea = false;
+};
+
+struct MapDeltaStats {
+  uint32_t bricks = 0;  // with stable surfels
+  uint32_t missing = 0, refine = 0, changed = 0;
+  uint32_t fovea = 0;  // of the due, the fovea's
+  int64_t ns = 0;      // plan()'s time
+};
+
+class MapDelta {
+ public:
+  // max_bricks: the map's (SurfelMapConfig::max_bricks).
+  static Result<MapDelta> create(const MapDeltaConfig& config, std::size_t max_bricks);
+
+  // The level the eye (gaze.origin_m, looking along gaze.direction) needs for
+  // the cube [origin, origin + size]^3, and its smallest eccentricity (degrees).
+  // gaze from normalizeGaze().
+  struct Need {
+    uint8_t level = 0;
+    float ecc_deg = 0.0f;
+  };
+  Need need(const Eigen::Vector3d& origin_m, double size_m, const Gaze& gaze) const;
+
+  // The bricks due for an eye at `gaze`, in budget order (valid until the next
+  // call). kInvalidInput for a bad gaze. Never allocates.
+  Result<std::span<const BrickDue>> plan(const SurfelMap& map, const Gaze& gaze, MapDeltaStats& stats);
+
+  // The caller sent `brick` at `level`: the operator now holds it so (until an
+  // acknowledgement says otherwise). Returns the brick's new version (from 1).
+  uint32_t markSent(const SurfelMap& map, uint16_t brick, uint8_t level);
+  // The operator holds nothing (a new session, or an operator that restarted).
+  void forgetAll();
+
+  static constexpr uint8_t kNotHeld = 0xff;
+  uint8_t heldLevel(uint16_t brick) const { return held_level_[brick]; }
+  uint32_t version(uint16_t brick) const { return version_[brick]; }
+  const MapDeltaConfig& config() const { return config_; }
+  std::size_t memoryBytes() const;
+
+ private:
+  MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std::size_t max_bricks);
+
+  MapDeltaConfig config_;
+  LevelBounds bounds_;
+  uint32_t plan_number_ = 0;
+  std::vector<uint8_t> held_level_;        // kNotHeld: the operator lacks it
+  std::vector<uint32_t> held_changes_;     // the map's change counter when sent
+  std::vector<uint32_t> held_stable_;      // ... and the stable surfels then
+  std::vector<uint32_t> version_;
+  std::vector<uint32_t> due_since_;        // plan number the brick became due (0: not due)
+  std::vector<uint64_t> order_;            // plan scratch: sort keys
+  std::vector<BrickDue> due_;              // by brick, then in plan order
+  std::vector<BrickDue> plan_;
+};
+
+}  // namespace fovea::pipeline::map
