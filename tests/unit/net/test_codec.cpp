@@ -4,6 +4,8 @@
 #include <cmath>
 #include <map>
 #include <random>
+#include <span>
+#include <string>
 #include <tuple>
 #include <vector>
 
@@ -346,6 +348,45 @@ TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
   cloud.region[0] = 0;
   ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
   EXPECT_EQ(enc.chunkCount(), 1u);
+}
+
+// A small frame's chunks, byte for byte as the encoder wrote them before point
+// chunks could carry a brick tag: fields added to PointChunk since must leave
+// frame chunks unchanged on the wire.
+pipeline::FoveatedCloud smallFrame() {
+  pipeline::FoveatedCloud cloud(16);
+  for (int i = 0; i < 16; ++i) {
+    EXPECT_TRUE(cloud.points.push(0.013f * static_cast<float>(i), -0.007f * static_cast<float>(i % 5),
+                                  1.5f + 0.002f * static_cast<float>(i % 3),
+                                  pipeline::packRgb(static_cast<uint8_t>(16 * i), 80, static_cast<uint8_t>(255 - 9 * i))));
+    cloud.region[static_cast<std::size_t>(i)] = static_cast<uint8_t>(i % 2);
+  }
+  return cloud;
+}
+
+std::string hex(std::span<const uint8_t> bytes) {
+  static const char* digits = "0123456789abcdef";
+  std::string s;
+  for (uint8_t b : bytes) s += {digits[b >> 4], digits[b & 15]};
+  return s;
+}
+
+TEST(CodecWire, FrameChunkBytesAreUnchanged) {
+  const char* const golden[] = {
+      // region 0 (fovea, 1 mm steps)
+      "140000000000000000000a0044000c00060008000a000000000002003c000000000000000000000079e9263108ac9cbf"
+      "000000000000f83ffca9f1d24d62503fb168de3a000000002a0000000800000000000000000000002c0000000f030704"
+      "0de6856b92e11b9df1c73df85a16528b509308c93b32b89337887d26b290dad88d3dee41d9b2905a",
+      // region 1 (voxel 2 cm, steps of 2.5 mm)
+      "140000000000000000000a0044000c00060008000a000000000002003c0000009a9999999999893f295c8fc2f5289cbf"
+      "000000000000f83f7b14ae47e17a643fb168de3a000000002a0000000800000001000100000000002a0000000c030704"
+      "ca8690e53362a6c71ff7cb6e9be54c1a7fdc7965cb426a7505b290da01b2c71dc4b3210ba9050000",
+  };
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321).isOk());
+  ASSERT_EQ(enc.chunkCount(), std::size(golden));
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) EXPECT_EQ(hex(enc.chunk(i)), golden[i]) << "chunk " << i;
 }
 
 // FlatBuffers reads a payload in place (net/wire.h kPayloadAlignment): every
