@@ -6,6 +6,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -252,6 +253,7 @@ inline std::size_t firstCodeBits(uint64_t code) { return 6 + static_cast<std::si
 struct FrameInProgress {
   uint32_t frame_id = 0;
   uint64_t capture_time_ns = 0;
+  const wire::BrickTag* brick = nullptr;  // every chunk's tag, in a brick encode
   std::size_t arena_used = 0;                                   // bytes of the arena holding chunks
   std::array<uint32_t, pipeline::kMaxRegions + 1> start{};      // region r: order[start[r], start[r + 1])
   std::array<std::array<int64_t, 3>, pipeline::kMaxRegions> qmin{}, qmax{};  // lattice bounds per region
@@ -353,6 +355,8 @@ struct ChunkEncoder::State {
   CodecConfig config;
   std::size_t max_points = 0;
   std::size_t data_budget = 0;  // bytes of `data` that always fit max_payload
+  std::size_t brick_data_budget = 0;  // the same with a brick tag in the chunk
+  std::size_t budget = 0;             // the one of the encode in progress
   std::size_t max_chunks = 0;
 
   // Per point of the frame, grouped by region.
@@ -383,15 +387,17 @@ struct ChunkEncoder::State {
   State() : fbb(1), summary_fbb(1) {}
   ~State() = default;
 
-  // Builds one PointChunk into fbb.
+  // Builds one PointChunk into fbb (a brick chunk when brick is set).
   void buildChunk(uint32_t frame_id, uint16_t index, uint8_t region, uint64_t capture_ns,
                   const wire::Vec3d& origin, double step_m, uint32_t points, uint8_t flags,
-                  const uint8_t* data, std::size_t data_size) {
+                  const uint8_t* data, std::size_t data_size, const wire::BrickTag* brick) {
     fbb.Clear();
     const auto vec = fbb.CreateVector(data, data_size);
     const wire::ChunkHeader header(origin, step_m, capture_ns, frame_id, points, index, region, flags);
     wire::PointChunkBuilder b(fbb);
     b.add_header(&header);
+    // Absent from frame chunks: their vtable and table stay as before the field.
+    if (brick != nullptr) b.add_brick(brick);
     b.add_data(vec);
     // A placeholder that is not the default, so the field is stored and can be
     // patched in place once the frame's chunk count is known.
@@ -434,22 +440,28 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->config = config;
   s->max_points = max_points;
 
-  // The payload of a chunk with no data: everything but the bytes of `data`.
+  // The payload of a chunk with no data: everything but the bytes of `data`;
+  // of a frame chunk, and of a brick chunk (the tag and its vtable entry).
   s->fbb = flatbuffers::FlatBufferBuilder(2 * kMaxChunkRawBytes + 1024);
   const wire::Vec3d zero(0, 0, 0);
-  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, nullptr, 0);
+  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, nullptr, 0, nullptr);
   const std::size_t empty = s->fbb.GetSize();
+  const wire::BrickTag any_tag(0, 0, 0, 0, 0);
+  s->buildChunk(0, 0, 0, 0, zero, 1.0, 0, 0, nullptr, 0, &any_tag);
+  const std::size_t empty_brick = s->fbb.GetSize();
   // + up to 7 bytes of alignment padding around the vector.
-  if (empty + 8 + 64 > config.max_payload) {
+  if (std::max(empty, empty_brick) + 8 + 64 > config.max_payload) {
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
                                 "codec.max_payload: " + std::to_string(config.max_payload) + " leaves no room for points");
   }
   s->data_budget = config.max_payload - empty - 8;
+  s->brick_data_budget = config.max_payload - empty_brick - 8;
+  s->budget = s->data_budget;
 
-  // Every chunk but a region's last holds more than data_budget - 23 bytes of at
+  // Every chunk but a region's last holds more than budget - 23 bytes of at
   // most 23 bytes per point (a 127-bit position code, a 17-bit luma code and two
-  // chroma codes of at most 19 bits).
-  const std::size_t per_chunk = s->data_budget - 23;
+  // chroma codes of at most 19 bits); the smaller budget makes the most chunks.
+  const std::size_t per_chunk = std::min(s->data_budget, s->brick_data_budget) - 23;
   s->max_chunks = (23 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
   // Each chunk starts at a kPayloadAlignment boundary (net/wire.h): the patch
   // below and every decoder read it in place.
@@ -464,8 +476,8 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->order.resize(max_points);
   s->order_tmp.resize(max_points);
   s->histogram.resize(std::size_t{1} << kRadixBits);
-  s->raw.resize(s->data_budget + 64);
-  s->packed.resize(ZSTD_compressBound(s->data_budget));
+  s->raw.resize(std::max(s->data_budget, s->brick_data_budget) + 64);
+  s->packed.resize(ZSTD_compressBound(std::max(s->data_budget, s->brick_data_budget)));
   if (config.entropy_coding) {
     s->zstd_workspace.resize(ZSTD_estimateCCtxSize(config.zstd_level));
     s->cctx = ZSTD_initStaticCCtx(s->zstd_workspace.data(), s->zstd_workspace.size());
@@ -490,9 +502,13 @@ uint32_t ChunkEncoder::chunkPoints(std::size_t i) const { return s_->chunks[i].p
 double ChunkEncoder::regionStep(int region) const { return s_->step[static_cast<std::size_t>(region)]; }
 
 Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
-                            uint32_t frame_id, uint64_t capture_time_ns) {
+                            uint32_t frame_id, uint64_t capture_time_ns, const BrickTag* brick) {
   State& s = *s_;
   s.chunk_count = 0;
+  if (brick != nullptr && brick->level >= pipeline::kMaxRegions) {
+    return {ErrorCode::kInvalidArgument, "codec: brick level " + std::to_string(brick->level) + " is not below " +
+                                             std::to_string(pipeline::kMaxRegions)};
+  }
   const std::size_t n = cloud.size();
   if (n > s.max_points) {
     return {ErrorCode::kCapacityExceeded, "codec: frame has " + std::to_string(n) + " points, max_points is " +
@@ -501,6 +517,10 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
   FrameInProgress frame;
   frame.frame_id = frame_id;
   frame.capture_time_ns = capture_time_ns;
+  std::optional<wire::BrickTag> tag;
+  if (brick != nullptr) tag.emplace(brick->x, brick->y, brick->z, brick->version, brick->level);
+  frame.brick = tag ? &*tag : nullptr;
+  s.budget = tag ? s.brick_data_budget : s.data_budget;
   if (Status st = s.countRegions(cloud, region_voxel_size_m, frame); !st) return st;
   if (Status st = s.quantize(cloud, frame); !st) return st;
   for (int r = 0; r < pipeline::kMaxRegions; ++r) {
@@ -600,7 +620,7 @@ Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, i
     const std::size_t points = packChunk(cut, k, orders, raw_size);
     if (points == 0) {
       return {ErrorCode::kCapacityExceeded, "codec: a point does not fit a chunk (bug: budget " +
-                                                std::to_string(data_budget) + ")"};
+                                                std::to_string(budget) + ")"};
     }
     if (Status st = storeChunk(cut, points, raw_size, frame); !st) return st;
     k += points;
@@ -684,7 +704,7 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
   bytes[0] = static_cast<uint8_t>(orders.position);
   for (std::size_t c = 0; c < 3; ++c) bytes[1 + c] = static_cast<uint8_t>(orders.colour[c]);
   BitWriter bw(bytes + kDataHeader);
-  const std::size_t budget_bits = 8 * (data_budget - kDataHeader);
+  const std::size_t budget_bits = 8 * (budget - kDataHeader);
   std::size_t count = 0;
   ColourPrev prev;
   for (std::size_t j = k; j < cut.points; ++j) {
@@ -736,7 +756,7 @@ Status ChunkEncoder::State::storeChunk(const RegionCut& cut, std::size_t points,
   }
   const uint8_t region = static_cast<uint8_t>(cut.region);
   buildChunk(frame.frame_id, static_cast<uint16_t>(chunk_count), region, frame.capture_time_ns, cut.origin,
-             step[region], static_cast<uint32_t>(points), flags, data, data_size);
+             step[region], static_cast<uint32_t>(points), flags, data, data_size, frame.brick);
   const std::size_t size = fbb.GetSize();
   if (size > config.max_payload) {
     chunk_count = 0;
@@ -826,6 +846,11 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   const uint8_t flags = h->flags();
   if (info.chunk_count == 0 || info.chunk_index >= info.chunk_count) return parseError("chunk index out of range");
   if (info.region >= pipeline::kMaxRegions) return parseError("region out of range");
+  if (const wire::BrickTag* tag = c->brick(); tag != nullptr) {
+    if (tag->level() >= pipeline::kMaxRegions) return parseError("brick level out of range");
+    info.has_brick = true;
+    info.brick = {tag->x(), tag->y(), tag->z(), tag->version(), tag->level()};
+  }
   if (!std::isfinite(info.step_m) || !(info.step_m > 0.0)) return parseError("step is not finite and > 0");
   if ((flags & ~kKnownFlags) != 0) return parseError("unknown flags");
   const wire::Vec3d& origin = h->origin_m();
@@ -1056,6 +1081,10 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload, int64_t receiv
   if (!wire::VerifyPointChunkBuffer(verifier)) {
     ++counters_.bad_chunks;
     return {ErrorCode::kParseError, "chunk: FlatBuffers verification failed"};
+  }
+  if (wire::GetPointChunk(payload.data())->brick() != nullptr) {
+    ++counters_.bad_chunks;
+    return {ErrorCode::kParseError, "chunk: a brick chunk is no part of a frame"};
   }
   const uint32_t id = wire::GetPointChunk(payload.data())->header()->frame_id();
   if (has_current_ && id != current_.frame_id) {

@@ -55,6 +55,14 @@ inline constexpr int64_t kMaxLatticeSpan = (int64_t{1} << 21) - 1;
 // Upper bound of a chunk's decompressed data (the decoder rejects more).
 inline constexpr std::size_t kMaxChunkRawBytes = 1u << 16;
 
+// Which map brick, and which version of it, a chunk's points belong to
+// (net/schema/chunk.fbs BrickTag; a kBrickChunk message, docs/protocol-chunks.md).
+struct BrickTag {
+  int32_t x = 0, y = 0, z = 0;  // the brick's grid key: its origin is key * brick_size_m
+  uint32_t version = 0;         // the robot's per-brick counter (serial-number order)
+  uint8_t level = 0;            // 0 = raw surfels; n >= 1: ACUITY lattice level n; < kMaxRegions
+};
+
 class ChunkEncoder {
  public:
   // max_points: points per foveated frame. Allocates every buffer here.
@@ -70,8 +78,12 @@ class ChunkEncoder {
   // max_points), kInvalidInput (non-finite point, region without a size),
   // kRangeExceeded (a region spans more than kMaxLatticeSpan steps on an axis,
   // or coordinates beyond 2^50 steps): then no chunk is valid. Never allocates.
+  // With `brick`, every chunk carries that tag (a map brick's parts: chunk
+  // indices and count are the parts of that version; frame_id is the robot's
+  // frame when the version was made) and is sized for it, so still fits
+  // max_payload; kInvalidArgument if brick->level >= pipeline::kMaxRegions.
   Status encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
-                uint32_t frame_id, uint64_t capture_time_ns);
+                uint32_t frame_id, uint64_t capture_time_ns, const BrickTag* brick = nullptr);
 
   // The chunks of the last encode(), fovea first then outward.
   std::size_t chunkCount() const;
@@ -104,6 +116,8 @@ struct DecodedChunk {
   uint64_t capture_time_ns = 0;
   std::size_t points = 0;
   double step_m = 0.0;
+  bool has_brick = false;  // a brick chunk (then `brick` is its tag)
+  BrickTag brick;
 };
 
 // Verifies and decodes one chunk payload; appends its points to `out` (region
@@ -112,6 +126,7 @@ struct DecodedChunk {
 // written relative to the caller's origin. Errors (nothing appended):
 // kParseError for malformed payloads, kCapacityExceeded when out is full,
 // kRangeExceeded when a point does not fit a float relative to out's origin.
+// A brick tag's level must be < pipeline::kMaxRegions (else kParseError).
 // Decompression uses a per-thread context (allocated on first use). The payload
 // must start at a kPayloadAlignment boundary (net/wire.h), else kParseError;
 // this holds for every decoder here (summary, FrameAssembler).
@@ -149,7 +164,8 @@ struct AssembledFrame {
 
 // Collects chunks by frame id (serial-number order, so ids may wrap). A frame
 // completes when its summary arrives or a chunk or summary of a newer frame
-// arrives; chunks of completed or older frames are dropped and counted.
+// arrives; chunks of completed or older frames are dropped and counted. A
+// chunk with a brick tag never belongs to a frame: refused, counted as bad.
 // All memory is allocated by create().
 class FrameAssembler {
  public:
@@ -169,7 +185,7 @@ class FrameAssembler {
 
   struct Counters {
     uint64_t chunks = 0;           // decoded into a frame
-    uint64_t bad_chunks = 0;       // failed verification or decoding
+    uint64_t bad_chunks = 0;       // failed verification or decoding, or a brick chunk
     uint64_t late_chunks = 0;      // for a frame already completed
     uint64_t duplicate_chunks = 0;
     uint64_t bad_summaries = 0;

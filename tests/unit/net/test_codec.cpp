@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "net/codec.h"
+#include "net/schema/chunk_generated.h"
 #include "tests/support/clouds.h"
 #include "tests/unit/net/mock_frame.h"
 
@@ -389,6 +390,113 @@ TEST(CodecWire, FrameChunkBytesAreUnchanged) {
   for (std::size_t i = 0; i < enc.chunkCount(); ++i) EXPECT_EQ(hex(enc.chunk(i)), golden[i]) << "chunk " << i;
 }
 
+// A map brick's surfels streamed as point chunks: the tag in every part.
+TEST(CodecBrick, EveryPartCarriesTheTagFitsAndRoundTrips) {
+  const std::size_t n = 4000;
+  pipeline::FoveatedCloud cloud(n);
+  cloud.points = test::randomCloud(n, Eigen::Vector3d(-1.25, 3.75, 0.25), 0.25f, 9);  // one 0.5 m brick
+  std::fill(cloud.region.begin(), cloud.region.end(), uint8_t{2});
+  const double voxel[] = {0.0, 0.002, 0.004};
+  const BrickTag tag{-3, 7, 0, 0xfffffffeu, 3};
+  for (std::size_t max_payload : {kMinMtu - kDatagramOverhead, kDefaultMtu - kDatagramOverhead}) {
+    for (bool entropy : {false, true}) {
+      CodecConfig config;
+      config.max_payload = max_payload;
+      config.entropy_coding = entropy;
+      config.halve_peripheral_chroma = entropy;
+      ChunkEncoder enc = makeEncoder(config, n);
+      ASSERT_TRUE(enc.encode(cloud, voxel, 77, 555, &tag).isOk());
+      ASSERT_GT(enc.chunkCount(), 3u);
+      pipeline::FoveatedCloud one(n);
+      for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+        ASSERT_LE(enc.chunk(i).size(), max_payload) << "part " << i;
+        one.clear();
+        Result<DecodedChunk> d = decodeChunk(enc.chunk(i), one);
+        ASSERT_TRUE(d.isOk()) << d.status().toString();
+        EXPECT_TRUE(d->has_brick);
+        EXPECT_EQ(d->brick.x, -3);
+        EXPECT_EQ(d->brick.y, 7);
+        EXPECT_EQ(d->brick.z, 0);
+        EXPECT_EQ(d->brick.version, 0xfffffffeu);
+        EXPECT_EQ(d->brick.level, 3);
+        EXPECT_EQ(d->chunk_index, i);  // part i of chunkCount()
+        EXPECT_EQ(d->chunk_count, enc.chunkCount());
+        EXPECT_EQ(d->frame_id, 77u);
+        EXPECT_EQ(d->capture_time_ns, 555u);
+        EXPECT_EQ(d->points, enc.chunkPoints(i));
+      }
+      const double colour_error = expectRoundTrip(cloud, decodeAll(enc, n), enc, !entropy);
+      EXPECT_LT(colour_error, entropy ? 40.0 : 1e-12);  // random colours: halved chroma is coarse
+      // The same points as a frame: no tag, and no fewer points per chunk.
+      const std::size_t brick_chunks = enc.chunkCount();
+      ASSERT_TRUE(enc.encode(cloud, voxel, 77, 555).isOk());
+      EXPECT_LE(enc.chunkCount(), brick_chunks);
+      for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+        one.clear();
+        Result<DecodedChunk> d = decodeChunk(enc.chunk(i), one);
+        ASSERT_TRUE(d.isOk());
+        EXPECT_FALSE(d->has_brick);
+      }
+    }
+  }
+}
+
+TEST(CodecBrick, TagAddsSixteenBytesAndLeavesTheDataAsIs) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321).isOk());
+  std::vector<std::vector<uint8_t>> frame;
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) frame.emplace_back(enc.chunk(i).begin(), enc.chunk(i).end());
+  const BrickTag tag{1, 2, 3, 4, 5};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321, &tag).isOk());
+  ASSERT_EQ(enc.chunkCount(), frame.size());
+  for (std::size_t i = 0; i < frame.size(); ++i) {
+    EXPECT_EQ(enc.chunk(i).size(), frame[i].size() + 16) << i;
+    const auto* a = wire::GetPointChunk(frame[i].data());
+    const auto* b = wire::GetPointChunk(enc.chunk(i).data());
+    EXPECT_EQ(a->brick(), nullptr);
+    ASSERT_NE(b->brick(), nullptr);
+    EXPECT_TRUE(std::equal(a->data()->begin(), a->data()->end(), b->data()->begin(), b->data()->end()));
+  }
+}
+
+// A PointChunk with header and data of a real chunk and a brick tag of the given level.
+std::vector<uint8_t> chunkWithBrickLevel(std::span<const uint8_t> real, uint8_t level) {
+  const wire::PointChunk* c = wire::GetPointChunk(real.data());
+  flatbuffers::FlatBufferBuilder fbb;
+  const auto data = fbb.CreateVector(c->data()->data(), c->data()->size());
+  const wire::BrickTag tag(4, 5, 6, 1, level);
+  wire::PointChunkBuilder b(fbb);
+  b.add_header(c->header());
+  b.add_brick(&tag);
+  b.add_data(data);
+  b.add_chunk_count(c->chunk_count());
+  fbb.Finish(b.Finish());
+  return {fbb.GetBufferPointer(), fbb.GetBufferPointer() + fbb.GetSize()};  // starts 8-aligned (malloc)
+}
+
+TEST(CodecBrick, LevelOutOfRangeIsRefused) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 1, 0).isOk());
+  pipeline::FoveatedCloud out(16);
+  const std::vector<uint8_t> last = chunkWithBrickLevel(enc.chunk(0), pipeline::kMaxRegions - 1);
+  Result<DecodedChunk> d = decodeChunk(last, out);
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  EXPECT_EQ(d->brick.level, pipeline::kMaxRegions - 1);
+  EXPECT_EQ(d->brick.z, 6);
+  for (int level : {pipeline::kMaxRegions, 255}) {
+    out.clear();
+    d = decodeChunk(chunkWithBrickLevel(enc.chunk(0), static_cast<uint8_t>(level)), out);
+    EXPECT_EQ(d.status().code(), ErrorCode::kParseError) << level;
+    EXPECT_EQ(out.size(), 0u);
+  }
+  // The encoder never makes one.
+  const BrickTag bad{0, 0, 0, 0, pipeline::kMaxRegions};
+  EXPECT_EQ(enc.encode(smallFrame(), voxel, 1, 0, &bad).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(enc.chunkCount(), 0u);
+}
+
 // FlatBuffers reads a payload in place (net/wire.h kPayloadAlignment): every
 // payload the encoder hands out starts aligned, and one off the boundary is an
 // error, never read (UBSan: misaligned load in flatbuffers/buffer.h).
@@ -567,6 +675,31 @@ TEST(FrameAssembler, CollectsFramesAndCountsWhatWasLost) {
   EXPECT_FALSE(asmb.addSummary(junk).isOk());
   EXPECT_EQ(asmb.counters().bad_chunks, 1u);
   EXPECT_EQ(asmb.counters().bad_summaries, 1u);
+}
+
+TEST(FrameAssembler, BrickChunksAreNoPartOfAFrame) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  FrameAssembler asmb = FrameAssembler::create(64).value();
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 5, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(0)).isOk());
+  // Brick chunks of the same and of a newer frame id: refused, the frame goes on.
+  const BrickTag tag{1, 1, 1, 9, 0};
+  for (uint32_t id : {5u, 6u}) {
+    ASSERT_TRUE(enc.encode(smallFrame(), voxel, id, 0, &tag).isOk());
+    for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+      EXPECT_EQ(asmb.addChunk(enc.chunk(i)).code(), ErrorCode::kParseError);
+      EXPECT_EQ(asmb.readyCount(), 0u);
+    }
+  }
+  EXPECT_EQ(asmb.counters().bad_chunks, 4u);
+  EXPECT_EQ(asmb.counters().chunks, 1u);
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 5, 0).isOk());
+  ASSERT_TRUE(asmb.addChunk(enc.chunk(1)).isOk());
+  asmb.flush();
+  ASSERT_EQ(asmb.readyCount(), 1u);
+  EXPECT_EQ(asmb.ready(0).frame_id, 5u);
+  EXPECT_EQ(asmb.ready(0).cloud->size(), 16u);
 }
 
 TEST(FrameAssembler, FrameIdsMayWrap) {

@@ -10,7 +10,7 @@
 namespace fovea::net {
 namespace {
 
-TEST(CodecZeroAllocation, EncodeAndSummaryAfterCreate) {
+TEST(CodecZeroAllocation, EncodeBrickEncodeAndSummaryAfterCreate) {
   // Two different frames (orbit path) and F1/F3, so chunk counts vary.
   const test::MockFoveatedFrame a = test::mockFoveatedFrame("mock:living-room,path=orbit", pipeline::Preset::kF1, 1);
   const test::MockFoveatedFrame b = test::mockFoveatedFrame("mock:living-room,path=orbit", pipeline::Preset::kF3, 3);
@@ -26,6 +26,10 @@ TEST(CodecZeroAllocation, EncodeAndSummaryAfterCreate) {
     for (uint32_t frame = 0; frame < frames; ++frame) {
       const test::MockFoveatedFrame& f = frame % 2 ? a : b;
       ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, frame, 0).isOk());
+      ASSERT_GT(enc.chunkCount(), 10u);
+      // The same points as parts of a map brick: tagged chunks, sized for the tag.
+      const BrickTag brick{-2, 0, 5, frame, static_cast<uint8_t>(frame % 3)};
+      ASSERT_TRUE(enc.encode(f.cloud, f.voxel_size_m, frame, 0, &brick).isOk());
       ASSERT_GT(enc.chunkCount(), 10u);
       (void)enc.encodeSummary(frame, sent, sent);
     }
