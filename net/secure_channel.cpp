@@ -67,7 +67,7 @@ void initCrypto() {
 }
 
 bool isKnownType(uint8_t type) {
-  return type >= static_cast<uint8_t>(MessageType::kHello) && type <= static_cast<uint8_t>(MessageType::kStatus);
+  return type >= static_cast<uint8_t>(MessageType::kHello) && type <= static_cast<uint8_t>(MessageType::kBrickChunk);
 }
 
 bool isSentBy(MessageType type, Role role) {
@@ -78,7 +78,8 @@ bool isSentBy(MessageType type, Role role) {
     case MessageType::kRefuse:
     case MessageType::kChunk:
     case MessageType::kFrameSummary:
-    case MessageType::kStatus: return role == Role::kRobot;
+    case MessageType::kStatus:
+    case MessageType::kBrickChunk: return role == Role::kRobot;
     case MessageType::kBye: return true;
   }
   return false;
@@ -98,6 +99,7 @@ const char* messageTypeName(MessageType type) {
     case MessageType::kChunk: return "chunk";
     case MessageType::kFrameSummary: return "frame-summary";
     case MessageType::kStatus: return "status";
+    case MessageType::kBrickChunk: return "brick-chunk";
   }
   return "unknown";
 }

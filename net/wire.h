@@ -29,6 +29,7 @@ enum class MessageType : uint8_t {
   kChunk = 6,         // robot -> operator: one chunk of a foveated frame
   kFrameSummary = 7,  // robot -> operator: after each frame, chunks per region
   kStatus = 8,        // robot -> operator, once a second: counters
+  kBrickChunk = 9,    // robot -> operator: one part of a map brick (a point chunk with a brick tag)
 };
 
 inline constexpr std::size_t kHeaderBytes = 20;

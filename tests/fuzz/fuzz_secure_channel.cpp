@@ -85,7 +85,8 @@ void parsePayload(MessageType type, std::span<const uint8_t> payload) {
     case MessageType::kGaze: { GazeSample m; (void)decode(copy, m); break; }
     case MessageType::kStatus: { StatusReport m; (void)decode(copy, m); break; }
     case MessageType::kFrameSummary: (void)decodeSummary(copy); break;
-    case MessageType::kChunk: {
+    case MessageType::kChunk:
+    case MessageType::kBrickChunk: {
       static pipeline::FoveatedCloud out(4096);
       out.clear();
       (void)decodeChunk(copy, out);

@@ -160,6 +160,11 @@ void expectHandshakeAndChunk(const char* listen) {
   const Datagram too_big = chunkPayload(robot->maxPayloadBytes() + 1, 1);
   EXPECT_EQ(robot->send(MessageType::kChunk, too_big), SendResult::kTooLarge);
   EXPECT_EQ(robot->send(MessageType::kGaze, payload), SendResult::kWrongType);
+  // A map brick's part travels as its own type (the link does not look inside).
+  ASSERT_EQ(robot->send(MessageType::kBrickChunk, payload), SendResult::kSent);
+  r = receiveType(**op, MessageType::kBrickChunk);
+  ASSERT_TRUE(r);
+  EXPECT_TRUE(std::equal(r->payload.begin(), r->payload.end(), payload.begin(), payload.end()));
 
   ASSERT_TRUE((*op)->sendGaze(gazeTowards(0, 0, 1)));
   ASSERT_TRUE(pollUntil(*robot, [&] { return robot->latestGaze().has_value(); }));

@@ -145,6 +145,9 @@ TEST(SecureChannel, DatagramBadMagicVersionTypeDropped) {
   EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
   m[3] = 200;
   EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
+  m[3] = static_cast<uint8_t>(MessageType::kBrickChunk) + 1;
+  EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
+  EXPECT_TRUE(isKnownType(static_cast<uint8_t>(MessageType::kBrickChunk)));
 }
 
 TEST(SecureChannel, WrongKeyDropped) {
@@ -218,6 +221,8 @@ TEST(SecureChannel, ReflectedDatagramIsWrongDirectionAndFailsAuth) {
   EXPECT_FALSE(isSentBy(MessageType::kChunk, Role::kOperator));
   EXPECT_TRUE(isSentBy(MessageType::kGaze, Role::kOperator));
   EXPECT_TRUE(isSentBy(MessageType::kBye, Role::kOperator));
+  EXPECT_TRUE(isSentBy(MessageType::kBrickChunk, Role::kRobot));
+  EXPECT_FALSE(isSentBy(MessageType::kBrickChunk, Role::kOperator));
   Pair p;
   auto d = p.sealChunk(bytes(50, 1));
   Header h;
