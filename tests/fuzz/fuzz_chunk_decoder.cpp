@@ -83,8 +83,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   return 0;
 }
 
-// Real chunks and summaries of each encoder configuration (mode 0), and two
-// clouds for the encoder mode.
+// Real chunks and summaries of each encoder configuration (mode 0), brick
+// chunks, and two clouds for the encoder mode.
 std::vector<fuzz::Input> fuzz::seeds() {
   Fixture f;
   std::vector<Input> out;
@@ -108,6 +108,15 @@ std::vector<fuzz::Input> fuzz::seeds() {
     const auto bytes = enc->encodeSummary(7, sent, cut);
     summary.insert(summary.end(), bytes.begin(), bytes.end());
     out.push_back(std::move(summary));
+  }
+  // A map brick's parts (kBrickChunk: a point chunk with a brick tag).
+  const net::BrickTag tag{-3, 7, 1, 41, 2};
+  if (f.encoders[0]->encode(cloud, voxel, 7, 0, &tag).isOk()) {
+    for (std::size_t c = 0; c < f.encoders[0]->chunkCount() && c < 2; ++c) {
+      Input chunk{0};
+      chunk.insert(chunk.end(), f.encoders[0]->chunk(c).begin(), f.encoders[0]->chunk(c).end());
+      out.push_back(std::move(chunk));
+    }
   }
   for (uint8_t mode : {1, 7}) {
     Input in{mode};
