@@ -1,0 +1,257 @@
+// fovea-map-delta: the bytes a stream of map changes (pipeline/map/map_delta.h:
+// bricks at the level the eye needs, sent once and again only when due) would
+// send, against the frame-by-frame streams FREF and F1, on the mock camera with
+// a scripted gaze. One process, no sockets: every stream is encoded by the same
+// codec (net/codec.h) and counted in datagram bytes (payload plus the
+// datagram's header and tag); the map's bricks carry their brick tag.
+//
+//   fovea-map-delta [--scene living-room] [--path static] [--frames 90] [--size 640x480]
+//                   [--budget-mbps 12.5] [--fps 30] [--dwell-frames 9]
+//
+// The gaze: the operator's eye at the camera, fixating the scene's focus point
+// and four points 0.25-0.4 m around it in turn, --dwell-frames frames each
+// (9: 300 ms at 30 fps), with an instant saccade between.
+//
+// MAP-DELTA each frame: the bricks the plan makes due in the fovea, then the
+// frame's points the map does not explain (ACUITY-foveated, as today's
+// chunks), then the other due bricks, while the frame's share of the budget
+// lasts; the rest waits. This measures what is sent, not yet what the operator
+// holds (the operator's cache is not built yet). An evaluation tool: it
+// allocates freely.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <initializer_list>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "hal/camera.h"
+#include "net/codec.h"
+#include "pipeline/backproject.h"
+#include "pipeline/foveator.h"
+#include "pipeline/map/map_delta.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/voxel_sampler.h"
+
+namespace {
+
+using namespace fovea;
+
+std::string option(int argc, char** argv, const char* name, const char* fallback) {
+  for (int i = 1; i + 1 < argc; ++i) {
+    if (std::strcmp(argv[i], name) == 0) return argv[i + 1];
+  }
+  return fallback;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// Datagram bytes of the encoder's last encode.
+std::size_t datagramBytes(const net::ChunkEncoder& encoder) {
+  std::size_t bytes = 0;
+  for (std::size_t i = 0; i < encoder.chunkCount(); ++i) bytes += encoder.chunk(i).size() + net::kDatagramOverhead;
+  return bytes;
+}
+
+struct Stream {
+  const char* name;
+  std::size_t bytes = 0;         // all frames
+  std::size_t bytes_steady = 0;  // after the first second
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string scene = option(argc, argv, "--scene", "living-room");
+  const std::string path = option(argc, argv, "--path", "static");
+  const std::string size = option(argc, argv, "--size", "640x480");
+  const int frames = std::atoi(option(argc, argv, "--frames", "90").c_str());
+  const double budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
+  const int fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
+  const int dwell = std::atoi(option(argc, argv, "--dwell-frames", "9").c_str());
+  if (frames < 1 || fps < 1 || dwell < 1 || !(budget_mbps > 0.0)) {
+    std::fprintf(stderr, "fovea-map-delta: --frames, --fps, --dwell-frames and --budget-mbps must be positive\n");
+    return 2;
+  }
+  const std::string spec = "mock:" + scene + ",path=" + path + ",size=" + size;
+  auto created_cam = hal::createCamera(spec);
+  if (!created_cam) {
+    std::fprintf(stderr, "fovea-map-delta: %s\n", created_cam.status().message().c_str());
+    return 2;
+  }
+  hal::Camera& camera = *created_cam.value();
+  if (!camera.open() || !camera.start()) {
+    std::fprintf(stderr, "fovea-map-delta: the mock camera did not start\n");
+    return 1;
+  }
+  const hal::CameraIntrinsics& k = camera.info().intrinsics;
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
+  const Eigen::Vector3d focus = camera.info().focus_point_m.value_or(Eigen::Vector3d(0, 0, 2));
+
+  pipeline::map::SurfelMapConfig map_config;
+  map_config.max_width = k.width;
+  map_config.max_height = k.height;
+  pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(map_config).value();
+  const pipeline::map::MapDeltaConfig delta_config;
+  pipeline::map::MapDelta delta = pipeline::map::MapDelta::create(delta_config, map_config.max_bricks).value();
+  const pipeline::RegionModel levels = pipeline::RegionModel::create(delta_config.acuity).value();
+
+  pipeline::PipelineCapacity capacity;
+  capacity.max_points = capacity.max_voxels = pixels;
+  pipeline::FoveationConfig f1;
+  f1.acuity.preset = pipeline::Preset::kF1;
+  pipeline::FoveationConfig acuity;
+  acuity.acuity = delta_config.acuity;
+  pipeline::Foveator f1_foveator = pipeline::Foveator::create(capacity, f1).value();
+  pipeline::Foveator live_foveator = pipeline::Foveator::create(capacity, acuity).value();
+  // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
+  constexpr std::size_t kMaxBrickPoints = 1 << 18;
+  net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, std::max(pixels, kMaxBrickPoints)).value();
+  pipeline::VoxelSampler sampler(kMaxBrickPoints, kMaxBrickPoints);
+  pipeline::PointCloud cloud(pixels), live(pixels), brick_points(kMaxBrickPoints);
+  pipeline::FoveatedCloud out(std::max(pixels, kMaxBrickPoints));
+  std::vector<uint8_t> brick_region(kMaxBrickPoints);
+
+  Stream fref{"FREF"}, f1_stream{"F1"}, bricks{"MAP-DELTA bricks"}, live_stream{"MAP-DELTA live"};
+  const double budget_per_frame = budget_mbps * 1e6 / fps;
+  std::vector<double> plan_ms, brick_encode_ms;
+  std::size_t live_points = 0;  // after the first second
+  std::size_t bricks_sent = 0, bricks_waited = 0, brick_points_sent = 0;
+  hal::RgbdFrame frame(k.width, k.height);
+  const Eigen::Vector3d offsets[5] = {{0, 0, 0}, {0.4, 0.25, 0}, {-0.4, 0.25, 0}, {-0.4, -0.25, 0}, {0.4, -0.25, 0}};
+  for (int f = 0; f < frames; ++f) {
+    if (!camera.acquire(frame, std::chrono::seconds(5))) {
+      std::fprintf(stderr, "fovea-map-delta: frame %d did not arrive\n", f);
+      return 1;
+    }
+    const bool steady = f >= fps;
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    const Eigen::Vector3d target = focus + frame.T_world_cam.R_world_cam * offsets[(f / dwell) % 5];
+    gaze.direction = (target - gaze.origin_m).normalized();
+    const auto frame_id = static_cast<uint32_t>(f);
+    auto count = [&](Stream& s, std::size_t bytes) {
+      s.bytes += bytes;
+      if (steady) s.bytes_steady += bytes;
+    };
+
+    // The frame-by-frame streams: FREF (every point) and F1.
+    pipeline::BackprojectCounts bp;
+    cloud.clear();
+    if (!pipeline::backprojectRef(frame, map_config.depth, cloud, bp)) return 1;
+    out.points.origin_m = cloud.origin_m;
+    std::copy_n(cloud.x(), cloud.size(), out.points.x());
+    std::copy_n(cloud.y(), cloud.size(), out.points.y());
+    std::copy_n(cloud.z(), cloud.size(), out.points.z());
+    std::copy_n(cloud.rgb(), cloud.size(), out.points.rgb());
+    std::fill_n(out.region.begin(), cloud.size(), uint8_t{0});
+    std::fill_n(out.weight.begin(), cloud.size(), 1u);
+    if (!out.points.resize(cloud.size())) return 1;
+    const double fovea_only[1] = {0.0};
+    if (!encoder.encode(out, fovea_only, frame_id, 0)) return 1;
+    count(fref, datagramBytes(encoder));
+    pipeline::FoveationStats fs;
+    if (!f1_foveator.foveate(cloud, gaze, out, fs)) return 1;
+    double sizes[pipeline::kMaxRegions] = {};
+    for (int r = 0; r < fs.region_count; ++r) sizes[r] = fs.regions[r].voxel_size_m;
+    if (!encoder.encode(out, std::span<const double>(sizes, static_cast<std::size_t>(fs.region_count)), frame_id, 0)) {
+      return 1;
+    }
+    count(f1_stream, datagramBytes(encoder));
+
+    // MAP-DELTA.
+    pipeline::map::FuseStats fuse;
+    if (map.fuse(frame, fuse) != pipeline::map::FuseOutcome::kFused) {
+      std::fprintf(stderr, "fovea-map-delta: frame %d: %s\n", f,
+                   std::string(pipeline::map::fuseOutcomeName(fuse.outcome)).c_str());
+      return 1;
+    }
+    pipeline::map::MapDeltaStats ds;
+    auto plan = delta.plan(map, gaze, ds);
+    if (!plan) return 1;
+    plan_ms.push_back(static_cast<double>(ds.ns) * 1e-6);
+    double left = budget_per_frame;
+    bool live_sent = false;
+    auto sendLive = [&] {
+      live_sent = true;
+      live.clear();
+      live.origin_m = cloud.origin_m;
+      map.appendUnexplained(frame, live);
+      if (steady) live_points += live.size();
+      pipeline::FoveationStats ls;
+      if (live.size() == 0 || !live_foveator.foveate(live, gaze, out, ls)) return;
+      double live_sizes[pipeline::kMaxRegions] = {};
+      for (int r = 0; r < ls.region_count; ++r) live_sizes[r] = ls.regions[r].voxel_size_m;
+      if (!encoder.encode(out, std::span<const double>(live_sizes, static_cast<std::size_t>(ls.region_count)),
+                          frame_id, 0)) {
+        return;
+      }
+      const std::size_t bytes = datagramBytes(encoder);
+      count(live_stream, bytes);
+      left -= static_cast<double>(bytes);
+    };
+    const auto encode_start = std::chrono::steady_clock::now();
+    for (const pipeline::map::BrickDue& due : plan.value()) {
+      if (!due.fovea && !live_sent) sendLive();
+      if (left <= 0.0) {
+        ++bricks_waited;
+        continue;
+      }
+      brick_points.clear();
+      brick_points.origin_m = map.brickOrigin(due.brick);
+      for (uint32_t slot = map.firstInBrick(due.brick); slot != pipeline::map::SurfelMap::kNoSurfel;
+           slot = map.nextInBrick(slot)) {
+        const pipeline::map::Surfel& s = map.surfel(slot);
+        if (!(s.flags & pipeline::map::kSurfelStable)) continue;
+        if (!brick_points.push(s.x, s.y, s.z, pipeline::packRgb(s.red, s.green, s.blue))) break;
+      }
+      std::fill_n(brick_region.begin(), brick_points.size(), due.level);
+      std::array<double, pipeline::kMaxRegions> voxel{};
+      for (int n = 1; n <= due.level; ++n) voxel[n] = levels.voxelSizeM(n, 0.0);
+      pipeline::SampleCounts sc;
+      if (!sampler.sample(brick_points, brick_region.data(), due.level + 1, voxel, out, sc)) return 1;
+      const net::BrickTag tag{map.brickKey(due.brick).x, map.brickKey(due.brick).y, map.brickKey(due.brick).z,
+                              delta.version(due.brick) + 1, due.level};
+      if (!encoder.encode(out, std::span<const double>(voxel.data(), due.level + 1u), frame_id, 0, &tag)) return 1;
+      const std::size_t bytes = datagramBytes(encoder);
+      count(bricks, bytes);
+      left -= static_cast<double>(bytes);
+      brick_points_sent += out.size();
+      ++bricks_sent;
+      delta.markSent(map, due.brick, due.level);
+    }
+    if (!live_sent) sendLive();
+    brick_encode_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - encode_start).count());
+  }
+
+  const double seconds = static_cast<double>(frames) / fps;
+  const double steady_seconds = static_cast<double>(std::max(0, frames - fps)) / fps;
+  std::printf("fovea-map-delta: %s, %d frames at %d fps, gaze: 5 fixations of %d frames, budget %.1f MB/s\n",
+              spec.c_str(), frames, fps, dwell, budget_mbps);
+  std::printf("  %-18s %10s %10s %16s %12s\n", "stream", "MB/s", "vs FREF", "MB/s after 1 s", "vs FREF");
+  const Stream delta_total{"MAP-DELTA", bricks.bytes + live_stream.bytes, bricks.bytes_steady + live_stream.bytes_steady};
+  for (const Stream* s : std::initializer_list<const Stream*>{&fref, &f1_stream, &delta_total, &bricks, &live_stream}) {
+    const double rate = static_cast<double>(s->bytes) / seconds * 1e-6;
+    const double steady_rate = steady_seconds > 0 ? static_cast<double>(s->bytes_steady) / steady_seconds * 1e-6 : 0.0;
+    const double vs = 100.0 * (1.0 - static_cast<double>(s->bytes) / static_cast<double>(fref.bytes));
+    const double vs_steady =
+        fref.bytes_steady > 0 ? 100.0 * (1.0 - static_cast<double>(s->bytes_steady) / static_cast<double>(fref.bytes_steady))
+                              : 0.0;
+    std::printf("  %-18s %10.3f %9.1f%% %16.3f %11.1f%%\n", s->name, rate, vs, steady_rate, vs_steady);
+  }
+  std::printf("  live points after 1 s: %.0f a frame\n", frames > fps ? static_cast<double>(live_points) / (frames - fps) : 0.0);
+  std::printf("  bricks sent %zu (%zu points), waited %zu brick-frames; map %zu surfels in %zu bricks\n",
+              bricks_sent, brick_points_sent, bricks_waited, map.size(), map.brickCount());
+  std::printf("  plan: median %.3f ms, max %.3f ms a frame; brick sampling and encoding: median %.3f ms a frame\n",
+              median(plan_ms), *std::max_element(plan_ms.begin(), plan_ms.end()), median(brick_encode_ms));
+  return 0;
+}
