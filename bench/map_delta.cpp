@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
       for (uint32_t slot = map.firstInBrick(due.brick); slot != pipeline::map::SurfelMap::kNoSurfel;
            slot = map.nextInBrick(slot)) {
         const pipeline::map::Surfel& s = map.surfel(slot);
-        if (!(s.flags & pipeline::map::kSurfelStable)) continue;
+        if (!(s.flags & pipeline::map::kSurfelSettled)) continue;
         if (!brick_points.push(s.x, s.y, s.z, pipeline::packRgb(s.red, s.green, s.blue))) break;
       }
       std::fill_n(brick_region.begin(), brick_points.size(), due.level);

@@ -198,6 +198,7 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("map.confidence_cap", map.map.confidence_cap, 1.0, 255.0),
       FOVEA_FLOAT("map.stable_confidence", map.map.stable_confidence, 0.01, 255.0),
       FOVEA_INT("map.unstable_max_frames", map.map.unstable_max_frames, 1, 1'000'000),
+      FOVEA_INT("map.settle_frames", map.map.settle_frames, 0, 1'000'000),
       FOVEA_FLOAT("map.carve_weight", map.map.carve_weight, 0.0, 100.0),
       FOVEA_FLOAT("map.max_pose_jump_m", map.map.max_pose_jump_m, 0.001, 1000.0),
       FOVEA_INT("map.eye_face_cells", map.eye.face_cells, 8, 2048),

@@ -108,15 +108,15 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     float& held = nearest_[indexOf(c, c.u, c.v)];
     held = std::min(held, dist);
   }
-  // ... and the map's stable surfels over their footprints (on their own face:
+  // ... and the map's settled surfels over their footprints (on their own face:
   // a footprint that crosses a cube edge leaves the other face's cells as they
   // were, which can only show more, never hide).
   const std::size_t slots = map.slotCount();
   for (std::size_t slot = 0; slot < slots; ++slot) {
     if (!map.live(slot)) continue;
     const Surfel& s = map.surfel(slot);
-    if (!(s.flags & kSurfelStable) || s.brick >= bricks) continue;
-    ++stats.stable;
+    if (!(s.flags & kSurfelSettled) || s.brick >= bricks) continue;
+    ++stats.settled;
     const Eigen::Vector3f d = brick_rel_[s.brick] + Eigen::Vector3f(s.x, s.y, s.z);
     const float dist = d.norm();
     if (!(dist >= kMinEyeDistanceM)) continue;
@@ -156,7 +156,7 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
   for (std::size_t slot = 0; slot < slots; ++slot) {
     if (!map.live(slot)) continue;
     const Surfel& s = map.surfel(slot);
-    if (!(s.flags & kSurfelStable) || s.brick >= bricks) continue;
+    if (!(s.flags & kSurfelSettled) || s.brick >= bricks) continue;
     const Eigen::Vector3f d = brick_rel_[s.brick] + Eigen::Vector3f(s.x, s.y, s.z);
     const float dist = d.norm();
     if (dist >= kMinEyeDistanceM) {

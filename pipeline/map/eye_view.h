@@ -1,4 +1,4 @@
-// The surfel map as the operator's eye sees it: which of the map's stable
+// The surfel map as the operator's eye sees it: which of the map's settled
 // surfels an eye at a given position can see, found with a coarse depth buffer
 // around the eye, so that the map's foveation sends what the operator can look
 // at and nothing hidden behind nearer surfaces.
@@ -6,10 +6,10 @@
 // The depth buffer is a cube map (six faces of face_cells x face_cells cells,
 // each holding the distance to the nearest surface in its direction): it covers
 // every direction, so the head may turn anywhere, and a cell is found with one
-// division, not a trigonometric function. Pass one splats every stable surfel
+// division, not a trigonometric function. Pass one splats every settled surfel
 // over its footprint (up to 2 cells around its centre) and every point already
 // in the cloud (the frame's points the map does not explain: a moving object
-// hides the wall behind it) into its cell; pass two appends each stable surfel
+// hides the wall behind it) into its cell; pass two appends each settled surfel
 // that is not farther than its cell's nearest surface by more than the margin.
 // A surfel is judged at its centre's cell, as a renderer's z-buffer would.
 //
@@ -43,7 +43,7 @@ struct EyeViewConfig {
 };
 
 struct EyeViewStats {
-  uint32_t stable = 0;        // stable surfels in the map
+  uint32_t settled = 0;       // settled surfels in the map (kSurfelSettled)
   uint32_t hidden = 0;        // ... behind a nearer surface from the eye: not sent
   uint32_t appended = 0;      // ... appended to the cloud
   uint32_t dropped_full = 0;  // ... visible but not appended: the cloud was full
@@ -56,7 +56,7 @@ class EyeView {
   // max_bricks: the map's (SurfelMapConfig::max_bricks).
   static Result<EyeView> create(const EyeViewConfig& config, std::size_t max_bricks);
 
-  // Appends to `cloud` (relative to cloud.origin_m) the stable surfels of `map`
+  // Appends to `cloud` (relative to cloud.origin_m) the settled surfels of `map`
   // that an eye at eye_m sees. The points already in the cloud occlude too and
   // stay. Never allocates.
   void appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats);

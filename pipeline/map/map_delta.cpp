@@ -46,7 +46,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
     : config_(config), bounds_(bounds) {
   held_level_.assign(max_bricks, kNotHeld);
   held_changes_.assign(max_bricks, 0);
-  held_stable_.assign(max_bricks, 0);
+  held_settled_.assign(max_bricks, 0);
   version_.assign(max_bricks, 0);
   due_since_.assign(max_bricks, 0);
   order_.resize(max_bricks);
@@ -56,7 +56,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
 
 std::size_t MapDelta::memoryBytes() const {
   return held_level_.capacity() +
-         (held_changes_.capacity() + held_stable_.capacity() + version_.capacity() + due_since_.capacity()) *
+         (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + due_since_.capacity()) *
              sizeof(uint32_t) +
          order_.capacity() * sizeof(uint64_t) + (due_.capacity() + plan_.capacity()) * sizeof(BrickDue);
 }
@@ -95,10 +95,10 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
   std::size_t n_due = 0;
   for (std::size_t b = 0; b < bricks; ++b) {
     const auto brick = static_cast<uint16_t>(b);
-    const uint32_t stable = map.brickStableCount(brick);
+    const uint32_t settled = map.brickSettledCount(brick);
     const uint8_t held = held_level_[b];
-    stats.bricks += stable > 0 ? 1 : 0;
-    if (held == kNotHeld && stable == 0) {
+    stats.bricks += settled > 0 ? 1 : 0;
+    if (held == kNotHeld && settled == 0) {
       due_since_[b] = 0;
       continue;
     }
@@ -114,7 +114,7 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
       ++stats.refine;
     } else {
       const uint32_t changes = map.brickChanges(brick) - held_changes_[b];
-      const double allowed = config_.change_fraction * std::ldexp(static_cast<double>(held_stable_[b]), held);
+      const double allowed = config_.change_fraction * std::ldexp(static_cast<double>(held_settled_[b]), held);
       if (changes > 0 && static_cast<double>(changes) > allowed) {
         due.need = BrickNeed::kChanged;
         is_due = true;
@@ -143,7 +143,7 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
 uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level) {
   held_level_[brick] = level;
   held_changes_[brick] = map.brickChanges(brick);
-  held_stable_[brick] = map.brickStableCount(brick);
+  held_settled_[brick] = map.brickSettledCount(brick);
   due_since_[brick] = 0;
   if (++version_[brick] == 0) version_[brick] = 1;
   return version_[brick];

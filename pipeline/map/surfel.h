@@ -20,7 +20,7 @@ struct Surfel {
   float x = 0.0f, y = 0.0f, z = 0.0f;  // metres from the brick's origin
   uint32_t normal_radius = 0;          // encodeNormal() << 8 | encodeRadius()
   uint8_t red = 0, green = 0, blue = 0;
-  uint8_t flags = 0;                   // kSurfelLive | kSurfelStable
+  uint8_t flags = 0;                   // kSurfelLive | kSurfelStable | kSurfelSettled
   uint16_t confidence = 0;             // 8.8 fixed point: the summed observation weights
   uint16_t brick = 0;                  // the brick's slot in the map's brick table
   uint32_t first_seen = 0;             // the map's frame number of the first observation
@@ -30,6 +30,10 @@ static_assert(sizeof(Surfel) == 32, "a surfel is 32 bytes");
 
 inline constexpr uint8_t kSurfelLive = 1;
 inline constexpr uint8_t kSurfelStable = 2;
+// Stable and in the map for SurfelMapConfig::settle_frames: the map's content
+// for the operator (what the eye view and the stream of changes send, what
+// explains a pixel).
+inline constexpr uint8_t kSurfelSettled = 4;
 
 // A unit normal as 24 bits: octahedral projection, 12 bits each for u and v.
 uint32_t encodeNormal(const Eigen::Vector3f& unit_normal);

@@ -78,7 +78,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_cam_.resize(config.max_bricks);
   brick_visible_.resize(config.max_bricks);
   brick_head_.assign(config.max_bricks, kNoSurfel);
-  brick_stable_.assign(config.max_bricks, 0);
+  brick_settled_.assign(config.max_bricks, 0);
   brick_changes_.assign(config.max_bricks, 0);
   link_next_.resize(config.max_surfels);
   link_prev_.resize(config.max_surfels);
@@ -105,7 +105,7 @@ std::size_t SurfelMap::memoryBytes() const {
          eviction_.capacity() * sizeof(uint64_t) + brick_keys_.capacity() * sizeof(BrickKey) +
          brick_table_.capacity() * sizeof(int32_t) + brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
          brick_visible_.capacity() +
-         (brick_head_.capacity() + brick_stable_.capacity() + brick_changes_.capacity() + link_next_.capacity() +
+         (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity() + link_next_.capacity() +
           link_prev_.capacity()) * sizeof(uint32_t) +
          (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
           weight_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
@@ -116,7 +116,7 @@ void SurfelMap::clear() {
   std::fill(surfels_.begin(), surfels_.begin() + static_cast<std::ptrdiff_t>(high_water_), Surfel{});
   std::fill(brick_table_.begin(), brick_table_.end(), 0);
   std::fill(brick_head_.begin(), brick_head_.end(), kNoSurfel);
-  std::fill(brick_stable_.begin(), brick_stable_.end(), 0);
+  std::fill(brick_settled_.begin(), brick_settled_.end(), 0);
   std::fill(brick_changes_.begin(), brick_changes_.end(), 0);
   free_count_ = high_water_ = live_ = brick_count_ = 0;
   frame_ = 0;
@@ -237,8 +237,8 @@ void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
 
 void SurfelMap::detachSurfel(uint32_t slot) {
   Surfel& s = surfels_[slot];
-  if (s.flags & kSurfelStable) {
-    --brick_stable_[s.brick];
+  if (s.flags & kSurfelSettled) {
+    --brick_settled_[s.brick];
     ++brick_changes_[s.brick];
   }
   const uint32_t next = link_next_[slot], prev = link_prev_[slot];
@@ -257,10 +257,10 @@ void SurfelMap::removeSurfel(uint32_t slot) {
   free_[free_count_++] = slot;
 }
 
-void SurfelMap::markStable(Surfel& s) {
-  if (s.flags & kSurfelStable) return;
-  s.flags |= kSurfelStable;
-  ++brick_stable_[s.brick];
+void SurfelMap::markSettled(Surfel& s) {
+  if (s.flags & kSurfelSettled) return;
+  s.flags |= kSurfelSettled;
+  ++brick_settled_[s.brick];
   ++brick_changes_[s.brick];
 }
 
@@ -435,7 +435,10 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
   link_prev_[slot] = kNoSurfel;
   if (head != kNoSurfel) link_prev_[head] = slot;
   brick_head_[s.brick] = slot;
-  if (weight >= config_.stable_confidence) markStable(s);
+  if (weight >= config_.stable_confidence) {
+    s.flags |= kSurfelStable;
+    if (config_.settle_frames == 0) markSettled(s);
+  }
   ++live_;
   return true;
 }
@@ -503,13 +506,15 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           }
           continue;
         }
-        // A stable surfel at the measured depth explains the pixel, whether or
+        // A settled surfel at the measured depth explains the pixel, whether or
         // not the measurement merges: an edge pixel has no normal, and a far
         // pixel's normal is too noisy for the tolerance (on the mock living
         // room these were 35 000 of the 40 000 pixels a static view left
-        // unexplained, and went to the operator every frame).
+        // unexplained, and went to the operator every frame). A stable surfel
+        // seen at its depth settles once old enough.
         const bool at_depth = seen <= z + tolerance;
-        if (at_depth && (s.flags & kSurfelStable)) explained_[i] = 1;
+        if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
+        if (at_depth && (s.flags & kSurfelSettled)) explained_[i] = 1;
         if (!has_normal) continue;
         if (at_depth) {
           const Eigen::Vector3f n_world = R_wc_f * normal;
@@ -533,8 +538,11 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
           const float capped = std::min(sum, cap);
           s.confidence = encodeConfidence(capped);
-          if (capped >= stable) markStable(s);
-          if (s.flags & kSurfelStable) explained_[i] = 1;
+          if (capped >= stable) {
+            s.flags |= kSurfelStable;
+            if (frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
+          }
+          if (s.flags & kSurfelSettled) explained_[i] = 1;
           s.last_seen = frame_;
           ++stats.merged;
           continue;

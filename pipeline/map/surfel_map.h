@@ -73,6 +73,11 @@ struct SurfelMapConfig {
   // frame's RMS depth error (4: 0.29).
   double stable_confidence = 1.5;
   uint32_t unstable_max_frames = 30;  // an unstable surfel older than this goes
+  // A stable surfel is settled (kSurfelSettled: the operator's from then on)
+  // once it is this many frames old and seen again: a moving object's surfels
+  // reach stability within two frames and go a few frames later, and would
+  // otherwise change the map, and every brick it passes, every frame.
+  uint32_t settle_frames = 10;
   // A surfel the camera sees through (at its centre's pixel) loses half its
   // confidence and carve_weight times the pixel's weight; one that only a
   // neighbouring pixel of its footprint sees through, that weight alone.
@@ -134,8 +139,9 @@ class SurfelMap {
   // allocates.
   FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid = true);
 
-  // The pixels of the last fused frame (pass that frame) that no stable surfel
-  // explains: new surface, a moving object, an edge without a normal. Appends
+  // The pixels of the last fused frame (pass that frame) that no settled
+  // surfel lies at (within the association's depth tolerance): new surface, a
+  // moving object, surface the map has not settled yet. Appends
   // their world positions (relative to out.origin_m) and colours to out until
   // it is full; returns how many it appended (0 when `frame` is not the last
   // fused one: other size or stamp). The map's foveation sends them beside the
@@ -162,13 +168,13 @@ class SurfelMap {
 
   // Per brick, for the stream of changes (issue 26): the live surfels as a
   // list (firstInBrick, then nextInBrick until kNoSurfel; any order), the
-  // stable ones among them, and a counter of changes to the stable set (a
-  // surfel became stable, or a stable one went) that only grows (wrapping):
-  // a reader keeps the value it last saw and compares.
+  // settled ones among them, and a counter of changes to the settled set (a
+  // surfel settled, or a settled one went) that only grows (wrapping): a
+  // reader keeps the value it last saw and compares.
   static constexpr uint32_t kNoSurfel = 0xffffffffu;
   uint32_t firstInBrick(uint16_t brick) const { return brick_head_[brick]; }
   uint32_t nextInBrick(uint32_t slot) const { return link_next_[slot]; }
-  uint32_t brickStableCount(uint16_t brick) const { return brick_stable_[brick]; }
+  uint32_t brickSettledCount(uint16_t brick) const { return brick_settled_[brick]; }
   uint32_t brickChanges(uint16_t brick) const { return brick_changes_[brick]; }
 
   const SurfelMapConfig& config() const { return config_; }
@@ -202,7 +208,7 @@ class SurfelMap {
   // Takes a surfel out of the map's bookkeeping (flags, brick list, counts) but
   // not into the free list: removeSurfel() does both.
   void detachSurfel(uint32_t slot);
-  void markStable(Surfel& s);
+  void markSettled(Surfel& s);
   // A surfel the camera saw through keeps `left` confidence; true when that is
   // none and it must go (the caller removes it: at once, or after the frame's
   // association while the index map may still name it). Counts both.
@@ -221,8 +227,8 @@ class SurfelMap {
   std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
   std::vector<uint8_t> brick_visible_;
   std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
-  std::vector<uint32_t> brick_stable_;    // ... its stable surfels
-  std::vector<uint32_t> brick_changes_;   // ... changes to its stable set (wrapping)
+  std::vector<uint32_t> brick_settled_;   // ... its settled surfels
+  std::vector<uint32_t> brick_changes_;   // ... changes to its settled set (wrapping)
   std::vector<uint32_t> link_next_, link_prev_;  // per slot: the brick list's neighbours
 
   // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
@@ -237,7 +243,7 @@ class SurfelMap {
   std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
   std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
-  std::vector<uint8_t> explained_;        // the last fused frame: 1 where a stable surfel took the pixel
+  std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
   std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
   float normal_cos_f_px_ = 0.0f;          // ... for this focal length (0: not made yet)
 

@@ -263,6 +263,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "map.confidence_cap=12.0",
     "map.stable_confidence=2.5",
     "map.unstable_max_frames=45",
+    "map.settle_frames=4",
     "map.carve_weight=1.5",
     "map.max_pose_jump_m=0.5",
     "map.eye_face_cells=192",

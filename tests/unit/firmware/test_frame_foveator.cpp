@@ -114,7 +114,9 @@ TEST(FrameFoveator, EveryPresetFoveatesTheMap) {
     ASSERT_NE(stage->map(), nullptr);
     EXPECT_GT(stage->mapMemoryBytes(), settings.map.max_surfels * sizeof(pipeline::map::Surfel));
     pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
-    for (int i = 0; i < 8; ++i) {
+    // Past map.settle_frames (10): the map's surfels are the operator's.
+    const int frames = static_cast<int>(settings.map.settle_frames) + 3;
+    for (int i = 0; i < frames; ++i) {
       ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
       pipeline::BackprojectCounts counts;
       pipeline::FoveationStats stats;
@@ -125,7 +127,7 @@ TEST(FrameFoveator, EveryPresetFoveatesTheMap) {
       EXPECT_EQ(stage->cloud().size(), figures.frame_points + figures.eye.appended);
       EXPECT_LE(figures.frame_points, rig.pixels);
       EXPECT_GT(out.size(), 0u);
-      if (i == 7) {
+      if (i == frames - 1) {
         EXPECT_GT(figures.eye.appended, rig.pixels / 2) << "the map's surfels reached the foveator";
         EXPECT_LT(figures.frame_points, rig.pixels / 2) << "the map explains most of the frame by now";
       }

@@ -118,16 +118,19 @@ SurfelMapConfig smallConfig(int w, int h) {
   c.max_height = h;
   c.max_surfels = 1 << 16;
   c.max_bricks = 1024;
+  // Stable surfels settle at once: the tests below fuse a few frames; the
+  // settling has its own test.
+  c.settle_frames = 0;
   return c;
 }
 
 // What must hold after any fuse(): the live count is the live flags', each
 // live surfel names a brick the map has and has finite, normalised fields, and
-// each brick's list holds exactly its live surfels, once each, with its stable
+// each brick's list holds exactly its live surfels, once each, with its settled
 // count (checked against a scan of every slot).
 void expectConsistent(const SurfelMap& map) {
   std::size_t live = 0;
-  std::vector<uint32_t> in_brick(map.brickCount()), stable_in_brick(map.brickCount());
+  std::vector<uint32_t> in_brick(map.brickCount()), settled_in_brick(map.brickCount());
   for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
     if (!map.live(slot)) continue;
     ++live;
@@ -137,7 +140,10 @@ void expectConsistent(const SurfelMap& map) {
     ASSERT_NEAR(surfelNormal(s).norm(), 1.0f, 1e-4f);
     ASSERT_LE(s.first_seen, s.last_seen);
     ++in_brick[s.brick];
-    stable_in_brick[s.brick] += (s.flags & kSurfelStable) ? 1 : 0;
+    settled_in_brick[s.brick] += (s.flags & kSurfelSettled) ? 1 : 0;
+    if (s.flags & kSurfelSettled) {
+      EXPECT_TRUE(s.flags & kSurfelStable) << "slot " << slot;
+    }
   }
   EXPECT_EQ(live, map.size());
   EXPECT_LE(map.size(), map.capacity());
@@ -153,8 +159,8 @@ void expectConsistent(const SurfelMap& map) {
       ++n;
     }
     EXPECT_EQ(n, in_brick[b]) << "brick " << b;
-    EXPECT_EQ(map.brickStableCount(brick), stable_in_brick[b]) << "brick " << b;
-    EXPECT_GE(map.brickChanges(brick), map.brickStableCount(brick)) << "brick " << b;
+    EXPECT_EQ(map.brickSettledCount(brick), settled_in_brick[b]) << "brick " << b;
+    EXPECT_GE(map.brickChanges(brick), map.brickSettledCount(brick)) << "brick " << b;
   }
 }
 
@@ -414,7 +420,7 @@ TEST(SurfelMap, AStaticWallSettlesAndStopsCountingChanges) {
     uint64_t changes = 0, stable = 0;
     for (std::size_t b = 0; b < map.brickCount(); ++b) {
       changes += map.brickChanges(static_cast<uint16_t>(b));
-      stable += map.brickStableCount(static_cast<uint16_t>(b));
+      stable += map.brickSettledCount(static_cast<uint16_t>(b));
     }
     return std::pair{changes, stable};
   };
@@ -432,6 +438,42 @@ TEST(SurfelMap, AStaticWallSettlesAndStopsCountingChanges) {
   const auto [changes, stable] = totals();
   // Nothing moved: at most 1 % of the stable surfels changed in 20 more frames.
   EXPECT_LE(changes - changes_settled, stable / 100) << stable << " stable surfels";
+}
+
+TEST(SurfelMap, StableSurfelsSettleOnlyWhenOldEnoughAndOnlySettledOnesExplainAPixel) {
+  const int w = 80, h = 60;
+  SurfelMapConfig config = smallConfig(w, h);
+  config.settle_frames = 5;
+  SurfelMap map = SurfelMap::create(config).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  PointCloud unexplained(static_cast<std::size_t>(w) * h);
+  FuseStats stats;
+  auto settled = [&] {
+    std::size_t n = 0, stable = 0;
+    for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+      n += map.live(slot) && (map.surfel(slot).flags & kSurfelSettled);
+      stable += map.live(slot) && (map.surfel(slot).flags & kSurfelStable);
+    }
+    return std::pair{n, stable};
+  };
+  for (int i = 0; i < 5; ++i) {
+    render(Scene{}, poseAt({0.002 * (i % 3), 0, 0}), i + 1, frame);
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+    unexplained.clear();
+    // Stable but young: nothing settled, nothing explained (every pixel sees the wall and goes live).
+    EXPECT_EQ(map.appendUnexplained(frame, unexplained), static_cast<std::size_t>(w) * h) << "frame " << i;
+  }
+  EXPECT_EQ(settled().first, 0u);
+  EXPECT_GT(settled().second, 1000u);
+  for (int i = 5; i < 8; ++i) {
+    render(Scene{}, poseAt({0.002 * (i % 3), 0, 0}), i + 1, frame);
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+  }
+  expectConsistent(map);
+  EXPECT_GT(settled().first, settled().second * 9 / 10);
+  unexplained.clear();
+  // (the view's border, which the camera's 2 mm steps uncover, stays unexplained longer: 6 %)
+  EXPECT_LT(map.appendUnexplained(frame, unexplained), static_cast<std::size_t>(w) * h / 10);
 }
 
 TEST(SurfelMap, AFullPoolEvictsTheLeastUsefulAndCountsIt) {
@@ -541,7 +583,7 @@ std::vector<bool> sentBySlot(const SurfelMap& map, const PointCloud& cloud, std:
   std::vector<bool> sent(map.slotCount(), false);
   std::size_t j = first;
   for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
-    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable) || j >= cloud.size()) continue;
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelSettled) || j >= cloud.size()) continue;
     if ((cloud.world(j) - map.worldPosition(slot)).norm() < 1e-3) {
       sent[slot] = true;
       ++j;
@@ -583,7 +625,7 @@ void expectTheBoxHidesTheWall(const SurfelMap& map, int trials, std::size_t min_
     const std::vector<bool> sent = sentBySlot(map, cloud, 0);
     std::size_t wall_hidden = 0, wall_visible = 0, front = 0;
     for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
-      if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+      if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelSettled)) continue;
       const Eigen::Vector3d p = map.worldPosition(slot);
       if (std::abs(p.z() - 3.0) < 0.01) {  // the wall
         if (segmentHitsBox(box, -margin, eye, p)) {
@@ -602,7 +644,7 @@ void expectTheBoxHidesTheWall(const SurfelMap& map, int trials, std::size_t min_
     EXPECT_GT(wall_hidden, min_hidden) << "trial " << trial;
     EXPECT_GT(wall_visible, min_visible) << "trial " << trial;
     EXPECT_GT(front, min_front) << "trial " << trial;
-    EXPECT_EQ(stats.appended + stats.hidden, stats.stable);
+    EXPECT_EQ(stats.appended + stats.hidden, stats.settled);
     EXPECT_EQ(stats.appended, cloud.size());
   }
 }
@@ -636,7 +678,7 @@ TEST(EyeView, CloseToASurfaceItsFootprintsCoverTheCellsBetweenItsSurfels) {
   const std::vector<bool> sent = sentBySlot(map, cloud, 0);
   std::size_t behind = 0, leaked = 0;
   for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
-    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelSettled)) continue;
     const Eigen::Vector3d p = map.worldPosition(slot);
     if (std::abs(p.z() - 3.0) < 0.01 && segmentHitsBox(box, -0.06, eye, p)) {
       ++behind;
@@ -668,7 +710,7 @@ TEST(EyeView, TheFramesPointsOccludeTooAndStay) {
   const Box plate_box{{-0.4, -0.4, 1.49}, {0.4, 0.4, 1.51}};
   std::size_t hidden = 0;
   for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
-    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelStable)) continue;
+    if (!map.live(slot) || !(map.surfel(slot).flags & kSurfelSettled)) continue;
     const Eigen::Vector3d p = map.worldPosition(slot);
     if (segmentHitsBox(plate_box, -0.03, eye, p)) {
       ++hidden;
@@ -695,11 +737,11 @@ TEST(EyeView, TenKilometresFromTheOriginSeesWhatTheOriginSees) {
   EyeViewStats near_stats, far_stats;
   view.appendVisible(near_map, eye, near_cloud, near_stats);
   view.appendVisible(far_map, eye + far, far_cloud, far_stats);
-  EXPECT_EQ(near_stats.stable, far_stats.stable);
+  EXPECT_EQ(near_stats.settled, far_stats.settled);
   // The two maps fused the same frames but their surfels' float offsets differ
   // by rounding: a surfel at a cell's edge may fall either way.
   EXPECT_NEAR(static_cast<double>(far_stats.hidden), static_cast<double>(near_stats.hidden),
-              0.002 * near_stats.stable + 5);
+              0.002 * near_stats.settled + 5);
   EXPECT_GT(near_stats.hidden, 1000u);
 }
 
@@ -711,7 +753,7 @@ TEST(EyeView, AFullCloudCountsWhatItCouldNotTake) {
   view.appendVisible(map, Eigen::Vector3d::Zero(), cloud, stats);
   EXPECT_EQ(cloud.size(), 1000u);
   EXPECT_EQ(stats.appended, 1000u);
-  EXPECT_EQ(stats.appended + stats.dropped_full + stats.hidden, stats.stable);
+  EXPECT_EQ(stats.appended + stats.dropped_full + stats.hidden, stats.settled);
   EXPECT_GT(stats.dropped_full, 0u);
   EXPECT_FALSE(EyeView::create(EyeViewConfig{.face_cells = 4}, 16).isOk());
   EXPECT_FALSE(EyeView::create(EyeViewConfig{.occlusion_margin = std::nan("")}, 16).isOk());
