@@ -11,8 +11,8 @@
 // then due when:
 //  - the operator lacks it (kMissing), or needs it finer than it holds it
 //    (kRefine; coarsening is never sent: the operator draws what it has);
-//  - its stable set changed (SurfelMap::brickChanges: surfels became stable or
-//    went) by more than change_fraction * 2^h of the stable surfels it held when
+//  - its settled set changed (SurfelMap::brickChanges: surfels settled or
+//    went) by more than change_fraction * 2^h of the settled surfels it held when
 //    sent at level h (kChanged): a coarse level hides more.
 // The plan lists the due bricks in budget order: the fovea's first (the brick
 // comes within fovea_ecc_deg of the gaze), then changes, then the periphery's;
@@ -47,7 +47,7 @@ struct MapDeltaConfig {
   }();
   // A brick that comes within this of the gaze is the fovea's: sent first.
   double fovea_ecc_deg = 5.0;
-  // Changes to a brick's stable set (fraction of its stable surfels when sent,
+  // Changes to a brick's settled set (fraction of its settled surfels when sent,
   // times 2^level) that make it due again.
   double change_fraction = 0.01;
 
@@ -64,7 +64,7 @@ struct BrickDue {
 };
 
 struct MapDeltaStats {
-  uint32_t bricks = 0;  // with stable surfels
+  uint32_t bricks = 0;  // with settled surfels
   uint32_t missing = 0, refine = 0, changed = 0;
   uint32_t fovea = 0;  // of the due, the fovea's
   int64_t ns = 0;      // plan()'s time
@@ -88,9 +88,13 @@ class MapDelta {
   // call). kInvalidInput for a bad gaze. Never allocates.
   Result<std::span<const BrickDue>> plan(const SurfelMap& map, const Gaze& gaze, MapDeltaStats& stats);
 
-  // The caller sent `brick` at `level`: the operator now holds it so (until an
-  // acknowledgement says otherwise). Returns the brick's new version (from 1).
+  // The caller sent `brick` at `level`: the operator now holds it so (until
+  // forget() says otherwise: the sender resends lost parts, and tells when a
+  // version cannot be delivered). Returns the brick's new version (from 1).
   uint32_t markSent(const SurfelMap& map, uint16_t brick, uint8_t level);
+  // The operator does not hold `brick` (it evicted it, or its version was lost
+  // on the way: net/brick_sender.h): it is due again.
+  void forget(uint16_t brick) { held_level_[brick] = kNotHeld; }
   // The operator holds nothing (a new session, or an operator that restarted).
   void forgetAll();
 
@@ -108,7 +112,7 @@ class MapDelta {
   uint32_t plan_number_ = 0;
   std::vector<uint8_t> held_level_;        // kNotHeld: the operator lacks it
   std::vector<uint32_t> held_changes_;     // the map's change counter when sent
-  std::vector<uint32_t> held_stable_;      // ... and the stable surfels then
+  std::vector<uint32_t> held_settled_;      // ... and the settled surfels then
   std::vector<uint32_t> version_;
   std::vector<uint32_t> due_since_;        // plan number the brick became due (0: not due)
   std::vector<uint64_t> order_;            // plan scratch: sort keys

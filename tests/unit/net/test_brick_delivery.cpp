@@ -1,0 +1,218 @@
+// Delivering map bricks over a lossy link (net/brick_sender.h on the robot,
+// net/brick_cache.h on the operator, the codec's brick chunks between them):
+// with 10 % of the parts and of the acknowledgements lost, duplicates and
+// reordering, every brick's last version is drawn within a bounded number of
+// resend rounds after the loss stops, and the sender's memory stays fixed;
+// parts overwritten in the store before their acknowledgement make the version
+// lost, and the caller is told.
+#include <algorithm>
+#include <deque>
+#include <map>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "net/brick_cache.h"
+#include "net/brick_sender.h"
+#include "net/codec.h"
+#include "net/wire.h"
+
+namespace fovea::net {
+namespace {
+
+constexpr int64_t kMs = 1'000'000;
+
+// The points of version `version` of brick `b`: a small slab whose size and
+// height depend on both, so that versions differ.
+void brickPoints(int b, uint32_t version, pipeline::FoveatedCloud& out) {
+  out.clear();
+  out.points.origin_m = Eigen::Vector3d(b * 0.5, 0.0, 1.0);
+  const int n = 300 + static_cast<int>((b * 37 + version * 11) % 500);
+  for (int i = 0; i < n; ++i) {
+    ASSERT_TRUE(out.points.push(0.001f * static_cast<float>(i % 40), 0.001f * static_cast<float>(i / 40),
+                                0.0001f * static_cast<float>(version), 0x808080u));
+  }
+  std::fill_n(out.region.begin(), out.size(), uint8_t{0});
+  std::fill_n(out.weight.begin(), out.size(), 1u);
+}
+
+struct Datagram {
+  std::vector<uint8_t> payload;  // a chunk: 8-byte aligned when copied into an aligned buffer
+};
+
+TEST(BrickDelivery, TenPercentLossDuplicatesAndReorderingConvergeToTheLastVersions) {
+  constexpr int kBricks = 12;
+  BrickSenderConfig sender_config;
+  sender_config.store_bytes = 1 << 20;
+  sender_config.max_bricks = kBricks;
+  sender_config.resend_after_ns = 30 * kMs;
+  BrickSender sender = BrickSender::create(sender_config).value();
+  BrickCacheConfig cache_config;
+  cache_config.max_bricks = 64;
+  cache_config.max_points = 1 << 16;
+  BrickCache cache = BrickCache::create(cache_config).value();
+  ChunkEncoder encoder = ChunkEncoder::create(CodecConfig{}, 4096).value();
+  pipeline::FoveatedCloud points(4096), decoded(4096);
+  std::mt19937 rng(1026);
+  std::deque<Datagram> to_operator;
+  std::deque<BrickPartId> to_robot;
+  std::vector<uint32_t> version(kBricks, 0);
+  alignas(8) uint8_t aligned[kMaxMtu];
+  bool lossy = true;
+  auto send = [&](std::span<const uint8_t> payload) {
+    if (lossy && rng() % 10 == 0) return;  // lost
+    to_operator.push_back({{payload.begin(), payload.end()}});
+    if (lossy && rng() % 10 == 0) to_operator.push_back({{payload.begin(), payload.end()}});  // duplicated
+    if (lossy && to_operator.size() > 1 && rng() % 4 == 0) {
+      std::swap(to_operator.back(), to_operator[rng() % to_operator.size()]);  // reordered
+    }
+  };
+  auto sendVersion = [&](int b, int64_t now) {
+    ++version[b];
+    brickPoints(b, version[b], points);
+    const double fovea[1] = {0.0};
+    const BrickTag tag{b, 0, 2, version[b], 0};
+    ASSERT_TRUE(encoder.encode(points, fovea, 0, 0, &tag));
+    int lost = -2;
+    ASSERT_TRUE(sender.begin(static_cast<uint16_t>(b), version[b], static_cast<uint16_t>(encoder.chunkCount()), now, &lost));
+    EXPECT_EQ(lost, -1);
+    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) {
+      ASSERT_TRUE(sender.addPart(static_cast<uint16_t>(i), encoder.chunk(i)));
+      send(encoder.chunk(i));
+    }
+  };
+  auto operatorReceives = [&](int64_t now) {
+    while (!to_operator.empty()) {
+      const Datagram d = std::move(to_operator.front());
+      to_operator.pop_front();
+      std::copy(d.payload.begin(), d.payload.end(), aligned);
+      decoded.clear();
+      Result<DecodedChunk> chunk = decodeChunk(std::span<const uint8_t>(aligned, d.payload.size()), decoded);
+      ASSERT_TRUE(chunk) << chunk.status().toString();
+      cache.add(chunk.value(), decoded, 0, now);
+    }
+    for (const BrickPartId& id : cache.received()) {
+      if (lossy && rng() % 10 == 0) continue;  // the acknowledgement is lost
+      to_robot.push_back(id);
+    }
+    cache.clearReceived();
+  };
+  auto robotReceives = [&] {
+    while (!to_robot.empty()) {
+      const BrickPartId id = to_robot.front();
+      to_robot.pop_front();
+      sender.acknowledge(static_cast<uint16_t>(id.key.x), id.version, id.part);
+    }
+  };
+  int64_t now = 0;
+  std::size_t lost_versions = 0;
+  auto resendRound = [&] {
+    sender.collectResends(now, 10'000, [&](uint16_t, uint16_t, std::span<const uint8_t> payload) { send(payload); },
+                          [&](uint16_t) { ++lost_versions; });
+  };
+  // 50 rounds of 10 ms: every brick gets a few versions, all with loss.
+  for (int round = 0; round < 50; ++round, now += 10 * kMs) {
+    if (round % 5 == 0) {
+      for (int b = 0; b < kBricks; ++b) {
+        if (rng() % 2 == 0) sendVersion(b, now);
+      }
+    }
+    operatorReceives(now);
+    robotReceives();
+    resendRound();
+  }
+  // The loss stops: within 20 rounds (200 ms, resend_after 30 ms) the operator draws every brick's last version.
+  lossy = false;
+  int rounds = 0;
+  auto converged = [&] {
+    for (int b = 0; b < kBricks; ++b) {
+      if (version[b] == 0) continue;
+      const int slot = cache.find({b, 0, 2});
+      if (slot < 0 || !cache.held(static_cast<std::size_t>(slot)) ||
+          cache.version(static_cast<std::size_t>(slot)) != version[b]) {
+        return false;
+      }
+    }
+    return true;
+  };
+  for (; rounds < 20 && !converged(); ++rounds, now += 10 * kMs) {
+    operatorReceives(now);
+    robotReceives();
+    resendRound();
+  }
+  EXPECT_TRUE(converged()) << "after " << rounds << " rounds without loss";
+  EXPECT_EQ(lost_versions, 0u) << "the store holds every part in flight";
+  EXPECT_GT(sender.counters().resends, 0u);
+  EXPECT_GT(cache.counters().duplicate_parts, 0u);
+  // Every version done once its acknowledgements arrive.
+  operatorReceives(now);
+  robotReceives();
+  EXPECT_EQ(sender.inFlight(), 0u);
+  // Each drawn brick holds exactly its last version's points.
+  for (int b = 0; b < kBricks; ++b) {
+    if (version[b] == 0) continue;
+    brickPoints(b, version[b], points);
+    EXPECT_EQ(cache.pointCount(static_cast<std::size_t>(cache.find({b, 0, 2}))), points.size()) << "brick " << b;
+  }
+}
+
+TEST(BrickDelivery, PartsOverwrittenBeforeTheirAcknowledgementLoseTheVersion) {
+  BrickSenderConfig config;
+  config.store_bytes = 65536;
+  config.max_bricks = 4;
+  config.resend_after_ns = 10 * kMs;
+  BrickSender sender = BrickSender::create(config).value();
+  std::vector<uint8_t> part(4000, 7);
+  ASSERT_TRUE(sender.begin(0, 1, 2, 0, nullptr));
+  ASSERT_TRUE(sender.addPart(0, part));
+  ASSERT_TRUE(sender.addPart(1, part));
+  EXPECT_EQ(sender.acknowledge(0, 1, 0), BrickSender::Ack::kPart);
+  // Brick 1's versions fill the store past brick 0's unacknowledged part.
+  for (uint32_t v = 1; v <= 20; ++v) {
+    ASSERT_TRUE(sender.begin(1, v, 1, 0, nullptr));
+    ASSERT_TRUE(sender.addPart(0, part));
+  }
+  std::vector<int> lost;
+  std::size_t resent = 0;
+  sender.collectResends(20 * kMs, 100, [&](uint16_t, uint16_t, std::span<const uint8_t>) { ++resent; },
+                        [&](uint16_t brick) { lost.push_back(brick); });
+  EXPECT_EQ(lost, std::vector<int>{0});
+  EXPECT_EQ(resent, 1u) << "brick 1's last version is still whole and resent";
+  EXPECT_FALSE(sender.inFlight(0));
+  // Acknowledgements of what is not in flight are counted, not trusted.
+  EXPECT_EQ(sender.acknowledge(0, 1, 1), BrickSender::Ack::kUnknown);
+  EXPECT_EQ(sender.acknowledge(1, 19, 0), BrickSender::Ack::kUnknown);  // replaced by 20
+  EXPECT_EQ(sender.acknowledge(3, 1, 0), BrickSender::Ack::kUnknown);   // never sent
+  EXPECT_EQ(sender.acknowledge(1, 20, 5), BrickSender::Ack::kUnknown);  // no such part
+  EXPECT_EQ(sender.acknowledge(1, 20, 0), BrickSender::Ack::kDone);
+  EXPECT_EQ(sender.acknowledge(1, 20, 0), BrickSender::Ack::kUnknown);  // again
+  EXPECT_EQ(sender.counters().acks_unknown, 5u);
+  EXPECT_EQ(sender.inFlight(), 0u);
+}
+
+TEST(BrickDelivery, AFullTableCrowdsOutTheOldestVersionAndSaysWhich) {
+  BrickSenderConfig config;
+  config.max_in_flight = 2;
+  config.max_bricks = 8;
+  BrickSender sender = BrickSender::create(config).value();
+  int lost = -2;
+  ASSERT_TRUE(sender.begin(5, 1, 1, 0, &lost));
+  EXPECT_EQ(lost, -1);
+  ASSERT_TRUE(sender.begin(6, 1, 1, 0, &lost));
+  ASSERT_TRUE(sender.begin(7, 1, 1, 0, &lost));
+  EXPECT_EQ(lost, 5);
+  EXPECT_FALSE(sender.inFlight(5));
+  EXPECT_EQ(sender.inFlight(), 2u);
+  // Bad calls: a brick beyond the table, too many parts, a part of nothing begun.
+  EXPECT_FALSE(sender.begin(8, 1, 1, 0, &lost));
+  EXPECT_FALSE(sender.begin(1, 1, 0, 0, &lost));
+  EXPECT_FALSE(sender.begin(1, 1, 300, 0, &lost));
+  EXPECT_FALSE(sender.addPart(1, std::vector<uint8_t>(10)));
+  BrickSenderConfig bad;
+  bad.store_bytes = 100;
+  EXPECT_FALSE(BrickSender::create(bad));
+}
+
+}  // namespace
+}  // namespace fovea::net
