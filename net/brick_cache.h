@@ -26,6 +26,7 @@
 
 #include "core/result.h"
 #include "net/codec.h"
+#include "net/messages.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::net {
@@ -37,18 +38,6 @@ struct BrickCacheConfig {
   std::size_t max_parts = 1024;         // parts of one brick version
   std::size_t max_pending_acks = 4096;  // parts received and not yet acknowledged
   Status validate() const;
-};
-
-struct BrickKey {
-  int32_t x = 0, y = 0, z = 0;
-  bool operator==(const BrickKey&) const = default;
-};
-
-// One part received (for the acknowledgement).
-struct BrickPartId {
-  BrickKey key;
-  uint32_t version = 0;
-  uint16_t part = 0;
 };
 
 struct BrickCacheCounters {

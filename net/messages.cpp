@@ -1,5 +1,6 @@
 #include "net/messages.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
@@ -134,6 +135,31 @@ std::span<const uint8_t> MessageEncoder::encode(const StatusReport& m) {
   return finish();
 }
 
+std::size_t BrickAckMsg::partsThatFit(std::size_t max_payload, std::size_t evicted) {
+  // The table, its vtable and two vector lengths in 64 bytes, then the structs.
+  constexpr std::size_t kFixed = 64, kPart = sizeof(wire::BrickPartAck), kKey = sizeof(wire::BrickKey);
+  const std::size_t keys = std::min(evicted, kMaxEvicted) * kKey;
+  if (max_payload < kFixed + keys) return 0;
+  return std::min(kMaxParts, (max_payload - kFixed - keys) / kPart);
+}
+
+std::span<const uint8_t> MessageEncoder::encode(const BrickAckMsg& m) {
+  begin();
+  const std::size_t parts = std::min(m.part_count, BrickAckMsg::kMaxParts);
+  const std::size_t evicted = std::min(m.evicted_count, BrickAckMsg::kMaxEvicted);
+  wire::BrickKey* keys = nullptr;
+  const auto evicted_vec = builder_.CreateUninitializedVectorOfStructs<wire::BrickKey>(evicted, &keys);
+  for (std::size_t i = 0; i < evicted; ++i) keys[i] = wire::BrickKey(m.evicted[i].x, m.evicted[i].y, m.evicted[i].z);
+  wire::BrickPartAck* acks = nullptr;
+  const auto parts_vec = builder_.CreateUninitializedVectorOfStructs<wire::BrickPartAck>(parts, &acks);
+  for (std::size_t i = 0; i < parts; ++i) {
+    const BrickPartId& p = m.parts[i];
+    acks[i] = wire::BrickPartAck(wire::BrickKey(p.key.x, p.key.y, p.key.z), p.version, p.part);
+  }
+  builder_.Finish(wire::CreateBrickAck(builder_, parts_vec, evicted_vec));
+  return finish();
+}
+
 std::optional<DropReason> decode(std::span<const uint8_t> payload, HelloMsg& out) {
   const auto* m = verified<wire::Hello>(payload);
   if (m == nullptr) return DropReason::kVerify;
@@ -202,6 +228,27 @@ std::optional<DropReason> decode(std::span<const uint8_t> payload, GazeSample& o
     return DropReason::kSemantic;
   }
   out = g;
+  return std::nullopt;
+}
+
+std::optional<DropReason> decode(std::span<const uint8_t> payload, BrickAckMsg& out) {
+  const auto* m = verified<wire::BrickAck>(payload);
+  if (m == nullptr) return DropReason::kVerify;
+  const auto* parts = m->parts();
+  const auto* evicted = m->evicted();
+  if ((parts && parts->size() > BrickAckMsg::kMaxParts) || (evicted && evicted->size() > BrickAckMsg::kMaxEvicted)) {
+    return DropReason::kSemantic;
+  }
+  out.part_count = parts ? parts->size() : 0;
+  for (std::size_t i = 0; i < out.part_count; ++i) {
+    const wire::BrickPartAck* p = parts->Get(static_cast<flatbuffers::uoffset_t>(i));
+    out.parts[i] = BrickPartId{{p->key().x(), p->key().y(), p->key().z()}, p->version(), p->part()};
+  }
+  out.evicted_count = evicted ? evicted->size() : 0;
+  for (std::size_t i = 0; i < out.evicted_count; ++i) {
+    const wire::BrickKey* k = evicted->Get(static_cast<flatbuffers::uoffset_t>(i));
+    out.evicted[i] = BrickKey{k->x(), k->y(), k->z()};
+  }
   return std::nullopt;
 }
 

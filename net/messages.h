@@ -110,6 +110,32 @@ struct StatusReport {
   std::optional<Vec3> gaze_direction;
 };
 
+// A map brick's grid key (pipeline/map/surfel_map.h: origin = key * brick size).
+struct BrickKey {
+  int32_t x = 0, y = 0, z = 0;
+  bool operator==(const BrickKey&) const = default;
+};
+
+// One part of a brick version (net/brick_cache.h, net/brick_sender.h).
+struct BrickPartId {
+  BrickKey key;
+  uint32_t version = 0;
+  uint16_t part = 0;
+  bool operator==(const BrickPartId&) const = default;
+};
+
+// The operator's acknowledgement of brick parts, and the bricks it evicted.
+struct BrickAckMsg {
+  static constexpr std::size_t kMaxParts = 400;   // 20 bytes each: fits the largest MTU
+  static constexpr std::size_t kMaxEvicted = 32;  // 12 bytes each
+  std::array<BrickPartId, kMaxParts> parts{};
+  std::size_t part_count = 0;
+  std::array<BrickKey, kMaxEvicted> evicted{};
+  std::size_t evicted_count = 0;
+  // How many parts fit a payload of max_payload bytes beside `evicted` keys.
+  static std::size_t partsThatFit(std::size_t max_payload, std::size_t evicted);
+};
+
 // Encodes messages into a builder whose buffer is reserved once (kMaxPayloadBytes).
 // The returned span stays valid until the next encode.
 class MessageEncoder {
@@ -121,6 +147,7 @@ class MessageEncoder {
   std::span<const uint8_t> encode(const ByeMsg& m);
   std::span<const uint8_t> encode(const GazeSample& m);
   std::span<const uint8_t> encode(const StatusReport& m);
+  std::span<const uint8_t> encode(const BrickAckMsg& m);
 
  private:
   void begin();
@@ -136,5 +163,7 @@ std::optional<DropReason> decode(std::span<const uint8_t> payload, RefuseMsg& ou
 std::optional<DropReason> decode(std::span<const uint8_t> payload, ByeMsg& out);
 std::optional<DropReason> decode(std::span<const uint8_t> payload, GazeSample& out);
 std::optional<DropReason> decode(std::span<const uint8_t> payload, StatusReport& out);
+// kSemantic for more parts or evicted keys than BrickAckMsg holds.
+std::optional<DropReason> decode(std::span<const uint8_t> payload, BrickAckMsg& out);
 
 }  // namespace fovea::net

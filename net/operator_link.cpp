@@ -154,6 +154,22 @@ bool OperatorLink::sendGaze(GazeSample sample) {
   return true;
 }
 
+bool OperatorLink::sendBrickAck(const BrickAckMsg& ack) {
+  if (!active_) return false;
+  const std::span<const uint8_t> payload = encoder_.encode(ack);
+  if (payload.size() + kDatagramOverhead > mtu_bytes_) {
+    ++counters_.send_failures;
+    return false;
+  }
+  const auto d = channel_.seal(MessageType::kBrickAck, payload, tx_buf_);
+  if (d.empty() || !socket_.sendTo(d, robot_)) {
+    ++counters_.send_failures;
+    return false;
+  }
+  ++counters_.brick_acks_sent;
+  return true;
+}
+
 void OperatorLink::noteRobotStamp(int64_t robot_stamp_ns, int64_t received_ns) {
   echo_robot_stamp_ns_ = robot_stamp_ns;
   echo_received_ns_ = received_ns;

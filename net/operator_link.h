@@ -42,6 +42,7 @@ struct OperatorLinkCounters {
   uint64_t hellos_sent = 0;
   uint64_t accepts_repeated = 0;    // Accepts after the first (answers to retransmitted Hellos)
   uint64_t gaze_sent = 0;
+  uint64_t brick_acks_sent = 0;
   uint64_t send_failures = 0;
 };
 
@@ -76,6 +77,10 @@ class OperatorLink {
   // operator_stamp_ns is 0, and fills the feedback except last_frame_id
   // (datagrams lost, bytes received, the robot-timestamp echo).
   [[nodiscard]] bool sendGaze(GazeSample sample);
+  // Sends a brick acknowledgement (net/brick_cache.h's received() and evicted();
+  // BrickAckMsg::partsThatFit says how many parts this session's MTU takes:
+  // false when the message is larger).
+  [[nodiscard]] bool sendBrickAck(const BrickAckMsg& ack);
   // The next authentic payload (chunk, frame summary, status, bye), waiting up to
   // timeout_ms; nullopt on timeout. Invalid datagrams are dropped and counted.
   std::optional<Received> receive(int timeout_ms);

@@ -179,6 +179,7 @@ void RobotLink::handleHello(const Header& header, std::span<const uint8_t> datag
   rememberNonce(hello.client_nonce);
   latest_gaze_.reset();
   last_rtt_ns_ = -1;
+  brick_ack_count_ = brick_eviction_count_ = 0;
   ++counters_.sessions_accepted;
   sendAccept(now_ns);
 }
@@ -202,6 +203,30 @@ void RobotLink::handleSessionMessage(const Header& header, std::span<const uint8
     }
     ++counters_.sessions_ended_bye;
     session_.reset();
+    return;
+  }
+  if (header.type == MessageType::kBrickAck) {
+    if (auto drop = decode(payload, brick_ack_msg_)) {
+      counters_.dropped.add(*drop);
+      return;
+    }
+    session_->last_heard_ns = now_ns;
+    session_->info.confirmed = true;
+    ++counters_.brick_acks;
+    for (std::size_t i = 0; i < brick_ack_msg_.part_count; ++i) {
+      if (brick_ack_count_ == brick_acks_.size()) {
+        counters_.brick_ack_overflow += brick_ack_msg_.part_count - i;
+        break;
+      }
+      brick_acks_[brick_ack_count_++] = brick_ack_msg_.parts[i];
+    }
+    for (std::size_t i = 0; i < brick_ack_msg_.evicted_count; ++i) {
+      if (brick_eviction_count_ == brick_evictions_.size()) {
+        counters_.brick_ack_overflow += brick_ack_msg_.evicted_count - i;
+        break;
+      }
+      brick_evictions_[brick_eviction_count_++] = brick_ack_msg_.evicted[i];
+    }
     return;
   }
   // Gaze (the only other operator type).

@@ -44,6 +44,8 @@ struct RobotLinkCounters {
   uint64_t sessions_timed_out = 0;
   uint64_t gaze_accepted = 0;       // became the newest sample
   uint64_t gaze_stale = 0;          // authentic but older than the newest sample
+  uint64_t brick_acks = 0;          // BrickAck messages taken
+  uint64_t brick_ack_overflow = 0;  // parts or evicted keys dropped: the caller did not take them in time
 };
 
 struct SessionInfo {
@@ -86,6 +88,13 @@ class RobotLink {
   const std::optional<ReceivedGaze>& latestGaze() const { return latest_gaze_; }
   // Last round trip measured from a gaze's echo of a robot timestamp (-1: none).
   int64_t lastRttNs() const { return last_rtt_ns_; }
+
+  // Brick parts the operator acknowledged and bricks it evicted (BrickAck),
+  // since the last takeBrickAcks(): the caller takes them after each poll().
+  // A new session starts empty. Fixed capacity (what overflows is counted).
+  std::span<const BrickPartId> brickAcks() const { return {brick_acks_.data(), brick_ack_count_}; }
+  std::span<const BrickKey> brickEvictions() const { return {brick_evictions_.data(), brick_eviction_count_}; }
+  void takeBrickAcks() { brick_ack_count_ = brick_eviction_count_ = 0; }
 
   // Sends one datagram of a robot->operator type (chunk, frame summary, status).
   SendResult send(MessageType type, std::span<const uint8_t> payload);
@@ -133,6 +142,13 @@ class RobotLink {
   std::size_t past_nonce_count_ = 0;
   MessageEncoder encoder_;
   RobotLinkCounters counters_;
+  static constexpr std::size_t kBrickAckCapacity = 8192;
+  static constexpr std::size_t kBrickEvictionCapacity = 1024;
+  BrickAckMsg brick_ack_msg_;  // decode scratch
+  std::array<BrickPartId, kBrickAckCapacity> brick_acks_{};
+  std::size_t brick_ack_count_ = 0;
+  std::array<BrickKey, kBrickEvictionCapacity> brick_evictions_{};
+  std::size_t brick_eviction_count_ = 0;
   // One datagram in, its plaintext, one datagram out (preallocated).
   std::array<uint8_t, kMaxMtu + 1> rx_buf_{};
   PlainBuffer plain_buf_;

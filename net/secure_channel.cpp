@@ -67,13 +67,14 @@ void initCrypto() {
 }
 
 bool isKnownType(uint8_t type) {
-  return type >= static_cast<uint8_t>(MessageType::kHello) && type <= static_cast<uint8_t>(MessageType::kBrickChunk);
+  return type >= static_cast<uint8_t>(MessageType::kHello) && type <= static_cast<uint8_t>(MessageType::kBrickAck);
 }
 
 bool isSentBy(MessageType type, Role role) {
   switch (type) {
     case MessageType::kHello:
-    case MessageType::kGaze: return role == Role::kOperator;
+    case MessageType::kGaze:
+    case MessageType::kBrickAck: return role == Role::kOperator;
     case MessageType::kAccept:
     case MessageType::kRefuse:
     case MessageType::kChunk:
@@ -100,6 +101,7 @@ const char* messageTypeName(MessageType type) {
     case MessageType::kFrameSummary: return "frame-summary";
     case MessageType::kStatus: return "status";
     case MessageType::kBrickChunk: return "brick-chunk";
+    case MessageType::kBrickAck: return "brick-ack";
   }
   return "unknown";
 }

@@ -30,6 +30,7 @@ enum class MessageType : uint8_t {
   kFrameSummary = 7,  // robot -> operator: after each frame, chunks per region
   kStatus = 8,        // robot -> operator, once a second: counters
   kBrickChunk = 9,    // robot -> operator: one part of a map brick (a point chunk with a brick tag)
+  kBrickAck = 10,    // operator -> robot: brick parts received, bricks dropped (net/messages.h)
 };
 
 inline constexpr std::size_t kHeaderBytes = 20;

@@ -1,4 +1,4 @@
-// Fuzz target for the control messages (net/messages.h) and the frame summary
+// Fuzz target for the control messages (net/messages.h, BrickAck included) and the frame summary
 // (net/codec.h): byte 0 picks the parser, the rest is its payload, as it lies
 // in a link's buffer after decryption. Oracle: a message that decodes encodes
 // to bytes that decode again and re-encode to the same bytes.
@@ -15,7 +15,7 @@ namespace {
 using namespace fovea;
 using namespace fovea::net;
 
-constexpr int kParsers = 7;
+constexpr int kParsers = 8;
 
 [[noreturn]] void fail(const char* what) {
   std::fprintf(stderr, "fuzz_messages: %s\n", what);
@@ -29,11 +29,13 @@ MessageEncoder& encoder() {
 
 template <typename Msg>
 void roundTrip(std::span<const uint8_t> payload) {
-  Msg m;
+  static Msg m;  // static: BrickAckMsg is 8 KB
+  m = Msg{};
   if (decode(payload, m)) return;
   const std::span<const uint8_t> bytes = encoder().encode(m);
   const std::vector<uint8_t> first(bytes.begin(), bytes.end());
-  Msg again;
+  static Msg again;
+  again = Msg{};
   if (decode(first, again)) fail("a decoded message, encoded again, does not decode");
   const std::span<const uint8_t> second = encoder().encode(again);
   if (!std::equal(first.begin(), first.end(), second.begin(), second.end())) {
@@ -55,6 +57,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
     case 3: roundTrip<ByeMsg>(payload); break;
     case 4: roundTrip<GazeSample>(payload); break;
     case 5: roundTrip<StatusReport>(payload); break;
+    case 6: roundTrip<BrickAckMsg>(payload); break;
     default: (void)decodeSummary(payload); break;
   }
   return 0;
@@ -98,11 +101,18 @@ std::vector<fuzz::Input> fuzz::seeds() {
   status.frames_sent = 100;
   status.rtt_ns = 2'000'000;
   add(5, enc.encode(status));
+  static BrickAckMsg ack;  // 8 KB: not on the stack
+  ack.part_count = 2;
+  ack.parts[0] = {{1, -2, 3}, 7, 0};
+  ack.parts[1] = {{1, -2, 3}, 7, 4};
+  ack.evicted_count = 1;
+  ack.evicted[0] = {-5, 0, 9};
+  add(6, enc.encode(ack));
   auto chunk_encoder = ChunkEncoder::create(CodecConfig{}, 16);
   if (chunk_encoder.isOk()) {
     const uint16_t sent[] = {3, 2, 1};
     const uint16_t cut[] = {0, 1, 0};
-    add(6, chunk_encoder.value().encodeSummary(9, sent, cut));
+    add(7, chunk_encoder.value().encodeSummary(9, sent, cut));
   }
   return seeds;
 }

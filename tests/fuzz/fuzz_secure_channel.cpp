@@ -84,6 +84,7 @@ void parsePayload(MessageType type, std::span<const uint8_t> payload) {
     case MessageType::kBye: { ByeMsg m; (void)decode(copy, m); break; }
     case MessageType::kGaze: { GazeSample m; (void)decode(copy, m); break; }
     case MessageType::kStatus: { StatusReport m; (void)decode(copy, m); break; }
+    case MessageType::kBrickAck: { static BrickAckMsg m; (void)decode(copy, m); break; }
     case MessageType::kFrameSummary: (void)decodeSummary(copy); break;
     case MessageType::kChunk:
     case MessageType::kBrickChunk: {

@@ -352,6 +352,39 @@ TEST(Links, InvalidGazeFromTheOperatorDroppedAsSemantic) {
   EXPECT_EQ(robot->counters().gaze_accepted, 1u);
 }
 
+TEST(Links, BrickAcknowledgementsReachTheRobotAndAnOversizedOneIsNotSent) {
+  const Key key = generateKey();
+  auto robot = makeRobot(key);
+  ASSERT_TRUE(robot);
+  auto op = connectWhilePolling(*robot, robot->localEndpoint().toString(), operatorConfig(key, "alice"));
+  ASSERT_TRUE(op) << op.status().toString();
+  static BrickAckMsg ack;
+  const std::size_t fit = BrickAckMsg::partsThatFit((*op)->mtuBytes() - kDatagramOverhead, 2);
+  ASSERT_GT(fit, 40u) << "a 1200-byte MTU takes dozens of parts";
+  ack.part_count = fit;
+  for (std::size_t i = 0; i < fit; ++i) ack.parts[i] = {{static_cast<int32_t>(i), -1, 2}, 9, static_cast<uint16_t>(i)};
+  ack.evicted_count = 2;
+  ack.evicted[0] = {4, 5, 6};
+  ack.evicted[1] = {-7, 8, -9};
+  ASSERT_TRUE((*op)->sendBrickAck(ack));
+  ASSERT_TRUE(pollUntil(*robot, [&] { return robot->counters().brick_acks == 1; }));
+  ASSERT_EQ(robot->brickAcks().size(), fit);
+  EXPECT_EQ(robot->brickAcks()[3], ack.parts[3]);
+  ASSERT_EQ(robot->brickEvictions().size(), 2u);
+  EXPECT_EQ(robot->brickEvictions()[1], (BrickKey{-7, 8, -9}));
+  robot->takeBrickAcks();
+  EXPECT_TRUE(robot->brickAcks().empty());
+  // partsThatFit leaves at most a few parts' room unused...
+  MessageEncoder encoder;
+  ack.part_count = fit + 3;
+  for (std::size_t i = fit; i < fit + 3; ++i) ack.parts[i] = ack.parts[0];
+  EXPECT_GT(encoder.encode(ack).size() + kDatagramOverhead, (*op)->mtuBytes());
+  // ... and what does not fit is refused at the operator, counted.
+  const uint64_t failures = (*op)->counters().send_failures;
+  EXPECT_FALSE((*op)->sendBrickAck(ack));
+  EXPECT_EQ((*op)->counters().send_failures, failures + 1);
+}
+
 TEST(Links, StatusEchoGivesRoundTrip) {
   const Key key = generateKey();
   auto robot = makeRobot(key);
