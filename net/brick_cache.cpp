@@ -5,15 +5,13 @@
 #include <cstring>
 #include <limits>
 
+#include "core/grid_hash.h"
+
 namespace fovea::net {
 
 namespace {
 
-std::size_t keyHash(const BrickKey& k) {
-  // The map's brick hash (Teschner et al. 2003).
-  const auto ux = static_cast<uint32_t>(k.x), uy = static_cast<uint32_t>(k.y), uz = static_cast<uint32_t>(k.z);
-  return static_cast<std::size_t>((ux * 73856093u) ^ (uy * 19349663u) ^ (uz * 83492791u));
-}
+std::size_t keyHash(const BrickKey& k) { return gridHash(k.x, k.y, k.z); }
 
 // a is newer than b in serial-number order.
 bool newer(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b) > 0; }

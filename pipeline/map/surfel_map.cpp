@@ -12,6 +12,7 @@
 #include <Eigen/LU>
 
 #include "core/clock.h"
+#include "core/grid_hash.h"
 
 namespace fovea::pipeline::map {
 
@@ -23,12 +24,6 @@ constexpr uint8_t kGrey[3] = {128, 128, 128};  // the colour of a frame without 
 constexpr std::size_t kNormalCosBuckets = 1024;  // the normal tolerance's table over the depth range
 
 std::size_t nextPowerOfTwo(std::size_t n) { return std::bit_ceil(std::max<std::size_t>(n, 2)); }
-
-std::size_t brickHash(int32_t x, int32_t y, int32_t z) {
-  // Three large primes (Teschner et al. 2003), as voxel hashing maps do.
-  const auto ux = static_cast<uint32_t>(x), uy = static_cast<uint32_t>(y), uz = static_cast<uint32_t>(z);
-  return static_cast<std::size_t>((ux * 73856093u) ^ (uy * 19349663u) ^ (uz * 83492791u));
-}
 
 }  // namespace
 
@@ -141,7 +136,7 @@ int SurfelMap::findOrAddBrick(const Eigen::Vector3d& p_world) {
   if (!(std::abs(cell.x()) < kLimit && std::abs(cell.y()) < kLimit && std::abs(cell.z()) < kLimit)) return -1;
   const BrickKey key{static_cast<int32_t>(cell.x()), static_cast<int32_t>(cell.y()), static_cast<int32_t>(cell.z())};
   const std::size_t mask = brick_table_.size() - 1;
-  for (std::size_t i = brickHash(key.x, key.y, key.z) & mask;; i = (i + 1) & mask) {
+  for (std::size_t i = gridHash(key.x, key.y, key.z) & mask;; i = (i + 1) & mask) {
     const int32_t entry = brick_table_[i];
     if (entry == 0) {
       if (brick_count_ == config_.max_bricks) return -1;

@@ -124,6 +124,23 @@ SurfelMapConfig smallConfig(int w, int h) {
   return c;
 }
 
+// Fuses `frames` frames of `scene` from the origin, the camera shaking by 2 mm
+// (a static camera's noise), stamps counting on from `stamp`.
+void fuseStill(SurfelMap& map, hal::RgbdFrame& frame, const Scene& scene, int frames, int64_t& stamp) {
+  FuseStats stats;
+  for (int i = 0; i < frames; ++i) {
+    render(scene, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+  }
+}
+
+// The box the tests put in front of the wall.
+Scene sceneWithBox() {
+  Scene s;
+  s.boxes.push_back(Box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}});
+  return s;
+}
+
 // What must hold after any fuse(): the live count is the live flags', each
 // live surfel names a brick the map has and has finite, normalised fields, and
 // each brick's list holds exactly its live surfels, once each, with its settled
@@ -239,15 +256,11 @@ TEST(SurfelMap, AnObjectThatLeftLeavesNoGhost) {
   const int w = 80, h = 60;
   SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
   hal::RgbdFrame frame = makeFrame(w, h);
-  Scene with_box;
-  const Box box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}};
-  with_box.boxes.push_back(box);
+  const Scene with_box = sceneWithBox();
+  const Box box = with_box.boxes[0];
   FuseStats stats;
   int64_t stamp = 0;
-  for (int i = 0; i < 15; ++i) {
-    render(with_box, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
-    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
-  }
+  fuseStill(map, frame, with_box, 15, stamp);
   auto inBox = [&] {
     std::size_t n = 0;
     for (std::size_t slot = 0; slot < map.slotCount(); ++slot) n += map.live(slot) && box.contains(map.worldPosition(slot), 0.01);
@@ -856,31 +869,20 @@ TEST(MapDelta, SendsWhatTheOperatorLacksThenNothingUntilTheGazeOrTheMapChanges) 
   EXPECT_EQ(stats.missing, stats.bricks);
 }
 
-TEST(MapDelta, ABrickWhoseStableSetChangedIsDueAgainAndWaitingBricksGoOldestFirst) {
+TEST(MapDelta, ABrickWhoseSettledSetChangedIsDueAgainAndWaitingBricksGoOldestFirst) {
   const int w = 80, h = 60;
   SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
   hal::RgbdFrame frame = makeFrame(w, h);
-  Scene with_box;
-  const Box box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}};
-  with_box.boxes.push_back(box);
-  FuseStats fuse;
   int64_t stamp = 0;
-  for (int i = 0; i < 10; ++i) {
-    render(with_box, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
-    ASSERT_EQ(map.fuse(frame, fuse), FuseOutcome::kFused);
-  }
+  fuseStill(map, frame, sceneWithBox(), 10, stamp);
   MapDelta delta = makeDelta();
   MapDeltaStats stats;
   const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
   auto plan = delta.plan(map, gaze, stats);
   ASSERT_TRUE(plan);
   for (const BrickDue& due : plan.value()) delta.markSent(map, due.brick, due.level);
-  // The box goes: its bricks lose their stable surfels and the wall appears behind it.
-  Scene empty;
-  for (int i = 0; i < 10; ++i) {
-    render(empty, poseAt({0.002 * (i % 3), 0, 0}), ++stamp, frame);
-    ASSERT_EQ(map.fuse(frame, fuse), FuseOutcome::kFused);
-  }
+  // The box goes: its bricks lose their settled surfels and the wall appears behind it.
+  fuseStill(map, frame, Scene{}, 10, stamp);
   plan = delta.plan(map, gaze, stats);
   ASSERT_TRUE(plan);
   EXPECT_GT(stats.changed, 0u);
