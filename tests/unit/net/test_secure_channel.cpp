@@ -145,9 +145,10 @@ TEST(SecureChannel, DatagramBadMagicVersionTypeDropped) {
   EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
   m[3] = 200;
   EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
-  m[3] = static_cast<uint8_t>(MessageType::kBrickChunk) + 1;
+  m[3] = static_cast<uint8_t>(MessageType::kBrickAck) + 1;
   EXPECT_EQ(p.openAtOperator(m), DropReason::kBadType);
   EXPECT_TRUE(isKnownType(static_cast<uint8_t>(MessageType::kBrickChunk)));
+  EXPECT_TRUE(isKnownType(static_cast<uint8_t>(MessageType::kBrickAck)));
 }
 
 TEST(SecureChannel, WrongKeyDropped) {
