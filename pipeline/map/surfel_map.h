@@ -67,10 +67,10 @@ struct SurfelMapConfig {
   // Confidence: each observation adds its weight (at most 1); capped so that a
   // surface that changes moves within a few dozen frames.
   double confidence_cap = 20.0;
-  // A surfel is stable (written, shown) from here on. 1.5: on the mock living
-  // room's orbit (fovea-map-accuracy, docs/map.md) 4 left 34 % of the surface
-  // seen without a stable surfel within 1 cm, 1.5 left 14 % at 0.42 of a
-  // frame's RMS depth error (4: 0.29).
+  // A surfel is stable (written to PLY; shown once settled, below) from here
+  // on. 1.5: on the mock living room's orbit (fovea-map-accuracy, docs/map.md)
+  // 4 left 34 % of the surface seen without a stable surfel within 1 cm, 1.5
+  // left 14 % at 0.42 of a frame's RMS depth error (4: 0.29).
   double stable_confidence = 1.5;
   uint32_t unstable_max_frames = 30;  // an unstable surfel older than this goes
   // A stable surfel is settled (kSurfelSettled: the operator's from then on)
