@@ -13,9 +13,6 @@ namespace {
 
 std::size_t keyHash(const BrickKey& k) { return gridHash(k.x, k.y, k.z); }
 
-// a is newer than b in serial-number order.
-bool newer(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b) > 0; }
-
 }  // namespace
 
 Status BrickCacheConfig::validate() const {
@@ -210,7 +207,7 @@ BrickCache::Outcome BrickCache::add(const DecodedChunk& chunk, const pipeline::F
     }
     return outcome;
   };
-  if (e.has_current && !newer(version, e.current.version)) {
+  if (e.has_current && !serialNewer(version, e.current.version)) {
     if (version == e.current.version) {
       ++counters_.duplicate_parts;
       return ack(Outcome::kDuplicate);
@@ -219,7 +216,7 @@ BrickCache::Outcome BrickCache::add(const DecodedChunk& chunk, const pipeline::F
     return Outcome::kStale;
   }
   if (e.has_pending && version != e.pending.version) {
-    if (!newer(version, e.pending.version)) {
+    if (!serialNewer(version, e.pending.version)) {
       ++counters_.stale_parts;
       return Outcome::kStale;
     }

@@ -1027,11 +1027,6 @@ Result<FrameAssembler> FrameAssembler::create(std::size_t max_points) {
   return FrameAssembler(max_points);
 }
 
-namespace {
-// Serial-number order (RFC 1982 style) so frame ids may wrap.
-bool newer(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b) > 0; }
-}  // namespace
-
 void FrameAssembler::startFrame(uint32_t frame_id) {
   current_ = AssembledFrame{};
   current_.frame_id = frame_id;
@@ -1088,12 +1083,12 @@ Status FrameAssembler::addChunk(std::span<const uint8_t> payload, int64_t receiv
   }
   const uint32_t id = wire::GetPointChunk(payload.data())->header()->frame_id();
   if (has_current_ && id != current_.frame_id) {
-    if (!newer(id, current_.frame_id)) {
+    if (!serialNewer(id, current_.frame_id)) {
       ++counters_.late_chunks;
       return Status::ok();
     }
     completeCurrent(false);
-  } else if (!has_current_ && has_last_completed_ && !newer(id, last_completed_id_)) {
+  } else if (!has_current_ && has_last_completed_ && !serialNewer(id, last_completed_id_)) {
     ++counters_.late_chunks;
     return Status::ok();
   }
@@ -1128,12 +1123,12 @@ Status FrameAssembler::addSummary(std::span<const uint8_t> payload) {
   }
   const uint32_t id = s->frame_id;
   if (has_current_ && id != current_.frame_id) {
-    if (!newer(id, current_.frame_id)) {
+    if (!serialNewer(id, current_.frame_id)) {
       ++counters_.late_summaries;
       return Status::ok();
     }
     completeCurrent(false);
-  } else if (!has_current_ && has_last_completed_ && !newer(id, last_completed_id_)) {
+  } else if (!has_current_ && has_last_completed_ && !serialNewer(id, last_completed_id_)) {
     ++counters_.late_summaries;
     return Status::ok();
   }

@@ -20,6 +20,10 @@ namespace fovea::net {
 
 inline constexpr uint8_t kProtocolVersion = 1;
 
+// a is newer than b in serial-number order (RFC 1982 style), so that 32-bit
+// counters on the wire (frame ids, brick versions) may wrap.
+inline bool serialNewer(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b) > 0; }
+
 enum class MessageType : uint8_t {
   kHello = 1,         // operator -> robot: asks for a session
   kAccept = 2,        // robot -> operator
