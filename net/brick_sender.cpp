@@ -89,7 +89,7 @@ bool BrickSender::begin(uint16_t brick, uint32_t version, uint16_t parts, int64_
   return true;
 }
 
-bool BrickSender::addPart(uint16_t part, std::span<const uint8_t> payload) {
+bool BrickSender::addPart(uint16_t part, std::span<const uint8_t> payload, std::span<const uint8_t>* stored) {
   if (current_ == SIZE_MAX || part >= records_[current_].parts || payload.size() > ring_.size() / 10 ||
       payload.size() > std::numeric_limits<uint16_t>::max()) {
     return false;
@@ -103,6 +103,7 @@ bool BrickSender::addPart(uint16_t part, std::span<const uint8_t> payload) {
   lengths(current_)[part] = static_cast<uint16_t>(payload.size());
   written_ += payload.size();
   ++counters_.parts;
+  if (stored) *stored = std::span<const uint8_t>(ring_.data() + start, payload.size());
   return true;
 }
 
@@ -128,6 +129,10 @@ BrickSender::Ack BrickSender::acknowledge(uint16_t brick, uint32_t version, uint
 
 void BrickSender::drop(uint16_t brick) {
   if (brick < record_of_.size() && record_of_[brick] >= 0) release(static_cast<std::size_t>(record_of_[brick]));
+}
+
+void BrickSender::reset() {
+  for (std::size_t r = 0; r < records_.size(); ++r) release(r);
 }
 
 }  // namespace fovea::net

@@ -54,13 +54,17 @@ class BrickSender {
   bool begin(uint16_t brick, uint32_t version, uint16_t parts, int64_t now_ns, int* lost);
   // Stores part `part` of the version begun last (its datagram payload). false
   // when the part is out of range or larger than a tenth of the store.
-  bool addPart(uint16_t part, std::span<const uint8_t> payload);
+  // `stored` (may be null) gets the copy in the store, which stays valid until
+  // store_bytes more are written: the caller may send from it.
+  bool addPart(uint16_t part, std::span<const uint8_t> payload, std::span<const uint8_t>* stored = nullptr);
 
   enum class Ack : uint8_t { kPart, kDone, kUnknown };
   // An acknowledgement of part `part` of `version` of `brick`.
   Ack acknowledge(uint16_t brick, uint32_t version, uint16_t part);
   // The operator dropped the brick: nothing of it is in flight any more.
   void drop(uint16_t brick);
+  // A new session: nothing is in flight (the counters stay).
+  void reset();
 
   // Calls resend(brick, part, payload) for every part unacknowledged for
   // resend_after_ns, at most max_parts parts, and lost(brick) for each
