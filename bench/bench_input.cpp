@@ -1,5 +1,7 @@
 #include "bench/bench_input.h"
 
+#include <cstring>
+
 #include <chrono>
 #include <memory>
 
@@ -51,6 +53,13 @@ Result<FrameInput> tumFrame(const std::string& path, int index) {
   (void)index;
   return Status(ErrorCode::kNotFound, "TUM input: this build has no TUM backend (libpng was not found)");
 #endif
+}
+
+std::string option(int argc, char** argv, const char* name, const char* fallback) {
+  for (int i = 1; i + 1 < argc; ++i) {
+    if (std::strcmp(argv[i], name) == 0) return argv[i + 1];
+  }
+  return fallback;
 }
 
 }  // namespace fovea::bench

@@ -21,6 +21,9 @@ struct FrameInput {
 // towards the scene's focus point (what `fovead run` does by default).
 Result<FrameInput> mockLivingRoom(int width = 640, int height = 480);
 
+// The value after `name` on a command line ("--frames 90"), or `fallback`.
+std::string option(int argc, char** argv, const char* name, const char* fallback);
+
 // Frame `index` (0-based) of a TUM sequence folder, gaze along the camera's
 // optical axis. kNotFound when the TUM backend is not built.
 Result<FrameInput> tumFrame(const std::string& path, int index);

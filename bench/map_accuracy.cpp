@@ -30,11 +30,13 @@
 #include <unordered_map>
 #include <vector>
 
+#include "bench/bench_input.h"
 #include "hal/camera.h"
 #include "pipeline/map/surfel_map.h"
 
 namespace {
 
+using fovea::bench::option;
 using fovea::hal::RgbdFrame;
 using fovea::pipeline::map::SurfelMap;
 
@@ -138,13 +140,6 @@ void evaluate(const SurfelMap& map, const RgbdFrame& noisy, const RgbdFrame& tru
       t.covered += near;
     }
   }
-}
-
-std::string option(int argc, char** argv, const char* name, const char* fallback) {
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::strcmp(argv[i], name) == 0) return argv[i + 1];
-  }
-  return fallback;
 }
 
 }  // namespace

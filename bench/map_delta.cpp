@@ -42,11 +42,13 @@
 
 #include <Eigen/Geometry>
 
+#include "bench/bench_input.h"
 #include "hal/camera.h"
 #include "net/brick_cache.h"
 #include "net/codec.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "pipeline/map/brick_batch.h"
 #include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/voxel_sampler.h"
@@ -54,13 +56,7 @@
 namespace {
 
 using namespace fovea;
-
-std::string option(int argc, char** argv, const char* name, const char* fallback) {
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::strcmp(argv[i], name) == 0) return argv[i + 1];
-  }
-  return fallback;
-}
+using bench::option;
 
 double median(std::vector<double> v) {
   if (v.empty()) return 0.0;
@@ -200,7 +196,6 @@ int main(int argc, char** argv) {
   pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(map_config).value();
   const pipeline::map::MapDeltaConfig delta_config;
   pipeline::map::MapDelta delta = pipeline::map::MapDelta::create(delta_config, map_config.max_bricks).value();
-  const pipeline::RegionModel levels = pipeline::RegionModel::create(delta_config.acuity).value();
 
   pipeline::PipelineCapacity capacity;
   capacity.max_points = capacity.max_voxels = pixels;
@@ -213,10 +208,11 @@ int main(int argc, char** argv) {
   // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
   constexpr std::size_t kMaxBrickPoints = 1 << 18;
   net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, std::max(pixels, kMaxBrickPoints)).value();
-  pipeline::VoxelSampler sampler(kMaxBrickPoints, kMaxBrickPoints);
-  pipeline::PointCloud cloud(pixels), live(pixels), brick_points(kMaxBrickPoints);
-  pipeline::FoveatedCloud out(std::max(pixels, kMaxBrickPoints));
-  std::vector<uint8_t> brick_region(kMaxBrickPoints);
+  pipeline::map::BrickSampler brick_sampler =
+      pipeline::map::BrickSampler::create(delta_config.acuity, kMaxBrickPoints).value();
+  pipeline::map::BrickBatch batch(kMaxBrickPoints, 1);
+  pipeline::PointCloud cloud(pixels), live(pixels);
+  pipeline::FoveatedCloud out(pixels);
   // The operator's side: the bricks it holds (no loss here), and the last
   // frame's decoded F1 and live points.
   net::BrickCacheConfig cache_config;
@@ -319,27 +315,22 @@ int main(int argc, char** argv) {
         ++bricks_waited;
         continue;
       }
-      brick_points.clear();
-      brick_points.origin_m = map.brickOrigin(due.brick);
-      for (uint32_t slot = map.firstInBrick(due.brick); slot != pipeline::map::SurfelMap::kNoSurfel;
-           slot = map.nextInBrick(slot)) {
-        const pipeline::map::Surfel& s = map.surfel(slot);
-        if (!(s.flags & pipeline::map::kSurfelSettled)) continue;
-        if (!brick_points.push(s.x, s.y, s.z, pipeline::packRgb(s.red, s.green, s.blue))) break;
+      // One brick at a time through the service's sampler (pipeline/map/brick_batch.h).
+      uint32_t version = delta.version(due.brick) + 1;
+      if (version == 0) version = 1;
+      batch.clear(map.brickOrigin(due.brick));
+      if (!brick_sampler.append(map, due.brick, due.level, version, due.fovea, batch)) return 1;
+      const pipeline::map::BrickBatchEntry& e = batch.entries()[0];
+      const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
+      if (!encoder.encode(batch.points, std::span<const double>(batch.level_step_m.data(), due.level + 1u), frame_id, 0,
+                          &tag)) {
+        return 1;
       }
-      std::fill_n(brick_region.begin(), brick_points.size(), due.level);
-      std::array<double, pipeline::kMaxRegions> voxel{};
-      for (int n = 1; n <= due.level; ++n) voxel[n] = levels.voxelSizeM(n, 0.0);
-      pipeline::SampleCounts sc;
-      if (!sampler.sample(brick_points, brick_region.data(), due.level + 1, voxel, out, sc)) return 1;
-      const net::BrickTag tag{map.brickKey(due.brick).x, map.brickKey(due.brick).y, map.brickKey(due.brick).z,
-                              delta.version(due.brick) + 1, due.level};
-      if (!encoder.encode(out, std::span<const double>(voxel.data(), due.level + 1u), frame_id, 0, &tag)) return 1;
       const std::size_t bytes = datagramBytes(encoder);
       decodeAll(encoder, &cache, nullptr, decoded, now_ns);
       count(bricks, bytes);
       left -= static_cast<double>(bytes);
-      brick_points_sent += out.size();
+      brick_points_sent += batch.points.size();
       ++bricks_sent;
       delta.markSent(map, due.brick, due.level);
     }
