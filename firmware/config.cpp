@@ -199,6 +199,12 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT("map.stable_confidence", map.map.stable_confidence, 0.01, 255.0),
       FOVEA_INT("map.unstable_max_frames", map.map.unstable_max_frames, 1, 1'000'000),
       FOVEA_INT("map.settle_frames", map.map.settle_frames, 0, 1'000'000),
+      // The map streamed as bricks the operator keeps (docs/map-delta.md); false:
+      // the map's surfels the eye sees go with every frame.
+      FOVEA_BOOL("map.delta", map.delta),
+      FOVEA_FLOAT("map.change_fraction", map.delta_config.change_fraction, 0.0, 1.0),
+      FOVEA_INT("map.max_brick_surfels", map.max_brick_surfels, 1, 1 << 24),
+      FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 1, 1 << 26),
       FOVEA_FLOAT("map.carve_weight", map.map.carve_weight, 0.0, 100.0),
       FOVEA_FLOAT("map.max_pose_jump_m", map.map.max_pose_jump_m, 0.001, 1000.0),
       FOVEA_INT("map.eye_face_cells", map.eye.face_cells, 8, 2048),

@@ -43,6 +43,20 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
     if (!eye) return eye.status();
     stage.map_ = std::make_unique<pipeline::map::SurfelMap>(std::move(fused.value()));
     stage.eye_ = std::make_unique<pipeline::map::EyeView>(std::move(eye.value()));
+    if (map.delta) {
+      if (map.max_frame_brick_points == 0 || map.max_frame_bricks == 0) {
+        return Result<FrameFoveator>(ErrorCode::kInvalidArgument, "map: a frame's bricks need room (max_frame_brick_points, max_frame_bricks)");
+      }
+      Result<pipeline::map::MapDelta> delta = pipeline::map::MapDelta::create(map.delta_config, map_config.max_bricks);
+      if (!delta) return delta.status();
+      Result<pipeline::map::BrickSampler> sampler =
+          pipeline::map::BrickSampler::create(map.delta_config.acuity, map.max_brick_surfels);
+      if (!sampler) return sampler.status();
+      stage.delta_ = std::make_unique<pipeline::map::MapDelta>(std::move(delta.value()));
+      stage.bricks_ = std::make_unique<pipeline::map::BrickSampler>(std::move(sampler.value()));
+      stage.max_frame_brick_points_ = map.max_frame_brick_points;
+      stage.max_frame_bricks_ = map.max_frame_bricks;
+    }
   }
   return stage;
 }
@@ -74,9 +88,56 @@ Status FrameFoveator::foveate(const pipeline::Gaze& gaze, pipeline::FoveatedClou
   if (source_ == FoveationSource::kMap) {
     if (!gaze.origin_m.allFinite()) return {ErrorCode::kInvalidInput, "gaze origin is not finite"};
     if (!cloud_.resize(map_figures_.frame_points)) return {ErrorCode::kCapacityExceeded, "map: frame points beyond the cloud"};
-    eye_->appendVisible(*map_, gaze.origin_m, cloud_, map_figures_.eye);
+    // With bricks the operator holds the map: only the live points go as a frame.
+    if (!delta_) eye_->appendVisible(*map_, gaze.origin_m, cloud_, map_figures_.eye);
   }
   return foveator_.foveate(cloud_, gaze, out, stats);
+}
+
+pipeline::map::BrickBatch FrameFoveator::makeBrickBatch() const {
+  if (!delta_) return {};
+  return pipeline::map::BrickBatch(max_frame_brick_points_, max_frame_bricks_);
+}
+
+Status FrameFoveator::planBricks(const pipeline::Gaze& gaze, double budget_bytes, double live_bytes,
+                                 pipeline::map::BrickBatch& batch) {
+  batch.clear(cloud_.origin_m);
+  map_figures_.bricks_planned = 0;
+  map_figures_.brick_points = 0;
+  if (!delta_) return {ErrorCode::kInvalidArgument, "bricks: the stage does not stream the map's bricks"};
+  Result<std::span<const pipeline::map::BrickDue>> plan = delta_->plan(*map_, gaze, map_figures_.delta);
+  if (!plan) return plan.status();
+  double left = budget_bytes;
+  bool live_charged = false;
+  for (const pipeline::map::BrickDue& due : plan.value()) {
+    if (!due.fovea && !live_charged) {
+      left -= live_bytes;
+      live_charged = true;
+    }
+    if (left <= 0.0) break;  // the rest stays due, oldest first next frame
+    const std::size_t before = batch.points.size();
+    uint32_t version = delta_->version(due.brick) + 1;  // what markSent will make it (0 is skipped)
+    if (version == 0) version = 1;
+    if (!bricks_->append(*map_, due.brick, due.level, version, due.fovea, batch)) break;
+    delta_->markSent(*map_, due.brick, due.level);
+    const std::size_t points = batch.points.size() - before;
+    left -= static_cast<double>(points) * kWireBytesPerPointEstimate;
+    ++map_figures_.bricks_planned;
+    map_figures_.brick_points += static_cast<uint32_t>(points);
+  }
+  return Status::ok();
+}
+
+void FrameFoveator::forgetBrick(uint16_t brick) {
+  if (delta_ && map_ && brick < map_->config().max_bricks) delta_->forget(brick);
+}
+
+void FrameFoveator::forgetBatch(const pipeline::map::BrickBatch& batch) {
+  for (const pipeline::map::BrickBatchEntry& e : batch.entries()) forgetBrick(e.brick);
+}
+
+void FrameFoveator::forgetAllBricks() {
+  if (delta_) delta_->forgetAll();
 }
 
 }  // namespace fovea::firmware

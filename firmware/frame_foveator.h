@@ -4,7 +4,12 @@
 //  - map: the frame is fused into the surfel map; the cloud is then the frame's
 //    points the map does not explain yet (a moving object, new surface) and,
 //    once the gaze is known, the map's stable surfels the operator's eye can
-//    see (pipeline/map/eye_view.h), all foveated together.
+//    see (pipeline/map/eye_view.h), all foveated together;
+//  - map with bricks (MapSettings::delta, the service's default for the map
+//    source): the operator keeps the map, so the cloud is only the frame's
+//    points the map does not explain (the live points), and planBricks() fills
+//    a batch with the map's bricks the operator's eye needs and lacks
+//    (pipeline/map/map_delta.h, docs/map-delta.md), which the streamer sends.
 // The foveation configuration the gaze policy chose is applied only when it
 // changes. Everything is allocated by create(); a frame allocates nothing.
 #pragma once
@@ -20,7 +25,9 @@
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
+#include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
+#include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/point_cloud.h"
 
@@ -36,13 +43,31 @@ struct MapSettings {
   FoveationSource source = FoveationSource::kFrame;
   pipeline::map::SurfelMapConfig map;
   pipeline::map::EyeViewConfig eye;
+  // Stream the map as bricks the operator keeps (map source only): the eye view
+  // is then not appended to the frame. Off here; the service's configuration
+  // turns it on (map.delta).
+  bool delta = false;
+  pipeline::map::MapDeltaConfig delta_config;
+  // A brick's settled surfels sampled at most (the rest are left out, counted).
+  std::size_t max_brick_surfels = 1u << 16;
+  // The points one frame's bricks may carry (BrickBatch's capacity).
+  std::size_t max_frame_brick_points = 1u << 18;
+  std::size_t max_frame_bricks = 1024;
 };
+
+// Bytes a point is estimated to take on the wire, chunk headers included
+// (docs/protocol-chunks.md: about 4), for planning a frame's bricks within
+// the budget before they are encoded; the pacing holds the real budget.
+inline constexpr double kWireBytesPerPointEstimate = 4.5;
 
 // What the map did with the last frame (map source only).
 struct MapFrameFigures {
   pipeline::map::FuseStats fuse;
   pipeline::map::EyeViewStats eye;
   uint32_t frame_points = 0;  // the frame's points in the cloud: unexplained (fused) or all (refused)
+  pipeline::map::MapDeltaStats delta;  // planBricks()'s
+  uint32_t bricks_planned = 0;         // into the batch
+  uint32_t brick_points = 0;
 };
 
 class FrameFoveator {
@@ -79,6 +104,24 @@ class FrameFoveator {
   // surfels the eye at gaze.origin_m sees appended first, afresh at each call).
   Status foveate(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out, pipeline::FoveationStats& stats);
 
+  // Bricks (streamsBricks() only). Fills `batch` (cleared first) with the
+  // bricks due for the eye at `gaze`, in the plan's order, while the estimated
+  // bytes fit `budget_bytes`; `live_bytes` (the frame's live points) are
+  // charged after the fovea's bricks, so those go first. Each brick put in the
+  // batch is taken as sent (MapDelta::markSent): a brick that then never
+  // reaches the operator must be forgotten (forgetBrick, forgetBatch).
+  Status planBricks(const pipeline::Gaze& gaze, double budget_bytes, double live_bytes,
+                    pipeline::map::BrickBatch& batch);
+  bool streamsBricks() const { return delta_ != nullptr; }
+  // The operator does not hold `brick` (lost, evicted): due again.
+  void forgetBrick(uint16_t brick);
+  // A batch whose bricks never went out (a dropped frame): all due again.
+  void forgetBatch(const pipeline::map::BrickBatch& batch);
+  // The operator holds nothing (a new session).
+  void forgetAllBricks();
+  // A batch sized for this stage (empty when it does not stream bricks).
+  pipeline::map::BrickBatch makeBrickBatch() const;
+
   FoveationSource source() const { return source_; }
   const pipeline::PointCloud& cloud() const { return cloud_; }
   pipeline::Foveator& foveator() { return foveator_; }
@@ -87,7 +130,11 @@ class FrameFoveator {
   const pipeline::map::SurfelMap* map() const { return map_.get(); }
   const MapFrameFigures& mapFigures() const { return map_figures_; }
   // Bytes the map source allocated (the map and the eye's depth buffer).
-  std::size_t mapMemoryBytes() const { return map_ ? map_->memoryBytes() + eye_->memoryBytes() : 0; }
+  std::size_t mapMemoryBytes() const {
+    return map_ ? map_->memoryBytes() + eye_->memoryBytes() + (delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0)
+                : 0;
+  }
+  const pipeline::map::MapDelta* mapDelta() const { return delta_.get(); }
 
  private:
   FrameFoveator(pipeline::Foveator foveator, const pipeline::PipelineCapacity& capacity,
@@ -105,6 +152,9 @@ class FrameFoveator {
   FoveationSource source_ = FoveationSource::kFrame;
   std::unique_ptr<pipeline::map::SurfelMap> map_;
   std::unique_ptr<pipeline::map::EyeView> eye_;
+  std::unique_ptr<pipeline::map::MapDelta> delta_;        // map source with bricks
+  std::unique_ptr<pipeline::map::BrickSampler> bricks_;
+  std::size_t max_frame_brick_points_ = 0, max_frame_bricks_ = 0;
   MapFrameFigures map_figures_;
 };
 

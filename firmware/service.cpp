@@ -187,12 +187,17 @@ Status Service::allocate() {
   // The map source foveates the map's surfels too: the clouds hold them.
   const std::size_t points = FrameFoveator::cloudCapacity(pixels, config_.map);
   before = heapInUse();
+  map_bricks_ = config_.map.source == FoveationSource::kMap && config_.map.delta;
   {
     FoveatedFrame prototype;
     prototype.cloud = pipeline::FoveatedCloud(points);
+    if (map_bricks_) {
+      prototype.bricks = pipeline::map::BrickBatch(config_.map.max_frame_brick_points, config_.map.max_frame_bricks);
+    }
     foveated_ = std::make_unique<fovea::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
   }
-  memory_.add("foveated cloud slots (foveation -> send)", foveated_->slotCount(), delta(before, heapInUse()));
+  memory_.add(map_bricks_ ? "foveated cloud and brick slots (foveation -> send)" : "foveated cloud slots (foveation -> send)",
+              foveated_->slotCount(), delta(before, heapInUse()));
 
   before = heapInUse();
   Result<FrameFoveator> stage =
@@ -219,10 +224,20 @@ Status Service::allocate() {
       if (!key->warning.empty()) log().log(LogLevel::kWarning, "key_file: %s", key->warning.c_str());
       stream.link.key = key->key;
     }
+    if (map_bricks_) {
+      stream.map_bricks = true;
+      stream.brick_sender.max_bricks = config_.map.map.max_bricks;
+      stream.max_brick_points = config_.map.max_brick_surfels;
+      stream.max_frame_brick_points = config_.map.max_frame_brick_points;
+    }
     before = heapInUse();
     Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, points);
     if (!streamer) return streamer.status();
     streamer_ = std::move(streamer.value());
+    if (map_bricks_) {
+      brick_feedback_ = std::make_unique<BrickFeedback>(config_.map.map.max_bricks);
+      streamer_->attachBrickFeedback(brick_feedback_.get());
+    }
     memory_.add("streamer (link, datagram pool, scheduler)", 1, delta(before, heapInUse()));
     // The chunk encoder follows each session's MTU, so it is made when a
     // session starts; its size at the largest MTU is measured here with a probe.
@@ -232,7 +247,13 @@ Status Service::allocate() {
     {
       Result<net::ChunkEncoder> probe = net::ChunkEncoder::create(codec, pixels);
       if (!probe) return probe.status();
-      memory_.add("chunk encoder (made at session start)", 1, delta(before, heapInUse()));
+      if (map_bricks_) {
+        Result<net::ChunkEncoder> brick_probe = net::ChunkEncoder::create(codec, stream.max_brick_points);
+        if (!brick_probe) return brick_probe.status();
+      }
+      memory_.add(map_bricks_ ? "chunk encoders, frame and brick (made at session start)"
+                              : "chunk encoder (made at session start)",
+                  map_bricks_ ? 2 : 1, delta(before, heapInUse()));
     }
   }
 
@@ -429,6 +450,10 @@ void Service::foveationLoop() {
     }
     const CapturedFrame& f = frames_->slot(in);
     FoveatedFrame& o = foveated_->slot(out);
+    if (o.bricks_pending) {  // the ring dropped the frame before the send stage took it
+      stage_->forgetBatch(o.bricks);
+      o.bricks_pending = false;
+    }
     const int64_t t0 = monotonicNs();
     pipeline::BackprojectCounts counts;
     Status s = stage_->backproject(f.frame, counts, f.pose_fresh);
@@ -440,6 +465,21 @@ void Service::foveationLoop() {
       s = stage_->use(decision.foveation);
     }
     if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
+    if (s && map_bricks_) {
+      if (brick_feedback_) {
+        brick_feedback_->drain([&](std::size_t brick) { stage_->forgetBrick(static_cast<uint16_t>(brick)); },
+                               [&] { stage_->forgetAllBricks(); });
+      }
+      const double budget = static_cast<double>(brick_budget_bytes_per_s_.load(std::memory_order_relaxed)) *
+                            static_cast<double>(period_ns_) * 1e-9;
+      s = stage_->planBricks(decision.gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate,
+                             o.bricks);
+      if (s) {
+        bricks_planned_.fetch_add(stage_->mapFigures().bricks_planned, std::memory_order_relaxed);
+      } else {
+        stage_->forgetBatch(o.bricks);
+      }
+    }
     o.frame_id = static_cast<uint32_t>(f.frame.sequence);
     o.captured_ns = f.captured_ns;
     o.acquire_ns = f.acquire_ns;
@@ -458,6 +498,7 @@ void Service::foveationLoop() {
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - t0);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
+    o.bricks_pending = !o.bricks.entries().empty();
     out_ring.publish(out);
   }
   foveation_alive_.store(false, std::memory_order_release);
@@ -506,6 +547,7 @@ void Service::sendLoop() {
       }
       streamer_->poll();
       publishGaze();
+      if (map_bricks_) brick_budget_bytes_per_s_.store(streamer_->sessionBudgetBytesPerS(), std::memory_order_relaxed);
     }
     fovea::SlotIndex slot;
     if (!ring.tryTake(slot)) {
@@ -517,17 +559,23 @@ void Service::sendLoop() {
       }
       continue;
     }
-    const FoveatedFrame& f = foveated_->slot(slot);
+    FoveatedFrame& f = foveated_->slot(slot);
+    f.bricks_pending = false;
+    const pipeline::map::BrickBatch* bricks = map_bricks_ && streamer_ ? &f.bricks : nullptr;
     if (!streamer_) {
       frames_unsent_.fetch_add(1, std::memory_order_relaxed);
+      if (map_bricks_ && brick_feedback_) {
+        for (const pipeline::map::BrickBatchEntry& e : f.bricks.entries()) brick_feedback_->forget(e.brick);
+      }
     } else if (!stream_allowed_.load(std::memory_order_relaxed)) {
       frames_withheld_.fetch_add(1, std::memory_order_relaxed);  // privacy: captured, never sent
+      if (bricks) streamer_->discardBricks(*bricks);
     } else {
       const int64_t t0 = monotonicNs();
       // A frame must be out before the next one is due; what is not goes unsent.
       const int64_t deadline_ns = t0 + period_ns_ - std::min<int64_t>(period_ns_ / 10, 2'000'000);
       Result<FrameSendReport> sent =
-          streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns, period_ns_);
+          streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns, period_ns_, bricks);
       if (!sent) {
         (void)log().logLimited(send_site, LogLevel::kWarning, "send: %s", sent.status().toString().c_str());
       } else if (sent->had_session) {
@@ -538,6 +586,14 @@ void Service::sendLoop() {
         frames_unsent_.fetch_add(1, std::memory_order_relaxed);
       }
       wire_bytes_.store(streamer_->link().counters().bytes_sent, std::memory_order_relaxed);
+      if (const net::BrickSenderCounters* bc = streamer_->brickCounters()) {
+        brick_versions_.store(bc->versions, std::memory_order_relaxed);
+        brick_parts_.store(bc->parts, std::memory_order_relaxed);
+        brick_resends_.store(bc->resends, std::memory_order_relaxed);
+        brick_versions_done_.store(bc->versions_done, std::memory_order_relaxed);
+        brick_versions_lost_.store(bc->versions_lost, std::memory_order_relaxed);
+        brick_acks_unknown_.store(bc->acks_unknown, std::memory_order_relaxed);
+      }
     }
     if (!ring.release(slot)) foveate_errors_.fetch_add(1, std::memory_order_relaxed);
     if (streamer_) {
@@ -716,14 +772,19 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   }
   // The map: its size, this window's fusion time, and since start the surfels
   // evicted and the frames refused (no pose; anything else).
-  char map[160] = "";
+  char map[256] = "";
   if (stage_->map() != nullptr) {
-    std::snprintf(map, sizeof map,
-                  " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64
-                  " other",
-                  map_surfels_.load(std::memory_order_relaxed), latency[3],
-                  map_evicted_.load(std::memory_order_relaxed), map_refused_no_pose_.load(std::memory_order_relaxed),
-                  map_refused_other_.load(std::memory_order_relaxed));
+    const int used = std::snprintf(
+        map, sizeof map,
+        " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64 " other",
+        map_surfels_.load(std::memory_order_relaxed), latency[3], map_evicted_.load(std::memory_order_relaxed),
+        map_refused_no_pose_.load(std::memory_order_relaxed), map_refused_other_.load(std::memory_order_relaxed));
+    if (map_bricks_ && used > 0 && static_cast<std::size_t>(used) < sizeof map) {
+      std::snprintf(map + used, sizeof map - static_cast<std::size_t>(used),
+                    ", bricks %" PRIu64 " versions %" PRIu64 " done %" PRIu64 " lost",
+                    brick_versions_.load(std::memory_order_relaxed), brick_versions_done_.load(std::memory_order_relaxed),
+                    brick_versions_lost_.load(std::memory_order_relaxed));
+    }
   }
   const int n = std::snprintf(
       out, size,
@@ -797,6 +858,14 @@ void Service::stop() {
                 "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; refused %" PRIu64
                 " frames without a pose, %" PRIu64 " for another reason",
                 s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
+      if (map_bricks_) {
+        log().log(LogLevel::kInfo,
+                  "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64
+                  " parts resent; %" PRIu64 " versions acknowledged whole, %" PRIu64 " lost (sent again); %" PRIu64
+                  " acknowledgements for nothing in flight",
+                  s.map.bricks_planned, s.map.brick_versions, s.map.brick_parts, s.map.brick_resends,
+                  s.map.brick_versions_done, s.map.brick_versions_lost, s.map.brick_acks_unknown);
+      }
     }
   }
 }
@@ -831,6 +900,13 @@ ServiceStats Service::stats() const {
   s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);
   s.map.refused_other = map_refused_other_.load(std::memory_order_relaxed);
   s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
+  s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);
+  s.map.brick_versions = brick_versions_.load(std::memory_order_relaxed);
+  s.map.brick_parts = brick_parts_.load(std::memory_order_relaxed);
+  s.map.brick_resends = brick_resends_.load(std::memory_order_relaxed);
+  s.map.brick_versions_done = brick_versions_done_.load(std::memory_order_relaxed);
+  s.map.brick_versions_lost = brick_versions_lost_.load(std::memory_order_relaxed);
+  s.map.brick_acks_unknown = brick_acks_unknown_.load(std::memory_order_relaxed);
   return s;
 }
 

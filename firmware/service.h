@@ -146,6 +146,16 @@ struct ServiceStats {
     uint64_t refused_no_pose = 0;    // frames without a pose (stale, none yet)
     uint64_t refused_other = 0;      // bad pose, pose jump, clock, size
     uint64_t evicted = 0;            // surfels evicted from a full pool
+    // Its bricks (map.delta, docs/map-delta.md): put in frames by the planner,
+    // versions and parts sent, parts resent, versions the operator took whole,
+    // versions lost on the way (due again), acknowledgements for nothing in flight.
+    uint64_t bricks_planned = 0;
+    uint64_t brick_versions = 0;
+    uint64_t brick_parts = 0;
+    uint64_t brick_resends = 0;
+    uint64_t brick_versions_done = 0;
+    uint64_t brick_versions_lost = 0;
+    uint64_t brick_acks_unknown = 0;
   } map;
 };
 
@@ -217,6 +227,12 @@ class Service {
     int64_t foveation_start_ns = 0;  // taken from the capture ring
     int64_t backproject_ns = 0;
     int64_t foveated_ns = 0;  // published to the send ring
+    // The map's bricks that go with the frame (map.delta), and whether the
+    // send stage has yet to take them: a slot that comes back to the
+    // foveation stage still pending was dropped by the ring, so its bricks
+    // never went and are due again.
+    pipeline::map::BrickBatch bricks;
+    bool bricks_pending = false;
   };
   // The timing log's line for one frame sent (no allocation: the file's buffer is ours).
   void logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent);
@@ -253,6 +269,13 @@ class Service {
   std::unique_ptr<FrameFoveator> stage_;
   std::unique_ptr<GazePolicy> policy_;  // the foveation thread's
   std::unique_ptr<Streamer> streamer_;  // the send thread's only
+  // The map's bricks: what the send stage learns the operator lacks, for the
+  // planner in the foveation stage; the session's budget the planner fills.
+  bool map_bricks_ = false;
+  std::unique_ptr<BrickFeedback> brick_feedback_;
+  std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
+  std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},
+      brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0};
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;

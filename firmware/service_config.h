@@ -81,7 +81,13 @@ struct ServiceConfig {
   CameraSettings camera;
   pipeline::PipelineCapacity pipeline;  // max points and voxels, kernels, threads per frame
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
-  MapSettings map;                      // foveation.source and [map]: the fused scene map
+  // foveation.source and [map]: the fused scene map, streamed as bricks the
+  // operator keeps (map.delta) unless turned off.
+  MapSettings map = [] {
+    MapSettings bricks;
+    bricks.delta = true;
+    return bricks;
+  }();
   // listen, key, budget, MTU, gaze timeout, fallback, codec. stream.link.listen
   // "" (the default here): the service does not stream (host-mock's default).
   StreamConfig stream = [] {

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 
 #include "core/clock.h"
+#include "core/grid_hash.h"
 
 namespace fovea::firmware {
 
@@ -33,15 +34,40 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
     return Result<std::unique_ptr<Streamer>>(ErrorCode::kInvalidArgument, "stream burst: must be within 0 .. 1000 ms");
   }
   if (max_points == 0) return Result<std::unique_ptr<Streamer>>(ErrorCode::kInvalidArgument, "stream: max_points is 0");
+  if (config.map_bricks) {
+    if (Status s = config.brick_sender.validate(); !s) return s;
+    if (config.max_brick_points == 0 || config.max_brick_points > config.max_frame_brick_points ||
+        config.max_resend_parts == 0) {
+      return Result<std::unique_ptr<Streamer>>(
+          ErrorCode::kInvalidArgument, "stream bricks: max_brick_points must be in [1, max_frame_brick_points], max_resend_parts > 0");
+    }
+  }
   Result<std::unique_ptr<net::RobotLink>> link = net::RobotLink::create(config.link);
   if (!link) return link.status();
-  // A chunk holds at least one point, so a frame has at most max_points chunks.
+  // A chunk holds at least one point, so a frame has at most max_points chunks,
+  // and its bricks at most their points plus the parts resent.
+  const std::size_t max_chunks =
+      max_points + (config.map_bricks ? config.max_frame_brick_points + config.max_resend_parts : 0);
   Result<net::UplinkScheduler> scheduler =
-      net::UplinkScheduler::create(max_points, static_cast<double>(config.link.max_budget_bytes_per_s),
+      net::UplinkScheduler::create(max_chunks, static_cast<double>(config.link.max_budget_bytes_per_s),
                                    static_cast<double>(4 * net::kMaxMtu), monotonicNs());
   if (!scheduler) return scheduler.status();
-  return std::unique_ptr<Streamer>(
+  std::unique_ptr<Streamer> streamer(
       new Streamer(config, std::move(link.value()), std::move(scheduler.value()), max_points));
+  streamer->chunk_bytes_.resize(max_chunks);
+  streamer->chunk_regions_.resize(max_chunks);
+  streamer->outgoing_.resize(max_chunks);
+  if (config.map_bricks) {
+    Result<net::BrickSender> sender = net::BrickSender::create(config.brick_sender);
+    if (!sender) return sender.status();
+    streamer->brick_sender_.emplace(std::move(sender.value()));
+    streamer->brick_cloud_ = pipeline::FoveatedCloud(config.max_brick_points);
+    streamer->slot_key_.resize(config.brick_sender.max_bricks);
+    std::size_t cells = 1;
+    while (cells < 2 * config.brick_sender.max_bricks) cells *= 2;
+    streamer->slot_index_.assign(cells, 0);
+  }
+  return streamer;
 }
 
 Streamer::Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
@@ -49,9 +75,7 @@ Streamer::Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> l
     : config_(config),
       link_(std::move(link)),
       scheduler_(std::move(scheduler)),
-      max_points_(max_points),
-      chunk_bytes_(max_points),
-      chunk_regions_(max_points) {}
+      max_points_(max_points) {}
 
 void Streamer::idleUntil(int64_t until_ns) {
   for (int64_t now = monotonicNs(); now < until_ns; now = monotonicNs()) {
@@ -103,35 +127,184 @@ Status Streamer::beginSession(int64_t now_ns) {
   Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_);
   if (!encoder) return encoder.status();
   encoder_.emplace(std::move(encoder.value()));
+  if (brick_sender_) {
+    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points);
+    if (!bricks) return bricks.status();
+    brick_encoder_.emplace(std::move(bricks.value()));
+    // A new operator (or one that restarted) holds nothing: every brick is due.
+    brick_sender_->reset();
+    if (feedback_) feedback_->forgetAll();
+  }
   if (Status s = applyBudget(now_ns); !s) return s;
   session_started_ns_ = session.started_ns;
   return Status::ok();
 }
 
+uint64_t Streamer::sessionBudgetBytesPerS() const {
+  if (!link_->hasSession()) return 0;
+  return std::min(link_->session()->budget_bytes_per_s, budget_cap_bytes_per_s_);
+}
+
+int Streamer::brickSlot(const net::BrickKey& key) const {
+  const std::size_t mask = slot_index_.size() - 1;
+  for (std::size_t i = gridHash(key.x, key.y, key.z) & mask;; i = (i + 1) & mask) {
+    const int32_t e = slot_index_[i];
+    if (e == 0) return -1;
+    if (slot_key_[static_cast<std::size_t>(e - 1)] == key) return e - 1;
+  }
+}
+
+void Streamer::rememberBrickSlot(uint16_t slot, const net::BrickKey& key) {
+  if (brickSlot(key) == slot) return;
+  // The map never gives a slot another key (its bricks are never freed), so
+  // the index holds at most max_bricks entries in 2 * max_bricks cells.
+  slot_key_[slot] = key;
+  const std::size_t mask = slot_index_.size() - 1;
+  std::size_t i = gridHash(key.x, key.y, key.z) & mask;
+  while (slot_index_[i] != 0 && slot_index_[i] != slot + 1) i = (i + 1) & mask;
+  slot_index_[i] = slot + 1;
+}
+
+void Streamer::takeBrickAcks() {
+  if (!brick_sender_) return;
+  for (const net::BrickPartId& id : link_->brickAcks()) {
+    const int slot = brickSlot(id.key);
+    if (slot < 0) {
+      ++unknown_brick_keys_;
+      continue;
+    }
+    (void)brick_sender_->acknowledge(static_cast<uint16_t>(slot), id.version, id.part);
+  }
+  for (const net::BrickKey& key : link_->brickEvictions()) {
+    const int slot = brickSlot(key);
+    if (slot < 0) {
+      ++unknown_brick_keys_;
+      continue;
+    }
+    brick_sender_->drop(static_cast<uint16_t>(slot));
+    if (feedback_) feedback_->forget(static_cast<std::size_t>(slot));
+  }
+  link_->takeBrickAcks();
+}
+
+void Streamer::discardBricks(const pipeline::map::BrickBatch& bricks) {
+  if (!feedback_) return;
+  for (const pipeline::map::BrickBatchEntry& e : bricks.entries()) feedback_->forget(e.brick);
+}
+
+void Streamer::stage(std::span<const uint8_t> payload, net::MessageType type, uint8_t region) {
+  outgoing_[outgoing_count_] = {payload.data(), static_cast<uint16_t>(payload.size()), type};
+  chunk_bytes_[outgoing_count_] = static_cast<uint32_t>(payload.size() + net::kDatagramOverhead);
+  chunk_regions_[outgoing_count_] = region;
+  ++outgoing_count_;
+}
+
+bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline::map::BrickBatchEntry& e,
+                          uint8_t region, uint32_t frame_id, int64_t now_ns, FrameSendReport& report) {
+  auto fail = [&] {
+    if (feedback_) feedback_->forget(e.brick);
+    return false;
+  };
+  if (e.count == 0 || e.count > brick_cloud_.points.capacity()) return fail();
+  // Parts staged this frame are sent from the sender's store: they must not be
+  // overwritten before the frame's pacing reaches them.
+  if (brick_store_staged_ + static_cast<std::size_t>(e.count) * 8 > config_.brick_sender.store_bytes / 2) return fail();
+  pipeline::PointCloud& p = brick_cloud_.points;
+  const pipeline::PointCloud& from = batch.points.points;
+  p.origin_m = from.origin_m;
+  std::copy_n(from.x() + e.first, e.count, p.x());
+  std::copy_n(from.y() + e.first, e.count, p.y());
+  std::copy_n(from.z() + e.first, e.count, p.z());
+  std::copy_n(from.rgb() + e.first, e.count, p.rgb());
+  std::fill_n(brick_cloud_.region.begin(), e.count, e.level);
+  std::copy_n(batch.points.weight.begin() + e.first, e.count, brick_cloud_.weight.begin());
+  if (!p.resize(e.count)) return fail();
+  const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
+  if (!brick_encoder_->encode(brick_cloud_, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id,
+                              0, &tag)) {
+    return fail();
+  }
+  const std::size_t parts = brick_encoder_->chunkCount();
+  if (parts == 0 || parts > config_.brick_sender.max_parts || outgoing_count_ + parts > outgoing_.size()) return fail();
+  const net::BrickKey key{e.key.x, e.key.y, e.key.z};
+  rememberBrickSlot(e.brick, key);
+  int lost = -1;
+  if (!brick_sender_->begin(e.brick, e.version, static_cast<uint16_t>(parts), now_ns, &lost)) return fail();
+  if (lost >= 0 && feedback_) feedback_->forget(static_cast<std::size_t>(lost));
+  for (std::size_t i = 0; i < parts; ++i) {
+    std::span<const uint8_t> stored;
+    if (!brick_sender_->addPart(static_cast<uint16_t>(i), brick_encoder_->chunk(i), &stored)) {
+      brick_sender_->drop(e.brick);
+      return fail();
+    }
+    brick_store_staged_ += stored.size();
+    stage(stored, net::MessageType::kBrickChunk, region);
+  }
+  ++report.bricks;
+  report.brick_parts += static_cast<uint32_t>(parts);
+  return true;
+}
+
 Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud,
                                             const pipeline::FoveationStats& stats, uint32_t frame_id,
-                                            int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns) {
+                                            int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns,
+                                            const pipeline::map::BrickBatch* bricks) {
   FrameSendReport report;
+  if (bricks && !brick_sender_) return Status(ErrorCode::kInvalidArgument, "stream: bricks without map_bricks");
   link_->poll(0);
-  if (!link_->hasSession()) return report;
+  if (!link_->hasSession()) {
+    if (bricks) discardBricks(*bricks);
+    return report;
+  }
   report.had_session = true;
   int64_t now = monotonicNs();
   if (link_->session()->started_ns != session_started_ns_) {
-    if (Status s = beginSession(now); !s) return s;
+    if (Status s = beginSession(now); !s) {
+      if (bricks) discardBricks(*bricks);
+      return s;
+    }
   }
+  takeBrickAcks();
 
   std::array<double, pipeline::kMaxRegions> voxel_size_m{};
   for (int r = 0; r < stats.region_count; ++r) voxel_size_m[r] = stats.regions[r].voxel_size_m;
   const int64_t t0 = monotonicNs();
+  // The send order: the fovea's bricks (region 0, never cut), the frame's live
+  // chunks (fovea first), then the other bricks and the resends as the
+  // outermost region, which the budget cuts first.
+  constexpr auto kLast = static_cast<uint8_t>(pipeline::kMaxRegions - 1);
+  outgoing_count_ = 0;
+  brick_store_staged_ = 0;
+  if (bricks) {
+    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
+      if (e.fovea) (void)stageBrick(*bricks, e, 0, frame_id, now, report);
+    }
+  }
   if (Status s = encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
                                   static_cast<uint64_t>(capture_ns));
       !s) {
+    if (bricks) discardBricks(*bricks);
     return s;
   }
+  const std::size_t live_first = outgoing_count_;
   const std::size_t chunks = encoder_->chunkCount();
-  for (std::size_t i = 0; i < chunks; ++i) {
-    chunk_bytes_[i] = static_cast<uint32_t>(encoder_->chunk(i).size() + net::kDatagramOverhead);
-    chunk_regions_[i] = encoder_->chunkRegion(i);
+  for (std::size_t i = 0; i < chunks; ++i) stage(encoder_->chunk(i), net::MessageType::kChunk, encoder_->chunkRegion(i));
+  const std::size_t live_end = outgoing_count_;
+  if (bricks) {
+    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
+      if (!e.fovea) (void)stageBrick(*bricks, e, kLast, frame_id, now, report);
+    }
+  }
+  if (brick_sender_) {
+    const std::size_t room = std::min(config_.max_resend_parts, outgoing_.size() - outgoing_count_);
+    report.brick_resends = static_cast<uint32_t>(brick_sender_->collectResends(
+        now, room,
+        [&](uint16_t, uint16_t, std::span<const uint8_t> payload) {
+          stage(payload, net::MessageType::kBrickChunk, kLast);
+        },
+        [&](uint16_t brick) {
+          if (feedback_) feedback_->forget(brick);
+        }));
   }
   now = monotonicNs();
   report.encode_ns = now - t0;
@@ -140,20 +313,26 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   // gets a quarter period: its fovea goes out, the periphery is cut to fit.
   deadline_ns = std::max(deadline_ns, now + interval_ns / 4);
   // The plan fits what the budget earns until the deadline, not a whole period.
-  if (Status s = scheduler_.beginFrame(std::span<const uint32_t>(chunk_bytes_.data(), chunks),
-                                       std::span<const uint8_t>(chunk_regions_.data(), chunks), now, deadline_ns - now);
+  if (Status s = scheduler_.beginFrame(std::span<const uint32_t>(chunk_bytes_.data(), outgoing_count_),
+                                       std::span<const uint8_t>(chunk_regions_.data(), outgoing_count_), now,
+                                       deadline_ns - now);
       !s) {
     return s;
   }
-  for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) report.chunks_cut += scheduler_.cutPerRegion()[r];
+  // The frame summary counts the frame's own chunks only (a brick part is no
+  // part of a frame): planned are those before the plan's end.
+  std::array<uint16_t, pipeline::kMaxRegions> planned{}, cut{};
+  for (std::size_t i = live_first; i < live_end; ++i) {
+    ++(i < scheduler_.plannedChunks() ? planned : cut)[chunk_regions_[i]];
+  }
+  for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) report.chunks_cut += cut[r];
 
   const uint64_t bytes_before = scheduler_.counters().bytes_sent;
   const int64_t send_start = now;
   while (now < deadline_ns && link_->hasSession()) {
     const net::UplinkScheduler::Step step = scheduler_.next(now);
     if (step.kind == net::UplinkScheduler::Step::Kind::kDone) {
-      const std::span<const uint8_t> summary =
-          encoder_->encodeSummary(frame_id, scheduler_.plannedPerRegion(), scheduler_.cutPerRegion());
+      const std::span<const uint8_t> summary = encoder_->encodeSummary(frame_id, planned, cut);
       if (link_->send(net::MessageType::kFrameSummary, summary) == net::SendResult::kSent) {
         scheduler_.chargeExtra(summary.size() + net::kDatagramOverhead, now);
       }
@@ -172,12 +351,18 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
         nanosleep(&pause, nullptr);
       }
     } else {
-      if (link_->send(net::MessageType::kChunk, encoder_->chunk(step.chunk)) == net::SendResult::kSent) {
-        ++report.chunks_sent;
+      const Outgoing& o = outgoing_[step.chunk];
+      if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {
+        if (o.type == net::MessageType::kChunk) {
+          ++report.chunks_sent;
+        } else {
+          ++report.brick_parts_sent;
+        }
       }
     }
     now = monotonicNs();
   }
+  takeBrickAcks();
   report.send_ns = monotonicNs() - send_start;
   report.bytes_sent = scheduler_.counters().bytes_sent - bytes_before;
   return report;

@@ -12,13 +12,16 @@
 #include <string>
 
 #include "core/result.h"
+#include "firmware/brick_feedback.h"
 #include "firmware/gaze_policy.h"
 #include "hal/frame.h"
 #include "net/codec.h"
+#include "net/brick_sender.h"
 #include "net/key.h"
 #include "net/robot_link.h"
 #include "net/uplink_scheduler.h"
 #include "pipeline/foveator.h"
+#include "pipeline/map/brick_batch.h"
 
 namespace fovea::firmware {
 
@@ -29,6 +32,13 @@ struct StreamConfig {
   // Burst of the token bucket: this many milliseconds of the budget (at least
   // four datagrams), so a frame's first chunks leave at once.
   double burst_ms = 5.0;
+  // The map's bricks (foveation.source = map with map.delta, docs/map-delta.md):
+  // sent beside the frame's live points, kept until acknowledged, resent.
+  bool map_bricks = false;
+  net::BrickSenderConfig brick_sender;
+  std::size_t max_brick_points = 1u << 16;        // one brick's points at most (its encoder's size)
+  std::size_t max_frame_brick_points = 1u << 18;  // one frame's bricks' points at most
+  std::size_t max_resend_parts = 512;             // brick parts resent with one frame at most
 };
 
 // What happened to one frame on the way out.
@@ -41,6 +51,12 @@ struct FrameSendReport {
   int64_t encode_ns = 0;
   int64_t send_ns = 0;        // first datagram to last (or to the deadline)
   bool completed = false;     // everything planned went out before the deadline
+  // The map's bricks (map_bricks): versions begun, their parts, parts resent,
+  // and brick parts that went out (new and resent).
+  uint32_t bricks = 0;
+  uint32_t brick_parts = 0;
+  uint32_t brick_resends = 0;
+  uint32_t brick_parts_sent = 0;
 };
 
 class Streamer {
@@ -52,8 +68,11 @@ class Streamer {
   net::Endpoint localEndpoint() const { return link_->localEndpoint(); }
   const net::RobotLink& link() const { return *link_; }
 
-  // Handles waiting datagrams (hello, gaze, bye) without blocking.
-  void poll() { link_->poll(0); }
+  // Handles waiting datagrams (hello, gaze, bye, brick acknowledgements) without blocking.
+  void poll() {
+    link_->poll(0);
+    takeBrickAcks();
+  }
   // Handles datagrams until now >= until_ns (waits in poll, no busy loop).
   void idleUntil(int64_t until_ns);
 
@@ -73,8 +92,29 @@ class Streamer {
   // outermost regions to what the budget allows until the deadline; a late
   // frame gets at least interval_ns / 4 (the frame period) so its fovea goes
   // out. Without a session it only polls.
+  //
+  // With `bricks` (map_bricks) the frame also carries the map's bricks the
+  // planner put in it, and the send order is: the fovea's bricks, the frame's
+  // live points, the other bricks, then brick parts unacknowledged for
+  // resend_after_ns; the budget cuts from the end. Every brick part is kept
+  // (net/brick_sender.h) until the operator acknowledges it; a version that can
+  // no longer be delivered, a brick the operator evicted and every brick of a
+  // frame that could not go are told to the BrickFeedback.
   Result<FrameSendReport> sendFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
-                                    uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns);
+                                    uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns,
+                                    const pipeline::map::BrickBatch* bricks = nullptr);
+
+  // The map's bricks. Where the streamer tells what the operator lacks (owned by
+  // the caller, shared with the planner); required with map_bricks before the
+  // first sendFrame.
+  void attachBrickFeedback(BrickFeedback* feedback) { feedback_ = feedback; }
+  // A frame's bricks that will not be sent (no session, privacy): due again.
+  void discardBricks(const pipeline::map::BrickBatch& bricks);
+  // The budget of the session in progress (bytes/s, under the cap); 0 without one.
+  uint64_t sessionBudgetBytesPerS() const;
+  // The brick sender's counters (null without map_bricks); acknowledgements
+  // for no brick the robot knows are counted in acks_unknown.
+  const net::BrickSenderCounters* brickCounters() const { return brick_sender_ ? &brick_sender_->counters() : nullptr; }
 
   // A status report with the link's and the uplink's figures and the caller's
   // frame counts (frames_dropped adds the frames the uplink superseded); the
@@ -93,6 +133,22 @@ class Streamer {
   Status beginSession(int64_t now_ns);
   // Budget and burst for the current session, under the cap.
   Status applyBudget(int64_t now_ns);
+  // Hands the operator's brick acknowledgements and evictions to the sender.
+  void takeBrickAcks();
+  // The map slot the robot sent `key` from (-1: none).
+  int brickSlot(const net::BrickKey& key) const;
+  void rememberBrickSlot(uint16_t slot, const net::BrickKey& key);
+  // Queues one datagram of the frame in send order.
+  struct Outgoing {
+    const uint8_t* data = nullptr;
+    uint16_t size = 0;
+    net::MessageType type = net::MessageType::kChunk;
+  };
+  void stage(std::span<const uint8_t> payload, net::MessageType type, uint8_t region);
+  // Encodes one brick of the batch, keeps its parts and queues them; false when
+  // it cannot (then the feedback has it).
+  bool stageBrick(const pipeline::map::BrickBatch& batch, const pipeline::map::BrickBatchEntry& e, uint8_t region,
+                  uint32_t frame_id, int64_t now_ns, FrameSendReport& report);
 
   StreamConfig config_;
   std::unique_ptr<net::RobotLink> link_;
@@ -101,6 +157,17 @@ class Streamer {
   std::optional<net::ChunkEncoder> encoder_;
   std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, max chunks
   std::vector<uint8_t> chunk_regions_;
+  std::vector<Outgoing> outgoing_;       // the frame's datagrams in send order
+  std::size_t outgoing_count_ = 0;
+  // The map's bricks (map_bricks).
+  std::optional<net::BrickSender> brick_sender_;
+  std::optional<net::ChunkEncoder> brick_encoder_;  // made at session start, as encoder_
+  pipeline::FoveatedCloud brick_cloud_;             // one brick's points, for its encoder
+  std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
+  std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
+  std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
+  BrickFeedback* feedback_ = nullptr;
+  uint64_t unknown_brick_keys_ = 0;
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;
   uint64_t budget_cap_bytes_per_s_ = UINT64_MAX;

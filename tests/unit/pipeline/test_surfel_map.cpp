@@ -13,12 +13,14 @@
 #include <optional>
 #include <random>
 #include <set>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include "pipeline/acuity_levels.h"
+#include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
 #include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
@@ -932,6 +934,83 @@ TEST(MapDelta, BadGazeAndBadConfigurationsAreRefused) {
   EXPECT_FALSE(MapDelta::create(config, 100));
   EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 0));
   EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 70000));
+}
+
+
+// The sampler a frame's bricks go through: at level 0 every settled surfel of
+// the brick as it is, at level n one point per voxel of ACUITY's level-n
+// lattice (checked against a set of the voxels the settled surfels occupy,
+// computed here), all inside the brick's cube, in the batch beside each other;
+// a full batch refuses the next brick and keeps what it has.
+TEST(BrickSampler, LevelZeroIsTheSettledSurfelsAndLevelNOnePointPerLatticeVoxel) {
+  const int w = 80, h = 60;
+  SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  Scene scene;
+  scene.boxes.push_back(Box{{-0.3, -0.3, 1.4}, {0.3, 0.3, 1.6}});
+  int64_t stamp = 0;
+  fuseStill(map, frame, scene, 20, stamp);
+  uint16_t brick = 0;
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    if (map.brickSettledCount(static_cast<uint16_t>(b)) > map.brickSettledCount(brick)) brick = static_cast<uint16_t>(b);
+  }
+  const uint32_t settled = map.brickSettledCount(brick);
+  ASSERT_GT(settled, 100u);
+  const MapDeltaConfig config;
+  BrickSampler sampler = BrickSampler::create(config.acuity, 1 << 16).value();
+  BrickBatch batch(1 << 16, 3);
+  const Eigen::Vector3d origin(0.1, -0.2, 0.3);
+  batch.clear(origin);
+  ASSERT_TRUE(sampler.append(map, brick, 0, 7, true, batch));
+  ASSERT_EQ(batch.entries().size(), 1u);
+  EXPECT_EQ(batch.entries()[0].count, settled);
+  EXPECT_EQ(batch.entries()[0].version, 7u);
+  EXPECT_TRUE(batch.entries()[0].fovea);
+  const Eigen::Vector3d lo = map.brickOrigin(brick);
+  const double size = map.config().brick_size_m;
+  auto inside = [&](const BrickBatchEntry& e) {
+    for (uint32_t i = e.first; i < e.first + e.count; ++i) {
+      const Eigen::Vector3d p = batch.points.points.world(i) - lo;
+      if ((p.array() < -1e-4).any() || (p.array() > size + 1e-4).any()) return false;
+    }
+    return true;
+  };
+  EXPECT_TRUE(inside(batch.entries()[0]));
+
+  for (uint8_t level = 1; level <= 4; ++level) {
+    ASSERT_TRUE(sampler.append(map, brick, level, 8, false, batch) || batch.full());
+    if (batch.full() && batch.entries().back().level != level) {
+      batch.clear(origin);
+      ASSERT_TRUE(sampler.append(map, brick, level, 8, false, batch));
+    }
+    const BrickBatchEntry& e = batch.entries().back();
+    ASSERT_EQ(e.level, level);
+    EXPECT_TRUE(inside(e));
+    const double step = sampler.levelSteps()[level];
+    ASSERT_GT(step, 0.0);
+    // The voxels the settled surfels occupy, from the map itself.
+    std::set<std::tuple<int64_t, int64_t, int64_t>> voxels;
+    for (uint32_t s = map.firstInBrick(brick); s != SurfelMap::kNoSurfel; s = map.nextInBrick(s)) {
+      const Surfel& sf = map.surfel(s);
+      if (!(sf.flags & kSurfelSettled)) continue;
+      const Eigen::Vector3d p = lo + Eigen::Vector3d(sf.x, sf.y, sf.z);
+      voxels.insert({static_cast<int64_t>(std::floor(p.x() / step)), static_cast<int64_t>(std::floor(p.y() / step)),
+                     static_cast<int64_t>(std::floor(p.z() / step))});
+    }
+    EXPECT_EQ(e.count, voxels.size()) << "level " << int(level);
+    uint64_t weight = 0;
+    for (uint32_t i = e.first; i < e.first + e.count; ++i) {
+      weight += batch.points.weight[i];
+      EXPECT_EQ(batch.points.region[i], level);
+    }
+    EXPECT_EQ(weight, settled);  // every settled surfel stands behind one point
+  }
+  // Full: the next brick is refused and the batch keeps its entries.
+  while (!batch.full()) ASSERT_TRUE(sampler.append(map, brick, 3, 9, false, batch));
+  const std::size_t points = batch.points.size();
+  EXPECT_FALSE(sampler.append(map, brick, 0, 10, false, batch));
+  EXPECT_EQ(batch.points.size(), points);
+  EXPECT_EQ(batch.entries().size(), 3u);
 }
 
 }  // namespace

@@ -1,0 +1,301 @@
+// The streamer's side of the map's bricks (issue 26), over loopback to a real
+// OperatorLink and BrickCache: a frame's bricks arrive whole beside the live
+// frame and are acknowledged; an operator that never acknowledges gets the
+// same parts again until it does; an
+// eviction, a new session and a frame with no session tell the planner what the
+// operator lacks; acknowledgements of what was never sent are counted and change
+// nothing.
+#include "firmware/streamer.h"
+
+#include <chrono>
+#include <cstring>
+#include <memory>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/clock.h"
+#include "net/brick_cache.h"
+#include "net/operator_link.h"
+#include "tests/support/test_time.h"
+
+namespace fovea::firmware {
+namespace {
+
+using namespace std::chrono_literals;
+
+constexpr std::size_t kMaxBricks = 64;
+
+// Three bricks of a few hundred points each, at level 0, slots 3, 7 and 11.
+pipeline::map::BrickBatch makeBatch(uint32_t version, std::size_t points_per_brick = 300) {
+  pipeline::map::BrickBatch batch(4096, 16);
+  batch.clear(Eigen::Vector3d(1.0, 2.0, 0.5));
+  const uint16_t slots[3] = {3, 7, 11};
+  for (int b = 0; b < 3; ++b) {
+    auto& e = batch.add();
+    e.brick = slots[b];
+    e.key = {b, -1, 2};
+    e.version = version;
+    e.level = 0;
+    e.fovea = b == 0;
+    e.first = static_cast<uint32_t>(batch.points.size());
+    for (std::size_t i = 0; i < points_per_brick; ++i) {
+      const float x = 0.5f * static_cast<float>(b) + 0.01f * static_cast<float>(i % 40);
+      const float y = 0.01f * static_cast<float>(i / 40);
+      EXPECT_TRUE(batch.points.points.push(x, y, 0.25f, pipeline::packRgb(10, 20, static_cast<uint8_t>(b))));
+      batch.points.region[batch.points.size() - 1] = 0;
+      batch.points.weight[batch.points.size() - 1] = 1;
+    }
+    e.count = static_cast<uint32_t>(points_per_brick);
+  }
+  return batch;
+}
+
+struct Rig {
+  std::unique_ptr<Streamer> streamer;
+  BrickFeedback feedback{kMaxBricks};
+  std::unique_ptr<net::OperatorLink> op;
+  pipeline::FoveatedCloud live{64};
+  pipeline::FoveationStats stats;
+
+  explicit Rig(int64_t resend_after_ns = 100'000'000) {
+    StreamConfig config;
+    config.link.listen = "127.0.0.1:0";
+    config.link.insecure = true;
+    config.map_bricks = true;
+    config.brick_sender.max_bricks = kMaxBricks;
+    config.brick_sender.resend_after_ns = resend_after_ns;
+    config.max_brick_points = 1024;
+    config.max_frame_brick_points = 4096;
+    Result<std::unique_ptr<Streamer>> created = Streamer::create(config, 1000);
+    EXPECT_TRUE(created) << created.status().message();
+    streamer = std::move(created.value());
+    streamer->attachBrickFeedback(&feedback);
+    std::atomic<bool> stop{false};
+    std::thread robot([&] {
+      while (!stop.load()) streamer->idleUntil(monotonicNs() + 2'000'000);
+    });
+    net::OperatorLinkConfig op_config;
+    op_config.insecure = true;
+    Result<std::unique_ptr<net::OperatorLink>> link =
+        net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
+    stop.store(true);
+    robot.join();
+    EXPECT_TRUE(link) << link.status().message();
+    op = std::move(link.value());
+    // A live frame of a few points in the fovea.
+    for (int i = 0; i < 10; ++i) EXPECT_TRUE(live.points.push(0.1f * static_cast<float>(i), 0.0f, 1.0f, 0x808080));
+    std::fill_n(live.region.begin(), 10, uint8_t{0});
+    std::fill_n(live.weight.begin(), 10, 1u);
+    stats.region_count = 1;
+  }
+
+  Result<FrameSendReport> send(const pipeline::map::BrickBatch* batch, uint32_t frame_id) {
+    const int64_t now = monotonicNs();
+    return streamer->sendFrame(live, stats, frame_id, now, now + 30'000'000, 33'000'000, batch);
+  }
+
+  // What the planner would hear now.
+  std::set<std::size_t> forgotten(bool* all = nullptr) {
+    std::set<std::size_t> out;
+    bool everything = false;
+    feedback.drain([&](std::size_t b) { out.insert(b); }, [&] { everything = true; });
+    if (all) *all = everything;
+    return out;
+  }
+};
+
+// The operator: receives for `ms`, brick parts into the cache, and
+// acknowledges what it took when `acknowledge`.
+struct Operator {
+  net::BrickCache cache = net::BrickCache::create(net::BrickCacheConfig{}).value();
+  pipeline::FoveatedCloud scratch{1 << 14};
+  std::size_t frame_chunks = 0, brick_parts = 0;
+
+  void receive(net::OperatorLink& link, int ms, bool acknowledge) {
+    alignas(16) static uint8_t aligned[net::kMaxMtu];
+    const int64_t end = monotonicNs() + test::scaled(std::chrono::milliseconds(ms)).count() * 1'000'000;
+    while (monotonicNs() < end) {
+      std::optional<net::Received> r = link.receive(5);
+      if (r && (r->type == net::MessageType::kBrickChunk || r->type == net::MessageType::kChunk)) {
+        std::memcpy(aligned, r->payload.data(), r->payload.size());
+        scratch.clear();
+        Result<net::DecodedChunk> d = net::decodeChunk(std::span<const uint8_t>(aligned, r->payload.size()), scratch);
+        ASSERT_TRUE(d) << d.status().message();
+        EXPECT_EQ(d->has_brick, r->type == net::MessageType::kBrickChunk);
+        if (d->has_brick) {
+          ++brick_parts;
+          cache.add(d.value(), scratch, 0, monotonicNs());
+        } else {
+          ++frame_chunks;
+        }
+      }
+      if (acknowledge && !cache.received().empty()) {
+        net::BrickAckMsg ack;
+        for (const net::BrickPartId& id : cache.received()) {
+          if (ack.part_count == net::BrickAckMsg::kMaxParts) break;
+          ack.parts[ack.part_count++] = id;
+        }
+        ASSERT_TRUE(link.sendBrickAck(ack));
+        cache.clearReceived();
+      }
+    }
+  }
+};
+
+TEST(BrickFeedback, TellsEachForgottenBrickOnceAndANewSessionFirst) {
+  BrickFeedback feedback(130);
+  std::vector<std::size_t> got;
+  int all = 0;
+  auto drain = [&] {
+    got.clear();
+    all = 0;
+    feedback.drain([&](std::size_t b) { got.push_back(b); }, [&] { ++all; });
+  };
+  drain();
+  EXPECT_TRUE(got.empty());
+  EXPECT_EQ(all, 0);
+  feedback.forget(0);
+  feedback.forget(129);
+  feedback.forget(64);
+  feedback.forget(64);
+  feedback.forget(100000);  // beyond the map: ignored
+  feedback.forgetAll();
+  drain();
+  EXPECT_EQ(got, (std::vector<std::size_t>{0, 64, 129}));
+  EXPECT_EQ(all, 1);
+  drain();
+  EXPECT_TRUE(got.empty());
+  EXPECT_EQ(all, 0);
+  // From another thread, while the planner drains.
+  std::thread sender([&] {
+    for (std::size_t b = 0; b < 130; ++b) feedback.forget(b);
+  });
+  std::set<std::size_t> seen;
+  for (int i = 0; i < 1000 && seen.size() < 130; ++i) {
+    feedback.drain([&](std::size_t b) { seen.insert(b); }, [] {});
+  }
+  sender.join();
+  feedback.drain([&](std::size_t b) { seen.insert(b); }, [] {});
+  EXPECT_EQ(seen.size(), 130u);
+}
+
+TEST(StreamerBricks, ABatchArrivesWholeBesideTheLiveFrameAndIsAcknowledged) {
+  Rig rig;
+  Operator op;
+  pipeline::map::BrickBatch batch = makeBatch(1);
+  Result<FrameSendReport> sent = rig.send(&batch, 1);
+  ASSERT_TRUE(sent) << sent.status().message();
+  EXPECT_TRUE(sent->had_session);
+  EXPECT_EQ(sent->bricks, 3u);
+  EXPECT_EQ(sent->brick_parts_sent, sent->brick_parts);
+  EXPECT_GE(sent->brick_parts, 3u);
+  EXPECT_TRUE(sent->completed);
+  op.receive(*rig.op, 300, true);
+  EXPECT_GE(op.frame_chunks, 1u);
+  EXPECT_EQ(op.cache.bricksHeld(), 3u);
+  EXPECT_EQ(op.cache.pointsHeld(), 900u);
+  const int held = op.cache.find(net::BrickKey{1, -1, 2});
+  ASSERT_GE(held, 0);
+  EXPECT_EQ(op.cache.version(static_cast<std::size_t>(held)), 1u);
+  // Every point where the robot had it (world = batch origin + point), to the codec's step.
+  std::size_t near = 0;
+  op.cache.forEachPoint(static_cast<std::size_t>(held), [&](const Eigen::Vector3d& p, uint32_t rgb) {
+    const Eigen::Vector3d rel = p - Eigen::Vector3d(1.0, 2.0, 0.5);
+    near += std::abs(rel.z() - 0.25) < 0.002 && rel.x() > 0.49 && rel.x() < 0.9 && pipeline::rgbBlue(rgb) == 1 ? 1 : 0;
+  });
+  EXPECT_EQ(near, 300u);
+  // The acknowledgements reach the robot with its next poll: every version done.
+  ASSERT_TRUE(test::waitUntil(
+      [&] {
+        rig.streamer->poll();
+        return rig.streamer->brickCounters()->versions_done == 3;
+      },
+      3000ms));
+  EXPECT_EQ(rig.streamer->brickCounters()->acks_unknown, 0u);
+  bool all = false;
+  EXPECT_TRUE(rig.forgotten(&all).empty());
+  EXPECT_TRUE(all);  // the session began: the operator held nothing
+  // Nothing is resent once acknowledged.
+  Result<FrameSendReport> next = rig.send(nullptr, 2);
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->brick_resends, 0u);
+}
+
+TEST(StreamerBricks, UnacknowledgedPartsGoAgainUntilAcknowledged) {
+  Rig rig(20'000'000);  // resend after 20 ms
+  Operator op;
+  pipeline::map::BrickBatch batch = makeBatch(5);
+  ASSERT_TRUE(rig.send(&batch, 1));
+  op.receive(*rig.op, 100, false);
+  EXPECT_EQ(op.cache.bricksHeld(), 3u);
+  const std::size_t first_parts = op.brick_parts;
+  // Later frames carry the resends: duplicates at the operator, nothing new drawn.
+  uint32_t resent = 0;
+  for (uint32_t f = 2; f < 6; ++f) {
+    std::this_thread::sleep_for(25ms);
+    Result<FrameSendReport> r = rig.send(nullptr, f);
+    ASSERT_TRUE(r);
+    resent += r->brick_resends;
+  }
+  EXPECT_GE(resent, first_parts);
+  op.receive(*rig.op, 100, false);
+  EXPECT_GT(op.cache.counters().duplicate_parts, 0u);
+  EXPECT_EQ(op.cache.counters().versions, 3u);
+  // Acknowledging now ends the resends.
+  op.receive(*rig.op, 10, false);
+  {
+    net::BrickAckMsg ack;
+    for (const net::BrickPartId& id : op.cache.received()) {
+      if (ack.part_count < net::BrickAckMsg::kMaxParts) ack.parts[ack.part_count++] = id;
+    }
+    ASSERT_TRUE(rig.op->sendBrickAck(ack));
+  }
+  ASSERT_TRUE(test::waitUntil(
+      [&] {
+        rig.streamer->poll();
+        return rig.streamer->brickCounters()->versions_done == 3;
+      },
+      3000ms));
+}
+
+TEST(StreamerBricks, EvictionsAndFramesThatCannotGoAreToldToThePlanner) {
+  Rig rig;
+  Operator op;
+  pipeline::map::BrickBatch batch = makeBatch(1);
+  ASSERT_TRUE(rig.send(&batch, 1));
+  op.receive(*rig.op, 200, true);
+  ASSERT_EQ(op.cache.bricksHeld(), 3u);
+  (void)rig.forgotten();
+  // The operator evicts brick {1,-1,2} (slot 7), and acknowledges parts of a
+  // brick never sent and of a version never sent.
+  net::BrickAckMsg ack;
+  ack.evicted[ack.evicted_count++] = net::BrickKey{1, -1, 2};
+  ack.parts[ack.part_count++] = net::BrickPartId{net::BrickKey{40, 40, 40}, 1, 0};
+  ack.parts[ack.part_count++] = net::BrickPartId{net::BrickKey{0, -1, 2}, 99, 0};
+  ASSERT_TRUE(rig.op->sendBrickAck(ack));
+  std::set<std::size_t> forgotten;
+  ASSERT_TRUE(test::waitUntil(
+      [&] {
+        rig.streamer->poll();
+        for (std::size_t b : rig.forgotten()) forgotten.insert(b);
+        return !forgotten.empty();
+      },
+      3000ms));
+  EXPECT_EQ(forgotten, std::set<std::size_t>({7}));
+  EXPECT_GE(rig.streamer->brickCounters()->acks_unknown, 1u);  // the version never sent
+  // A frame's bricks that cannot go (privacy, or no session) are due again.
+  rig.streamer->discardBricks(batch);
+  EXPECT_EQ(rig.forgotten(), std::set<std::size_t>({3, 7, 11}));
+  // Without map_bricks a batch is refused, not sent.
+  StreamConfig plain;
+  plain.link.listen = "127.0.0.1:0";
+  plain.link.insecure = true;
+  std::unique_ptr<Streamer> frames_only = Streamer::create(plain, 100).value();
+  EXPECT_FALSE(frames_only->sendFrame(rig.live, rig.stats, 1, 0, monotonicNs() + 1'000'000, 33'000'000, &batch));
+}
+
+}  // namespace
+}  // namespace fovea::firmware
