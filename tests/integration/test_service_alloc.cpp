@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <thread>
 
@@ -16,6 +17,9 @@
 
 #include "firmware/log.h"
 #include "firmware/service.h"
+#include "core/clock.h"
+#include "net/brick_cache.h"
+#include "net/codec.h"
 #include "net/operator_link.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/service_doubles.h"
@@ -95,6 +99,7 @@ constexpr uint64_t kSentDuringTheCount = 10;
 
 struct StreamingCount {
   uint64_t frames = 0, sent = 0, allocations = 0, gaze_changes = 0;
+  uint64_t brick_versions = 0, brick_versions_done = 0;  // during the count (map bricks)
 };
 
 // The service streaming to an operator on loopback, 300 frames counted after
@@ -102,8 +107,18 @@ struct StreamingCount {
 // silent for 250 ms after every 150 ms, longer than the gaze timeout (100 ms),
 // so the service keeps switching between the operator's foveation and the
 // fallback's (firmware/gaze_policy.h) during the count.
-void countWhileStreaming(bool gaps, StreamingCount& count) {
+// With `map_bricks` the service fuses the map and streams its bricks
+// (foveation.source = map, map.delta), and the operator keeps them in a
+// BrickCache and acknowledges them: the planner, the sampler, the brick
+// encoder, the sender's store, the acknowledgements and the feedback run
+// during the count.
+void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = false) {
   ServiceConfig config = allocConfig();
+  if (map_bricks) {
+    config.map.source = FoveationSource::kMap;
+    config.map.delta = true;
+    config.map.map.max_surfels = 100'000;
+  }
   config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
       StatusLinesConfig::kNoLine;
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=100";
@@ -129,9 +144,16 @@ void countWhileStreaming(bool gaps, StreamingCount& count) {
   // The operator (its own allocations are not the service's: it runs before
   // and after the count, and during it only sends and receives into fixed buffers).
   std::atomic<bool> stop{false};
+  net::BrickCacheConfig cache_config;
+  cache_config.max_points = 1u << 18;
+  cache_config.max_bricks = 1024;
+  net::BrickCache cache = net::BrickCache::create(cache_config).value();
+  pipeline::FoveatedCloud decoded(1u << 14);
+  net::BrickAckMsg ack;
   std::thread operator_thread([&] {
     const auto begin = std::chrono::steady_clock::now();
     auto next = begin;
+    alignas(16) static uint8_t aligned[net::kMaxMtu];
     while (!stop.load()) {
       const auto now = std::chrono::steady_clock::now();
       const bool silent = gaps && (now - begin) % 400ms >= 150ms;
@@ -144,7 +166,25 @@ void countWhileStreaming(bool gaps, StreamingCount& count) {
         }
         next += 10ms;
       }
-      (void)op.value()->receive(2);
+      const std::optional<net::Received> r = op.value()->receive(2);
+      if (r && r->type == net::MessageType::kBrickChunk) {
+        std::memcpy(aligned, r->payload.data(), r->payload.size());
+        decoded.clear();
+        Result<net::DecodedChunk> d = net::decodeChunk(std::span<const uint8_t>(aligned, r->payload.size()), decoded);
+        if (d) (void)cache.add(d.value(), decoded, 0, monotonicNs());
+      }
+      if (!cache.received().empty() || !cache.evicted().empty()) {
+        ack.part_count = ack.evicted_count = 0;
+        for (const net::BrickPartId& id : cache.received()) {
+          if (ack.part_count < 60) ack.parts[ack.part_count++] = id;
+        }
+        for (const net::BrickKey& key : cache.evicted()) {
+          if (ack.evicted_count < net::BrickAckMsg::kMaxEvicted) ack.evicted[ack.evicted_count++] = key;
+        }
+        (void)op.value()->sendBrickAck(ack);
+        cache.clearReceived();
+        cache.clearEvicted();
+      }
     }
   });
   struct JoinOnExit {  // a failed ASSERT below must not leave the thread joinable
@@ -168,6 +208,8 @@ void countWhileStreaming(bool gaps, StreamingCount& count) {
     count.sent = end.frames_sent - start.frames_sent;
     count.gaze_changes = sink.changes.load() - changes_before;
     count.allocations = scope.allocations();
+    count.brick_versions = end.map.brick_versions - start.map.brick_versions;
+    count.brick_versions_done = end.map.brick_versions_done - start.map.brick_versions_done;
   }
   stop.store(true);
   operator_thread.join();
@@ -196,6 +238,19 @@ TEST(ServiceAllocation, ThreeHundredFramesWhileTheOperatorGazeComesAndGoes) {
   if (HasFatalFailure()) return;
   EXPECT_GE(count.gaze_changes, 4u) << "the gaze never switched to the fallback and back during the count";
   EXPECT_GE(count.sent, kSentDuringTheCount);
+  EXPECT_EQ(count.allocations, 0u);
+}
+
+TEST(ServiceAllocation, ThreeHundredFramesStreamingTheMapsBricksToAnOperatorThatKeepsThem) {
+  StreamingCount count;
+  countWhileStreaming(false, count, true);
+  if (HasFatalFailure()) return;
+  std::printf("map bricks during the count: %llu versions sent, %llu acknowledged whole\n",
+              static_cast<unsigned long long>(count.brick_versions),
+              static_cast<unsigned long long>(count.brick_versions_done));
+  EXPECT_GE(count.sent, kSentDuringTheCount);
+  EXPECT_GT(count.brick_versions, 0u) << "no brick went out during the count";
+  EXPECT_GT(count.brick_versions_done, 0u) << "no brick was acknowledged during the count";
   EXPECT_EQ(count.allocations, 0u);
 }
 
