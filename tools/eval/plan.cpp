@@ -37,6 +37,9 @@ std::vector<std::string> conditionSettings(const Condition& c) {
   if (c.level_margin > 0.0) out.push_back("foveation.level_margin=" + shortestDecimal(c.level_margin));
   if (c.refine_passes > 0) out.push_back("foveation.refine_passes=" + std::to_string(c.refine_passes));
   if (!c.source.empty()) out.push_back("foveation.source=" + c.source);
+  // MAP is the map foveated as the eye sees it with every frame, not the
+  // stream of the map's bricks (fovead's default with the map since issue 26).
+  if (c.source == "map") out.push_back("map.delta=false");
   return out;
 }
 

@@ -33,7 +33,9 @@ struct Condition {
   double level_margin = 0.0;
   int refine_passes = 0;
   // What is foveated (foveation.source): "" the frame (fovead's default), "map"
-  // the fused surfel map (docs/map.md).
+  // the fused surfel map (docs/map.md), sent with every frame as the eye sees
+  // it (map.delta = false: the service's default with the map is to stream
+  // the map's bricks, docs/map-delta.md, which this table does not measure yet).
   std::string source = {};
 };
 // The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper), also with a
@@ -47,7 +49,7 @@ std::vector<Condition> defaultConditions();
 std::vector<Condition> allConditions();
 // What a condition sets beyond its preset, as `fovead --set` takes it, in this order:
 // foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes,
-// foveation.source (those set).
+// foveation.source and, with the map, map.delta = false (those set).
 std::vector<std::string> conditionSettings(const Condition& c);
 // A setting's number as `fovead --set` takes it: the shortest decimal that reads back
 // as the same double (0.002, not 0.0020000000000000000416).

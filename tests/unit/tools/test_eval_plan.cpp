@@ -121,7 +121,7 @@ TEST(EvalPlan, MapIsAcuityOnTheMapAndNotADefault) {
   EXPECT_EQ((*map)[1].name, "MAP");
   EXPECT_EQ((*map)[1].preset, "ACUITY");
   EXPECT_EQ((*map)[1].source, "map");
-  EXPECT_EQ(conditionSettings((*map)[1]), std::vector<std::string>{"foveation.source=map"});
+  EXPECT_EQ(conditionSettings((*map)[1]), (std::vector<std::string>{"foveation.source=map", "map.delta=false"}));
   // ACUITY itself stays on the frame, and no default condition is on the map.
   EXPECT_EQ((*map)[0].source, "");
   EXPECT_EQ(conditionSettings((*map)[0]), std::vector<std::string>{});
