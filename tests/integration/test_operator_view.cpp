@@ -73,8 +73,8 @@ TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"state\":\"streaming\""); }, 10s)) << op.output();
   ASSERT_TRUE(waitUntil([&] { return tab.frames() >= 3; }, 10s)) << op.output();
   const std::vector<uint8_t> frame = tab.lastFrame();
-  ASSERT_GE(frame.size(), 104u);
-  EXPECT_EQ(std::string(frame.begin(), frame.begin() + 4), "FVF1");
+  ASSERT_GE(frame.size(), 136u);
+  EXPECT_EQ(std::string(frame.begin(), frame.begin() + 4), "FVF2");
 
   // The robot stops (it says Bye): the page shows it gone, the operator keeps trying.
   EXPECT_EQ(robot.stop(SIGTERM, 10), 0) << robot.output();
