@@ -113,14 +113,10 @@ MapTotals MapHolder::totals() const {
   return t;
 }
 
-std::size_t MapHolder::memoryBytes() const {
-  return cache_->memoryBytes() + scratch_.points.capacity() * (3 * sizeof(float) + sizeof(uint32_t)) +
-         scratch_.region.capacity() + scratch_.weight.capacity() * sizeof(scratch_.weight[0]) + sizeof ack_;
-}
-
 std::string mapLiveText(const MapTotals& now, const MapTotals& before) {
   char buf[256];
-  std::snprintf(buf, sizeof buf, "map %zu bricks %zu pts, +%llu parts +%llu versions, %llu evicted, %llu dup %llu stale %llu bad, %llu acks",
+  std::snprintf(buf, sizeof buf,
+                "map %zu bricks %zu pts, +%llu parts +%llu versions, %llu evicted, %llu dup %llu stale %llu bad, %llu acks",
                 now.bricks_held, now.points_held, static_cast<unsigned long long>(now.parts - before.parts),
                 static_cast<unsigned long long>(now.versions - before.versions),
                 static_cast<unsigned long long>(now.evicted - before.evicted),

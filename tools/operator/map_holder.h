@@ -87,7 +87,6 @@ class MapHolder {
   net::BrickCache& cache() { return *cache_; }
   const net::BrickCache& cache() const { return *cache_; }
   MapTotals totals() const;
-  std::size_t memoryBytes() const;
 
  private:
   struct AckCursor {
