@@ -1,13 +1,25 @@
 // fovea-operator --view as a process, with a tab on its WebSocket: the states
 // the page shows as the robot refuses (busy with another operator), accepts,
 // streams and goes away, and the operator reconnecting throughout; and that
-// the operator started with --view and no robot keeps serving the page.
+// the operator started with --view and no robot keeps serving the page. And,
+// against a robot played here (a net::RobotLink), the operator keeping the
+// map's bricks: acknowledged, drawn in the page's frames, counted in its logs.
 #include <gtest/gtest.h>
 
 #include <signal.h>
 
+#include <cstring>
+#include <fstream>
 #include <regex>
+#include <set>
+#include <sstream>
 #include <string>
+#include <tuple>
+#include <vector>
+
+#include "core/clock.h"
+#include "net/codec.h"
+#include "net/robot_link.h"
 
 #include "tests/support/process.h"
 #include "tests/support/test_time.h"
@@ -73,8 +85,8 @@ TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
   ASSERT_TRUE(waitUntil([&] { return tab.hasText("\"state\":\"streaming\""); }, 10s)) << op.output();
   ASSERT_TRUE(waitUntil([&] { return tab.frames() >= 3; }, 10s)) << op.output();
   const std::vector<uint8_t> frame = tab.lastFrame();
-  ASSERT_GE(frame.size(), 104u);
-  EXPECT_EQ(std::string(frame.begin(), frame.begin() + 4), "FVF1");
+  ASSERT_GE(frame.size(), 136u);
+  EXPECT_EQ(std::string(frame.begin(), frame.begin() + 4), "FVF2");
 
   // The robot stops (it says Bye): the page shows it gone, the operator keeps trying.
   EXPECT_EQ(robot.stop(SIGTERM, 10), 0) << robot.output();
@@ -101,6 +113,106 @@ TEST_F(OperatorView, WithoutARobotThePageStaysUpAndSaysSo) {
   tab.send(R"({"type":"gaze","origin":[0,0,1],"direction":[0,1,0]})");
   EXPECT_EQ(op.stop(SIGTERM, 20), 1) << op.output();
   EXPECT_NE(op.output().find("viewer: 1 tabs served (0 refused)"), std::string::npos) << op.output();
+}
+
+// A robot that streams bricks: three brick versions (one of several parts), a
+// bad brick payload and a few live frames, while it takes the acknowledgements.
+TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
+  net::RobotLinkConfig rc;
+  rc.listen = "127.0.0.1:0";
+  rc.insecure = true;
+  std::unique_ptr<net::RobotLink> robot = net::RobotLink::create(rc).value();
+  const std::string address = "127.0.0.1:" + std::to_string(robot->localEndpoint().port());
+  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address +
+                             " --insecure --view 127.0.0.1:0 --quiet --map-points 65536 --map-bricks 64 --frame-log " +
+                             dir_.file("frames.csv") + " --summary " + dir_.file("summary.json"));
+  const int port = viewerPort(op);
+  ASSERT_GT(port, 0) << op.output();
+  test::Tab tab(port);
+  ASSERT_TRUE(tab.connected()) << tab.error();
+  ASSERT_TRUE(waitUntil([&] {
+    robot->poll(10);
+    return robot->hasSession();
+  }, 10s)) << op.output();
+
+  // The points of a slab at a brick (or the live frame), encoded as the robot's service would.
+  net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, 4096).value();
+  pipeline::FoveatedCloud cloud(4096);
+  auto encode = [&](int points, Eigen::Vector3d origin, const net::BrickTag* tag, uint32_t frame_id) {
+    cloud.clear();
+    cloud.points.origin_m = origin;
+    for (int i = 0; i < points; ++i) {
+      ASSERT_TRUE(cloud.points.push(0.004f * static_cast<float>(i % 60), 0.004f * static_cast<float>(i / 60), 0.0f, 0x40a0c0u));
+    }
+    std::fill_n(cloud.region.begin(), cloud.size(), uint8_t{0});
+    std::fill_n(cloud.weight.begin(), cloud.size(), 1u);
+    const double fovea[1] = {0.0};
+    ASSERT_TRUE(encoder.encode(cloud, fovea, frame_id, static_cast<uint64_t>(monotonicNs()), tag));
+  };
+  std::set<std::tuple<int, uint32_t, uint16_t>> sent_parts, acked;
+  const std::vector<std::pair<net::BrickTag, int>> bricks = {{{0, 4, 2, 1, 0}, 1500}, {{1, 4, 2, 3, 0}, 200}, {{2, 4, 2, 1, 0}, 100}};
+  int map_points = 0;
+  for (const auto& [tag, points] : bricks) {
+    encode(points, Eigen::Vector3d(0.5 * tag.x, 0.5 * tag.y, 0.5 * tag.z), &tag, 1);
+    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) {
+      ASSERT_EQ(robot->send(net::MessageType::kBrickChunk, encoder.chunk(i)), net::SendResult::kSent);
+      sent_parts.insert({tag.x, tag.version, static_cast<uint16_t>(i)});
+    }
+    map_points += points;
+  }
+  ASSERT_GT(sent_parts.size(), 3u) << "the first brick comes in several parts";
+  const uint8_t garbage[64] = {1, 2, 3};
+  ASSERT_EQ(robot->send(net::MessageType::kBrickChunk, garbage), net::SendResult::kSent);
+  // Live frames, until every part is acknowledged and the page has drawn the map.
+  uint32_t frame_id = 10;
+  std::vector<uint8_t> frame;
+  const bool done = waitUntil([&] {
+    encode(300, Eigen::Vector3d(1.0, 3.0, 1.0), nullptr, ++frame_id);
+    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) (void)robot->send(net::MessageType::kChunk, encoder.chunk(i));
+    const uint16_t chunks[1] = {static_cast<uint16_t>(encoder.chunkCount())}, cut[1] = {0};
+    (void)robot->send(net::MessageType::kFrameSummary, encoder.encodeSummary(frame_id, chunks, cut));
+    robot->poll(30);
+    for (const net::BrickPartId& id : robot->brickAcks()) acked.insert({id.key.x, id.version, id.part});
+    robot->takeBrickAcks();
+    frame = tab.frames() > 0 ? tab.lastFrame() : std::vector<uint8_t>{};
+    uint32_t m = 0;
+    if (frame.size() >= 16) std::memcpy(&m, frame.data() + 12, 4);
+    return acked == sent_parts && m == static_cast<uint32_t>(map_points);
+  }, 15s);
+  EXPECT_TRUE(done) << acked.size() << " of " << sent_parts.size() << " parts acknowledged\n" << op.output();
+  EXPECT_EQ(acked, sent_parts);
+  ASSERT_GE(frame.size(), 136u);
+  uint32_t n = 0, m = 0;
+  std::memcpy(&n, frame.data() + 8, 4);
+  std::memcpy(&m, frame.data() + 12, 4);
+  EXPECT_EQ(m, static_cast<uint32_t>(map_points)) << "the page's frame holds every held brick's points";
+  EXPECT_EQ(n, m + 300) << "after the live frame's";
+
+  EXPECT_EQ(op.stop(SIGTERM, 20), 0) << op.output();
+  const std::string out = op.output();
+  EXPECT_NE(out.find("map: 3 bricks and " + std::to_string(map_points) + " points held"), std::string::npos) << out;
+  std::stringstream summary;
+  summary << std::ifstream(dir_.file("summary.json")).rdbuf();
+  EXPECT_NE(summary.str().find("\"map\": {\"bricks_held\": 3, \"points_held\": " + std::to_string(map_points)),
+            std::string::npos) << summary.str();
+  EXPECT_NE(summary.str().find("\"versions_completed\": 3"), std::string::npos) << summary.str();
+  EXPECT_NE(summary.str().find("\"bad_parts\": 1"), std::string::npos) << summary.str();
+  // The frame log's header ends with the map's columns, and its last line holds the whole map.
+  std::ifstream log(dir_.file("frames.csv"));
+  std::string header, line, last;
+  std::getline(log, header);
+  EXPECT_NE(header.find(",summary_received,map_bricks,map_points,brick_parts,brick_versions"), std::string::npos) << header;
+  uint64_t parts_logged = 0;
+  while (std::getline(log, line)) {
+    last = line;
+    std::vector<std::string> cells;
+    std::stringstream cs(line);
+    for (std::string c; std::getline(cs, c, ',');) cells.push_back(c);
+    ASSERT_EQ(cells.size(), 12u) << line;
+    parts_logged += std::stoull(cells[10]);
+  }
+  EXPECT_NE(last.find(",3," + std::to_string(map_points) + ","), std::string::npos) << last;
+  EXPECT_LE(parts_logged, sent_parts.size()) << "parts since the previous line add up to at most all of them";
 }
 
 TEST_F(OperatorView, BadViewAddressesAreUsageErrors) {

@@ -26,6 +26,7 @@
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
 #include "tools/operator/gaze_script.h"
+#include "tools/operator/map_holder.h"
 #include "tools/operator/operator_stats.h"
 #include "tools/operator/view_frame.h"
 #include "tools/operator/view_server.h"
@@ -41,6 +42,7 @@ const char* kHelp =
     "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
     "                      [--save-ply DIR]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
+    "                      [--map-points N] [--map-bricks N]\n"
     "                      [--clock auto|shared|estimated] [--quiet]\n"
     "\n"
     "Connects to fovead run --listen, sends gaze samples from a script, receives and\n"
@@ -61,13 +63,19 @@ const char* kHelp =
     "  --duration SECONDS    stop after this long (default: until SIGINT/SIGTERM or the robot's bye)\n"
     "  --summary FILE.json   write the whole run's figures as JSON at the end\n"
     "  --frame-log FILE      one CSV line per frame decoded: frame id, capture stamp (robot clock),\n"
-    "                        decoded (this host's clock), latency, points, chunks (docs/eval.md)\n"
+    "                        decoded (this host's clock), latency, points, chunks (docs/eval.md); then\n"
+    "                        what the operator holds of the robot's map: bricks, points, and the brick\n"
+    "                        parts taken (not duplicates) and versions completed since the previous line\n"
     "  --save-ply DIR        write every decoded frame as DIR/frame_ID.ply (world coordinates, region)\n"
     "  --name NAME           the name the robot shows (default fovea-operator)\n"
     "  --budget MBPS         the bandwidth to ask for, MB/s (default: what the robot allows)\n"
     "  --mtu BYTES           the largest UDP payload to ask for (default 1200)\n"
     "  --gaze-hz HZ          gaze samples per second (default 120, up to 200)\n"
     "  --max-points N        the largest frame to decode, in points (default 307200 = 640x480)\n"
+    "  --map-points N        the robot's map bricks to keep, in points (default 4194304 = 4 Mi, 16 bytes\n"
+    "                        each; 256 .. 67108864); with --view each viewer buffer holds them too\n"
+    "  --map-bricks N        the map bricks to keep (default 4096, 1 .. 1048576); the brick least\n"
+    "                        recently drawn or received goes first, and the robot is told\n"
     "  --clock MODE          how capture stamps (robot clock) compare with arrival (this host's):\n"
     "                        shared: one CLOCK_MONOTONIC (same host); estimated: the robot's clock\n"
     "                        estimated from its status stamps and the round trip it measures\n"
@@ -93,6 +101,8 @@ struct Options {
   double gaze_hz = 120.0;
   bool quiet = false;
   long max_points = 640 * 480;
+  long map_points = 4L << 20;
+  long map_bricks = 4096;
   std::string clock = "auto";
   std::string view;  // --view [ADDR:]PORT; empty: no viewer
   long view_tabs = 4;
@@ -146,6 +156,21 @@ Result<Options> parseOptions(int argc, char** argv) {
       if (!v) return v.status();
       if (!(v.value() >= 1 && v.value() <= 1e8)) return Result<Options>(ErrorCode::kInvalidArgument, "--max-points: must be within 1 .. 1e8");
       o.max_points = static_cast<long>(v.value());
+    } else if (flag == "--map-points") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      // At least one block of the cache's pool (256 points); at most 1 GiB of points.
+      if (!(v.value() >= 256 && v.value() <= 67108864 && v.value() == std::floor(v.value()))) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--map-points: must be a whole number within 256 .. 67108864");
+      }
+      o.map_points = static_cast<long>(v.value());
+    } else if (flag == "--map-bricks") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      if (!(v.value() >= 1 && v.value() <= 1048576 && v.value() == std::floor(v.value()))) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--map-bricks: must be a whole number within 1 .. 1048576");
+      }
+      o.map_bricks = static_cast<long>(v.value());
     } else if (flag == "--duration" || flag == "--budget" || flag == "--mtu" || flag == "--gaze-hz") {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
@@ -265,6 +290,7 @@ struct Station {
   std::optional<tools::GazeScript> script;
   net::OperatorLinkConfig link_config;
   std::optional<net::FrameAssembler> assembler;
+  std::optional<tools::MapHolder> map;
   std::unique_ptr<tools::ViewServer> view;
   std::ofstream frame_log;
 };
@@ -307,7 +333,8 @@ Exit startViewer(const Options& opt, Station& station) {
   tools::ViewServerConfig vc;
   vc.listen = opt.view;
   vc.max_tabs = static_cast<std::size_t>(opt.view_tabs);
-  vc.max_points = static_cast<std::size_t>(opt.max_points);
+  // A frame's points and the whole map beside them (view_frame.h).
+  vc.max_points = static_cast<std::size_t>(opt.max_points + opt.map_points);
   vc.gaze_hz = opt.gaze_hz;
   vc.script = opt.gaze;
   if (station.script) {
@@ -330,7 +357,8 @@ Exit startViewer(const Options& opt, Station& station) {
 Exit openFrameLog(const Options& opt, std::ofstream& frame_log) {
   if (opt.frame_log_path.empty()) return std::nullopt;
   frame_log.open(opt.frame_log_path);
-  frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received\n";
+  frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received,"
+               "map_bricks,map_points,brick_parts,brick_versions\n";
   if (!frame_log) {
     std::fprintf(stderr, "fovea-operator: --frame-log: cannot write '%s'\n", opt.frame_log_path.c_str());
     return kExitFailure;
@@ -347,6 +375,12 @@ Exit setUp(const Options& opt, Station& station) {
   Result<net::FrameAssembler> assembler = net::FrameAssembler::create(static_cast<std::size_t>(opt.max_points));
   if (!assembler) return failure("", assembler.status());
   station.assembler.emplace(std::move(assembler.value()));
+  net::BrickCacheConfig map_config;
+  map_config.max_points = static_cast<std::size_t>(opt.map_points);
+  map_config.max_bricks = static_cast<std::size_t>(opt.map_bricks);
+  Result<tools::MapHolder> map = tools::MapHolder::create(map_config);
+  if (!map) return startFailure(map.status());
+  station.map.emplace(std::move(map.value()));
   if (Exit e = startViewer(opt, station)) return e;
   return openFrameLog(opt, station.frame_log);
 }
@@ -365,6 +399,7 @@ struct Session {
   int64_t live_start_ns = 0;
   uint64_t lost_reported = 0;
   uint64_t last_frame_id = 0;
+  std::size_t max_payload = 0;  // of a datagram in this session: its MTU less kDatagramOverhead
 };
 
 // The run over all sessions: the figures and what the steps share.
@@ -374,6 +409,7 @@ class OperatorRun {
       : opt_(opt),
         station_(station),
         assembler_(*station.assembler),
+        map_(*station.map),
         view_(station.view.get()),
         splat_sizer_(net::CodecConfig{}.periphery_step_ratio),
         start_ns_(monotonicNs()),
@@ -397,6 +433,8 @@ class OperatorRun {
   void publishFigures(const Session& s, const tools::LiveFigures& live);
   void handleDatagram(Session& s, const net::Received& received);
   void handleReady(Session& s);
+  void sendBrickAcks(Session& s, int64_t now);
+  void publishView(const net::AssembledFrame& f);
   void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs);
   void saveFramePly(const net::AssembledFrame& f);
   void endSession(Session& s);
@@ -418,6 +456,10 @@ class OperatorRun {
   const Options& opt_;
   Station& station_;
   net::FrameAssembler& assembler_;
+  tools::MapHolder& map_;
+  tools::MapTotals map_live_before_{};  // at the last live line
+  tools::MapTotals map_logged_before_{};  // at the last --frame-log line
+  uint64_t view_map_points_left_out_ = 0, view_map_frames_cut_ = 0;
   tools::ViewServer* view_;  // null without --view
   tools::OperatorStats stats_;
   tools::SplatSizer splat_sizer_;
@@ -475,7 +517,8 @@ void OperatorRun::runSession(net::OperatorLink& link) {
     if (now >= end_ns_) break;
     if (now >= s.next_gaze_ns) sendGaze(s, now);
     if (now >= s.next_live_ns) reportLive(s, now);
-    const int64_t wake_ns = std::min({s.next_gaze_ns, s.next_live_ns, end_ns_});
+    if (map_.ackDue(now, s.max_payload)) sendBrickAcks(s, now);
+    const int64_t wake_ns = std::min({s.next_gaze_ns, s.next_live_ns, map_.nextAckNs(), end_ns_});
     const int timeout_ms = static_cast<int>(std::clamp<int64_t>((wake_ns - now + 999'999) / 1'000'000, 0, 1000));
     const std::optional<net::Received> received = link.receive(timeout_ms);
     if (received) handleDatagram(s, *received);
@@ -500,6 +543,8 @@ Session OperatorRun::beginSession(net::OperatorLink& link) {
   std::fflush(stdout);
   publishState(tools::LinkState::kStreaming, "");
   s.ip_udp_header_bytes = robot_address_.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
+  s.max_payload = link.mtuBytes() - net::kDatagramOverhead;
+  if (sessions_ > 1) map_.reset();  // the robot delivers its map afresh to a new session
   const int64_t session_start_ns = monotonicNs();
   s.next_gaze_ns = session_start_ns;
   s.next_live_ns = session_start_ns + 1'000'000'000;
@@ -532,10 +577,14 @@ void OperatorRun::reportLive(Session& s, int64_t now) {
     s.lost_reported = lost;
   }
   const tools::LiveFigures live = stats_.takeWindow(static_cast<double>(now - s.live_start_ns) * 1e-9);
+  const tools::MapTotals map = map_.totals();
   if (!opt_.quiet) {
-    std::printf("%s\n", tools::liveLine(live).c_str());
+    // The map's figures once the robot streams bricks (a robot that does not keeps the line as it was).
+    const std::string map_text = map.payloads > 0 ? " | " + tools::mapLiveText(map, map_live_before_) : std::string();
+    std::printf("%s%s\n", tools::liveLine(live).c_str(), map_text.c_str());
     std::fflush(stdout);
   }
+  map_live_before_ = map;
   if (view_) publishFigures(s, live);
   s.live_start_ns = now;
   s.next_live_ns += 1'000'000'000;
@@ -577,6 +626,11 @@ void OperatorRun::handleDatagram(Session& s, const net::Received& received) {
       (void)assembler_.addSummary(received.payload);
       handleReady(s);
       break;
+    case net::MessageType::kBrickChunk:
+      (void)map_.add(received.payload, received.received_ns);  // outcomes are counted by the map
+      // More parts than one acknowledgement takes: send now rather than let the list grow.
+      if (map_.ackDue(received.received_ns, s.max_payload)) sendBrickAcks(s, received.received_ns);
+      break;
     case net::MessageType::kBye:
       robot_said_bye_ = true;
       break;
@@ -613,9 +667,24 @@ void OperatorRun::handleReady(Session& s) {
     stats_.frame(obs);
     if (station_.frame_log) logFrame(f, obs);
     s.last_frame_id = f.frame_id;
-    if (view_) view_->publishFrame(tools::packViewFrame(f, splat_sizer_.sizes(f), view_->frameBuffer()));
+    if (view_) publishView(f);
     if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
   }
+}
+
+void OperatorRun::sendBrickAcks(Session& s, int64_t now) {
+  map_.sendAcks(s.max_payload, now, [&s](const net::BrickAckMsg& ack) { return s.link.sendBrickAck(ack); });
+}
+
+// The frame with the map's bricks behind its live points (the buffer holds both: startViewer).
+void OperatorRun::publishView(const net::AssembledFrame& f) {
+  const tools::ViewMap map{&map_.cache(), net::CodecConfig{}.periphery_step_ratio, monotonicNs()};
+  const tools::ViewPack pack = tools::packViewFrame(f, splat_sizer_.sizes(f), map, view_->frameBuffer());
+  if (pack.map_points_left_out > 0) {
+    ++view_map_frames_cut_;
+    view_map_points_left_out_ += pack.map_points_left_out;
+  }
+  view_->publishFrame(pack.bytes);
 }
 
 void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs) {
@@ -624,7 +693,11 @@ void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObser
   station_.frame_log << f.frame_id << ',' << f.capture_time_ns << ',' << f.last_chunk_received_ns << ','
                      << (std::isnan(obs.latency_ms) ? std::string() : std::to_string(std::llround(obs.latency_ms * 1e3)))
                      << ',' << points << ',' << obs.chunks_received << ',' << obs.chunks_expected << ','
-                     << (f.summary_received ? 1 : 0) << '\n';
+                     << (f.summary_received ? 1 : 0);
+  const tools::MapTotals map = map_.totals();
+  station_.frame_log << ',' << map.bricks_held << ',' << map.points_held << ',' << map.parts - map_logged_before_.parts
+                     << ',' << map.versions - map_logged_before_.versions << '\n';
+  map_logged_before_ = map;
 }
 
 void OperatorRun::saveFramePly(const net::AssembledFrame& f) {
@@ -661,6 +734,14 @@ int OperatorRun::finish() {
               static_cast<unsigned long long>(ac.chunks), static_cast<unsigned long long>(ac.bad_chunks),
               static_cast<unsigned long long>(ac.late_chunks), static_cast<unsigned long long>(ac.duplicate_chunks),
               robot_said_bye_ ? "; the robot ended the session" : "");
+  const tools::MapTotals map = map_.totals();
+  std::printf("  map: %zu bricks and %zu points held; %llu brick parts taken (%llu duplicate, %llu stale, %llu bad, %llu no room), "
+              "%llu versions completed, %llu bricks evicted, %llu acknowledgements sent (%llu failed)\n",
+              map.bricks_held, map.points_held, static_cast<unsigned long long>(map.parts),
+              static_cast<unsigned long long>(map.duplicate_parts), static_cast<unsigned long long>(map.stale_parts),
+              static_cast<unsigned long long>(map.bad_parts), static_cast<unsigned long long>(map.no_room_parts),
+              static_cast<unsigned long long>(map.versions), static_cast<unsigned long long>(map.evicted),
+              static_cast<unsigned long long>(map.acks_sent), static_cast<unsigned long long>(map.ack_send_failures));
   if (!opt_.ply_dir.empty()) {
     std::printf("  wrote %llu frames to %s%s\n", static_cast<unsigned long long>(ply_written_), opt_.ply_dir.c_str(),
                 ply_failed_ ? " (some failed)" : "");
@@ -675,17 +756,19 @@ std::string OperatorRun::viewerSummary() const {
   if (!view_) return {};
   const tools::ViewServerCounters vc = view_->counters();
   std::printf("  viewer: %llu tabs served (%llu refused), %llu frames published, %llu sent to tabs, %llu dropped for slow tabs, "
-              "%llu malformed messages, %llu gaze samples from tabs\n",
+              "%llu malformed messages, %llu gaze samples from tabs, %llu map points left out of %llu frames\n",
               static_cast<unsigned long long>(vc.tabs_served), static_cast<unsigned long long>(vc.tabs_refused),
               static_cast<unsigned long long>(vc.frames_published), static_cast<unsigned long long>(vc.frames_sent),
               static_cast<unsigned long long>(vc.frames_dropped), static_cast<unsigned long long>(vc.malformed),
-              static_cast<unsigned long long>(vc.gaze_received));
+              static_cast<unsigned long long>(vc.gaze_received), static_cast<unsigned long long>(view_map_points_left_out_),
+              static_cast<unsigned long long>(view_map_frames_cut_));
   return ", \"sessions\": " + std::to_string(sessions_) + ", \"viewer\": {\"tabs_served\": " +
          std::to_string(vc.tabs_served) + ", \"tabs_refused\": " + std::to_string(vc.tabs_refused) +
          ", \"frames_published\": " + std::to_string(vc.frames_published) + ", \"frames_sent\": " +
          std::to_string(vc.frames_sent) + ", \"frames_dropped\": " + std::to_string(vc.frames_dropped) +
          ", \"malformed\": " + std::to_string(vc.malformed) + ", \"gaze_received\": " + std::to_string(vc.gaze_received) +
-         "}";
+         ", \"map_points_left_out\": " + std::to_string(view_map_points_left_out_) +
+         ", \"map_frames_cut\": " + std::to_string(view_map_frames_cut_) + "}";
 }
 
 Exit OperatorRun::writeSummaryJson(double seconds, const std::string& view_json) const {
@@ -700,7 +783,8 @@ Exit OperatorRun::writeSummaryJson(double seconds, const std::string& view_json)
       "\"robot\": \"" + robot_address_ + "\", \"gaze_samples_sent\": " + std::to_string(gaze_sent_) +
       ", \"last_gaze\": {\"origin_m\": " + vec3Json(last_gaze_.origin_m) + ", \"direction\": " +
       vec3Json(last_gaze_.direction) + "}" + robot_gaze + ", \"chunks_bad\": " + std::to_string(assembler_.counters().bad_chunks) +
-      ", \"datagrams_invalid\": " + std::to_string(link_total_.dropped.total()) + view_json;
+      ", \"datagrams_invalid\": " + std::to_string(link_total_.dropped.total()) +
+      tools::mapSummaryJson(map_.totals()) + view_json;
   std::ofstream file(opt_.summary_path);
   file << stats_.summaryJson(seconds, extra);
   if (!file) {

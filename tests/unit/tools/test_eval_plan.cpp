@@ -154,8 +154,10 @@ class EvalRunLogs : public ::testing::Test {
     }
     t << "14,1132000000,33000,100";  // cut short
     std::ofstream o(dir_ / "frames.csv");
-    o << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received\n"
-      << "9,0,0,9000,1,1,1,1\n10,0,0,9000,1,1,1,1\n11,0,0,,1,1,1,1\n12,0,0,10000,1,1,1,1\n13,0,0,11000,1,1,1,1\n";
+    o << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received,"
+         "map_bricks,map_points,brick_parts,brick_versions\n"
+      << "9,0,0,9000,1,1,1,1,0,0,0,0\n10,0,0,9000,1,1,1,1,0,0,0,0\n11,0,0,,1,1,1,1,2,512,3,1\n12,0,0,10000,1,1,1,1,2,512,0,0\n"
+      << "13,0,0,11000,1,1,1,1,2,512,0,0\n";
     std::ofstream(dir_ / "summary.json") << "{\n  \"datagrams\": 500,\n  \"datagrams_lost\": 3,\n}\n";
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }

@@ -1,6 +1,8 @@
 // The viewer's binary frame, read back by an independent reader written here
 // from the layout in docs/viewer.md, and the splat sizes.
 #include <cstring>
+#include <set>
+#include <tuple>
 #include <random>
 #include <vector>
 
@@ -44,23 +46,24 @@ TEST(ViewFrame, LayoutReadsBackExactly) {
   std::vector<uint8_t> buf(viewFrameBytes(1000));
   const std::size_t bytes = packViewFrame(f.frame, splat, buf);
   const std::size_t n = 321;
-  ASSERT_EQ(bytes, 104 + 16 * n);
-  EXPECT_EQ(std::memcmp(buf.data(), "FVF1", 4), 0);
+  ASSERT_EQ(bytes, 136 + 16 * n);
+  EXPECT_EQ(std::memcmp(buf.data(), "FVF2", 4), 0);
   EXPECT_EQ(readAt<uint32_t>(buf, 4), 77u);
   EXPECT_EQ(readAt<uint32_t>(buf, 8), n);
-  EXPECT_EQ(readAt<uint32_t>(buf, 12), 0u);
+  EXPECT_EQ(readAt<uint32_t>(buf, 12), 0u) << "no map points";
   EXPECT_EQ(readAt<double>(buf, 16), 1e4);
   EXPECT_EQ(readAt<double>(buf, 24), -2.5);
   EXPECT_EQ(readAt<double>(buf, 32), 0.125);
   for (std::size_t r = 0; r < 8; ++r) {
     EXPECT_EQ(readAt<float>(buf, 40 + 4 * r), splat[r]);
     EXPECT_EQ(readAt<uint32_t>(buf, 72 + 4 * r), f.frame.points[r]);
+    EXPECT_EQ(readAt<float>(buf, 104 + 4 * r), 0.0f) << "no map";
   }
-  const std::size_t colours = 104 + 12 * n, regions = colours + 3 * n;
+  const std::size_t colours = 136 + 12 * n, regions = colours + 3 * n;
   for (std::size_t i = 0; i < n; ++i) {
-    EXPECT_EQ(readAt<float>(buf, 104 + 12 * i), f.cloud.points.x()[i]);
-    EXPECT_EQ(readAt<float>(buf, 104 + 12 * i + 4), f.cloud.points.y()[i]);
-    EXPECT_EQ(readAt<float>(buf, 104 + 12 * i + 8), f.cloud.points.z()[i]);
+    EXPECT_EQ(readAt<float>(buf, 136 + 12 * i), f.cloud.points.x()[i]);
+    EXPECT_EQ(readAt<float>(buf, 136 + 12 * i + 4), f.cloud.points.y()[i]);
+    EXPECT_EQ(readAt<float>(buf, 136 + 12 * i + 8), f.cloud.points.z()[i]);
     const uint32_t rgb = f.cloud.points.rgb()[i];
     EXPECT_EQ(buf[colours + 3 * i], rgb >> 16);
     EXPECT_EQ(buf[colours + 3 * i + 1], (rgb >> 8) & 0xff);
@@ -80,6 +83,115 @@ TEST(ViewFrame, ABufferTooSmallOrNoCloudWritesNothing) {
   // An empty cloud is a valid frame of no points.
   Frame none = randomFrame(0, 3);
   EXPECT_EQ(packViewFrame(none.frame, {}, big), viewFrameBytes(0));
+}
+
+// A brick version made by the robot's encoder and taken into the cache.
+void addBrick(net::BrickCache& cache, net::BrickTag tag, int points, int64_t now) {
+  pipeline::FoveatedCloud cloud(static_cast<std::size_t>(points));
+  cloud.points.origin_m = Eigen::Vector3d(0.5 * tag.x, 0.5 * tag.y, 0.5 * tag.z);
+  for (int i = 0; i < points; ++i) {
+    ASSERT_TRUE(cloud.points.push(0.01f * static_cast<float>(i % 40), 0.01f * static_cast<float>(i / 40), 0.25f,
+                                  0x010203u * static_cast<uint32_t>(i % 80)));
+  }
+  std::fill_n(cloud.region.begin(), cloud.size(), tag.level);
+  std::fill_n(cloud.weight.begin(), cloud.size(), 1u);
+  net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, static_cast<std::size_t>(points)).value();
+  std::vector<double> voxel(tag.level + 1u);
+  for (std::size_t l = 1; l < voxel.size(); ++l) voxel[l] = 0.01 * static_cast<double>(l);
+  ASSERT_TRUE(encoder.encode(cloud, voxel, 1, 0, &tag));
+  alignas(8) uint8_t aligned[net::kMaxMtu];
+  pipeline::FoveatedCloud decoded(static_cast<std::size_t>(points));
+  for (std::size_t i = 0; i < encoder.chunkCount(); ++i) {
+    const std::span<const uint8_t> c = encoder.chunk(i);
+    std::memcpy(aligned, c.data(), c.size());
+    decoded.clear();
+    Result<net::DecodedChunk> chunk = net::decodeChunk(std::span<const uint8_t>(aligned, c.size()), decoded);
+    ASSERT_TRUE(chunk) << chunk.status().message();
+    cache.add(chunk.value(), decoded, 0, now);
+  }
+  ASSERT_GE(cache.find({tag.x, tag.y, tag.z}), 0);
+}
+
+net::BrickCache smallCache(std::size_t bricks) {
+  net::BrickCacheConfig c;
+  c.max_bricks = bricks;
+  c.max_points = 4096;
+  return net::BrickCache::create(c).value();
+}
+
+TEST(ViewFrame, TheMapsHeldBricksFollowTheFramesPoints) {
+  Frame f = randomFrame(100, 4);
+  net::BrickCache cache = smallCache(8);
+  addBrick(cache, {3, -1, 2, 1, 0}, 150, 10);
+  addBrick(cache, {-2, 0, 5, 4, 2}, 90, 10);
+  std::array<float, pipeline::kMaxRegions> splat{0.004f, 0.02f};
+  std::vector<uint8_t> buf(viewFrameBytes(1000));
+  const double ratio = net::CodecConfig{}.periphery_step_ratio;
+  const ViewPack pack = packViewFrame(f.frame, splat, ViewMap{&cache, ratio, 20}, buf);
+  const std::size_t live = 100, m = 240, n = live + m;
+  ASSERT_EQ(pack.bytes, viewFrameBytes(n));
+  EXPECT_EQ(pack.map_points, m);
+  EXPECT_EQ(pack.map_points_left_out, 0u);
+  EXPECT_EQ(readAt<uint32_t>(buf, 8), n);
+  EXPECT_EQ(readAt<uint32_t>(buf, 12), m);
+  for (std::size_t r = 0; r < 8; ++r) EXPECT_EQ(readAt<uint32_t>(buf, 72 + 4 * r), f.frame.points[r]) << "live points only";
+  // Level 0: raw surfels, drawn like the frame's fovea; level 2: its voxel (2 cm).
+  EXPECT_FLOAT_EQ(readAt<float>(buf, 104), 0.004f);
+  EXPECT_FLOAT_EQ(readAt<float>(buf, 104 + 4 * 2), 0.02f);
+  EXPECT_EQ(readAt<float>(buf, 104 + 4 * 1), 0.0f) << "no brick at level 1";
+  // Every held point, at its world position less the frame's origin, with its colour, region 8 + level.
+  std::multiset<std::tuple<float, float, float, uint32_t, uint8_t>> want, got;
+  for (std::size_t slot = 0; slot < cache.slotCount(); ++slot) {
+    if (!cache.held(slot)) continue;
+    cache.forEachPoint(slot, [&](const Eigen::Vector3d& w, uint32_t rgb) {
+      const Eigen::Vector3d p = w - f.cloud.points.origin_m;
+      want.insert({static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()), rgb,
+                   static_cast<uint8_t>(8 + cache.level(slot))});
+    });
+  }
+  ASSERT_EQ(want.size(), m);
+  const std::size_t colours = 136 + 12 * n, regions = colours + 3 * n;
+  for (std::size_t i = live; i < n; ++i) {
+    const uint32_t rgb = (uint32_t{buf[colours + 3 * i]} << 16) | (uint32_t{buf[colours + 3 * i + 1]} << 8) |
+                         buf[colours + 3 * i + 2];
+    got.insert({readAt<float>(buf, 136 + 12 * i), readAt<float>(buf, 136 + 12 * i + 4), readAt<float>(buf, 136 + 12 * i + 8),
+                rgb, buf[regions + i]});
+  }
+  EXPECT_EQ(got, want);
+  // The frame's own points come first, unchanged.
+  for (std::size_t i = 0; i < live; ++i) {
+    EXPECT_EQ(readAt<float>(buf, 136 + 12 * i), f.cloud.points.x()[i]);
+    EXPECT_EQ(buf[regions + i], f.cloud.region[i]);
+  }
+}
+
+TEST(ViewFrame, MapBricksThatDoNotFitAreLeftOutWholeAndCounted) {
+  Frame f = randomFrame(100, 5);
+  net::BrickCache cache = smallCache(8);
+  addBrick(cache, {0, 0, 0, 1, 0}, 150, 10);
+  addBrick(cache, {1, 0, 0, 1, 0}, 60, 10);
+  // Room for the frame and 100 map points: the small brick fits, the large one not.
+  std::vector<uint8_t> buf(viewFrameBytes(200));
+  const ViewPack pack = packViewFrame(f.frame, {}, ViewMap{&cache, 0.125, 20}, buf);
+  EXPECT_EQ(pack.map_points, 60u);
+  EXPECT_EQ(pack.map_bricks_left_out, 1u);
+  EXPECT_EQ(pack.map_points_left_out, 150u);
+  EXPECT_EQ(pack.bytes, viewFrameBytes(160));
+  EXPECT_EQ(readAt<uint32_t>(buf, 12), 60u);
+}
+
+TEST(ViewFrame, BricksDrawnAreTouchedSoTheCacheKeepsThem) {
+  // Two bricks of room: A arrives first, B later; drawing A alone makes B the least recently needed.
+  Frame f = randomFrame(10, 6);
+  net::BrickCache cache = smallCache(2);
+  addBrick(cache, {0, 0, 0, 1, 0}, 20, 10);
+  addBrick(cache, {1, 0, 0, 1, 0}, 30, 20);
+  // Room for the frame and 25 map points: A (20) is drawn at t = 30, B (30) is not.
+  std::vector<uint8_t> buf(viewFrameBytes(35));
+  ASSERT_EQ(packViewFrame(f.frame, {}, ViewMap{&cache, 0.125, 30}, buf).map_points, 20u);
+  addBrick(cache, {2, 0, 0, 1, 0}, 20, 40);
+  EXPECT_GE(cache.find({0, 0, 0}), 0) << "drawn, so kept";
+  EXPECT_LT(cache.find({1, 0, 0}), 0) << "not drawn since t = 20: evicted";
 }
 
 TEST(SplatSizer, PeripheryFromItsStepAndTheFoveaFromItsSpacing) {

@@ -1,7 +1,7 @@
 // fovea point-cloud viewer (served by `fovea-operator --view`).
 //
-// Draws the foveated frames the operator receives (binary "FVF1" messages on the
-// WebSocket /ws) as round splats with WebGL2, moves the operator's eye with the
+// Draws the foveated frames the operator receives (binary "FVF2" messages on the
+// WebSocket /ws: the frame's live points and the map's bricks the operator holds) as round splats with WebGL2, moves the operator's eye with the
 // mouse, touch or keyboard, and sends the gaze (the ray from the eye through the
 // cursor, or the head's forward ray in VR) back to the operator, which forwards it
 // to the robot. World frame: metres, z up. docs/viewer-page.md describes the page.
@@ -16,11 +16,11 @@
   const SPLAT_OVERLAP = 1.5; // splats a bit larger than their voxel so the periphery reads as a surface
   const MAX_SPLAT_PX = 64;
   const BACKGROUND = [0x0b / 255, 0x0d / 255, 0x10 / 255];
-  const MAGIC = 0x46564631; // "FVF1" read big-endian
-  const HEADER_BYTES = 104;
+  const MAGIC = 0x46564632; // "FVF2" read big-endian
+  const HEADER_BYTES = 136;
   const BYTES_PER_POINT = 16; // 12 position + 3 colour + 1 region
-  const MAX_POINTS = 1 << 22; // a frame of more (64 MiB) is taken as malformed
-  const REGIONS = 8;
+  const MAX_POINTS = 1 << 27; // a frame of more (2 GiB) is taken as malformed (the map may hold 64 Mi points)
+  const REGIONS = 8; // a map point's region byte is REGIONS + its brick's level
   const MOVE_JUMP_DEG = 3; // a gaze jump starts a move; the fovea within this angle ends it
   const MAX_LATENCIES = 1000;
   const RING_SAMPLES = 6000; // points sampled per frame to size the region rings
@@ -162,6 +162,7 @@
     badMessages: 0,
     lastFrameId: null,
     points: 0,
+    mapPoints: 0,
     renderFps: 0,
     regionColours: params.get('regions') === '1',
     flyMode: false,
@@ -313,7 +314,7 @@ layout(location = 1) in vec3 aColour;
 layout(location = 2) in uint aRegion;
 uniform mat4 uProjection;
 uniform mat4 uView;
-uniform float uSplatM[8];
+uniform float uSplatM[16]; // the live regions', then the map's levels
 uniform float uPxPerRadian; // viewport px per unit of (size / depth), times the overlap
 uniform float uMaxSplatPx;
 uniform bool uRegionColours;
@@ -322,9 +323,10 @@ out vec3 vColour;
 void main() {
   vec4 v = uView * vec4(aPosition, 1.0);
   gl_Position = uProjection * v;
-  uint region = min(aRegion, 7u);
+  uint region = min(aRegion, 15u);
   gl_PointSize = clamp(uSplatM[region] * uPxPerRadian / max(-v.z, 1e-3), 1.0, uMaxSplatPx);
-  vColour = uRegionColours ? uPalette[region] : aColour;
+  // Region colours: a map brick in its level's colour, dimmed, behind the live points.
+  vColour = uRegionColours ? uPalette[region & 7u] * (region >= 8u ? 0.5 : 1.0) : aColour;
 }`;
   const FRAGMENT_SHADER = `#version 300 es
 precision mediump float;
@@ -451,7 +453,7 @@ void main() {
   // Angular radius (radians) around `axis` that holds RING_FRACTION of each region's
   // points seen from `eye`, from a subsample; null for a region with too few points.
   function regionRadii(eye, axis) {
-    const { n, positions, regions } = frame;
+    const { live: n, positions, regions } = frame; // the rings are the live frame's regions
     const e = sub(eye, frame.origin);
     const stride = Math.max(1, Math.floor(n / RING_SAMPLES));
     const angles = Array.from({ length: REGIONS }, () => []);
@@ -592,19 +594,24 @@ void main() {
     const dv = new DataView(buffer);
     if (dv.getUint32(0, false) !== MAGIC) return null;
     const n = dv.getUint32(8, true);
-    if (n > MAX_POINTS || buffer.byteLength !== HEADER_BYTES + BYTES_PER_POINT * n) return null;
+    const mapPoints = dv.getUint32(12, true); // the last of the n
+    if (n > MAX_POINTS || mapPoints > n || buffer.byteLength !== HEADER_BYTES + BYTES_PER_POINT * n) return null;
     const origin = [dv.getFloat64(16, true), dv.getFloat64(24, true), dv.getFloat64(32, true)];
     if (!isVec3(origin)) return null;
-    const splat = new Float32Array(REGIONS);
+    const splat = new Float32Array(2 * REGIONS); // the live regions', then the map's levels
     const perRegion = [];
     for (let k = 0; k < REGIONS; k++) {
       const s = dv.getFloat32(40 + 4 * k, true);
+      const m = dv.getFloat32(104 + 4 * k, true);
       splat[k] = Number.isFinite(s) && s > 0 ? s : 0;
+      splat[REGIONS + k] = Number.isFinite(m) && m > 0 ? m : 0;
       perRegion.push(dv.getUint32(72 + 4 * k, true));
     }
     const f = {
       id: dv.getUint32(4, true),
       n,
+      live: n - mapPoints,
+      mapPoints,
       origin,
       splat,
       perRegion,
@@ -618,7 +625,7 @@ void main() {
   }
 
   function regionZeroCentroid(f) {
-    const { n, positions, regions } = f;
+    const { live: n, positions, regions } = f;
     let sx = 0;
     let sy = 0;
     let sz = 0;
@@ -661,7 +668,8 @@ void main() {
     needsDraw = true;
     fovea.framesReceived++;
     fovea.lastFrameId = f.id;
-    fovea.points = f.n;
+    fovea.points = f.live;
+    fovea.mapPoints = f.mapPoints;
     if (frameFirstFrame && !eyeChosen && f.n > 0) frameBoundingBox(f);
   }
 
@@ -1040,7 +1048,7 @@ void main() {
       `state      ${state}`,
       `stream     ${num(s.fps, 1)} fps  ${num(s.wire_mb_per_s, 2)} MB/s  lost ${num(s.datagrams_lost)}`,
       `latency    p50 ${num(lat.p50, 1)}  p99 ${num(lat.p99, 1)} ms`,
-      `points     ${fovea.points}  per region ${perRegion.join(' / ') || '-'}`,
+      `points     ${fovea.points}  per region ${perRegion.join(' / ') || '-'}  map ${fovea.mapPoints || 0}`,
       `gaze       ${mode}  sent ${num(s.gaze_sent)}  age at robot ${num(robot.gaze_age_ms, 1)} ms  rtt ${num(robot.rtt_ms, 2)} ms`,
       `tabs       ${num(view.tabs)}  dropped for this tab ${num(view.frames_dropped_for_tab)}  malformed ${num(view.malformed)}`,
       `render     ${fovea.renderFps} fps  frames ${fovea.framesReceived}  bad messages ${fovea.badMessages}`,
@@ -1084,7 +1092,7 @@ void main() {
     const axis = normalize(sub(frame.centroid, eye));
     const [a, b] = perpendiculars(axis);
     const e = sub(eye, frame.origin);
-    const { n, positions, regions } = frame;
+    const { live: n, positions, regions } = frame;
     const ecc = Array.from({ length: REGIONS }, () => []);
     const sector = Array.from({ length: REGIONS }, () => []);
     for (let i = 0; i < n; i++) {
