@@ -146,8 +146,9 @@ TEST(FoveadServe, StreamsToFoveaOperator) {
 }
 
 // foveation.source = map: the service fuses the mock orbit into its map and
-// streams the map as the operator's eye sees it; the status line and the stop
-// line carry the map's figures.
+// streams the map's bricks (map.delta, the default) beside the live points; the
+// operator keeps them and acknowledges them; the status line and the stop line
+// carry the map's figures, the operator's summary what it holds.
 TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
   test::BackgroundProcess serve(fovead() +
                                 " serve --camera mock:living-room,path=orbit,size=160x120,realtime=on,fps=30"
@@ -165,6 +166,14 @@ TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
   ASSERT_TRUE(std::regex_search(op.output, frames, std::regex("summary: ([0-9]+) frames"))) << op.output;
   EXPECT_GE(std::stoi(frames[1].str()), 3) << op.output;
   EXPECT_NE(op.output.find(" 0 bad"), std::string::npos) << op.output;
+  std::smatch held;
+  ASSERT_TRUE(std::regex_search(op.output, held,
+                                std::regex("map: ([0-9]+) bricks and ([0-9]+) points held; [0-9]+ brick parts taken "
+                                           "\\([0-9]+ duplicate, [0-9]+ stale, 0 bad, 0 no room\\), ([0-9]+) versions completed")))
+      << op.output;
+  EXPECT_GT(std::stoul(held[1].str()), 3u) << op.output;
+  EXPECT_GT(std::stoul(held[2].str()), 1000u) << op.output;
+  EXPECT_GT(std::stoul(held[3].str()), 3u) << op.output;
   ASSERT_TRUE(serve.waitFor(" surfels, fuse ", 5.0)) << serve.output();
   int exit_code = -1;
   stopSeconds(serve, SIGTERM, exit_code);
@@ -177,6 +186,13 @@ TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
       << serve_out;
   EXPECT_GT(std::stoul(map[1].str()), 5000u) << serve_out;
   EXPECT_GT(std::stoul(map[2].str()), 3u) << serve_out;
+  std::smatch bricks;
+  ASSERT_TRUE(std::regex_search(serve_out, bricks,
+                                std::regex("map bricks: ([0-9]+) planned; ([0-9]+) versions in [0-9]+ parts sent, [0-9]+ "
+                                           "parts resent; ([0-9]+) versions acknowledged whole")))
+      << serve_out;
+  EXPECT_GT(std::stoul(bricks[3].str()), 3u) << serve_out;  // the operator's acknowledgements reached the robot
+  EXPECT_LE(std::stoul(bricks[3].str()), std::stoul(bricks[2].str())) << serve_out;
 }
 
 TEST(FoveadServe, FrameLimitAndBadFlags) {

@@ -72,7 +72,7 @@ const char* kHelp =
     "  --mtu BYTES           the largest UDP payload to ask for (default 1200)\n"
     "  --gaze-hz HZ          gaze samples per second (default 120, up to 200)\n"
     "  --max-points N        the largest frame to decode, in points (default 307200 = 640x480)\n"
-    "  --map-points N        the robot's map bricks to keep, in points (default 4194304 = 4 Mi, 16 bytes\n"
+    "  --map-points N        the robot's map bricks to keep, in points (default 1048576 = 1 Mi, 16 bytes\n"
     "                        each; 256 .. 67108864); with --view each viewer buffer holds them too\n"
     "  --map-bricks N        the map bricks to keep (default 4096, 1 .. 1048576); the brick least\n"
     "                        recently drawn or received goes first, and the robot is told\n"
@@ -101,7 +101,7 @@ struct Options {
   double gaze_hz = 120.0;
   bool quiet = false;
   long max_points = 640 * 480;
-  long map_points = 4L << 20;
+  long map_points = 1L << 20;
   long map_bricks = 4096;
   std::string clock = "auto";
   std::string view;  // --view [ADDR:]PORT; empty: no viewer
