@@ -104,12 +104,17 @@ Status FrameFoveator::planBricks(const pipeline::Gaze& gaze, double budget_bytes
   batch.clear(cloud_.origin_m);
   map_figures_.bricks_planned = 0;
   map_figures_.brick_points = 0;
+  map_figures_.bricks_waiting = 0;
+  map_figures_.fovea_bricks_waiting = 0;
   if (!delta_) return {ErrorCode::kInvalidArgument, "bricks: the stage does not stream the map's bricks"};
   Result<std::span<const pipeline::map::BrickDue>> plan = delta_->plan(*map_, gaze, map_figures_.delta);
   if (!plan) return plan.status();
   double left = budget_bytes;
   bool live_charged = false;
-  for (const pipeline::map::BrickDue& due : plan.value()) {
+  const std::span<const pipeline::map::BrickDue> due_bricks = plan.value();
+  std::size_t next = 0;
+  for (; next < due_bricks.size(); ++next) {
+    const pipeline::map::BrickDue& due = due_bricks[next];
     if (!due.fovea && !live_charged) {
       left -= live_bytes;
       live_charged = true;
@@ -124,6 +129,10 @@ Status FrameFoveator::planBricks(const pipeline::Gaze& gaze, double budget_bytes
     left -= static_cast<double>(points) * kWireBytesPerPointEstimate;
     ++map_figures_.bricks_planned;
     map_figures_.brick_points += static_cast<uint32_t>(points);
+  }
+  for (std::size_t i = next; i < due_bricks.size(); ++i) {
+    ++map_figures_.bricks_waiting;
+    map_figures_.fovea_bricks_waiting += due_bricks[i].fovea ? 1 : 0;
   }
   return Status::ok();
 }

@@ -68,6 +68,8 @@ struct MapFrameFigures {
   pipeline::map::MapDeltaStats delta;  // planBricks()'s
   uint32_t bricks_planned = 0;         // into the batch
   uint32_t brick_points = 0;
+  uint32_t bricks_waiting = 0;         // due but not in the batch (the budget): they wait
+  uint32_t fovea_bricks_waiting = 0;   // ... of them the fovea's
 };
 
 class FrameFoveator {

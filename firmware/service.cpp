@@ -475,7 +475,12 @@ void Service::foveationLoop() {
       s = stage_->planBricks(decision.gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate,
                              o.bricks);
       if (s) {
-        bricks_planned_.fetch_add(stage_->mapFigures().bricks_planned, std::memory_order_relaxed);
+        const MapFrameFigures& figures = stage_->mapFigures();
+        bricks_planned_.fetch_add(figures.bricks_planned, std::memory_order_relaxed);
+        o.bricks_waiting = figures.bricks_waiting;
+        o.fovea_bricks_waiting = figures.fovea_bricks_waiting;
+        o.planned_for_gaze_stamp_ns =
+            decision.source == GazeSource::kOperator ? gaze_box_.current().stamp_ns : 0;
       } else {
         stage_->forgetBatch(o.bricks);
       }
@@ -547,7 +552,11 @@ void Service::sendLoop() {
       }
       streamer_->poll();
       publishGaze();
-      if (map_bricks_) brick_budget_bytes_per_s_.store(streamer_->sessionBudgetBytesPerS(), std::memory_order_relaxed);
+      if (map_bricks_) {
+        brick_budget_bytes_per_s_.store(streamer_->sessionBudgetBytesPerS(), std::memory_order_relaxed);
+        // Acknowledgements arrive between frames too.
+        bricks_in_flight_.store(streamer_->bricksInFlight(), std::memory_order_relaxed);
+      }
     }
     fovea::SlotIndex slot;
     if (!ring.tryTake(slot)) {
@@ -593,6 +602,10 @@ void Service::sendLoop() {
         brick_versions_done_.store(bc->versions_done, std::memory_order_relaxed);
         brick_versions_lost_.store(bc->versions_lost, std::memory_order_relaxed);
         brick_acks_unknown_.store(bc->acks_unknown, std::memory_order_relaxed);
+        bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
+        fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);
+        bricks_in_flight_.store(streamer_->bricksInFlight(), std::memory_order_relaxed);
+        planned_for_gaze_stamp_ns_.store(f.planned_for_gaze_stamp_ns, std::memory_order_release);
       }
     }
     if (!ring.release(slot)) foveate_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -907,6 +920,10 @@ ServiceStats Service::stats() const {
   s.map.brick_versions_done = brick_versions_done_.load(std::memory_order_relaxed);
   s.map.brick_versions_lost = brick_versions_lost_.load(std::memory_order_relaxed);
   s.map.brick_acks_unknown = brick_acks_unknown_.load(std::memory_order_relaxed);
+  s.map.planned_for_gaze_stamp_ns = planned_for_gaze_stamp_ns_.load(std::memory_order_acquire);
+  s.map.bricks_waiting = bricks_waiting_.load(std::memory_order_relaxed);
+  s.map.fovea_bricks_waiting = fovea_bricks_waiting_.load(std::memory_order_relaxed);
+  s.map.bricks_in_flight = bricks_in_flight_.load(std::memory_order_relaxed);
   return s;
 }
 

@@ -156,6 +156,15 @@ struct ServiceStats {
     uint64_t brick_versions_done = 0;
     uint64_t brick_versions_lost = 0;
     uint64_t brick_acks_unknown = 0;
+    // The operator's copy against the map, as of the last frame sent: bricks
+    // due that did not fit it (of them the fovea's), versions not yet
+    // acknowledged whole, and the operator's stamp of the gaze that frame's
+    // bricks were planned for (0: the fallback's). All zero with a stamp at or
+    // after a gaze sample's: the operator holds what that gaze needs.
+    uint64_t bricks_waiting = 0;
+    uint64_t fovea_bricks_waiting = 0;
+    uint64_t bricks_in_flight = 0;
+    int64_t planned_for_gaze_stamp_ns = 0;
   } map;
 };
 
@@ -233,6 +242,8 @@ class Service {
     // never went and are due again.
     pipeline::map::BrickBatch bricks;
     bool bricks_pending = false;
+    uint32_t bricks_waiting = 0, fovea_bricks_waiting = 0;
+    int64_t planned_for_gaze_stamp_ns = 0;  // the operator's stamp of the gaze planned for (0: fallback)
   };
   // The timing log's line for one frame sent (no allocation: the file's buffer is ours).
   void logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent);
@@ -276,6 +287,9 @@ class Service {
   std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
   std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},
       brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0};
+  // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
+  std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
+  std::atomic<int64_t> planned_for_gaze_stamp_ns_{0};
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;

@@ -115,6 +115,8 @@ class Streamer {
   // The brick sender's counters (null without map_bricks); acknowledgements
   // for no brick the robot knows are counted in acks_unknown.
   const net::BrickSenderCounters* brickCounters() const { return brick_sender_ ? &brick_sender_->counters() : nullptr; }
+  // Brick versions sent and not yet acknowledged whole.
+  std::size_t bricksInFlight() const { return brick_sender_ ? brick_sender_->inFlight() : 0; }
 
   // A status report with the link's and the uplink's figures and the caller's
   // frame counts (frames_dropped adds the frames the uplink superseded); the

@@ -39,13 +39,35 @@ constexpr std::size_t kMaxDatagramBytes = 65'536;
 
 }  // namespace
 
-Result<LossyPolicy> LossyPolicy::create(const LossShares& shares, uint64_t seed) {
-  if (!isShare(shares.drop) || !isShare(shares.reorder) || shares.drop + shares.reorder > 1.0) {
-    return Result<LossyPolicy>(ErrorCode::kInvalidArgument,
-                               "loss and reorder shares must be within 0..1 and add up to at most 1 (got " +
-                                   std::to_string(shares.drop) + " and " + std::to_string(shares.reorder) + ")");
+namespace {
+Status checkShares(const LossShares& shares) {
+  if (!isShare(shares.drop) || !isShare(shares.reorder) || !isShare(shares.duplicate) ||
+      shares.drop + shares.reorder + shares.duplicate > 1.0) {
+    return {ErrorCode::kInvalidArgument, "loss, reorder and duplicate shares must be within 0..1 and add up to at most 1 (got " +
+                                             std::to_string(shares.drop) + ", " + std::to_string(shares.reorder) +
+                                             " and " + std::to_string(shares.duplicate) + ")"};
   }
+  return Status::ok();
+}
+}  // namespace
+
+Result<LossyPolicy> LossyPolicy::create(const LossShares& shares, uint64_t seed) {
+  if (Status s = checkShares(shares); !s) return Result<LossyPolicy>(s.code(), s.message());
   return LossyPolicy(shares, seed);
+}
+
+Status LossyPolicy::setShares(const LossShares& shares) {
+  if (Status s = checkShares(shares); !s) return s;
+  shares_ = shares;
+  return Status::ok();
+}
+
+Status LossyRelay::setShares(const LossShares& up, const LossShares& down) {
+  if (Status s = checkShares(up); !s) return s;
+  if (Status s = checkShares(down); !s) return s;
+  (void)up_.policy.setShares(up);
+  (void)down_.policy.setShares(down);
+  return Status::ok();
 }
 
 RelayAction LossyPolicy::next() {
@@ -53,6 +75,7 @@ RelayAction LossyPolicy::next() {
   const double u = static_cast<double>(splitmix64(state_) >> 11) * 0x1.0p-53;
   if (u < shares_.drop) return RelayAction::kDrop;
   if (u < shares_.drop + shares_.reorder) return RelayAction::kHold;
+  if (u < shares_.drop + shares_.reorder + shares_.duplicate) return RelayAction::kDuplicate;
   return RelayAction::kForward;
 }
 
@@ -99,7 +122,8 @@ void LossyRelay::releaseHeld(Direction& d, net::UdpSocket& out, const net::Endpo
 
 void LossyRelay::relay(Direction& d, std::span<const uint8_t> datagram, net::UdpSocket& out, const net::Endpoint& to) {
   d.counters.received += 1;
-  switch (d.policy.next()) {
+  const RelayAction action = d.policy.next();
+  switch (action) {
     case RelayAction::kDrop:
       d.counters.dropped += 1;
       return;
@@ -112,12 +136,14 @@ void LossyRelay::relay(Direction& d, std::span<const uint8_t> datagram, net::Udp
         return;
       }
       [[fallthrough]];  // one slot: a second hold while one waits is forwarded
+    case RelayAction::kDuplicate:
     case RelayAction::kForward:
       if (out.sendTo(datagram, to)) {
         d.counters.forwarded += 1;
       } else {
         d.counters.send_failures += 1;
       }
+      if (action == RelayAction::kDuplicate && out.sendTo(datagram, to)) d.counters.duplicated += 1;
       releaseHeld(d, out, to);  // the held one arrives after this one
       return;
   }

@@ -14,13 +14,14 @@
 
 namespace fovea::tools {
 
-// Shares of datagrams, each in [0, 1], drop + reorder <= 1.
+// Shares of datagrams, each in [0, 1], drop + reorder + duplicate <= 1.
 struct LossShares {
   double drop = 0.0;
   double reorder = 0.0;
+  double duplicate = 0.0;  // forwarded twice
 };
 
-enum class RelayAction : uint8_t { kForward, kDrop, kHold };
+enum class RelayAction : uint8_t { kForward, kDrop, kHold, kDuplicate };
 
 // One direction's decisions: a fixed sequence for a seed (splitmix64), so a
 // soak run can be repeated datagram for datagram.
@@ -28,6 +29,8 @@ class LossyPolicy {
  public:
   static Result<LossyPolicy> create(const LossShares& shares, uint64_t seed);
   RelayAction next();
+  // New shares from the next datagram on (the sequence goes on).
+  Status setShares(const LossShares& shares);
 
  private:
   LossyPolicy(const LossShares& shares, uint64_t seed) : shares_(shares), state_(seed) {}
@@ -40,6 +43,7 @@ struct RelayDirectionCounters {
   uint64_t forwarded = 0;  // includes the reordered ones
   uint64_t dropped = 0;
   uint64_t reordered = 0;  // held back and sent after a later datagram
+  uint64_t duplicated = 0;  // forwarded twice (counted once in forwarded)
   uint64_t send_failures = 0;
 };
 
@@ -60,6 +64,9 @@ class LossyRelay {
   void pump(int timeout_ms);
   // Sends what is held back (at the end of a run).
   void flush();
+  // New shares in each direction from the next datagram on (a link that
+  // recovers, for a test of what follows the loss).
+  Status setShares(const LossShares& up, const LossShares& down);
 
   net::Endpoint localEndpoint() const { return client_side_.localEndpoint(); }
   const RelayDirectionCounters& up() const { return up_.counters; }

@@ -2,7 +2,10 @@
 // a share of the datagrams in each direction and reorders a few, from a seed,
 // so that a stream can be tested on a lossy link on one machine
 // (toolchain/soak puts it between fovea-operator and fovead serve).
+#include <algorithm>
+#include <climits>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -19,7 +22,8 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-lossy-relay --to HOST:PORT [--listen HOST:PORT] [--loss SHARE] [--loss-up SHARE]\n"
-    "                         [--loss-down SHARE] [--reorder SHARE] [--seed N] [--stats-interval SECONDS]\n"
+    "                         [--loss-down SHARE] [--reorder SHARE] [--duplicate SHARE] [--loss-seconds S]\n"
+    "                         [--seed N] [--stats-interval SECONDS]\n"
     "\n"
     "Relays UDP datagrams between one client (whoever last sent to --listen) and the\n"
     "server at --to, dropping a share of them in each direction and holding back a\n"
@@ -33,6 +37,9 @@ const char* kHelp =
     "  --loss-up SHARE         client -> server only (default --loss)\n"
     "  --loss-down SHARE       server -> client only (default --loss)\n"
     "  --reorder SHARE         the share reordered in each direction (default 0.001)\n"
+    "  --duplicate SHARE       the share forwarded twice in each direction (default 0)\n"
+    "  --loss-seconds S        after S seconds the link recovers: nothing is dropped, reordered or\n"
+    "                          duplicated any more (default: never; the line 'relay: loss stopped' says when)\n"
     "  --seed N                the decisions' seed (default 1)\n"
     "  --stats-interval S      print the counters every S seconds (default 60; 0: only at the end)\n"
     "\n"
@@ -54,10 +61,10 @@ bool parseShare(const char* flag, const char* text, double& out) {
 
 void printCounters(const char* what, const tools::LossyRelay& relay) {
   const auto line = [](const char* dir, const tools::RelayDirectionCounters& c) {
-    std::printf(" | %s received %llu forwarded %llu dropped %llu reordered %llu send-failures %llu", dir,
+    std::printf(" | %s received %llu forwarded %llu dropped %llu reordered %llu duplicated %llu send-failures %llu", dir,
                 static_cast<unsigned long long>(c.received), static_cast<unsigned long long>(c.forwarded),
                 static_cast<unsigned long long>(c.dropped), static_cast<unsigned long long>(c.reordered),
-                static_cast<unsigned long long>(c.send_failures));
+                static_cast<unsigned long long>(c.duplicated), static_cast<unsigned long long>(c.send_failures));
   };
   std::printf("relay: %s", what);
   line("up", relay.up());
@@ -70,7 +77,8 @@ void printCounters(const char* what, const tools::LossyRelay& relay) {
 
 int main(int argc, char** argv) {
   std::string listen = "127.0.0.1:0", to;
-  double loss = 0.02, reorder = 0.001, loss_up = -1, loss_down = -1, stats_interval_s = 60;
+  double loss = 0.02, reorder = 0.001, loss_up = -1, loss_down = -1, stats_interval_s = 60, duplicate = 0.0,
+         loss_seconds = -1;
   unsigned long long seed = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
@@ -96,6 +104,13 @@ int main(int argc, char** argv) {
       ok = parseShare("--loss-down", value, loss_down);
     } else if (flag == "--reorder") {
       ok = parseShare("--reorder", value, reorder);
+    } else if (flag == "--duplicate") {
+      ok = parseShare("--duplicate", value, duplicate);
+    } else if (flag == "--loss-seconds") {
+      char* end = nullptr;
+      loss_seconds = std::strtod(value, &end);
+      ok = end != value && *end == '\0' && loss_seconds >= 0.0 && loss_seconds <= 1e6;
+      if (!ok) std::fprintf(stderr, "fovea-lossy-relay: --loss-seconds: '%s' is not a number of seconds\n", value);
     } else if (flag == "--seed" || flag == "--stats-interval") {
       char* end = nullptr;
       const double v = std::strtod(value, &end);
@@ -125,8 +140,8 @@ int main(int argc, char** argv) {
   }
   config.listen = listen_ep.value();
   config.server = to_ep.value();
-  config.up = {loss_up >= 0 ? loss_up : loss, reorder};
-  config.down = {loss_down >= 0 ? loss_down : loss, reorder};
+  config.up = {loss_up >= 0 ? loss_up : loss, reorder, duplicate};
+  config.down = {loss_down >= 0 ? loss_down : loss, reorder, duplicate};
   config.seed = seed;
   Result<tools::LossyRelay> created = tools::LossyRelay::create(config);
   if (!created) {
@@ -142,9 +157,17 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
 
   const int64_t interval_ns = static_cast<int64_t>(stats_interval_s * 1e9);
-  int64_t next_stats_ns = monotonicNs() + interval_ns;
+  const int64_t started_ns = monotonicNs();
+  int64_t next_stats_ns = started_ns + interval_ns;
+  int64_t recover_ns = loss_seconds >= 0 ? started_ns + static_cast<int64_t>(loss_seconds * 1e9) : INT64_MAX;
   while (!g_stop) {
-    relay.pump(100);
+    relay.pump(recover_ns == INT64_MAX ? 100 : static_cast<int>(std::clamp<int64_t>((recover_ns - monotonicNs()) / 1'000'000, 0, 100)));
+    if (monotonicNs() >= recover_ns) {
+      (void)relay.setShares({}, {});
+      recover_ns = INT64_MAX;
+      printCounters("loss stopped", relay);
+      std::fflush(stdout);
+    }
     if (interval_ns > 0 && monotonicNs() >= next_stats_ns) {
       printCounters("counters", relay);
       next_stats_ns += interval_ns;

@@ -47,6 +47,21 @@ TEST(LossyPolicy, DropsAndReordersTheAskedShares) {
   EXPECT_NEAR(count(first, RelayAction::kDrop), 2000, 450);
 }
 
+TEST(LossyPolicy, DuplicatesTheAskedShareAndRecoversWhenTold) {
+  Result<LossyPolicy> p = LossyPolicy::create({0.1, 0.01, 0.02}, 7);
+  ASSERT_TRUE(p);
+  std::vector<RelayAction> v;
+  for (int i = 0; i < 200'000; ++i) v.push_back(p->next());
+  EXPECT_NEAR(count(v, RelayAction::kDrop), 20000, 1200);
+  EXPECT_NEAR(count(v, RelayAction::kHold), 2000, 450);
+  EXPECT_NEAR(count(v, RelayAction::kDuplicate), 4000, 600);
+  // The link recovers: every datagram is forwarded from then on.
+  ASSERT_TRUE(p->setShares({}));
+  for (int i = 0; i < 10'000; ++i) ASSERT_EQ(p->next(), RelayAction::kForward);
+  EXPECT_FALSE(p->setShares({0.6, 0.0, 0.5}));  // more than everything
+  EXPECT_FALSE(LossyPolicy::create({0.0, 0.0, -0.1}, 1));
+}
+
 TEST(LossyPolicy, EdgesZeroAndOne) {
   EXPECT_EQ(count(draws({0.0, 0.0}, 3, 100'000), RelayAction::kForward), 100'000);
   EXPECT_EQ(count(draws({1.0, 0.0}, 3, 100'000), RelayAction::kDrop), 100'000);
