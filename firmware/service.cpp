@@ -470,8 +470,14 @@ void Service::foveationLoop() {
         brick_feedback_->drain([&](std::size_t brick) { stage_->forgetBrick(static_cast<uint16_t>(brick)); },
                                [&] { stage_->forgetAllBricks(); });
       }
+      // The frame's share of the budget is the time since the last frame's, not
+      // the camera's period: fusing a large frame can take longer than that, and
+      // the link would idle between frames (at most four periods' worth).
+      const int64_t now = monotonicNs();
+      o.send_window_ns = last_plan_ns_ > 0 ? std::clamp(now - last_plan_ns_, period_ns_, 4 * period_ns_) : period_ns_;
+      last_plan_ns_ = now;
       const double budget = static_cast<double>(brick_budget_bytes_per_s_.load(std::memory_order_relaxed)) *
-                            static_cast<double>(period_ns_) * 1e-9;
+                            static_cast<double>(o.send_window_ns) * 1e-9;
       s = stage_->planBricks(decision.gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate,
                              o.bricks);
       if (s) {
@@ -524,22 +530,10 @@ void Service::sendLoop() {
   placeThread("fovea-send", config_.runtime.send_thread);
   static LogRateLimit send_site;
   fovea::SlotRing& ring = foveated_->ring();
-  bool gaze_valid = false;
-  int64_t gaze_received_ns = -1;
-  // Hands the operator's newest gaze to the foveation stage when it changes.
-  auto publishGaze = [&] {
-    OperatorGaze gaze;
-    const bool valid = streamer_->operatorGaze(gaze);
-    const int64_t received_ns = gaze.received_ns;
-    if (valid != gaze_valid || (valid && received_ns != gaze_received_ns)) {
-      gaze_box_.writeBuffer() = gaze;
-      gaze_box_.publish();
-      gaze_valid = valid;
-      gaze_received_ns = received_ns;
-      gaze_received_ns_.store(valid ? received_ns : 0, std::memory_order_relaxed);
-    }
-    operator_connected_.store(streamer_->link().hasSession(), std::memory_order_relaxed);
-  };
+  auto publishGaze = [this] { publishOperatorGaze(); };
+  if (streamer_) {
+    streamer_->setPollHook([](void* service) { static_cast<Service*>(service)->publishOperatorGaze(); }, this);
+  }
   int64_t next_report_ns = monotonicNs() + 1'000'000'000;
   for (;;) {
     const bool foveation_done = !foveation_alive_.load(std::memory_order_acquire);
@@ -581,8 +575,11 @@ void Service::sendLoop() {
       if (bricks) streamer_->discardBricks(*bricks);
     } else {
       const int64_t t0 = monotonicNs();
-      // A frame must be out before the next one is due; what is not goes unsent.
-      const int64_t deadline_ns = t0 + period_ns_ - std::min<int64_t>(period_ns_ / 10, 2'000'000);
+      // A frame must be out before the next one is due; what is not goes unsent
+      // (brick parts are kept and resent). With the map's bricks the next frame is
+      // due a window after this one's plan (the foveation stage's pace).
+      const int64_t window_ns = map_bricks_ ? f.send_window_ns : period_ns_;
+      const int64_t deadline_ns = t0 + window_ns - std::min<int64_t>(window_ns / 10, 2'000'000);
       Result<FrameSendReport> sent =
           streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns, period_ns_, bricks);
       if (!sent) {
@@ -621,6 +618,20 @@ void Service::sendLoop() {
       }
     }
   }
+}
+
+void Service::publishOperatorGaze() {
+  OperatorGaze gaze;
+  const bool valid = streamer_->operatorGaze(gaze);
+  const int64_t received_ns = gaze.received_ns;
+  if (valid != sent_gaze_valid_ || (valid && received_ns != sent_gaze_received_ns_)) {
+    gaze_box_.writeBuffer() = gaze;
+    gaze_box_.publish();
+    sent_gaze_valid_ = valid;
+    sent_gaze_received_ns_ = received_ns;
+    gaze_received_ns_.store(valid ? received_ns : 0, std::memory_order_relaxed);
+  }
+  operator_connected_.store(streamer_->link().hasSession(), std::memory_order_relaxed);
 }
 
 void Service::run(uint64_t max_frames, int64_t max_duration_ns) {

@@ -244,6 +244,7 @@ class Service {
     bool bricks_pending = false;
     uint32_t bricks_waiting = 0, fovea_bricks_waiting = 0;
     int64_t planned_for_gaze_stamp_ns = 0;  // the operator's stamp of the gaze planned for (0: fallback)
+    int64_t send_window_ns = 0;             // the time its bricks were planned to fill (map bricks)
   };
   // The timing log's line for one frame sent (no allocation: the file's buffer is ours).
   void logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent);
@@ -256,6 +257,9 @@ class Service {
   // The foveation stage's map figures to the atomics the status line reads.
   void publishMapFigures(const pipeline::map::SurfelMap& map);
   void sendLoop();
+  // Hands the operator's newest gaze to the foveation stage when it changes
+  // (the send stage's, also while it paces a frame out).
+  void publishOperatorGaze();
   void supervise(int64_t now_ns);
   void applyReload();
   // USB hot-plug (supervisor only): start logs whether it runs, drain logs each
@@ -290,6 +294,9 @@ class Service {
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> planned_for_gaze_stamp_ns_{0};
+  int64_t last_plan_ns_ = 0;
+  bool sent_gaze_valid_ = false;        // the send stage's: the gaze it last handed on
+  int64_t sent_gaze_received_ns_ = -1;  // the foveation stage's: when it planned the last frame's bricks
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;

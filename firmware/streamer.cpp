@@ -350,6 +350,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
         const timespec pause{0, static_cast<long>(wait_ns)};
         nanosleep(&pause, nullptr);
       }
+      if (poll_hook_) poll_hook_(poll_hook_context_);
     } else {
       const Outgoing& o = outgoing_[step.chunk];
       if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {

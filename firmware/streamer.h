@@ -108,6 +108,14 @@ class Streamer {
   // the caller, shared with the planner); required with map_bricks before the
   // first sendFrame.
   void attachBrickFeedback(BrickFeedback* feedback) { feedback_ = feedback; }
+  // Called after each poll of the link while a frame's datagrams are paced out
+  // (the service hands the operator's newest gaze on from there: a frame's
+  // sending may take longer than the gaze timeout). Null: none.
+  using PollHook = void (*)(void* context);
+  void setPollHook(PollHook hook, void* context) {
+    poll_hook_ = hook;
+    poll_hook_context_ = context;
+  }
   // A frame's bricks that will not be sent (no session, privacy): due again.
   void discardBricks(const pipeline::map::BrickBatch& bricks);
   // The budget of the session in progress (bytes/s, under the cap); 0 without one.
@@ -169,6 +177,8 @@ class Streamer {
   std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
   BrickFeedback* feedback_ = nullptr;
+  PollHook poll_hook_ = nullptr;
+  void* poll_hook_context_ = nullptr;
   uint64_t unknown_brick_keys_ = 0;
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;

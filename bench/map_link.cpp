@@ -1,0 +1,378 @@
+// fovea-map-link: the stream of the map's bricks over real sockets (issue 26,
+// docs/map-delta.md), in one process so that both ends can be watched: the
+// service (firmware::Service, `fovead serve`'s runtime) on the mock camera with
+// foveation.source = map, and an operator as fovea-operator is one (an
+// OperatorLink and a MapHolder that keeps and acknowledges the bricks, the gaze
+// at 120 Hz) on loopback, optionally through a LossyRelay.
+//
+//   fovea-map-link --experiment gaze|loss|join [--scene living-room] [--path static] [--size 640x480]
+//                  [--fps 30] [--budget-mbps 12.5] [--saccades 12] [--dwell-ms 1500] [--loss 0.1]
+//                  [--loss-seconds 6] [--join-after 8] [--seed 1]
+//
+// "The operator holds what its gaze needs" is read from the robot's side
+// (ServiceStats::Map): a frame planned for that gaze sample or a later one was
+// sent, nothing due waited for the budget (bricks_waiting 0), and every version
+// sent is acknowledged whole (bricks_in_flight 0): the operator then holds each
+// brick at the level the gaze needs, in its newest version (net/brick_cache.h
+// never draws a stale or partial one). The acknowledgement's way back is
+// included, so the figure is an upper bound by half a round trip.
+//
+// Experiments:
+//  gaze  after a warm-up (the operator fixates the scene's focus until it holds
+//        everything), --saccades fixations --dwell-ms apart on a grid of
+//        points around the focus, each new: from the operator's first sample of
+//        the new fixation to when it holds what that gaze needs; p50 and p99.
+//  loss  the link drops --loss of the datagrams both ways, duplicates 1 % and
+//        reorders 1 % for --loss-seconds, then recovers: from the recovery to
+//        when the operator holds what its gaze needs (its copy is then what a
+//        loss-free link would have given it), and the versions lost on the way.
+//  join  the service fuses --join-after seconds with nobody there; then the
+//        operator says hello, asking for --budget-mbps: from the hello to when it
+//        holds what its gaze needs (the whole map seen so far, at the levels the
+//        gaze needs), and the points and bytes that took.
+// An evaluation tool: it allocates freely and prints its figures.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "bench/bench_input.h"
+#include "core/clock.h"
+#include "firmware/service.h"
+#include "hal/camera.h"
+#include "hal/gpio/mock/mock_gpio.h"
+#include "net/operator_link.h"
+#include "tools/lossy_relay/lossy_relay.h"
+#include "tools/operator/map_holder.h"
+
+namespace {
+
+using namespace fovea;
+using bench::option;
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size())) - 1));
+  return v[i];
+}
+
+// The operator: gaze at 120 Hz towards `target`, bricks into the holder,
+// acknowledgements when due; frame chunks counted.
+struct Operator {
+  Operator(std::unique_ptr<net::OperatorLink> l, tools::MapHolder h, const Eigen::Vector3d& e)
+      : link(std::move(l)), holder(std::move(h)), eye(e) {}
+  std::unique_ptr<net::OperatorLink> link;
+  tools::MapHolder holder;
+  Eigen::Vector3d eye;
+  std::atomic<int> target_index{0};
+  std::vector<Eigen::Vector3d> targets;
+  std::atomic<int64_t> target_stamp_ns{0};  // the stamp of the first sample towards the current target
+  std::atomic<bool> stop{false};
+  std::atomic<uint64_t> frame_chunks{0}, bytes{0};
+  std::atomic<int64_t> last_completed_ns{0};  // when the last brick version arrived whole
+  std::thread thread;
+
+  void run() {
+    uint64_t sequence = 0;
+    int sent_target = -1;
+    int64_t next_gaze = monotonicNs();
+    const std::size_t max_payload = link->mtuBytes() - net::kDatagramOverhead;
+    while (!stop.load()) {
+      const int64_t now = monotonicNs();
+      if (now >= next_gaze) {
+        const int t = target_index.load();
+        const Eigen::Vector3d d = (targets[static_cast<std::size_t>(t)] - eye).normalized();
+        const Eigen::Quaterniond head = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), d);
+        net::GazeSample g;
+        g.sequence = ++sequence;
+        g.operator_stamp_ns = now;
+        g.gaze_origin_m = {eye.x(), eye.y(), eye.z()};
+        g.gaze_direction = {d.x(), d.y(), d.z()};
+        g.hmd_position_m = g.gaze_origin_m;
+        g.hmd_orientation = {head.w(), head.x(), head.y(), head.z()};
+        if (link->sendGaze(g) && t != sent_target) {
+          sent_target = t;
+          target_stamp_ns.store(now);
+        }
+        next_gaze += 1'000'000'000 / 120;
+      }
+      if (std::optional<net::Received> r = link->receive(1)) {
+        bytes.fetch_add(r->payload.size() + net::kDatagramOverhead);
+        if (r->type == net::MessageType::kBrickChunk) {
+          if (holder.add(r->payload, r->received_ns) == net::BrickCache::Outcome::kCompleted) {
+            last_completed_ns.store(r->received_ns);
+          }
+        } else if (r->type == net::MessageType::kChunk) {
+          frame_chunks.fetch_add(1);
+        }
+      }
+      if (holder.ackDue(monotonicNs(), max_payload)) {
+        holder.sendAcks(max_payload, monotonicNs(), [&](const net::BrickAckMsg& m) { return link->sendBrickAck(m); });
+      }
+    }
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string experiment = option(argc, argv, "--experiment", "");
+  const std::string scene = option(argc, argv, "--scene", "living-room");
+  const std::string path = option(argc, argv, "--path", "static");
+  const std::string size = option(argc, argv, "--size", "640x480");
+  const int fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
+  const double budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
+  const int saccades = std::atoi(option(argc, argv, "--saccades", "12").c_str());
+  const int dwell_ms = std::atoi(option(argc, argv, "--dwell-ms", "1500").c_str());
+  const double loss = std::atof(option(argc, argv, "--loss", "0.1").c_str());
+  const double loss_seconds = std::atof(option(argc, argv, "--loss-seconds", "6").c_str());
+  const double join_after = std::atof(option(argc, argv, "--join-after", "8").c_str());
+  const auto seed = static_cast<uint64_t>(std::atoll(option(argc, argv, "--seed", "1").c_str()));
+  if ((experiment != "gaze" && experiment != "loss" && experiment != "join") || fps < 1 || !(budget_mbps > 0) ||
+      saccades < 1 || dwell_ms < 100 || !(loss >= 0 && loss <= 0.5) || !(loss_seconds > 0) || !(join_after >= 0)) {
+    std::fprintf(stderr,
+                 "usage: fovea-map-link --experiment gaze|loss|join [--scene S] [--path P] [--size WxH] [--fps N]\n"
+                 "                      [--budget-mbps MBPS] [--saccades N] [--dwell-ms MS] [--loss SHARE]\n"
+                 "                      [--loss-seconds S] [--join-after S] [--seed N]\n");
+    return 2;
+  }
+  const std::string spec = "mock:" + scene + ",path=" + path + ",size=" + size + ",fps=" + std::to_string(fps);
+
+  // Where the operator's eye is and what it looks at: the camera's first pose and
+  // the scene's focus, from a camera of the same spec in this process.
+  Eigen::Vector3d eye, focus;
+  Eigen::Matrix3d camera_axes;
+  {
+    auto cam = hal::createCamera(spec);
+    if (!cam || !cam.value()->open() || !cam.value()->start()) {
+      std::fprintf(stderr, "fovea-map-link: %s: the camera did not start\n", spec.c_str());
+      return 1;
+    }
+    hal::RgbdFrame first(cam.value()->info().intrinsics.width, cam.value()->info().intrinsics.height);
+    if (!cam.value()->acquire(first, std::chrono::seconds(5))) return 1;
+    eye = first.T_world_cam.t_world_cam;
+    camera_axes = first.T_world_cam.R_world_cam;
+    focus = cam.value()->info().focus_point_m.value_or(eye + camera_axes.col(2) * 2.5);
+  }
+
+  firmware::ServiceConfig config;
+  config.camera.spec = spec + ",realtime=on";
+  config.map.source = firmware::FoveationSource::kMap;
+  config.map.delta = true;
+  config.stream.link.listen = "127.0.0.1:0";
+  config.stream.link.insecure = true;
+  config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
+      config.gpio.lines.privacy_line = firmware::StatusLinesConfig::kNoLine;
+  config.runtime.status_interval_ms = 60'000;
+  firmware::Service::Environment environment;
+  environment.gpio = std::make_unique<hal::mock::MockGpio>(8);
+  Result<std::unique_ptr<firmware::Service>> created = firmware::Service::create(config, std::move(environment));
+  if (!created) {
+    std::fprintf(stderr, "fovea-map-link: %s\n", created.status().message().c_str());
+    return 1;
+  }
+  firmware::Service& service = *created.value();
+  if (Status s = service.start(); !s) {
+    std::fprintf(stderr, "fovea-map-link: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::thread supervisor([&] { service.run(); });
+  struct Stopper {
+    firmware::Service& service;
+    std::thread& thread;
+    ~Stopper() {
+      service.requestStop();
+      if (thread.joinable()) thread.join();
+    }
+  } stopper{service, supervisor};
+
+  // The link: direct, or through the relay (loss).
+  std::unique_ptr<tools::LossyRelay> relay;
+  std::atomic<bool> relay_stop{false};
+  std::thread relay_thread;
+  net::Endpoint robot = service.localEndpoint();
+  if (experiment == "loss") {
+    tools::LossyRelayConfig rc;
+    rc.listen = net::Endpoint::parse("127.0.0.1:0").value();
+    rc.server = robot;
+    rc.up = rc.down = {loss, 0.01, 0.01};
+    rc.seed = seed;
+    Result<tools::LossyRelay> r = tools::LossyRelay::create(rc);
+    if (!r) {
+      std::fprintf(stderr, "fovea-map-link: relay: %s\n", r.status().message().c_str());
+      return 1;
+    }
+    relay = std::make_unique<tools::LossyRelay>(std::move(r.value()));
+    robot = relay->localEndpoint();
+  }
+  std::atomic<bool> recover{false};
+  if (relay) {
+    relay_thread = std::thread([&] {
+      bool recovered = false;
+      while (!relay_stop.load()) {
+        if (!recovered && recover.load()) {
+          (void)relay->setShares({}, {});
+          recovered = true;
+        }
+        relay->pump(2);
+      }
+    });
+  }
+  struct RelayStopper {
+    std::atomic<bool>& stop;
+    std::thread& thread;
+    ~RelayStopper() {
+      stop.store(true);
+      if (thread.joinable()) thread.join();
+    }
+  } relay_stopper{relay_stop, relay_thread};
+
+  if (experiment == "join") std::this_thread::sleep_for(std::chrono::duration<double>(join_after));
+  const firmware::ServiceStats before_join = service.stats();
+
+  net::OperatorLinkConfig op_config;
+  op_config.insecure = true;
+  op_config.budget_bytes_per_s = static_cast<uint64_t>(budget_mbps * 1e6);
+  const int64_t hello_ns = monotonicNs();
+  Result<std::unique_ptr<net::OperatorLink>> link = net::OperatorLink::connect(robot.toString(), op_config);
+  if (!link) {
+    std::fprintf(stderr, "fovea-map-link: connect: %s\n", link.status().message().c_str());
+    return 1;
+  }
+  net::BrickCacheConfig cache;
+  cache.max_points = std::size_t{1} << 21;
+  Operator op(std::move(link.value()), tools::MapHolder::create(cache).value(), eye);
+  // Fixations: the focus, then a grid of points around it (camera-relative
+  // offsets, 4 x 3 over 2.4 m x 1.2 m), each new.
+  op.targets.push_back(focus);
+  for (int k = 0; k < saccades; ++k) {
+    const double u = -1.2 + 0.8 * static_cast<double>(k % 4), v = -0.6 + 0.6 * static_cast<double>((k / 4) % 3);
+    op.targets.push_back(focus + camera_axes * Eigen::Vector3d(u, v, 0.0));
+  }
+  op.thread = std::thread([&] { op.run(); });
+  struct OperatorStopper {
+    Operator& op;
+    ~OperatorStopper() {
+      op.stop.store(true);
+      if (op.thread.joinable()) op.thread.join();
+    }
+  } operator_stopper{op};
+
+  // Holds what the gaze whose first sample was stamped `since` needs; waits up
+  // to timeout_s. Returns the time from `from_ns`, or -1.
+  auto heldAfter = [&](int64_t since, int64_t from_ns, double timeout_s) -> double {
+    const int64_t end = monotonicNs() + static_cast<int64_t>(timeout_s * 1e9);
+    while (monotonicNs() < end) {
+      const firmware::ServiceStats s = service.stats();
+      if (s.map.planned_for_gaze_stamp_ns >= since && s.map.bricks_waiting == 0 && s.map.bricks_in_flight == 0) {
+        return static_cast<double>(monotonicNs() - from_ns) * 1e-6;
+      }
+      std::this_thread::sleep_for(std::chrono::microseconds(500));
+    }
+    const firmware::ServiceStats s = service.stats();
+    std::printf("  (not held: last frame sent planned for gaze %s, %llu bricks waiting, %llu of the fovea, %llu versions "
+                "in flight)\n",
+                s.map.planned_for_gaze_stamp_ns >= since ? "this one or later" : "an older one",
+                static_cast<unsigned long long>(s.map.bricks_waiting),
+                static_cast<unsigned long long>(s.map.fovea_bricks_waiting),
+                static_cast<unsigned long long>(s.map.bricks_in_flight));
+    return -1.0;
+  };
+  auto waitStamp = [&] {
+    while (op.target_stamp_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    return op.target_stamp_ns.load();
+  };
+
+  std::printf("fovea-map-link: %s, %s, budget %.1f MB/s\n", experiment.c_str(), spec.c_str(), budget_mbps);
+  int status = 0;
+  if (experiment == "gaze") {
+    const double warm = heldAfter(waitStamp(), hello_ns, 30.0);
+    std::printf("  warm-up: the operator held what the first fixation needs after %.0f ms\n", warm);
+    std::this_thread::sleep_for(std::chrono::seconds(3));  // the map settles (map.settle_frames) and goes out
+    std::vector<double> latency, held_latency;
+    int failed = 0;
+    for (int k = 1; k <= saccades; ++k) {
+      const uint64_t planned_before = service.stats().map.bricks_planned;
+      op.target_stamp_ns.store(0);
+      op.target_index.store(k);
+      const int64_t stamp = waitStamp();
+      const double ms = heldAfter(stamp, stamp, dwell_ms * 1e-3);
+      const uint64_t planned = service.stats().map.bricks_planned - planned_before;
+      // When the operator itself held it: the last version that completed
+      // before the robot heard it was all there (0 when none came: it held the
+      // detail already).
+      const int64_t completed = op.last_completed_ns.load();
+      const double held_ms = completed > stamp ? static_cast<double>(completed - stamp) * 1e-6 : 0.0;
+      std::printf("  saccade %2d: robot sure after %s ms, operator held it after %.0f ms (%llu bricks planned meanwhile)\n",
+                  k, ms >= 0 ? std::to_string(static_cast<int>(std::lround(ms))).c_str() : "not within the dwell",
+                  ms >= 0 ? std::min(held_ms, ms) : NAN, static_cast<unsigned long long>(planned));
+      if (ms >= 0) {
+        latency.push_back(ms);
+        held_latency.push_back(std::min(held_ms, ms));
+      } else {
+        ++failed;
+      }
+      const int64_t dwell_end = stamp + static_cast<int64_t>(dwell_ms) * 1'000'000;
+      while (monotonicNs() < dwell_end) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    std::printf("  gaze shift to the fovea's detail, held by the operator: p50 %.1f ms, p99 %.1f ms; known to the robot "
+                "(its acknowledgement back): p50 %.1f ms, p99 %.1f ms; over %zu saccades (%d not within %d ms)\n",
+                percentile(held_latency, 0.5), percentile(held_latency, 0.99), percentile(latency, 0.5),
+                percentile(latency, 0.99), latency.size(), failed, dwell_ms);
+    status = failed > 0 ? 1 : 0;
+  } else if (experiment == "loss") {
+    const int64_t start = monotonicNs();
+    std::this_thread::sleep_for(std::chrono::duration<double>(loss_seconds));
+    const firmware::ServiceStats lossy = service.stats();
+    recover.store(true);
+    const int64_t recovered_ns = monotonicNs();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the relay's next pump takes the new shares
+    // A gaze sample sent after the recovery: the plans from then on.
+    const int64_t since = monotonicNs();
+    const double ms = heldAfter(since, recovered_ns, 10.0);
+    const firmware::ServiceStats end = service.stats();
+    const tools::MapTotals held = op.holder.totals();
+    std::printf("  %.1f s at %.0f %% loss (1 %% duplicated, 1 %% reordered), then none: dropped up %llu down %llu, "
+                "duplicated %llu down\n",
+                static_cast<double>(recovered_ns - start) * 1e-9, loss * 100,
+                static_cast<unsigned long long>(relay->up().dropped),
+                static_cast<unsigned long long>(relay->down().dropped),
+                static_cast<unsigned long long>(relay->down().duplicated));
+    std::printf("  robot: %llu versions, %llu lost on the way (sent again), %llu parts resent (%llu during the loss)\n",
+                static_cast<unsigned long long>(end.map.brick_versions),
+                static_cast<unsigned long long>(end.map.brick_versions_lost),
+                static_cast<unsigned long long>(end.map.brick_resends),
+                static_cast<unsigned long long>(lossy.map.brick_resends));
+    std::printf("  operator: %zu bricks, %zu points held; %llu versions completed, %llu duplicate parts, %llu stale\n",
+                held.bricks_held, held.points_held, static_cast<unsigned long long>(held.versions),
+                static_cast<unsigned long long>(held.duplicate_parts), static_cast<unsigned long long>(held.stale_parts));
+    if (ms >= 0) {
+      std::printf("  after the loss stopped the operator held what its gaze needs in %.0f ms\n", ms);
+    } else {
+      std::printf("  the operator did not hold what its gaze needs within 10 s of the loss stopping\n");
+      status = 1;
+    }
+  } else {
+    const double ms = heldAfter(waitStamp(), hello_ns, 30.0);
+    const tools::MapTotals held = op.holder.totals();
+    std::printf("  the map after %.1f s alone: %llu surfels; the operator joined asking %.1f MB/s\n", join_after,
+                static_cast<unsigned long long>(before_join.map.surfels), budget_mbps);
+    if (ms >= 0) {
+      std::printf("  it held what its gaze needs (%zu bricks, %zu points) %.0f ms after its hello, %.2f MB received\n",
+                  held.bricks_held, held.points_held, ms, static_cast<double>(op.bytes.load()) * 1e-6);
+    } else {
+      std::printf("  it did not hold what its gaze needs within 30 s\n");
+      status = 1;
+    }
+  }
+  return status;
+}
