@@ -205,7 +205,7 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
     if (feedback_) feedback_->forget(e.brick);
     return false;
   };
-  if (e.count == 0 || e.count > brick_cloud_.points.capacity()) return fail();
+  if (e.count > brick_cloud_.points.capacity()) return fail();  // (none: a brick whose surfels all went)
   // Parts staged this frame are sent from the sender's store: they must not be
   // overwritten before the frame's pacing reaches them.
   if (brick_store_staged_ + static_cast<std::size_t>(e.count) * 8 > config_.brick_sender.store_bytes / 2) return fail();

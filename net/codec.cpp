@@ -526,6 +526,17 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
   for (int r = 0; r < pipeline::kMaxRegions; ++r) {
     if (Status st = s.encodeRegion(cloud, r, frame); !st) return st;
   }
+  if (tag && s.chunk_count == 0) {
+    // A brick version with no points (its surfels all went): one chunk of none,
+    // so that the operator replaces what it draws of the brick with nothing.
+    std::memset(s.raw.data(), 0, kDataHeader);
+    s.buildChunk(frame_id, 0, brick->level, capture_time_ns, wire::Vec3d(0.0, 0.0, 0.0), s.step[brick->level], 0, 0,
+                 s.raw.data(), kDataHeader, frame.brick);
+    const std::size_t size = s.fbb.GetSize();
+    std::memcpy(s.arena.data(), s.fbb.GetBufferPointer(), size);
+    s.chunks[0] = {0, static_cast<uint32_t>(size), 0, brick->level};
+    s.chunk_count = 1;
+  }
   return s.patchChunkCount();
 }
 
@@ -869,7 +880,8 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
     raw_size = static_cast<std::size_t>(content);
   }
   const bool half = (flags & kChunkFlagHalfChroma) != 0;
-  if (raw_size < kDataHeader || n == 0 || n > 8 * (raw_size - kDataHeader)) {
+  // A brick chunk may carry no point: the version of a brick whose surfels all went.
+  if (raw_size < kDataHeader || (n == 0 && !info.has_brick) || n > 8 * (raw_size - kDataHeader)) {
     return parseError("point count does not fit the data");
   }
 

@@ -224,6 +224,33 @@ TEST(StreamerBricks, ABatchArrivesWholeBesideTheLiveFrameAndIsAcknowledged) {
   EXPECT_EQ(next->brick_resends, 0u);
 }
 
+TEST(StreamerBricks, ABrickWhoseSurfelsAllWentIsSentAsAnEmptyVersion) {
+  Rig rig;
+  Operator op;
+  pipeline::map::BrickBatch batch = makeBatch(1);
+  ASSERT_TRUE(rig.send(&batch, 1));
+  op.receive(*rig.op, 200, true);
+  ASSERT_EQ(op.cache.pointsHeld(), 900u);
+  // Version 2: brick 7 ({1,-1,2}) has no point left.
+  pipeline::map::BrickBatch emptied(64, 4);
+  emptied.clear(Eigen::Vector3d(1.0, 2.0, 0.5));
+  auto& e = emptied.add();
+  e.brick = 7;
+  e.key = {1, -1, 2};
+  e.version = 2;
+  e.count = 0;
+  Result<FrameSendReport> sent = rig.send(&emptied, 2);
+  ASSERT_TRUE(sent);
+  EXPECT_EQ(sent->bricks, 1u);
+  EXPECT_EQ(sent->brick_parts, 1u);
+  op.receive(*rig.op, 200, true);
+  const int slot = op.cache.find(net::BrickKey{1, -1, 2});
+  ASSERT_GE(slot, 0);
+  EXPECT_EQ(op.cache.version(static_cast<std::size_t>(slot)), 2u);
+  EXPECT_EQ(op.cache.pointCount(static_cast<std::size_t>(slot)), 0u);
+  EXPECT_EQ(op.cache.pointsHeld(), 600u);
+}
+
 TEST(StreamerBricks, UnacknowledgedPartsGoAgainUntilAcknowledged) {
   Rig rig(20'000'000);  // resend after 20 ms
   Operator op;

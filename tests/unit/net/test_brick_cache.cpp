@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <map>
 #include <random>
+#include <cstring>
 #include <set>
 #include <vector>
 
@@ -91,6 +92,45 @@ TEST(BrickCache, AVersionIsDrawnOnlyWhenAllItsPartsArrived) {
   EXPECT_EQ(cache.counters().versions, 1u);
   EXPECT_EQ(cache.bricksHeld(), 1u);
   EXPECT_EQ(cache.pointsHeld(), 320u);
+}
+
+// A brick whose surfels all went is sent as a version of no point (one empty
+// chunk, net/codec.h): through the real encoder and decoder, it replaces what
+// the operator draws of the brick with nothing, and an older version arriving
+// late does not bring the points back.
+TEST(BrickCache, AnEmptyVersionThroughTheCodecEmptiesTheBrick) {
+  BrickCache cache = BrickCache::create(small()).value();
+  const BrickKey key{3, 1, -2};
+  ASSERT_EQ(add(cache, makePart(key, 4, 0, 1)), BrickCache::Outcome::kCompleted);
+  const int slot = cache.find(key);
+  ASSERT_GE(slot, 0);
+  EXPECT_EQ(cache.pointCount(static_cast<std::size_t>(slot)), 10u);
+
+  ChunkEncoder encoder = ChunkEncoder::create(CodecConfig{}, 64).value();
+  pipeline::FoveatedCloud none(64);
+  const double steps[3] = {0.0, 0.01, 0.02};
+  const BrickTag tag{key.x, key.y, key.z, 5, 2};
+  ASSERT_TRUE(encoder.encode(none, steps, 7, 0, &tag));
+  ASSERT_EQ(encoder.chunkCount(), 1u);
+  alignas(16) uint8_t aligned[kMaxMtu];
+  const std::span<const uint8_t> c = encoder.chunk(0);
+  std::memcpy(aligned, c.data(), c.size());
+  pipeline::FoveatedCloud decoded(64);
+  Result<DecodedChunk> d = decodeChunk(std::span<const uint8_t>(aligned, c.size()), decoded);
+  ASSERT_TRUE(d) << d.status().message();
+  EXPECT_TRUE(d->has_brick);
+  EXPECT_EQ(d->points, 0u);
+  EXPECT_EQ(d->brick.version, 5u);
+  EXPECT_EQ(decoded.size(), 0u);
+  EXPECT_EQ(cache.add(d.value(), decoded, 0, 0), BrickCache::Outcome::kCompleted);
+  EXPECT_TRUE(cache.held(static_cast<std::size_t>(slot)));
+  EXPECT_EQ(cache.version(static_cast<std::size_t>(slot)), 5u);
+  EXPECT_EQ(cache.pointCount(static_cast<std::size_t>(slot)), 0u);
+  EXPECT_EQ(add(cache, makePart(key, 4, 0, 1)), BrickCache::Outcome::kStale);
+  EXPECT_EQ(cache.pointCount(static_cast<std::size_t>(slot)), 0u);
+  // A frame (no tag) of no point is no chunk at all, as before.
+  ASSERT_TRUE(encoder.encode(none, steps, 8, 0));
+  EXPECT_EQ(encoder.chunkCount(), 0u);
 }
 
 TEST(BrickCache, AStaleVersionIsNeverDrawnOverANewerOneAndVersionsWrap) {
