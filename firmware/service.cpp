@@ -805,7 +805,7 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
         map_refused_no_pose_.load(std::memory_order_relaxed), map_refused_other_.load(std::memory_order_relaxed));
     if (map_bricks_ && used > 0 && static_cast<std::size_t>(used) < sizeof map) {
       std::snprintf(map + used, sizeof map - static_cast<std::size_t>(used),
-                    ", bricks %" PRIu64 " versions %" PRIu64 " done %" PRIu64 " lost",
+                    ", brick versions %" PRIu64 " sent %" PRIu64 " acknowledged %" PRIu64 " lost",
                     brick_versions_.load(std::memory_order_relaxed), brick_versions_done_.load(std::memory_order_relaxed),
                     brick_versions_lost_.load(std::memory_order_relaxed));
     }
