@@ -180,5 +180,82 @@ TEST(FrameFoveator, AFrameWithoutAPoseIsCountedAndStillShown) {
   EXPECT_EQ(stage->cloud().size(), 0u);
 }
 
+// With bricks (map.delta) the frame carries only the live points, and
+// planBricks fills the batch with what the operator lacks: everything due at
+// first, nothing once it holds it all, a forgotten brick again, everything
+// after forgetAllBricks, and within a small budget the fovea's bricks first
+// while the rest wait (counted).
+TEST(FrameFoveator, PlanBricksSendsWhatTheOperatorLacksWithinTheBudget) {
+  Rig rig = openRig();
+  ASSERT_TRUE(rig.camera);
+  MapSettings settings = mapSource();
+  settings.delta = true;
+  settings.map.settle_frames = 2;
+  Result<FrameFoveator> stage = FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1}, {}, {},
+                                                      settings, rig.width, rig.height);
+  ASSERT_TRUE(stage.isOk()) << stage.status().toString();
+  ASSERT_TRUE(stage->streamsBricks());
+  pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
+  pipeline::map::BrickBatch batch = stage->makeBrickBatch();
+  pipeline::BackprojectCounts counts;
+  pipeline::FoveationStats stats;
+  for (int i = 0; i < 8; ++i) {
+    ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
+    ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
+  }
+  const pipeline::Gaze gaze = gazeFor(rig.frame);
+  ASSERT_TRUE(stage->foveate(gaze, out, stats).isOk());
+  // No eye view appended: the cloud is the frame's live points alone.
+  EXPECT_EQ(stage->cloud().size(), stage->mapFigures().frame_points);
+  EXPECT_EQ(stage->mapFigures().eye.appended, 0u);
+
+  constexpr double kAll = 1e12;
+  ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
+  const std::size_t bricks = batch.entries().size();
+  ASSERT_GT(bricks, 2u);
+  EXPECT_EQ(stage->mapFigures().bricks_waiting, 0u);
+  uint64_t settled = 0;
+  for (std::size_t b = 0; b < stage->map()->brickCount(); ++b) settled += stage->map()->brickSettledCount(static_cast<uint16_t>(b));
+  for (const pipeline::map::BrickBatchEntry& e : batch.entries()) EXPECT_EQ(e.version, 1u);
+  EXPECT_LE(batch.points.size(), settled);
+  EXPECT_GT(batch.points.size(), 0u);
+
+  ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
+  EXPECT_EQ(batch.entries().size(), 0u) << "the operator holds every brick it was sent";
+  const uint16_t forgotten = 1;
+  stage->forgetBrick(forgotten);
+  stage->forgetBrick(60000);  // beyond the map: ignored
+  ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
+  ASSERT_EQ(batch.entries().size(), 1u);
+  EXPECT_EQ(batch.entries()[0].brick, forgotten);
+  EXPECT_EQ(batch.entries()[0].version, 2u);
+  stage->forgetAllBricks();
+  ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
+  EXPECT_EQ(batch.entries().size(), bricks);
+  // A frame's bricks that never went (forgetBatch): due again.
+  stage->forgetBatch(batch);
+  // A budget of one byte: the first brick of the plan (the fovea's) goes, the rest wait.
+  ASSERT_TRUE(stage->planBricks(gaze, 1.0, 0.0, batch).isOk());
+  ASSERT_EQ(batch.entries().size(), 1u);
+  EXPECT_TRUE(batch.entries()[0].fovea);
+  EXPECT_EQ(stage->mapFigures().bricks_waiting, bricks - 1);
+  // Live points costing more than the budget: only the fovea's bricks go before them.
+  stage->forgetAllBricks();
+  ASSERT_TRUE(stage->planBricks(gaze, 1e6, 2e6, batch).isOk());
+  for (const pipeline::map::BrickBatchEntry& e : batch.entries()) EXPECT_TRUE(e.fovea);
+  EXPECT_GT(stage->mapFigures().bricks_waiting, 0u);
+  // No budget: nothing.
+  stage->forgetAllBricks();
+  ASSERT_TRUE(stage->planBricks(gaze, 0.0, 0.0, batch).isOk());
+  EXPECT_EQ(batch.entries().size(), 0u);
+  EXPECT_EQ(stage->mapFigures().bricks_waiting, bricks);
+  // A bad gaze is an error, and nothing is taken as sent.
+  pipeline::Gaze bad = gaze;
+  bad.direction = Eigen::Vector3d::Zero();
+  EXPECT_FALSE(stage->planBricks(bad, kAll, 0.0, batch).isOk());
+  ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
+  EXPECT_EQ(batch.entries().size(), bricks);
+}
+
 }  // namespace
 }  // namespace fovea::firmware
