@@ -22,7 +22,8 @@
 namespace fovea::tools {
 
 // Acknowledge at a few tens of hertz: the robot resends a part it has not heard
-// of for 30 ms (docs/map-delta.md, "Loss"), so 25 ms keeps resends for lost parts only.
+// of for 100 ms (net::BrickSenderConfig::resend_after_ns), so 25 ms keeps
+// resends for lost parts only.
 inline constexpr int64_t kBrickAckPeriodNs = 25'000'000;
 
 // Everything counted since start (across sessions), and what is held now.
