@@ -461,6 +461,10 @@ void Service::foveationLoop() {
     if (const pipeline::map::SurfelMap* map = stage_->map()) publishMapFigures(*map);
     GazePolicy::Decision decision;
     if (s) {
+      // The newest gaze after the back-projection, not from before it: fusing a
+      // frame into the map takes tens of milliseconds, the gaze timeout is 100,
+      // and the operator's eye may have moved meanwhile.
+      (void)gaze_box_.update();
       decision = policy_->decide(gaze_box_.current(), monotonicNs(), f.frame.T_world_cam);
       s = stage_->use(decision.foveation);
     }
@@ -485,12 +489,11 @@ void Service::foveationLoop() {
         bricks_planned_.fetch_add(figures.bricks_planned, std::memory_order_relaxed);
         o.bricks_waiting = figures.bricks_waiting;
         o.fovea_bricks_waiting = figures.fovea_bricks_waiting;
-        o.planned_for_gaze_stamp_ns =
-            decision.source == GazeSource::kOperator ? gaze_box_.current().stamp_ns : 0;
       } else {
         stage_->forgetBatch(o.bricks);
       }
     }
+    o.gaze_stamp_ns = decision.source == GazeSource::kOperator ? gaze_box_.current().stamp_ns : 0;
     o.frame_id = static_cast<uint32_t>(f.frame.sequence);
     o.captured_ns = f.captured_ns;
     o.acquire_ns = f.acquire_ns;
@@ -602,8 +605,8 @@ void Service::sendLoop() {
         bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
         fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);
         bricks_in_flight_.store(streamer_->bricksInFlight(), std::memory_order_relaxed);
-        planned_for_gaze_stamp_ns_.store(f.planned_for_gaze_stamp_ns, std::memory_order_release);
       }
+      if (sent && sent->fovea_completed) sent_gaze_stamp_ns_.store(f.gaze_stamp_ns, std::memory_order_release);
     }
     if (!ring.release(slot)) foveate_errors_.fetch_add(1, std::memory_order_relaxed);
     if (streamer_) {
@@ -931,7 +934,7 @@ ServiceStats Service::stats() const {
   s.map.brick_versions_done = brick_versions_done_.load(std::memory_order_relaxed);
   s.map.brick_versions_lost = brick_versions_lost_.load(std::memory_order_relaxed);
   s.map.brick_acks_unknown = brick_acks_unknown_.load(std::memory_order_relaxed);
-  s.map.planned_for_gaze_stamp_ns = planned_for_gaze_stamp_ns_.load(std::memory_order_acquire);
+  s.sent_gaze_stamp_ns = sent_gaze_stamp_ns_.load(std::memory_order_acquire);
   s.map.bricks_waiting = bricks_waiting_.load(std::memory_order_relaxed);
   s.map.fovea_bricks_waiting = fovea_bricks_waiting_.load(std::memory_order_relaxed);
   s.map.bricks_in_flight = bricks_in_flight_.load(std::memory_order_relaxed);

@@ -157,15 +157,17 @@ struct ServiceStats {
     uint64_t brick_versions_lost = 0;
     uint64_t brick_acks_unknown = 0;
     // The operator's copy against the map, as of the last frame sent: bricks
-    // due that did not fit it (of them the fovea's), versions not yet
-    // acknowledged whole, and the operator's stamp of the gaze that frame's
-    // bricks were planned for (0: the fallback's). All zero with a stamp at or
-    // after a gaze sample's: the operator holds what that gaze needs.
+    // due that did not fit it (of them the fovea's), and versions not yet
+    // acknowledged whole. All zero with sent_gaze_stamp_ns at or after a gaze
+    // sample's stamp: the operator holds what that gaze needs.
     uint64_t bricks_waiting = 0;
     uint64_t fovea_bricks_waiting = 0;
     uint64_t bricks_in_flight = 0;
-    int64_t planned_for_gaze_stamp_ns = 0;
   } map;
+  // The operator's stamp of the gaze the last frame whose fovea went out whole
+  // (its fovea's bricks and chunks) was foveated (and its bricks planned) for;
+  // 0: the fallback's.
+  int64_t sent_gaze_stamp_ns = 0;
 };
 
 class Service {
@@ -243,7 +245,7 @@ class Service {
     pipeline::map::BrickBatch bricks;
     bool bricks_pending = false;
     uint32_t bricks_waiting = 0, fovea_bricks_waiting = 0;
-    int64_t planned_for_gaze_stamp_ns = 0;  // the operator's stamp of the gaze planned for (0: fallback)
+    int64_t gaze_stamp_ns = 0;              // the operator's stamp of the gaze foveated for (0: fallback)
     int64_t send_window_ns = 0;             // the time its bricks were planned to fill (map bricks)
   };
   // The timing log's line for one frame sent (no allocation: the file's buffer is ours).
@@ -293,7 +295,7 @@ class Service {
       brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0};
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
-  std::atomic<int64_t> planned_for_gaze_stamp_ns_{0};
+  std::atomic<int64_t> sent_gaze_stamp_ns_{0};
   int64_t last_plan_ns_ = 0;
   bool sent_gaze_valid_ = false;        // the send stage's: the gaze it last handed on
   int64_t sent_gaze_received_ns_ = -1;  // the foveation stage's: when it planned the last frame's bricks

@@ -327,6 +327,12 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   }
   for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) report.chunks_cut += cut[r];
 
+  // The send order begins with everything of region 0 (the fovea's bricks, the
+  // frame's fovea): the fovea is out once that many steps were sent.
+  std::size_t fovea_chunks = 0;
+  while (fovea_chunks < outgoing_count_ && chunk_regions_[fovea_chunks] == 0) ++fovea_chunks;
+  std::size_t steps_sent = 0;
+  report.fovea_completed = fovea_chunks == 0;
   const uint64_t bytes_before = scheduler_.counters().bytes_sent;
   const int64_t send_start = now;
   while (now < deadline_ns && link_->hasSession()) {
@@ -337,6 +343,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
         scheduler_.chargeExtra(summary.size() + net::kDatagramOverhead, now);
       }
       report.completed = true;
+      report.fovea_completed = true;
       break;
     }
     if (step.kind == net::UplinkScheduler::Step::Kind::kWait) {
@@ -352,6 +359,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
       }
       if (poll_hook_) poll_hook_(poll_hook_context_);
     } else {
+      report.fovea_completed = ++steps_sent >= fovea_chunks;
       const Outgoing& o = outgoing_[step.chunk];
       if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {
         if (o.type == net::MessageType::kChunk) {

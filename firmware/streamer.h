@@ -51,6 +51,7 @@ struct FrameSendReport {
   int64_t encode_ns = 0;
   int64_t send_ns = 0;        // first datagram to last (or to the deadline)
   bool completed = false;     // everything planned went out before the deadline
+  bool fovea_completed = false;  // everything of the fovea (region 0: its bricks, the frame's fovea) went out
   // The map's bricks (map_bricks): versions begun, their parts, parts resent,
   // and brick parts that went out (new and resent).
   uint32_t bricks = 0;
