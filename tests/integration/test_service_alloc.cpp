@@ -144,9 +144,12 @@ void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = fal
   // The operator (its own allocations are not the service's: it runs before
   // and after the count, and during it only sends and receives into fixed buffers).
   std::atomic<bool> stop{false};
+  // An operator with room for a few bricks only: it evicts all the time and
+  // tells the robot, which sends them again, so bricks flow throughout the count
+  // however early the map settled (the eviction path runs too).
   net::BrickCacheConfig cache_config;
-  cache_config.max_points = 1u << 18;
-  cache_config.max_bricks = 1024;
+  cache_config.max_points = 4096;
+  cache_config.max_bricks = 8;
   net::BrickCache cache = net::BrickCache::create(cache_config).value();
   pipeline::FoveatedCloud decoded(1u << 14);
   net::BrickAckMsg ack;
