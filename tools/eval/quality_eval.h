@@ -38,20 +38,12 @@ struct QualityRow {
   FoveatedQuality quality;     // against FREF's image
   // Input points displaced by more than their MAR: against their representative;
   // for a cloud the operator held (MAP-DELTA), against the nearest point drawn,
-  // over the input points inside the eye's image (heldShareAboveMar).
+  // over the input points inside the eye's image (heldShareAboveMar, quality/held_error.h);
+  // NaN when no input point is in the image.
   double above_mar_share = 0;
   uint32_t points = 0;         // decoded points drawn
   std::string image;           // the side-by-side PNG written, if any
 };
-
-// The share of `input`'s points inside the eye's image (in front of it and
-// projecting into it) whose nearest point of `drawn` is displaced, seen from the
-// eye, by more than the MAR at the input point's eccentricity (m = slope, Eq. 1),
-// as fovea-map-delta measures it (bench/map_delta.cpp). An input point with no
-// drawn point within 10 cm counts as above. Uses a hash grid of 2 cm cells;
-// allocates. `seen` (optional): the input points judged.
-double heldShareAboveMar(const pipeline::PointCloud& input, const pipeline::PointCloud& drawn, const EyeCamera& eye,
-                         const Eigen::Vector3d& gaze_direction, double slope, std::size_t* seen = nullptr);
 
 class QualityEvaluator {
  public:

@@ -364,8 +364,8 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
 
   md << "## Visual quality: an objective stand-in for the paper's user study\n\n"
      << "**These are objective proxies, not a user study.** The paper asked 24 people to rate each condition against "
-        "FREF (DSIS, a 5-point impairment scale). Here, for frame " << in.quality_frame << " of each dataset and each "
-        "HMD position measured, every condition's cloud (foveated with that position's gaze on the scene's centre, "
+        "FREF (DSIS, a 5-point impairment scale). Here, for frame " << in.quality_frame << " of each dataset (with "
+        "MAP-DELTA: the frame its operator saved, in the `frame` column) and each HMD position measured, every condition's cloud (foveated with that position's gaze on the scene's centre, "
         "through the stream's codec and back) is drawn by a deterministic software renderer (tools/eval/quality/: "
         "z-buffered square splats, a raw point as large as the camera pixel it came from, a voxel-sampled one as "
         "large as its voxel or, when that is finer, as that pixel) from the HMD's eye at "
