@@ -101,18 +101,12 @@ struct Options {
   std::string tum = "../shared/data/tum-fr3-teddy";
   bool tum_given = false;
   int quality_positions = -1;
-  int quality_frame = -1;  // -1: kDefaultQualityFrame, or kMapDeltaQualityFrame with MAP-DELTA
+  int quality_frame = -1;  // -1: defaultQualityFrame (plan.h)
   std::string fovead, op;
   bool fresh = false;
   bool plot = true;
 };
 
-// The quality frame by default: the 31st, the paper's experiment's; with MAP-DELTA
-// the 91st. The operator receives frames only after its hello (the first decoded
-// is the 30th to 35th on this host), and the map's bricks settle over the next
-// second or so (docs/eval.md, "MAP-DELTA").
-constexpr int kDefaultQualityFrame = 30;
-constexpr int kMapDeltaQualityFrame = 90;
 // The file a MAP-DELTA run's operator writes at the quality frame (--save-held).
 const char* kHeldFile = "held.ply";
 
@@ -490,9 +484,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-eval: %s\n", conditions.status().message().c_str());
     return kExitUsage;
   }
-  const bool with_map_delta = std::any_of(conditions->begin(), conditions->end(),
-                                          [](const Condition& c) { return c.map_delta; });
-  if (o.quality_frame < 0) o.quality_frame = with_map_delta ? kMapDeltaQualityFrame : kDefaultQualityFrame;
+  if (o.quality_frame < 0) o.quality_frame = defaultQualityFrame(conditions.value());
   const std::string fovead = findProgram(o.fovead, "fovead", {".", "../firmware", "../../firmware"});
   const std::string op = findProgram(o.op, "fovea-operator", {".", ".."});
 
@@ -618,8 +610,12 @@ int run(int argc, char** argv) {
       std::optional<tools::HeldCloud> held;
       for (const Condition& c : report.conditions) {
         if (!c.map_delta) continue;
-        const std::string path = (out / "runs" / runName(d.dataset, c, d.positions[k]) / kHeldFile).string();
-        Result<tools::HeldCloud> loaded = tools::loadHeldCloud(path);
+        const fs::path run_dir = out / "runs" / runName(d.dataset, c, d.positions[k]);
+        const std::string path = (run_dir / kHeldFile).string();
+        // Only a run in the table: a failed one's last attempt may have saved a cloud too.
+        Result<tools::HeldCloud> loaded = fs::exists(run_dir / "done", ec)
+                                              ? tools::loadHeldCloud(path)
+                                              : Result<tools::HeldCloud>(ErrorCode::kNotFound, "its run failed");
         if (!loaded) {
           std::printf("quality: %s position %d: %s not measured: %s\n", d.dataset.name.c_str(), d.positions[k].index,
                       c.name.c_str(), loaded.status().message().c_str());

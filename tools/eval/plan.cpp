@@ -45,6 +45,11 @@ std::vector<std::string> conditionSettings(const Condition& c) {
   return out;
 }
 
+int defaultQualityFrame(const std::vector<Condition>& conditions) {
+  const bool delta = std::any_of(conditions.begin(), conditions.end(), [](const Condition& c) { return c.map_delta; });
+  return delta ? kMapDeltaQualityFrame : kDefaultQualityFrame;
+}
+
 std::string shortestDecimal(double value) {
   char text[32];
   for (int digits = 1; digits <= 17; ++digits) {

@@ -55,6 +55,13 @@ std::vector<Condition> allConditions();
 // foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes,
 // foveation.source and, with the map, map.delta (those set).
 std::vector<std::string> conditionSettings(const Condition& c);
+// The quality frame (the camera's sequence number) when --quality-frame is not
+// given: 30, or 90 when a condition streams the map as bricks (MAP-DELTA): its
+// operator must hold the map by then, and the map's bricks come only once its
+// surfels settled, 1 to 3 s after the start on the 2-core host (docs/eval.md).
+inline constexpr int kDefaultQualityFrame = 30;
+inline constexpr int kMapDeltaQualityFrame = 90;
+int defaultQualityFrame(const std::vector<Condition>& conditions);
 // A setting's number as `fovead --set` takes it: the shortest decimal that reads back
 // as the same double (0.002, not 0.0020000000000000000416).
 std::string shortestDecimal(double value);

@@ -164,6 +164,10 @@ TEST(EvalPlan, MapDeltaIsTheMapStreamedAsBricksAndNotADefault) {
   EXPECT_EQ(allConditions().back().name, "MAP-DELTA");
   EXPECT_EQ(allConditions()[allConditions().size() - 2].name, "MAP");
   EXPECT_EQ(runName(defaultDatasets("/data/tum")[2], delta, makePositions(livingRoom(), 2, 1)[1]), "tum_MAP-DELTA_p2");
+  // Its images need a frame the operator received with the map settled: 90, not 30.
+  EXPECT_EQ(defaultQualityFrame(picked.value()), 90);
+  EXPECT_EQ(defaultQualityFrame(selectConditions("F1,FREF,MAP").value()), 30);
+  EXPECT_EQ(defaultQualityFrame(defaultConditions()), 30);
   Result<std::vector<Condition>> bad = selectConditions("MAP_DELTA");
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.status().message().find("MAP-DELTA"), std::string::npos);
