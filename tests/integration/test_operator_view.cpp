@@ -3,7 +3,8 @@
 // streams and goes away, and the operator reconnecting throughout; and that
 // the operator started with --view and no robot keeps serving the page. And,
 // against a robot played here (a net::RobotLink), the operator keeping the
-// map's bricks: acknowledged, drawn in the page's frames, counted in its logs.
+// map's bricks: acknowledged, drawn in the page's frames, counted in its logs,
+// and saved with a frame by --save-held.
 #include <gtest/gtest.h>
 
 #include <signal.h>
@@ -125,7 +126,8 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
   const std::string address = "127.0.0.1:" + std::to_string(robot->localEndpoint().port());
   test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address +
                              " --insecure --view 127.0.0.1:0 --quiet --map-points 65536 --map-bricks 64 --frame-log " +
-                             dir_.file("frames.csv") + " --summary " + dir_.file("summary.json"));
+                             dir_.file("frames.csv") + " --summary " + dir_.file("summary.json") + " --save-held 11:" +
+                             dir_.file("held.ply"));
   const int port = viewerPort(op);
   ASSERT_GT(port, 0) << op.output();
   test::Tab tab(port);
@@ -213,6 +215,20 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
   }
   EXPECT_NE(last.find(",3," + std::to_string(map_points) + ","), std::string::npos) << last;
   EXPECT_LE(parts_logged, sent_parts.size()) << "parts since the previous line add up to at most all of them";
+
+  // --save-held 11: the first live frame (whole, after every brick's parts) and the
+  // three bricks, as fovea-eval's MAP-DELTA reads them (tools/operator/held_cloud.h).
+  const std::string saved = "--save-held: frame 11 (300 live points, " + std::to_string(map_points) + " map points in 3 bricks)";
+  EXPECT_NE(out.find(saved), std::string::npos) << out;
+  std::stringstream text;
+  text << std::ifstream(dir_.file("held.ply") + ".txt").rdbuf();
+  EXPECT_EQ(text.str().rfind("frame_id 11\nlive_points 300\nmap_points " + std::to_string(map_points) + "\nmap_bricks 3\n", 0), 0u)
+      << text.str();
+  std::ifstream ply(dir_.file("held.ply"), std::ios::binary);
+  std::string ply_header, ply_line;
+  while (std::getline(ply, ply_line) && ply_line != "end_header") ply_header += ply_line + "\n";
+  EXPECT_NE(ply_header.find("element vertex " + std::to_string(300 + map_points) + "\n"), std::string::npos) << ply_header;
+  EXPECT_NE(ply_header.find("property uchar region"), std::string::npos) << ply_header;
 }
 
 TEST_F(OperatorView, BadViewAddressesAreUsageErrors) {

@@ -39,6 +39,7 @@
 #include "tools/eval/quality_eval.h"
 #include "tools/eval/report.h"
 #include "tools/eval/results.h"
+#include "tools/operator/held_cloud.h"
 
 extern char** environ;
 
@@ -76,11 +77,16 @@ const char* kHelp =
     "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
     "  --conditions LIST      F1, F2, F3, FREF, ACUITY, ACUITY-2MM (ACUITY with a distance floor of\n"
     "                         2 mm x s^2), ACUITY-REFINED (ACUITY, margin 0.3, one refinement pass),\n"
-    "                         MAP (ACUITY on the fused surfel map, foveation.source = map; docs/map.md)\n"
-    "                         (default: all but MAP)\n"
+    "                         MAP (ACUITY on the fused surfel map, foveation.source = map, map.delta =\n"
+    "                         false; docs/map.md), MAP-DELTA (the same map streamed as bricks the operator\n"
+    "                         keeps, map.delta = true; its quality from what the operator held,\n"
+    "                         docs/map-delta.md) (default: all but MAP and MAP-DELTA)\n"
     "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
     "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
-    "  --quality-frame K      the frame (0-based) the images are made from (default 30)\n"
+    "  --quality-frame K      the frame (the camera's sequence number, 0-based) the images are made from\n"
+    "                         (default 30; 90 with MAP-DELTA, whose operator must have received the\n"
+    "                         frame and the map settled); with MAP-DELTA, each measured position's\n"
+    "                         images are of the frame its operator saved (the first whole one >= K)\n"
     "  --fovead PATH, --operator PATH   the programs (default: beside fovea-eval, build tree or installed)\n"
     "  --fresh                discard the runs of an earlier evaluation in DIR\n"
     "  --no-plot              do not run gnuplot (the .gp scripts are still written)\n";
@@ -95,11 +101,14 @@ struct Options {
   std::string tum = "../shared/data/tum-fr3-teddy";
   bool tum_given = false;
   int quality_positions = -1;
-  int quality_frame = 30;
+  int quality_frame = -1;  // -1: defaultQualityFrame (plan.h)
   std::string fovead, op;
   bool fresh = false;
   bool plot = true;
 };
+
+// The file a MAP-DELTA run's operator writes at the quality frame (--save-held).
+const char* kHeldFile = "held.ply";
 
 volatile std::sig_atomic_t g_stop = 0;
 void onSignal(int) { g_stop = 1; }
@@ -252,6 +261,9 @@ struct RunSpec {
   Condition condition;
   HmdPosition position;
   std::string dir;
+  // MAP-DELTA at a position whose images are measured: the operator saves what
+  // it draws at the first whole frame with this id or later (-1: not).
+  int held_frame = -1;
 };
 
 // What a finished run was, kept beside its logs: a run of the same name made with
@@ -265,6 +277,8 @@ std::string runSignature(const RunSpec& r, const Options& o) {
   if (r.condition.level_margin > 0.0) settings += "\nlevel_margin " + shortestDecimal(r.condition.level_margin);
   if (r.condition.refine_passes > 0) settings += "\nrefine_passes " + std::to_string(r.condition.refine_passes);
   if (!r.condition.source.empty()) settings += "\nsource " + r.condition.source;
+  if (r.condition.map_delta) settings += "\nmap_delta";
+  if (r.held_frame >= 0) settings += "\nheld_frame " + std::to_string(r.held_frame);
   return "camera " + r.dataset.camera_spec + "\npreset " + r.condition.preset + settings + "\nframes " +
          std::to_string(o.frames) + "\nbudget " + kBudgetMbps + "\nseed " + std::to_string(o.seed) + "\nposition " +
          std::to_string(r.position.index) + " of " + std::to_string(o.positions) + "\n";
@@ -289,10 +303,20 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
   // o.frames decoded are measured whatever was captured.
   const int fps = 30;
   std::string last_error;
+  // After a short attempt: at least the share of frames it decoded scaled up, plus
+  // a fifth (the map source fuses every frame at 5 to 12 fps on the 2-core host, so
+  // 120 frames need 300 to 700 captured), at most 20 times the frames.
+  int scaled = 0;
   for (int attempt = 0; attempt < 3 && !g_stop; ++attempt) {
-    const int captured = (o.frames + 45) * (attempt + 1);
+    // MAP-DELTA's operator saves what it draws at the quality frame: the camera runs
+    // two seconds past it whatever the frames measured.
+    const int captured = std::min(std::max({(o.frames + 45) * (attempt + 1), scaled,
+                                            run.held_frame >= 0 ? run.held_frame + 60 : 0}),
+                                  std::max((o.frames + 45) * (attempt + 1), 20 * o.frames));
     const double seconds = static_cast<double>(captured) / fps;
     const int port = freePort();
+    fs::remove(run.dir + "/" + kHeldFile, ec);  // an earlier attempt's
+    fs::remove(run.dir + "/" + kHeldFile + ".txt", ec);
     const std::string listen = "127.0.0.1:" + std::to_string(port);
     std::vector<std::string> serve = {fovead, "serve", "--listen", listen, "--insecure", "--camera",
                                       run.dataset.camera_spec, "--preset", run.condition.preset, "--budget",
@@ -306,11 +330,15 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
     // service says it runs (opening the camera can take longer: TUM decodes every frame
     // first, slower on a loaded machine), or after 60 s or the service's exit.
     waitForLine(run.dir + "/fovead.log", "fovead serve: running", robot, std::chrono::seconds(60));
-    const pid_t operator_pid =
-        spawn({op, "--connect", listen, "--insecure", "--gaze", gazeScript(run.position, 400, 50), "--frame-log",
-               run.dir + "/frames.csv", "--summary", run.dir + "/summary.json", "--budget", kBudgetMbps, "--quiet", "--duration",
-               std::to_string(static_cast<int>(seconds + 20))},
-              run.dir + "/operator.log");
+    std::vector<std::string> operator_args = {
+        op, "--connect", listen, "--insecure", "--gaze", gazeScript(run.position, 400, 50), "--frame-log",
+        run.dir + "/frames.csv", "--summary", run.dir + "/summary.json", "--budget", kBudgetMbps, "--quiet", "--duration",
+        std::to_string(static_cast<int>(seconds + 20))};
+    if (run.held_frame >= 0) {
+      operator_args.insert(operator_args.end(),
+                           {"--save-held", std::to_string(run.held_frame) + ":" + run.dir + "/" + kHeldFile});
+    }
+    const pid_t operator_pid = spawn(operator_args, run.dir + "/operator.log");
     if (operator_pid < 0) {
       (void)waitFor(robot, std::chrono::steady_clock::now());
       return R(ErrorCode::kNotFound, "cannot start " + op + " (--operator PATH)");
@@ -325,6 +353,9 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
       r->condition = run.condition.name;
       r->position = run.position.index;
       return r;
+    }
+    if (r && r->frames > 0) {
+      scaled = static_cast<int>(std::ceil(1.2 * captured * static_cast<double>(o.frames) / r->frames)) + 45;
     }
     last_error = (r ? "only " + std::to_string(r->frames) + " of " + std::to_string(o.frames) + " frames decoded"
                     : r.status().message()) +
@@ -409,6 +440,11 @@ Result<DatasetScene> openScene(const Dataset& d, int quality_frame, bool with_ma
   return scene;
 }
 
+// The positions per dataset whose images are measured (the first ones).
+int qualityCount(const Options& o, std::size_t positions) {
+  return o.quality_positions < 0 ? static_cast<int>(positions) : std::min<int>(o.quality_positions, static_cast<int>(positions));
+}
+
 std::string minutes(double s) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%d:%02d", static_cast<int>(s) / 60, static_cast<int>(s) % 60);
@@ -426,7 +462,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-eval: %s\n", parsed.status().message().c_str());
     return kExitUsage;
   }
-  const Options& o = parsed.value();
+  Options o = parsed.value();
   std::error_code ec;
   const bool have_tum = fs::exists(o.tum + "/associations.txt", ec);
   if (o.tum_given && !have_tum) {
@@ -448,6 +484,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-eval: %s\n", conditions.status().message().c_str());
     return kExitUsage;
   }
+  if (o.quality_frame < 0) o.quality_frame = defaultQualityFrame(conditions.value());
   const std::string fovead = findProgram(o.fovead, "fovead", {".", "../firmware", "../../firmware"});
   const std::string op = findProgram(o.op, "fovea-operator", {".", ".."});
 
@@ -482,9 +519,12 @@ int run(int argc, char** argv) {
     }
     const std::vector<HmdPosition> positions = makePositions(scene->geometry, o.positions, o.seed);
     report.datasets.push_back({d, scene->geometry, positions});
-    for (const HmdPosition& p : positions) {
+    for (std::size_t k = 0; k < positions.size(); ++k) {
+      const HmdPosition& p = positions[k];
       for (const Condition& c : conditions.value()) {
-        plan.push_back({d, c, p, (out / "runs" / runName(d, c, p)).string()});
+        // MAP-DELTA's quality comes from what its operator drew at the quality frame.
+        const int held_frame = c.map_delta && static_cast<int>(k) < qualityCount(o, positions.size()) ? o.quality_frame : -1;
+        plan.push_back({d, c, p, (out / "runs" / runName(d, c, p)).string(), held_frame});
       }
     }
     scenes.emplace(d.name, std::move(scene.value()));
@@ -556,18 +596,63 @@ int run(int argc, char** argv) {
   QualityOptions quality;
   report.quality_options = quality;
   report.quality_frame = o.quality_frame;
+  // MAP-DELTA's positions may be measured at a later frame than the quality frame
+  // (the first whole one its operator received from it on): every condition of
+  // that position is then drawn from that frame, opened again here.
+  std::map<std::pair<std::string, int>, DatasetScene> later_scenes;
   for (const ReportDataset& d : report.datasets) {
-    const int count = o.quality_positions < 0 ? static_cast<int>(d.positions.size())
-                                              : std::min<int>(o.quality_positions, static_cast<int>(d.positions.size()));
+    const int count = qualityCount(o, d.positions.size());
     for (int k = 0; k < count && !g_stop; ++k) {
       QualityOptions q = quality;
       // Side-by-side images of the first position only: enough to look at.
       if (k == 0) q.image_path_prefix = (out / "images" / (d.dataset.name + "_p1")).string();
-      std::printf("quality: %s position %d\n", d.dataset.name.c_str(), d.positions[k].index);
+      DatasetScene* scene = &scenes.at(d.dataset.name);
+      std::optional<tools::HeldCloud> held;
+      for (const Condition& c : report.conditions) {
+        if (!c.map_delta) continue;
+        const fs::path run_dir = out / "runs" / runName(d.dataset, c, d.positions[k]);
+        const std::string path = (run_dir / kHeldFile).string();
+        // Only a run in the table: a failed one's last attempt may have saved a cloud too.
+        Result<tools::HeldCloud> loaded = fs::exists(run_dir / "done", ec)
+                                              ? tools::loadHeldCloud(path)
+                                              : Result<tools::HeldCloud>(ErrorCode::kNotFound, "its run failed");
+        if (!loaded) {
+          std::printf("quality: %s position %d: %s not measured: %s\n", d.dataset.name.c_str(), d.positions[k].index,
+                      c.name.c_str(), loaded.status().message().c_str());
+          continue;
+        }
+        held = std::move(loaded.value());
+        const int frame = static_cast<int>(held->info.frame_id);
+        if (frame == o.quality_frame) continue;
+        auto it = later_scenes.find({d.dataset.name, frame});
+        if (it == later_scenes.end()) {
+          std::printf("quality: %s position %d: %s's operator saved frame %d: every condition drawn from it\n",
+                      d.dataset.name.c_str(), d.positions[k].index, c.name.c_str(), frame);
+          std::fflush(stdout);
+          Result<DatasetScene> later = openScene(d.dataset, frame, scene->map != nullptr);
+          if (!later) {
+            std::fprintf(stderr, "fovea-eval: quality %s frame %d: %s\n", d.dataset.name.c_str(), frame,
+                         later.status().message().c_str());
+            return kExitFailure;
+          }
+          it = later_scenes.emplace(std::make_pair(d.dataset.name, frame), std::move(later.value())).first;
+        }
+        scene = &it->second;
+      }
+      if (scene->quality_frame.sequence != static_cast<uint64_t>(held ? held->info.frame_id : o.quality_frame)) {
+        // The frame id on the wire is the camera's sequence number; opened here
+        // without pacing, the camera numbers its frames 0, 1, 2, ...
+        std::fprintf(stderr, "fovea-eval: quality %s: the camera numbered the frame %llu, not %d\n", d.dataset.name.c_str(),
+                     static_cast<unsigned long long>(scene->quality_frame.sequence),
+                     held ? static_cast<int>(held->info.frame_id) : o.quality_frame);
+        return kExitFailure;
+      }
+      std::printf("quality: %s position %d, frame %llu\n", d.dataset.name.c_str(), d.positions[k].index,
+                  static_cast<unsigned long long>(scene->quality_frame.sequence));
       std::fflush(stdout);
       Result<std::vector<QualityRow>> rows =
-          (*evaluator)->evaluate(scenes.at(d.dataset.name).quality_frame, d.dataset, d.positions[k], report.conditions, q,
-                                 scenes.at(d.dataset.name).map.get());
+          (*evaluator)->evaluate(scene->quality_frame, d.dataset, d.positions[k], report.conditions, q, scene->map.get(),
+                                 held ? &*held : nullptr);
       if (!rows) {
         std::fprintf(stderr, "fovea-eval: quality %s position %d: %s\n", d.dataset.name.c_str(), d.positions[k].index,
                      rows.status().message().c_str());

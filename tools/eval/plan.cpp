@@ -27,7 +27,8 @@ std::vector<Condition> defaultConditions() {
 
 std::vector<Condition> allConditions() {
   std::vector<Condition> all = defaultConditions();
-  all.push_back({"MAP", "ACUITY", 0.0, 0.0, 0, "map"});
+  all.push_back({"MAP", "ACUITY", 0.0, 0.0, 0, "map", false});
+  all.push_back({"MAP-DELTA", "ACUITY", 0.0, 0.0, 0, "map", true});
   return all;
 }
 
@@ -37,10 +38,16 @@ std::vector<std::string> conditionSettings(const Condition& c) {
   if (c.level_margin > 0.0) out.push_back("foveation.level_margin=" + shortestDecimal(c.level_margin));
   if (c.refine_passes > 0) out.push_back("foveation.refine_passes=" + std::to_string(c.refine_passes));
   if (!c.source.empty()) out.push_back("foveation.source=" + c.source);
-  // MAP is the map foveated as the eye sees it with every frame, not the
-  // stream of the map's bricks (fovead's default with the map since issue 26).
-  if (c.source == "map") out.push_back("map.delta=false");
+  // MAP is the map foveated as the eye sees it with every frame; MAP-DELTA the
+  // stream of the map's bricks (fovead's default with the map since issue 26),
+  // said explicitly so that the run does not depend on the default.
+  if (c.source == "map") out.push_back(c.map_delta ? "map.delta=true" : "map.delta=false");
   return out;
+}
+
+int defaultQualityFrame(const std::vector<Condition>& conditions) {
+  const bool delta = std::any_of(conditions.begin(), conditions.end(), [](const Condition& c) { return c.map_delta; });
+  return delta ? kMapDeltaQualityFrame : kDefaultQualityFrame;
 }
 
 std::string shortestDecimal(double value) {
@@ -68,7 +75,7 @@ Result<std::vector<Condition>> selectConditions(const std::string& names) {
   std::vector<Condition> out;
   for (const std::string& n : splitComma(names)) {
     auto it = std::find_if(all.begin(), all.end(), [&](const Condition& c) { return c.name == n; });
-    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP)");
+    if (it == all.end()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: unknown '" + n + "' (F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP, MAP-DELTA)");
     out.push_back(*it);
   }
   if (out.empty()) return Result<std::vector<Condition>>(ErrorCode::kInvalidArgument, "--conditions: none given");

@@ -24,7 +24,7 @@ struct Dataset {
 std::vector<Dataset> defaultDatasets(const std::string& tum_path);
 
 struct Condition {
-  std::string name;    // F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP
+  std::string name;    // F1, F2, F3, FREF, ACUITY, ACUITY-2MM, ACUITY-REFINED, MAP, MAP-DELTA
   std::string preset;  // fovead --preset
   // ACUITY's distance floor (foveation.floor_per_m2, m per m^2 of distance); 0: none.
   double floor_per_m2 = 0.0;
@@ -33,24 +33,35 @@ struct Condition {
   double level_margin = 0.0;
   int refine_passes = 0;
   // What is foveated (foveation.source): "" the frame (fovead's default), "map"
-  // the fused surfel map (docs/map.md), sent with every frame as the eye sees
-  // it (map.delta = false: the service's default with the map is to stream
-  // the map's bricks, docs/map-delta.md, which this table does not measure yet).
+  // the fused surfel map (docs/map.md).
   std::string source = {};
+  // With the map: false, the map's surfels the eye sees sent with every frame
+  // (map.delta = false, MAP); true, the map streamed as bricks the operator keeps
+  // and each frame's live points (map.delta = true, MAP-DELTA, docs/map-delta.md),
+  // whose quality is measured from what the operator holds (fovea-operator --save-held).
+  bool map_delta = false;
 };
 // The paper's F1, F2, F3 and FREF, and ACUITY (the mode beyond the paper), also with a
 // distance floor of 2 mm x s^2 (as fast as F1 on the mock room) and refined (margin
 // 0.3, one pass; docs/acuity-levels.md).
 std::vector<Condition> defaultConditions();
 // Every condition --conditions may name: the default ones, then MAP (ACUITY
-// foveating the fused surfel map, foveation.source = map; not a default: it
-// fuses every frame with the scalar reference, about 54 ms a 640x480 frame,
-// docs/eval.md).
+// foveating the fused surfel map, foveation.source = map, map.delta = false) and
+// MAP-DELTA (the same map streamed as bricks, map.delta = true); neither is a
+// default: the service fuses every frame, 60 to 140 ms a 640x480 frame on the
+// 2-core host (docs/eval.md).
 std::vector<Condition> allConditions();
 // What a condition sets beyond its preset, as `fovead --set` takes it, in this order:
 // foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes,
-// foveation.source and, with the map, map.delta = false (those set).
+// foveation.source and, with the map, map.delta (those set).
 std::vector<std::string> conditionSettings(const Condition& c);
+// The quality frame (the camera's sequence number) when --quality-frame is not
+// given: 30, or 90 when a condition streams the map as bricks (MAP-DELTA): its
+// operator must hold the map by then, and the map's bricks come only once its
+// surfels settled, 1 to 3 s after the start on the 2-core host (docs/eval.md).
+inline constexpr int kDefaultQualityFrame = 30;
+inline constexpr int kMapDeltaQualityFrame = 90;
+int defaultQualityFrame(const std::vector<Condition>& conditions);
 // A setting's number as `fovead --set` takes it: the shortest decimal that reads back
 // as the same double (0.002, not 0.0020000000000000000416).
 std::string shortestDecimal(double value);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Geometry>
 
@@ -10,6 +11,7 @@
 #include "pipeline/error_metrics.h"
 #include "pipeline/foveator.h"
 #include "tools/common/splat_spacing.h"
+#include "tools/eval/quality/held_error.h"
 #include "tools/eval/quality/png_writer.h"
 #include "tools/eval/quality/splat_renderer.h"
 
@@ -69,7 +71,8 @@ EyeCamera eyeCamera(const HmdPosition& position, const Eigen::Vector3d& up, cons
 Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame& frame, const Dataset& dataset,
                                                            const HmdPosition& position,
                                                            const std::vector<Condition>& conditions,
-                                                           const QualityOptions& options, firmware::FrameFoveator* map) {
+                                                           const QualityOptions& options, firmware::FrameFoveator* map,
+                                                           const tools::HeldCloud* held) {
   using R = Result<std::vector<QualityRow>>;
   State& s = *s_;
   pipeline::BackprojectCounts counts;
@@ -90,7 +93,116 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     if (c.name != "FREF") order.push_back(c);
   }
   std::vector<QualityRow> rows;
+  // Draws `splats` from the eye, measures it against the reference (or makes it
+  // the reference) and writes the side-by-side image with `lines` (empty: the rings).
+  const auto draw = [&](const SplatCloud& splats, const std::string& name, std::vector<double> lines,
+                        QualityRow& row) -> Status {
+    const bool is_reference = name == "FREF";
+    Image& target = is_reference ? s.reference : s.image;
+    (void)renderSplats(splats, camera, {0, 0, 0}, target);
+    Result<FoveatedQuality> q =
+        foveatedQuality(s.reference, target, camera, gaze.direction, options.ring_edges_deg, options.slope);
+    if (!q) return q.status();
+    row.quality = q.value();
+    if (!options.image_path_prefix.empty() && !is_reference) {
+      if (lines.size() < 2) lines = options.ring_edges_deg;
+      row.image = options.image_path_prefix + "_" + name + ".png";
+      if (Status st = writeSideBySidePng(row.image, s.reference, target, camera, gaze.direction, lines,
+                                         options.image_scale);
+          !st) {
+        return st;
+      }
+    }
+    return Status::ok();
+  };
   for (const Condition& c : order) {
+    if (c.map_delta) {
+      // What the operator drew at this frame (fovea-operator --save-held), not a
+      // foveation of the frame here.
+      QualityRow row;
+      row.dataset = dataset.name;
+      row.condition = c.name;
+      row.position = position.index;
+      row.frame = static_cast<int>(frame.sequence);
+      if (held == nullptr) {
+        row.measured = false;
+        row.quality = rows.front().quality;  // FREF's rings (their bounds and weights), every figure NaN
+        for (Ring& r : row.quality.rings) r.psnr_db = r.ssim = std::numeric_limits<double>::quiet_NaN();
+        row.quality.weighted_psnr_db = row.quality.weighted_ssim = row.quality.psnr_db = row.quality.ssim =
+            std::numeric_limits<double>::quiet_NaN();
+        row.above_mar_share = std::numeric_limits<double>::quiet_NaN();
+        rows.push_back(std::move(row));
+        continue;
+      }
+      const tools::HeldCloud& h = *held;
+      if (h.info.frame_id != frame.sequence) {
+        return R(ErrorCode::kInvalidArgument, c.name + ": the operator's cloud is of frame " + std::to_string(h.info.frame_id) +
+                                                  ", the quality frame is " + std::to_string(frame.sequence));
+      }
+      const std::size_t n = h.points.size();
+      if (h.region.size() != n) return R(ErrorCode::kInvalidArgument, c.name + ": a region per point is needed");
+      // Splats as for every other condition: a live region's median spacing or
+      // its voxel, whichever is larger, FREF's raw spacing for raw points; the
+      // same per brick level (level 0, raw surfels: at least FREF's raw spacing
+      // and the brick's step). The viewer draws a level at its voxel alone
+      // (tools/operator/view_frame.h), which leaves holes where the map's
+      // surfels lie farther apart than a fine level's voxel.
+      pipeline::FoveatedCloud live;
+      live.points = h.points;
+      live.region = h.region;
+      std::array<uint32_t, pipeline::kMaxRegions> region_points{};
+      for (uint8_t r : h.region) {
+        if (r < pipeline::kMaxRegions) ++region_points[r];
+      }
+      std::array<float, pipeline::kMaxRegions> live_size = medianNeighbourSpacing(live, region_points, s.spacing);
+      const double ratio = h.info.periphery_step_ratio;
+      for (int r = 1; r < pipeline::kMaxRegions; ++r) {
+        live_size[r] = std::max(live_size[r], static_cast<float>(h.info.live_step_m[r] / ratio));
+      }
+      live_size[0] = s.raw_spacing_m;
+      // The map's points by level, measured the same way (a brick's points keep
+      // the codec's Morton order in the cache).
+      pipeline::FoveatedCloud bricks;
+      bricks.points = h.points;
+      bricks.region.assign(n, pipeline::kMaxRegions);  // the live points: in no level
+      std::array<uint32_t, pipeline::kMaxRegions> level_points{};
+      for (std::size_t i = 0; i < n; ++i) {
+        const uint8_t r = h.region[i];
+        if (r >= tools::kHeldMapRegion && r < tools::kHeldMapRegion + pipeline::kMaxRegions) {
+          bricks.region[i] = static_cast<uint8_t>(r - tools::kHeldMapRegion);
+          ++level_points[bricks.region[i]];
+        }
+      }
+      std::array<float, pipeline::kMaxRegions> map_size = medianNeighbourSpacing(bricks, level_points, s.spacing);
+      map_size[0] = std::max({map_size[0], s.raw_spacing_m, static_cast<float>(h.info.map_step_m[0])});
+      for (int l = 1; l < pipeline::kMaxRegions; ++l) {
+        map_size[l] = std::max(map_size[l], static_cast<float>(h.info.map_step_m[l] / ratio));
+      }
+      std::vector<float> size_m(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        const uint8_t r = h.region[i];
+        float size = 0.0f;
+        if (r < pipeline::kMaxRegions) {
+          size = live_size[r];
+        } else if (r >= tools::kHeldMapRegion && r < tools::kHeldMapRegion + pipeline::kMaxRegions) {
+          size = map_size[r - tools::kHeldMapRegion];
+        }
+        size_m[i] = size > 0.0f ? size : static_cast<float>((h.points.world(i) - sensor).norm() / fx);
+      }
+      SplatCloud splats;
+      splats.x = h.points.x();
+      splats.y = h.points.y();
+      splats.z = h.points.z();
+      splats.rgb = h.points.rgb();
+      splats.size_m = size_m.data();
+      splats.count = n;
+      splats.origin_m = h.points.origin_m;
+      row.points = static_cast<uint32_t>(n);
+      row.above_mar_share = heldShareAboveMar(s.cloud, h.points, camera, gaze.direction, options.slope);
+      if (Status st = draw(splats, c.name, {}, row); !st) return st;
+      rows.push_back(std::move(row));
+      continue;
+    }
     pipeline::FoveationConfig config;
     Result<pipeline::Preset> preset = pipeline::parsePreset(c.preset);
     if (!preset) return preset.status();
@@ -186,28 +298,14 @@ Result<std::vector<QualityRow>> QualityEvaluator::evaluate(const hal::RgbdFrame&
     splats.count = p.size();
     splats.origin_m = p.origin_m;
     row.points = static_cast<uint32_t>(p.size());
-    const bool is_reference = c.name == "FREF";
-    Image& target = is_reference ? s.reference : s.image;
-    (void)renderSplats(splats, camera, {0, 0, 0}, target);
-    Result<FoveatedQuality> q =
-        foveatedQuality(s.reference, target, camera, gaze.direction, options.ring_edges_deg, options.slope);
-    if (!q) return q.status();
-    row.quality = q.value();
-    if (!options.image_path_prefix.empty() && !is_reference) {
-      // The lines on the difference: the condition's own region borders (the paper's
-      // cones), or, for ACUITY, which has none, the measuring rings.
-      std::vector<double> lines = {0.0};
-      for (int b = 0; b < foveator->model().boundCount(); ++b) {
-        if (foveator->model().boundDeg(b) < 90.0) lines.push_back(foveator->model().boundDeg(b));
-      }
-      if (lines.size() < 2) lines = options.ring_edges_deg;
-      row.image = options.image_path_prefix + "_" + c.name + ".png";
-      if (Status st = writeSideBySidePng(row.image, s.reference, target, camera, gaze.direction, lines,
-                                         options.image_scale);
-          !st) {
-        return st;
-      }
+    row.frame = static_cast<int>(frame.sequence);
+    // The lines on the difference: the condition's own region borders (the paper's
+    // cones), or, for ACUITY, which has none, the measuring rings.
+    std::vector<double> lines = {0.0};
+    for (int b = 0; b < foveator->model().boundCount(); ++b) {
+      if (foveator->model().boundDeg(b) < 90.0) lines.push_back(foveator->model().boundDeg(b));
     }
+    if (Status st = draw(splats, c.name, lines, row); !st) return st;
     rows.push_back(std::move(row));
   }
   return rows;

@@ -15,6 +15,7 @@
 #include "firmware/frame_foveator.h"
 #include "tools/eval/plan.h"
 #include "tools/eval/quality/image_quality.h"
+#include "tools/operator/held_cloud.h"
 
 namespace fovea::tools::eval {
 
@@ -30,8 +31,16 @@ struct QualityOptions {
 struct QualityRow {
   std::string dataset, condition;
   int position = 0;
+  int frame = -1;              // the dataset's frame (the camera's sequence number) drawn
+  // false: nothing to measure (MAP-DELTA without what the operator held at the
+  // frame: never decoded, lost, or before the operator's hello); every figure NaN.
+  bool measured = true;
   FoveatedQuality quality;     // against FREF's image
-  double above_mar_share = 0;  // input points displaced by more than their MAR
+  // Input points displaced by more than their MAR: against their representative;
+  // for a cloud the operator held (MAP-DELTA), against the nearest point drawn,
+  // over the input points inside the eye's image (heldShareAboveMar, quality/held_error.h);
+  // NaN when no input point is in the image.
+  double above_mar_share = 0;
   uint32_t points = 0;         // decoded points drawn
   std::string image;           // the side-by-side PNG written, if any
 };
@@ -46,9 +55,14 @@ class QualityEvaluator {
   // source's stage that fused the dataset's frames up to and including `frame`
   // (its cloud the frame's unexplained points); kInvalidArgument without one.
   // max_points (create) must then hold FrameFoveator::cloudCapacity.
+  // A condition with map_delta (MAP-DELTA) is not foveated here: it draws `held`,
+  // what fovea-operator --save-held wrote at this frame (its live points and the
+  // bricks it held), sized as the viewer sizes them; without it, the row is not
+  // measured (measured = false, NaN figures).
   Result<std::vector<QualityRow>> evaluate(const hal::RgbdFrame& frame, const Dataset& dataset,
                                            const HmdPosition& position, const std::vector<Condition>& conditions,
-                                           const QualityOptions& options, firmware::FrameFoveator* map = nullptr);
+                                           const QualityOptions& options, firmware::FrameFoveator* map = nullptr,
+                                           const tools::HeldCloud* held = nullptr);
 
  private:
   struct State;

@@ -49,12 +49,26 @@ const ConditionSummary* find(const std::vector<ConditionSummary>& s, const std::
 struct QualityMean {
   double weighted_psnr = kNaN, weighted_ssim = kNaN, psnr = kNaN, ssim = kNaN, above_mar = kNaN;
   double points = kNaN;
-  int positions = 0;
+  int positions = 0;     // measured
+  int not_measured = 0;  // MAP-DELTA positions without what the operator held
+  std::string frames;    // the frames drawn, comma-separated
 };
 QualityMean qualityMean(const std::vector<QualityRow>& rows, const std::string& dataset, const std::string& condition) {
   std::vector<double> wp, ws, p, s, a, n;
+  int not_measured = 0;
+  std::string frames;
   for (const QualityRow& r : rows) {
     if (r.dataset != dataset || r.condition != condition) continue;
+    if (!r.measured) {
+      ++not_measured;
+      continue;
+    }
+    const std::string frame = std::to_string(r.frame);
+    if (frames.empty()) {
+      frames = frame;
+    } else if (("," + frames + ",").find("," + frame + ",") == std::string::npos) {
+      frames += "," + frame;
+    }
     wp.push_back(r.quality.weighted_psnr_db);
     ws.push_back(r.quality.weighted_ssim);
     p.push_back(r.quality.psnr_db);
@@ -64,6 +78,8 @@ QualityMean qualityMean(const std::vector<QualityRow>& rows, const std::string& 
   }
   QualityMean m;
   m.positions = static_cast<int>(wp.size());
+  m.not_measured = not_measured;
+  m.frames = frames;
   if (wp.empty()) return m;
   m.weighted_psnr = mean(wp);
   m.weighted_ssim = mean(ws);
@@ -95,7 +111,7 @@ std::string conditionSettingsText(const std::vector<Condition>& conditions) {
     if (settings.empty()) continue;
     out += c.name + " is `--preset " + c.preset;
     for (const std::string& setting : settings) out += " --set " + setting;
-    out += c.source.empty() ? "` (docs/acuity-levels.md); " : "` (docs/map.md); ";
+    out += c.source.empty() ? "` (docs/acuity-levels.md); " : c.map_delta ? "` (docs/map-delta.md); " : "` (docs/map.md); ";
   }
   return out;
 }
@@ -149,13 +165,13 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     const std::string ring = "ring_" + fixed(edges[k], 1) + "_" + fixed(edges[k + 1], 1);
     quality_csv += "," + ring + "_psnr_db," + ring + "_ssim," + ring + "_weight";
   }
-  quality_csv += ",image\n";
+  quality_csv += ",image,frame,measured\n";
   for (const QualityRow& q : in.quality) {
     quality_csv += q.dataset + "," + q.condition + "," + std::to_string(q.position) + "," + std::to_string(q.points) + "," +
                    fixed(q.above_mar_share, 6) + "," + fixed(q.quality.weighted_psnr_db, 3) + "," +
                    fixed(q.quality.weighted_ssim, 5) + "," + fixed(q.quality.psnr_db, 3) + "," + fixed(q.quality.ssim, 5);
     for (const Ring& r : q.quality.rings) quality_csv += "," + fixed(r.psnr_db, 3) + "," + fixed(r.ssim, 5) + "," + fixed(r.weight, 5);
-    quality_csv += "," + q.image + "\n";
+    quality_csv += "," + q.image + "," + std::to_string(q.frame) + "," + (q.measured ? "1" : "0") + "\n";
   }
   for (const auto& [name, text] : {std::pair<std::string, std::string>{"runs.csv", runs_csv},
                                    {"table2.csv", table_csv}, {"stages.csv", stages_csv}, {"quality.csv", quality_csv}}) {
@@ -348,8 +364,8 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
 
   md << "## Visual quality: an objective stand-in for the paper's user study\n\n"
      << "**These are objective proxies, not a user study.** The paper asked 24 people to rate each condition against "
-        "FREF (DSIS, a 5-point impairment scale). Here, for frame " << in.quality_frame << " of each dataset and each "
-        "HMD position measured, every condition's cloud (foveated with that position's gaze on the scene's centre, "
+        "FREF (DSIS, a 5-point impairment scale). Here, for frame " << in.quality_frame << " of each dataset (with "
+        "MAP-DELTA: the frame its operator saved, in the `frame` column) and each HMD position measured, every condition's cloud (foveated with that position's gaze on the scene's centre, "
         "through the stream's codec and back) is drawn by a deterministic software renderer (tools/eval/quality/: "
         "z-buffered square splats, a raw point as large as the camera pixel it came from, a voxel-sampled one as "
         "large as its voxel or, when that is finer, as that pixel) from the HMD's eye at "
@@ -365,15 +381,30 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
      << "- **above MAR**: the share of input points displaced, seen from the eye, by more than the MAR at their "
         "eccentricity (the speed-against-error report's measure, docs/report/).\n\n"
      << "Means over the positions measured (FREF against itself: PSNR inf, SSIM 1):\n\n";
+  if (std::any_of(in.conditions.begin(), in.conditions.end(), [](const Condition& c) { return c.map_delta; })) {
+    md << "MAP-DELTA is drawn from what its run's operator held (`fovea-operator --save-held`, docs/eval.md): the "
+          "live points of the first frame from the quality frame on that arrived whole, and every map brick it held "
+          "then; every condition of that position is drawn from that frame (the camera's sequence number, the "
+          "`frame` column). Its *above MAR* judges each FREF input point inside the eye's image against the nearest "
+          "point drawn, not against its own representative (there is none): not the same measure as the other "
+          "rows'. A position whose operator saved nothing is *not measured*.\n\n";
+  }
   for (const ReportDataset& d : in.datasets) {
-    md << "### " << d.dataset.name << "\n\n| condition | positions | points drawn | weighted PSNR [dB] | weighted SSIM | "
-          "PSNR, whole image [dB] | SSIM, whole image | above MAR |\n|---|---:|---:|---:|---:|---:|---:|---:|\n";
+    md << "### " << d.dataset.name << "\n\n| condition | positions | frame | points drawn | weighted PSNR [dB] | weighted SSIM | "
+          "PSNR, whole image [dB] | SSIM, whole image | above MAR |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for (const Condition& c : in.conditions) {
       const QualityMean q = qualityMean(in.quality, d.dataset.name, c.name);
-      if (q.positions == 0) continue;
-      md << "| " << c.name << " | " << q.positions << " | " << fixed(q.points, 0) << " | " << fixed(q.weighted_psnr, 2)
+      if (q.positions == 0 && q.not_measured == 0) continue;
+      if (q.positions == 0) {
+        md << "| " << c.name << " | 0 of " << q.not_measured << " | - | not measured | not measured | not measured | "
+           << "not measured | not measured | not measured |\n";
+        continue;
+      }
+      md << "| " << c.name << " | " << q.positions << (q.not_measured ? " of " + std::to_string(q.positions + q.not_measured) : "")
+         << " | " << q.frames << " | " << fixed(q.points, 0) << " | " << fixed(q.weighted_psnr, 2)
          << " | " << fixed(q.weighted_ssim, 4) << " | " << fixed(q.psnr, 2) << " | " << fixed(q.ssim, 4) << " | "
-         << fixed(100.0 * q.above_mar, 1) << " % |\n";
+         << (std::isnan(q.above_mar) ? std::string("n/a") : fixed(100.0 * q.above_mar, 1) + " %")
+         << (c.map_delta ? " (nearest point)" : "") << " |\n";
     }
     md << "\n";
   }

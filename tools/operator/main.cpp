@@ -26,6 +26,7 @@
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
 #include "tools/operator/gaze_script.h"
+#include "tools/operator/held_cloud.h"
 #include "tools/operator/map_holder.h"
 #include "tools/operator/operator_stats.h"
 #include "tools/operator/view_frame.h"
@@ -40,7 +41,7 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) (--gaze SCRIPT | --view [ADDR:]PORT)\n"
     "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
-    "                      [--save-ply DIR]\n"
+    "                      [--save-ply DIR] [--save-held FRAME_ID:FILE.ply]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
     "                      [--map-points N] [--map-bricks N]\n"
     "                      [--clock auto|shared|estimated] [--quiet]\n"
@@ -67,6 +68,11 @@ const char* kHelp =
     "                        what the operator holds of the robot's map: bricks, points, and the brick\n"
     "                        parts taken (not duplicates) and versions completed since the previous line\n"
     "  --save-ply DIR        write every decoded frame as DIR/frame_ID.ply (world coordinates, region)\n"
+    "  --save-held ID:FILE   once, at the first frame with id >= ID that arrived whole: write what the\n"
+    "                        operator draws, that frame's points and every map brick held, to FILE (PLY,\n"
+    "                        world coordinates, colour, region: the frame's, or 8 + the brick's level)\n"
+    "                        and FILE + \".txt\" (the frame id, counts, steps;\n"
+    "                        tools/operator/held_cloud.h); nothing when no such frame arrives whole\n"
     "  --name NAME           the name the robot shows (default fovea-operator)\n"
     "  --budget MBPS         the bandwidth to ask for, MB/s (default: what the robot allows)\n"
     "  --mtu BYTES           the largest UDP payload to ask for (default 1200)\n"
@@ -95,6 +101,8 @@ struct Options {
   std::string summary_path;
   std::string frame_log_path;
   std::string ply_dir;
+  std::optional<uint32_t> held_frame;  // --save-held ID:FILE
+  std::string held_path;
   std::string name = "fovea-operator";
   double budget_mbps = 0.0;
   long mtu = static_cast<long>(net::kDefaultMtu);
@@ -137,6 +145,23 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.frame_log_path = value;
     } else if (flag == "--save-ply") {
       o.ply_dir = value;
+    } else if (flag == "--save-held") {
+      const std::string spec = value;
+      const std::size_t colon = spec.find(':');
+      char* end = nullptr;
+      const std::string id = colon == std::string::npos ? spec : spec.substr(0, colon);
+      const unsigned long long frame = std::strtoull(id.c_str(), &end, 10);
+      if (colon == std::string::npos || id.empty() || *end != '\0' || id[0] == '-' || frame > 0xffffffffull ||
+          colon + 1 >= spec.size()) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--save-held: '" + spec + "' is not FRAME_ID:FILE.ply (a frame id within 0 .. 4294967295)");
+      }
+      o.held_frame = static_cast<uint32_t>(frame);
+      o.held_path = spec.substr(colon + 1);
+      const std::filesystem::path parent = std::filesystem::path(o.held_path).parent_path();
+      std::error_code ec;
+      if (!parent.empty() && !std::filesystem::is_directory(parent, ec)) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--save-held: no directory '" + parent.string() + "'");
+      }
     } else if (flag == "--name") {
       o.name = value;
     } else if (flag == "--view") {
@@ -437,6 +462,7 @@ class OperatorRun {
   void publishView(const net::AssembledFrame& f);
   void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs);
   void saveFramePly(const net::AssembledFrame& f);
+  void saveHeld(const net::AssembledFrame& f);
   void endSession(Session& s);
   std::string viewerSummary() const;
   Exit writeSummaryJson(double seconds, const std::string& view_json) const;
@@ -467,6 +493,8 @@ class OperatorRun {
   const int64_t end_ns_;
   const int64_t gaze_period_ns_;
   uint64_t ply_written_ = 0, ply_failed_ = 0, gaze_sent_ = 0, sessions_ = 0;
+  bool held_done_ = false;     // --save-held: written (or failed), not tried again
+  std::string held_result_;    // what it wrote, or why not
   std::optional<net::GazeSample> last_sent_;
   std::optional<tools::ViewerGaze> last_shown_;
   tools::GazePoint last_gaze_;
@@ -669,6 +697,7 @@ void OperatorRun::handleReady(Session& s) {
     s.last_frame_id = f.frame_id;
     if (view_) publishView(f);
     if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
+    if (opt_.held_frame && !held_done_ && f.frame_id >= *opt_.held_frame && tools::frameComplete(f)) saveHeld(f);
   }
 }
 
@@ -711,6 +740,20 @@ void OperatorRun::saveFramePly(const net::AssembledFrame& f) {
   }
 }
 
+// --save-held: once a run. Allocates (the cloud of the held bricks and the frame's
+// points) and writes the file on the receive loop: a one-off, not the per-frame path.
+void OperatorRun::saveHeld(const net::AssembledFrame& f) {
+  held_done_ = true;
+  const tools::HeldCloud held = tools::heldCloud(f, map_.cache());
+  if (Status st = tools::saveHeldCloud(opt_.held_path, held); !st) {
+    held_result_ = "failed: " + st.message();
+    return;
+  }
+  held_result_ = "frame " + std::to_string(f.frame_id) + " (" + std::to_string(held.info.live_points) + " live points, " +
+                 std::to_string(held.info.map_points) + " map points in " + std::to_string(held.info.map_bricks) +
+                 " bricks) to " + opt_.held_path;
+}
+
 void OperatorRun::endSession(Session& s) {
   net::OperatorLink& link = s.link;
   assembler_.flush();
@@ -745,6 +788,12 @@ int OperatorRun::finish() {
   if (!opt_.ply_dir.empty()) {
     std::printf("  wrote %llu frames to %s%s\n", static_cast<unsigned long long>(ply_written_), opt_.ply_dir.c_str(),
                 ply_failed_ ? " (some failed)" : "");
+  }
+  if (opt_.held_frame) {
+    if (held_result_.empty()) {
+      held_result_ = "no frame with id >= " + std::to_string(*opt_.held_frame) + " arrived whole: nothing written";
+    }
+    std::printf("  --save-held: %s\n", held_result_.c_str());
   }
   const std::string view_json = viewerSummary();
   if (Exit e = writeSummaryJson(seconds, view_json)) return *e;

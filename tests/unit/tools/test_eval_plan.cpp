@@ -130,11 +130,47 @@ TEST(EvalPlan, MapIsAcuityOnTheMapAndNotADefault) {
     EXPECT_EQ(c.source, "") << c.name;
     for (const std::string& setting : conditionSettings(c)) EXPECT_EQ(setting.find("foveation.source"), std::string::npos) << c.name;
   }
-  EXPECT_EQ(allConditions().size(), defaultConditions().size() + 1);
+  EXPECT_EQ(allConditions().size(), defaultConditions().size() + 2);  // MAP and MAP-DELTA
   EXPECT_EQ(runName(defaultDatasets("")[0], (*map)[1], makePositions(livingRoom(), 2, 1)[0]), "living-room_MAP_p1");
   Result<std::vector<Condition>> bad = selectConditions("map");  // names are upper case
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.status().message().find("MAP"), std::string::npos);
+}
+
+// MAP-DELTA is MAP with the map streamed as bricks the operator keeps
+// (map.delta = true, said explicitly); named only, like MAP.
+TEST(EvalPlan, MapDeltaIsTheMapStreamedAsBricksAndNotADefault) {
+  Result<std::vector<Condition>> picked = selectConditions("F1,FREF,MAP,MAP-DELTA");
+  ASSERT_TRUE(picked);
+  ASSERT_EQ(picked->size(), 4u);
+  const Condition& map = (*picked)[2];
+  const Condition& delta = (*picked)[3];
+  EXPECT_EQ(delta.name, "MAP-DELTA");
+  EXPECT_EQ(delta.preset, "ACUITY");
+  EXPECT_EQ(delta.source, "map");
+  EXPECT_TRUE(delta.map_delta);
+  EXPECT_FALSE(map.map_delta);
+  EXPECT_EQ(delta.floor_per_m2, 0.0);
+  EXPECT_EQ(delta.level_margin, 0.0);
+  EXPECT_EQ(delta.refine_passes, 0);
+  EXPECT_EQ(conditionSettings(delta), (std::vector<std::string>{"foveation.source=map", "map.delta=true"}));
+  EXPECT_EQ(conditionSettings(map), (std::vector<std::string>{"foveation.source=map", "map.delta=false"}));
+  for (const Condition& c : defaultConditions()) {
+    EXPECT_NE(c.name, "MAP-DELTA");
+    EXPECT_FALSE(c.map_delta) << c.name;
+  }
+  // The last of every condition, after MAP.
+  ASSERT_GE(allConditions().size(), 2u);
+  EXPECT_EQ(allConditions().back().name, "MAP-DELTA");
+  EXPECT_EQ(allConditions()[allConditions().size() - 2].name, "MAP");
+  EXPECT_EQ(runName(defaultDatasets("/data/tum")[2], delta, makePositions(livingRoom(), 2, 1)[1]), "tum_MAP-DELTA_p2");
+  // Its images need a frame the operator received with the map settled: 90, not 30.
+  EXPECT_EQ(defaultQualityFrame(picked.value()), 90);
+  EXPECT_EQ(defaultQualityFrame(selectConditions("F1,FREF,MAP").value()), 30);
+  EXPECT_EQ(defaultQualityFrame(defaultConditions()), 30);
+  Result<std::vector<Condition>> bad = selectConditions("MAP_DELTA");
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.status().message().find("MAP-DELTA"), std::string::npos);
 }
 
 // A run directory written by hand: the service logged frames 10..14, the operator
