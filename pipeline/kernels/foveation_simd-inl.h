@@ -59,9 +59,60 @@ inline std::size_t BackprojectCountRowsT(const BackprojectParams& p, int row0, i
   return valid;
 }
 
+// Compaction of three vectors by one mask. Highway 1.0.3's AVX2 Compress keeps its
+// 1 KiB index table as a non-static local, which GCC copies onto the stack at every
+// call: three copies per 8 pixels were half of back-projection's time (perf). For
+// vectors of at most 8 lanes the indices come from our own static table (one nibble a
+// lane, as Highway's) once per mask, and the three vectors share them; wider vectors
+// (AVX3, SVE) keep Highway's native compress. Same lanes, same order: the output is
+// CompressBlendedStore's, bit for bit.
+// kCompressNibbles[bits]: the set lanes of `bits` in ascending order, one nibble each
+// from the lowest, the remaining lanes after them.
+struct CompressNibbleTable {
+  uint32_t nibbles[256];
+  constexpr CompressNibbleTable() : nibbles() {
+    for (uint32_t bits = 0; bits < 256; ++bits) {
+      uint32_t packed = 0;
+      int out = 0;
+      for (uint32_t lane = 0; lane < 8; ++lane) {
+        if (bits & (1u << lane)) packed |= lane << (4 * out++);
+      }
+      for (uint32_t lane = 0; lane < 8; ++lane) {
+        if (!(bits & (1u << lane))) packed |= lane << (4 * out++);
+      }
+      nibbles[bits] = packed;
+    }
+  }
+};
+inline constexpr CompressNibbleTable kCompressNibbles{};
+
+template <class DF>
+HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, hn::Vec<DF> b, hn::Vec<DF> c,
+                                      float* oa, float* ob, float* oc) {
+  if constexpr (hn::MaxLanes(DF()) <= 8) {
+    const hn::RebindToSigned<DF> di;
+    uint8_t bits[8] = {};
+    hn::StoreMaskBits(df, mask, bits);
+    const std::size_t count = static_cast<std::size_t>(hwy::PopCount(bits[0]));
+    const auto packed = hn::Set(di, static_cast<int32_t>(kCompressNibbles.nibbles[bits[0]]));
+    const auto shifts = hn::ShiftLeft<2>(hn::Iota(di, 0));
+    const auto lanes = hn::And(hn::Shr(packed, shifts), hn::Set(di, 0xF));
+    const auto idx = hn::IndicesFromVec(df, lanes);
+    const auto keep = hn::FirstN(df, count);
+    hn::BlendedStore(hn::TableLookupLanes(a, idx), keep, df, oa);
+    hn::BlendedStore(hn::TableLookupLanes(b, idx), keep, df, ob);
+    hn::BlendedStore(hn::TableLookupLanes(c, idx), keep, df, oc);
+    return count;
+  } else {
+    hn::CompressBlendedStore(a, mask, df, oa);
+    hn::CompressBlendedStore(b, mask, df, ob);
+    return hn::CompressBlendedStore(c, mask, df, oc);
+  }
+}
+
 // One vector of pixels starting at column u; depth from `src` (the row, or a padded
-// copy of its tail). Writes the valid ones at out + n through CompressBlendedStore
-// (which writes only the selected lanes) and returns the new n.
+// copy of its tail). Writes the valid ones at out + n through CompressStore3 (which
+// writes only the selected lanes) and returns the new n.
 template <class DF>
 HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, const uint16_t* src, int u,
                                          hn::Vec<DF> yn, float* ox, float* oy, float* oz, std::size_t n) {
@@ -83,9 +134,7 @@ HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, cons
                           hn::Mul(hn::Set(df, p.r[5]), z));
   const auto wz = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[6]), x), hn::Mul(hn::Set(df, p.r[7]), y)),
                           hn::Mul(hn::Set(df, p.r[8]), z));
-  hn::CompressBlendedStore(wx, mask, df, ox + n);
-  hn::CompressBlendedStore(wy, mask, df, oy + n);
-  return n + hn::CompressBlendedStore(wz, mask, df, oz + n);
+  return n + CompressStore3(df, mask, wx, wy, wz, ox + n, oy + n, oz + n);
 }
 
 inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std::size_t out_offset) {
