@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <memory>
@@ -29,7 +30,9 @@
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/error_metrics.h"
 #include "pipeline/partition.h"
+#include "pipeline/pyramid_sampler.h"
 #include "pipeline/voxel_sampler.h"
 #ifdef FOVEA_HAVE_PCL
 #include "bench/pcl_method.h"
@@ -48,6 +51,7 @@ struct Input {
   pipeline::DepthRange range;   // back-projection range (fovead's default 0.1..10 m)
   pipeline::FoveationConfig config;
   double acuity_floor_per_m2 = 0.001;  // the floor of acuity-floor-simd-1t and acuity-features-simd-1t
+  double pyramid_margin = 0.0;         // the pyramid rows' margin (0: ACUITY's level_margin)
   std::string description;
   std::size_t input_points = 0;  // valid points after back-projection (the ns/point denominator)
 };
@@ -66,7 +70,32 @@ class Method {
   virtual Status run() = 0;  // the timed part
   virtual std::size_t outputSize() const = 0;
   virtual bool output(Output&) const { return false; }  // false: nothing to compare
+  // After the timed runs: the error of the output against the full cloud, seen by
+  // the fixed observer (pipeline/error_metrics.h, m = 0.022). false: not measured.
+  virtual bool error(pipeline::ErrorMetrics&) { return false; }
 };
+
+// The full cloud of the input (back-projected with the reference) and the
+// evaluator, for the error column: computed once, after the timed runs.
+struct ErrorInput {
+  PointCloud cloud;
+  std::optional<pipeline::ErrorEvaluator> evaluator;
+};
+
+ErrorInput& errorInput(const Input& input) {
+  static ErrorInput e;
+  if (!e.evaluator) {
+    if (input.has_frame) {
+      e.cloud = PointCloud(input.frame.pixelCount());
+      pipeline::BackprojectCounts counts;
+      (void)pipeline::backprojectRef(input.frame, input.range, e.cloud, counts);
+    } else {
+      e.cloud = input.cloud;
+    }
+    e.evaluator.emplace(pipeline::ErrorEvaluator::create(e.cloud.size()).value());
+  }
+  return e;
+}
 
 // (iv) The memory-bandwidth floor: one pass that reads the input images (depth
 // and colour; for a PLY input the cloud's x, y, z and colour arrays) and sums
@@ -147,6 +176,18 @@ class FoveaMethod final : public Method {
     for (int r = 0; r < stats_.region_count; ++r) o.voxel_size_m[r] = stats_.regions[r].voxel_size_m;
     return true;
   }
+  bool error(pipeline::ErrorMetrics& metrics) override {
+    ErrorInput& e = errorInput(input_);
+    std::vector<uint32_t> representative(e.cloud.size());
+    pipeline::FoveatedCloud out(e.cloud.size());
+    pipeline::FoveationStats stats;
+    if (!foveator_.foveate(e.cloud, gaze_, out, stats, representative.data())) return false;
+    pipeline::ErrorModel model;
+    model.model = &foveator_.model();
+    for (int r = 0; r < stats.region_count; ++r) model.voxel_size_m[r] = stats.regions[r].voxel_size_m;
+    return static_cast<bool>(e.evaluator->evaluate(e.cloud, foveator_.lastRegions(), representative.data(),
+                                                   out.points, gaze_, model, metrics));
+  }
   const pipeline::FoveationStats& stats() const { return stats_; }
   const uint8_t* regions() const { return foveator_.lastRegions(); }
   const PointCloud& cloud() const { return input_.has_frame ? cloud_ : input_.cloud; }
@@ -186,6 +227,55 @@ class FoveaMethod final : public Method {
   pipeline::Backprojector backprojector_;
   pipeline::Foveator foveator_;
   pipeline::FoveationStats stats_;
+};
+
+// (v) ACUITY on the image pyramid (pipeline/pyramid_sampler.h): approximate, from
+// the depth image straight to the output, with ACUITY's knobs (the distance floor
+// with kFloor). Frames only: a PLY cloud has no image.
+class PyramidMethod final : public Method {
+ public:
+  PyramidMethod(const Input& input, bool floor)
+      : input_(input),
+        config_(configFor(input, floor)),
+        rule_(pipeline::PyramidRule::fromAcuity(config_.acuity)),
+        sampler_(pipeline::PyramidSampler::create(input.frame.width(), input.frame.height()).value()),
+        out_(input.frame.pixelCount()) {}
+  Status run() override { return sampler_.sample(input_.frame, input_.range, input_.gaze, rule_, out_, stats_); }
+  std::size_t outputSize() const override { return out_.size(); }
+  const pipeline::PyramidStats& stats() const { return stats_; }
+  bool error(pipeline::ErrorMetrics& metrics) override {
+    ErrorInput& e = errorInput(input_);
+    std::vector<uint32_t> by_pixel(input_.frame.pixelCount());
+    if (!sampler_.sample(input_.frame, input_.range, input_.gaze, rule_, out_, stats_, by_pixel.data())) return false;
+    // Valid pixels in row-major order are the back-projected cloud's points.
+    std::vector<uint32_t> representative;
+    for (const uint32_t r : by_pixel) {
+      if (r != pipeline::PyramidSampler::kNoRepresentative) representative.push_back(r);
+    }
+    if (representative.size() != e.cloud.size()) return false;
+    const std::vector<uint8_t> region(e.cloud.size(), 0);  // no regions: the pooled figures are the measure
+    auto model = pipeline::RegionModel::create(config_.acuity);
+    if (!model) return false;
+    pipeline::ErrorModel error_model;
+    error_model.model = &model.value();
+    return static_cast<bool>(e.evaluator->evaluate(e.cloud, region.data(), representative.data(), out_.points,
+                                                   input_.gaze, error_model, metrics));
+  }
+
+ private:
+  static pipeline::FoveationConfig configFor(const Input& input, bool floor) {
+    pipeline::FoveationConfig config = input.config;
+    config.acuity.preset = pipeline::Preset::kAcuity;
+    if (floor) config.acuity.floor_per_m2 = input.acuity_floor_per_m2;
+    if (input.pyramid_margin > 0.0) config.acuity.level_margin = input.pyramid_margin;
+    return config;
+  }
+  const Input& input_;
+  pipeline::FoveationConfig config_;
+  pipeline::PyramidRule rule_;
+  pipeline::PyramidSampler sampler_;
+  pipeline::FoveatedCloud out_;
+  pipeline::PyramidStats stats_;
 };
 
 // Threads for the multi-threaded row: every core the process may use.
@@ -271,6 +361,18 @@ const MethodEntry kMethods[] = {
      "ACUITY refined (margin 0.3, one refinement pass: fovea-eval's ACUITY-REFINED), one thread",
      [](const Input& in) -> std::unique_ptr<Method> {
        return std::make_unique<FoveaMethod>(in, fovea::KernelSet::kSimd, 1, FoveaMethod::Acuity::kRefined);
+     }},
+    {"acuity-pyramid-1t",
+     "ACUITY on the image pyramid (approximate; pipeline/pyramid_sampler.h), one thread; frames only",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       if (!in.has_frame) return nullptr;
+       return std::make_unique<PyramidMethod>(in, false);
+     }},
+    {"acuity-pyramid-floor-1t",
+     "the same with the distance floor (--acuity-floor)",
+     [](const Input& in) -> std::unique_ptr<Method> {
+       if (!in.has_frame) return nullptr;
+       return std::make_unique<PyramidMethod>(in, true);
      }},
     {"floor", "memory-bandwidth floor: one pass summing the depth and colour images",
      [](const Input& in) -> std::unique_ptr<Method> { return std::make_unique<FloorMethod>(in); }},
@@ -410,13 +512,16 @@ std::size_t latticeDisagreements(const PointCloud& cloud, const uint8_t* region,
 int usage(const char* message) {
   if (message) std::fprintf(stderr, "fovea-compare: %s\n", message);
   std::fprintf(stderr,
-               "usage: fovea-compare [--runs N] [--preset F1|F2|F3|FREF] [--acuity-floor MM]\n"
+               "usage: fovea-compare [--runs N] [--preset F1|F2|F3|FREF] [--acuity-floor MM] [--methods A,B,...]\n"
                "                     [--tum PATH [--frame N] | --ply FILE --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
                "Runs the foveation methods on one input (default: the mock living-room frame, 640x480)\n"
                "and prints a table and one `method=... ms_median=...` line per method.\n"
                "  --acuity-floor MM  distance floor of the acuity-floor and acuity-features methods, mm per m^2\n"
                "                     of distance (foveation.floor_per_m2 x 1000; default 1: F1's bytes on the\n"
-               "                     mock room)\n");
+               "                     mock room)\n"
+               "  --methods A,B,...  run only these rows (by name; the table lists them all)\n"
+               "  --pyramid-margin M the pyramid rows' margin (default ACUITY's level_margin, 0.5): smaller keeps\n"
+               "                     fewer points, with more above the MAR\n");
   return 2;
 }
 
@@ -432,6 +537,8 @@ int run(int argc, char** argv) {
   std::string tum_path, ply_path, preset = "F1";
   int frame_index = 0;
   double acuity_floor_mm = 1.0;
+  std::string only_methods;  // ",a,b," or empty: every method
+  double input_pyramid_margin = 0.0;
   std::optional<Eigen::Vector3d> gaze_origin, gaze_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
@@ -445,6 +552,14 @@ int run(int argc, char** argv) {
     if (arg == "--runs") {
       runs = std::atoi(v);
       if (runs < 1 || runs > 100000) return usage("--runs: expected a count in 1..100000");
+    } else if (arg == "--pyramid-margin") {
+      char* end = nullptr;
+      input_pyramid_margin = std::strtod(v, &end);
+      if (end == v || *end != '\0' || !(input_pyramid_margin > 0.0 && input_pyramid_margin <= 100.0)) {
+        return usage("--pyramid-margin: expected a margin in (0, 100]");
+      }
+    } else if (arg == "--methods") {
+      only_methods = std::string(",") + v + ",";
     } else if (arg == "--tum") {
       tum_path = v;
     } else if (arg == "--frame") {
@@ -477,6 +592,7 @@ int run(int argc, char** argv) {
   if (!parsed_preset) return usage(parsed_preset.status().message().c_str());
   input.config.acuity.preset = parsed_preset.value();
   input.acuity_floor_per_m2 = acuity_floor_mm * 1e-3;
+  input.pyramid_margin = input_pyramid_margin;
   pipeline::Gaze gaze;
   if (!ply_path.empty()) {
     Result<io::PlyCloud> ply = io::readPly(ply_path);
@@ -543,8 +659,10 @@ int run(int argc, char** argv) {
     rows.push_back({&entry, {}});
     by_row.push_back(nullptr);
     if (entry.make == nullptr) continue;
+    if (!only_methods.empty() && only_methods.find(std::string(",") + entry.name + ",") == std::string::npos) continue;
     methods.push_back(entry.make(input));
     by_row.back() = methods.back().get();
+    if (by_row.back() == nullptr) continue;
     if (std::string_view(entry.name) == "fovea-ref") fovea_ref = static_cast<FoveaMethod*>(methods.back().get());
   }
   // One warm-up run each (caches, page faults, PCL's first allocations), then the
@@ -566,6 +684,12 @@ int run(int argc, char** argv) {
   for (std::size_t m = 0; m < rows.size(); ++m) {
     if (by_row[m] != nullptr) finish(*by_row[m], rows[m].timing);
   }
+  // The error of each output, after the timing (it runs the method again).
+  std::vector<std::optional<pipeline::ErrorMetrics>> errors(rows.size());
+  for (std::size_t m = 0; m < rows.size(); ++m) {
+    pipeline::ErrorMetrics metrics;
+    if (by_row[m] != nullptr && by_row[m]->error(metrics)) errors[m] = metrics;
+  }
   const auto find = [&](std::string_view name) -> const Timing* {
     for (const Row& r : rows) {
       if (r.entry->name == name && r.timing.ran) return &r.timing;
@@ -582,9 +706,10 @@ int run(int argc, char** argv) {
     for (int r = 1; r < s.region_count; ++r) std::printf(" region %d %.2f mm", r, 1000.0 * s.regions[r].voxel_size_m);
     std::printf("\n");
   }
-  std::printf("\n%-23s %9s %9s %9s %10s %9s %9s %9s %12s\n", "method", "median ms", "min ms", "max ms", "out points",
-              "ns/point", "vs pcl", "vs floor", "max d [mm]");
-  for (const Row& row : rows) {
+  std::printf("\n%-23s %9s %9s %9s %10s %9s %9s %9s %12s %9s %8s\n", "method", "median ms", "min ms", "max ms",
+              "out points", "ns/point", "vs pcl", "vs floor", "max d [mm]", ">MAR %", "rms mm");
+  for (std::size_t m = 0; m < rows.size(); ++m) {
+    const Row& row = rows[m];
     const Timing& t = row.timing;
     if (!t.ran) {
       std::printf("%-23s %9s   -- %s\n", row.entry->name, "-", row.entry->what);
@@ -598,13 +723,32 @@ int run(int argc, char** argv) {
     } else if (&t == pcl) {
       std::snprintf(diff, sizeof diff, "(reference)");
     }
-    std::printf("%-23s %9.3f %9.3f %9.3f %10zu %9.2f %9s %9s %12s\n", row.entry->name, t.median, t.min, t.max,
-                t.out_points, 1e6 * t.median / static_cast<double>(input.input_points), vs_pcl, vs_floor, diff);
+    char above[16] = "-", rms[16] = "-";
+    if (errors[m]) {
+      std::snprintf(above, sizeof above, "%.3f", 100.0 * errors[m]->all.shareAboveReferenceMar());
+      std::snprintf(rms, sizeof rms, "%.3f", 1000.0 * errors[m]->all.rmsM());
+    }
+    std::printf("%-23s %9.3f %9.3f %9.3f %10zu %9.2f %9s %9s %12s %9s %8s\n", row.entry->name, t.median, t.min, t.max,
+                t.out_points, 1e6 * t.median / static_cast<double>(input.input_points), vs_pcl, vs_floor, diff,
+                above, rms);
   }
   std::printf(
       "\n  ns/point: median time / %zu input points. vs pcl, vs floor: speed-up = that method's median / this "
-      "method's\n  (above 1: faster). The floor only reads the input once; it produces nothing.\n",
+      "method's\n  (above 1: faster). The floor only reads the input once; it produces nothing.\n"
+      "  >MAR %%: input points whose move to their output point the eye resolves (pipeline/error_metrics.h, the\n"
+      "  fixed observer m = 0.022); rms mm: root mean square of those moves. Measured after the timing.\n",
       input.input_points);
+
+  // The pyramid's cells: where its points came from and how many cells it tested.
+  for (std::size_t m = 0; m < rows.size(); ++m) {
+    if (by_row[m] == nullptr || std::string_view(rows[m].entry->name).find("pyramid") == std::string_view::npos) {
+      continue;
+    }
+    const pipeline::PyramidStats& ps = static_cast<const PyramidMethod*>(by_row[m])->stats();
+    std::printf("  %s: %u cells tested; points by level (0 = pixels):", rows[m].entry->name, ps.cells_tested);
+    for (std::size_t k = 0; k < ps.out_by_level.size(); ++k) std::printf(" %u", ps.out_by_level[k]);
+    std::printf("\n");
+  }
 
   // What differs from PCL, and why.
   for (const Row& row : rows) {
@@ -640,8 +784,14 @@ int run(int argc, char** argv) {
   for (const Row& row : rows) {
     const Timing& t = row.timing;
     if (!t.ran) continue;
-    std::printf("method=%s ms_median=%.4f ms_min=%.4f ms_max=%.4f out_points=%zu ns_per_point=%.3f\n", row.entry->name,
+    const std::size_t m = static_cast<std::size_t>(&row - rows.data());
+    std::printf("method=%s ms_median=%.4f ms_min=%.4f ms_max=%.4f out_points=%zu ns_per_point=%.3f", row.entry->name,
                 t.median, t.min, t.max, t.out_points, 1e6 * t.median / static_cast<double>(input.input_points));
+    if (errors[m]) {
+      std::printf(" above_mar_pct=%.4f rms_mm=%.4f", 100.0 * errors[m]->all.shareAboveReferenceMar(),
+                  1000.0 * errors[m]->all.rmsM());
+    }
+    std::printf("\n");
   }
   return 0;
 }

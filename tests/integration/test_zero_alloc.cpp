@@ -16,6 +16,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/map/surfel_map.h"
+#include "pipeline/pyramid_sampler.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/clouds.h"
 #include "tests/support/test_time.h"
@@ -104,6 +105,42 @@ TEST_P(ZeroAllocationKernels, HundredMockFramesAfterWarmUp) {
     all_ok = runFrame(i) && all_ok;
     if (i == frames / 2) all_ok = foveator.setConfig(f3).isOk() && all_ok;  // a live preset change is on the frame path too
   }
+  const uint64_t allocations = scope.allocations();
+  EXPECT_TRUE(all_ok);
+  EXPECT_EQ(allocations, 0u);
+  cam.stop();
+}
+
+// ACUITY on the image pyramid (pipeline/pyramid_sampler.h), frame after frame with a
+// moving gaze, from the camera's frame to the output, with the representatives too.
+TEST(ZeroAllocation, PyramidSamplerOnMockFrames) {
+  const std::unique_ptr<hal::Camera> camera = startedCamera(
+      test::timeScale() > 1.0 ? "mock:living-room,path=orbit,size=320x240" : "mock:living-room,path=orbit");
+  ASSERT_TRUE(camera);
+  hal::Camera& cam = *camera;
+  const hal::CameraIntrinsics& k = cam.info().intrinsics;
+  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
+  hal::RgbdFrame frame(k.width, k.height);
+  pipeline::FoveatedCloud out(pixels);
+  std::vector<uint32_t> representative(pixels);
+  pipeline::PyramidSampler sampler = pipeline::PyramidSampler::create(k.width, k.height).value();
+  pipeline::AcuityConfig acuity;
+  acuity.floor_per_m2 = 0.001;
+  const pipeline::PyramidRule rule = pipeline::PyramidRule::fromAcuity(acuity);
+  auto runFrame = [&](int i) {
+    pipeline::PyramidStats stats;
+    if (!cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk()) return false;
+    pipeline::Gaze gaze;
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2) + Eigen::Vector3d(0.01 * (i % 7), 0.0, 0.0);
+    return sampler.sample(frame, pipeline::DepthRange{}, gaze, rule, out, stats, i % 2 ? representative.data() : nullptr)
+               .isOk() &&
+           out.size() > 0;
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(runFrame(i));  // warm-up
+  test::AllocationScope scope;
+  bool all_ok = true;
+  for (int i = 0; i < framesCounted(); ++i) all_ok = runFrame(i) && all_ok;
   const uint64_t allocations = scope.allocations();
   EXPECT_TRUE(all_ok);
   EXPECT_EQ(allocations, 0u);

@@ -1,0 +1,371 @@
+#include "pipeline/pyramid_sampler.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "pipeline/acuity_levels.h"
+
+namespace fovea::pipeline {
+
+PyramidRule PyramidRule::fromAcuity(const AcuityConfig& config) {
+  PyramidRule rule;
+  rule.slope = static_cast<float>(config.slope);
+  rule.margin = static_cast<float>(config.level_margin);
+  rule.floor_m = static_cast<float>(config.floor_m);
+  rule.floor_per_m2 = static_cast<float>(config.floor_per_m2);
+  return rule;
+}
+
+Status PyramidRule::validate() const {
+  const auto finite_non_negative = [](float v) { return std::isfinite(v) && v >= 0.0f; };
+  if (!finite_non_negative(slope)) return {ErrorCode::kInvalidArgument, "pyramid: slope must be finite and >= 0"};
+  if (!(std::isfinite(margin) && margin > 0.0f)) {
+    return {ErrorCode::kInvalidArgument, "pyramid: margin must be finite and > 0"};
+  }
+  if (!finite_non_negative(floor_m) || !finite_non_negative(floor_per_m2)) {
+    return {ErrorCode::kInvalidArgument, "pyramid: floors must be finite and >= 0"};
+  }
+  return Status::ok();
+}
+
+namespace {
+
+// The squared deviations from the mean of two sets of depths (count n, sum s, squared
+// deviations m2) taken together (Chan, Golub and LeVeque's pairwise update): stable
+// where sum(z^2)/n - mean^2 loses every digit of a millimetre spread at metres of
+// depth in float. Either set may be empty.
+inline float combinedM2(float na, float sa, float m2a, float nb, float sb, float m2b) {
+  const float delta = sb / std::max(nb, 1.0f) - sa / std::max(na, 1.0f);
+  return (m2a + m2b) + (delta * delta) * (na * nb / std::max(na + nb, 1.0f));
+}
+
+}  // namespace
+
+Result<PyramidSampler> PyramidSampler::create(int max_width, int max_height, int levels) {
+  if (max_width < 1 || max_height < 1 || max_width > 16384 || max_height > 16384) {
+    return Status{ErrorCode::kInvalidArgument, "pyramid: frame size must be within 1..16384"};
+  }
+  if (levels < 1 || levels > kMaxPyramidLevels) {
+    return Status{ErrorCode::kInvalidArgument,
+                  "pyramid: levels must be within 1.." + std::to_string(kMaxPyramidLevels)};
+  }
+  return PyramidSampler(max_width, max_height, levels);
+}
+
+void PyramidSampler::Level::resize(std::size_t cells) {
+  for (std::vector<float>* a : {&n, &sx, &sy, &sz, &m2, &zmax}) a->assign(cells, 0.0f);
+}
+
+PyramidSampler::PyramidSampler(int max_width, int max_height, int levels)
+    : max_width_(max_width), max_height_(max_height), levels_(levels), pyramid_(static_cast<std::size_t>(levels)) {
+  for (int k = 1; k <= levels; ++k) {
+    const int w = (max_width + (1 << k) - 1) >> k;
+    const int h = (max_height + (1 << k) - 1) >> k;
+    pyramid_[static_cast<std::size_t>(k - 1)].resize(static_cast<std::size_t>(w) * h);
+  }
+  // Rows padded to an even width: the odd column's partner is an invalid pixel.
+  const auto padded = static_cast<std::size_t>(max_width + 1);
+  for (std::vector<float>* a : {&row_x_, &row_z_, &row_valid_, &column_xn_}) {
+    a->assign(padded, 0.0f);
+  }
+}
+
+// Level 1 straight from the depth image. Per row, a loop over pixels (x, z and
+// validity, 0 when invalid), then one over cells adding pixel pairs; both are plain
+// loops over arrays that the compiler vectorises. y is summed as yn * z per row:
+// y = yn z for every pixel of row v. Colours are summed only for the cells that are
+// emitted (Walk::meanColour): every pixel's colour is read once either way.
+void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepthRange& raw) {
+  const int w = frame.width();
+  const int h = frame.height();
+  Level& level = pyramid_[0];
+  level.width = (w + 1) / 2;
+  level.height = (h + 1) / 2;
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const auto scale = static_cast<float>(frame.depth_scale_m);
+  const auto cx = static_cast<float>(k.cx);
+  const auto cy = static_cast<float>(k.cy);
+  const auto inv_fx = static_cast<float>(1.0 / k.fx);
+  const auto inv_fy = static_cast<float>(1.0 / k.fy);
+  float* __restrict xn = column_xn_.data();
+  for (int u = 0; u < w; ++u) xn[u] = (static_cast<float>(u) - cx) * inv_fx;
+  const auto raw_min = static_cast<uint32_t>(std::clamp<int64_t>(raw.min, 0, 65536));
+  const auto raw_max = static_cast<uint32_t>(std::clamp<int64_t>(raw.max, -1, 65535) + 1);  // exclusive
+  float* __restrict rx = row_x_.data();
+  float* __restrict rz = row_z_.data();
+  float* __restrict rv = row_valid_.data();
+  // The odd column's partner (when w is odd) stays an invalid pixel.
+  rx[w] = rz[w] = rv[w] = 0.0f;
+  const int cells = level.width;
+  for (int j = 0; j < level.height; ++j) {
+    const std::size_t row0 = static_cast<std::size_t>(j) * cells;
+    float* __restrict n = level.n.data() + row0;
+    float* __restrict sx = level.sx.data() + row0;
+    float* __restrict sy = level.sy.data() + row0;
+    float* __restrict sz = level.sz.data() + row0;
+    float* __restrict m2 = level.m2.data() + row0;
+    float* __restrict zmax = level.zmax.data() + row0;
+    for (int v = 2 * j; v < std::min(2 * j + 2, h); ++v) {
+      const uint16_t* __restrict drow = frame.depth() + static_cast<std::size_t>(v) * w;
+      for (int u = 0; u < w; ++u) {
+        const uint32_t d = drow[u];
+        const float ok = (d >= raw_min && d < raw_max) ? 1.0f : 0.0f;
+        const float z = static_cast<float>(d) * scale * ok;
+        rz[u] = z;
+        rx[u] = xn[u] * z;
+        rv[u] = ok;
+      }
+      const float yn = (static_cast<float>(v) - cy) * inv_fy;
+      // The pair's squared deviation from its mean: (z0 - z1)^2 / 2 when both are
+      // valid, 0 otherwise.
+      if (v == 2 * j) {
+        for (int i = 0; i < cells; ++i) {
+          const int u = 2 * i;
+          const float zs = rz[u] + rz[u + 1];
+          const float dz = rz[u] - rz[u + 1];
+          n[i] = rv[u] + rv[u + 1];
+          sx[i] = rx[u] + rx[u + 1];
+          sy[i] = yn * zs;
+          sz[i] = zs;
+          m2[i] = (rv[u] * rv[u + 1]) * (0.5f * (dz * dz));
+          zmax[i] = std::max(rz[u], rz[u + 1]);
+        }
+      } else {
+        for (int i = 0; i < cells; ++i) {
+          const int u = 2 * i;
+          const float zs = rz[u] + rz[u + 1];
+          const float dz = rz[u] - rz[u + 1];
+          const float pn = rv[u] + rv[u + 1];
+          const float pm2 = (rv[u] * rv[u + 1]) * (0.5f * (dz * dz));
+          m2[i] = combinedM2(n[i], sz[i], m2[i], pn, zs, pm2);
+          n[i] += pn;
+          sx[i] += rx[u] + rx[u + 1];
+          sy[i] += yn * zs;
+          sz[i] += zs;
+          zmax[i] = std::max(zmax[i], std::max(rz[u], rz[u + 1]));
+        }
+      }
+    }
+  }
+}
+
+// Level k (>= 2) from the 2 x 2 cells below it; a missing child (odd size) is empty.
+void PyramidSampler::buildLevel(int k) {
+  const Level& below = pyramid_[static_cast<std::size_t>(k - 2)];
+  Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
+  level.width = (below.width + 1) / 2;
+  level.height = (below.height + 1) / 2;
+  for (int j = 0; j < level.height; ++j) {
+    for (int i = 0; i < level.width; ++i) {
+      float n = 0.0f, sx = 0.0f, sy = 0.0f, sz = 0.0f, m2 = 0.0f, zmax = 0.0f;
+      for (int dj = 0; dj < 2 && 2 * j + dj < below.height; ++dj) {
+        for (int di = 0; di < 2 && 2 * i + di < below.width; ++di) {
+          const std::size_t c = static_cast<std::size_t>(2 * j + dj) * below.width + 2 * i + di;
+          m2 = combinedM2(n, sz, m2, below.n[c], below.sz[c], below.m2[c]);
+          n += below.n[c];
+          sx += below.sx[c], sy += below.sy[c], sz += below.sz[c];
+          zmax = std::max(zmax, below.zmax[c]);
+        }
+      }
+      const std::size_t at = static_cast<std::size_t>(j) * level.width + i;
+      level.n[at] = n, level.sx[at] = sx, level.sy[at] = sy, level.sz[at] = sz, level.m2[at] = m2;
+      level.zmax[at] = zmax;
+    }
+  }
+}
+
+struct PyramidSampler::Walk {
+  const hal::RgbdFrame* frame = nullptr;
+  uint32_t raw_min = 0, raw_max = 0;  // raw_max exclusive
+  float scale = 0.0f, cx = 0.0f, cy = 0.0f, inv_fx = 0.0f, inv_fy = 0.0f;
+  float inv_f = 0.0f;  // the wider pixel pitch per metre of depth
+  float r[9] = {};     // R_world_cam
+  float o[3] = {};     // camera position - eye, world frame
+  float l[3] = {};     // unit gaze
+  float growth_deg = 0.0f;
+  PyramidRule rule;
+  FoveatedCloud* out = nullptr;
+  std::size_t n = 0;
+  PyramidStats* stats = nullptr;
+  uint32_t* representative = nullptr;  // by pixel, or null
+
+  // The rounded mean colour of the valid pixels of the 2^k square at cell (i, j)
+  // (integer sums, exact), which also get output point `index` as representative.
+  uint32_t meanColour(int k, int i, int j, uint32_t index) const {
+    const int w = frame->width();
+    const int u0 = i << k, u1 = std::min((i + 1) << k, w);
+    const int v0 = j << k, v1 = std::min((j + 1) << k, frame->height());
+    const uint16_t* depth = frame->depth();
+    const uint8_t* rgb = frame->rgb();
+    uint32_t count = 0, r = 0, g = 0, b = 0;
+    for (int v = v0; v < v1; ++v) {
+      const std::size_t row = static_cast<std::size_t>(v) * w;
+      for (int u = u0; u < u1; ++u) {  // branch-free: validity is noisy at silhouettes
+        const std::size_t p = row + u;
+        const uint32_t d = depth[p];
+        const uint32_t ok = (d >= raw_min) & (d < raw_max);
+        count += ok;
+        r += ok * rgb[3 * p], g += ok * rgb[3 * p + 1], b += ok * rgb[3 * p + 2];
+      }
+      if (representative != nullptr) {
+        for (int u = u0; u < u1; ++u) {
+          const uint32_t d = depth[row + u];
+          if (d >= raw_min && d < raw_max) representative[row + u] = index;
+        }
+      }
+    }
+    if (!frame->has_rgb || count == 0) return 0u;
+    const auto mean = [count](uint32_t sum) { return static_cast<uint8_t>((sum + count / 2) / count); };
+    return packRgb(mean(r), mean(g), mean(b));
+  }
+
+  void emit(float cxm, float cym, float czm, uint32_t rgb, uint8_t level, uint32_t weight) {
+    PointCloud& pc = out->points;
+    pc.x()[n] = (r[0] * cxm + r[1] * cym) + r[2] * czm;
+    pc.y()[n] = (r[3] * cxm + r[4] * cym) + r[5] * czm;
+    pc.z()[n] = (r[6] * cxm + r[7] * cym) + r[8] * czm;
+    pc.rgb()[n] = rgb;
+    out->region[n] = level;
+    out->weight[n] = weight;
+    ++n;
+    ++stats->out_by_level[level];
+  }
+};
+
+void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
+  if (k == 0) {
+    const hal::RgbdFrame& f = *walk.frame;
+    if (i >= f.width() || j >= f.height()) return;
+    const std::size_t p = static_cast<std::size_t>(j) * f.width() + i;
+    const uint32_t d = f.depth()[p];
+    if (d < walk.raw_min || d >= walk.raw_max) return;
+    // backprojectRef's expressions.
+    const float z = static_cast<float>(d) * walk.scale;
+    const float x = ((static_cast<float>(i) - walk.cx) * walk.inv_fx) * z;
+    const float y = ((static_cast<float>(j) - walk.cy) * walk.inv_fy) * z;
+    const uint8_t* c = f.rgb() + 3 * p;
+    walk.emit(x, y, z, f.has_rgb ? packRgb(c[0], c[1], c[2]) : 0u, 0, 1);
+    if (walk.representative != nullptr) walk.representative[p] = static_cast<uint32_t>(walk.n - 1);
+    return;
+  }
+  const Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
+  if (i >= level.width || j >= level.height) return;
+  const std::size_t at = static_cast<std::size_t>(j) * level.width + i;
+  const float count = level.n[at];
+  if (count == 0.0f) return;
+  ++walk.stats->cells_tested;
+  const float inv_n = 1.0f / count;
+  const float mx = level.sx[at] * inv_n, my = level.sy[at] * inv_n, mz = level.sz[at] * inv_n;
+  // The cube that holds the cell's points: its side e, its diagonal.
+  const float variance = level.m2[at] * inv_n;
+  const float e = std::max(static_cast<float>(1 << k) * level.zmax[at] * walk.inv_f, 2.0f * std::sqrt(variance));
+  const float diagonal = 1.7320508f * e;
+  bool merge = false;
+  if (walk.rule.floor_m > 0.0f || walk.rule.floor_per_m2 > 0.0f) {
+    const float s2 = (mx * mx + my * my) + mz * mz;
+    merge = e <= walk.rule.floor_m + walk.rule.floor_per_m2 * s2;
+  }
+  if (!merge) {
+    // The centroid seen from the eye: v = R m + (camera - eye).
+    const float vx = ((walk.r[0] * mx + walk.r[1] * my) + walk.r[2] * mz) + walk.o[0];
+    const float vy = ((walk.r[3] * mx + walk.r[4] * my) + walk.r[5] * mz) + walk.o[1];
+    const float vz = ((walk.r[6] * mx + walk.r[7] * my) + walk.r[8] * mz) + walk.o[2];
+    const float r = std::sqrt((vx * vx + vy * vy) + vz * vz);
+    if (r > 2.0f * diagonal) {
+      const float t = (vx * walk.l[0] + vy * walk.l[1]) + vz * walk.l[2];
+      const float ax = vx - t * walk.l[0], ay = vy - t * walk.l[1], az = vz - t * walk.l[2];
+      const float d = std::sqrt((ax * ax + ay * ay) + az * az);
+      const float r_min = r - diagonal;
+      // The angle the cube subtends from its centre is below atan(diagonal / r_min),
+      // which is below diagonal / r_min.
+      const float spread_deg = diagonal / r_min * kLevelsRadToDeg;
+      const float ecc = eccentricitySpecDeg(t, d) - spread_deg - walk.growth_deg;
+      const float ecc_min = ecc > 0.0f ? ecc : 0.0f;
+      const float allowed = r_min * sinSpec((walk.rule.slope * ecc_min + kLevelsMar0Deg) * kLevelsDegToRad);
+      merge = walk.rule.margin * e <= allowed;
+    }
+  }
+  if (merge) {
+    const uint32_t rgb = walk.meanColour(k, i, j, static_cast<uint32_t>(walk.n));
+    walk.emit(mx, my, mz, rgb, static_cast<uint8_t>(k), static_cast<uint32_t>(count));
+    return;
+  }
+  visit(walk, k - 1, 2 * i, 2 * j);
+  visit(walk, k - 1, 2 * i + 1, 2 * j);
+  visit(walk, k - 1, 2 * i, 2 * j + 1);
+  visit(walk, k - 1, 2 * i + 1, 2 * j + 1);
+}
+
+Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& range, const Gaze& gaze,
+                              const PyramidRule& rule, FoveatedCloud& out, PyramidStats& stats,
+                              uint32_t* representative_by_pixel) {
+  stats = {};
+  out.points.clear();
+  if (Status s = validateFrame(frame); !s) return s;
+  if (Status s = range.validate(); !s) return s;
+  if (Status s = rule.validate(); !s) return s;
+  if (frame.width() > max_width_ || frame.height() > max_height_) {
+    return {ErrorCode::kCapacityExceeded, "pyramid: frame " + std::to_string(frame.width()) + "x" +
+                                              std::to_string(frame.height()) + " is larger than the sampler's " +
+                                              std::to_string(max_width_) + "x" + std::to_string(max_height_)};
+  }
+  if (out.points.capacity() < frame.pixelCount() || out.region.size() < frame.pixelCount() ||
+      out.weight.size() < frame.pixelCount()) {
+    return {ErrorCode::kCapacityExceeded, "pyramid: the output holds fewer points than the frame has pixels"};
+  }
+  if (!gaze.origin_m.allFinite() || !gaze.direction.allFinite() || !std::isfinite(gaze.fovea_growth_deg)) {
+    return {ErrorCode::kInvalidInput, "pyramid: gaze is not finite"};
+  }
+  const RawDepthRange raw = rawDepthRange(range, frame.depth_scale_m);
+  buildFirstLevel(frame, raw);
+  for (int k = 2; k <= levels_; ++k) buildLevel(k);
+
+  Walk walk;
+  walk.frame = &frame;
+  walk.raw_min = static_cast<uint32_t>(std::clamp<int64_t>(raw.min, 0, 65536));
+  walk.raw_max = static_cast<uint32_t>(std::clamp<int64_t>(raw.max, -1, 65535) + 1);
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  walk.scale = static_cast<float>(frame.depth_scale_m);
+  walk.cx = static_cast<float>(k.cx);
+  walk.cy = static_cast<float>(k.cy);
+  walk.inv_fx = static_cast<float>(1.0 / k.fx);
+  walk.inv_fy = static_cast<float>(1.0 / k.fy);
+  walk.inv_f = std::max(walk.inv_fx, walk.inv_fy);
+  const Eigen::Matrix3d& rot = frame.T_world_cam.R_world_cam;
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) walk.r[3 * a + b] = static_cast<float>(rot(a, b));
+  }
+  const Eigen::Vector3d o = frame.T_world_cam.t_world_cam - gaze.origin_m;  // large parts cancel in double
+  const Eigen::Vector3d l = gaze.direction.normalized();
+  for (int a = 0; a < 3; ++a) {
+    walk.o[a] = static_cast<float>(o[a]);
+    walk.l[a] = static_cast<float>(l[a]);
+  }
+  walk.growth_deg = static_cast<float>(gaze.fovea_growth_deg);
+  walk.rule = rule;
+  walk.out = &out;
+  walk.stats = &stats;
+  walk.representative = representative_by_pixel;
+  if (representative_by_pixel != nullptr) {
+    std::fill(representative_by_pixel, representative_by_pixel + frame.pixelCount(), kNoRepresentative);
+  }
+
+  const Level& top = pyramid_[static_cast<std::size_t>(levels_ - 1)];
+  uint32_t valid = 0;
+  for (int j = 0; j < top.height; ++j) {
+    for (int i = 0; i < top.width; ++i) {
+      valid += static_cast<uint32_t>(top.n[static_cast<std::size_t>(j) * top.width + i]);
+      visit(walk, levels_, i, j);
+    }
+  }
+  out.points.origin_m = frame.T_world_cam.t_world_cam;
+  out.points.has_color = frame.has_rgb;
+  (void)out.points.resize(walk.n);  // walk.n <= valid pixels <= capacity
+  stats.points_in = valid;
+  stats.points_out = static_cast<uint32_t>(walk.n);
+  return Status::ok();
+}
+
+}  // namespace fovea::pipeline
