@@ -61,7 +61,7 @@ Status Backprojector::runPooled(Backprojector& self, const hal::RgbdFrame& frame
       mine = Part{};
       mine.valid = kernels::backprojectCountRows(*j->params, row0, row1, &mine.no_depth, &mine.out_of_range);
     } else {
-      kernels::backprojectRows(*j->params, row0, row1, mine.offset);
+      kernels::backprojectRows(*j->params, row0, row1, mine.offset, mine.offset + mine.valid);
     }
   };
   self.pool_->run(task, &job);

@@ -86,9 +86,10 @@ struct CompressNibbleTable {
 };
 inline constexpr CompressNibbleTable kCompressNibbles{};
 
+// full: the whole vector may be stored (lanes past the selected ones are don't-care).
 template <class DF>
 HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, hn::Vec<DF> b, hn::Vec<DF> c,
-                                      float* oa, float* ob, float* oc) {
+                                      float* oa, float* ob, float* oc, bool full) {
   if constexpr (hn::MaxLanes(DF()) <= 8) {
     const hn::RebindToSigned<DF> di;
     uint8_t bits[8] = {};
@@ -98,12 +99,19 @@ HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, h
     const auto shifts = hn::ShiftLeft<2>(hn::Iota(di, 0));
     const auto lanes = hn::And(hn::Shr(packed, shifts), hn::Set(di, 0xF));
     const auto idx = hn::IndicesFromVec(df, lanes);
-    const auto keep = hn::FirstN(df, count);
-    hn::BlendedStore(hn::TableLookupLanes(a, idx), keep, df, oa);
-    hn::BlendedStore(hn::TableLookupLanes(b, idx), keep, df, ob);
-    hn::BlendedStore(hn::TableLookupLanes(c, idx), keep, df, oc);
+    if (full) {
+      hn::StoreU(hn::TableLookupLanes(a, idx), df, oa);
+      hn::StoreU(hn::TableLookupLanes(b, idx), df, ob);
+      hn::StoreU(hn::TableLookupLanes(c, idx), df, oc);
+    } else {
+      const auto keep = hn::FirstN(df, count);
+      hn::BlendedStore(hn::TableLookupLanes(a, idx), keep, df, oa);
+      hn::BlendedStore(hn::TableLookupLanes(b, idx), keep, df, ob);
+      hn::BlendedStore(hn::TableLookupLanes(c, idx), keep, df, oc);
+    }
     return count;
   } else {
+    (void)full;
     hn::CompressBlendedStore(a, mask, df, oa);
     hn::CompressBlendedStore(b, mask, df, ob);
     return hn::CompressBlendedStore(c, mask, df, oc);
@@ -115,7 +123,8 @@ HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, h
 // writes only the selected lanes) and returns the new n.
 template <class DF>
 HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, const uint16_t* src, int u,
-                                         hn::Vec<DF> yn, float* ox, float* oy, float* oz, std::size_t n) {
+                                         hn::Vec<DF> yn, float* ox, float* oy, float* oz, std::size_t n,
+                                         std::size_t limit) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du32;
   const hn::Rebind<uint16_t, DF> du16;
@@ -134,10 +143,11 @@ HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, cons
                           hn::Mul(hn::Set(df, p.r[5]), z));
   const auto wz = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[6]), x), hn::Mul(hn::Set(df, p.r[7]), y)),
                           hn::Mul(hn::Set(df, p.r[8]), z));
-  return n + CompressStore3(df, mask, wx, wy, wz, ox + n, oy + n, oz + n);
+  return n + CompressStore3(df, mask, wx, wy, wz, ox + n, oy + n, oz + n, n + hn::Lanes(df) <= limit);
 }
 
-inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std::size_t out_offset) {
+inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std::size_t out_offset,
+                             std::size_t out_limit) {
   const hn::ScalableTag<float> df;
   const std::size_t lanes = hn::Lanes(df);
   const auto w = static_cast<std::size_t>(p.width);
@@ -154,13 +164,14 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
     const std::size_t n_row = n;
     std::size_t u = 0;
     for (; u + lanes <= w; u += lanes) {
-      n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n);
+      n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n, out_limit);
     }
     if (u < w) {
       // The tail: zero-padded depth (0 is never valid), results staged and copied.
       std::memset(tail_depth, 0, sizeof tail_depth);
       std::memcpy(tail_depth, row + u, (w - u) * sizeof(uint16_t));
-      const std::size_t got = BackprojectVector(df, p, tail_depth, static_cast<int>(u), yn, tail_x, tail_y, tail_z, 0);
+      const std::size_t got =
+          BackprojectVector(df, p, tail_depth, static_cast<int>(u), yn, tail_x, tail_y, tail_z, 0, lanes);
       std::memcpy(p.out_x + n, tail_x, got * sizeof(float));
       std::memcpy(p.out_y + n, tail_y, got * sizeof(float));
       std::memcpy(p.out_z + n, tail_z, got * sizeof(float));

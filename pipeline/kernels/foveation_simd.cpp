@@ -70,8 +70,9 @@ std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int 
   return HWY_DYNAMIC_DISPATCH(BackprojectCountRowsT)(params, row0, row1, no_depth, out_of_range);
 }
 
-void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset) {
-  HWY_DYNAMIC_DISPATCH(BackprojectRowsT)(params, row0, row1, out_offset);
+void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset,
+                     std::size_t out_limit) {
+  HWY_DYNAMIC_DISPATCH(BackprojectRowsT)(params, row0, row1, out_offset, out_limit);
 }
 
 namespace {
@@ -195,7 +196,7 @@ Status backprojectSimd(const hal::RgbdFrame& frame, const DepthRange& range, Poi
   p.out_y = out.y();
   p.out_z = out.z();
   p.out_rgb = out.rgb();
-  kernels::backprojectRows(p, 0, p.height, 0);
+  kernels::backprojectRows(p, 0, p.height, 0, out.capacity());
   counts.valid = valid;
   (void)out.resize(valid);
   return Status::ok();

@@ -98,7 +98,13 @@ Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& rang
 std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int row1, std::size_t* no_depth,
                                  std::size_t* out_of_range);
 // Writes the valid pixels of rows [row0, row1) at out_* + out_offset, in image order.
-void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset);
+// Writes the valid pixels of rows [row0, row1) from out_offset on. out_limit: the end
+// of what the call may write (its rows' last point + 1, or the cloud's capacity):
+// below it, whole vectors are stored, lanes past the last point included, because a
+// full store costs a fraction of a masked one (AVX2's vmaskmovps); nothing at or past
+// out_limit is written. The points are the same either way.
+void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset,
+                     std::size_t out_limit);
 
 struct PartitionParams {
   double origin_minus_eye[3] = {};
