@@ -87,9 +87,12 @@ struct CompressNibbleTable {
 inline constexpr CompressNibbleTable kCompressNibbles{};
 
 // full: the whole vector may be stored (lanes past the selected ones are don't-care).
+// colour/oc4: a fourth vector (the packed colours) compacted alike, when oc4 is not null.
 template <class DF>
 HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, hn::Vec<DF> b, hn::Vec<DF> c,
-                                      float* oa, float* ob, float* oc, bool full) {
+                                      float* oa, float* ob, float* oc, bool full,
+                                      hn::Vec<hn::RebindToUnsigned<DF>> colour, uint32_t* oc4) {
+  const hn::RebindToUnsigned<DF> du;
   if constexpr (hn::MaxLanes(DF()) <= 8) {
     const hn::RebindToSigned<DF> di;
     uint8_t bits[8] = {};
@@ -99,32 +102,40 @@ HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, h
     const auto shifts = hn::ShiftLeft<2>(hn::Iota(di, 0));
     const auto lanes = hn::And(hn::Shr(packed, shifts), hn::Set(di, 0xF));
     const auto idx = hn::IndicesFromVec(df, lanes);
+    const auto idx_u = hn::IndicesFromVec(du, hn::BitCast(du, lanes));
     if (full) {
       hn::StoreU(hn::TableLookupLanes(a, idx), df, oa);
       hn::StoreU(hn::TableLookupLanes(b, idx), df, ob);
       hn::StoreU(hn::TableLookupLanes(c, idx), df, oc);
+      if (oc4 != nullptr) hn::StoreU(hn::TableLookupLanes(colour, idx_u), du, oc4);
     } else {
       const auto keep = hn::FirstN(df, count);
       hn::BlendedStore(hn::TableLookupLanes(a, idx), keep, df, oa);
       hn::BlendedStore(hn::TableLookupLanes(b, idx), keep, df, ob);
       hn::BlendedStore(hn::TableLookupLanes(c, idx), keep, df, oc);
+      if (oc4 != nullptr) hn::BlendedStore(hn::TableLookupLanes(colour, idx_u), hn::FirstN(du, count), du, oc4);
     }
     return count;
   } else {
     (void)full;
     hn::CompressBlendedStore(a, mask, df, oa);
     hn::CompressBlendedStore(b, mask, df, ob);
+    if (oc4 != nullptr) hn::CompressBlendedStore(colour, hn::RebindMask(du, mask), du, oc4);
     return hn::CompressBlendedStore(c, mask, df, oc);
   }
 }
 
 // One vector of pixels starting at column u; depth from `src` (the row, or a padded
 // copy of its tail). Writes the valid ones at out + n through CompressStore3 (which
-// writes only the selected lanes) and returns the new n.
+// writes only the selected lanes, or whole vectors below `limit`) and returns the
+// new n. With rgb_px (the first lane's colour bytes, not the image's first pixel)
+// the colours are gathered and compacted too: 4 bytes from one before each pixel's
+// 3, so that no lane reads past the image's last byte.
 template <class DF>
 HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, const uint16_t* src, int u,
                                          hn::Vec<DF> yn, float* ox, float* oy, float* oz, std::size_t n,
-                                         std::size_t limit) {
+                                         std::size_t limit, const uint8_t* rgb_px = nullptr,
+                                         uint32_t* orgb = nullptr) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du32;
   const hn::Rebind<uint16_t, DF> du16;
@@ -143,7 +154,32 @@ HWY_INLINE std::size_t BackprojectVector(DF df, const BackprojectParams& p, cons
                           hn::Mul(hn::Set(df, p.r[5]), z));
   const auto wz = hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[6]), x), hn::Mul(hn::Set(df, p.r[7]), y)),
                           hn::Mul(hn::Set(df, p.r[8]), z));
-  return n + CompressStore3(df, mask, wx, wy, wz, ox + n, oy + n, oz + n, n + hn::Lanes(df) <= limit);
+  auto colour = hn::Zero(du32);
+  if (rgb_px != nullptr && p.has_rgb) {
+    // Bytes (b of the pixel before, r, g, b) as a little-endian word: >> 8 gives
+    // r | g << 8 | b << 16, and packRgb wants r << 16 | g << 8 | b.
+    const auto offsets = hn::Sub(hn::Mul(hn::Iota(di, 0), hn::Set(di, 3)), hn::Set(di, 1));
+    const auto word = hn::BitCast(du32, hn::GatherOffset(di, reinterpret_cast<const int32_t*>(rgb_px), offsets));
+    const auto rgb = hn::ShiftRight<8>(word);
+    const auto byte = hn::Set(du32, 0xFF);
+    colour = hn::Or(hn::Or(hn::ShiftLeft<16>(hn::And(rgb, byte)), hn::And(rgb, hn::Set(du32, 0xFF00))),
+                    hn::And(hn::ShiftRight<16>(rgb), byte));
+  }
+  return n + CompressStore3(df, mask, wx, wy, wz, ox + n, oy + n, oz + n, n + hn::Lanes(df) <= limit, colour,
+                            orgb != nullptr ? orgb + n : nullptr);
+}
+
+// Colours of the valid pixels of columns [q0, q1) of a row, from out + c on (a
+// scalar gather of 3 bytes): the image's first vector and the rows' tails.
+inline void BackprojectColoursScalar(const BackprojectParams& p, std::size_t row_start, std::size_t q0,
+                                     std::size_t q1, std::size_t c) {
+  const uint16_t* row = p.depth + row_start;
+  for (std::size_t q = q0; q < q1; ++q) {
+    const int32_t raw = row[q];
+    if (raw < p.raw_min || raw > p.raw_max) continue;
+    const uint8_t* px = p.rgb + 3 * (row_start + q);
+    p.out_rgb[c++] = p.has_rgb ? packRgb(px[0], px[1], px[2]) : 0u;
+  }
 }
 
 inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std::size_t out_offset,
@@ -161,10 +197,16 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
     const auto yn = hn::Set(df, yn_scalar);
     const std::size_t row_start = static_cast<std::size_t>(v) * w;
     const uint16_t* row = p.depth + row_start;
-    const std::size_t n_row = n;
     std::size_t u = 0;
     for (; u + lanes <= w; u += lanes) {
-      n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n, out_limit);
+      if (row_start + u > 0) {
+        n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n, out_limit,
+                              p.rgb + 3 * (row_start + u), p.out_rgb);
+      } else {  // the image's first pixel has no byte before it
+        const std::size_t n0 = n;
+        n = BackprojectVector(df, p, row + u, static_cast<int>(u), yn, p.out_x, p.out_y, p.out_z, n, out_limit);
+        BackprojectColoursScalar(p, row_start, u, u + lanes, n0);
+      }
     }
     if (u < w) {
       // The tail: zero-padded depth (0 is never valid), results staged and copied.
@@ -175,15 +217,8 @@ inline void BackprojectRowsT(const BackprojectParams& p, int row0, int row1, std
       std::memcpy(p.out_x + n, tail_x, got * sizeof(float));
       std::memcpy(p.out_y + n, tail_y, got * sizeof(float));
       std::memcpy(p.out_z + n, tail_z, got * sizeof(float));
+      BackprojectColoursScalar(p, row_start, u, w, n);
       n += got;
-    }
-    // Colours: the same pixels in the same order (a scalar gather of 3 bytes).
-    std::size_t c = n_row;
-    for (std::size_t q = 0; q < w; ++q) {
-      const int32_t raw = row[q];
-      if (raw < p.raw_min || raw > p.raw_max) continue;
-      const uint8_t* px = p.rgb + 3 * (row_start + q);
-      p.out_rgb[c++] = p.has_rgb ? packRgb(px[0], px[1], px[2]) : 0u;
     }
   }
 }

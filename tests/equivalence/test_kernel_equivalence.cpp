@@ -116,6 +116,9 @@ void expectSameBackprojection(const hal::RgbdFrame& frame, const DepthRange& ran
   EXPECT_EQ(cr.valid, cs.valid);
   EXPECT_EQ(cr.no_depth, cs.no_depth);
   EXPECT_EQ(cr.out_of_range, cs.out_of_range);
+  // A cloud exactly as large as the frame's valid pixels: the kernel's whole-vector
+  // stores must give way to masked ones near its end (ASan sees any write past it).
+  if (capacity != cr.valid && cr.valid > 0) expectSameBackprojection(frame, range, cr.valid);
 }
 
 TEST_P(TargetTest, BackprojectRandomFrames) {
