@@ -43,7 +43,7 @@ inline float combinedM2(float na, float sa, float m2a, float nb, float sb, float
 
 }  // namespace
 
-Result<PyramidSampler> PyramidSampler::create(int max_width, int max_height, int levels) {
+Result<PyramidSampler> PyramidSampler::create(int max_width, int max_height, int levels, KernelSet kernels) {
   if (max_width < 1 || max_height < 1 || max_width > 16384 || max_height > 16384) {
     return Status{ErrorCode::kInvalidArgument, "pyramid: frame size must be within 1..16384"};
   }
@@ -51,20 +51,29 @@ Result<PyramidSampler> PyramidSampler::create(int max_width, int max_height, int
     return Status{ErrorCode::kInvalidArgument,
                   "pyramid: levels must be within 1.." + std::to_string(kMaxPyramidLevels)};
   }
-  return PyramidSampler(max_width, max_height, levels);
+  return PyramidSampler(max_width, max_height, levels, kernels);
 }
 
 void PyramidSampler::Level::resize(std::size_t cells) {
-  for (std::vector<float>* a : {&n, &sx, &sy, &sz, &m2, &zmax}) a->assign(cells, 0.0f);
+  for (std::vector<float>* a : {&n, &sx, &sy, &sz, &m2, &zmax, &merge}) a->assign(cells, 0.0f);
 }
 
-PyramidSampler::PyramidSampler(int max_width, int max_height, int levels)
-    : max_width_(max_width), max_height_(max_height), levels_(levels), pyramid_(static_cast<std::size_t>(levels)) {
+PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, KernelSet kernels)
+    : max_width_(max_width),
+      max_height_(max_height),
+      levels_(levels),
+      kernels_(kernels),
+      pyramid_(static_cast<std::size_t>(levels)) {
   for (int k = 1; k <= levels; ++k) {
     const int w = (max_width + (1 << k) - 1) >> k;
     const int h = (max_height + (1 << k) - 1) >> k;
     pyramid_[static_cast<std::size_t>(k - 1)].resize(static_cast<std::size_t>(w) * h);
   }
+  const std::size_t first_cells = pyramid_[0].n.size();
+  candidates_.resize(first_cells);
+  parents_.resize(first_cells);
+  for (std::vector<float>& g : gathered_) g.resize(first_cells);
+  verdict_.resize(first_cells);
   // Rows padded to an even width: the odd column's partner is an invalid pixel.
   const auto padded = static_cast<std::size_t>(max_width + 1);
   for (std::vector<float>* a : {&row_x_, &row_z_, &row_valid_, &column_xn_}) {
@@ -176,16 +185,102 @@ void PyramidSampler::buildLevel(int k) {
   }
 }
 
+void pyramidMergeRef(const kernels::PyramidMergeParams& p, const kernels::PyramidCellSums& c, std::size_t count,
+                     float* merge) {
+  const Eigen::Vector3f l(p.eye.l[0], p.eye.l[1], p.eye.l[2]);
+  for (std::size_t i = 0; i < count; ++i) {
+    const float inv_n = 1.0f / c.n[i];
+    const float mx = c.sx[i] * inv_n, my = c.sy[i] * inv_n, mz = c.sz[i] * inv_n;
+    const float variance = c.m2[i] * inv_n;
+    const float e = std::max(p.lateral * c.zmax[i], 2.0f * std::sqrt(variance));
+    const float diagonal = kernels::kPyramidSqrt3 * e;
+    bool floor_merge = false;
+    if (p.floors) {
+      const float s2 = (mx * mx + my * my) + mz * mz;
+      floor_merge = e <= p.floor_m + p.floor_per_m2 * s2;
+    }
+    const float vx = ((p.r[0] * mx + p.r[1] * my) + p.r[2] * mz) + p.eye.origin_minus_eye[0];
+    const float vy = ((p.r[3] * mx + p.r[4] * my) + p.r[5] * mz) + p.eye.origin_minus_eye[1];
+    const float vz = ((p.r[6] * mx + p.r[7] * my) + p.r[8] * mz) + p.eye.origin_minus_eye[2];
+    const EyeView view = eyeViewSpec(vx, vy, vz, l, 0.0f);
+    const float r_min = view.r_m - diagonal;
+    const float spread = (diagonal / r_min) * kLevelsRadToDeg;
+    float ecc = (view.ecc_deg - spread) - p.growth_deg;
+    ecc = ecc < 0.0f ? 0.0f : ecc;
+    const float allowed = p.eye.bounds.allowedM(r_min, ecc);
+    const bool eye_merge = view.r_m > 2.0f * diagonal && p.margin * e <= allowed;
+    merge[i] = floor_merge || eye_merge ? 1.0f : 0.0f;
+  }
+}
+
+void PyramidSampler::decide(const hal::RgbdFrame& frame, const Gaze& gaze, const PyramidRule& rule,
+                            PyramidStats& stats) {
+  kernels::PyramidMergeParams p;
+  const Eigen::Vector3d o = frame.T_world_cam.t_world_cam - gaze.origin_m;  // large parts cancel in double
+  const Eigen::Vector3d l = gaze.direction.normalized();
+  for (int a = 0; a < 3; ++a) {
+    p.eye.origin_minus_eye[a] = static_cast<float>(o[a]);
+    p.eye.l[a] = static_cast<float>(l[a]);
+    for (int b = 0; b < 3; ++b) p.r[3 * a + b] = static_cast<float>(frame.T_world_cam.R_world_cam(a, b));
+  }
+  p.eye.bounds.slope = rule.slope;
+  p.growth_deg = static_cast<float>(gaze.fovea_growth_deg);
+  p.margin = rule.margin;
+  p.floors = rule.floor_m > 0.0f || rule.floor_per_m2 > 0.0f;
+  p.floor_m = rule.floor_m;
+  p.floor_per_m2 = rule.floor_per_m2;
+  const float inv_f = std::max(static_cast<float>(1.0 / frame.intrinsics.fx),
+                               static_cast<float>(1.0 / frame.intrinsics.fy));
+  std::size_t parents = 0;
+  for (int k = levels_; k >= 1; --k) {
+    Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
+    std::size_t count = 0;
+    if (k == levels_) {
+      const std::size_t cells = static_cast<std::size_t>(level.width) * level.height;
+      for (std::size_t at = 0; at < cells; ++at) {
+        if (level.n[at] != 0.0f) candidates_[count++] = static_cast<uint32_t>(at);
+      }
+    } else {
+      const Level& above = pyramid_[static_cast<std::size_t>(k)];
+      for (std::size_t q = 0; q < parents; ++q) {
+        const uint32_t at = parents_[q];
+        if (above.merge[at] != 0.0f) continue;
+        const int i = static_cast<int>(at % static_cast<uint32_t>(above.width));
+        const int j = static_cast<int>(at / static_cast<uint32_t>(above.width));
+        for (int cj = 2 * j; cj < std::min(2 * j + 2, level.height); ++cj) {
+          for (int ci = 2 * i; ci < std::min(2 * i + 2, level.width); ++ci) {
+            const std::size_t child = static_cast<std::size_t>(cj) * level.width + ci;
+            if (level.n[child] != 0.0f) candidates_[count++] = static_cast<uint32_t>(child);
+          }
+        }
+      }
+    }
+    const std::vector<float>* sums[6] = {&level.n, &level.sx, &level.sy, &level.sz, &level.m2, &level.zmax};
+    for (int a = 0; a < 6; ++a) {
+      const float* from = sums[a]->data();
+      float* to = gathered_[a].data();
+      for (std::size_t q = 0; q < count; ++q) to[q] = from[candidates_[q]];
+    }
+    p.lateral = static_cast<float>(1 << k) * inv_f;
+    const kernels::PyramidCellSums cells{gathered_[0].data(), gathered_[1].data(), gathered_[2].data(),
+                                         gathered_[3].data(), gathered_[4].data(), gathered_[5].data()};
+    if (kernels_ == KernelSet::kSimd) {
+      kernels::pyramidMergeSimd(p, cells, count, verdict_.data());
+    } else {
+      pyramidMergeRef(p, cells, count, verdict_.data());
+    }
+    for (std::size_t q = 0; q < count; ++q) level.merge[candidates_[q]] = verdict_[q];
+    stats.cells_tested += static_cast<uint32_t>(count);
+    std::swap(candidates_, parents_);
+    parents = count;
+  }
+}
+
 struct PyramidSampler::Walk {
   const hal::RgbdFrame* frame = nullptr;
   uint32_t raw_min = 0, raw_max = 0;  // raw_max exclusive
   float scale = 0.0f, cx = 0.0f, cy = 0.0f, inv_fx = 0.0f, inv_fy = 0.0f;
-  float inv_f = 0.0f;  // the wider pixel pitch per metre of depth
-  float r[9] = {};     // R_world_cam
-  float o[3] = {};     // camera position - eye, world frame
-  float l[3] = {};     // unit gaze
-  float growth_deg = 0.0f;
-  PyramidRule rule;
+  float r[9] = {};  // R_world_cam
   FoveatedCloud* out = nullptr;
   std::size_t n = 0;
   PyramidStats* stats = nullptr;
@@ -255,39 +350,9 @@ void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
   const std::size_t at = static_cast<std::size_t>(j) * level.width + i;
   const float count = level.n[at];
   if (count == 0.0f) return;
-  ++walk.stats->cells_tested;
-  const float inv_n = 1.0f / count;
-  const float mx = level.sx[at] * inv_n, my = level.sy[at] * inv_n, mz = level.sz[at] * inv_n;
-  // The cube that holds the cell's points: its side e, its diagonal.
-  const float variance = level.m2[at] * inv_n;
-  const float e = std::max(static_cast<float>(1 << k) * level.zmax[at] * walk.inv_f, 2.0f * std::sqrt(variance));
-  const float diagonal = 1.7320508f * e;
-  bool merge = false;
-  if (walk.rule.floor_m > 0.0f || walk.rule.floor_per_m2 > 0.0f) {
-    const float s2 = (mx * mx + my * my) + mz * mz;
-    merge = e <= walk.rule.floor_m + walk.rule.floor_per_m2 * s2;
-  }
-  if (!merge) {
-    // The centroid seen from the eye: v = R m + (camera - eye).
-    const float vx = ((walk.r[0] * mx + walk.r[1] * my) + walk.r[2] * mz) + walk.o[0];
-    const float vy = ((walk.r[3] * mx + walk.r[4] * my) + walk.r[5] * mz) + walk.o[1];
-    const float vz = ((walk.r[6] * mx + walk.r[7] * my) + walk.r[8] * mz) + walk.o[2];
-    const float r = std::sqrt((vx * vx + vy * vy) + vz * vz);
-    if (r > 2.0f * diagonal) {
-      const float t = (vx * walk.l[0] + vy * walk.l[1]) + vz * walk.l[2];
-      const float ax = vx - t * walk.l[0], ay = vy - t * walk.l[1], az = vz - t * walk.l[2];
-      const float d = std::sqrt((ax * ax + ay * ay) + az * az);
-      const float r_min = r - diagonal;
-      // The angle the cube subtends from its centre is below atan(diagonal / r_min),
-      // which is below diagonal / r_min.
-      const float spread_deg = diagonal / r_min * kLevelsRadToDeg;
-      const float ecc = eccentricitySpecDeg(t, d) - spread_deg - walk.growth_deg;
-      const float ecc_min = ecc > 0.0f ? ecc : 0.0f;
-      const float allowed = r_min * sinSpec((walk.rule.slope * ecc_min + kLevelsMar0Deg) * kLevelsDegToRad);
-      merge = walk.rule.margin * e <= allowed;
-    }
-  }
-  if (merge) {
+  if (level.merge[at] != 0.0f) {
+    const float inv_n = 1.0f / count;
+    const float mx = level.sx[at] * inv_n, my = level.sy[at] * inv_n, mz = level.sz[at] * inv_n;
     const uint32_t rgb = walk.meanColour(k, i, j, static_cast<uint32_t>(walk.n));
     walk.emit(mx, my, mz, rgb, static_cast<uint8_t>(k), static_cast<uint32_t>(count));
     return;
@@ -332,25 +397,17 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
   walk.cy = static_cast<float>(k.cy);
   walk.inv_fx = static_cast<float>(1.0 / k.fx);
   walk.inv_fy = static_cast<float>(1.0 / k.fy);
-  walk.inv_f = std::max(walk.inv_fx, walk.inv_fy);
   const Eigen::Matrix3d& rot = frame.T_world_cam.R_world_cam;
   for (int a = 0; a < 3; ++a) {
     for (int b = 0; b < 3; ++b) walk.r[3 * a + b] = static_cast<float>(rot(a, b));
   }
-  const Eigen::Vector3d o = frame.T_world_cam.t_world_cam - gaze.origin_m;  // large parts cancel in double
-  const Eigen::Vector3d l = gaze.direction.normalized();
-  for (int a = 0; a < 3; ++a) {
-    walk.o[a] = static_cast<float>(o[a]);
-    walk.l[a] = static_cast<float>(l[a]);
-  }
-  walk.growth_deg = static_cast<float>(gaze.fovea_growth_deg);
-  walk.rule = rule;
   walk.out = &out;
   walk.stats = &stats;
   walk.representative = representative_by_pixel;
   if (representative_by_pixel != nullptr) {
     std::fill(representative_by_pixel, representative_by_pixel + frame.pixelCount(), kNoRepresentative);
   }
+  decide(frame, gaze, rule, stats);
 
   const Level& top = pyramid_[static_cast<std::size_t>(levels_ - 1)];
   uint32_t valid = 0;

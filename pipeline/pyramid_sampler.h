@@ -42,10 +42,12 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/acuity.h"
 #include "pipeline/backproject.h"
+#include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/partition.h"
 #include "pipeline/point_cloud.h"
 
@@ -73,10 +75,24 @@ struct PyramidStats {
   std::array<uint32_t, kMaxPyramidLevels + 1> out_by_level{};  // [0]: pixels
 };
 
+// The rule for `count` cells of one level, the specification: merge[i] = 1 where
+// cell i merges, 0 where it splits. In float, one operation a step, in this order,
+// no FMA (pyramidMergeSimd reproduces it bit for bit): inv_n = 1 / n; m = s inv_n;
+// e = max(lateral zmax, 2 sqrt(m2 inv_n)); diagonal = sqrt(3) e; the floor test
+// e <= floor_m + floor_per_m2 ((mx mx + my my) + mz mz) when floors; v = R m + o
+// (each row ((r0 mx + r1 my) + r2 mz) + o); r and the centre's eccentricity as
+// eyeViewSpec (growth 0); r_min = r - diagonal; spread = (diagonal / r_min) x
+// rad-to-deg; E = (ecc - spread) - growth, 0 below 0; allowed = LevelBounds::allowedM
+// (r_min, E); merge = floor test or (r > 2 diagonal and margin e <= allowed).
+void pyramidMergeRef(const kernels::PyramidMergeParams& params, const kernels::PyramidCellSums& cells,
+                     std::size_t count, float* merge);
+
 class PyramidSampler {
  public:
   // Sized for frames up to max_width x max_height; levels in [1, kMaxPyramidLevels].
-  static Result<PyramidSampler> create(int max_width, int max_height, int levels = 5);
+  // kernels: the rule's kernel, pyramidMergeRef or pyramidMergeSimd (same output).
+  static Result<PyramidSampler> create(int max_width, int max_height, int levels = 5,
+                                       KernelSet kernels = defaultKernelSet());
 
   // Foveates `frame` for `gaze` (from normalizeGaze(); its fovea growth is used)
   // into `out`, whose capacity must be at least the frame's pixels. The cloud's
@@ -99,19 +115,30 @@ class PyramidSampler {
   struct Level {
     int width = 0, height = 0;
     std::vector<float> n, sx, sy, sz, m2, zmax;
+    std::vector<float> merge;  // the rule's verdict, for the cells the walk reaches
     void resize(std::size_t cells);
   };
   struct Walk;  // one sample() call's constants
 
-  PyramidSampler(int max_width, int max_height, int levels);
+  PyramidSampler(int max_width, int max_height, int levels, KernelSet kernels);
   void buildFirstLevel(const hal::RgbdFrame& frame, const RawDepthRange& raw);
   void buildLevel(int k);
+  // The rule for every cell the walk will reach, level by level from the top: the
+  // non-empty top cells, then the non-empty children of the cells that split,
+  // gathered into arrays for one kernel call a level.
+  void decide(const hal::RgbdFrame& frame, const Gaze& gaze, const PyramidRule& rule, PyramidStats& stats);
   void visit(Walk& walk, int k, int i, int j) const;
 
   int max_width_ = 0;
   int max_height_ = 0;
   int levels_ = 0;
+  KernelSet kernels_ = KernelSet::kSimd;
   std::vector<Level> pyramid_;  // [k - 1] is level k
+  // decide()'s scratch, sized for level 1: the cells of this level and the last,
+  // their sums gathered, the verdicts.
+  std::vector<uint32_t> candidates_, parents_;
+  std::vector<float> gathered_[6];
+  std::vector<float> verdict_;
   // One image row, camera frame: x, z and validity (0 when invalid).
   std::vector<float> row_x_, row_z_, row_valid_;
   std::vector<float> column_xn_;                  // (u - cx) / fx per column

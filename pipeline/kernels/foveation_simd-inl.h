@@ -437,6 +437,69 @@ inline void LevelRangeT(const float* x, const float* y, const float* z, const Le
               });
 }
 
+// ---- the image pyramid's rule ------------------------------------------------------
+
+// pyramidMergeRef's expressions, op for op, for one vector of cells.
+template <class DF>
+HWY_INLINE hn::Vec<DF> PyramidMergeVector(DF df, const PyramidMergeParams& p, const float* n, const float* sx,
+                                          const float* sy, const float* sz, const float* m2, const float* zmax) {
+  const auto inv_n = hn::Div(hn::Set(df, 1.0f), hn::LoadU(df, n));
+  const auto mx = hn::Mul(hn::LoadU(df, sx), inv_n);
+  const auto my = hn::Mul(hn::LoadU(df, sy), inv_n);
+  const auto mz = hn::Mul(hn::LoadU(df, sz), inv_n);
+  const auto variance = hn::Mul(hn::LoadU(df, m2), inv_n);
+  // std::max(a, b) as the select it is, (a < b) ? b : a, so that NaN goes the same way.
+  const auto lateral = hn::Mul(hn::Set(df, p.lateral), hn::LoadU(df, zmax));
+  const auto depth_spread = hn::Mul(hn::Set(df, 2.0f), hn::Sqrt(variance));
+  const auto e = hn::IfThenElse(hn::Lt(lateral, depth_spread), depth_spread, lateral);
+  const auto diagonal = hn::Mul(hn::Set(df, kPyramidSqrt3), e);
+  auto floor_merge = hn::Lt(hn::Zero(df), hn::Zero(df));
+  if (p.floors) {
+    const auto s2 = hn::Add(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), hn::Mul(mz, mz));
+    floor_merge = hn::Le(e, hn::Add(hn::Set(df, p.floor_m), hn::Mul(hn::Set(df, p.floor_per_m2), s2)));
+  }
+  // v = R m + (camera - eye); no lambda: SVE's sizeless vectors cannot be captured.
+  const auto vx = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[0]), mx), hn::Mul(hn::Set(df, p.r[1]), my)),
+                                  hn::Mul(hn::Set(df, p.r[2]), mz)),
+                          hn::Set(df, p.eye.origin_minus_eye[0]));
+  const auto vy = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[3]), mx), hn::Mul(hn::Set(df, p.r[4]), my)),
+                                  hn::Mul(hn::Set(df, p.r[5]), mz)),
+                          hn::Set(df, p.eye.origin_minus_eye[1]));
+  const auto vz = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, p.r[6]), mx), hn::Mul(hn::Set(df, p.r[7]), my)),
+                                  hn::Mul(hn::Set(df, p.r[8]), mz)),
+                          hn::Set(df, p.eye.origin_minus_eye[2]));
+  const auto r = EyeDistanceVector(df, vx, vy, vz);
+  const auto ecc_centre = EccentricityVector(df, p.eye, vx, vy, vz);
+  const auto r_min = hn::Sub(r, diagonal);
+  const auto spread = hn::Mul(hn::Div(diagonal, r_min), hn::Set(df, kLevelsRadToDeg));
+  auto ecc = hn::Sub(hn::Sub(ecc_centre, spread), hn::Set(df, p.growth_deg));
+  ecc = hn::IfThenElse(hn::Lt(ecc, hn::Zero(df)), hn::Zero(df), ecc);
+  const auto allowed = AllowedVector(df, p.eye, r_min, ecc);
+  const auto eye_merge = hn::And(hn::Gt(r, hn::Mul(hn::Set(df, 2.0f), diagonal)),
+                                 hn::Le(hn::Mul(hn::Set(df, p.margin), e), allowed));
+  return hn::IfThenElseZero(hn::Or(floor_merge, eye_merge), hn::Set(df, 1.0f));
+}
+
+inline void PyramidMergeRangeT(const PyramidMergeParams& p, const PyramidCellSums& c, std::size_t count,
+                               float* merge) {
+  const hn::ScalableTag<float> df;
+  const std::size_t lanes = hn::Lanes(df);
+  std::size_t i = 0;
+  for (; i + lanes <= count; i += lanes) {
+    hn::StoreU(PyramidMergeVector(df, p, c.n + i, c.sx + i, c.sy + i, c.sz + i, c.m2 + i, c.zmax + i), df,
+               merge + i);
+  }
+  if (i < count) {  // the tail through the same code, zero-padded (n = 0 never merges)
+    constexpr std::size_t kMax = HWY_MAX_BYTES / sizeof(float);
+    HWY_ALIGN float t[6][kMax] = {};
+    const float* in[6] = {c.n, c.sx, c.sy, c.sz, c.m2, c.zmax};
+    for (int a = 0; a < 6; ++a) std::memcpy(t[a], in[a] + i, (count - i) * sizeof(float));
+    HWY_ALIGN float out[kMax];
+    hn::Store(PyramidMergeVector(df, p, t[0], t[1], t[2], t[3], t[4], t[5]), df, out);
+    std::memcpy(merge + i, out, (count - i) * sizeof(float));
+  }
+}
+
 // ---- ACUITY's refinement ---------------------------------------------------------
 
 // refineTestRef's states for points [begin, end), op for op in float. Each vector of

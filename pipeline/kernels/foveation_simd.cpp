@@ -29,6 +29,7 @@ HWY_EXPORT(RefineTestRangeT);
 HWY_EXPORT(VoxelIndexRangeT);
 HWY_EXPORT(VoxelKeyRangeT);
 HWY_EXPORT(HitConeRangeT);
+HWY_EXPORT(PyramidMergeRangeT);
 
 namespace {
 void voxelIndexDispatch(const float* coord, const uint8_t* region, std::size_t n, double origin_m,
@@ -68,6 +69,11 @@ Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& rang
 std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int row1, std::size_t* no_depth,
                                  std::size_t* out_of_range) {
   return HWY_DYNAMIC_DISPATCH(BackprojectCountRowsT)(params, row0, row1, no_depth, out_of_range);
+}
+
+void pyramidMergeSimd(const PyramidMergeParams& params, const PyramidCellSums& cells, std::size_t count,
+                      float* merge) {
+  HWY_DYNAMIC_DISPATCH(PyramidMergeRangeT)(params, cells, count, merge);
 }
 
 void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset,

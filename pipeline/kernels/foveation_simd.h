@@ -140,6 +140,35 @@ RefineInputs prepareRefine(const PointCloud& cloud, const PointCloud& out, const
 // refineTestRef's states of points [begin, end); returns the points beyond their MAR.
 std::size_t refineTestRange(const PointCloud& cloud, const LevelParams& params, const RefineInputs& inputs,
                             const uint8_t* region, std::size_t begin, std::size_t end, uint8_t* state);
+// The image pyramid's rule (pipeline/pyramid_sampler.h) for cells of one level: what
+// it needs besides the cells' sums. eye.l, eye.origin_minus_eye (camera - eye) and
+// eye.bounds.slope are used; eye.growth_deg is 0 (the growth is applied after the
+// cell's spread, growth_deg below).
+inline constexpr float kPyramidSqrt3 = 1.7320508f;  // a cube's diagonal per side
+struct PyramidMergeParams {
+  LevelParams eye;
+  float r[9] = {};          // R_world_cam, row-major
+  float growth_deg = 0.0f;  // Gaze::fovea_growth_deg
+  float margin = 0.5f;
+  bool floors = false;      // floor_m or floor_per_m2 > 0
+  float floor_m = 0.0f;
+  float floor_per_m2 = 0.0f;
+  float lateral = 0.0f;     // 2^k max(1/fx, 1/fy): the cell's side per metre of depth
+};
+// The sums of `count` cells, one array each (camera frame).
+struct PyramidCellSums {
+  const float* n = nullptr;
+  const float* sx = nullptr;
+  const float* sy = nullptr;
+  const float* sz = nullptr;
+  const float* m2 = nullptr;
+  const float* zmax = nullptr;
+};
+// merge[i] = 1 where cell i merges, 0 where it splits: pyramidMergeRef's arithmetic,
+// bit for bit (pyramid_sampler.h).
+void pyramidMergeSimd(const PyramidMergeParams& params, const PyramidCellSums& cells, std::size_t count,
+                      float* merge);
+
 // Levels of points [begin, end); histogram[r] += points of level r (r = kRegionInvalid too).
 void levelRange(const PointCloud& cloud, const LevelParams& params, std::size_t begin, std::size_t end,
                 uint8_t* region_out, uint32_t* histogram256);

@@ -23,6 +23,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/partition.h"
+#include "pipeline/pyramid_sampler.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"
 
@@ -763,6 +764,106 @@ TEST(Registration, NaNProducingParametersAreRefused) {
   }
 }
 
+
+// ---- the image pyramid's rule ------------------------------------------------------
+
+// pyramidMergeSimd against pyramidMergeRef on `cells` (six arrays of `count`), bit for bit.
+// Returns how many cells merge.
+std::size_t expectSameMerge(const kernels::PyramidMergeParams& p, const std::vector<std::vector<float>>& sums,
+                            const char* what) {
+  const std::size_t count = sums[0].size();
+  const kernels::PyramidCellSums cells{sums[0].data(), sums[1].data(), sums[2].data(),
+                                       sums[3].data(), sums[4].data(), sums[5].data()};
+  std::vector<float> ref(count + 1, -1.0f), simd(count + 1, -1.0f);
+  pyramidMergeRef(p, cells, count, ref.data());
+  kernels::pyramidMergeSimd(p, cells, count, simd.data());
+  EXPECT_EQ(simd[count], -1.0f) << what << ": wrote past the end";
+  std::size_t merged = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    merged += ref[i] != 0.0f;
+    EXPECT_EQ(std::bit_cast<uint32_t>(ref[i]), std::bit_cast<uint32_t>(simd[i]))
+        << what << ": cell " << i << " of " << count << " (n " << sums[0][i] << ", m " << sums[1][i] << " "
+        << sums[2][i] << " " << sums[3][i] << ", m2 " << sums[4][i] << ", zmax " << sums[5][i] << ")";
+    if (::testing::Test::HasFailure()) break;
+  }
+  return merged;
+}
+
+kernels::PyramidMergeParams randomMergeParams(std::mt19937_64& rng, bool floors) {
+  kernels::PyramidMergeParams p;
+  const Eigen::Matrix3d r = Eigen::Quaterniond(Eigen::Vector4d::Random().normalized()).toRotationMatrix();
+  const Eigen::Vector3d l = test::randomUnit(rng);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int a = 0; a < 3; ++a) {
+    p.eye.l[a] = static_cast<float>(l[a]);
+    p.eye.origin_minus_eye[a] = 0.3f * (unit(rng) - 0.5f);
+    for (int b = 0; b < 3; ++b) p.r[3 * a + b] = static_cast<float>(r(a, b));
+  }
+  p.eye.bounds.slope = 0.01f + 0.04f * unit(rng);
+  p.growth_deg = unit(rng) < 0.5f ? 0.0f : 10.0f * unit(rng);
+  p.margin = 0.1f + unit(rng);
+  p.floors = floors;
+  p.floor_m = floors ? 0.01f * unit(rng) : 0.0f;
+  p.floor_per_m2 = floors ? 0.003f * unit(rng) : 0.0f;
+  p.lateral = static_cast<float>(1 << (1 + rng() % 7)) / (100.0f + 600.0f * unit(rng));
+  return p;
+}
+
+// Cells as a camera gives them: n pixels at depths 0.2 to 20 m, their sums, a spread.
+std::vector<std::vector<float>> randomCells(std::mt19937_64& rng, std::size_t count) {
+  std::vector<std::vector<float>> sums(6, std::vector<float>(count));
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (std::size_t i = 0; i < count; ++i) {
+    const float n = static_cast<float>(1 + rng() % 1024);
+    const float z = 0.2f + 20.0f * unit(rng) * unit(rng);
+    sums[0][i] = n;
+    sums[1][i] = n * z * (unit(rng) - 0.5f);
+    sums[2][i] = n * z * (unit(rng) - 0.5f);
+    sums[3][i] = n * z;
+    sums[4][i] = n * (0.01f * z * unit(rng)) * (0.01f * z * unit(rng));
+    sums[5][i] = z * (1.0f + 0.1f * unit(rng));
+  }
+  return sums;
+}
+
+TEST_P(TargetTest, PyramidRuleRandomCells) {
+  std::mt19937_64 rng(61);
+  std::size_t cells = 0, merged = 0;
+  for (std::size_t count : {0, 1, 2, 3, 5, 7, 8, 9, 15, 16, 17, 31, 33, 1000, 4099}) {
+    for (bool floors : {false, true}) {
+      merged += expectSameMerge(randomMergeParams(rng, floors), randomCells(rng, count), "random");
+      cells += count;
+    }
+  }
+  // Both verdicts are well represented, so both ways through the rule were compared.
+  EXPECT_GT(merged, cells / 10);
+  EXPECT_LT(merged, cells - cells / 10);
+}
+
+// Empty cells (n = 0: NaN everywhere), zero spread, the eye inside a cell, cells on
+// the gaze axis and behind the eye, and values that over- or underflow float.
+TEST_P(TargetTest, PyramidRuleHardCells) {
+  std::mt19937_64 rng(62);
+  const float values[] = {0.0f, -0.0f, 1.0f, 1e-38f, kDenormf, 3e38f, -3e38f, kInff, kNaNf, 0.5f, 1024.0f, 4096.0f};
+  std::uniform_int_distribution<int> pick(0, 11);
+  std::vector<std::vector<float>> specials(6, std::vector<float>(3000));
+  for (std::size_t i = 0; i < 3000; ++i) {
+    for (int a = 0; a < 6; ++a) specials[a][i] = values[pick(rng)];
+  }
+  for (bool floors : {false, true}) expectSameMerge(randomMergeParams(rng, floors), specials, "specials");
+  // On the gaze axis, ahead and behind, and at the eye: the eye at the camera, the
+  // gaze along +z, cells at (0, 0, z) for z of both signs, m2 = 0.
+  kernels::PyramidMergeParams p = randomMergeParams(rng, false);
+  for (int a = 0; a < 9; ++a) p.r[a] = (a % 4 == 0) ? 1.0f : 0.0f;
+  p.eye.origin_minus_eye[0] = p.eye.origin_minus_eye[1] = p.eye.origin_minus_eye[2] = 0.0f;
+  p.eye.l[0] = p.eye.l[1] = 0.0f, p.eye.l[2] = 1.0f;
+  std::vector<std::vector<float>> axis(6);
+  for (float z : {-5.0f, -0.001f, 0.0f, 1e-6f, 0.001f, 0.5f, 3.0f, 1e3f}) {
+    axis[0].push_back(1.0f), axis[1].push_back(0.0f), axis[2].push_back(0.0f), axis[3].push_back(z);
+    axis[4].push_back(0.0f), axis[5].push_back(z);
+  }
+  expectSameMerge(p, axis, "on the axis");
+}
 
 INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(simdTargetsHere()), test::simdTargetName);
 
