@@ -171,7 +171,7 @@ const std::vector<Field>& fields() {
             }},
       FOVEA_FLOAT("foveation.view_cull_deg", foveation.acuity.view_cull_deg, 0.001, 180.0),
       // The map source (docs/map.md); not reloadable: it allocates the map.
-      Field{"foveation.source", Kind::kChoice, 0, 0, {"frame", "map"},
+      Field{"foveation.source", Kind::kChoice, 0, 0, {"frame", "map", "pyramid"},
             [](const ServiceConfig& c) -> Value { return std::string(foveationSourceName(c.map.source)); },
             [](ServiceConfig& c, const Value& v) {
               c.map.source = parseFoveationSource(std::get<std::string>(v)).value();

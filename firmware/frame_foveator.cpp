@@ -1,6 +1,7 @@
 #include "firmware/frame_foveator.h"
 
 #include <algorithm>
+#include <chrono>
 
 namespace fovea::firmware {
 
@@ -8,6 +9,7 @@ std::string_view foveationSourceName(FoveationSource source) {
   switch (source) {
     case FoveationSource::kFrame: return "frame";
     case FoveationSource::kMap: return "map";
+    case FoveationSource::kPyramid: return "pyramid";
   }
   return "?";
 }
@@ -15,6 +17,7 @@ std::string_view foveationSourceName(FoveationSource source) {
 std::optional<FoveationSource> parseFoveationSource(std::string_view name) {
   if (name == "frame") return FoveationSource::kFrame;
   if (name == "map") return FoveationSource::kMap;
+  if (name == "pyramid") return FoveationSource::kPyramid;
   return std::nullopt;
 }
 
@@ -32,6 +35,13 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
   if (!foveator) return foveator.status();
   FrameFoveator stage(std::move(foveator.value()), sized, range);
   stage.source_ = map.source;
+  if (map.source == FoveationSource::kPyramid) {
+    Result<pipeline::PyramidSampler> pyramid = pipeline::PyramidSampler::create(width, height, 5, capacity.kernels);
+    if (!pyramid) return pyramid.status();
+    stage.pyramid_ = std::make_unique<pipeline::PyramidSampler>(std::move(pyramid.value()));
+    stage.pyramid_rule_ = pipeline::PyramidRule::fromAcuity(config.acuity);
+    if (Status s = stage.pyramid_rule_.validate(); !s) return s;
+  }
   if (map.source == FoveationSource::kMap) {
     pipeline::map::SurfelMapConfig map_config = map.map;
     map_config.depth = range;
@@ -63,6 +73,12 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
 
 Status FrameFoveator::backproject(const hal::RgbdFrame& frame, pipeline::BackprojectCounts& counts, bool pose_valid) {
   if (source_ == FoveationSource::kFrame) return backprojector_.run(frame, range_, cloud_, counts);
+  if (source_ == FoveationSource::kPyramid) {
+    frame_ = &frame;
+    counts = {};
+    counts.pixels = frame.pixelCount();
+    return Status::ok();
+  }
   map_figures_ = {};
   const pipeline::map::FuseOutcome outcome = map_->fuse(frame, map_figures_.fuse, pose_valid);
   if (outcome != pipeline::map::FuseOutcome::kFused) {
@@ -85,6 +101,7 @@ Status FrameFoveator::backproject(const hal::RgbdFrame& frame, pipeline::Backpro
 
 Status FrameFoveator::foveate(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out,
                               pipeline::FoveationStats& stats) {
+  if (source_ == FoveationSource::kPyramid) return foveatePyramid(gaze, out, stats);
   if (source_ == FoveationSource::kMap) {
     if (!gaze.origin_m.allFinite()) return {ErrorCode::kInvalidInput, "gaze origin is not finite"};
     if (!cloud_.resize(map_figures_.frame_points)) return {ErrorCode::kCapacityExceeded, "map: frame points beyond the cloud"};
@@ -92,6 +109,31 @@ Status FrameFoveator::foveate(const pipeline::Gaze& gaze, pipeline::FoveatedClou
     if (!delta_) eye_->appendVisible(*map_, gaze.origin_m, cloud_, map_figures_.eye);
   }
   return foveator_.foveate(cloud_, gaze, out, stats);
+}
+
+Status FrameFoveator::foveatePyramid(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out,
+                                     pipeline::FoveationStats& stats) {
+  if (frame_ == nullptr) return {ErrorCode::kInvalidArgument, "pyramid: no frame taken in"};
+  const hal::RgbdFrame& frame = *frame_;
+  frame_ = nullptr;
+  if (foveator_.model().preset() != pipeline::Preset::kAcuity) {
+    // The pyramid is ACUITY's rule; another preset (a fallback) takes the exact path.
+    pipeline::BackprojectCounts counts;
+    if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) return s;
+    return foveator_.foveate(cloud_, gaze, out, stats);
+  }
+  stats = {};
+  const auto t0 = std::chrono::steady_clock::now();
+  Result<pipeline::Gaze> unit = pipeline::normalizeGaze(gaze);
+  if (!unit) return unit.status();
+  pipeline::PyramidStats pyramid;
+  if (Status s = pyramid_->sample(frame, range_, unit.value(), pyramid_rule_, out, pyramid); !s) return s;
+  stats.region_count = pyramid_->levels() + 1;
+  for (int k = 0; k < stats.region_count; ++k) stats.regions[k].points_out = pyramid.out_by_level[k];
+  stats.points_in = pyramid.points_in;
+  stats.points_out = pyramid.points_out;
+  stats.sample_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count();
+  return Status::ok();
 }
 
 pipeline::map::BrickBatch FrameFoveator::makeBrickBatch() const {

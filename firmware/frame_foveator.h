@@ -24,6 +24,7 @@
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
+#include "pipeline/pyramid_sampler.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
@@ -33,7 +34,11 @@
 
 namespace fovea::firmware {
 
-enum class FoveationSource : uint8_t { kFrame, kMap };
+// What is foveated: each frame's back-projected points (the exact methods), the
+// fused map, or each frame's image pyramid (ACUITY's rule on pixel cells,
+// approximate: pipeline/pyramid_sampler.h; a preset other than ACUITY, such as the
+// gaze policy's fallback, back-projects the frame as kFrame does).
+enum class FoveationSource : uint8_t { kFrame, kMap, kPyramid };
 std::string_view foveationSourceName(FoveationSource source);
 std::optional<FoveationSource> parseFoveationSource(std::string_view name);
 
@@ -85,7 +90,8 @@ class FrameFoveator {
     return map.source == FoveationSource::kMap ? pixels + map.map.max_surfels : pixels;
   }
 
-  // Takes a frame in. frame source: back-projects it into cloud()
+  // Takes a frame in. pyramid source: only keeps `frame`, which must stay valid
+  // until foveate(). frame source: back-projects it into cloud()
   // (kCapacityExceeded for a frame larger than the capacity). map source: fuses
   // it (a refused frame is counted in the map's counters; pose_valid false is
   // the pose source's "no pose for this stamp") and puts the points the map does
@@ -98,12 +104,19 @@ class FrameFoveator {
   Status use(const pipeline::FoveationConfig* config) {
     if (config == in_use_) return Status::ok();
     if (Status s = foveator_.setConfig(*config); !s) return s;
+    if (pyramid_) {
+      const pipeline::PyramidRule rule = pipeline::PyramidRule::fromAcuity(config->acuity);
+      if (Status s = rule.validate(); !s) return s;
+      pyramid_rule_ = rule;
+    }
     in_use_ = config;
     return Status::ok();
   }
   void invalidate() { in_use_ = nullptr; }
   // Foveates the cloud of the last backproject() (map source: with the map's
   // surfels the eye at gaze.origin_m sees appended first, afresh at each call).
+  // Pyramid source: samples the frame of the last backproject() (stats' regions
+  // are the pyramid's levels, 0 = pixels; sample_ns its time).
   Status foveate(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out, pipeline::FoveationStats& stats);
 
   // Bricks (streamsBricks() only). Fills `batch` (cleared first) with the
@@ -137,8 +150,12 @@ class FrameFoveator {
                 : 0;
   }
   const pipeline::map::MapDelta* mapDelta() const { return delta_.get(); }
+  // Bytes the pyramid source allocated (0 for the others).
+  std::size_t pyramidMemoryBytes() const { return pyramid_ ? pyramid_->memoryBytes() : 0; }
 
  private:
+  Status foveatePyramid(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out, pipeline::FoveationStats& stats);
+
   FrameFoveator(pipeline::Foveator foveator, const pipeline::PipelineCapacity& capacity,
                 const pipeline::DepthRange& range)
       : foveator_(std::move(foveator)),
@@ -158,6 +175,9 @@ class FrameFoveator {
   std::unique_ptr<pipeline::map::BrickSampler> bricks_;
   std::size_t max_frame_brick_points_ = 0, max_frame_bricks_ = 0;
   MapFrameFigures map_figures_;
+  std::unique_ptr<pipeline::PyramidSampler> pyramid_;  // pyramid source
+  pipeline::PyramidRule pyramid_rule_;
+  const hal::RgbdFrame* frame_ = nullptr;  // pyramid source: the last backproject()'s
 };
 
 }  // namespace fovea::firmware

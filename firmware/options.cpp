@@ -128,7 +128,7 @@ Result<MapSettings> mapSettingsFromArgs(const Args& args) {
   MapSettings settings;
   if (const std::string* v = args.get("--source")) {
     const std::optional<FoveationSource> source = parseFoveationSource(*v);
-    if (!source) return badValue("--source", *v, "frame or map");
+    if (!source) return badValue("--source", *v, "frame, map or pyramid");
     settings.source = *source;
   }
   if (const std::string* v = args.get("--max-surfels")) {

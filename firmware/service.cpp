@@ -209,6 +209,10 @@ Status Service::allocate() {
     memory_.add("surfel map (pool, bricks, scratch, eye depth buffer)", 1, map_bytes);
     before += map_bytes;  // the foveator's line below is the rest
   }
+  if (const std::size_t pyramid_bytes = stage_->pyramidMemoryBytes(); pyramid_bytes > 0) {
+    memory_.add("image pyramid (cell sums, scratch)", 1, pyramid_bytes);
+    before += pyramid_bytes;
+  }
   if (Status s = config_.stream.gaze.validate(); !s) return s;
   policy_ = std::make_unique<GazePolicy>(config_.stream.gaze, config_.foveation);
   const std::size_t cloud_bytes = points * (3 * sizeof(float) + sizeof(uint32_t));

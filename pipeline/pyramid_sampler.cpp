@@ -185,6 +185,14 @@ void PyramidSampler::buildLevel(int k) {
   }
 }
 
+std::size_t PyramidSampler::memoryBytes() const {
+  std::size_t bytes = (candidates_.size() + parents_.size()) * sizeof(uint32_t) + verdict_.size() * sizeof(float);
+  for (const std::vector<float>& g : gathered_) bytes += g.size() * sizeof(float);
+  for (const std::vector<float>* row : {&row_x_, &row_z_, &row_valid_, &column_xn_}) bytes += row->size() * sizeof(float);
+  for (const Level& level : pyramid_) bytes += 7 * level.n.size() * sizeof(float);
+  return bytes;
+}
+
 void pyramidMergeRef(const kernels::PyramidMergeParams& p, const kernels::PyramidCellSums& c, std::size_t count,
                      float* merge) {
   const Eigen::Vector3f l(p.eye.l[0], p.eye.l[1], p.eye.l[2]);

@@ -107,6 +107,8 @@ class PyramidSampler {
   static constexpr uint32_t kNoRepresentative = 0xFFFFFFFFu;
 
   int levels() const { return levels_; }
+  // Bytes allocated by create().
+  std::size_t memoryBytes() const;
 
  private:
   // Sums over each cell's valid pixels, camera frame, one array per sum (the

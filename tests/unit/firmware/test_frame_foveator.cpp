@@ -61,6 +61,8 @@ pipeline::Gaze gazeFor(const hal::RgbdFrame& frame) {
 TEST(FrameFoveator, SourceNamesParse) {
   EXPECT_EQ(parseFoveationSource("frame"), FoveationSource::kFrame);
   EXPECT_EQ(parseFoveationSource("map"), FoveationSource::kMap);
+  EXPECT_EQ(parseFoveationSource("pyramid"), FoveationSource::kPyramid);
+  EXPECT_EQ(foveationSourceName(FoveationSource::kPyramid), "pyramid");
   EXPECT_FALSE(parseFoveationSource("Map").has_value());
   EXPECT_FALSE(parseFoveationSource("").has_value());
   EXPECT_EQ(foveationSourceName(FoveationSource::kMap), "map");
@@ -94,6 +96,59 @@ TEST(FrameFoveator, TheFrameSourceIsBackProjectionAndFoveation) {
     for (std::size_t p = 0; p < a.size(); ++p) {
       ASSERT_EQ(a.points.world(p), b.points.world(p)) << "point " << p;
     }
+  }
+}
+
+// The pyramid source: ACUITY is the image pyramid's sampling (the same points as a
+// PyramidSampler of its own, the regions its levels); another preset, as the gaze
+// policy's fallback sets, is the frame source's exact path; foveate() without a
+// frame taken in is an error.
+TEST(FrameFoveator, ThePyramidSourceSamplesTheImageAndFallsBackToTheFrame) {
+  Rig rig = openRig();
+  ASSERT_TRUE(rig.camera);
+  const pipeline::PipelineCapacity capacity{rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1};
+  MapSettings pyramid_source;
+  pyramid_source.source = FoveationSource::kPyramid;
+  pipeline::FoveationConfig acuity;
+  acuity.acuity.preset = pipeline::Preset::kAcuity;
+  acuity.acuity.floor_per_m2 = 0.001;
+  const pipeline::FoveationConfig f1;
+  Result<FrameFoveator> stage = FrameFoveator::create(capacity, acuity, {}, pyramid_source, rig.width, rig.height);
+  ASSERT_TRUE(stage.isOk()) << stage.status().toString();
+  EXPECT_GT(stage->pyramidMemoryBytes(), rig.pixels * sizeof(float));
+  pipeline::PyramidSampler sampler = pipeline::PyramidSampler::create(rig.width, rig.height).value();
+  pipeline::Backprojector backprojector(1, capacity.kernels);
+  pipeline::PointCloud cloud(rig.pixels);
+  pipeline::Foveator foveator = pipeline::Foveator::create(capacity, f1).value();
+  pipeline::FoveatedCloud a(rig.pixels), b(rig.pixels);
+  pipeline::BackprojectCounts counts;
+  pipeline::FoveationStats sa, sb;
+  EXPECT_EQ(stage->foveate(gazeFor(rig.frame), a, sa).code(), ErrorCode::kInvalidArgument);  // no frame yet
+  for (int i = 0; i < 4; ++i) {
+    ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
+    const bool fallback = i % 2 == 1;
+    ASSERT_TRUE(stage->use(fallback ? &f1 : &acuity).isOk());
+    ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
+    ASSERT_TRUE(stage->foveate(gazeFor(rig.frame), a, sa).isOk());
+    if (fallback) {
+      ASSERT_TRUE(backprojector.run(rig.frame, {}, cloud, counts).isOk());
+      ASSERT_TRUE(foveator.foveate(cloud, gazeFor(rig.frame), b, sb).isOk());
+    } else {
+      pipeline::PyramidStats ps;
+      const pipeline::Gaze gaze = pipeline::normalizeGaze(gazeFor(rig.frame)).value();
+      ASSERT_TRUE(sampler.sample(rig.frame, {}, gaze, pipeline::PyramidRule::fromAcuity(acuity.acuity), b, ps).isOk());
+      EXPECT_EQ(sa.points_in, ps.points_in);
+      EXPECT_EQ(sa.region_count, sampler.levels() + 1);
+      EXPECT_EQ(sa.regions[0].points_out, ps.out_by_level[0]);
+    }
+    ASSERT_EQ(a.size(), b.size()) << (fallback ? "F1 fallback" : "ACUITY");
+    EXPECT_EQ(sa.points_out, a.size());
+    for (std::size_t p = 0; p < a.size(); ++p) {
+      ASSERT_EQ(a.points.world(p), b.points.world(p)) << "point " << p;
+      ASSERT_EQ(a.region[p], b.region[p]) << "point " << p;
+    }
+    // One foveate() per frame taken in.
+    EXPECT_EQ(stage->foveate(gazeFor(rig.frame), a, sa).code(), ErrorCode::kInvalidArgument);
   }
 }
 
