@@ -540,9 +540,9 @@ void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, s
     out.points.x()[o] = std::clamp(static_cast<float>(a.fx + a.sx * inv_n), a.lo[0], a.hi[0]);
     out.points.y()[o] = std::clamp(static_cast<float>(a.fy + a.sy * inv_n), a.lo[1], a.hi[1]);
     out.points.z()[o] = std::clamp(static_cast<float>(a.fz + a.sz * inv_n), a.lo[2], a.hi[2]);
-    out.points.rgb()[o] = packRgb(static_cast<uint8_t>((a.sr + cnt / 2) / cnt),
-                                  static_cast<uint8_t>((a.sg + cnt / 2) / cnt),
-                                  static_cast<uint8_t>((a.sb + cnt / 2) / cnt));
+    out.points.rgb()[o] =
+        packRgb(roundedMeanColour(a.sr, cnt, inv_n), roundedMeanColour(a.sg, cnt, inv_n),
+                roundedMeanColour(a.sb, cnt, inv_n));
     out.region[o] = r;
     out.weight[o] = a.n;
     ++counts.out[r];

@@ -50,6 +50,22 @@ namespace fovea::pipeline {
 // index the recent-voxel cache and the table.
 constexpr uint64_t hashVoxelKey(uint64_t key) { return key * 0x9E3779B97F4A7C15ull; }
 
+// (sum + count / 2) / count, the reference's rounded mean colour, without a 64-bit
+// division (tens of cycles each, three a voxel: most of writing the voxels out):
+// the quotient from the double reciprocal inv_count = 1.0 / count, at most one off
+// for numerators below 2^52 (a colour sum is below 2^40), then corrected with
+// integer multiplications. Exact: tests/equivalence/test_sampler_equivalence.cpp.
+inline uint8_t roundedMeanColour(uint64_t sum, uint64_t count, double inv_count) {
+  const uint64_t numerator = sum + count / 2;
+  uint64_t q = static_cast<uint64_t>(static_cast<double>(numerator) * inv_count);
+  if (q * count > numerator) {
+    --q;
+  } else if ((q + 1) * count <= numerator) {
+    ++q;
+  }
+  return static_cast<uint8_t>(q);
+}
+
 class HashVoxelSampler {
  public:
   HashVoxelSampler() = default;

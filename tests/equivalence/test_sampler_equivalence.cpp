@@ -421,5 +421,35 @@ TEST(FoveatorKernelSets, MockCameraFramesEndToEnd) {
   cam.stop();
 }
 
+// The sampler's division-free mean colour against the integer division, for every
+// colour sum of up to 300 points and sampled sums (the extremes included) up to 2^24
+// points; the reciprocal is the one the sampler computes.
+TEST(RoundedMeanColour, EqualsTheIntegerDivision) {
+  std::mt19937_64 rng(3);
+  for (uint64_t count = 1; count <= (uint64_t{1} << 24); count = count < 300 ? count + 1 : count * 3 / 2) {
+    const double inv = 1.0 / static_cast<double>(count);
+    const auto check = [&](uint64_t sum) {
+      ASSERT_EQ(roundedMeanColour(sum, count, inv), static_cast<uint8_t>((sum + count / 2) / count))
+          << sum << " / " << count;
+    };
+    if (count <= 300) {
+      for (uint64_t sum = 0; sum <= 255 * count; ++sum) check(sum);
+    } else {
+      for (uint64_t sum : {uint64_t{0}, count / 2 - 1, count / 2, 255 * count, 255 * count - count / 2 - 1,
+                           255 * count - count / 2}) {
+        check(sum);
+      }
+      for (int i = 0; i < 20000; ++i) check(rng() % (255 * count + 1));
+      for (uint64_t k = 0; k <= 255; ++k) {  // at each rounding boundary and either side of it
+        for (uint64_t at : {k * count + (count + 1) / 2, k * count + count / 2}) {
+          for (uint64_t sum : {at - 1, at, at + 1}) {
+            if (sum <= 255 * count) check(sum);
+          }
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fovea::pipeline
