@@ -30,19 +30,6 @@ Status PyramidRule::validate() const {
   return Status::ok();
 }
 
-namespace {
-
-// The squared deviations from the mean of two sets of depths (count n, sum s, squared
-// deviations m2) taken together (Chan, Golub and LeVeque's pairwise update): stable
-// where sum(z^2)/n - mean^2 loses every digit of a millimetre spread at metres of
-// depth in float. Either set may be empty.
-inline float combinedM2(float na, float sa, float m2a, float nb, float sb, float m2b) {
-  const float delta = sb / std::max(nb, 1.0f) - sa / std::max(na, 1.0f);
-  return (m2a + m2b) + (delta * delta) * (na * nb / std::max(na + nb, 1.0f));
-}
-
-}  // namespace
-
 Result<PyramidSampler> PyramidSampler::create(int max_width, int max_height, int levels, KernelSet kernels) {
   if (max_width < 1 || max_height < 1 || max_width > 16384 || max_height > 16384) {
     return Status{ErrorCode::kInvalidArgument, "pyramid: frame size must be within 1..16384"};
@@ -67,7 +54,7 @@ PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, Kernel
   for (int k = 1; k <= levels; ++k) {
     const int w = (max_width + (1 << k) - 1) >> k;
     const int h = (max_height + (1 << k) - 1) >> k;
-    pyramid_[static_cast<std::size_t>(k - 1)].resize(static_cast<std::size_t>(w) * h);
+    pyramid_[static_cast<std::size_t>(k - 1)].resize(static_cast<std::size_t>(w + 1) * (h + 1));  // + padding
   }
   const std::size_t first_cells = pyramid_[0].n.size();
   candidates_.resize(first_cells);
@@ -76,22 +63,23 @@ PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, Kernel
   verdict_.resize(first_cells);
   // Rows padded to an even width: the odd column's partner is an invalid pixel.
   const auto padded = static_cast<std::size_t>(max_width + 1);
-  for (std::vector<float>* a : {&row_x_, &row_z_, &row_valid_, &column_xn_}) {
-    a->assign(padded, 0.0f);
+  for (int r = 0; r < 2; ++r) {
+    for (std::vector<float>* a : {&row_x_[r], &row_z_[r], &row_valid_[r]}) a->assign(padded, 0.0f);
   }
+  column_xn_.assign(padded, 0.0f);
 }
 
-// Level 1 straight from the depth image. Per row, a loop over pixels (x, z and
-// validity, 0 when invalid), then one over cells adding pixel pairs; both are plain
-// loops over arrays that the compiler vectorises. y is summed as yn * z per row:
-// y = yn z for every pixel of row v. Colours are summed only for the cells that are
+// Level 1 straight from the depth image, two rows at a time: per row a loop over
+// pixels (x, z and validity, 0 when invalid), then one over cells adding each 2 x 2
+// square; both are plain loops over arrays that the compiler vectorises. y is summed
+// as yn * z per row (y = yn z for every pixel of row v). m2 comes from the square's
+// own mean (one division a cell). Colours are summed only for the cells that are
 // emitted (Walk::meanColour): every pixel's colour is read once either way.
 void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepthRange& raw) {
   const int w = frame.width();
   const int h = frame.height();
   Level& level = pyramid_[0];
-  level.width = (w + 1) / 2;
-  level.height = (h + 1) / 2;
+  level.setSize((w + 1) / 2, (h + 1) / 2);
   const hal::CameraIntrinsics& k = frame.intrinsics;
   const auto scale = static_cast<float>(frame.depth_scale_m);
   const auto cx = static_cast<float>(k.cx);
@@ -102,85 +90,113 @@ void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepth
   for (int u = 0; u < w; ++u) xn[u] = (static_cast<float>(u) - cx) * inv_fx;
   const auto raw_min = static_cast<uint32_t>(std::clamp<int64_t>(raw.min, 0, 65536));
   const auto raw_max = static_cast<uint32_t>(std::clamp<int64_t>(raw.max, -1, 65535) + 1);  // exclusive
-  float* __restrict rx = row_x_.data();
-  float* __restrict rz = row_z_.data();
-  float* __restrict rv = row_valid_.data();
-  // The odd column's partner (when w is odd) stays an invalid pixel.
-  rx[w] = rz[w] = rv[w] = 0.0f;
+  // Rows 2j (a) and 2j + 1 (b; all invalid past the image), padded to an even width
+  // with an invalid pixel.
+  const auto fill = [&](int v, float* __restrict x, float* __restrict z, float* __restrict valid) {
+    x[w] = z[w] = valid[w] = 0.0f;
+    if (v >= h) {
+      std::fill(x, x + w, 0.0f), std::fill(z, z + w, 0.0f), std::fill(valid, valid + w, 0.0f);
+      return;
+    }
+    const uint16_t* __restrict drow = frame.depth() + static_cast<std::size_t>(v) * w;
+    for (int u = 0; u < w; ++u) {
+      const uint32_t d = drow[u];
+      const float ok = (d >= raw_min && d < raw_max) ? 1.0f : 0.0f;
+      const float zu = static_cast<float>(d) * scale * ok;
+      z[u] = zu;
+      x[u] = xn[u] * zu;
+      valid[u] = ok;
+    }
+  };
+  float* __restrict xa = row_x_[0].data();
+  float* __restrict za = row_z_[0].data();
+  float* __restrict va = row_valid_[0].data();
+  float* __restrict xb = row_x_[1].data();
+  float* __restrict zb = row_z_[1].data();
+  float* __restrict vb = row_valid_[1].data();
   const int cells = level.width;
   for (int j = 0; j < level.height; ++j) {
-    const std::size_t row0 = static_cast<std::size_t>(j) * cells;
+    fill(2 * j, xa, za, va);
+    fill(2 * j + 1, xb, zb, vb);
+    const float yna = (static_cast<float>(2 * j) - cy) * inv_fy;
+    const float ynb = (static_cast<float>(2 * j + 1) - cy) * inv_fy;
+    const std::size_t row0 = static_cast<std::size_t>(j) * level.stride;
     float* __restrict n = level.n.data() + row0;
     float* __restrict sx = level.sx.data() + row0;
     float* __restrict sy = level.sy.data() + row0;
     float* __restrict sz = level.sz.data() + row0;
     float* __restrict m2 = level.m2.data() + row0;
     float* __restrict zmax = level.zmax.data() + row0;
-    for (int v = 2 * j; v < std::min(2 * j + 2, h); ++v) {
-      const uint16_t* __restrict drow = frame.depth() + static_cast<std::size_t>(v) * w;
-      for (int u = 0; u < w; ++u) {
-        const uint32_t d = drow[u];
-        const float ok = (d >= raw_min && d < raw_max) ? 1.0f : 0.0f;
-        const float z = static_cast<float>(d) * scale * ok;
-        rz[u] = z;
-        rx[u] = xn[u] * z;
-        rv[u] = ok;
-      }
-      const float yn = (static_cast<float>(v) - cy) * inv_fy;
-      // The pair's squared deviation from its mean: (z0 - z1)^2 / 2 when both are
-      // valid, 0 otherwise.
-      if (v == 2 * j) {
-        for (int i = 0; i < cells; ++i) {
-          const int u = 2 * i;
-          const float zs = rz[u] + rz[u + 1];
-          const float dz = rz[u] - rz[u + 1];
-          n[i] = rv[u] + rv[u + 1];
-          sx[i] = rx[u] + rx[u + 1];
-          sy[i] = yn * zs;
-          sz[i] = zs;
-          m2[i] = (rv[u] * rv[u + 1]) * (0.5f * (dz * dz));
-          zmax[i] = std::max(rz[u], rz[u + 1]);
-        }
-      } else {
-        for (int i = 0; i < cells; ++i) {
-          const int u = 2 * i;
-          const float zs = rz[u] + rz[u + 1];
-          const float dz = rz[u] - rz[u + 1];
-          const float pn = rv[u] + rv[u + 1];
-          const float pm2 = (rv[u] * rv[u + 1]) * (0.5f * (dz * dz));
-          m2[i] = combinedM2(n[i], sz[i], m2[i], pn, zs, pm2);
-          n[i] += pn;
-          sx[i] += rx[u] + rx[u + 1];
-          sy[i] += yn * zs;
-          sz[i] += zs;
-          zmax[i] = std::max(zmax[i], std::max(rz[u], rz[u + 1]));
-        }
-      }
+    for (int i = 0; i < cells; ++i) {
+      const int u = 2 * i;
+      const float a0 = za[u], a1 = za[u + 1], b0 = zb[u], b1 = zb[u + 1];
+      const float count = (va[u] + va[u + 1]) + (vb[u] + vb[u + 1]);
+      const float zs_a = a0 + a1, zs_b = b0 + b1;
+      const float zs = zs_a + zs_b;
+      const float mean = zs / std::max(count, 1.0f);
+      const float d0 = a0 - mean, d1 = a1 - mean, d2 = b0 - mean, d3 = b1 - mean;
+      n[i] = count;
+      sx[i] = (xa[u] + xa[u + 1]) + (xb[u] + xb[u + 1]);
+      sy[i] = yna * zs_a + ynb * zs_b;
+      sz[i] = zs;
+      m2[i] = (va[u] * (d0 * d0) + va[u + 1] * (d1 * d1)) + (vb[u] * (d2 * d2) + vb[u + 1] * (d3 * d3));
+      zmax[i] = std::max(std::max(a0, a1), std::max(b0, b1));
     }
   }
+  level.clearPadding();
 }
 
-// Level k (>= 2) from the 2 x 2 cells below it; a missing child (odd size) is empty.
+// Level k (>= 2) from the 2 x 2 cells below it (the level below is padded to even
+// sizes with empty cells, so every cell has four). m2 by the pairwise update:
+// the children's m2 plus each child's n (mean_child - mean)^2.
 void PyramidSampler::buildLevel(int k) {
   const Level& below = pyramid_[static_cast<std::size_t>(k - 2)];
   Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
-  level.width = (below.width + 1) / 2;
-  level.height = (below.height + 1) / 2;
+  level.setSize((below.width + 1) / 2, (below.height + 1) / 2);
+  const std::size_t bs = below.stride;
   for (int j = 0; j < level.height; ++j) {
+    const std::size_t c0 = static_cast<std::size_t>(2 * j) * bs;  // row 2j of the level below
+    const std::size_t c1 = c0 + bs;
+    const std::size_t row0 = static_cast<std::size_t>(j) * level.stride;
     for (int i = 0; i < level.width; ++i) {
-      float n = 0.0f, sx = 0.0f, sy = 0.0f, sz = 0.0f, m2 = 0.0f, zmax = 0.0f;
-      for (int dj = 0; dj < 2 && 2 * j + dj < below.height; ++dj) {
-        for (int di = 0; di < 2 && 2 * i + di < below.width; ++di) {
-          const std::size_t c = static_cast<std::size_t>(2 * j + dj) * below.width + 2 * i + di;
-          m2 = combinedM2(n, sz, m2, below.n[c], below.sz[c], below.m2[c]);
-          n += below.n[c];
-          sx += below.sx[c], sy += below.sy[c], sz += below.sz[c];
-          zmax = std::max(zmax, below.zmax[c]);
-        }
+      const std::size_t c[4] = {c0 + 2 * i, c0 + 2 * i + 1, c1 + 2 * i, c1 + 2 * i + 1};
+      float count = 0.0f, sx = 0.0f, sy = 0.0f, sz = 0.0f, m2 = 0.0f, zmax = 0.0f;
+      for (const std::size_t q : c) {
+        count += below.n[q];
+        sx += below.sx[q], sy += below.sy[q], sz += below.sz[q];
+        m2 += below.m2[q];
+        zmax = std::max(zmax, below.zmax[q]);
       }
-      const std::size_t at = static_cast<std::size_t>(j) * level.width + i;
-      level.n[at] = n, level.sx[at] = sx, level.sy[at] = sy, level.sz[at] = sz, level.m2[at] = m2;
+      const float mean = sz / std::max(count, 1.0f);
+      for (const std::size_t q : c) {
+        const float d = below.sz[q] / std::max(below.n[q], 1.0f) - mean;
+        m2 += below.n[q] * (d * d);
+      }
+      const std::size_t at = row0 + i;
+      level.n[at] = count, level.sx[at] = sx, level.sy[at] = sy, level.sz[at] = sz, level.m2[at] = m2;
       level.zmax[at] = zmax;
+    }
+  }
+  level.clearPadding();
+}
+
+void PyramidSampler::Level::setSize(int w, int h) {
+  width = w;
+  height = h;
+  stride = (w + 1) & ~1;
+  rows = (h + 1) & ~1;
+}
+
+// The empty cells that pad the level to even sizes (a frame of another size may
+// have left sums there).
+void PyramidSampler::Level::clearPadding() {
+  for (std::vector<float>* a : {&n, &sx, &sy, &sz, &m2, &zmax}) {
+    float* v = a->data();
+    for (int j = 0; j < height; ++j) {
+      for (int i = width; i < stride; ++i) v[static_cast<std::size_t>(j) * stride + i] = 0.0f;
+    }
+    for (int j = height; j < rows; ++j) {
+      std::fill(v + static_cast<std::size_t>(j) * stride, v + static_cast<std::size_t>(j + 1) * stride, 0.0f);
     }
   }
 }
@@ -188,7 +204,8 @@ void PyramidSampler::buildLevel(int k) {
 std::size_t PyramidSampler::memoryBytes() const {
   std::size_t bytes = (candidates_.size() + parents_.size()) * sizeof(uint32_t) + verdict_.size() * sizeof(float);
   for (const std::vector<float>& g : gathered_) bytes += g.size() * sizeof(float);
-  for (const std::vector<float>* row : {&row_x_, &row_z_, &row_valid_, &column_xn_}) bytes += row->size() * sizeof(float);
+  for (int r = 0; r < 2; ++r) bytes += 3 * row_x_[r].size() * sizeof(float);
+  bytes += column_xn_.size() * sizeof(float);
   for (const Level& level : pyramid_) bytes += 7 * level.n.size() * sizeof(float);
   return bytes;
 }
@@ -244,22 +261,24 @@ void PyramidSampler::decide(const hal::RgbdFrame& frame, const Gaze& gaze, const
     Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
     std::size_t count = 0;
     if (k == levels_) {
-      const std::size_t cells = static_cast<std::size_t>(level.width) * level.height;
-      for (std::size_t at = 0; at < cells; ++at) {
-        if (level.n[at] != 0.0f) candidates_[count++] = static_cast<uint32_t>(at);
+      for (int j = 0; j < level.height; ++j) {
+        for (int i = 0; i < level.width; ++i) {
+          const std::size_t at = static_cast<std::size_t>(j) * level.stride + i;
+          if (level.n[at] != 0.0f) candidates_[count++] = static_cast<uint32_t>(at);
+        }
       }
     } else {
       const Level& above = pyramid_[static_cast<std::size_t>(k)];
       for (std::size_t q = 0; q < parents; ++q) {
         const uint32_t at = parents_[q];
         if (above.merge[at] != 0.0f) continue;
-        const int i = static_cast<int>(at % static_cast<uint32_t>(above.width));
-        const int j = static_cast<int>(at / static_cast<uint32_t>(above.width));
-        for (int cj = 2 * j; cj < std::min(2 * j + 2, level.height); ++cj) {
-          for (int ci = 2 * i; ci < std::min(2 * i + 2, level.width); ++ci) {
-            const std::size_t child = static_cast<std::size_t>(cj) * level.width + ci;
-            if (level.n[child] != 0.0f) candidates_[count++] = static_cast<uint32_t>(child);
-          }
+        const uint32_t i = at % static_cast<uint32_t>(above.stride);
+        const uint32_t j = at / static_cast<uint32_t>(above.stride);
+        // Four children each (padding cells are empty).
+        const uint32_t first = 2 * j * static_cast<uint32_t>(level.stride) + 2 * i;
+        for (const uint32_t child : {first, first + 1, first + static_cast<uint32_t>(level.stride),
+                                     first + static_cast<uint32_t>(level.stride) + 1}) {
+          if (level.n[child] != 0.0f) candidates_[count++] = child;
         }
       }
     }
@@ -355,7 +374,7 @@ void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
   }
   const Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
   if (i >= level.width || j >= level.height) return;
-  const std::size_t at = static_cast<std::size_t>(j) * level.width + i;
+  const std::size_t at = static_cast<std::size_t>(j) * level.stride + i;
   const float count = level.n[at];
   if (count == 0.0f) return;
   if (level.merge[at] != 0.0f) {
@@ -421,7 +440,7 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
   uint32_t valid = 0;
   for (int j = 0; j < top.height; ++j) {
     for (int i = 0; i < top.width; ++i) {
-      valid += static_cast<uint32_t>(top.n[static_cast<std::size_t>(j) * top.width + i]);
+      valid += static_cast<uint32_t>(top.n[static_cast<std::size_t>(j) * top.stride + i]);
       visit(walk, levels_, i, j);
     }
   }

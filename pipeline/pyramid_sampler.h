@@ -113,9 +113,15 @@ class PyramidSampler {
  private:
   // Sums over each cell's valid pixels, camera frame, one array per sum (the
   // build's loops run over cells in step). Counts are exact in float (at most 4^7).
-  // m2: the squared deviations of the depths from their mean, combined pairwise.
+  // m2: the squared deviations of the depths from their mean (each square's own,
+  // then combined pairwise). Cell (i, j) is at j * stride + i; the cells past width
+  // and height up to stride and rows (even) are empty, so that every cell of the
+  // level above has four children.
   struct Level {
     int width = 0, height = 0;
+    int stride = 0, rows = 0;
+    void setSize(int w, int h);
+    void clearPadding();
     std::vector<float> n, sx, sy, sz, m2, zmax;
     std::vector<float> merge;  // the rule's verdict, for the cells the walk reaches
     void resize(std::size_t cells);
@@ -141,8 +147,8 @@ class PyramidSampler {
   std::vector<uint32_t> candidates_, parents_;
   std::vector<float> gathered_[6];
   std::vector<float> verdict_;
-  // One image row, camera frame: x, z and validity (0 when invalid).
-  std::vector<float> row_x_, row_z_, row_valid_;
+  // Two image rows, camera frame: x, z and validity (0 when invalid).
+  std::vector<float> row_x_[2], row_z_[2], row_valid_[2];
   std::vector<float> column_xn_;                  // (u - cx) / fx per column
 };
 

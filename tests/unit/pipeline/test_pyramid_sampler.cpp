@@ -252,6 +252,21 @@ TEST(PyramidSampler, RandomFramesAgreeWithTheBruteForce) {
   EXPECT_GT(rules, 1000);  // the rule was really checked, not left out as too close
 }
 
+// One sampler for frames of changing sizes: a smaller frame must not see the sums a
+// larger one left past its edges.
+TEST(PyramidSampler, FramesOfChangingSizesShareOneSampler) {
+  std::mt19937 rng(9);
+  PyramidSampler sampler = PyramidSampler::create(161, 121, 5).value();
+  for (const auto& size : {std::pair{161, 121}, std::pair{33, 17}, std::pair{160, 120}, std::pair{7, 5},
+                           std::pair{97, 71}}) {
+    SCOPED_TRACE(testing::Message() << size.first << "x" << size.second);
+    const hal::RgbdFrame f = randomFrame(rng, size.first, size.second);
+    const Gaze gaze = gazeAtPixel(f, size.first * 0.7, size.second * 0.2);
+    const Sampled s = sample(sampler, f, gaze, PyramidRule{});
+    checkAgainstBruteForce(f, gaze, PyramidRule{}, 5, s);
+  }
+}
+
 TEST(PyramidSampler, TheFoveaKeepsEveryPixelAndThePeripheryMerges) {
   hal::RgbdFrame f = makeFrame(320, 240, 300.0);
   for (std::size_t p = 0; p < f.pixelCount(); ++p) f.depth()[p] = 3000;  // a wall 3 m away
