@@ -560,6 +560,15 @@ int run(int argc, char** argv) {
       }
     } else if (arg == "--methods") {
       only_methods = std::string(",") + v + ",";
+      std::size_t begin = 1;
+      while (begin < only_methods.size()) {
+        const std::size_t end = only_methods.find(',', begin);
+        const std::string name = only_methods.substr(begin, end - begin);
+        const bool known = std::any_of(std::begin(kMethods), std::end(kMethods),
+                                       [&](const MethodEntry& e) { return name == e.name; });
+        if (!known) return usage(("--methods: no method named '" + name + "'").c_str());
+        begin = end + 1;
+      }
     } else if (arg == "--tum") {
       tum_path = v;
     } else if (arg == "--frame") {
@@ -656,10 +665,11 @@ int run(int argc, char** argv) {
   std::vector<std::unique_ptr<Method>> methods;
   std::vector<Method*> by_row;
   for (const MethodEntry& entry : kMethods) {
+    // Rows not asked for are not listed either.
+    if (!only_methods.empty() && only_methods.find(std::string(",") + entry.name + ",") == std::string::npos) continue;
     rows.push_back({&entry, {}});
     by_row.push_back(nullptr);
     if (entry.make == nullptr) continue;
-    if (!only_methods.empty() && only_methods.find(std::string(",") + entry.name + ",") == std::string::npos) continue;
     methods.push_back(entry.make(input));
     by_row.back() = methods.back().get();
     if (by_row.back() == nullptr) continue;
