@@ -57,6 +57,7 @@ PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, Kernel
     pyramid_[static_cast<std::size_t>(k - 1)].resize(static_cast<std::size_t>(w + 1) * (h + 1));  // + padding
   }
   const std::size_t first_cells = pyramid_[0].n.size();
+  for (std::vector<float>* a : {&pyramid_[0].cr, &pyramid_[0].cg, &pyramid_[0].cb}) a->assign(first_cells, 0.0f);
   candidates_.resize(first_cells);
   parents_.resize(first_cells);
   for (std::vector<float>& g : gathered_) g.resize(first_cells);
@@ -73,8 +74,8 @@ PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, Kernel
 // pixels (x, z and validity, 0 when invalid), then one over cells adding each 2 x 2
 // square; both are plain loops over arrays that the compiler vectorises. y is summed
 // as yn * z per row (y = yn z for every pixel of row v). m2 comes from the square's
-// own mean (one division a cell). Colours are summed only for the cells that are
-// emitted (Walk::meanColour): every pixel's colour is read once either way.
+// own mean (one division a cell), and the colour sums of level 1 (not above it: an
+// emitted cell adds up its level-1 cells, Walk::meanColour).
 void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepthRange& raw) {
   const int w = frame.width();
   const int h = frame.height();
@@ -142,6 +143,33 @@ void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepth
       m2[i] = (va[u] * (d0 * d0) + va[u + 1] * (d1 * d1)) + (vb[u] * (d2 * d2) + vb[u + 1] * (d3 * d3));
       zmax[i] = std::max(std::max(a0, a1), std::max(b0, b1));
     }
+    if (frame.has_rgb) {
+      // The square's colour sums over its valid pixels (exact in float: at most
+      // 4 x 255), for the emitted cells' means. Byte loads, so a loop of its own;
+      // row b past the image reads row a's bytes with no valid pixel to count.
+      const uint8_t* ca = frame.rgb() + 3 * static_cast<std::size_t>(2 * j) * w;
+      const uint8_t* cb = 2 * j + 1 < h ? ca + 3 * static_cast<std::size_t>(w) : ca;
+      float* __restrict sr = level.cr.data() + row0;
+      float* __restrict sg = level.cg.data() + row0;
+      float* __restrict sb = level.cb.data() + row0;
+      const int pairs = w / 2;  // cells with both columns in the image
+      for (int i = 0; i < pairs; ++i) {
+        const int u = 2 * i;
+        const uint8_t* pa = ca + 3 * u;
+        const uint8_t* pb = cb + 3 * u;
+        sr[i] = (va[u] * pa[0] + va[u + 1] * pa[3]) + (vb[u] * pb[0] + vb[u + 1] * pb[3]);
+        sg[i] = (va[u] * pa[1] + va[u + 1] * pa[4]) + (vb[u] * pb[1] + vb[u + 1] * pb[4]);
+        sb[i] = (va[u] * pa[2] + va[u + 1] * pa[5]) + (vb[u] * pb[2] + vb[u + 1] * pb[5]);
+      }
+      if (pairs < cells) {  // an odd width: the last cell has one column
+        const int u = 2 * pairs;
+        const uint8_t* pa = ca + 3 * u;
+        const uint8_t* pb = cb + 3 * u;
+        sr[pairs] = va[u] * pa[0] + vb[u] * pb[0];
+        sg[pairs] = va[u] * pa[1] + vb[u] * pb[1];
+        sb[pairs] = va[u] * pa[2] + vb[u] * pb[2];
+      }
+    }
   }
   level.clearPadding();
 }
@@ -206,7 +234,9 @@ std::size_t PyramidSampler::memoryBytes() const {
   for (const std::vector<float>& g : gathered_) bytes += g.size() * sizeof(float);
   for (int r = 0; r < 2; ++r) bytes += 3 * row_x_[r].size() * sizeof(float);
   bytes += column_xn_.size() * sizeof(float);
-  for (const Level& level : pyramid_) bytes += 7 * level.n.size() * sizeof(float);
+  for (const Level& level : pyramid_) {
+    bytes += (7 * level.n.size() + level.cr.size() + level.cg.size() + level.cb.size()) * sizeof(float);
+  }
   return bytes;
 }
 
@@ -313,33 +343,33 @@ struct PyramidSampler::Walk {
   PyramidStats* stats = nullptr;
   uint32_t* representative = nullptr;  // by pixel, or null
 
-  // The rounded mean colour of the valid pixels of the 2^k square at cell (i, j)
-  // (integer sums, exact), which also get output point `index` as representative.
-  uint32_t meanColour(int k, int i, int j, uint32_t index) const {
-    const int w = frame->width();
-    const int u0 = i << k, u1 = std::min((i + 1) << k, w);
-    const int v0 = j << k, v1 = std::min((j + 1) << k, frame->height());
-    const uint16_t* depth = frame->depth();
-    const uint8_t* rgb = frame->rgb();
-    uint32_t count = 0, r = 0, g = 0, b = 0;
-    for (int v = v0; v < v1; ++v) {
-      const std::size_t row = static_cast<std::size_t>(v) * w;
-      for (int u = u0; u < u1; ++u) {  // branch-free: validity is noisy at silhouettes
-        const std::size_t p = row + u;
-        const uint32_t d = depth[p];
-        const uint32_t ok = (d >= raw_min) & (d < raw_max);
-        count += ok;
-        r += ok * rgb[3 * p], g += ok * rgb[3 * p + 1], b += ok * rgb[3 * p + 2];
-      }
-      if (representative != nullptr) {
-        for (int u = u0; u < u1; ++u) {
-          const uint32_t d = depth[row + u];
-          if (d >= raw_min && d < raw_max) representative[row + u] = index;
+  // The rounded mean colour of the valid pixels of the 2^k square at cell (i, j),
+  // from level 1's colour sums (`first`); with `representative`, those pixels get
+  // output point `index`.
+  uint32_t meanColour(const Level& first, int k, int i, int j, float count, uint32_t index) const {
+    if (representative != nullptr) {
+      const int w = frame->width();
+      for (int v = j << k; v < std::min((j + 1) << k, frame->height()); ++v) {
+        for (int u = i << k; u < std::min((i + 1) << k, w); ++u) {
+          const std::size_t p = static_cast<std::size_t>(v) * w + u;
+          const uint32_t d = frame->depth()[p];
+          if (d >= raw_min && d < raw_max) representative[p] = index;
         }
       }
     }
-    if (!frame->has_rgb || count == 0) return 0u;
-    const auto mean = [count](uint32_t sum) { return static_cast<uint8_t>((sum + count / 2) / count); };
+    if (!frame->has_rgb) return 0u;
+    const int shift = k - 1;
+    const int i0 = i << shift, i1 = std::min((i + 1) << shift, first.width);
+    const int j0 = j << shift, j1 = std::min((j + 1) << shift, first.height);
+    float r = 0.0f, g = 0.0f, b = 0.0f;  // exact: below 4^7 x 255 < 2^24
+    for (int cj = j0; cj < j1; ++cj) {
+      const std::size_t row = static_cast<std::size_t>(cj) * first.stride;
+      for (int ci = i0; ci < i1; ++ci) {
+        r += first.cr[row + ci], g += first.cg[row + ci], b += first.cb[row + ci];
+      }
+    }
+    const auto n = static_cast<uint32_t>(count);
+    const auto mean = [n](float sum) { return static_cast<uint8_t>((static_cast<uint32_t>(sum) + n / 2) / n); };
     return packRgb(mean(r), mean(g), mean(b));
   }
 
@@ -380,7 +410,7 @@ void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
   if (level.merge[at] != 0.0f) {
     const float inv_n = 1.0f / count;
     const float mx = level.sx[at] * inv_n, my = level.sy[at] * inv_n, mz = level.sz[at] * inv_n;
-    const uint32_t rgb = walk.meanColour(k, i, j, static_cast<uint32_t>(walk.n));
+    const uint32_t rgb = walk.meanColour(pyramid_[0], k, i, j, count, static_cast<uint32_t>(walk.n));
     walk.emit(mx, my, mz, rgb, static_cast<uint8_t>(k), static_cast<uint32_t>(count));
     return;
   }

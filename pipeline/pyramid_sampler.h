@@ -124,6 +124,7 @@ class PyramidSampler {
     void clearPadding();
     std::vector<float> n, sx, sy, sz, m2, zmax;
     std::vector<float> merge;  // the rule's verdict, for the cells the walk reaches
+    std::vector<float> cr, cg, cb;  // level 1 only: colour sums over the valid pixels
     void resize(std::size_t cells);
   };
   struct Walk;  // one sample() call's constants
