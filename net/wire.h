@@ -6,7 +6,7 @@
 //   3       1     message type (MessageType)
 //   4       8     sender epoch: random, chosen by the sender per session
 //   12      8     sequence number, little-endian, per sender, from 1
-//   20      n     ciphertext of the FlatBuffers payload
+//   20      n     ciphertext of the payload (FlatBuffers, or a point chunk)
 //   20+n    16    authentication tag
 //
 // The 20 header bytes are authenticated as associated data; the payload is
@@ -18,7 +18,7 @@
 
 namespace fovea::net {
 
-inline constexpr uint8_t kProtocolVersion = 1;
+inline constexpr uint8_t kProtocolVersion = 2;  // 2: point chunks with a binary header (docs/protocol-chunks.md)
 
 // a is newer than b in serial-number order (RFC 1982 style), so that 32-bit
 // counters on the wire (frame ids, brick versions) may wrap.
