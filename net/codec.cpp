@@ -791,17 +791,45 @@ std::pair<const uint64_t*, const uint32_t*> ChunkEncoder::State::sortByMorton(st
   constexpr std::size_t kBins = std::size_t{1} << kRadixBits;
   constexpr uint64_t kMask = kBins - 1;
   std::fill(histogram.begin(), histogram.begin() + static_cast<std::ptrdiff_t>(passes * kBins), 0u);
+  const std::size_t m = end - begin;
+  // When the key and the point's place in the region fit 64 bits together (always
+  // on the mock frames: 33 to 39 bits of key, at most 15 of place), the passes move
+  // one word per point instead of a key and an index.
+  const int place_bits = std::bit_width(m - 1);
+  const bool packed = key_bits + place_bits <= 64;
   for (std::size_t k = begin; k < end; ++k) {
     const uint64_t key = morton(static_cast<uint64_t>(qx[k] - qmin[0]), static_cast<uint64_t>(qy[k] - qmin[1]),
                                 static_cast<uint64_t>(qz[k] - qmin[2]));
-    keys[k] = key;
+    keys[k] = packed ? (key << place_bits) | (k - begin) : key;
     for (int p = 0; p < passes; ++p) ++histogram[static_cast<std::size_t>(p) * kBins + ((key >> (p * kRadixBits)) & kMask)];
   }
   uint64_t* k_in = keys.data() + begin;
   uint64_t* k_out = keys_tmp.data() + begin;
   uint32_t* o_in = order.data() + begin;
   uint32_t* o_out = order_tmp.data() + begin;
-  const std::size_t m = end - begin;
+  if (packed) {
+    for (int p = 0; p < passes; ++p) {
+      uint32_t* h = histogram.data() + static_cast<std::size_t>(p) * kBins;
+      const int shift = p * kRadixBits + place_bits;
+      if (h[(k_in[0] >> shift) & kMask] == m) continue;  // one digit for all: the pass would not move a key
+      uint32_t sum = 0;
+      for (std::size_t d = 0; d < kBins; ++d) {
+        const uint32_t c = h[d];
+        h[d] = sum;
+        sum += c;
+      }
+      for (std::size_t k = 0; k < m; ++k) k_out[h[(k_in[k] >> shift) & kMask]++] = k_in[k];
+      std::swap(k_in, k_out);
+    }
+    // Unpack in place: keys, and the input index of each.
+    const uint64_t place_mask = (uint64_t{1} << place_bits) - 1;
+    for (std::size_t k = 0; k < m; ++k) {
+      const uint64_t v = k_in[k];
+      o_out[k] = o_in[v & place_mask];
+      k_in[k] = v >> place_bits;
+    }
+    return {k_in, o_out};
+  }
   for (int p = 0; p < passes; ++p) {
     uint32_t* h = histogram.data() + static_cast<std::size_t>(p) * kBins;
     const int shift = p * kRadixBits;
