@@ -462,6 +462,34 @@ struct ColourPrev {
   }
 }
 
+// A point after the first, full colour: its position delta and colour codes, in
+// one put() when they fit 56 bits together (nearly always).
+[[gnu::always_inline]] inline void putPointFull(BitWriter& bw, uint64_t delta, uint32_t c, const Orders& orders,
+                                                const ColourPrev& prev, ColourPrev& next) {
+  const int kp = orders.position;
+  const int lp = 2 * (std::bit_width((delta >> kp) + 1) - 1) + 1 + kp;
+  const Ycocg v = toYcocg(c);
+  next.y = static_cast<uint8_t>(v.y);
+  next.fco = v.co, next.fcg = v.cg;
+  int l0, l1, l2;
+  const uint64_t c0 = BitWriter::egCode(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0], l0);
+  const uint64_t c1 = BitWriter::egCode(zigzag9(next.fco - prev.fco), orders.colour[1], l1);
+  const uint64_t c2 = BitWriter::egCode(zigzag9(next.fcg - prev.fcg), orders.colour[2], l2);
+  if (lp + l0 + l1 + l2 <= 56) {
+    int len;
+    const uint64_t pc = BitWriter::egCode(delta, kp, len);
+    bw.put(pc | (c0 << lp) | (c1 << (lp + l0)) | (c2 << (lp + l0 + l1)), lp + l0 + l1 + l2);
+    return;
+  }
+  bw.putEg(delta, kp);
+  if (l0 + l1 + l2 <= 56) {
+    bw.put(c0 | (c1 << l0) | (c2 << (l0 + l1)), l0 + l1 + l2);
+  } else {
+    bw.put(c0 | (c1 << l0), l0 + l1);
+    bw.put(c2, l2);
+  }
+}
+
 // Point j's luma, and after the second point of a pair the pair's chroma. The
 // bits a first point's own chroma would take if it stays alone: they must fit too.
 [[gnu::always_inline]] inline std::size_t putHalfColour(BitWriter& bw, const RegionCut& cut, std::size_t j,
@@ -894,17 +922,21 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
   const std::size_t last = std::min(cut.points, k + 0xffff);  // point_count is 16 bits
   for (std::size_t j = k; j < last; ++j) {
     const BitWriter::Mark before = bw.mark();
-    if (count == 0) {
-      putFirstCode(bw, cut.keys[j]);
-    } else {
-      bw.putEg(cut.keys[j] - cut.keys[j - 1], orders.position);
-    }
     ColourPrev next = prev;
     std::size_t extra = 0;
-    if (cut.half) {
-      extra = putHalfColour(bw, cut, j, count, orders, prev, next);
+    if (!cut.half && count != 0) {  // the common case
+      putPointFull(bw, cut.keys[j] - cut.keys[j - 1], cut.rgb[cut.order[j]], orders, prev, next);
     } else {
-      putFullColour(bw, cut.rgb[cut.order[j]], orders, prev, next);
+      if (count == 0) {
+        putFirstCode(bw, cut.keys[j]);
+      } else {
+        bw.putEg(cut.keys[j] - cut.keys[j - 1], orders.position);
+      }
+      if (cut.half) {
+        extra = putHalfColour(bw, cut, j, count, orders, prev, next);
+      } else {
+        putFullColour(bw, cut.rgb[cut.order[j]], orders, prev, next);
+      }
     }
     if (bw.bits() + extra > budget_bits) {
       bw.rewind(before);
