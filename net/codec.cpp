@@ -411,11 +411,11 @@ struct FrameInProgress {
 struct RegionCut {
   int region;
   const uint64_t* keys;   // Morton keys, sorted
-  const uint32_t* order;  // the input index of each key
+  const uint32_t* order;  // the input index of each key (rgb is gathered in this order)
   std::size_t points;
   bool half;              // chroma shared by pairs of points
   std::array<int64_t, 3> origin_q;  // the region's lattice origin (qmin), steps
-  const uint32_t* rgb;    // of the input points
+  const uint32_t* rgb;    // colour of each key's point
 };
 
 // A chunk's Exp-Golomb orders: of the position deltas, and of the three colour codes.
@@ -495,11 +495,11 @@ struct ColourPrev {
 [[gnu::always_inline]] inline std::size_t putHalfColour(BitWriter& bw, const RegionCut& cut, std::size_t j,
                                                         std::size_t count, const Orders& orders, const ColourPrev& prev,
                                                         ColourPrev& next) {
-  const uint32_t c = cut.rgb[cut.order[j]];
+  const uint32_t c = cut.rgb[j];
   next.y = static_cast<uint8_t>(luma(c));
   bw.putEg(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0]);
   if (count % 2 == 1) {  // the pair's chroma, after its second point
-    const uint32_t c0 = cut.rgb[cut.order[j - 1]];
+    const uint32_t c0 = cut.rgb[j - 1];
     next.co = pairCo(c0, c), next.cg = pairCg(c0, c);
     bw.putEg(zigzag8(static_cast<uint8_t>(next.co - prev.co)), orders.colour[1]);
     bw.putEg(zigzag8(static_cast<uint8_t>(next.cg - prev.cg)), orders.colour[2]);
@@ -545,6 +545,7 @@ struct ChunkEncoder::State {
   std::vector<int64_t> qx, qy, qz;  // lattice coordinates, in `order`'s slots (grouped by region)
   std::vector<uint64_t> keys, keys_tmp;
   std::vector<uint32_t> order, order_tmp;
+  std::vector<uint32_t> colours;  // the points' colours in Morton order (a separate gather: more loads in flight)
   std::vector<uint32_t> histogram;  // 1 << kRadixBits per radix pass
 
   // One chunk in the making: 4 order bytes, then the bitstream (+ slack for rollback).
@@ -647,6 +648,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->keys_tmp.resize(max_points);
   s->order.resize(max_points);
   s->order_tmp.resize(max_points);
+  s->colours.resize(max_points);
   s->histogram.resize(((63 + kRadixBits - 1) / kRadixBits) * (std::size_t{1} << kRadixBits));  // one per pass
   s->raw.resize(config.max_payload + 64);
   s->packed.resize(ZSTD_compressBound(config.max_payload));
@@ -785,13 +787,15 @@ Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, i
                                            std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
   }
   const std::pair<const uint64_t*, const uint32_t*> sorted = sortByMorton(begin, end, qmin, span);
+  const uint32_t* rgb = cloud.points.rgb();
+  for (std::size_t k = 0; k < end - begin; ++k) colours[begin + k] = rgb[sorted.second[k]];
   const RegionCut cut{r,
                       sorted.first,
                       sorted.second,
                       end - begin,
                       r > 0 && config.halve_peripheral_chroma,
                       qmin,
-                      cloud.points.rgb()};
+                      colours.data() + begin};
   budget = config.max_payload - headerBytes(qmin, frame.brick != nullptr);
   for (std::size_t k = 0; k < cut.points;) {
     const Orders orders = chooseOrders(cut, k);
@@ -885,18 +889,18 @@ Orders ChunkEncoder::State::chooseOrders(const RegionCut& cut, std::size_t k) {
   uint64_t* sp = sample.data();
   for (std::size_t j = 1; j < probe; ++j) sp[j - 1] = cut.keys[k + j] - cut.keys[k + j - 1];
   if (cut.half) {
-    uint32_t c0 = cut.rgb[cut.order[k]];
+    uint32_t c0 = cut.rgb[k];
     for (std::size_t j = 1; j < probe; ++j) {
-      const uint32_t c1 = cut.rgb[cut.order[k + j]];
+      const uint32_t c1 = cut.rgb[k + j];
       sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(luma(c1) - luma(c0)));
       sp[128 + j - 1] = zigzag8(static_cast<uint8_t>(pairCo(c1, c1) - pairCo(c0, c0)));
       sp[192 + j - 1] = zigzag8(static_cast<uint8_t>(pairCg(c1, c1) - pairCg(c0, c0)));
       c0 = c1;
     }
   } else {
-    Ycocg a = toYcocg(cut.rgb[cut.order[k]]);
+    Ycocg a = toYcocg(cut.rgb[k]);
     for (std::size_t j = 1; j < probe; ++j) {
-      const Ycocg b = toYcocg(cut.rgb[cut.order[k + j]]);
+      const Ycocg b = toYcocg(cut.rgb[k + j]);
       sp[64 + j - 1] = zigzag8(static_cast<uint8_t>(b.y - a.y));
       sp[128 + j - 1] = zigzag9(b.co - a.co);
       sp[192 + j - 1] = zigzag9(b.cg - a.cg);
@@ -925,7 +929,7 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
     ColourPrev next = prev;
     std::size_t extra = 0;
     if (!cut.half && count != 0) {  // the common case
-      putPointFull(bw, cut.keys[j] - cut.keys[j - 1], cut.rgb[cut.order[j]], orders, prev, next);
+      putPointFull(bw, cut.keys[j] - cut.keys[j - 1], cut.rgb[j], orders, prev, next);
     } else {
       if (count == 0) {
         putFirstCode(bw, cut.keys[j]);
@@ -935,7 +939,7 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
       if (cut.half) {
         extra = putHalfColour(bw, cut, j, count, orders, prev, next);
       } else {
-        putFullColour(bw, cut.rgb[cut.order[j]], orders, prev, next);
+        putFullColour(bw, cut.rgb[j], orders, prev, next);
       }
     }
     if (bw.bits() + extra > budget_bits) {
@@ -947,7 +951,7 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
   }
   if (count == 0) return 0;
   if (cut.half && count % 2 == 1) {  // a lone last point: its own chroma
-    const uint32_t c = cut.rgb[cut.order[k + count - 1]];
+    const uint32_t c = cut.rgb[k + count - 1];
     bw.putEg(zigzag8(static_cast<uint8_t>(pairCo(c, c) - prev.co)), orders.colour[1]);
     bw.putEg(zigzag8(static_cast<uint8_t>(pairCg(c, c) - prev.cg)), orders.colour[2]);
   }
