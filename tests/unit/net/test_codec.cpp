@@ -2,6 +2,7 @@
 // datagram sizes, loss of any chunk, range limits and hostile payloads.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <random>
 #include <span>
@@ -533,6 +534,46 @@ TEST(CodecDecode, PayloadUnalignedIsAnErrorNotARead) {
   EXPECT_EQ(decodeSummary({shifted.data() + 1, summary.size()}).status().code(), ErrorCode::kParseError);
   std::copy(chunk.begin(), chunk.end(), shifted.begin());
   EXPECT_TRUE(decodeChunk({shifted.data(), chunk.size()}, out).isOk());
+}
+
+// The header's own rules (docs/protocol-chunks.md "Decoding rules" 1 and 2), each
+// broken in an otherwise valid chunk: an error that says so, nothing appended.
+TEST(CodecDecode, MalformedHeadersAreErrorsNamingTheRule) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321).isOk());
+  const std::vector<uint8_t> good(enc.chunk(1).begin(), enc.chunk(1).end());
+  pipeline::FoveatedCloud out(16);
+  ASSERT_TRUE(decodeChunk(good, out).isOk());
+  auto expectError = [&](std::vector<uint8_t> bad, const std::string& what) {
+    out.clear();
+    Result<DecodedChunk> d = decodeChunk(bad, out);
+    EXPECT_EQ(d.status().code(), ErrorCode::kParseError) << what;
+    EXPECT_NE(d.status().message().find(what), std::string::npos) << d.status().toString();
+    EXPECT_EQ(out.size(), 0u);
+  };
+  std::vector<uint8_t> c = good;
+  c[18] |= 0x40;  // bits 6-7 of the region byte
+  expectError(c, "unknown flags");
+  c = good;
+  c[14] = c[15] = 0;  // chunk_count 0
+  expectError(c, "chunk index out of range");
+  c = good;
+  for (std::size_t i = 27; i < 27 + 8; ++i) c[i] = 0x80;  // a varint of more than 8 bytes
+  expectError(c, "origin varint");
+  c = good;
+  for (std::size_t i = 27; i < 27 + 7; ++i) c[i] = 0xff;  // 8 bytes, but 2^56 - 1 >= 2^51
+  c[34] = 0x7f;
+  expectError(c, "origin beyond 2^50 steps");
+  c = good;
+  const double nan = std::nan("");
+  std::memcpy(c.data() + 19, &nan, 8);  // little-endian host (as the encoder's putLe)
+  expectError(c, "step is not finite");
+  expectError({good.begin(), good.begin() + 29}, "shorter than its header");
+  c = good;
+  c[18] |= 0x20;  // a brick flag without a tag: the tag is truncated or the data too short
+  c.resize(27 + 3 + 10);
+  expectError(c, "brick tag truncated");
 }
 
 TEST(CodecDecode, FullOutputCloudIsAnErrorAndAppendsNothing) {
