@@ -960,7 +960,7 @@ std::size_t ChunkEncoder::State::packChunk(const RegionCut& cut, std::size_t k, 
   return count;
 }
 
-// The packed chunk, compressed where that pays, as a PointChunk into the arena.
+// The packed chunk, compressed where that pays, with its header into the arena.
 Status ChunkEncoder::State::storeChunk(const RegionCut& cut, std::size_t points, std::size_t raw_size,
                                        FrameInProgress& frame) {
   const uint8_t* data = raw.data();

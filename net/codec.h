@@ -47,7 +47,7 @@ struct CodecConfig {
 // [220, 8916] (MTU minus 36 bytes)".
 Status validate(const CodecConfig& config);
 
-// Flags of PointChunk.flags.
+// Flags of a chunk (DecodedChunk; in the header byte with the region, docs/protocol-chunks.md).
 inline constexpr uint8_t kChunkFlagZstd = 1u << 0;
 inline constexpr uint8_t kChunkFlagHalfChroma = 1u << 1;
 // Positions are 21-bit lattice coordinates per axis (a 63-bit Morton code)

@@ -39,7 +39,7 @@ enum class MessageType : uint8_t {
 
 inline constexpr std::size_t kHeaderBytes = 20;
 inline constexpr std::size_t kTagBytes = 16;
-// Bytes a datagram spends besides its FlatBuffers payload.
+// Bytes a datagram spends besides its payload.
 inline constexpr std::size_t kDatagramOverhead = kHeaderBytes + kTagBytes;
 
 // UDP payload sizes: the default keeps clear of fragmentation on any path
@@ -52,7 +52,9 @@ inline constexpr std::size_t kMaxMtu = 8952;  // 9000 - IPv6 header (40) - UDP h
 // bytes to uoffset_t*, double*...), so a payload must start at an address aligned
 // for its largest scalar (ulong, double: 8 bytes). The 20-byte header leaves a
 // payload unaligned inside its datagram: payloads are decrypted into an aligned
-// buffer (net/secure_channel.h PlainBuffer) and the decoders reject unaligned input.
+// buffer (net/secure_channel.h PlainBuffer) and the decoders reject unaligned input
+// (a point chunk, read byte by byte since protocol version 2, would not need it: its
+// decoder keeps the one rule all the same).
 inline constexpr std::size_t kPayloadAlignment = 8;
 inline bool isPayloadAligned(const uint8_t* payload) {
   return reinterpret_cast<std::uintptr_t>(payload) % kPayloadAlignment == 0;

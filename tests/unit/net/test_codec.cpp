@@ -351,9 +351,8 @@ TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
   EXPECT_EQ(enc.chunkCount(), 1u);
 }
 
-// A small frame's chunks, byte for byte as the encoder wrote them before point
-// chunks could carry a brick tag: fields added to PointChunk since must leave
-// frame chunks unchanged on the wire.
+// A small frame, whose chunks' bytes are pinned below (CodecWire): a change of the
+// wire format must show here, and bump the protocol version (net/wire.h).
 pipeline::FoveatedCloud smallFrame() {
   pipeline::FoveatedCloud cloud(16);
   for (int i = 0; i < 16; ++i) {
@@ -510,9 +509,9 @@ TEST(CodecBrick, LevelOutOfRangeIsRefused) {
   EXPECT_EQ(enc.chunkCount(), 0u);
 }
 
-// FlatBuffers reads a payload in place (net/wire.h kPayloadAlignment): every
-// payload the encoder hands out starts aligned, and one off the boundary is an
-// error, never read (UBSan: misaligned load in flatbuffers/buffer.h).
+// Every payload starts at kPayloadAlignment (net/wire.h): the summary is FlatBuffers,
+// read in place, and every decoder holds to the same rule. Each payload the encoder
+// hands out starts aligned, and one off the boundary is an error, never read.
 TEST(CodecDecode, PayloadUnalignedIsAnErrorNotARead) {
   const test::MockFoveatedFrame& f = livingRoom();
   ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
