@@ -3,7 +3,8 @@
 //
 // Robot side: ChunkEncoder allocates everything in create(); encode() and
 // encodeSummary() never allocate. Operator side: decodeChunk(), decodeSummary()
-// and FrameAssembler verify every byte (FlatBuffers verifier + semantic checks)
+// and FrameAssembler verify every byte (the chunk header's structure, the
+// summary's FlatBuffers verifier, semantic checks)
 // and return an error for any malformed input; they never crash.
 #pragma once
 
@@ -22,7 +23,7 @@
 namespace fovea::net {
 
 struct CodecConfig {
-  // Largest FlatBuffers payload of one chunk (bytes): the datagram adds
+  // Largest payload of one chunk (bytes: header and data): the datagram adds
   // kDatagramOverhead. In [kMinMtu, kMaxMtu] - kDatagramOverhead.
   std::size_t max_payload = kDefaultMtu - kDatagramOverhead;
   // Quantization step of the fovea (region 0), metres: error <= step / 2 per axis.
@@ -46,7 +47,7 @@ struct CodecConfig {
 // [220, 8916] (MTU minus 36 bytes)".
 Status validate(const CodecConfig& config);
 
-// Flags of PointChunk.flags.
+// Flags of a chunk (DecodedChunk; in the header byte with the region, docs/protocol-chunks.md).
 inline constexpr uint8_t kChunkFlagZstd = 1u << 0;
 inline constexpr uint8_t kChunkFlagHalfChroma = 1u << 1;
 // Positions are 21-bit lattice coordinates per axis (a 63-bit Morton code)
@@ -56,7 +57,7 @@ inline constexpr int64_t kMaxLatticeSpan = (int64_t{1} << 21) - 1;
 inline constexpr std::size_t kMaxChunkRawBytes = 1u << 16;
 
 // Which map brick, and which version of it, a chunk's points belong to
-// (net/schema/chunk.fbs BrickTag; a kBrickChunk message, docs/protocol-chunks.md).
+// (the chunk header's brick tag; a kBrickChunk message, docs/protocol-chunks.md).
 struct BrickTag {
   int32_t x = 0, y = 0, z = 0;  // the brick's grid key: its origin is key * brick_size_m
   uint32_t version = 0;         // the robot's per-brick counter (serial-number order)

@@ -6,7 +6,7 @@
 //   3       1     message type (MessageType)
 //   4       8     sender epoch: random, chosen by the sender per session
 //   12      8     sequence number, little-endian, per sender, from 1
-//   20      n     ciphertext of the FlatBuffers payload
+//   20      n     ciphertext of the payload (FlatBuffers, or a point chunk)
 //   20+n    16    authentication tag
 //
 // The 20 header bytes are authenticated as associated data; the payload is
@@ -18,7 +18,7 @@
 
 namespace fovea::net {
 
-inline constexpr uint8_t kProtocolVersion = 1;
+inline constexpr uint8_t kProtocolVersion = 2;  // 2: point chunks with a binary header (docs/protocol-chunks.md)
 
 // a is newer than b in serial-number order (RFC 1982 style), so that 32-bit
 // counters on the wire (frame ids, brick versions) may wrap.
@@ -39,7 +39,7 @@ enum class MessageType : uint8_t {
 
 inline constexpr std::size_t kHeaderBytes = 20;
 inline constexpr std::size_t kTagBytes = 16;
-// Bytes a datagram spends besides its FlatBuffers payload.
+// Bytes a datagram spends besides its payload.
 inline constexpr std::size_t kDatagramOverhead = kHeaderBytes + kTagBytes;
 
 // UDP payload sizes: the default keeps clear of fragmentation on any path
@@ -52,7 +52,9 @@ inline constexpr std::size_t kMaxMtu = 8952;  // 9000 - IPv6 header (40) - UDP h
 // bytes to uoffset_t*, double*...), so a payload must start at an address aligned
 // for its largest scalar (ulong, double: 8 bytes). The 20-byte header leaves a
 // payload unaligned inside its datagram: payloads are decrypted into an aligned
-// buffer (net/secure_channel.h PlainBuffer) and the decoders reject unaligned input.
+// buffer (net/secure_channel.h PlainBuffer) and the decoders reject unaligned input
+// (a point chunk, read byte by byte since protocol version 2, would not need it: its
+// decoder keeps the one rule all the same).
 inline constexpr std::size_t kPayloadAlignment = 8;
 inline bool isPayloadAligned(const uint8_t* payload) {
   return reinterpret_cast<std::uintptr_t>(payload) % kPayloadAlignment == 0;

@@ -6,7 +6,7 @@
 // Input: byte 0 picks the mode. Even: the rest is a payload, decoded as is. Odd:
 // the rest describes a small cloud (8 bytes per point) that is encoded with the
 // real encoder, then the trailing bytes flip bits of the first chunk, so the
-// fuzzer reaches past the FlatBuffers verifier into the bit stream.
+// fuzzer reaches past the header checks into the bit stream.
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -38,8 +38,8 @@ struct Fixture {
 };
 
 // Decodes a copy: the copy starts aligned as the links' receive buffers do
-// (FlatBuffers reads in place and needs that), and ends where the payload ends,
-// so AddressSanitizer sees a read past it.
+// (the summary is FlatBuffers, read in place; every decoder requires it), and
+// ends where the payload ends, so AddressSanitizer sees a read past it.
 void decodeAll(Fixture& f, std::span<const uint8_t> bytes) {
   const std::vector<uint8_t> copy(bytes.begin(), bytes.end());
   const std::span<const uint8_t> payload(copy);

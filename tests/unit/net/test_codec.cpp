@@ -2,6 +2,7 @@
 // datagram sizes, loss of any chunk, range limits and hostile payloads.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <random>
 #include <span>
@@ -12,7 +13,6 @@
 #include <gtest/gtest.h>
 
 #include "net/codec.h"
-#include "net/schema/chunk_generated.h"
 #include "tests/support/clouds.h"
 #include "tests/unit/net/mock_frame.h"
 
@@ -351,9 +351,8 @@ TEST(CodecRange, ExtremeAndNonFiniteCoordinates) {
   EXPECT_EQ(enc.chunkCount(), 1u);
 }
 
-// A small frame's chunks, byte for byte as the encoder wrote them before point
-// chunks could carry a brick tag: fields added to PointChunk since must leave
-// frame chunks unchanged on the wire.
+// A small frame, whose chunks' bytes are pinned below (CodecWire): a change of the
+// wire format must show here, and bump the protocol version (net/wire.h).
 pipeline::FoveatedCloud smallFrame() {
   pipeline::FoveatedCloud cloud(16);
   for (int i = 0; i < 16; ++i) {
@@ -373,15 +372,14 @@ std::string hex(std::span<const uint8_t> bytes) {
 }
 
 TEST(CodecWire, FrameChunkBytesAreUnchanged) {
+  // Protocol version 2: the binary header (frame 42, capture 987654321 ns, chunk i of 2,
+  // 8 points, region, step as a double, the origin's three zigzag varints), then the
+  // data exactly as in version 1's FlatBuffers chunks (whose bytes were here before).
   const char* const golden[] = {
       // region 0 (fovea, 1 mm steps)
-      "140000000000000000000a0044000c00060008000a000000000002003c000000000000000000000079e9263108ac9cbf"
-      "000000000000f83ffca9f1d24d62503fb168de3a000000002a0000000800000000000000000000002c0000000f030704"
-      "0de6856b92e11b9df1c73df85a16528b509308c93b32b89337887d26b290dad88d3dee41d9b2905a",
+      "2a000000b168de3a0000000000000200080000fca9f1d24d62503f0037b8170f0307040de6856b92e11b9df1c73df85a16528b509308c93b32b89337887d26b290dad88d3dee41d9b2905a",
       // region 1 (voxel 2 cm, steps of 2.5 mm)
-      "140000000000000000000a0044000c00060008000a000000000002003c0000009a9999999999893f295c8fc2f5289cbf"
-      "000000000000f83f7b14ae47e17a643fb168de3a000000002a0000000800000001000100000000002a0000000c030704"
-      "ca8690e53362a6c71ff7cb6e9be54c1a7fdc7965cb426a7505b290da01b2c71dc4b3210ba9050000",
+      "2a000000b168de3a00000000010002000800017b14ae47e17a643f0a15b0090c030704ca8690e53362a6c71ff7cb6e9be54c1a7fdc7965cb426a7505b290da01b2c71dc4b3210ba905",
   };
   ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
   const double voxel[] = {0.0, 0.02};
@@ -441,7 +439,18 @@ TEST(CodecBrick, EveryPartCarriesTheTagFitsAndRoundTrips) {
   }
 }
 
-TEST(CodecBrick, TagAddsSixteenBytesAndLeavesTheDataAsIs) {
+// The tag is 17 bytes after the origin (docs/protocol-chunks.md "Chunk header"):
+// x, y, z, version (little-endian 32-bit), level.
+std::vector<uint8_t> tagBytes(const BrickTag& tag) {
+  std::vector<uint8_t> out;
+  for (uint32_t v : {static_cast<uint32_t>(tag.x), static_cast<uint32_t>(tag.y), static_cast<uint32_t>(tag.z), tag.version}) {
+    for (int i = 0; i < 4; ++i) out.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  out.push_back(tag.level);
+  return out;
+}
+
+TEST(CodecBrick, TagAddsSeventeenBytesAndLeavesTheDataAsIs) {
   ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
   const double voxel[] = {0.0, 0.02};
   ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321).isOk());
@@ -450,44 +459,47 @@ TEST(CodecBrick, TagAddsSixteenBytesAndLeavesTheDataAsIs) {
   const BrickTag tag{1, 2, 3, 4, 5};
   ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321, &tag).isOk());
   ASSERT_EQ(enc.chunkCount(), frame.size());
+  const std::vector<uint8_t> tb = tagBytes(tag);
   for (std::size_t i = 0; i < frame.size(); ++i) {
-    EXPECT_EQ(enc.chunk(i).size(), frame[i].size() + 16) << i;
-    const auto* a = wire::GetPointChunk(frame[i].data());
-    const auto* b = wire::GetPointChunk(enc.chunk(i).data());
-    EXPECT_EQ(a->brick(), nullptr);
-    ASSERT_NE(b->brick(), nullptr);
-    EXPECT_TRUE(std::equal(a->data()->begin(), a->data()->end(), b->data()->begin(), b->data()->end()));
+    const std::span<const uint8_t> b = enc.chunk(i);
+    ASSERT_EQ(b.size(), frame[i].size() + 17) << i;
+    // The same header but for the brick flag (bit 5 of byte 18), then the tag, then the same data.
+    const std::size_t header = std::search(b.begin(), b.end(), tb.begin(), tb.end()) - b.begin();
+    ASSERT_LT(header, b.size()) << i;
+    EXPECT_EQ(b[18], frame[i][18] | 0x20) << i;
+    EXPECT_TRUE(std::equal(b.begin(), b.begin() + 18, frame[i].begin())) << i;
+    EXPECT_TRUE(std::equal(b.begin() + 19, b.begin() + static_cast<std::ptrdiff_t>(header), frame[i].begin() + 19)) << i;
+    EXPECT_TRUE(std::equal(b.begin() + static_cast<std::ptrdiff_t>(header + 17), b.end(),
+                           frame[i].begin() + static_cast<std::ptrdiff_t>(header), frame[i].end()))
+        << i;
   }
 }
 
-// A PointChunk with header and data of a real chunk and a brick tag of the given level.
-std::vector<uint8_t> chunkWithBrickLevel(std::span<const uint8_t> real, uint8_t level) {
-  const wire::PointChunk* c = wire::GetPointChunk(real.data());
-  flatbuffers::FlatBufferBuilder fbb;
-  const auto data = fbb.CreateVector(c->data()->data(), c->data()->size());
-  const wire::BrickTag tag(4, 5, 6, 1, level);
-  wire::PointChunkBuilder b(fbb);
-  b.add_header(c->header());
-  b.add_brick(&tag);
-  b.add_data(data);
-  b.add_chunk_count(c->chunk_count());
-  fbb.Finish(b.Finish());
-  return {fbb.GetBufferPointer(), fbb.GetBufferPointer() + fbb.GetSize()};  // starts 8-aligned (malloc)
+// A brick chunk of the small frame with tag {4, 5, 6, 1, level}: the encoder's, its level byte patched.
+std::vector<uint8_t> chunkWithBrickLevel(ChunkEncoder& enc, uint8_t level) {
+  const double voxel[] = {0.0, 0.02};
+  const BrickTag tag{4, 5, 6, 1, 0};
+  EXPECT_TRUE(enc.encode(smallFrame(), voxel, 1, 0, &tag).isOk());
+  std::vector<uint8_t> c(enc.chunk(0).begin(), enc.chunk(0).end());
+  const std::vector<uint8_t> tb = tagBytes(tag);
+  const auto at = std::search(c.begin(), c.end(), tb.begin(), tb.end());
+  EXPECT_NE(at, c.end());
+  if (at != c.end()) at[16] = level;
+  return c;  // starts 8-aligned (the vector's allocation)
 }
 
 TEST(CodecBrick, LevelOutOfRangeIsRefused) {
   ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
   const double voxel[] = {0.0, 0.02};
-  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 1, 0).isOk());
   pipeline::FoveatedCloud out(16);
-  const std::vector<uint8_t> last = chunkWithBrickLevel(enc.chunk(0), pipeline::kMaxRegions - 1);
+  const std::vector<uint8_t> last = chunkWithBrickLevel(enc, pipeline::kMaxRegions - 1);
   Result<DecodedChunk> d = decodeChunk(last, out);
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->brick.level, pipeline::kMaxRegions - 1);
   EXPECT_EQ(d->brick.z, 6);
   for (int level : {pipeline::kMaxRegions, 255}) {
     out.clear();
-    d = decodeChunk(chunkWithBrickLevel(enc.chunk(0), static_cast<uint8_t>(level)), out);
+    d = decodeChunk(chunkWithBrickLevel(enc, static_cast<uint8_t>(level)), out);
     EXPECT_EQ(d.status().code(), ErrorCode::kParseError) << level;
     EXPECT_EQ(out.size(), 0u);
   }
@@ -497,9 +509,9 @@ TEST(CodecBrick, LevelOutOfRangeIsRefused) {
   EXPECT_EQ(enc.chunkCount(), 0u);
 }
 
-// FlatBuffers reads a payload in place (net/wire.h kPayloadAlignment): every
-// payload the encoder hands out starts aligned, and one off the boundary is an
-// error, never read (UBSan: misaligned load in flatbuffers/buffer.h).
+// Every payload starts at kPayloadAlignment (net/wire.h): the summary is FlatBuffers,
+// read in place, and every decoder holds to the same rule. Each payload the encoder
+// hands out starts aligned, and one off the boundary is an error, never read.
 TEST(CodecDecode, PayloadUnalignedIsAnErrorNotARead) {
   const test::MockFoveatedFrame& f = livingRoom();
   ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());
@@ -521,6 +533,46 @@ TEST(CodecDecode, PayloadUnalignedIsAnErrorNotARead) {
   EXPECT_EQ(decodeSummary({shifted.data() + 1, summary.size()}).status().code(), ErrorCode::kParseError);
   std::copy(chunk.begin(), chunk.end(), shifted.begin());
   EXPECT_TRUE(decodeChunk({shifted.data(), chunk.size()}, out).isOk());
+}
+
+// The header's own rules (docs/protocol-chunks.md "Decoding rules" 1 and 2), each
+// broken in an otherwise valid chunk: an error that says so, nothing appended.
+TEST(CodecDecode, MalformedHeadersAreErrorsNamingTheRule) {
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 16);
+  const double voxel[] = {0.0, 0.02};
+  ASSERT_TRUE(enc.encode(smallFrame(), voxel, 42, 987654321).isOk());
+  const std::vector<uint8_t> good(enc.chunk(1).begin(), enc.chunk(1).end());
+  pipeline::FoveatedCloud out(16);
+  ASSERT_TRUE(decodeChunk(good, out).isOk());
+  auto expectError = [&](std::vector<uint8_t> bad, const std::string& what) {
+    out.clear();
+    Result<DecodedChunk> d = decodeChunk(bad, out);
+    EXPECT_EQ(d.status().code(), ErrorCode::kParseError) << what;
+    EXPECT_NE(d.status().message().find(what), std::string::npos) << d.status().toString();
+    EXPECT_EQ(out.size(), 0u);
+  };
+  std::vector<uint8_t> c = good;
+  c[18] |= 0x40;  // bits 6-7 of the region byte
+  expectError(c, "unknown flags");
+  c = good;
+  c[14] = c[15] = 0;  // chunk_count 0
+  expectError(c, "chunk index out of range");
+  c = good;
+  for (std::size_t i = 27; i < 27 + 8; ++i) c[i] = 0x80;  // a varint of more than 8 bytes
+  expectError(c, "origin varint");
+  c = good;
+  for (std::size_t i = 27; i < 27 + 7; ++i) c[i] = 0xff;  // 8 bytes, but 2^56 - 1 >= 2^51
+  c[34] = 0x7f;
+  expectError(c, "origin beyond 2^50 steps");
+  c = good;
+  const double nan = std::nan("");
+  std::memcpy(c.data() + 19, &nan, 8);  // little-endian host (as the encoder's putLe)
+  expectError(c, "step is not finite");
+  expectError({good.begin(), good.begin() + 29}, "shorter than its header");
+  c = good;
+  c[18] |= 0x20;  // a brick flag without a tag: the tag is truncated or the data too short
+  c.resize(27 + 3 + 10);
+  expectError(c, "brick tag truncated");
 }
 
 TEST(CodecDecode, FullOutputCloudIsAnErrorAndAppendsNothing) {
