@@ -629,8 +629,8 @@ TEST(Resolve, BoardThenFileThenSet) {
   const std::vector<std::string> small = {"pipeline.max_points=1000"};
   Result<ServiceConfig> bad = resolveServiceConfig("host-mock", std::nullopt, small);
   ASSERT_FALSE(bad.isOk());
-  EXPECT_EQ(bad.status().message(), boardDir() + "/host-mock.toml:19: pipeline.max_voxels: must be at most "
-                                                  "pipeline.max_points (got 307200 > 1000)");
+  EXPECT_EQ(bad.status().message(), boardDir() + "/host-mock.toml:20: pipeline.max_voxels: must be at most "
+                                                  "pipeline.max_points (got 92160 > 1000)");
   const std::vector<std::string> listen = {"stream.listen=0.0.0.0:7000"};
   Result<ServiceConfig> unkeyed = resolveServiceConfig("host-mock", std::nullopt, listen);
   ASSERT_FALSE(unkeyed.isOk());
