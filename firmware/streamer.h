@@ -139,6 +139,8 @@ class Streamer {
   void sendStatus(const net::StatusReport& report);
 
   const net::UplinkCounters& uplinkCounters() const { return scheduler_.counters(); }
+  // The token bucket's burst in bytes (StreamConfig::burst_ms; 0: a frame period).
+  double burstBytes() const { return scheduler_.bucket().burstBytes(); }
 
  private:
   Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
