@@ -71,6 +71,7 @@ double number(const std::string& s) {
 
 struct Frame {
   double captured_ns = kNaN;
+  double bytes_sent = 0.0;
   std::map<std::string, double> ms;  // stage -> milliseconds
 };
 
@@ -141,6 +142,7 @@ int main(int argc, char** argv) {
     Frame& f = frames[row[static_cast<std::size_t>(robot.column("frame_id"))]];
     if (f.ms.empty()) order.push_back(row[static_cast<std::size_t>(robot.column("frame_id"))]);
     f.captured_ns = number(row[static_cast<std::size_t>(robot.column("captured_ns"))]);
+    if (const int c = robot.column("bytes_sent"); c >= 0) f.bytes_sent = number(row[static_cast<std::size_t>(c)]);
     for (const char* k : {"acquire", "queue", "backproject", "partition", "sample", "handoff", "encode", "send"}) {
       f.ms[k] = us(row, robot.column(std::string(k) + "_us"));
     }
@@ -169,7 +171,19 @@ int main(int argc, char** argv) {
     all.push_back(&f);
     (f.captured_ns - first_ns < 1e9 ? first_second : after).push_back(&f);
   }
-  std::printf("frames sent %zu, decoded by the operator %zu (joined by frame id)\n\n", all.size(), decoded);
+  std::printf("frames sent %zu, decoded by the operator %zu (joined by frame id)\n", all.size(), decoded);
+  // The uplink over any second: the bytes of the frames captured within one
+  // second of each frame's capture (datagram bytes, summaries included).
+  double max_window = 0.0, total = 0.0;
+  for (std::size_t i = 0, j = 0; i < all.size(); ++i) {
+    total += all[i]->bytes_sent;
+    double window = 0.0;
+    for (j = i; j < all.size() && all[j]->captured_ns - all[i]->captured_ns < 1e9; ++j) window += all[j]->bytes_sent;
+    if (all.back()->captured_ns - all[i]->captured_ns >= 1e9) max_window = std::max(max_window, window);
+  }
+  const double span_s = (all.back()->captured_ns - all.front()->captured_ns) * 1e-9;
+  std::printf("uplink: %.2f MB/s over the run, at most %.2f MB in any second of frames\n\n",
+              span_s > 0 ? total / span_s * 1e-6 : kNaN, max_window * 1e-6);
   printTable("every frame sent (the first second included)", all);
   std::printf("\n");
   printTable("the first second", first_second);
