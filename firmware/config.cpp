@@ -135,6 +135,7 @@ const std::vector<Field>& fields() {
       // [pipeline]
       FOVEA_INT("pipeline.max_points", pipeline.max_points, 1, 50'000'000),
       FOVEA_INT("pipeline.max_voxels", pipeline.max_voxels, 1, 50'000'000),
+      FOVEA_INT("pipeline.max_output_points", max_output_points, 0, 50'000'000),
       Field{"pipeline.kernels", Kind::kChoice, 0, 0, {"ref", "simd"},
             [](const ServiceConfig& c) -> Value { return std::string(fovea::kernelSetName(c.pipeline.kernels)); },
             [](ServiceConfig& c, const Value& v) {
@@ -223,7 +224,7 @@ const std::vector<Field>& fields() {
               c.stream.link.max_budget_bytes_per_s = static_cast<uint64_t>(std::llround(std::get<double>(v) * 1e6));
             }},
       FOVEA_NS_AS_MS("stream.session_timeout_ms", stream.link.session_timeout_ns, 100, 600'000),
-      FOVEA_FLOAT("stream.burst_ms", stream.burst_ms, 0.1, 1000.0),
+      FOVEA_FLOAT("stream.burst_ms", stream.burst_ms, 0.0, 1000.0),
       FOVEA_NS_AS_MS("stream.gaze_timeout_ms", stream.gaze.timeout_ns, 1, 60'000),
       FOVEA_FLOAT("stream.fallback_voxel_m", stream.gaze.fallback_voxel_m, 0.001, 1.0),
       FOVEA_FLOAT("stream.gaze_growth_max_deg", stream.gaze.growth_max_deg, 0.0, 90.0),
@@ -249,7 +250,7 @@ const std::vector<Field>& fields() {
       FOVEA_NS_AS_MS("gpio.heartbeat_period_ms", gpio.lines.heartbeat_period_ns, 10, 60'000),
       FOVEA_STRING("gpio.consumer", gpio.lines.consumer, &checkNonEmpty),
       // [runtime]
-      FOVEA_INT("runtime.ring_depth", runtime.ring_depth, 2, 64),
+      FOVEA_INT("runtime.ring_depth", runtime.ring_depth, 1, 64),
       FOVEA_BOOL("runtime.memory_lock", runtime.memory_lock),
       Field{"runtime.log_level", Kind::kChoice, 0, 0, {"error", "warning", "notice", "info", "debug"},
             [](const ServiceConfig& c) -> Value { return std::string(logLevelName(c.runtime.log_level)); },
@@ -665,6 +666,12 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
   if (c.pipeline.max_voxels > c.pipeline.max_points) {
     return FieldError{"pipeline.max_voxels",
                       "must be at most pipeline.max_points (got " + std::to_string(c.pipeline.max_voxels) + " > " +
+                          std::to_string(c.pipeline.max_points) + ")",
+                      {"pipeline.max_points"}};
+  }
+  if (c.max_output_points > c.pipeline.max_points) {
+    return FieldError{"pipeline.max_output_points",
+                      "must be at most pipeline.max_points (got " + std::to_string(c.max_output_points) + " > " +
                           std::to_string(c.pipeline.max_points) + ")",
                       {"pipeline.max_points"}};
   }

@@ -184,8 +184,15 @@ Status Service::allocate() {
   }
   memory_.add("frame slots (RGB-D, capture -> foveation)", frames_->slotCount(), delta(before, heapInUse()));
 
-  // The map source foveates the map's surfels too: the clouds hold them.
-  const std::size_t points = FrameFoveator::cloudCapacity(pixels, config_.map);
+  // The foveated output: the fovea whole and a point per voxel, at most
+  // pipeline.max_output_points (0: the pixels). A preset that keeps every point
+  // (FREF) needs the pixels; the map source foveates the map's surfels too, so
+  // its clouds hold them (the map's memory on top of the frame's).
+  std::size_t points = FrameFoveator::cloudCapacity(pixels, config_.map);
+  if (config_.map.source == FoveationSource::kFrame && config_.foveation.acuity.preset != pipeline::Preset::kFRef &&
+      config_.max_output_points > 0) {
+    points = std::min(points, config_.max_output_points);
+  }
   before = heapInUse();
   map_bricks_ = config_.map.source == FoveationSource::kMap && config_.map.delta;
   {
@@ -215,7 +222,7 @@ Status Service::allocate() {
   }
   if (Status s = config_.stream.gaze.validate(); !s) return s;
   policy_ = std::make_unique<GazePolicy>(config_.stream.gaze, config_.foveation);
-  const std::size_t cloud_bytes = points * (3 * sizeof(float) + sizeof(uint32_t));
+  const std::size_t cloud_bytes = stage_->cloud().capacity() * (3 * sizeof(float) + sizeof(uint32_t));
   const std::size_t stage_bytes = delta(before, heapInUse());
   memory_.add("point cloud (back-projection)", 1, std::min(cloud_bytes, stage_bytes));
   memory_.add("foveator (partition, sampler, workers)", 1, stage_bytes - std::min(cloud_bytes, stage_bytes));
@@ -242,23 +249,11 @@ Status Service::allocate() {
       brick_feedback_ = std::make_unique<BrickFeedback>(config_.map.map.max_bricks);
       streamer_->attachBrickFeedback(brick_feedback_.get());
     }
-    memory_.add("streamer (link, datagram pool, scheduler)", 1, delta(before, heapInUse()));
-    // The chunk encoder follows each session's MTU, so it is made when a
-    // session starts; its size at the largest MTU is measured here with a probe.
-    net::CodecConfig codec = stream.codec;
-    codec.max_payload = stream.link.max_mtu_bytes - net::kDatagramOverhead;
-    before = heapInUse();
-    {
-      Result<net::ChunkEncoder> probe = net::ChunkEncoder::create(codec, pixels);
-      if (!probe) return probe.status();
-      if (map_bricks_) {
-        Result<net::ChunkEncoder> brick_probe = net::ChunkEncoder::create(codec, stream.max_brick_points);
-        if (!brick_probe) return brick_probe.status();
-      }
-      memory_.add(map_bricks_ ? "chunk encoders, frame and brick (made at session start)"
-                              : "chunk encoder (made at session start)",
-                  map_bricks_ ? 2 : 1, delta(before, heapInUse()));
-    }
+    // The chunk encoders are made for the largest MTU here (a session at another
+    // MTU makes its own when it starts, in place of these).
+    memory_.add(map_bricks_ ? "streamer (link, scheduler, 2 chunk encoders)"
+                            : "streamer (link, scheduler, chunk encoder)",
+                1, delta(before, heapInUse()));
   }
 
   before = heapInUse();
@@ -506,7 +501,16 @@ void Service::foveationLoop() {
     if (!s) {
       out_ring.cancel(out);
       foveate_errors_.fetch_add(1, std::memory_order_relaxed);
-      (void)log().logLimited(foveate_site, LogLevel::kWarning, "foveation: %s", s.toString().c_str());
+      if (s.code() == ErrorCode::kCapacityExceeded) {
+        // More voxels or output points than the configuration allows: the frame
+        // is dropped and counted (the status line's "over capacity").
+        frames_over_capacity_.fetch_add(1, std::memory_order_relaxed);
+        (void)log().logLimited(foveate_site, LogLevel::kWarning,
+                               "foveation: %s (frame dropped; pipeline.max_voxels %zu, pipeline.max_output_points %zu)",
+                               s.toString().c_str(), stage_->foveator().capacity().max_voxels, o.cloud.points.capacity());
+      } else {
+        (void)log().logLimited(foveate_site, LogLevel::kWarning, "foveation: %s", s.toString().c_str());
+      }
       continue;
     }
     if (decision.changed) {
@@ -817,14 +821,19 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
                     brick_versions_lost_.load(std::memory_order_relaxed));
     }
   }
+  // Frames dropped since start for more voxels or points than configured (only once there is one).
+  char over[48] = "";
+  if (const uint64_t n_over = frames_over_capacity_.load(std::memory_order_relaxed); n_over > 0) {
+    std::snprintf(over, sizeof over, " over capacity %" PRIu64, n_over);
+  }
   const int n = std::snprintf(
       out, size,
       "status: fps in %.1f foveated %.1f out %.1f | drops capture %" PRIu64 " foveation %" PRIu64
-      " | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s%s%s | memory %.1f MiB"
+      "%s | ms p50/p99 capture %s foveate %s send %s | wire %.2f MB/s | gaze age %s%s%s%s | memory %.1f MiB"
       " | lines heartbeat %s streaming %d fault %d | usb %s",
       static_cast<double>(w.captured - window_.captured) / dt_s, static_cast<double>(w.foveated - window_.foveated) / dt_s,
       static_cast<double>(w.sent - window_.sent) / dt_s, w.capture_drops - window_.capture_drops,
-      w.foveation_drops - window_.foveation_drops, latency[0], latency[1], latency[2],
+      w.foveation_drops - window_.foveation_drops, over, latency[0], latency[1], latency[2],
       static_cast<double>(w.wire_bytes - window_.wire_bytes) / dt_s / 1e6, gaze_age,
       status_lines_->state().privacy_active ? " | privacy pause" : "", pose, map,
       static_cast<double>(memory_.totalBytes()) / kMiB,
@@ -909,6 +918,7 @@ ServiceStats Service::stats() const {
   s.capture_errors = capture_errors_.load(std::memory_order_relaxed);
   s.frames_foveated = frames_foveated_.load(std::memory_order_relaxed);
   s.foveate_errors = foveate_errors_.load(std::memory_order_relaxed);
+  s.frames_over_capacity = frames_over_capacity_.load(std::memory_order_relaxed);
   s.frames_sent = frames_sent_.load(std::memory_order_relaxed);
   s.frames_withheld = frames_withheld_.load(std::memory_order_relaxed);
   s.frames_unsent = frames_unsent_.load(std::memory_order_relaxed);

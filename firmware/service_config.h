@@ -62,8 +62,11 @@ struct GpioSettings {
 };
 
 struct RuntimeSettings {
-  // Frame slots per ring between stages (capture -> foveation -> send); latest wins.
-  int ring_depth = 2;
+  // Frames queued per ring between stages (capture -> foveation -> send); latest
+  // wins. 1: a stage always takes the newest frame (a FIFO of 2 hands a stage
+  // that fell behind the older of two, a frame period late), and each ring has
+  // 3 slots instead of 4.
+  int ring_depth = 1;
   ThreadPlacement capture_thread;
   ThreadPlacement foveation_thread;
   ThreadPlacement send_thread;
@@ -80,6 +83,12 @@ struct ServiceConfig {
   std::string board = "host-mock";  // the profile these settings started from
   CameraSettings camera;
   pipeline::PipelineCapacity pipeline;  // max points and voxels, kernels, threads per frame
+  // pipeline.max_output_points: the points one foveated frame may hold (the fovea
+  // whole plus one per voxel), which sizes the foveated slots and the chunk
+  // encoder. 0: the camera's pixels. A preset that keeps every point (FREF) and
+  // the map source always get the pixels (the map's surfels on top). A frame
+  // that needs more is dropped and counted (the status line's "over capacity").
+  std::size_t max_output_points = 0;
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
   // foveation.source and [map]: the fused scene map, streamed as bricks the
   // operator keeps (map.delta) unless turned off.

@@ -30,8 +30,9 @@ int pollMs(int64_t wait_ns) {
 Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, std::size_t max_points) {
   if (Status s = config.gaze.validate(); !s) return s;
   if (Status s = net::validate(config.codec); !s) return s;
-  if (!(config.burst_ms > 0.0 && config.burst_ms <= 1000.0)) {
-    return Result<std::unique_ptr<Streamer>>(ErrorCode::kInvalidArgument, "stream burst: must be within 0 .. 1000 ms");
+  if (!(config.burst_ms >= 0.0 && config.burst_ms <= 1000.0)) {
+    return Result<std::unique_ptr<Streamer>>(ErrorCode::kInvalidArgument,
+                                             "stream burst: must be within 0 .. 1000 ms (0: a frame period)");
   }
   if (max_points == 0) return Result<std::unique_ptr<Streamer>>(ErrorCode::kInvalidArgument, "stream: max_points is 0");
   if (config.map_bricks) {
@@ -45,15 +46,20 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
   Result<std::unique_ptr<net::RobotLink>> link = net::RobotLink::create(config.link);
   if (!link) return link.status();
   // A chunk holds at least one point, so a frame has at most max_points chunks,
-  // and its bricks at most their points plus the parts resent.
-  const std::size_t max_chunks =
-      max_points + (config.map_bricks ? config.max_frame_brick_points + config.max_resend_parts : 0);
+  // and at most 65535 (the codec's chunk index is 16 bits); its bricks at most
+  // their points plus the parts resent.
+  const std::size_t max_chunks = std::min<std::size_t>(max_points, 0xffff) +
+                                 (config.map_bricks ? config.max_frame_brick_points + config.max_resend_parts : 0);
   Result<net::UplinkScheduler> scheduler =
       net::UplinkScheduler::create(max_chunks, static_cast<double>(config.link.max_budget_bytes_per_s),
                                    static_cast<double>(4 * net::kMaxMtu), monotonicNs());
   if (!scheduler) return scheduler.status();
   std::unique_ptr<Streamer> streamer(
       new Streamer(config, std::move(link.value()), std::move(scheduler.value()), max_points));
+  // The chunk encoders for the largest MTU, made once here: a session at that
+  // MTU (the default's) uses them, and only another MTU makes new ones when it
+  // starts.
+  if (Status s = streamer->makeEncoders(config.link.max_mtu_bytes); !s) return s;
   streamer->chunk_bytes_.resize(max_chunks);
   streamer->chunk_regions_.resize(max_chunks);
   streamer->outgoing_.resize(max_chunks);
@@ -79,7 +85,16 @@ Streamer::Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> l
 
 void Streamer::idleUntil(int64_t until_ns) {
   for (int64_t now = monotonicNs(); now < until_ns; now = monotonicNs()) {
-    link_->poll(pollMs(until_ns - now));
+    const int64_t wait_ns = until_ns - now;
+    if (wait_ns >= 1'000'000) {
+      link_->poll(pollMs(wait_ns));
+    } else {
+      // poll() counts in milliseconds: a shorter wait (the send stage's idle
+      // step) would take a whole one, and a frame foveated meanwhile would wait.
+      link_->poll(0);
+      const timespec pause{0, static_cast<long>(wait_ns)};
+      nanosleep(&pause, nullptr);
+    }
   }
 }
 
@@ -115,22 +130,38 @@ Status Streamer::setBudgetCap(uint64_t bytes_per_s, int64_t now_ns) {
 Status Streamer::applyBudget(int64_t now_ns) {
   const net::SessionInfo& session = *link_->session();
   const double budget = static_cast<double>(std::min(session.budget_bytes_per_s, budget_cap_bytes_per_s_));
-  const double burst = std::max(budget * config_.burst_ms * 1e-3, 4.0 * session.mtu_bytes);
+  const double burst_s = config_.burst_ms > 0.0 ? config_.burst_ms * 1e-3 : static_cast<double>(frame_interval_ns_) * 1e-9;
+  const double burst = std::max(budget * burst_s, 4.0 * session.mtu_bytes);
   return scheduler_.setBudget(budget, burst, now_ns);
+}
+
+Status Streamer::makeEncoders(uint32_t mtu_bytes) {
+  net::CodecConfig codec = config_.codec;
+  codec.max_payload = mtu_bytes - net::kDatagramOverhead;
+  // The old ones go first, so that the heap never holds both.
+  encoder_.reset();
+  brick_encoder_.reset();
+  encoder_mtu_ = 0;
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_);
+  if (!encoder) return encoder.status();
+  encoder_.emplace(std::move(encoder.value()));
+  if (brick_sender_ || config_.map_bricks) {
+    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points);
+    if (!bricks) return bricks.status();
+    brick_encoder_.emplace(std::move(bricks.value()));
+  }
+  encoder_mtu_ = mtu_bytes;
+  return Status::ok();
 }
 
 Status Streamer::beginSession(int64_t now_ns) {
   const net::SessionInfo& session = *link_->session();
-  net::CodecConfig codec = config_.codec;
-  codec.max_payload = session.mtu_bytes - net::kDatagramOverhead;
-  // Allocation at session start, never per frame.
-  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_);
-  if (!encoder) return encoder.status();
-  encoder_.emplace(std::move(encoder.value()));
+  // Allocation at session start, never per frame, and only for an MTU other
+  // than the one the encoders were made for.
+  if (session.mtu_bytes != encoder_mtu_) {
+    if (Status s = makeEncoders(session.mtu_bytes); !s) return s;
+  }
   if (brick_sender_) {
-    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points);
-    if (!bricks) return bricks.status();
-    brick_encoder_.emplace(std::move(bricks.value()));
     // A new operator (or one that restarted) holds nothing: every brick is due.
     brick_sender_->reset();
     if (feedback_) feedback_->forgetAll();
@@ -258,6 +289,13 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   }
   report.had_session = true;
   int64_t now = monotonicNs();
+  if (interval_ns > 0 && interval_ns != frame_interval_ns_) {
+    // The burst follows the frame period (burst_ms 0): set again when it changes.
+    frame_interval_ns_ = interval_ns;
+    if (config_.burst_ms <= 0.0 && link_->session()->started_ns == session_started_ns_) {
+      if (Status s = applyBudget(now); !s) return s;
+    }
+  }
   if (link_->session()->started_ns != session_started_ns_) {
     if (Status s = beginSession(now); !s) {
       if (bricks) discardBricks(*bricks);

@@ -1,9 +1,9 @@
 // The robot side of a stream: the link to the operator, the chunk encoder and
 // the uplink scheduler, driven once per frame by whoever sends (fovead run's
 // loop, or the service's send thread), which also picks the gaze with its own
-// GazePolicy from operatorGaze(). Everything is allocated by create()
-// and when a session starts (the encoder follows the session's MTU); a frame
-// allocates nothing.
+// GazePolicy from operatorGaze(). Everything is allocated by create(), the
+// chunk encoders for the largest MTU; a session at another MTU makes new ones
+// when it starts; a frame allocates nothing.
 #pragma once
 
 #include <cstdint>
@@ -30,8 +30,11 @@ struct StreamConfig {
   GazePolicyConfig gaze;
   net::CodecConfig codec;     // max_payload follows each session's MTU
   // Burst of the token bucket: this many milliseconds of the budget (at least
-  // four datagrams), so a frame's first chunks leave at once.
-  double burst_ms = 5.0;
+  // four datagrams). 0 (the default): one frame period (sendFrame's
+  // interval_ns), so a frame that fits what the budget earns over a period
+  // leaves at once instead of being paced out across it; the budget still holds
+  // over any window (at most a period's worth above it).
+  double burst_ms = 0.0;
   // The map's bricks (foveation.source = map with map.delta, docs/map-delta.md):
   // sent beside the frame's live points, kept until acknowledged, resent.
   bool map_bricks = false;
@@ -136,12 +139,16 @@ class Streamer {
   void sendStatus(const net::StatusReport& report);
 
   const net::UplinkCounters& uplinkCounters() const { return scheduler_.counters(); }
+  // The token bucket's burst in bytes (StreamConfig::burst_ms; 0: a frame period).
+  double burstBytes() const { return scheduler_.bucket().burstBytes(); }
 
  private:
   Streamer(const StreamConfig& config, std::unique_ptr<net::RobotLink> link, net::UplinkScheduler scheduler,
            std::size_t max_points);
   // Sets the encoder and the budget up for a new session.
   Status beginSession(int64_t now_ns);
+  // (Re)makes the chunk encoders for datagrams of mtu_bytes.
+  Status makeEncoders(uint32_t mtu_bytes);
   // Budget and burst for the current session, under the cap.
   Status applyBudget(int64_t now_ns);
   // Hands the operator's brick acknowledgements and evictions to the sender.
@@ -166,13 +173,14 @@ class Streamer {
   net::UplinkScheduler scheduler_;
   std::size_t max_points_;
   std::optional<net::ChunkEncoder> encoder_;
+  uint32_t encoder_mtu_ = 0;  // the MTU encoder_ (and brick_encoder_) were made for; 0: none
   std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, max chunks
   std::vector<uint8_t> chunk_regions_;
   std::vector<Outgoing> outgoing_;       // the frame's datagrams in send order
   std::size_t outgoing_count_ = 0;
   // The map's bricks (map_bricks).
   std::optional<net::BrickSender> brick_sender_;
-  std::optional<net::ChunkEncoder> brick_encoder_;  // made at session start, as encoder_
+  std::optional<net::ChunkEncoder> brick_encoder_;  // made with encoder_
   pipeline::FoveatedCloud brick_cloud_;             // one brick's points, for its encoder
   std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
   std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
@@ -181,6 +189,7 @@ class Streamer {
   PollHook poll_hook_ = nullptr;
   void* poll_hook_context_ = nullptr;
   uint64_t unknown_brick_keys_ = 0;
+  int64_t frame_interval_ns_ = 33'333'333;  // the last sendFrame's interval_ns (burst_ms 0)
   // The session the encoder and budget were set up for (its start time).
   int64_t session_started_ns_ = -1;
   uint64_t budget_cap_bytes_per_s_ = UINT64_MAX;

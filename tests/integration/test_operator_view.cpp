@@ -203,15 +203,20 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
   std::ifstream log(dir_.file("frames.csv"));
   std::string header, line, last;
   std::getline(log, header);
-  EXPECT_NE(header.find(",summary_received,map_bricks,map_points,brick_parts,brick_versions"), std::string::npos) << header;
+  EXPECT_NE(header.find(",summary_received,map_bricks,map_points,brick_parts,brick_versions,fovea_decoded_ns,fovea_latency_us"),
+            std::string::npos)
+      << header;
   uint64_t parts_logged = 0;
   while (std::getline(log, line)) {
     last = line;
     std::vector<std::string> cells;
     std::stringstream cs(line);
     for (std::string c; std::getline(cs, c, ',');) cells.push_back(c);
-    ASSERT_EQ(cells.size(), 12u) << line;
+    ASSERT_EQ(cells.size(), 14u) << line;
     parts_logged += std::stoull(cells[10]);
+    // The frame's one chunk is its fovea: decoded when the frame was (one clock here).
+    EXPECT_EQ(cells[12], cells[2]) << line;
+    EXPECT_EQ(cells[13], cells[3]) << line;
   }
   EXPECT_NE(last.find(",3," + std::to_string(map_points) + ","), std::string::npos) << last;
   EXPECT_LE(parts_logged, sent_parts.size()) << "parts since the previous line add up to at most all of them";

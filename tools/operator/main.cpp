@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -66,7 +67,9 @@ const char* kHelp =
     "  --frame-log FILE      one CSV line per frame decoded: frame id, capture stamp (robot clock),\n"
     "                        decoded (this host's clock), latency, points, chunks (docs/eval.md); then\n"
     "                        what the operator holds of the robot's map: bricks, points, and the brick\n"
-    "                        parts taken (not duplicates) and versions completed since the previous line\n"
+    "                        parts taken (not duplicates) and versions completed since the previous line;\n"
+    "                        last, when the fovea's chunks were decoded and its latency (empty when a\n"
+    "                        fovea chunk was lost; from the arrival order, exact on loopback)\n"
     "  --save-ply DIR        write every decoded frame as DIR/frame_ID.ply (world coordinates, region)\n"
     "  --save-held ID:FILE   once, at the first frame with id >= ID that arrived whole: write what the\n"
     "                        operator draws, that frame's points and every map brick held, to FILE (PLY,\n"
@@ -383,7 +386,7 @@ Exit openFrameLog(const Options& opt, std::ofstream& frame_log) {
   if (opt.frame_log_path.empty()) return std::nullopt;
   frame_log.open(opt.frame_log_path);
   frame_log << "frame_id,capture_ns,decoded_ns,latency_us,points,chunks_received,chunks_expected,summary_received,"
-               "map_bricks,map_points,brick_parts,brick_versions\n";
+               "map_bricks,map_points,brick_parts,brick_versions,fovea_decoded_ns,fovea_latency_us\n";
   if (!frame_log) {
     std::fprintf(stderr, "fovea-operator: --frame-log: cannot write '%s'\n", opt.frame_log_path.c_str());
     return kExitFailure;
@@ -460,7 +463,12 @@ class OperatorRun {
   void handleReady(Session& s);
   void sendBrickAcks(Session& s, int64_t now);
   void publishView(const net::AssembledFrame& f);
-  void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs);
+  void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs, int64_t fovea_decoded_ns,
+                const Session& s);
+  // When the frame's fovea (region 0) was decoded: the arrival of its last fovea
+  // chunk, or -1 (no fovea chunk, or some of them lost). Takes the frame's
+  // entries off chunk_arrivals_.
+  int64_t takeFoveaArrival(const net::AssembledFrame& f);
   void saveFramePly(const net::AssembledFrame& f);
   void saveHeld(const net::AssembledFrame& f);
   void endSession(Session& s);
@@ -502,6 +510,13 @@ class OperatorRun {
   std::string robot_address_;
   std::optional<net::StatusReport> last_status_;
   net::OperatorLinkCounters link_total_{};
+  // Arrival times of the chunks the assembler decoded into frames, in order. A
+  // frame's decoded chunks are contiguous in it (the assembler holds one frame
+  // in progress), so a completed frame's are the first ones; the robot sends
+  // the fovea's chunks first, so in send order (loopback) the fovea was decoded
+  // at the arrival of its chunks_received[0]-th chunk. Bounded: at most one
+  // frame's chunks (65536) and one more are kept.
+  std::deque<int64_t> chunk_arrivals_;
 };
 
 Exit OperatorRun::runSessions() {
@@ -573,6 +588,7 @@ Session OperatorRun::beginSession(net::OperatorLink& link) {
   s.ip_udp_header_bytes = robot_address_.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
   s.max_payload = link.mtuBytes() - net::kDatagramOverhead;
   if (sessions_ > 1) map_.reset();  // the robot delivers its map afresh to a new session
+  chunk_arrivals_.clear();
   const int64_t session_start_ns = monotonicNs();
   s.next_gaze_ns = session_start_ns;
   s.next_live_ns = session_start_ns + 1'000'000'000;
@@ -646,10 +662,16 @@ void OperatorRun::handleDatagram(Session& s, const net::Received& received) {
     // The assembler's ready frames are those of its last call: look at them
     // right after a chunk or summary only (after any other datagram they
     // would be counted again).
-    case net::MessageType::kChunk:
+    case net::MessageType::kChunk: {
+      const uint64_t decoded_before = assembler_.counters().chunks;
       (void)assembler_.addChunk(received.payload, received.received_ns);  // failures are counted by the assembler
+      // A chunk of a newer frame completes the one in progress first: that one's
+      // arrivals are all before this chunk's, which handleReady leaves in place.
+      if (assembler_.counters().chunks > decoded_before) chunk_arrivals_.push_back(received.received_ns);
       handleReady(s);
+      if (chunk_arrivals_.size() > 65537) chunk_arrivals_.clear();  // (cannot happen: a frame has < 65536 chunks)
       break;
+    }
     case net::MessageType::kFrameSummary:
       (void)assembler_.addSummary(received.payload);
       handleReady(s);
@@ -692,8 +714,12 @@ void OperatorRun::handleReady(Session& s) {
       obs.chunks_received += f.chunks_received[r];
       obs.chunks_expected += f.chunks_expected[r];
     }
+    const int64_t fovea_ns = takeFoveaArrival(f);
+    obs.fovea_latency_ms = fovea_ns >= 0 && s.clock_offset_ns
+                               ? static_cast<double>(fovea_ns + *s.clock_offset_ns - static_cast<int64_t>(f.capture_time_ns)) * 1e-6
+                               : std::numeric_limits<double>::quiet_NaN();
     stats_.frame(obs);
-    if (station_.frame_log) logFrame(f, obs);
+    if (station_.frame_log) logFrame(f, obs, fovea_ns, s);
     s.last_frame_id = f.frame_id;
     if (view_) publishView(f);
     if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
@@ -716,7 +742,21 @@ void OperatorRun::publishView(const net::AssembledFrame& f) {
   view_->publishFrame(pack.bytes);
 }
 
-void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs) {
+int64_t OperatorRun::takeFoveaArrival(const net::AssembledFrame& f) {
+  std::size_t received = 0;
+  for (uint16_t c : f.chunks_received) received += c;
+  received = std::min(received, chunk_arrivals_.size());
+  const uint16_t fovea = f.chunks_received[0];
+  // The fovea is whole when the summary says so (without one: when its chunks
+  // are all that arrived of region 0 and the frame had any other chunk).
+  const bool whole = f.summary_received ? fovea == f.chunks_expected[0] : received > fovea;
+  const int64_t at = fovea > 0 && fovea <= received && whole ? chunk_arrivals_[fovea - 1] : -1;
+  chunk_arrivals_.erase(chunk_arrivals_.begin(), chunk_arrivals_.begin() + static_cast<std::ptrdiff_t>(received));
+  return at;
+}
+
+void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs, int64_t fovea_decoded_ns,
+                           const Session& s) {
   uint32_t points = 0;
   for (uint32_t p : obs.points_per_region) points += p;
   station_.frame_log << f.frame_id << ',' << f.capture_time_ns << ',' << f.last_chunk_received_ns << ','
@@ -725,7 +765,14 @@ void OperatorRun::logFrame(const net::AssembledFrame& f, const tools::FrameObser
                      << (f.summary_received ? 1 : 0);
   const tools::MapTotals map = map_.totals();
   station_.frame_log << ',' << map.bricks_held << ',' << map.points_held << ',' << map.parts - map_logged_before_.parts
-                     << ',' << map.versions - map_logged_before_.versions << '\n';
+                     << ',' << map.versions - map_logged_before_.versions << ',';
+  if (fovea_decoded_ns >= 0) {
+    station_.frame_log << fovea_decoded_ns << ',';
+    if (s.clock_offset_ns) station_.frame_log << std::llround(obs.fovea_latency_ms * 1e3);
+  } else {
+    station_.frame_log << ',';
+  }
+  station_.frame_log << '\n';
   map_logged_before_ = map;
 }
 

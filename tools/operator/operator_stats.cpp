@@ -19,6 +19,7 @@ void OperatorStats::add(Tally& t, const FrameObservation& f) {
   t.chunks_expected += f.chunks_expected;
   for (std::size_t r = 0; r < f.points_per_region.size(); ++r) t.points[r] += f.points_per_region[r];
   if (!std::isnan(f.latency_ms)) t.latency_ms.push_back(f.latency_ms);  // NaN: not known
+  if (!std::isnan(f.fovea_latency_ms)) t.fovea_latency_ms.push_back(f.fovea_latency_ms);
 }
 
 void OperatorStats::frame(const FrameObservation& f) {
@@ -87,6 +88,10 @@ std::string OperatorStats::summaryJson(double seconds, const std::string& extra)
   j += "  \"latency_ms\": {\"p50\": " + jsonNumber(quantile(total_.latency_ms, 0.5)) +
        ", \"p99\": " + jsonNumber(quantile(total_.latency_ms, 0.99)) +
        ", \"max\": " + jsonNumber(quantile(total_.latency_ms, 1.0)) + "},\n";
+  // Capture to the fovea's chunks decoded (fovea-operator --frame-log: fovea_latency_us).
+  j += "  \"fovea_latency_ms\": {\"p50\": " + jsonNumber(quantile(total_.fovea_latency_ms, 0.5)) +
+       ", \"p99\": " + jsonNumber(quantile(total_.fovea_latency_ms, 0.99)) +
+       ", \"max\": " + jsonNumber(quantile(total_.fovea_latency_ms, 1.0)) + "},\n";
   j += "  \"points_per_frame_by_region\": [";
   for (std::size_t r = 0; r < total_.points.size(); ++r) {
     j += (r ? ", " : "") + jsonNumber(total_.frames ? static_cast<double>(total_.points[r]) / static_cast<double>(total_.frames) : 0.0);

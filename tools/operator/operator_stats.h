@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <limits>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -26,6 +27,7 @@ double quantile(std::vector<double> samples, double q);
 struct FrameObservation {
   uint32_t frame_id = 0;
   double latency_ms = 0.0;  // capture (robot) to decoded (operator); NaN: unknown (left out)
+  double fovea_latency_ms = std::numeric_limits<double>::quiet_NaN();  // capture to the fovea decoded; NaN: unknown
   std::array<uint32_t, pipeline::kMaxRegions> points_per_region{};
   uint32_t chunks_received = 0;
   uint32_t chunks_expected = 0;  // from the frame summary (0 when it was lost)
@@ -81,6 +83,7 @@ class OperatorStats {
     uint64_t chunks_expected = 0;
     std::array<uint64_t, pipeline::kMaxRegions> points{};
     std::vector<double> latency_ms;
+    std::vector<double> fovea_latency_ms;
   };
   static void add(Tally& t, const FrameObservation& f);
   Tally window_;

@@ -165,6 +165,8 @@ TEST(Config, RulesBetweenFields) {
   // Only max_points in the file: the message points at it.
   EXPECT_EQ(loadError("[pipeline]\nmax_points = 1000\n"),
             "fovea.toml:2: pipeline.max_voxels: must be at most pipeline.max_points (got 307200 > 1000)");
+  EXPECT_EQ(loadError("[pipeline]\nmax_points = 1000\nmax_voxels = 500\nmax_output_points = 2000\n"),
+            "fovea.toml:4: pipeline.max_output_points: must be at most pipeline.max_points (got 2000 > 1000)");
   EXPECT_EQ(loadError("[gpio]\nheartbeat_line = 4\nstreaming_line = 5\nfault_line = 4\n"),
             "fovea.toml:4: gpio.fault_line: line 4 is already used by gpio.heartbeat_line");
   EXPECT_EQ(loadError("[stream]\nlisten = \"0.0.0.0:7000\"\n"),
@@ -235,6 +237,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "camera.pose.buffer_poses=512",
     "pipeline.max_points=100000",
     "pipeline.max_voxels=90000",
+    "pipeline.max_output_points=95000",
     "pipeline.kernels=ref",
     "pipeline.threads=4",
     "foveation.preset=custom",
@@ -629,8 +632,8 @@ TEST(Resolve, BoardThenFileThenSet) {
   const std::vector<std::string> small = {"pipeline.max_points=1000"};
   Result<ServiceConfig> bad = resolveServiceConfig("host-mock", std::nullopt, small);
   ASSERT_FALSE(bad.isOk());
-  EXPECT_EQ(bad.status().message(), boardDir() + "/host-mock.toml:19: pipeline.max_voxels: must be at most "
-                                                  "pipeline.max_points (got 307200 > 1000)");
+  EXPECT_EQ(bad.status().message(), boardDir() + "/host-mock.toml:20: pipeline.max_voxels: must be at most "
+                                                  "pipeline.max_points (got 92160 > 1000)");
   const std::vector<std::string> listen = {"stream.listen=0.0.0.0:7000"};
   Result<ServiceConfig> unkeyed = resolveServiceConfig("host-mock", std::nullopt, listen);
   ASSERT_FALSE(unkeyed.isOk());

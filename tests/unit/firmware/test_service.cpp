@@ -101,6 +101,34 @@ TEST(Service, MemoryBudgetCountsEveryPool) {
   EXPECT_NE(memory.breakdown().find("frame slots"), std::string::npos);
 }
 
+// pipeline.max_output_points sizes the foveated slots (not the pixels), and a
+// frame that needs more voxels than pipeline.max_voxels is dropped and counted,
+// never a crash; the status line says how many.
+TEST(Service, OutputCapacityIsConfiguredAndAnOverflowIsCountedNotACrash) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.status_interval_ms = 50;
+  config.max_output_points = 4000;
+  config.pipeline.max_voxels = 10;  // the mock room at 160x120 takes hundreds
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  const MemoryBudget& memory = running.service->memory();
+  // Pool 2: the foveated cloud slots, 4000 points of 21 bytes each (not 160x120).
+  EXPECT_NE(std::string(memory.pools[2].name).find("foveated cloud slots"), std::string::npos);
+  EXPECT_LT(memory.pools[2].bytes, memory.pools[2].count * 4000u * 32u);
+  EXPECT_GE(memory.pools[2].bytes, memory.pools[2].count * 4000u * 16u);
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_over_capacity >= 3; }, 5000ms));
+  ASSERT_TRUE(waitUntil([&] { return sink.contains(" over capacity "); }, 5000ms)) << "status line without the count";
+  EXPECT_TRUE(sink.contains("pipeline.max_voxels 10"));
+  running.stop();
+  const ServiceStats end = running.service->stats();
+  EXPECT_EQ(end.frames_foveated, 0u);
+  EXPECT_EQ(end.frames_over_capacity, end.foveate_errors);
+}
+
 TEST(Service, RejectsABadConfigurationNamingTheField) {
   ServiceConfig config = test::smallServiceConfig();
   config.runtime.ring_depth = 0;

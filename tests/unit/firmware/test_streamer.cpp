@@ -93,5 +93,46 @@ TEST(Streamer, OperatorGazeCarriesTheEyeAndTheHeadsForwardAxis) {
   EXPECT_FALSE(gaze.valid);
 }
 
+// The token bucket's burst: by default (burst_ms 0) one frame period of the
+// session's budget, so a frame that fits the budget over a period leaves at
+// once; burst_ms > 0 sets it in milliseconds. Both as a budget times a time,
+// read from the scheduler (nothing timed).
+TEST(Streamer, BurstIsOneFramePeriodOfTheBudgetByDefault) {
+  for (const double burst_ms : {0.0, 5.0}) {
+    StreamConfig config;
+    config.link.listen = "127.0.0.1:0";
+    config.link.insecure = true;
+    config.burst_ms = burst_ms;
+    Result<std::unique_ptr<Streamer>> created = Streamer::create(config, 1000);
+    ASSERT_TRUE(created) << created.status().message();
+    Streamer& streamer = *created.value();
+    std::atomic<bool> stop{false};
+    std::thread robot([&] {
+      while (!stop.load()) streamer.idleUntil(monotonicNs() + 2'000'000);
+    });
+    net::OperatorLinkConfig op_config;
+    op_config.insecure = true;
+    op_config.budget_bytes_per_s = 12'500'000;
+    Result<std::unique_ptr<net::OperatorLink>> op =
+        net::OperatorLink::connect(streamer.localEndpoint().toString(), op_config);
+    stop.store(true);
+    robot.join();
+    ASSERT_TRUE(op) << op.status().message();
+    pipeline::FoveatedCloud cloud{16};
+    for (int i = 0; i < 4; ++i) ASSERT_TRUE(cloud.points.push(0.1f * static_cast<float>(i), 0.0f, 1.0f, 0x808080));
+    std::fill_n(cloud.region.begin(), 4, uint8_t{0});
+    std::fill_n(cloud.weight.begin(), 4, 1u);
+    pipeline::FoveationStats stats;
+    stats.region_count = 1;
+    const int64_t now = monotonicNs();
+    Result<FrameSendReport> sent = streamer.sendFrame(cloud, stats, 1, now, now + 30'000'000, 40'000'000);
+    ASSERT_TRUE(sent) << sent.status().message();
+    ASSERT_TRUE(sent->had_session);
+    const double budget = static_cast<double>(streamer.sessionBudgetBytesPerS());
+    EXPECT_EQ(budget, 12'500'000.0);
+    EXPECT_DOUBLE_EQ(streamer.burstBytes(), budget * (burst_ms > 0 ? burst_ms * 1e-3 : 0.040)) << burst_ms;
+  }
+}
+
 }  // namespace
 }  // namespace fovea::firmware
