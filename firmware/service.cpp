@@ -187,9 +187,10 @@ Status Service::allocate() {
   // The foveated output: the fovea whole and a point per voxel, at most
   // pipeline.max_output_points (0: the pixels). A preset that keeps every point
   // (FREF) needs the pixels; the map source foveates the map's surfels too, so
-  // its clouds hold them (the map's memory on top of the frame's).
+  // its clouds hold them (the map's memory on top of the frame's). The pyramid
+  // source is capped like the frame source (a frame beyond it: over capacity).
   std::size_t points = FrameFoveator::cloudCapacity(pixels, config_.map);
-  if (config_.map.source == FoveationSource::kFrame && config_.foveation.acuity.preset != pipeline::Preset::kFRef &&
+  if (config_.map.source != FoveationSource::kMap && config_.foveation.acuity.preset != pipeline::Preset::kFRef &&
       config_.max_output_points > 0) {
     points = std::min(points, config_.max_output_points);
   }

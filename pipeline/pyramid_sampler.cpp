@@ -340,6 +340,8 @@ struct PyramidSampler::Walk {
   float r[9] = {};  // R_world_cam
   FoveatedCloud* out = nullptr;
   std::size_t n = 0;
+  std::size_t capacity = 0;  // of out
+  bool full = false;         // a point did not fit: the walk stops
   PyramidStats* stats = nullptr;
   uint32_t* representative = nullptr;  // by pixel, or null
 
@@ -374,6 +376,10 @@ struct PyramidSampler::Walk {
   }
 
   void emit(float cxm, float cym, float czm, uint32_t rgb, uint8_t level, uint32_t weight) {
+    if (n == capacity) {
+      full = true;
+      return;
+    }
     PointCloud& pc = out->points;
     pc.x()[n] = (r[0] * cxm + r[1] * cym) + r[2] * czm;
     pc.y()[n] = (r[3] * cxm + r[4] * cym) + r[5] * czm;
@@ -387,6 +393,7 @@ struct PyramidSampler::Walk {
 };
 
 void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
+  if (walk.full) return;
   if (k == 0) {
     const hal::RgbdFrame& f = *walk.frame;
     if (i >= f.width() || j >= f.height()) return;
@@ -399,7 +406,7 @@ void PyramidSampler::visit(Walk& walk, int k, int i, int j) const {
     const float y = ((static_cast<float>(j) - walk.cy) * walk.inv_fy) * z;
     const uint8_t* c = f.rgb() + 3 * p;
     walk.emit(x, y, z, f.has_rgb ? packRgb(c[0], c[1], c[2]) : 0u, 0, 1);
-    if (walk.representative != nullptr) walk.representative[p] = static_cast<uint32_t>(walk.n - 1);
+    if (walk.representative != nullptr && !walk.full) walk.representative[p] = static_cast<uint32_t>(walk.n - 1);
     return;
   }
   const Level& level = pyramid_[static_cast<std::size_t>(k - 1)];
@@ -433,9 +440,8 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
                                               std::to_string(frame.height()) + " is larger than the sampler's " +
                                               std::to_string(max_width_) + "x" + std::to_string(max_height_)};
   }
-  if (out.points.capacity() < frame.pixelCount() || out.region.size() < frame.pixelCount() ||
-      out.weight.size() < frame.pixelCount()) {
-    return {ErrorCode::kCapacityExceeded, "pyramid: the output holds fewer points than the frame has pixels"};
+  if (out.region.size() < out.points.capacity() || out.weight.size() < out.points.capacity()) {
+    return {ErrorCode::kInvalidArgument, "pyramid: the output's region and weight arrays are shorter than its points"};
   }
   if (!gaze.origin_m.allFinite() || !gaze.direction.allFinite() || !std::isfinite(gaze.fovea_growth_deg)) {
     return {ErrorCode::kInvalidInput, "pyramid: gaze is not finite"};
@@ -459,6 +465,7 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
     for (int b = 0; b < 3; ++b) walk.r[3 * a + b] = static_cast<float>(rot(a, b));
   }
   walk.out = &out;
+  walk.capacity = out.points.capacity();
   walk.stats = &stats;
   walk.representative = representative_by_pixel;
   if (representative_by_pixel != nullptr) {
@@ -474,9 +481,14 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
       visit(walk, levels_, i, j);
     }
   }
+  if (walk.full) {
+    out.points.clear();
+    return {ErrorCode::kCapacityExceeded, "pyramid: the frame needs more than the output's " +
+                                              std::to_string(walk.capacity) + " points"};
+  }
   out.points.origin_m = frame.T_world_cam.t_world_cam;
   out.points.has_color = frame.has_rgb;
-  (void)out.points.resize(walk.n);  // walk.n <= valid pixels <= capacity
+  (void)out.points.resize(walk.n);  // walk.n <= capacity
   stats.points_in = valid;
   stats.points_out = static_cast<uint32_t>(walk.n);
   return Status::ok();

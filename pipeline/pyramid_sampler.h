@@ -95,10 +95,10 @@ class PyramidSampler {
                                        KernelSet kernels = defaultKernelSet());
 
   // Foveates `frame` for `gaze` (from normalizeGaze(); its fovea growth is used)
-  // into `out`, whose capacity must be at least the frame's pixels. The cloud's
-  // origin is the camera's position, as back-projection's. Errors: a frame that
-  // validateFrame() refuses or larger than create()'s size, a bad range or rule,
-  // too small an output. representative_by_pixel, if not null (frame.pixelCount()
+  // into `out` (its capacity: at most the frame's pixels are ever needed). The
+  // cloud's origin is the camera's position, as back-projection's. Errors: a frame
+  // that validateFrame() refuses or larger than create()'s size, a bad range, rule
+  // or gaze; kCapacityExceeded when the points do not fit `out` (left empty). representative_by_pixel, if not null (frame.pixelCount()
   // entries), gets for every valid pixel the index of its output point and
   // kNoRepresentative for the others (for error measures; it costs a pass).
   Status sample(const hal::RgbdFrame& frame, const DepthRange& range, const Gaze& gaze, const PyramidRule& rule,

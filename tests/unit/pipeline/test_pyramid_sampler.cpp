@@ -368,9 +368,18 @@ TEST(PyramidSampler, BadInputIsRefusedWithAReason) {
   bad = PyramidRule{};
   bad.floor_per_m2 = -1.0f;
   EXPECT_EQ(sampler.sample(f, DepthRange{}, gaze, bad, out, stats).code(), ErrorCode::kInvalidArgument);
-  FoveatedCloud small(255);
+  // An output too small for what the frame needs: refused, left empty; one that
+  // fits exactly is enough.
+  ASSERT_TRUE(sampler.sample(f, DepthRange{}, gaze, PyramidRule{}, out, stats).isOk());
+  const std::size_t needed = out.size();
+  ASSERT_GT(needed, 1u);
+  FoveatedCloud small(needed - 1), exact(needed);
   s = sampler.sample(f, DepthRange{}, gaze, PyramidRule{}, small, stats);
   EXPECT_EQ(s.code(), ErrorCode::kCapacityExceeded);
+  EXPECT_NE(s.toString().find(std::to_string(needed - 1)), std::string::npos) << s.toString();
+  EXPECT_EQ(small.size(), 0u);
+  EXPECT_TRUE(sampler.sample(f, DepthRange{}, gaze, PyramidRule{}, exact, stats).isOk());
+  EXPECT_EQ(exact.size(), needed);
   hal::RgbdFrame big = makeFrame(17, 16);
   s = sampler.sample(big, DepthRange{}, gaze, PyramidRule{}, out, stats);
   EXPECT_EQ(s.code(), ErrorCode::kCapacityExceeded);
