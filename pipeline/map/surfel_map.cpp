@@ -415,13 +415,6 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
 
 namespace {
 
-// std::lround for |x| < 2^23 (x - trunc(x) is exact there), without the call.
-inline int roundHalfAway(float x) {
-  const int t = static_cast<int>(x);
-  const float frac = x - static_cast<float>(t);
-  return frac >= 0.5f ? t + 1 : frac <= -0.5f ? t - 1 : t;
-}
-
 // A footprint's pixels (du, dv) with du^2 + dv^2 <= reach^2, in the reference's
 // order (rows, then columns), by reach 0, 1, 2: the first 1, 5 and 13 entries of
 // the lists below.
@@ -496,7 +489,7 @@ void SurfelMap::splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_
       if (!(p.z() >= min_z)) continue;
       const float pu = fx * p.x() / p.z() + cx, pv = fy * p.y() / p.z() + cy;
       if (!(pu > u_lo && pu < u_hi && pv > v_lo && pv < v_hi)) continue;
-      const int iu = roundHalfAway(pu), iv = roundHalfAway(pv);
+      const int iu = roundHalfAwayFromZero(pu), iv = roundHalfAwayFromZero(pv);
       if (iu >= 0 && iv >= 0 && iu < w && iv < h) {
         const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
         const float measured = measured_z[centre];
