@@ -83,6 +83,8 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   }
   weight_u_.resize(static_cast<std::size_t>(config.max_width));
   weight_v_.resize(static_cast<std::size_t>(config.max_height));
+  ray_u_.resize(static_cast<std::size_t>(config.max_width));
+  ray_v_.resize(static_cast<std::size_t>(config.max_height));
   index_depth_.resize(pixels);
   index_.resize(pixels);
   index_reach_.resize(pixels);
@@ -103,7 +105,7 @@ std::size_t SurfelMap::memoryBytes() const {
          (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity() + link_next_.capacity() +
           link_prev_.capacity()) * sizeof(uint32_t) +
          (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
-          weight_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
+          weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
          index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
 }
 
@@ -335,6 +337,11 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
   const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
   const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
   const auto carve = static_cast<float>(config_.carve_weight);
+  if (config_.kernels != KernelSet::kRef) {
+    splatFast(frame, R_cw_f, stats);
+    return;
+  }
+  // The reference: every surfel in slot order, its footprint's pixels in row order.
   for (std::size_t slot = 0; slot < high_water_; ++slot) {
     const Surfel& s = surfels_[slot];
     if (!(s.flags & kSurfelLive)) continue;
@@ -401,6 +408,149 @@ void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
           index_[i] = static_cast<uint32_t>(slot);
           index_reach_[i] = reach_sq;
         }
+      }
+    }
+  }
+}
+
+namespace {
+
+// A footprint's pixels (du, dv) with du^2 + dv^2 <= reach^2, in the reference's
+// order (rows, then columns), by reach 0, 1, 2: the first 1, 5 and 13 entries of
+// the lists below.
+struct SplatOffset {
+  int8_t du, dv;
+  uint8_t reach_sq;
+};
+constexpr SplatOffset kSplat0[] = {{0, 0, 0}};
+constexpr SplatOffset kSplat1[] = {{0, -1, 1}, {-1, 0, 1}, {0, 0, 0}, {1, 0, 1}, {0, 1, 1}};
+constexpr SplatOffset kSplat2[] = {{0, -2, 4}, {-1, -1, 2}, {0, -1, 1}, {1, -1, 2}, {-2, 0, 4},
+                                   {-1, 0, 1}, {0, 0, 0},   {1, 0, 1},  {2, 0, 4},  {-1, 1, 2},
+                                   {0, 1, 1},  {1, 1, 2},   {0, 2, 4}};
+static_assert(kMaxSplatPixels == 2, "the footprints above go to 2 pixels");
+
+}  // namespace
+
+// The fast path of renderIndexMap()'s splatting: the reference's arithmetic and
+// order of side effects (surfels in slot order, the same removals, carvings and
+// z-buffer updates), so the same index map bit for bit
+// (test_map_equivalence's MapsFusedWithEitherKernelSetAreTheSame), without its
+// per-surfel and per-pixel overheads: the rays through the columns and rows from
+// tables made once a frame, lround() inline, the footprint's pixels from a list
+// instead of a (2 reach + 1)^2 loop with a circle test, and no bounds tests for a
+// footprint inside the image.
+void SurfelMap::splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats) {
+  const int w = frame.width(), h = frame.height();
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
+  const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  const float inv_fx = 1.0f / fx, inv_fy = 1.0f / fy;
+  const float f = 0.5f * (fx + fy);
+  const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
+  const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
+  const auto carve = static_cast<float>(config_.carve_weight);
+  float* const ray_u = ray_u_.data();
+  float* const ray_v = ray_v_.data();
+  for (int x = 0; x < w; ++x) ray_u[x] = (static_cast<float>(x) - cx) * inv_fx;
+  for (int y = 0; y < h; ++y) ray_v[y] = (static_cast<float>(y) - cy) * inv_fy;
+  const float u_lo = -0.5f - kMaxSplatPixels, u_hi = static_cast<float>(w) - 0.5f + kMaxSplatPixels;
+  const float v_lo = -0.5f - kMaxSplatPixels, v_hi = static_cast<float>(h) - 0.5f + kMaxSplatPixels;
+  float* const index_depth = index_depth_.data();
+  uint32_t* const index = index_.data();
+  uint8_t* const index_reach = index_reach_.data();
+  const float* const measured_z = vertex_z_.data();
+  const uint8_t* const visible = brick_visible_.data();
+  const uint32_t unstable_max = config_.unstable_max_frames;
+  // Two passes over a batch of slots: the first decides each surfel's fate and
+  // computes its projection from the surfel alone (nothing another surfel's fate
+  // changes: a removal or carving touches only that surfel), surfel after
+  // independent surfel, so the divisions and square roots of several overlap;
+  // the second applies the removals, carvings and splats in slot order, as the
+  // reference does.
+  enum : uint8_t { kSkip, kRemoveUnstable, kCarve, kSplat };
+  constexpr std::size_t kBatch = 128;
+  uint8_t action[kBatch];
+  int32_t centre_u[kBatch], centre_v[kBatch];
+  uint8_t reach_of[kBatch];
+  float depth_of[kBatch], plane_of[kBatch], same_of[kBatch], nx_of[kBatch], ny_of[kBatch], nz_of[kBatch];
+  const float* const pixel_weight = weight_.data();
+  for (std::size_t b0 = 0; b0 < high_water_; b0 += kBatch) {
+    const std::size_t count_in_batch = std::min(kBatch, high_water_ - b0);
+    for (std::size_t j = 0; j < count_in_batch; ++j) {
+      const Surfel& s = surfels_[b0 + j];
+      action[j] = kSkip;
+      if (!(s.flags & kSurfelLive)) continue;
+      if (!(s.flags & kSurfelStable) && frame_ - s.first_seen > unstable_max) {
+        action[j] = kRemoveUnstable;
+        continue;
+      }
+      if (!visible[s.brick]) continue;
+      const Eigen::Vector3f p = brick_cam_[s.brick] + R_cw_f * Eigen::Vector3f(s.x, s.y, s.z);
+      if (!(p.z() >= min_z)) continue;
+      const float pu = fx * p.x() / p.z() + cx, pv = fy * p.y() / p.z() + cy;
+      if (!(pu > u_lo && pu < u_hi && pv > v_lo && pv < v_hi)) continue;
+      const int iu = roundHalfAwayFromZero(pu), iv = roundHalfAwayFromZero(pv);
+      if (iu >= 0 && iv >= 0 && iu < w && iv < h) {
+        const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
+        const float measured = measured_z[centre];
+        if (measured > 0.0f && p.z() < measured - sigmas * depthSigma(measured)) {
+          action[j] = kCarve;
+          plane_of[j] = 0.5f * decodeConfidence(s.confidence) - carve * pixel_weight[centre];  // what it keeps
+          continue;
+        }
+      }
+      action[j] = kSplat;
+      centre_u[j] = iu;
+      centre_v[j] = iv;
+      const float footprint = f * surfelRadius(s) / p.z();
+      reach_of[j] = static_cast<uint8_t>(std::clamp(static_cast<int>(footprint), 0, kMaxSplatPixels));
+      const Eigen::Vector3f n = R_cw_f * surfelNormal(s);
+      nx_of[j] = n.x();
+      ny_of[j] = n.y();
+      nz_of[j] = n.z();
+      plane_of[j] = n.dot(p);
+      depth_of[j] = p.z();
+      same_of[j] = sigmas * depthSigma(p.z());
+    }
+    for (std::size_t j = 0; j < count_in_batch; ++j) {
+      const auto slot = static_cast<uint32_t>(b0 + j);
+      switch (action[j]) {
+        case kSkip: continue;
+        case kRemoveUnstable:
+          removeSurfel(slot);
+          ++stats.removed_unstable;
+          continue;
+        case kCarve:
+          if (carveTo(slot, plane_of[j], stats)) removeSurfel(slot);
+          continue;
+        default: break;
+      }
+      const int iu = centre_u[j], iv = centre_v[j];
+      const int reach = reach_of[j];
+      const float nx = nx_of[j], ny = ny_of[j], nz = nz_of[j];
+      const float plane = plane_of[j], pz = depth_of[j], same = same_of[j];
+      const SplatOffset* offsets = reach == 0 ? kSplat0 : reach == 1 ? kSplat1 : kSplat2;
+      const int count = reach == 0 ? 1 : reach == 1 ? 5 : 13;
+      const bool inside = iu >= reach && iv >= reach && iu + reach < w && iv + reach < h;
+      for (int o = 0; o < count; ++o) {
+        const int x = iu + offsets[o].du, y = iv + offsets[o].dv;
+        if (!inside && (x < 0 || x >= w || y < 0 || y >= h)) continue;
+        // Without branches (selects and unconditional stores): which way each
+        // test goes is data.
+        const float rx = ray_u[x], ry = ray_v[y];
+        const float along = nx * rx + (ny * ry + nz);
+        const bool steep = along * along > 0.04f * (rx * rx + ry * ry + 1.0f);
+        const float on_plane = plane / (steep ? along : 1.0f);
+        float z = steep ? on_plane : pz;
+        z = z >= min_z ? z : pz;
+        const std::size_t i = static_cast<std::size_t>(y) * w + x;
+        const uint8_t reach_sq = offsets[o].reach_sq;
+        const float held = index_depth[i];
+        const uint8_t held_reach = index_reach[i];
+        const bool take = (z < held - same) | ((z <= held + same) & (reach_sq < held_reach));
+        index_depth[i] = take ? z : held;
+        index[i] = take ? slot : index[i];
+        index_reach[i] = take ? reach_sq : held_reach;
       }
     }
   }
@@ -478,9 +628,17 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   // associated: the index map may still name them at other pixels.
   std::size_t carved_away = 0;
   std::size_t to_add = 0;
+  const std::size_t pixels = frame.pixelCount();
+  constexpr std::size_t kPrefetchPixels = 16;
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      // The surfel a few pixels on: the index map names surfels in no order the
+      // cache can guess (a prefetch changes no result).
+      if (i + kPrefetchPixels < pixels) {
+        const uint32_t ahead = index_[i + kPrefetchPixels];
+        if (ahead != kNone) __builtin_prefetch(&surfels_[ahead]);
+      }
       const float weight = weight_[i];
       if (weight == 0.0f) continue;
       const float z = vertex_z_[i];

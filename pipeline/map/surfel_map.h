@@ -199,6 +199,8 @@ class SurfelMap {
   }
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
+  // renderIndexMap()'s splatting when config_.kernels is not the reference (the same bits).
+  void splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
   std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
@@ -239,6 +241,7 @@ class SurfelMap {
   std::vector<float> radius_;
   std::vector<float> weight_;
   std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
+  std::vector<float> ray_u_, ray_v_;        // splatFast(): (u - cx) / fx by column, (v - cy) / fy by row
   std::vector<float> index_depth_;        // the index map's z-buffer
   std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre

@@ -246,6 +246,32 @@ TEST_P(TargetTest, BadIntrinsicsAreRefusedBeforeTheKernel) {
   }
 }
 
+// The index map's fast path rounds a surfel's centre with roundHalfAwayFromZero;
+// the reference with std::lround. Every half-integer of the projection's range
+// (a frame up to 8192 pixels and the splat's reach beyond it), the floats either
+// side of each, and a sweep of 2^20 floats in between.
+TEST(MapRounding, RoundingIsLround) {
+  int differ = 0;
+  auto check = [&](float x) {
+    if (roundHalfAwayFromZero(x) != static_cast<int>(std::lround(x)) && differ++ < 5) {
+      ADD_FAILURE() << "x = " << x << " (0x" << std::hex << std::bit_cast<uint32_t>(x) << std::dec
+                    << "): " << roundHalfAwayFromZero(x) << " against lround " << std::lround(x);
+    }
+  };
+  for (int k = -8; k <= 2 * 8200; ++k) {
+    const float half = 0.5f * static_cast<float>(k);
+    check(half);
+    check(std::nextafter(half, -1e9f));
+    check(std::nextafter(half, 1e9f));
+  }
+  for (uint32_t k = 0; k < (1u << 20); ++k) check(-3.0f + 8200.0f * static_cast<float>(k) / 1048576.0f);
+  check(0.0f);
+  check(-0.0f);
+  check(0.49999997f);
+  check(-0.49999997f);
+  EXPECT_EQ(differ, 0);
+}
+
 // ---- whole maps --------------------------------------------------------------
 
 ::testing::AssertionResult sameMap(const SurfelMap& a, const SurfelMap& b) {
