@@ -28,4 +28,6 @@ std::array<float, 256> makeRadiusTable() {
   return table;
 }
 
+const std::array<float, 256> kRadiusTable = makeRadiusTable();
+
 }  // namespace fovea::pipeline::map

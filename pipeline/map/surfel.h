@@ -92,10 +92,12 @@ inline constexpr float kMaxRadiusM = 0.1f;
 // A radius in metres as a byte on a log scale over [kMinRadiusM, kMaxRadiusM]
 // (clamped to it; NaN gives the smallest).
 uint8_t encodeRadius(float radius_m);
-// decodeRadius's 256 values (an inline variable: made before any static of a file
-// that includes this header).
+// decodeRadius's 256 values, made by surfel.cpp's static initialisation. Not an
+// inline variable: that would run makeRadiusTable() in every program that includes
+// this header, and a test binary without the pipeline library then fails to link.
+// No static initialiser decodes a radius.
 std::array<float, 256> makeRadiusTable();
-inline const std::array<float, 256> kRadiusTable = makeRadiusTable();
+extern const std::array<float, 256> kRadiusTable;
 inline float decodeRadius(uint8_t code) { return kRadiusTable[code]; }
 
 inline constexpr float kConfidenceScale = 256.0f;
