@@ -103,12 +103,12 @@ class FrameFoveator {
   // configuration was replaced in place). On error the previous one stays.
   Status use(const pipeline::FoveationConfig* config) {
     if (config == in_use_) return Status::ok();
-    if (Status s = foveator_.setConfig(*config); !s) return s;
+    const pipeline::PyramidRule rule = pipeline::PyramidRule::fromAcuity(config->acuity);
     if (pyramid_) {
-      const pipeline::PyramidRule rule = pipeline::PyramidRule::fromAcuity(config->acuity);
-      if (Status s = rule.validate(); !s) return s;
-      pyramid_rule_ = rule;
+      if (Status s = rule.validate(); !s) return s;  // before anything changes
     }
+    if (Status s = foveator_.setConfig(*config); !s) return s;
+    if (pyramid_) pyramid_rule_ = rule;
     in_use_ = config;
     return Status::ok();
   }
