@@ -1,11 +1,13 @@
 // ACUITY on the image pyramid: an approximate foveation that works on the organised
-// depth image instead of a point cloud (issue 27; docs/kernels.md, "The pyramid").
+// depth image instead of a point cloud (issue 27; docs/kernels.md, "The image pyramid").
 //
 // The exact methods back-project every pixel, then put every point in a world
 // voxel. A camera frame is organised: a square of 2^k x 2^k neighbouring pixels on
 // one surface is a patch of about 2^k z / f metres, so a pyramid of per-cell sums
-// (valid pixels, camera-frame x, y, z sums, depth range, colour sums) gives every
-// coarse "voxel" the image can offer without touching a point twice. The sampler
+// (valid pixels, camera-frame x, y, z sums, the depths' spread and largest value,
+// and at level 1 the colour sums) gives every coarse "voxel" the image can offer
+// without touching a point twice. The sampler decides the rule for the cells the
+// walk will reach, level by level from the top (pyramidMergeRef / Simd below), then
 // walks the pyramid from its coarsest cells down and emits a cell's centroid where
 // ACUITY's rule holds for the whole cell:
 //
@@ -14,16 +16,16 @@
 // e is the cell's extent, max(2^k z_max max(1/fx, 1/fy), 2 sigma_z), sigma_z the
 // standard deviation of its depths: the side of a cube that holds its points but
 // for the depth noise's tails, so a point moves about sqrt(3) e to the centroid at
-// most, as a point moves at most sqrt(3) v_n to its voxel's (the depth's range
+// most, as a point moves at most sqrt(3) v_n to its voxel's. (The depths' range
 // instead of 2 sigma would hold every point, but a noisy sensor's range is several
-// sigma and nothing would merge: the measured share above the MAR tells the cost); r_min and E_min are the
-// nearest distance and the smallest eccentricity any point of that cube can have
-// seen from the eye (the centroid's, less the cube's diagonal and the angle it
-// subtends, less the fovea's growth). A cell thinner than the sensor floor
-// (floor_m + floor_per_m2 s^2 at the centroid's distance s from the camera) merges
-// too. A cell that fails splits into its four children; a single pixel is emitted
-// as its back-projected point. A depth step inside a cell makes e large, so cells
-// never average across a silhouette.
+// sigma and nothing would merge; the measured share above the MAR tells the cost.)
+// r_min and E_min are the nearest distance and the smallest eccentricity any point
+// of that cube can have seen from the eye (the centroid's, less the cube's diagonal
+// and the angle it subtends, less the fovea's growth). A cell thinner than the
+// sensor floor (floor_m + floor_per_m2 s^2 at the centroid's distance s from the
+// camera) merges too. A cell that fails splits into its four children; a single
+// pixel is emitted as its back-projected point. A depth step inside a cell makes e
+// large, so cells never average across a silhouette.
 //
 // What it is not: the exact world-voxel sampling. Cells are anchored to the image,
 // not to the world, so a static scene's points move with the camera, and a cell's
