@@ -468,6 +468,12 @@ void Service::foveationLoop() {
       // and the operator's eye may have moved meanwhile.
       (void)gaze_box_.update();
       decision = policy_->decide(gaze_box_.current(), monotonicNs(), f.frame.T_world_cam);
+      // Logged where it is decided: the policy reports a change once, and a frame
+      // that then fails (over capacity, say) would otherwise lose it for good.
+      if (decision.changed) {
+        const std::string_view name = gazeSourceName(decision.source);
+        log().log(LogLevel::kInfo, "gaze: %.*s", static_cast<int>(name.size()), name.data());
+      }
       s = stage_->use(decision.foveation);
     }
     if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
@@ -515,10 +521,6 @@ void Service::foveationLoop() {
         (void)log().logLimited(foveate_site, LogLevel::kWarning, "foveation: %s", s.toString().c_str());
       }
       continue;
-    }
-    if (decision.changed) {
-      const std::string_view name = gazeSourceName(decision.source);
-      log().log(LogLevel::kInfo, "gaze: %.*s", static_cast<int>(name.size()), name.data());
     }
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - t0);
