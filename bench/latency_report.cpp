@@ -17,50 +17,11 @@
 #include <vector>
 
 #include "pipeline/quantile.h"
+#include "tools/eval/csv_table.h"
 
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  int column(const std::string& name) const {
-    const auto it = std::find(header.begin(), header.end(), name);
-    return it == header.end() ? -1 : static_cast<int>(it - header.begin());
-  }
-};
-
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> out;
-  std::string field;
-  std::stringstream in(line);
-  while (std::getline(in, field, ',')) out.push_back(field);
-  if (!line.empty() && line.back() == ',') out.emplace_back();
-  return out;
-}
-
-bool readCsv(const std::string& path, const std::vector<std::string>& required, Csv& csv) {
-  std::ifstream in(path);
-  std::string line;
-  if (!in || !std::getline(in, line)) {
-    std::fprintf(stderr, "fovea-latency-report: %s: cannot read (or empty)\n", path.c_str());
-    return false;
-  }
-  csv.header = split(line);
-  for (const std::string& name : required) {
-    if (csv.column(name) < 0) {
-      std::fprintf(stderr, "fovea-latency-report: %s: no column '%s'\n", path.c_str(), name.c_str());
-      return false;
-    }
-  }
-  while (std::getline(in, line)) {
-    std::vector<std::string> row = split(line);
-    if (row.size() != csv.header.size()) break;  // a line cut short ends the file
-    csv.rows.push_back(std::move(row));
-  }
-  return true;
-}
 
 double number(const std::string& s) {
   if (s.empty()) return kNaN;
@@ -128,13 +89,18 @@ int main(int argc, char** argv) {
                  "  TIMING.csv: fovead serve --timing-log; FRAMES.csv: fovea-operator --frame-log (one host)\n");
     return 2;
   }
-  Csv robot, op;
-  if (!readCsv(argv[1], {"frame_id", "captured_ns", "acquire_us", "queue_us", "backproject_us", "partition_us",
-                         "sample_us", "handoff_us", "encode_us", "send_us", "captured_to_sent_us"},
-               robot) ||
-      !readCsv(argv[2], {"frame_id", "latency_us"}, op)) {
-    return 1;
+  fovea::Result<fovea::tools::CsvTable> robot_read = fovea::tools::readCsvTable(
+      argv[1], {"frame_id", "captured_ns", "acquire_us", "queue_us", "backproject_us", "partition_us", "sample_us",
+                "handoff_us", "encode_us", "send_us", "captured_to_sent_us"});
+  fovea::Result<fovea::tools::CsvTable> op_read = fovea::tools::readCsvTable(argv[2], {"frame_id", "latency_us"});
+  for (const fovea::Status& s : {robot_read.status(), op_read.status()}) {
+    if (!s.isOk()) {
+      std::fprintf(stderr, "fovea-latency-report: %s\n", s.message().c_str());
+      return 1;
+    }
   }
+  const fovea::tools::CsvTable& robot = robot_read.value();
+  const fovea::tools::CsvTable& op = op_read.value();
   std::map<std::string, Frame> frames;  // by frame id
   std::vector<std::string> order;
   const auto us = [](const std::vector<std::string>& row, int c) { return number(row[static_cast<std::size_t>(c)]) * 1e-3; };

@@ -10,50 +10,13 @@
 #include <sstream>
 
 #include "pipeline/quantile.h"
+#include "tools/eval/csv_table.h"
 #include "tools/common/nan.h"
 #include "tools/eval/statistics.h"
 
 namespace fovea::tools::eval {
 
 namespace {
-
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  int column(const std::string& name) const {
-    auto it = std::find(header.begin(), header.end(), name);
-    return it == header.end() ? -1 : static_cast<int>(it - header.begin());
-  }
-};
-
-std::vector<std::string> splitLine(const std::string& line) {
-  std::vector<std::string> out;
-  std::string field;
-  std::stringstream in(line);
-  while (std::getline(in, field, ',')) out.push_back(field);
-  if (!line.empty() && line.back() == ',') out.emplace_back();
-  return out;
-}
-
-Result<Csv> readCsv(const std::string& path, const std::vector<std::string>& required) {
-  std::ifstream in(path);
-  if (!in) return Result<Csv>(ErrorCode::kNotFound, path + ": cannot read");
-  Csv csv;
-  std::string line;
-  if (!std::getline(in, line)) return Result<Csv>(ErrorCode::kParseError, path + ": empty");
-  csv.header = splitLine(line);
-  for (const std::string& name : required) {
-    if (csv.column(name) < 0) return Result<Csv>(ErrorCode::kParseError, path + ": no column '" + name + "'");
-  }
-  for (int n = 2; std::getline(in, line); ++n) {
-    if (line.empty()) continue;
-    std::vector<std::string> row = splitLine(line);
-    // A line cut short (the process was stopped while writing) ends the file.
-    if (row.size() != csv.header.size()) break;
-    csv.rows.push_back(std::move(row));
-  }
-  return csv;
-}
 
 bool parseNumber(const std::string& s, double& out) {
   if (s.empty()) return false;
@@ -82,9 +45,9 @@ Result<RunResult> readRun(const std::string& dir, int frames) {
                                                   "captured_to_sent_us", "points_out", "chunks_sent", "bytes_sent",
                                                   "completed"};
   static const std::vector<std::string> kOperator = {"frame_id", "latency_us"};
-  Result<Csv> robot = readCsv(dir + "/timing.csv", kRobot);
+  Result<CsvTable> robot = readCsvTable(dir + "/timing.csv", kRobot);
   if (!robot) return robot.status();
-  Result<Csv> op = readCsv(dir + "/frames.csv", kOperator);
+  Result<CsvTable> op = readCsvTable(dir + "/frames.csv", kOperator);
   if (!op) return op.status();
   std::map<long long, std::size_t> by_id;
   const int id_col = robot->column("frame_id");
