@@ -443,23 +443,42 @@ struct ColourPrev {
   }
 }
 
-// Lossless YCoCg-R deltas of point j.
-[[gnu::always_inline]] inline void putFullColour(BitWriter& bw, uint32_t c, const Orders& orders, const ColourPrev& prev,
-                                                 ColourPrev& next) {
+// Lossless YCoCg-R deltas of point j as three Exp-Golomb codes (values below 512
+// and orders <= 8: at most 27 bits each); `next` gets the point's YCoCg-R.
+struct ColourCodes {
+  uint64_t code[3];
+  int len[3];
+  int bits() const { return len[0] + len[1] + len[2]; }
+  // The three codes packed from the lowest bit (bits() <= 64 when used whole).
+  uint64_t packed() const { return code[0] | (code[1] << len[0]) | (code[2] << (len[0] + len[1])); }
+};
+
+[[gnu::always_inline]] inline ColourCodes fullColourCodes(uint32_t c, const Orders& orders, const ColourPrev& prev,
+                                                          ColourPrev& next) {
   const Ycocg v = toYcocg(c);
   next.y = static_cast<uint8_t>(v.y);
   next.fco = v.co, next.fcg = v.cg;
-  // Values below 512 and orders <= 8: codes of at most 27 bits, two in one put().
-  int l0, l1, l2;
-  const uint64_t c0 = BitWriter::egCode(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0], l0);
-  const uint64_t c1 = BitWriter::egCode(zigzag9(next.fco - prev.fco), orders.colour[1], l1);
-  const uint64_t c2 = BitWriter::egCode(zigzag9(next.fcg - prev.fcg), orders.colour[2], l2);
-  if (l0 + l1 + l2 <= 56) {
-    bw.put(c0 | (c1 << l0) | (c2 << (l0 + l1)), l0 + l1 + l2);
+  ColourCodes codes;
+  codes.code[0] = BitWriter::egCode(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0], codes.len[0]);
+  codes.code[1] = BitWriter::egCode(zigzag9(next.fco - prev.fco), orders.colour[1], codes.len[1]);
+  codes.code[2] = BitWriter::egCode(zigzag9(next.fcg - prev.fcg), orders.colour[2], codes.len[2]);
+  return codes;
+}
+
+// The three codes, in one put() when they fit 56 bits (two otherwise).
+[[gnu::always_inline]] inline void putColourCodes(BitWriter& bw, const ColourCodes& codes) {
+  if (codes.bits() <= 56) {
+    bw.put(codes.packed(), codes.bits());
   } else {
-    bw.put(c0 | (c1 << l0), l0 + l1);
-    bw.put(c2, l2);
+    bw.put(codes.code[0] | (codes.code[1] << codes.len[0]), codes.len[0] + codes.len[1]);
+    bw.put(codes.code[2], codes.len[2]);
   }
+}
+
+// Lossless YCoCg-R deltas of point j.
+[[gnu::always_inline]] inline void putFullColour(BitWriter& bw, uint32_t c, const Orders& orders, const ColourPrev& prev,
+                                                 ColourPrev& next) {
+  putColourCodes(bw, fullColourCodes(c, orders, prev, next));
 }
 
 // A point after the first, full colour: its position delta and colour codes, in
@@ -468,26 +487,15 @@ struct ColourPrev {
                                                 const ColourPrev& prev, ColourPrev& next) {
   const int kp = orders.position;
   const int lp = 2 * (std::bit_width((delta >> kp) + 1) - 1) + 1 + kp;
-  const Ycocg v = toYcocg(c);
-  next.y = static_cast<uint8_t>(v.y);
-  next.fco = v.co, next.fcg = v.cg;
-  int l0, l1, l2;
-  const uint64_t c0 = BitWriter::egCode(zigzag8(static_cast<uint8_t>(next.y - prev.y)), orders.colour[0], l0);
-  const uint64_t c1 = BitWriter::egCode(zigzag9(next.fco - prev.fco), orders.colour[1], l1);
-  const uint64_t c2 = BitWriter::egCode(zigzag9(next.fcg - prev.fcg), orders.colour[2], l2);
-  if (lp + l0 + l1 + l2 <= 56) {
+  const ColourCodes codes = fullColourCodes(c, orders, prev, next);
+  if (lp + codes.bits() <= 56) {
     int len;
     const uint64_t pc = BitWriter::egCode(delta, kp, len);
-    bw.put(pc | (c0 << lp) | (c1 << (lp + l0)) | (c2 << (lp + l0 + l1)), lp + l0 + l1 + l2);
+    bw.put(pc | (codes.packed() << lp), lp + codes.bits());
     return;
   }
   bw.putEg(delta, kp);
-  if (l0 + l1 + l2 <= 56) {
-    bw.put(c0 | (c1 << l0) | (c2 << (l0 + l1)), l0 + l1 + l2);
-  } else {
-    bw.put(c0 | (c1 << l0), l0 + l1);
-    bw.put(c2, l2);
-  }
+  putColourCodes(bw, codes);
 }
 
 // Point j's luma, and after the second point of a pair the pair's chroma. The
