@@ -40,6 +40,7 @@ TEST(Streamer, OperatorGazeCarriesTheEyeAndTheHeadsForwardAxis) {
   });
   net::OperatorLinkConfig op_config;
   op_config.insecure = true;
+  op_config.connect_timeout_ms = static_cast<int>(test::scaled(3000ms).count());
   Result<std::unique_ptr<net::OperatorLink>> op =
       net::OperatorLink::connect(streamer.localEndpoint().toString(), op_config);
   stop.store(true);
@@ -112,6 +113,7 @@ TEST(Streamer, BurstIsOneFramePeriodOfTheBudgetByDefault) {
     });
     net::OperatorLinkConfig op_config;
     op_config.insecure = true;
+    op_config.connect_timeout_ms = static_cast<int>(test::scaled(3000ms).count());
     op_config.budget_bytes_per_s = 12'500'000;
     Result<std::unique_ptr<net::OperatorLink>> op =
         net::OperatorLink::connect(streamer.localEndpoint().toString(), op_config);

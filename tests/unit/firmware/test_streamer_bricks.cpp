@@ -79,6 +79,7 @@ struct Rig {
     });
     net::OperatorLinkConfig op_config;
     op_config.insecure = true;
+    op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
     Result<std::unique_ptr<net::OperatorLink>> link =
         net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
     stop.store(true);
@@ -92,9 +93,13 @@ struct Rig {
     stats.region_count = 1;
   }
 
+  // The deadline is what the sends may take, a bound (a frame of this size
+  // goes out in well under a millisecond): scaled, so that a sanitizer build on
+  // a loaded machine does not cut the frame these tests look at whole.
   Result<FrameSendReport> send(const pipeline::map::BrickBatch* batch, uint32_t frame_id) {
     const int64_t now = monotonicNs();
-    return streamer->sendFrame(live, stats, frame_id, now, now + 30'000'000, 33'000'000, batch);
+    const auto deadline = static_cast<int64_t>(test::waitLimitSeconds(0.030) * 1e9);
+    return streamer->sendFrame(live, stats, frame_id, now, now + deadline, 33'000'000, batch);
   }
 
   // What the planner would hear now.
