@@ -1,0 +1,220 @@
+// Reads an MCAP file written by fovea with the format's reference library,
+// @mcap/core: McapIndexedReader (the summary, chunk indexes, seeking) and
+// McapStreamReader (sequential, CRCs checked), zstd through @mcap/support's
+// loadDecompressHandlers. Fails (exit 1) on any difference.
+//
+//   node check_mcap.mjs --writer PROGRAM --workdir DIR   fovea's Writer: runs
+//        PROGRAM (tests/mcap/mcap_sample_writer.cpp) for a file and a manifest
+//        of what it wrote, then compares every schema, channel and message
+//   node check_mcap.mjs --fovead FOVEAD --workdir DIR [--frames N]
+//        `fovead serve --record` over a short mock run: the four /fovea/
+//        channels, their schemas, message counts against the statistics, and
+//        the chunks channel against the frames
+//   node check_mcap.mjs --file F.mcap [--manifest M.json] a given file
+//
+// The packages come from toolchain/node/node_modules (bash toolchain/setup-host).
+import { createRequire } from "node:module";
+import { execFileSync } from "node:child_process";
+import fs from "node:fs";
+import path from "node:path";
+import { fileURLToPath } from "node:url";
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const root = path.resolve(here, "..", "..");
+const modules = path.join(root, "toolchain", "node", "node_modules");
+if (!fs.existsSync(path.join(modules, "@mcap", "core")) || !fs.existsSync(path.join(modules, "@mcap", "support"))) {
+  console.error(`check_mcap: ${modules} has no @mcap/core or @mcap/support: run bash toolchain/setup-host`);
+  process.exit(1);
+}
+const require = createRequire(path.join(modules, "..", "package.json"));
+const { McapIndexedReader, McapStreamReader } = require("@mcap/core");
+const { loadDecompressHandlers } = require("@mcap/support");
+
+let failures = 0;
+let checks = 0;
+function check(condition, what) {
+  checks++;
+  if (!condition) {
+    failures++;
+    console.error(`FAIL: ${what}`);
+  }
+}
+const hex = (bytes) => Buffer.from(bytes.buffer, bytes.byteOffset, bytes.byteLength).toString("hex");
+
+function args() {
+  const out = {};
+  const argv = process.argv.slice(2);
+  for (let i = 0; i < argv.length; i += 2) out[argv[i].replace(/^--/, "")] = argv[i + 1];
+  return out;
+}
+
+async function readIndexed(bytes, decompressHandlers) {
+  const readable = {
+    size: async () => BigInt(bytes.byteLength),
+    read: async (offset, length) => bytes.subarray(Number(offset), Number(offset + length)),
+  };
+  const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers });
+  const messages = [];
+  for await (const m of reader.readMessages()) messages.push(m);
+  return { reader, messages };
+}
+
+function readStream(bytes, decompressHandlers) {
+  const reader = new McapStreamReader({ decompressHandlers, validateCrcs: true });
+  reader.append(bytes);
+  const records = [];
+  for (let r; (r = reader.nextRecord()) !== undefined; ) records.push(r);
+  return { done: reader.done(), records };
+}
+
+// What both readers must agree on, and the statistics with them.
+async function readBoth(file) {
+  const bytes = new Uint8Array(fs.readFileSync(file));
+  const decompressHandlers = await loadDecompressHandlers();
+  const indexed = await readIndexed(bytes, decompressHandlers);
+  const stream = readStream(bytes, decompressHandlers);
+  const r = indexed.reader;
+  check(r.statistics !== undefined, `${file}: the indexed reader found Statistics in the summary`);
+  check(stream.done, `${file}: the stream reader reached the end (footer and magic)`);
+  const streamMessages = stream.records.filter((x) => x.type === "Message");
+  const streamSchemas = stream.records.filter((x) => x.type === "Schema");
+  const streamChannels = stream.records.filter((x) => x.type === "Channel");
+  check(stream.records.some((x) => x.type === "Footer"), `${file}: the stream reader read the footer`);
+  check(stream.records.some((x) => x.type === "DataEnd"), `${file}: the stream reader read DataEnd`);
+  const s = r.statistics ?? { messageCount: -1n, channelMessageCounts: new Map(), chunkCount: -1 };
+  check(s.messageCount === BigInt(indexed.messages.length),
+        `${file}: statistics.messageCount ${s.messageCount} = messages the indexed reader read ${indexed.messages.length}`);
+  check(indexed.messages.length === streamMessages.length,
+        `${file}: both readers read as many messages (${indexed.messages.length}, ${streamMessages.length})`);
+  check(s.chunkCount === r.chunkIndexes.length, `${file}: statistics.chunkCount ${s.chunkCount} = chunk indexes ${r.chunkIndexes.length}`);
+  check(s.channelCount === r.channelsById.size, `${file}: statistics.channelCount = channels in the summary`);
+  check(s.schemaCount === r.schemasById.size, `${file}: statistics.schemaCount = schemas in the summary`);
+  const perChannel = new Map();
+  for (const m of indexed.messages) perChannel.set(m.channelId, (perChannel.get(m.channelId) ?? 0) + 1);
+  for (const [id] of r.channelsById) {
+    check(BigInt(perChannel.get(id) ?? 0) === (s.channelMessageCounts.get(id) ?? -1n),
+          `${file}: channel ${id}: statistics count ${s.channelMessageCounts.get(id)} = messages read ${perChannel.get(id) ?? 0}`);
+  }
+  // The indexed reader gives log-time order; the stream reader file order. Same multiset.
+  const key = (m) => `${m.channelId}/${m.sequence}/${m.logTime}/${m.publishTime}/${hex(m.data)}`;
+  const a = indexed.messages.map(key).sort();
+  const b = streamMessages.map(key).sort();
+  check(a.length === b.length && a.every((x, i) => x === b[i]), `${file}: both readers read the same messages`);
+  // Seeking: a time range in the middle gives exactly the messages in it.
+  if (indexed.messages.length > 2) {
+    const times = indexed.messages.map((m) => m.logTime).sort((x, y) => (x < y ? -1 : x > y ? 1 : 0));
+    const startTime = times[Math.floor(times.length / 3)];
+    const endTime = times[Math.floor((2 * times.length) / 3)];
+    let n = 0;
+    for await (const m of r.readMessages({ startTime, endTime })) {
+      check(m.logTime >= startTime && m.logTime <= endTime, `${file}: a seek returned a message outside its range`);
+      n++;
+    }
+    const expected = times.filter((t) => t >= startTime && t <= endTime).length;
+    check(n === expected, `${file}: seeking to [${startTime}, ${endTime}] read ${n} messages, ${expected} are in it`);
+  }
+  return { indexed, stream: { messages: streamMessages, schemas: streamSchemas, channels: streamChannels } };
+}
+
+async function compareManifest(file, manifestFile) {
+  const manifest = JSON.parse(fs.readFileSync(manifestFile, "utf8"));
+  const { indexed, stream } = await readBoth(file);
+  const r = indexed.reader;
+  for (const want of manifest.schemas) {
+    for (const [who, got] of [["indexed", r.schemasById.get(want.id)], ["stream", stream.schemas.find((x) => x.id === want.id)]]) {
+      check(got !== undefined, `${who}: schema ${want.id} found`);
+      if (!got) continue;
+      check(got.name === want.name && got.encoding === want.encoding && hex(got.data) === want.data_hex,
+            `${who}: schema ${want.id} (${want.name}) has the name, encoding and data written`);
+    }
+  }
+  check(r.schemasById.size === manifest.schemas.length, `the summary has ${manifest.schemas.length} schemas`);
+  for (const want of manifest.channels) {
+    for (const [who, got] of [["indexed", r.channelsById.get(want.id)], ["stream", stream.channels.find((x) => x.id === want.id)]]) {
+      check(got !== undefined, `${who}: channel ${want.id} found`);
+      if (!got) continue;
+      check(got.topic === want.topic && got.messageEncoding === want.message_encoding && got.schemaId === want.schema_id,
+            `${who}: channel ${want.id} (${want.topic}) has the topic, encoding and schema written`);
+      for (const [k, v] of Object.entries(want.metadata)) check(got.metadata.get(k) === v, `${who}: channel ${want.id} metadata ${k}`);
+    }
+  }
+  check(r.channelsById.size === manifest.channels.length, `the summary has ${manifest.channels.length} channels`);
+  check(stream.messages.length === manifest.messages.length,
+        `the stream reader read ${stream.messages.length} messages, ${manifest.messages.length} were written`);
+  manifest.messages.forEach((want, i) => {
+    const got = stream.messages[i];
+    if (!got) return;
+    const same = got.channelId === want.channel && got.logTime === BigInt(want.log_time) &&
+                 got.publishTime === BigInt(want.publish_time) && hex(got.data) === want.data_hex;
+    check(same, `message ${i} (channel ${want.channel}) is read back as written`);
+  });
+  const counts = {};
+  for (const m of manifest.messages) counts[m.channel] = (counts[m.channel] ?? 0) + 1;
+  for (const c of manifest.channels) {
+    check((r.statistics?.channelMessageCounts.get(c.id) ?? -1n) === BigInt(counts[c.id] ?? 0),
+          `statistics: channel ${c.id} has ${counts[c.id] ?? 0} messages`);
+  }
+}
+
+async function checkFovead(fovead, workdir, frames) {
+  const file = path.join(workdir, "fovead-serve.mcap");
+  fs.rmSync(file, { force: true });
+  const out = execFileSync(fovead, ["serve", "--camera", "mock", "--frames", String(frames), "--to", "127.0.0.1:9",
+                                    "--record", file], { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
+  process.stdout.write(out.split("\n").filter((l) => l.includes("record")).join("\n") + "\n");
+  const { indexed, stream } = await readBoth(file);
+  const r = indexed.reader;
+  const topics = new Map([...r.channelsById.values()].map((c) => [c.topic, c]));
+  for (const topic of ["/fovea/chunks", "/fovea/gaze", "/fovea/camera_pose", "/fovea/status"]) {
+    check(topics.has(topic), `fovead's recording has the channel ${topic}`);
+    const c = topics.get(topic);
+    if (c && c.schemaId !== 0) {
+      const schema = r.schemasById.get(c.schemaId);
+      check(schema !== undefined && schema.data.byteLength > 0, `${topic}: its schema (${schema?.name}) is embedded`);
+    }
+  }
+  const count = (topic) => {
+    const c = topics.get(topic);
+    return c ? Number(r.statistics?.channelMessageCounts.get(c.id) ?? 0n) : 0;
+  };
+  check(count("/fovea/camera_pose") === frames, `/fovea/camera_pose has one message a frame: ${count("/fovea/camera_pose")} of ${frames}`);
+  check(count("/fovea/chunks") >= frames, `/fovea/chunks has at least a chunk a frame: ${count("/fovea/chunks")} for ${frames} frames`);
+  check(count("/fovea/status") >= 1, `/fovea/status has the status lines: ${count("/fovea/status")}`);
+  const chunks = topics.get("/fovea/chunks");
+  if (chunks) {
+    const schema = r.schemasById.get(chunks.schemaId);
+    check(schema?.encoding === "fovea.chunk", `/fovea/chunks' schema encoding is fovea.chunk (${schema?.encoding})`);
+    for (const m of stream.messages.filter((x) => x.channelId === chunks.id)) {
+      check(m.data.byteLength > 0, "a recorded chunk is not empty");
+    }
+  }
+  console.log(`fovead --record: ${stream.messages.length} messages, ${[...topics.keys()].map((t) => `${t}=${count(t)}`).join(" ")}`);
+}
+
+const a = args();
+try {
+  if (a.writer) {
+    fs.mkdirSync(a.workdir, { recursive: true });
+    for (const compression of ["zstd", "none"]) {
+      const file = path.join(a.workdir, `sample-${compression}.mcap`);
+      const manifest = path.join(a.workdir, `sample-${compression}.json`);
+      execFileSync(a.writer, [file, manifest, compression], { stdio: "inherit" });
+      await compareManifest(file, manifest);
+    }
+  } else if (a.fovead) {
+    fs.mkdirSync(a.workdir, { recursive: true });
+    await checkFovead(a.fovead, a.workdir, Number(a.frames ?? 30));
+  } else if (a.file) {
+    if (a.manifest) await compareManifest(a.file, a.manifest);
+    else await readBoth(a.file);
+  } else {
+    console.error("usage: check_mcap.mjs --writer PROGRAM --workdir DIR | --fovead FOVEAD --workdir DIR | --file F [--manifest M]");
+    process.exit(2);
+  }
+} catch (e) {
+  checks++;
+  failures++;
+  console.error(`FAIL: ${e.stack ?? e}`);
+}
+console.log(`check_mcap: ${checks - failures} passed, ${failures} failed`);
+process.exit(failures === 0 ? 0 : 1);
