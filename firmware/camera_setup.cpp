@@ -1,5 +1,6 @@
 #include "firmware/camera_setup.h"
 
+#include "firmware/mcap_camera.h"
 #include "hal/calibration_file.h"
 #include "hal/pose.h"
 
@@ -132,7 +133,7 @@ Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
 }
 
 Result<OpenedCamera> openConfiguredCamera(const CameraSettings& settings) {
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(settings.spec);
+  Result<std::unique_ptr<hal::Camera>> created = createCamera(settings.spec);
   if (!created) return Result<OpenedCamera>(invalidArgument(created.status().message()));
   hal::Camera& camera = *created.value();
   Result<std::string> calibrated = applyCameraCalibration(camera, settings);

@@ -14,6 +14,7 @@
 #include "firmware/camera_setup.h"
 #include "firmware/commands.h"
 #include "firmware/frame_foveator.h"
+#include "firmware/mcap_camera.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
 #include "firmware/stream_options.h"
@@ -726,7 +727,7 @@ int runCommand(int argc, char** argv) {
   Result<Args> args = Args::parse(argc, argv, 2, runFlags(), {"--help", "-h", "--insecure"});
   if (!args) return usage(args.status());
   if (args->has("--help") || args->has("-h")) {
-    std::printf("%s%s\ncameras:\n%s\n", kRunHelp, foveationFlagsHelp().c_str(), hal::cameraSpecHelp().c_str());
+    std::printf("%s%s\ncameras:\n%s\n", kRunHelp, foveationFlagsHelp().c_str(), cameraSpecHelp().c_str());
     return kExitOk;
   }
   Result<RunOptions> options = runOptionsFromArgs(args.value());

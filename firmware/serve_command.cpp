@@ -7,6 +7,7 @@
 
 #include "firmware/commands.h"
 #include "firmware/config.h"
+#include "firmware/mcap_camera.h"
 #include "firmware/options.h"
 #include "firmware/serve_options.h"
 #include "firmware/service.h"
@@ -91,7 +92,7 @@ int serveCommand(int argc, char** argv) {
   const std::vector<std::string> tokens(argv + 2, argv + argc);
   for (const std::string& t : tokens) {
     if (t == "--help" || t == "-h") {
-      std::printf("%s%s\ncameras:\n%s\n", kServeHelp, foveationFlagsHelp().c_str(), hal::cameraSpecHelp().c_str());
+      std::printf("%s%s\ncameras:\n%s\n", kServeHelp, foveationFlagsHelp().c_str(), cameraSpecHelp().c_str());
       return kExitOk;
     }
   }

@@ -17,6 +17,7 @@
 #include "core/clock.h"
 #include "core/sanitizer.h"
 #include "firmware/camera_setup.h"
+#include "firmware/mcap_camera.h"
 #include "firmware/options.h"
 #include "hal/capture_retry.h"
 #include "net/codec.h"
@@ -118,7 +119,7 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   if (Status s = config.camera.depth.validate(); !s) return s;
   const std::size_t heap_before_camera = heapInUse();
   if (!environment.camera) {
-    Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(config.camera.spec);
+    Result<std::unique_ptr<hal::Camera>> camera = createCamera(config.camera.spec);
     if (!camera) return R(camera.status().code(), "camera.spec: " + camera.status().message());
     environment.camera = std::move(camera.value());
   }

@@ -6,6 +6,7 @@
 #include <zstd.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cstring>
 
 #include "io/mcap/format.h"
@@ -76,6 +77,25 @@ std::string malformed(const char* record, const char* field) {
 
 Reader::Reader(std::span<const uint8_t> file, const ReaderOptions& options) : file_(file), options_(options) {}
 
+void Reader::reserve(std::size_t chunk_bytes) {
+  if (zstd_ == nullptr) zstd_ = ZSTD_createDCtx();
+  if (chunk_.size() < chunk_bytes) chunk_.resize(chunk_bytes);
+}
+
+void Reader::rewind() {
+  pos_ = 0;
+  started_ = false;
+  done_ = false;
+  complete_ = false;
+  in_chunk_ = false;
+  after_data_end_ = false;
+  chunk_records_ = {};
+  chunk_pos_ = 0;
+  chunk_offset_ = 0;
+  stop_reason_.clear();
+  stop_offset_ = 0;
+}
+
 Reader::~Reader() {
   if (zstd_ != nullptr) ZSTD_freeDCtx(static_cast<ZSTD_DCtx*>(zstd_));
 }
@@ -116,13 +136,15 @@ Reader::Item Reader::next() {
         continue;
       }
       const uint64_t left = chunk_records_.size() - chunk_pos_;
-      const std::string where = "the record at " + std::to_string(chunk_pos_) + " in the chunk at byte " +
-                                std::to_string(chunk_offset_);
-      if (left < kRecordPrefixBytes) return stop(chunk_offset_, where + " is cut off");
+      // Made on the error paths only: a replay reads every record without allocating.
+      auto where = [this] {
+        return "the record at " + std::to_string(chunk_pos_) + " in the chunk at byte " + std::to_string(chunk_offset_);
+      };
+      if (left < kRecordPrefixBytes) return stop(chunk_offset_, where() + " is cut off");
       const uint8_t opcode = chunk_records_[chunk_pos_];
       const uint64_t length = loadLe64(chunk_records_.data() + chunk_pos_ + 1);
       if (length > left - kRecordPrefixBytes) {
-        return stop(chunk_offset_, where + " claims " + std::to_string(length) + " bytes, " +
+        return stop(chunk_offset_, where() + " claims " + std::to_string(length) + " bytes, " +
                                        std::to_string(left - kRecordPrefixBytes) + " are left");
       }
       const std::span<const uint8_t> content =
@@ -213,6 +235,7 @@ Reader::Item Reader::enterChunk(std::span<const uint8_t> content, uint64_t offse
     }
   }
   ++chunks_;
+  largest_chunk_bytes_ = std::max(largest_chunk_bytes_, uncompressed_size);
   in_chunk_ = true;
   chunk_pos_ = 0;
   chunk_offset_ = offset;
@@ -225,6 +248,9 @@ Reader::Item Reader::onRecord(uint8_t opcode, std::span<const uint8_t> content, 
     case kOpSchema: {
       SchemaRecord s;
       s.id = c.u16("id");
+      // Met again (the summary repeats them, a replay's rewind reads them anew): known, and
+      // nothing is allocated for them.
+      if (c.ok && s.id != 0 && findSchema(s.id) != nullptr) return Item::kEnd;
       s.name = c.str("name");
       s.encoding = c.str("encoding");
       const uint32_t n = c.u32("data length");
@@ -240,6 +266,7 @@ Reader::Item Reader::onRecord(uint8_t opcode, std::span<const uint8_t> content, 
     case kOpChannel: {
       ChannelRecord ch;
       ch.id = c.u16("id");
+      if (c.ok && findChannel(ch.id) != nullptr) return Item::kEnd;  // met again: known
       ch.schema_id = c.u16("schema id");
       ch.topic = c.str("topic");
       ch.message_encoding = c.str("message encoding");

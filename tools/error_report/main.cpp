@@ -23,6 +23,7 @@
 #include <Eigen/Geometry>
 
 #include "firmware/frame_foveator.h"
+#include "firmware/mcap_camera.h"
 #include "hal/camera.h"
 #include "pipeline/backproject.h"
 #include "net/codec.h"
@@ -829,13 +830,13 @@ int run(int argc, char** argv) {
     return kExitUsage;
   }
   if (help) {
-    std::printf("%s\ncameras:\n%s\n", kHelp, hal::cameraSpecHelp().c_str());
+    std::printf("%s\ncameras:\n%s\n", kHelp, firmware::cameraSpecHelp().c_str());
     return kExitOk;
   }
   const Options& options = parsed.value();
   if (!options.replot_from.empty()) return replot(options);
 
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(options.camera);
+  Result<std::unique_ptr<hal::Camera>> created = firmware::createCamera(options.camera);
   if (!created) {
     std::fprintf(stderr, "fovea-error-report: --camera: %s\n", created.status().message().c_str());
     return kExitUsage;
@@ -903,7 +904,7 @@ int run(int argc, char** argv) {
   // The true surface: the mock scene without sensor noise, frame for frame.
   std::unique_ptr<hal::Camera> truth_camera;
   if (options.camera.rfind("mock:", 0) == 0 && options.camera.find("noise=off") == std::string::npos) {
-    Result<std::unique_ptr<hal::Camera>> t = hal::createCamera(options.camera + ",noise=off");
+    Result<std::unique_ptr<hal::Camera>> t = firmware::createCamera(options.camera + ",noise=off");
     if (t && t.value()->open() && t.value()->start()) truth_camera = std::move(t.value());
     if (!truth_camera) std::printf("fovea-error-report: no noiseless twin of %s: no true-surface columns\n", options.camera.c_str());
   }

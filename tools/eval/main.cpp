@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "hal/camera.h"
+#include "firmware/mcap_camera.h"
 #include "tools/eval/plan.h"
 #include "tools/eval/quality_eval.h"
 #include "tools/eval/report.h"
@@ -380,7 +381,7 @@ Result<DatasetScene> openScene(const Dataset& d, int quality_frame, bool with_ma
   using R = Result<DatasetScene>;
   std::string spec = d.camera_spec;
   if (const auto at = spec.find(",realtime=on"); at != std::string::npos) spec.erase(at, 12);  // as fast as it decodes
-  Result<std::unique_ptr<hal::Camera>> created = hal::createCamera(spec);
+  Result<std::unique_ptr<hal::Camera>> created = firmware::createCamera(spec);
   if (!created) return created.status();
   hal::Camera& camera = *created.value();
   if (Status s = camera.open(); !s) return s;
