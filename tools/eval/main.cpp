@@ -60,7 +60,7 @@ const std::string kBudgetMbps = "125";
 
 const char* kHelp =
     "usage: fovea-eval [--out-dir DIR] [--frames N] [--positions N] [--seed S] [--datasets LIST]\n"
-    "                  [--conditions LIST] [--tum PATH] [--quality-positions N] [--quality-frame K]\n"
+    "                  [--conditions LIST] [--tum PATH] [--mcap FILE] [--quality-positions N] [--quality-frame K]\n"
     "                  [--fovead PATH] [--operator PATH] [--fresh] [--no-plot]\n"
     "\n"
     "The paper's experiment (Table II) on fovea's own pipeline: for each dataset, HMD position and\n"
@@ -83,6 +83,9 @@ const char* kHelp =
     "                         keeps, map.delta = true; its quality from what the operator held,\n"
     "                         docs/map-delta.md) (default: all but MAP and MAP-DELTA)\n"
     "  --tum PATH             the TUM sequence (default ../shared/data/tum-fr3-teddy, when present)\n"
+    "  --mcap FILE            a session recorded with fovead serve --record FILE --record-frames\n"
+    "                         (docs/recording.md): its frames are the dataset 'recording', replayed as the\n"
+    "                         camera mcap:FILE; alone unless --datasets names others too\n"
     "  --quality-positions N  positions per dataset whose images are measured (default: all)\n"
     "  --quality-frame K      the frame (the camera's sequence number, 0-based) the images are made from\n"
     "                         (default 30; 90 with MAP-DELTA, whose operator must have received the\n"
@@ -98,6 +101,7 @@ struct Options {
   int positions = 5;
   uint64_t seed = 1;
   std::string datasets;
+  std::string mcap;  // --mcap FILE: a recording as the dataset "recording"
   std::string conditions = "F1,F2,F3,FREF,ACUITY,ACUITY-2MM,ACUITY-REFINED";
   std::string tum = "../shared/data/tum-fr3-teddy";
   bool tum_given = false;
@@ -153,6 +157,7 @@ Result<Options> parseOptions(int argc, char** argv, bool& help) {
     } else if (flag == "--datasets") o.datasets = v;
     else if (flag == "--conditions") o.conditions = v;
     else if (flag == "--tum") { o.tum = v; o.tum_given = true; }
+    else if (flag == "--mcap") o.mcap = v;
     else if (flag == "--fovead") o.fovead = v;
     else if (flag == "--operator") o.op = v;
     else return R(ErrorCode::kInvalidArgument, "unknown argument '" + flag + "' (see --help)");
@@ -470,8 +475,16 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-eval: --tum %s: no TUM sequence there (associations.txt)\n", o.tum.c_str());
     return kExitUsage;
   }
-  const std::vector<Dataset> available = defaultDatasets(have_tum ? fs::absolute(o.tum).string() : "");
+  std::vector<Dataset> available = defaultDatasets(have_tum ? fs::absolute(o.tum).string() : "");
+  if (!o.mcap.empty()) {
+    if (!fs::is_regular_file(o.mcap, ec)) {
+      std::fprintf(stderr, "fovea-eval: --mcap %s: no such file\n", o.mcap.c_str());
+      return kExitUsage;
+    }
+    available.push_back({"recording", "", "mcap:" + fs::absolute(o.mcap).string() + ",realtime=on,loop=on"});
+  }
   std::vector<Dataset> datasets = available;
+  if (!o.mcap.empty() && o.datasets.empty()) datasets = {available.back()};
   if (!o.datasets.empty()) {
     Result<std::vector<Dataset>> d = selectDatasets(available, o.datasets);
     if (!d) {

@@ -88,7 +88,7 @@ Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, con
     auto it = std::find_if(all.begin(), all.end(), [&](const Dataset& d) { return d.name == n; });
     if (it == all.end()) {
       return Result<std::vector<Dataset>>(ErrorCode::kInvalidArgument,
-                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, tum with --tum PATH)");
+                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, tum with --tum PATH, recording with --mcap FILE)");
     }
     out.push_back(*it);
   }
