@@ -1,5 +1,7 @@
 #include "io/mcap/recorder.h"
 
+#include <pthread.h>
+
 #include <chrono>
 #include <cstring>
 
@@ -132,6 +134,7 @@ bool Recorder::drainOnce() {
 }
 
 void Recorder::run() {
+  pthread_setname_np(pthread_self(), "fovea-mcap-writer");
   auto last_flush = std::chrono::steady_clock::now();
   const auto interval = std::chrono::milliseconds(config_.flush_interval_ms);
   for (;;) {
