@@ -23,6 +23,7 @@ const char* kServeHelp =
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
     "                    [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
     "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--timing-log FILE]\n"
+    "                    [--record FILE.mcap [--record-slots N]]\n"
     "\n"
     "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"
     "by latest-wins rings, all memory allocated at start-up (printed), status GPIO lines,\n"
@@ -49,6 +50,11 @@ const char* kServeHelp =
     "  --timing-log FILE        one CSV line per frame sent: its time in each stage, in microseconds\n"
     "                           (acquire, queue, back-projection, partition, sampling, hand-off, encoding,\n"
     "                           pacing and sending; docs/eval.md)\n"
+    "  --record FILE.mcap       record the run as MCAP (docs/recording.md): the chunks as sent (with --listen;\n"
+    "                           without an operator every frame's chunks as the encoder makes them), the gaze\n"
+    "                           received, each frame's camera pose, the status lines; never blocks the stages:\n"
+    "                           a full ring or disk drops and counts (the stop line says how many)\n"
+    "  --record-slots N         datagrams the send stage may queue for the recording's writer (default 4096)\n"
 
     "  stream options as for fovead run: --budget, --max-mtu, --gaze-timeout-ms, --fallback-voxel,\n"
     "                           --fovea-step, --chroma, --entropy\n";

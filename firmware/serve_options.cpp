@@ -13,7 +13,8 @@ const std::vector<std::string>& serveFlags() {
   static const std::vector<std::string> flags = [] {
     std::vector<std::string> f = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
                                   "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
-                                  "--depth-max",  "--log-level", "--timing-log"};
+                                  "--depth-max",  "--log-level", "--timing-log",
+                                  "--record",     "--record-slots"};
     f.insert(f.end(), kFoveationFlags.begin(), kFoveationFlags.end());
     f.insert(f.end(), kStreamFlags.begin(), kStreamFlags.end());
     return f;
@@ -59,6 +60,15 @@ Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base
   if (const std::string* v = args.get("--timing-log")) {
     if (v->empty()) return R(ErrorCode::kInvalidArgument, "--timing-log: expected a file path");
     config.runtime.timing_log = *v;
+  }
+  if (const std::string* v = args.get("--record")) {
+    if (v->empty()) return R(ErrorCode::kInvalidArgument, "--record: expected a file path (FILE.mcap)");
+    config.runtime.record.path = *v;
+  }
+  if (const std::string* v = args.get("--record-slots")) {
+    Result<long> slots = parseInteger("--record-slots", *v, 16, 1 << 20);
+    if (!slots) return slots.status();
+    config.runtime.record.send_slots = static_cast<std::size_t>(slots.value());
   }
   if (const std::string* v = args.get("--ring-depth")) {
     Result<long> depth = parseInteger("--ring-depth", *v, 1, 64);

@@ -284,6 +284,30 @@ Status Service::allocate() {
     std::fputs(kTimingLogHeader, file);
     memory_.add("timing log buffer", 1, delta(before, heapInUse()));
   }
+
+  if (!config_.runtime.record.path.empty()) {
+    before = heapInUse();
+    RecordSettings record = config_.runtime.record;
+    // A datagram's payload is at most the largest MTU a session may have.
+    if (streamer_) record.max_datagram_bytes = std::min<std::size_t>(record.max_datagram_bytes, config_.stream.link.max_mtu_bytes);
+    Result<std::unique_ptr<SessionRecorder>> recorder = SessionRecorder::create(record, log());
+    if (!recorder) return recorder.status();
+    recorder_ = std::move(recorder.value());
+    if (streamer_) {
+      // The send stage's taps: what went out and the gaze that came in.
+      streamer_->setSendTap(
+          [](void* r, net::MessageType type, std::span<const uint8_t> payload, uint32_t frame_id, int64_t capture_ns) {
+            static_cast<SessionRecorder*>(r)->onSent(type, payload, frame_id, capture_ns);
+          },
+          recorder_.get(), /*record_unsent=*/true);
+      streamer_->setReceiveTap(
+          [](void* r, net::MessageType type, std::span<const uint8_t> payload, int64_t now_ns) {
+            static_cast<SessionRecorder*>(r)->onReceived(type, payload, now_ns);
+          },
+          recorder_.get());
+    }
+    memory_.add("recording (rings, chunk and compression buffers)", 1, delta(before, heapInUse()));
+  }
   return Status::ok();
 }
 
@@ -315,6 +339,14 @@ Status Service::start() {
   if (Status s = camera_->start(); !s) {
     status_lines_->stop();
     return {s.code(), "camera " + camera_->info().name + ": " + s.message()};
+  }
+  if (recorder_) {
+    if (Status s = recorder_->start(); !s) {
+      camera_->stop();
+      status_lines_->stop();
+      return s;
+    }
+    log().log(LogLevel::kInfo, "recording to %s", recorder_->path().c_str());
   }
   startUsbMonitor();
   started_ns_ = monotonicNs();
@@ -523,6 +555,8 @@ void Service::foveationLoop() {
       }
       continue;
     }
+    // The recording's per-frame channels: the frame's pose and points are here.
+    if (recorder_) recorder_->onFrame(o.frame_id, f.captured_ns, f.frame, f.pose_fresh, o.cloud);
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - t0);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
@@ -749,6 +783,7 @@ void Service::supervise(int64_t now_ns) {
     std::memcpy(line, "STATUS=", 7);
     const std::size_t n = formatStatusLine(line + 7, sizeof line - 7);
     log().log(LogLevel::kInfo, "%s", line + 7);
+    if (recorder_) recorder_->onStatusLine(std::string_view(line + 7, n));
     status_lines_written_.fetch_add(1, std::memory_order_relaxed);
     if (config_.runtime.systemd_notify) notifier_.notify(std::string_view(line, 7 + n));
     const int64_t interval_ns = config_.runtime.status_interval_ms * 1'000'000;
@@ -891,6 +926,13 @@ void Service::stop() {
   if (was_running) camera_->stop();
   streamer_.reset();  // says Bye to the operator
   if (timing_log_) std::fflush(timing_log_.get());
+  if (recorder_) {
+    // Every thread that feeds it has ended: drain, summary, footer.
+    const Status closed = recorder_->close();
+    log().log(closed ? LogLevel::kInfo : LogLevel::kError, "%s%s%s", recorder_->summary().c_str(),
+              closed ? "" : "; the file is readable up to its last complete chunk: ",
+              closed ? "" : closed.message().c_str());
+  }
   if (status_lines_) status_lines_->stop();
   if (was_running) {
     const ServiceStats s = stats();

@@ -43,6 +43,7 @@
 #include "firmware/frame_foveator.h"
 #include "firmware/gaze_policy.h"
 #include "firmware/log.h"
+#include "firmware/session_recorder.h"
 #include "firmware/service_config.h"
 #include "firmware/status_lines.h"
 #include "firmware/streamer.h"
@@ -213,6 +214,8 @@ class Service {
   void stop();
 
   const MemoryBudget& memory() const { return memory_; }
+  // The recording's counters and summary line (null: not recording).
+  const SessionRecorder* recorder() const { return recorder_.get(); }
   const ServiceConfig& config() const { return config_; }
   ServiceStats stats() const;
   // Where the stream listens (streaming only).
@@ -352,6 +355,8 @@ class Service {
     void operator()(std::FILE* f) const { std::fclose(f); }
   };
   std::unique_ptr<std::FILE, FileCloser> timing_log_;
+  // --record (null: none); fed by the three stages and the supervisor.
+  std::unique_ptr<SessionRecorder> recorder_;
   std::unique_ptr<char[]> timing_log_buffer_;
   bool stopped_ = false;
 };

@@ -13,6 +13,7 @@
 #include "firmware/frame_foveator.h"
 #include "firmware/gaze_policy.h"
 #include "firmware/log.h"
+#include "firmware/session_recorder.h"
 #include "firmware/status_lines.h"
 #include "firmware/streamer.h"
 #include "pipeline/backproject.h"
@@ -77,6 +78,9 @@ struct RuntimeSettings {
   // One CSV line per frame sent, with its time in each stage (fovead serve
   // --timing-log; docs/eval.md). "": none.
   std::string timing_log;
+  // One MCAP file of this run (fovead serve --record; docs/recording.md).
+  // record.path "": none.
+  RecordSettings record;
 };
 
 struct ServiceConfig {

@@ -276,6 +276,27 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
   return true;
 }
 
+Status Streamer::tapUnsent(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
+                           uint32_t frame_id, int64_t capture_ns) {
+  if (!encoder_) return Status::ok();
+  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
+  for (int r = 0; r < stats.region_count; ++r) voxel_size_m[r] = stats.regions[r].voxel_size_m;
+  if (Status s = encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
+                                  static_cast<uint64_t>(capture_ns));
+      !s) {
+    return s;
+  }
+  std::array<uint16_t, pipeline::kMaxRegions> planned{}, cut{};
+  const std::size_t chunks = encoder_->chunkCount();
+  for (std::size_t i = 0; i < chunks; ++i) {
+    send_tap_(send_tap_context_, net::MessageType::kChunk, encoder_->chunk(i), frame_id, capture_ns);
+    ++planned[encoder_->chunkRegion(i)];
+  }
+  send_tap_(send_tap_context_, net::MessageType::kFrameSummary, encoder_->encodeSummary(frame_id, planned, cut),
+            frame_id, capture_ns);
+  return Status::ok();
+}
+
 Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud,
                                             const pipeline::FoveationStats& stats, uint32_t frame_id,
                                             int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns,
@@ -285,6 +306,9 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   link_->poll(0);
   if (!link_->hasSession()) {
     if (bricks) discardBricks(*bricks);
+    if (send_tap_ && record_unsent_) {
+      if (Status s = tapUnsent(cloud, stats, frame_id, capture_ns); !s) return s;
+    }
     return report;
   }
   report.had_session = true;
@@ -379,6 +403,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
       const std::span<const uint8_t> summary = encoder_->encodeSummary(frame_id, planned, cut);
       if (link_->send(net::MessageType::kFrameSummary, summary) == net::SendResult::kSent) {
         scheduler_.chargeExtra(summary.size() + net::kDatagramOverhead, now);
+        if (send_tap_) send_tap_(send_tap_context_, net::MessageType::kFrameSummary, summary, frame_id, capture_ns);
       }
       report.completed = true;
       report.fovea_completed = true;
@@ -400,6 +425,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
       report.fovea_completed = ++steps_sent >= fovea_chunks;
       const Outgoing& o = outgoing_[step.chunk];
       if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {
+        if (send_tap_) send_tap_(send_tap_context_, o.type, {o.data, o.size}, frame_id, capture_ns);
         if (o.type == net::MessageType::kChunk) {
           ++report.chunks_sent;
         } else {

@@ -120,6 +120,22 @@ class Streamer {
     poll_hook_ = hook;
     poll_hook_context_ = context;
   }
+  // What a recording (firmware/session_recorder.h) taps: every datagram payload
+  // sendFrame hands the link and the link took (chunks, brick chunks, frame
+  // summaries, as they went: plaintext, before sealing), and every operator
+  // message the link decoded (gaze samples with their HMD pose). With
+  // record_unsent, a frame without a session is still encoded (all of it, at
+  // the encoder's MTU, nothing cut) and its chunks and summary tapped, so a
+  // recording has the stream whether or not an operator watched. Called in the
+  // caller's thread (the send stage); the tap must not block or allocate.
+  using SendTap = void (*)(void* context, net::MessageType type, std::span<const uint8_t> payload, uint32_t frame_id,
+                           int64_t capture_ns);
+  void setSendTap(SendTap tap, void* context, bool record_unsent) {
+    send_tap_ = tap;
+    send_tap_context_ = context;
+    record_unsent_ = record_unsent;
+  }
+  void setReceiveTap(net::RobotLink::ReceiveTap tap, void* context) { link_->setReceiveTap(tap, context); }
   // A frame's bricks that will not be sent (no session, privacy): due again.
   void discardBricks(const pipeline::map::BrickBatch& bricks);
   // The budget of the session in progress (bytes/s, under the cap); 0 without one.
@@ -186,7 +202,13 @@ class Streamer {
   std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
   BrickFeedback* feedback_ = nullptr;
+  // Encodes a frame without a session for the send tap (record_unsent).
+  Status tapUnsent(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats, uint32_t frame_id,
+                   int64_t capture_ns);
   PollHook poll_hook_ = nullptr;
+  SendTap send_tap_ = nullptr;
+  void* send_tap_context_ = nullptr;
+  bool record_unsent_ = false;
   void* poll_hook_context_ = nullptr;
   uint64_t unknown_brick_keys_ = 0;
   int64_t frame_interval_ns_ = 33'333'333;  // the last sendFrame's interval_ns (burst_ms 0)

@@ -235,6 +235,7 @@ void RobotLink::handleSessionMessage(const Header& header, std::span<const uint8
     counters_.dropped.add(*drop);
     return;
   }
+  if (receive_tap_) receive_tap_(receive_tap_context_, header.type, payload, now_ns);
   session_->last_heard_ns = now_ns;
   session_->info.confirmed = true;
   if (latest_gaze_ && sample.sequence <= latest_gaze_->sample.sequence) {

@@ -105,6 +105,16 @@ class RobotLink {
 
   const RobotLinkCounters& counters() const { return counters_; }
 
+  // Called with every gaze sample the session's operator sent that decoded
+  // (stale ones included: as they came), its plaintext payload and when it
+  // arrived; for recordings (firmware/session_recorder.h). In poll()'s thread;
+  // must not block. Null: none.
+  using ReceiveTap = void (*)(void* context, MessageType type, std::span<const uint8_t> payload, int64_t now_ns);
+  void setReceiveTap(ReceiveTap tap, void* context) {
+    receive_tap_ = tap;
+    receive_tap_context_ = context;
+  }
+
  private:
   struct Session {
     SessionInfo info;
@@ -142,6 +152,8 @@ class RobotLink {
   std::size_t past_nonce_count_ = 0;
   MessageEncoder encoder_;
   RobotLinkCounters counters_;
+  ReceiveTap receive_tap_ = nullptr;
+  void* receive_tap_context_ = nullptr;
   static constexpr std::size_t kBrickAckCapacity = 8192;
   static constexpr std::size_t kBrickEvictionCapacity = 1024;
   BrickAckMsg brick_ack_msg_;  // decode scratch

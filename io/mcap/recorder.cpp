@@ -1,5 +1,7 @@
 #include "io/mcap/recorder.h"
 
+#include <pthread.h>
+
 #include <chrono>
 #include <cstring>
 
@@ -71,10 +73,17 @@ Result<uint16_t> Recorder::addChannel(std::string_view topic, std::string_view m
   return writer_->addChannel(topic, message_encoding, schema_id, metadata);
 }
 
-RecorderProducer* Recorder::addProducer() {
+RecorderProducer* Recorder::addProducer(std::size_t slots, std::size_t slot_bytes) {
   if (started_) return nullptr;
-  producers_.emplace_back(new RecorderProducer(*this, config_.slots, config_.slot_bytes));
+  producers_.emplace_back(new RecorderProducer(*this, slots ? slots : config_.slots,
+                                               slot_bytes ? slot_bytes : config_.slot_bytes));
   return producers_.back().get();
+}
+
+std::size_t Recorder::ringBytes() const {
+  std::size_t bytes = 0;
+  for (const auto& p : producers_) bytes += p->ring_.slotCount() * (p->slot_bytes_ + sizeof(RecorderProducer::Meta));
+  return bytes;
 }
 
 Status Recorder::start() {
@@ -125,6 +134,7 @@ bool Recorder::drainOnce() {
 }
 
 void Recorder::run() {
+  pthread_setname_np(pthread_self(), "fovea-mcap-writer");
   auto last_flush = std::chrono::steady_clock::now();
   const auto interval = std::chrono::milliseconds(config_.flush_interval_ms);
   for (;;) {

@@ -100,8 +100,11 @@ class Recorder {
   Result<uint16_t> addSchema(std::string_view name, std::string_view encoding, std::span<const uint8_t> data);
   Result<uint16_t> addChannel(std::string_view topic, std::string_view message_encoding, uint16_t schema_id,
                               std::span<const std::pair<std::string, std::string>> metadata = {});
-  // A producer with its own ring; the Recorder owns it.
-  RecorderProducer* addProducer();
+  // A producer with its own ring of `slots` slots of `slot_bytes` (0: the
+  // config's); the Recorder owns it.
+  RecorderProducer* addProducer(std::size_t slots = 0, std::size_t slot_bytes = 0);
+  // Bytes the rings hold (for the caller's memory budget).
+  std::size_t ringBytes() const;
 
   // Starts the writer thread.
   Status start();

@@ -5,6 +5,7 @@
 #include <unistd.h>
 #include <zstd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -87,7 +88,8 @@ struct Writer::ChunkIndexEntry {
   uint64_t end_time = 0;
   uint64_t chunk_offset = 0;
   uint64_t chunk_length = 0;
-  std::vector<std::pair<uint16_t, uint64_t>> index_offsets;
+  std::size_t offsets_first = 0;  // in Writer::index_offsets_
+  std::size_t offsets_count = 0;
   uint64_t index_length = 0;
   uint64_t compressed_size = 0;
   uint64_t uncompressed_size = 0;
@@ -139,6 +141,7 @@ Status Writer::start(const WriterOptions& options) {
   channel_records_.reserve(options_.max_channels);
   channels_.reserve(options_.max_channels);
   chunk_indexes_.reserve(1024);
+  index_offsets_.reserve(1024 * std::min<std::size_t>(options_.max_channels, 8));
   // The magic, then the Header.
   Builder b(staged_);
   b.bytes(kMagic);
@@ -308,10 +311,12 @@ Status Writer::flushChunk() {
   b.bytes(records);
   b.end(at);
   entry.chunk_length = staged_.size();
+  entry.offsets_first = index_offsets_.size();
   for (std::size_t i = 0; i < channels_.size(); ++i) {
     ChannelState& channel = channels_[i];
     if (channel.index.empty()) continue;
-    entry.index_offsets.emplace_back(static_cast<uint16_t>(i + 1), offset_ + staged_.size());
+    index_offsets_.emplace_back(static_cast<uint16_t>(i + 1), offset_ + staged_.size());
+    ++entry.offsets_count;
     const std::size_t index_at = b.begin(kOpMessageIndex);
     b.u16(static_cast<uint16_t>(i + 1));
     b.u32(static_cast<uint32_t>(channel.index.size() * 16));
@@ -328,7 +333,7 @@ Status Writer::flushChunk() {
   ++stats_.chunks;
   // The chunk and its indexes in one write.
   if (Status s = emitStaged(true); !s) return s;
-  chunk_indexes_.push_back(std::move(entry));
+  chunk_indexes_.push_back(entry);
   return Status::ok();
 }
 
@@ -390,9 +395,9 @@ Status Writer::close() {
     b.u64(entry.chunk_offset);
     b.u64(entry.chunk_length);
     const std::size_t map_at = b.beginU32();
-    for (const auto& [channel, offset] : entry.index_offsets) {
-      b.u16(channel);
-      b.u64(offset);
+    for (std::size_t i = 0; i < entry.offsets_count; ++i) {
+      b.u16(index_offsets_[entry.offsets_first + i].first);
+      b.u64(index_offsets_[entry.offsets_first + i].second);
     }
     b.endU32(map_at);
     b.u64(entry.index_length);

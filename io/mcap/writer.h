@@ -121,6 +121,8 @@ class Writer {
   std::vector<std::vector<uint8_t>> channel_records_;  // kept for the summary
   std::vector<ChannelState> channels_;                 // index = channel id - 1
   std::vector<ChunkIndexEntry> chunk_indexes_;
+  // Every chunk's (channel, message index offset) pairs, one run per chunk.
+  std::vector<std::pair<uint16_t, uint64_t>> index_offsets_;
   uint64_t message_start_time_ = 0;
   uint64_t message_end_time_ = 0;
   WriterStatistics stats_;

@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <string>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -17,6 +19,7 @@
 
 #include "firmware/log.h"
 #include "firmware/service.h"
+#include "io/mcap/reader.h"
 #include "core/clock.h"
 #include "net/brick_cache.h"
 #include "net/codec.h"
@@ -112,8 +115,9 @@ struct StreamingCount {
 // BrickCache and acknowledges them: the planner, the sampler, the brick
 // encoder, the sender's store, the acknowledgements and the feedback run
 // during the count.
-void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = false) {
+void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = false, const std::string& record = "") {
   ServiceConfig config = allocConfig();
+  config.runtime.record.path = record;  // --record: the recorder's rings and writer thread too
   if (map_bricks) {
     config.map.source = FoveationSource::kMap;
     config.map.delta = true;
@@ -243,6 +247,35 @@ TEST(ServiceAllocation, ThreeHundredFramesWhileTheOperatorGazeComesAndGoes) {
   countWhileStreaming(true, count);
   if (HasFatalFailure()) return;
   EXPECT_GE(count.gaze_changes, 4u) << "the gaze never switched to the fallback and back during the count";
+  EXPECT_GE(count.sent, kSentDuringTheCount);
+  EXPECT_EQ(count.allocations, 0u);
+}
+
+// --record: the stages copy into the recorder's rings, its writer thread
+// compresses and writes (io/mcap/recorder.h); none of it allocates once warm.
+TEST(ServiceAllocation, ThreeHundredFramesStreamedAndRecordedAllocateNothing) {
+  const char* tmp = std::getenv("TMPDIR");
+  const std::string path = std::string(tmp && *tmp ? tmp : "/tmp") + "/fovea-alloc-" + std::to_string(::getpid()) + ".mcap";
+  StreamingCount count;
+  countWhileStreaming(false, count, false, path);
+  // The recording holds the stream: chunks, summaries, poses, the operator's gaze.
+  Result<std::vector<uint8_t>> bytes = mcap::readFile(path);
+  std::remove(path.c_str());
+  ASSERT_TRUE(bytes.isOk());
+  mcap::Reader reader(*bytes);
+  std::map<std::string, uint64_t> per_topic;
+  while (reader.next() != mcap::Reader::Item::kEnd) {
+    if (reader.messagesRead() > 0 && reader.message().data.data() != nullptr) {
+      const mcap::ChannelRecord* channel = reader.findChannel(reader.message().channel_id);
+      if (channel) ++per_topic[channel->topic];
+    }
+  }
+  EXPECT_TRUE(reader.complete()) << reader.stopReason();
+  EXPECT_GE(per_topic["/fovea/camera_pose"], 300u);
+  EXPECT_GE(per_topic["/fovea/frame_summary"], count.sent);
+  EXPECT_GT(per_topic["/fovea/chunks"], per_topic["/fovea/frame_summary"]);
+  EXPECT_GT(per_topic["/fovea/gaze"], 0u);
+  if (HasFatalFailure()) return;
   EXPECT_GE(count.sent, kSentDuringTheCount);
   EXPECT_EQ(count.allocations, 0u);
 }

@@ -159,9 +159,10 @@ async function compareManifest(file, manifestFile) {
 async function checkFovead(fovead, workdir, frames) {
   const file = path.join(workdir, "fovead-serve.mcap");
   fs.rmSync(file, { force: true });
-  const out = execFileSync(fovead, ["serve", "--camera", "mock", "--frames", String(frames), "--to", "127.0.0.1:9",
-                                    "--record", file], { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
-  process.stdout.write(out.split("\n").filter((l) => l.includes("record")).join("\n") + "\n");
+  const out = execFileSync(fovead, ["serve", "--camera", "mock:living-room,realtime=on", "--frames", String(frames),
+                                    "--listen", "127.0.0.1:0", "--insecure", "--status-interval-ms", "100", "--record", file], { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
+  process.stdout.write(out.split("\n").filter((l) => l.includes("record") || l.includes("stopped")).join("\n") + "\n");
+  const foveated = Number((/stopped after (\d+) frames foveated/.exec(out) ?? [])[1] ?? -1);
   const { indexed, stream } = await readBoth(file);
   const r = indexed.reader;
   const topics = new Map([...r.channelsById.values()].map((c) => [c.topic, c]));
@@ -177,8 +178,11 @@ async function checkFovead(fovead, workdir, frames) {
     const c = topics.get(topic);
     return c ? Number(r.statistics?.channelMessageCounts.get(c.id) ?? 0n) : 0;
   };
-  check(count("/fovea/camera_pose") === frames, `/fovea/camera_pose has one message a frame: ${count("/fovea/camera_pose")} of ${frames}`);
-  check(count("/fovea/chunks") >= frames, `/fovea/chunks has at least a chunk a frame: ${count("/fovea/chunks")} for ${frames} frames`);
+  check(foveated > 0 && count("/fovea/camera_pose") === foveated,
+        `/fovea/camera_pose has one message a frame foveated: ${count("/fovea/camera_pose")} of ${foveated}`);
+  check(count("/fovea/frame_summary") === foveated,
+        `/fovea/frame_summary has one summary a frame foveated (no operator: every frame encoded): ${count("/fovea/frame_summary")} of ${foveated}`);
+  check(count("/fovea/chunks") >= foveated, `/fovea/chunks has at least a chunk a frame: ${count("/fovea/chunks")} for ${foveated} frames`);
   check(count("/fovea/status") >= 1, `/fovea/status has the status lines: ${count("/fovea/status")}`);
   const chunks = topics.get("/fovea/chunks");
   if (chunks) {
