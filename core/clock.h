@@ -16,4 +16,13 @@ inline int64_t monotonicNs() {
   return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
+// Wall-clock time, CLOCK_REALTIME in nanoseconds since the epoch: only where a
+// person or another program reads the time of day, as recordings' log times
+// (MCAP viewers show them on their timeline). Never for durations: it jumps.
+inline int64_t wallClockNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
 }  // namespace fovea

@@ -1,10 +1,5 @@
 #include "firmware/mcap_camera.h"
 
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -60,35 +55,22 @@ Result<std::unique_ptr<hal::Camera>> McapCamera::create(std::string_view args) {
 
 void McapCamera::unmap() {
   reader_.reset();
-  if (map_ != nullptr) munmap(const_cast<uint8_t*>(map_), map_bytes_);
-  map_ = nullptr;
-  map_bytes_ = 0;
+  file_ = mcap::MappedFile();
 }
 
 Status McapCamera::open() {
   unmap();
   opened_ = started_ = finished_ = false;
-  const int fd = ::open(options_.path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
-    return {errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
-            "mcap: cannot open '" + options_.path + "': " + std::strerror(errno)};
-  }
-  struct stat st {};
-  if (fstat(fd, &st) != 0 || st.st_size <= 0) {
-    ::close(fd);
-    return {ErrorCode::kInvalidInput, "mcap: '" + options_.path + "' is empty, not a recording"};
-  }
-  void* mapped = mmap(nullptr, static_cast<std::size_t>(st.st_size), PROT_READ, MAP_PRIVATE, fd, 0);
-  ::close(fd);
-  if (mapped == MAP_FAILED) return {ErrorCode::kIoError, "mcap: cannot map '" + options_.path + "': " + std::strerror(errno)};
-  map_ = static_cast<const uint8_t*>(mapped);
-  map_bytes_ = static_cast<std::size_t>(st.st_size);
+  frame_count_ = 0;
+  Result<mcap::MappedFile> mapped = mcap::MappedFile::open(options_.path);
+  if (!mapped) return Status(mapped.status().code(), "mcap: " + mapped.status().message());
+  file_ = std::move(mapped.value());
 
   // Once through the file: the frames channel, every frame checked, the size,
   // the stamps and where the file stops being readable.
   // The reader stays for the replay: it keeps the schemas, channels and its
   // chunk buffer from this pass, so acquire() allocates nothing.
-  reader_ = std::make_unique<mcap::Reader>(std::span<const uint8_t>(map_, map_bytes_));
+  reader_ = std::make_unique<mcap::Reader>(file_.bytes());
   mcap::Reader& reader = *reader_;
   hal::RgbdFrame scratch;  // sized below for the largest frame
   std::size_t scratch_pixels = 0;

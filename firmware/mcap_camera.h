@@ -29,6 +29,7 @@
 #include <string_view>
 
 #include "hal/camera.h"
+#include "io/mcap/mapped_file.h"
 #include "io/mcap/reader.h"
 
 namespace fovea::firmware {
@@ -69,8 +70,7 @@ class McapCamera final : public hal::Camera {
 
   McapCameraOptions options_;
   hal::CameraInfo info_;
-  const uint8_t* map_ = nullptr;
-  std::size_t map_bytes_ = 0;
+  mcap::MappedFile file_;
   std::unique_ptr<mcap::Reader> reader_;
   uint16_t frames_channel_ = 0;
   std::size_t frame_count_ = 0;

@@ -8,27 +8,14 @@
 #include <cstring>
 #include <string>
 
-#include "firmware/recording_schemas.h"
+#include "core/clock.h"
+#include "net/stream_channels.h"
 
 namespace fovea::firmware {
 
 namespace {
 
-// MCAP log times are wall-clock nanoseconds (what viewers show on their timeline);
-// the payloads keep their own monotonic stamps.
-uint64_t wallNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<uint64_t>(ts.tv_sec) * 1'000'000'000ull + static_cast<uint64_t>(ts.tv_nsec);
-}
-
 std::span<const uint8_t> bytesOf(std::string_view s) { return {reinterpret_cast<const uint8_t*>(s.data()), s.size()}; }
-
-std::vector<uint8_t> concat(std::initializer_list<std::span<const uint8_t>> parts) {
-  std::vector<uint8_t> out;
-  for (std::span<const uint8_t> p : parts) out.insert(out.end(), p.begin(), p.end());
-  return out;
-}
 
 constexpr const char* kPoseSchema = R"json({
   "title": "fovea.CameraPose",
@@ -71,40 +58,20 @@ Result<std::unique_ptr<SessionRecorder>> SessionRecorder::create(const RecordSet
   std::unique_ptr<SessionRecorder> r(new SessionRecorder());
   r->recorder_ = std::move(recorder.value());
   mcap::Recorder& m = *r->recorder_;
-  char version[160];
-  std::snprintf(version, sizeof version,
-                "fovea stream protocol version %u: point chunk payloads as sent (plaintext), "
-                "laid out as the document below says\n\n",
-                static_cast<unsigned>(net::kProtocolVersion));
-  const std::vector<uint8_t> chunk_schema = concat({bytesOf(version), protocolChunksText()});
-  const std::vector<uint8_t> control_schema = concat({controlFbsText(), bytesOf("\n// geometry.fbs\n"), geometryFbsText()});
-  auto schema = [&](const char* name, const char* encoding, std::span<const uint8_t> data) -> Result<uint16_t> {
-    return m.addSchema(name, encoding, data);
-  };
-  Result<uint16_t> chunk_id = schema("fovea.Chunk", "fovea.chunk", chunk_schema);
-  Result<uint16_t> summary_id = schema("fovea.net.wire.FrameSummary", "fovea.flatbuffer.fbs", chunkFbsText());
-  Result<uint16_t> gaze_id = schema("fovea.net.wire.Gaze", "fovea.flatbuffer.fbs", control_schema);
-  Result<uint16_t> pose_id = schema("fovea.CameraPose", "jsonschema", bytesOf(kPoseSchema));
-  Result<uint16_t> status_id = schema("fovea.StatusLine", "jsonschema", bytesOf(kStatusSchema));
-  for (const Result<uint16_t>* id : {&chunk_id, &summary_id, &gaze_id, &pose_id, &status_id}) {
+  // What travels the link: the channels both ends record (net/stream_channels.h).
+  Result<net::StreamChannels> stream = net::addStreamChannels(m);
+  if (!stream) return stream.status();
+  Result<uint16_t> pose_id = m.addSchema("fovea.CameraPose", "jsonschema", bytesOf(kPoseSchema));
+  Result<uint16_t> status_id = m.addSchema("fovea.StatusLine", "jsonschema", bytesOf(kStatusSchema));
+  for (const Result<uint16_t>* id : {&pose_id, &status_id}) {
     if (!*id) return id->status();
   }
-  char protocol[8];
-  std::snprintf(protocol, sizeof protocol, "%u", static_cast<unsigned>(net::kProtocolVersion));
-  const std::pair<std::string, std::string> meta[] = {{"protocol_version", protocol}};
-  Result<uint16_t> chunks = m.addChannel("/fovea/chunks", "fovea.chunk", *chunk_id, meta);
-  Result<uint16_t> summaries = m.addChannel("/fovea/frame_summary", "fovea.flatbuffer", *summary_id, meta);
-  Result<uint16_t> bricks = m.addChannel("/fovea/brick_chunks", "fovea.chunk", *chunk_id, meta);
-  Result<uint16_t> gaze = m.addChannel("/fovea/gaze", "fovea.flatbuffer", *gaze_id, meta);
   Result<uint16_t> pose = m.addChannel("/fovea/camera_pose", "json", *pose_id);
   Result<uint16_t> status = m.addChannel("/fovea/status", "json", *status_id);
-  for (const Result<uint16_t>* id : {&chunks, &summaries, &bricks, &gaze, &pose, &status}) {
+  for (const Result<uint16_t>* id : {&pose, &status}) {
     if (!*id) return id->status();
   }
-  r->chunks_ = *chunks;
-  r->summaries_ = *summaries;
-  r->bricks_ = *bricks;
-  r->gaze_ = *gaze;
+  r->stream_ = *stream;
   r->pose_ = *pose;
   r->status_channel_ = *status;
   r->send_ = m.addProducer(settings.send_slots, settings.max_datagram_bytes);
@@ -120,18 +87,12 @@ Status SessionRecorder::start() { return recorder_->start(); }
 Status SessionRecorder::close() { return recorder_ ? recorder_->close() : Status::ok(); }
 
 void SessionRecorder::onSent(net::MessageType type, std::span<const uint8_t> payload, uint32_t, int64_t) {
-  uint16_t channel = 0;
-  switch (type) {
-    case net::MessageType::kChunk: channel = chunks_; break;
-    case net::MessageType::kFrameSummary: channel = summaries_; break;
-    case net::MessageType::kBrickChunk: channel = bricks_; break;
-    default: return;
-  }
-  (void)send_->record(channel, wallNs(), payload);
+  if (type == net::MessageType::kGaze) return;
+  if (const uint16_t channel = stream_.channelOf(type); channel != 0) (void)send_->record(channel, static_cast<uint64_t>(wallClockNs()), payload);
 }
 
 void SessionRecorder::onReceived(net::MessageType type, std::span<const uint8_t> payload, int64_t) {
-  if (type == net::MessageType::kGaze) (void)send_->record(gaze_, wallNs(), payload);
+  if (type == net::MessageType::kGaze) (void)send_->record(stream_.gaze, static_cast<uint64_t>(wallClockNs()), payload);
 }
 
 void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal::RgbdFrame& frame, bool pose_fresh,
@@ -147,7 +108,7 @@ void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal:
       frame_id, frame.stamp_ns, captured_ns, pose.t_world_cam.x(), pose.t_world_cam.y(), pose.t_world_cam.z(), q.x(),
       q.y(), q.z(), q.w(), pose_fresh ? "true" : "false", cloud.size());
   if (n > 0 && static_cast<std::size_t>(n) < sizeof json) {
-    (void)frames_->record(pose_, wallNs(), {reinterpret_cast<const uint8_t*>(json), static_cast<std::size_t>(n)});
+    (void)frames_->record(pose_, static_cast<uint64_t>(wallClockNs()), {reinterpret_cast<const uint8_t*>(json), static_cast<std::size_t>(n)});
   }
   // Channels built from the frame (foxglove.PointCloud from cloud.points, with
   // cloud.region per point; foxglove.FrameTransform from `pose`) go here, each
@@ -174,7 +135,7 @@ void SessionRecorder::onStatusLine(std::string_view line) {
   }
   json[n++] = '"';
   json[n++] = '}';
-  (void)status_->record(status_channel_, wallNs(), {reinterpret_cast<const uint8_t*>(json), n});
+  (void)status_->record(status_channel_, static_cast<uint64_t>(wallClockNs()), {reinterpret_cast<const uint8_t*>(json), n});
 }
 
 std::string SessionRecorder::summary() const {

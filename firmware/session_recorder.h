@@ -30,6 +30,7 @@
 #include "firmware/log.h"
 #include "hal/frame.h"
 #include "io/mcap/recorder.h"
+#include "net/stream_channels.h"
 #include "net/wire.h"
 #include "pipeline/point_cloud.h"
 
@@ -79,7 +80,8 @@ class SessionRecorder {
   mcap::RecorderProducer* send_ = nullptr;
   mcap::RecorderProducer* frames_ = nullptr;
   mcap::RecorderProducer* status_ = nullptr;
-  uint16_t chunks_ = 0, summaries_ = 0, bricks_ = 0, gaze_ = 0, pose_ = 0, status_channel_ = 0;
+  net::StreamChannels stream_;
+  uint16_t pose_ = 0, status_channel_ = 0;
 };
 
 }  // namespace fovea::firmware

@@ -4,6 +4,7 @@
 // the wire, end-to-end latency, losses. The decoding is fovea::net's library
 // (ChunkEncoder's counterpart), which a VR front end links the same way.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -21,10 +22,14 @@
 #include <Eigen/Geometry>
 
 #include "core/clock.h"
+#include "io/mcap/mapped_file.h"
+#include "io/mcap/reader.h"
+#include "io/mcap/recorder.h"
 #include "io/ply.h"
 #include "net/codec.h"
 #include "net/key.h"
 #include "net/operator_link.h"
+#include "net/stream_channels.h"
 #include "net/udp_socket.h"
 #include "tools/operator/gaze_script.h"
 #include "tools/operator/held_cloud.h"
@@ -41,11 +46,12 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) (--gaze SCRIPT | --view [ADDR:]PORT)\n"
+    "       fovea-operator --replay FILE.mcap [--speed X] [--view [ADDR:]PORT] [...]\n"
     "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
     "                      [--save-ply DIR] [--save-held FRAME_ID:FILE.ply]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
     "                      [--map-points N] [--map-bricks N]\n"
-    "                      [--clock auto|shared|estimated] [--quiet]\n"
+    "                      [--clock auto|shared|estimated] [--record FILE.mcap] [--quiet]\n"
     "\n"
     "Connects to fovead run --listen, sends gaze samples from a script, receives and\n"
     "decodes the foveated frames, and prints once a second: frames per second, MB/s\n"
@@ -89,6 +95,13 @@ const char* kHelp =
     "                        shared: one CLOCK_MONOTONIC (same host); estimated: the robot's clock\n"
     "                        estimated from its status stamps and the round trip it measures\n"
     "                        (RTT/2 each way); auto (default): shared on a loopback address\n"
+    "  --record FILE.mcap    record the session as received (the chunks, frame summaries and map bricks\n"
+    "                        the operator decrypted) into an MCAP file (docs/recording.md)\n"
+    "  --replay FILE.mcap    instead of a robot: play a recording (this program's --record, or fovead\n"
+    "                        serve --record's: what the robot sent) into the viewer and the figures as\n"
+    "                        if live; says where the file stopped being readable, if it did\n"
+    "  --speed X             --replay's pace: 1 (default) as recorded, 2 twice as fast, 0 as fast as it\n"
+    "                        reads\n"
     "  --quiet               no live lines\n";
 
 volatile std::sig_atomic_t g_stop = 0;
@@ -116,6 +129,9 @@ struct Options {
   long map_bricks = 4096;
   std::string clock = "auto";
   std::string view;  // --view [ADDR:]PORT; empty: no viewer
+  std::string record_path;  // --record FILE.mcap
+  std::string replay_path;  // --replay FILE.mcap: no robot
+  double speed = 1.0;       // --replay's pace (0: as fast as it reads)
   long view_tabs = 4;
 };
 
@@ -165,6 +181,15 @@ Result<Options> parseOptions(int argc, char** argv) {
       if (!parent.empty() && !std::filesystem::is_directory(parent, ec)) {
         return Result<Options>(ErrorCode::kInvalidArgument, "--save-held: no directory '" + parent.string() + "'");
       }
+    } else if (flag == "--record") {
+      o.record_path = value;
+    } else if (flag == "--replay") {
+      o.replay_path = value;
+    } else if (flag == "--speed") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      if (!(v.value() >= 0 && v.value() <= 1000)) return Result<Options>(ErrorCode::kInvalidArgument, "--speed: must be within 0 .. 1000");
+      o.speed = v.value();
     } else if (flag == "--name") {
       o.name = value;
     } else if (flag == "--view") {
@@ -226,7 +251,13 @@ Result<Options> parseOptions(int argc, char** argv) {
       return Result<Options>(ErrorCode::kInvalidArgument, "unknown argument '" + flag + "' (see --help)");
     }
   }
-  if (o.connect.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--connect HOST:PORT is required");
+  if (!o.replay_path.empty()) {
+    // A replay talks to no robot: no key, no gaze to send.
+    if (!o.connect.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--replay: not together with --connect");
+    if (!o.record_path.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--record: not together with --replay");
+    return o;
+  }
+  if (o.connect.empty()) return Result<Options>(ErrorCode::kInvalidArgument, "--connect HOST:PORT is required (or --replay FILE.mcap)");
   if (o.gaze.empty() && o.view.empty()) {
     return Result<Options>(ErrorCode::kInvalidArgument, "--gaze SCRIPT is required (or --view [ADDR:]PORT, whose page gives the gaze)");
   }
@@ -321,6 +352,10 @@ struct Station {
   std::optional<tools::MapHolder> map;
   std::unique_ptr<tools::ViewServer> view;
   std::ofstream frame_log;
+  // --record: the file, its one producer (the receive loop) and channels.
+  std::unique_ptr<mcap::Recorder> recorder;
+  mcap::RecorderProducer* record_producer = nullptr;
+  net::StreamChannels record_channels;
 };
 
 Exit loadGazeScript(const Options& opt, Station& station) {
@@ -394,6 +429,26 @@ Exit openFrameLog(const Options& opt, std::ofstream& frame_log) {
   return std::nullopt;
 }
 
+// --record: the file and its channels (net/stream_channels.h), as fovead serve --record makes them.
+Exit openRecording(const Options& opt, Station& station) {
+  if (opt.record_path.empty()) return std::nullopt;
+  mcap::RecorderConfig config;
+  config.slots = 4096;
+  config.slot_bytes = net::kMaxMtu;
+  config.writer.chunk_bytes = 4 << 20;
+  Result<std::unique_ptr<mcap::Recorder>> recorder = mcap::Recorder::open(opt.record_path, config, [](std::string_view line) {
+    std::fprintf(stderr, "fovea-operator: --record: %.*s\n", static_cast<int>(line.size()), line.data());
+  });
+  if (!recorder) return failure("--record: ", recorder.status());
+  Result<net::StreamChannels> channels = net::addStreamChannels(*recorder.value());
+  if (!channels) return failure("--record: ", channels.status());
+  station.record_producer = recorder.value()->addProducer();
+  if (Status s = recorder.value()->start(); !s) return failure("--record: ", s);
+  station.record_channels = channels.value();
+  station.recorder = std::move(recorder.value());
+  return std::nullopt;
+}
+
 // Everything the station sets up, in the order it always has (the first failure is the one reported).
 Exit setUp(const Options& opt, Station& station) {
   if (Exit e = loadGazeScript(opt, station)) return e;
@@ -410,14 +465,15 @@ Exit setUp(const Options& opt, Station& station) {
   if (!map) return startFailure(map.status());
   station.map.emplace(std::move(map.value()));
   if (Exit e = startViewer(opt, station)) return e;
+  if (Exit e = openRecording(opt, station)) return e;
   return openFrameLog(opt, station.frame_log);
 }
 
 // One session with the robot: its link and its clocks.
 struct Session {
-  explicit Session(net::OperatorLink& l) : link(l) {}
+  explicit Session(net::OperatorLink* l) : link(l) {}
 
-  net::OperatorLink& link;
+  net::OperatorLink* link;  // null in a replay
   bool shared_clock = false;
   std::optional<int64_t> clock_offset_ns;  // robot minus local
   // What a packet capture adds to each UDP payload: the IP and UDP headers.
@@ -449,6 +505,9 @@ class OperatorRun {
   // the operator reconnects until it is stopped (a robot restarting, refusing
   // while busy, or not yet up).
   Exit runSessions();
+  // --replay: the recording's chunks, frame summaries and map bricks, paced by
+  // their log times (--speed), through what a session's datagrams go through.
+  Exit runReplay();
   // Prints the summary and writes --summary; the exit code.
   int finish();
 
@@ -538,6 +597,82 @@ Exit OperatorRun::runSessions() {
   return std::nullopt;
 }
 
+Exit OperatorRun::runReplay() {
+  Result<mcap::MappedFile> file = mcap::MappedFile::open(opt_.replay_path);
+  if (!file) return failure("--replay: ", file.status());
+  mcap::Reader reader(file->bytes());
+  // The recording's channel of each message type (0: not one of the link's).
+  std::array<uint8_t, 65536> type_of{};
+  robot_address_ = "replay of " + opt_.replay_path;
+  std::printf("replaying %s at %s\n", opt_.replay_path.c_str(),
+              opt_.speed > 0 ? (std::to_string(opt_.speed) + "x").c_str() : "full speed");
+  std::fflush(stdout);
+  publishState(tools::LinkState::kStreaming, "");
+  ++sessions_;
+  Session s(nullptr);
+  // Recorded times are wall-clock log times, not the robot's monotonic clock:
+  // latency is unknown (left out of the figures), not invented.
+  s.shared_clock = false;
+  s.ip_udp_header_bytes = 20 + 8;
+  s.max_payload = net::kMaxMtu;
+  const int64_t replay_start_ns = monotonicNs();
+  s.next_live_ns = replay_start_ns + 1'000'000'000;
+  s.live_start_ns = replay_start_ns;
+  uint64_t first_log_ns = 0;
+  bool first = true;
+  uint64_t replayed = 0, too_big = 0;
+  alignas(net::kPayloadAlignment) static uint8_t payload[net::kMaxMtu];
+  for (mcap::Reader::Item item = reader.next(); item != mcap::Reader::Item::kEnd && g_stop == 0; item = reader.next()) {
+    if (item == mcap::Reader::Item::kChannel) {
+      if (const std::optional<net::MessageType> t = net::streamMessageType(reader.channel().topic)) {
+        type_of[reader.channel().id] = static_cast<uint8_t>(*t);
+      }
+      continue;
+    }
+    if (item != mcap::Reader::Item::kMessage) continue;
+    const mcap::MessageView& m = reader.message();
+    const auto type = static_cast<net::MessageType>(type_of[m.channel_id]);
+    if (type_of[m.channel_id] == 0 || type == net::MessageType::kGaze) continue;
+    if (m.data.size() > sizeof payload) {
+      ++too_big;
+      continue;
+    }
+    if (first) {
+      first_log_ns = m.log_time_ns;
+      first = false;
+    }
+    // Paced: the message is due when as much time has passed as between it and the first.
+    if (opt_.speed > 0) {
+      const double since_ns = static_cast<double>(m.log_time_ns - first_log_ns) / opt_.speed;
+      const int64_t due_ns = replay_start_ns + static_cast<int64_t>(std::min(since_ns, 9.0e18));
+      for (int64_t now = monotonicNs(); now < due_ns && g_stop == 0; now = monotonicNs()) {
+        if (now >= s.next_live_ns) reportLive(s, now);
+        const int64_t wait_ns = std::min({due_ns - now, s.next_live_ns - now, int64_t{50'000'000}});
+        const timespec t{0, static_cast<long>(std::max<int64_t>(wait_ns, 0))};
+        nanosleep(&t, nullptr);
+      }
+    }
+    const int64_t now = monotonicNs();
+    if (now >= s.next_live_ns) reportLive(s, now);
+    std::memcpy(payload, m.data.data(), m.data.size());
+    net::Received received;
+    received.type = type;
+    received.payload = std::span<const uint8_t>(payload, m.data.size());
+    received.received_ns = static_cast<int64_t>(m.log_time_ns);
+    handleDatagram(s, received);
+    if (map_.ackDue(now, s.max_payload)) sendBrickAcks(s, now);
+    ++replayed;
+  }
+  endSession(s);
+  if (!reader.complete()) {
+    std::fprintf(stderr, "fovea-operator: --replay: %s: %s (the messages before it were played)\n",
+                 opt_.replay_path.c_str(), reader.stopReason().c_str());
+  }
+  std::printf("replayed %llu messages of %s%s\n", static_cast<unsigned long long>(replayed), opt_.replay_path.c_str(),
+              too_big > 0 ? (", " + std::to_string(too_big) + " larger than a datagram skipped").c_str() : "");
+  return std::nullopt;
+}
+
 // Without the viewer a failed hello ends the run; with it, only bad arguments do.
 Exit OperatorRun::connectFailed(const Status& status) {
   const std::string& why = status.message();
@@ -570,7 +705,7 @@ void OperatorRun::runSession(net::OperatorLink& link) {
 }
 
 Session OperatorRun::beginSession(net::OperatorLink& link) {
-  Session s(link);
+  Session s(&link);
   if (!link.notice().empty()) std::fprintf(stderr, "fovea-operator: *** %s ***\n", link.notice().c_str());
   // Latency compares the robot's capture stamp with this host's arrival time. On
   // one host the clocks are one; across hosts the robot's clock is estimated from
@@ -600,7 +735,7 @@ Session OperatorRun::beginSession(net::OperatorLink& link) {
 void OperatorRun::sendGaze(Session& s, int64_t now) {
   GazeChoice choice = chooseGaze(station_.script, view_, now - start_ns_, last_sent_);
   choice.sample.feedback.last_frame_id = s.last_frame_id;
-  if (s.link.sendGaze(choice.sample)) {
+  if (s.link->sendGaze(choice.sample)) {
     ++gaze_sent_;
     last_sent_ = choice.sample;
     last_shown_ = choice.viewer;
@@ -616,7 +751,7 @@ void OperatorRun::sendGaze(Session& s, int64_t now) {
 
 // Once a second: the live line, and the viewer's figures.
 void OperatorRun::reportLive(Session& s, int64_t now) {
-  if (const uint64_t lost = s.link.counters().datagrams_lost; lost > s.lost_reported) {
+  if (const uint64_t lost = s.link ? s.link->counters().datagrams_lost : 0; lost > s.lost_reported) {
     stats_.lost(lost - s.lost_reported);
     s.lost_reported = lost;
   }
@@ -647,7 +782,7 @@ void OperatorRun::publishFigures(const Session& s, const tools::LiveFigures& liv
   figures.gaze_mode = view_->gazeMode();
   figures.gaze_sent = gaze_sent_;
   figures.gaze_last = last_shown_;
-  if (const auto& status = s.link.lastStatus()) {
+  if (const auto& status = s.link ? s.link->lastStatus() : std::nullopt) {
     if (status->gaze_age_ns >= 0) figures.robot_gaze_age_ms = static_cast<double>(status->gaze_age_ns) * 1e-6;
     if (status->rtt_ns >= 0) figures.robot_rtt_ms = static_cast<double>(status->rtt_ns) * 1e-6;
     figures.robot_gaze_origin_m = array3(status->gaze_origin_m);
@@ -657,6 +792,11 @@ void OperatorRun::publishFigures(const Session& s, const tools::LiveFigures& liv
 }
 
 void OperatorRun::handleDatagram(Session& s, const net::Received& received) {
+  if (station_.record_producer) {
+    if (const uint16_t channel = station_.record_channels.channelOf(received.type); channel != 0) {
+      (void)station_.record_producer->record(channel, wallClockNs(), received.payload);  // a full ring drops and counts
+    }
+  }
   stats_.datagram(received.payload.size() + net::kDatagramOverhead, s.ip_udp_header_bytes);
   switch (received.type) {
     // The assembler's ready frames are those of its last call: look at them
@@ -687,8 +827,8 @@ void OperatorRun::handleDatagram(Session& s, const net::Received& received) {
     case net::MessageType::kStatus:
       // The link has decoded it (and echoes its stamp); the round trip the robot
       // measured from earlier echoes dates the stamp.
-      if (!s.shared_clock) {
-        if (const auto& status = s.link.lastStatus(); status && status->rtt_ns >= 0) {
+      if (!s.shared_clock && s.link) {
+        if (const auto& status = s.link->lastStatus(); status && status->rtt_ns >= 0) {
           s.clock_offset_ns = tools::estimateClockOffsetNs(status->robot_stamp_ns, status->rtt_ns, received.received_ns);
         }
       }
@@ -728,7 +868,8 @@ void OperatorRun::handleReady(Session& s) {
 }
 
 void OperatorRun::sendBrickAcks(Session& s, int64_t now) {
-  map_.sendAcks(s.max_payload, now, [&s](const net::BrickAckMsg& ack) { return s.link.sendBrickAck(ack); });
+  // A replay has nobody to tell: its acknowledgements are taken and dropped.
+  map_.sendAcks(s.max_payload, now, [&s](const net::BrickAckMsg& ack) { return s.link ? s.link->sendBrickAck(ack) : true; });
 }
 
 // The frame with the map's bricks behind its live points (the buffer holds both: startViewer).
@@ -802,9 +943,10 @@ void OperatorRun::saveHeld(const net::AssembledFrame& f) {
 }
 
 void OperatorRun::endSession(Session& s) {
-  net::OperatorLink& link = s.link;
   assembler_.flush();
   handleReady(s);
+  if (!s.link) return;  // a replay
+  net::OperatorLink& link = *s.link;
   if (const uint64_t lost = link.counters().datagrams_lost; lost > s.lost_reported) stats_.lost(lost - s.lost_reported);
   last_status_ = link.lastStatus();
   const net::OperatorLinkCounters& lc = link.counters();
@@ -908,6 +1050,16 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, onStopSignal);
   std::signal(SIGTERM, onStopSignal);
   OperatorRun run(opt, station);
-  if (Exit e = run.runSessions()) return *e;
-  return run.finish();
+  if (Exit e = opt.replay_path.empty() ? run.runSessions() : run.runReplay()) return *e;
+  const int code = run.finish();
+  if (station.recorder) {
+    const Status closed = station.recorder->close();
+    const mcap::RecorderCounters c = station.recorder->counters();
+    std::printf("  recording %s: %llu messages, %.2f MB; dropped: ring full %llu, too big %llu, disk %llu%s%s\n",
+                station.recorder->path().c_str(), static_cast<unsigned long long>(c.messages_written),
+                static_cast<double>(c.bytes_written) / 1e6, static_cast<unsigned long long>(c.dropped_ring_full),
+                static_cast<unsigned long long>(c.dropped_too_big), static_cast<unsigned long long>(c.dropped_disk),
+                closed ? "" : "; closing failed: ", closed ? "" : closed.message().c_str());
+  }
+  return code;
 }
