@@ -134,7 +134,7 @@ bool Recorder::drainOnce() {
 }
 
 void Recorder::run() {
-  pthread_setname_np(pthread_self(), "fovea-mcap-writer");
+  pthread_setname_np(pthread_self(), "fovea-mcap");  // at most 15 characters
   auto last_flush = std::chrono::steady_clock::now();
   const auto interval = std::chrono::milliseconds(config_.flush_interval_ms);
   for (;;) {

@@ -11,6 +11,7 @@
 #include "io/mcap/format.h"
 #include "io/mcap/reader.h"
 #include "io/mcap/writer.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::mcap {
 namespace {
@@ -275,7 +276,7 @@ TEST(McapReader, BitFlipsNeverCrash) {
   const std::vector<uint8_t> file = writeSample(options, 3, 60, nullptr, 30);
   std::mt19937 rng(28);
   int stopped = 0;
-  for (int trial = 0; trial < 3000; ++trial) {
+  for (int trial = 0; trial < test::repetitions(3000, 300); ++trial) {
     std::vector<uint8_t> bad = file;
     const int flips = 1 + static_cast<int>(rng() % 4);
     for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= static_cast<uint8_t>(1u << (rng() % 8));
