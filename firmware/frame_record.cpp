@@ -54,9 +54,7 @@ std::size_t frameRecordBytes(int width, int height, bool has_rgb) {
   return kFrameRecordHeaderBytes + pixels * 2 + (has_rgb ? pixels * 3 : 0);
 }
 
-std::size_t encodeFrameRecord(const hal::RgbdFrame& frame, std::span<uint8_t> out) {
-  const std::size_t bytes = frameRecordBytes(frame.width(), frame.height(), frame.has_rgb);
-  if (out.size() < bytes) return 0;
+void encodeFrameRecordHeader(const hal::RgbdFrame& frame, std::span<uint8_t, kFrameRecordHeaderBytes> out) {
   uint8_t* o = out.data();
   std::memcpy(o, kMagic, 4);
   put<uint16_t>(o, 4, kFrameRecordVersion);
@@ -75,6 +73,13 @@ std::size_t encodeFrameRecord(const hal::RgbdFrame& frame, std::span<uint8_t> ou
     for (int c = 0; c < 3; ++c) put<double>(o, 72 + 8 * (3 * r + c), frame.T_world_cam.R_world_cam(r, c));
   }
   for (int i = 0; i < 3; ++i) put<double>(o, 144 + 8 * i, frame.T_world_cam.t_world_cam(i));
+}
+
+std::size_t encodeFrameRecord(const hal::RgbdFrame& frame, std::span<uint8_t> out) {
+  const std::size_t bytes = frameRecordBytes(frame.width(), frame.height(), frame.has_rgb);
+  if (out.size() < bytes) return 0;
+  encodeFrameRecordHeader(frame, out.first<kFrameRecordHeaderBytes>());
+  uint8_t* o = out.data();
   const std::size_t pixels = frame.pixelCount();
   std::memcpy(o + kFrameRecordHeaderBytes, frame.depth(), pixels * 2);
   if (frame.has_rgb) std::memcpy(o + kFrameRecordHeaderBytes + pixels * 2, frame.rgb(), pixels * 3);

@@ -25,12 +25,14 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string_view>
 
 #include "core/result.h"
 #include "hal/frame.h"
 
 namespace fovea::firmware {
 
+inline constexpr std::string_view kFramesTopic = "/fovea/frames";
 inline constexpr uint16_t kFrameRecordVersion = 1;
 inline constexpr std::size_t kFrameRecordHeaderBytes = 168;
 // The MCAP schema of the channel: its name, and the layout above as its text.
@@ -39,6 +41,11 @@ std::span<const uint8_t> frameRecordSchemaText();
 
 // The bytes a record of a width x height frame takes.
 std::size_t frameRecordBytes(int width, int height, bool has_rgb);
+
+// The header alone: a record is it, then frame.depth() (pixels x 2 bytes), then
+// frame.rgb() (pixels x 3) when frame.has_rgb; for writers that gather the
+// parts instead of copying the images twice (the recorder's slot is the copy).
+void encodeFrameRecordHeader(const hal::RgbdFrame& frame, std::span<uint8_t, kFrameRecordHeaderBytes> out);
 
 // Writes `frame` into `out`; the bytes written, or 0 when `out` is too small.
 // Never allocates (the recorder calls it on the capture path).

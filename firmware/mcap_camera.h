@@ -28,13 +28,12 @@
 #include <string>
 #include <string_view>
 
+#include "firmware/frame_record.h"
 #include "hal/camera.h"
 #include "io/mcap/mapped_file.h"
 #include "io/mcap/reader.h"
 
 namespace fovea::firmware {
-
-inline constexpr std::string_view kFramesTopic = "/fovea/frames";
 
 struct McapCameraOptions {
   std::string path;

@@ -23,7 +23,7 @@ const char* kServeHelp =
     "                    [--camera SPEC] [--frames N] [--duration S] [--gpio SPEC] [--gpio-lines H,S,F[,P]]\n"
     "                    [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] ... [--ring-depth N] [--status-interval-ms MS]\n"
     "                    [--threads N] [--memory-lock] [--log-level LEVEL] [--timing-log FILE]\n"
-    "                    [--record FILE.mcap [--record-slots N]]\n"
+    "                    [--record FILE.mcap [--record-frames] [--record-slots N]]\n"
     "\n"
     "Runs fovead as a service: capture, foveation and sending in their own threads joined\n"
     "by latest-wins rings, all memory allocated at start-up (printed), status GPIO lines,\n"
@@ -54,6 +54,9 @@ const char* kServeHelp =
     "                           without an operator every frame's chunks as the encoder makes them), the gaze\n"
     "                           received, each frame's camera pose, the status lines; never blocks the stages:\n"
     "                           a full ring or disk drops and counts (the stop line says how many)\n"
+    "  --record-frames          with --record: every captured frame too, raw (depth, colour, intrinsics, pose;\n"
+    "                           about 1.5 MB a 640x480 frame before the file's zstd), so the recording is a\n"
+    "                           camera: fovead run --camera mcap:FILE.mcap replays it bit for bit\n"
     "  --record-slots N         datagrams the send stage may queue for the recording's writer (default 4096)\n"
 
     "  stream options as for fovead run: --budget, --max-mtu, --gaze-timeout-ms, --fallback-voxel,\n"

@@ -21,7 +21,7 @@ const std::vector<std::string>& serveFlags() {
   }();
   return flags;
 }
-const std::vector<std::string> kServeSwitches = {"--insecure", "--memory-lock"};
+const std::vector<std::string> kServeSwitches = {"--insecure", "--memory-lock", "--record-frames"};
 
 Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base) {
   using R = Result<ServiceConfig>;
@@ -64,6 +64,10 @@ Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base
   if (const std::string* v = args.get("--record")) {
     if (v->empty()) return R(ErrorCode::kInvalidArgument, "--record: expected a file path (FILE.mcap)");
     config.runtime.record.path = *v;
+  }
+  if (args.has("--record-frames")) {
+    if (config.runtime.record.path.empty()) return R(ErrorCode::kInvalidArgument, "--record-frames: only with --record FILE.mcap");
+    config.runtime.record.frames = true;
   }
   if (const std::string* v = args.get("--record-slots")) {
     Result<long> slots = parseInteger("--record-slots", *v, 16, 1 << 20);

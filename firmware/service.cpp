@@ -288,6 +288,9 @@ Status Service::allocate() {
   if (!config_.runtime.record.path.empty()) {
     before = heapInUse();
     RecordSettings record = config_.runtime.record;
+    // --record-frames: slots for the camera's frames (as the capture ring's).
+    record.frame_width = camera_->info().intrinsics.width;
+    record.frame_height = camera_->info().intrinsics.height;
     // A datagram's payload is at most the largest MTU a session may have.
     if (streamer_) record.max_datagram_bytes = std::min<std::size_t>(record.max_datagram_bytes, config_.stream.link.max_mtu_bytes);
     Result<std::unique_ptr<SessionRecorder>> recorder = SessionRecorder::create(record, log());
@@ -426,6 +429,7 @@ void Service::captureLoop() {
         pose_stale_.store(!f.pose_fresh, std::memory_order_relaxed);
         f.captured_ns = monotonicNs();
         f.acquire_ns = f.captured_ns - t0;
+        if (recorder_) recorder_->onCapture(f.frame);  // --record-frames: a copy into its ring, or a counted drop
         capture_latency_.add(f.acquire_ns);
         last_frame_ns_.store(f.captured_ns, std::memory_order_relaxed);
         ring.publish(slot);

@@ -3,12 +3,14 @@
 #include <time.h>
 
 #include <Eigen/Geometry>
+#include <array>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
 #include <string>
 
 #include "core/clock.h"
+#include "firmware/frame_record.h"
 #include "net/stream_channels.h"
 
 namespace fovea::firmware {
@@ -77,6 +79,18 @@ Result<std::unique_ptr<SessionRecorder>> SessionRecorder::create(const RecordSet
   r->send_ = m.addProducer(settings.send_slots, settings.max_datagram_bytes);
   r->frames_ = m.addProducer(settings.frame_slots, 512);
   r->status_ = m.addProducer(settings.status_slots, 2048);
+  if (settings.frames) {
+    if (settings.frame_width <= 0 || settings.frame_height <= 0) {
+      return invalidArgument("--record-frames: the camera's frame size is unknown");
+    }
+    Result<uint16_t> schema = m.addSchema(kFrameRecordSchemaName, "fovea.frame_record", frameRecordSchemaText());
+    if (!schema) return schema.status();
+    Result<uint16_t> channel = m.addChannel(kFramesTopic, "fovea.frame_record", *schema);
+    if (!channel) return channel.status();
+    r->frames_channel_ = *channel;
+    r->raw_ = m.addProducer(settings.frame_record_slots,
+                            frameRecordBytes(settings.frame_width, settings.frame_height, true));
+  }
   return r;
 }
 
@@ -113,6 +127,19 @@ void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal:
   // Channels built from the frame (foxglove.PointCloud from cloud.points, with
   // cloud.region per point; foxglove.FrameTransform from `pose`) go here, each
   // into a producer of its own made in create().
+}
+
+void SessionRecorder::onCapture(const hal::RgbdFrame& frame) {
+  if (raw_ == nullptr) return;
+  std::array<uint8_t, kFrameRecordHeaderBytes> header;
+  encodeFrameRecordHeader(frame, header);
+  const std::size_t pixels = frame.pixelCount();
+  const std::span<const uint8_t> parts[] = {
+      header,
+      {reinterpret_cast<const uint8_t*>(frame.depth()), pixels * 2},
+      {frame.rgb(), frame.has_rgb ? pixels * 3 : 0},
+  };
+  (void)raw_->record(frames_channel_, static_cast<uint64_t>(wallClockNs()), parts);
 }
 
 void SessionRecorder::onStatusLine(std::string_view line) {

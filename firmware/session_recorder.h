@@ -42,6 +42,12 @@ struct RecordSettings {
   std::size_t frame_slots = 64;     // poses queued from the foveation stage
   std::size_t status_slots = 64;    // status lines queued
   std::size_t max_datagram_bytes = net::kMaxMtu;
+  // --record-frames: every captured frame, raw (firmware/frame_record.h), on
+  // /fovea/frames; the slots hold frames of up to frame_width x frame_height.
+  bool frames = false;
+  std::size_t frame_record_slots = 8;
+  int frame_width = 0;
+  int frame_height = 0;
 };
 
 class SessionRecorder {
@@ -65,6 +71,9 @@ class SessionRecorder {
   // give them their own producer slots sized for the cloud, as frame_slots are.
   void onFrame(uint32_t frame_id, int64_t captured_ns, const hal::RgbdFrame& frame, bool pose_fresh,
                const pipeline::FoveatedCloud& cloud);
+  // fovea-capture: a frame as the camera gave it (with --record-frames; the
+  // pose source's pose applied). A frame larger than the slots is dropped and counted.
+  void onCapture(const hal::RgbdFrame& frame);
   // The supervisor: one status line.
   void onStatusLine(std::string_view line);
 
@@ -80,6 +89,8 @@ class SessionRecorder {
   mcap::RecorderProducer* send_ = nullptr;
   mcap::RecorderProducer* frames_ = nullptr;
   mcap::RecorderProducer* status_ = nullptr;
+  mcap::RecorderProducer* raw_ = nullptr;  // --record-frames
+  uint16_t frames_channel_ = 0;
   net::StreamChannels stream_;
   uint16_t pose_ = 0, status_channel_ = 0;
 };

@@ -23,8 +23,8 @@ RecorderProducer::RecorderProducer(Recorder& owner, std::size_t slots, std::size
       arena_(new uint8_t[ring_.slotCount() * slot_bytes]),
       meta_(new Meta[ring_.slotCount()]) {}
 
-bool RecorderProducer::record(uint16_t channel_id, uint64_t log_time_ns, std::span<const uint8_t> head,
-                              std::span<const uint8_t> data) {
+bool RecorderProducer::record(uint16_t channel_id, uint64_t log_time_ns,
+                              std::span<const std::span<const uint8_t>> parts) {
   if (owner_.stopping_.load(std::memory_order_acquire)) {
     bump(closed_);
     return false;
@@ -33,7 +33,8 @@ bool RecorderProducer::record(uint16_t channel_id, uint64_t log_time_ns, std::sp
     bump(disk_);
     return false;
   }
-  const std::size_t size = head.size() + data.size();
+  std::size_t size = 0;
+  for (std::span<const uint8_t> p : parts) size += p.size();
   if (size > slot_bytes_) {
     bump(too_big_);
     return false;
@@ -41,8 +42,10 @@ bool RecorderProducer::record(uint16_t channel_id, uint64_t log_time_ns, std::sp
   SlotIndex slot = 0;
   if (!ring_.tryAcquire(slot)) return false;  // counted by the ring (acquire_failures)
   uint8_t* dst = arena_.get() + static_cast<std::size_t>(slot) * slot_bytes_;
-  if (!head.empty()) std::memcpy(dst, head.data(), head.size());
-  if (!data.empty()) std::memcpy(dst + head.size(), data.data(), data.size());
+  for (std::span<const uint8_t> p : parts) {
+    if (!p.empty()) std::memcpy(dst, p.data(), p.size());
+    dst += p.size();
+  }
   meta_[slot] = Meta{channel_id, static_cast<uint32_t>(size), log_time_ns};
   ring_.publish(slot);  // drops the oldest queued message when full (counted by the ring)
   return true;

@@ -62,7 +62,12 @@ class RecorderProducer {
     return record(channel_id, log_time_ns, {}, data);
   }
   bool record(uint16_t channel_id, uint64_t log_time_ns, std::span<const uint8_t> head,
-              std::span<const uint8_t> data);
+              std::span<const uint8_t> data) {
+    const std::span<const uint8_t> parts[] = {head, data};
+    return record(channel_id, log_time_ns, parts);
+  }
+  // The concatenation of `parts` as one message (a frame's header and images).
+  bool record(uint16_t channel_id, uint64_t log_time_ns, std::span<const std::span<const uint8_t>> parts);
 
  private:
   friend class Recorder;

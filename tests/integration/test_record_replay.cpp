@@ -1,0 +1,175 @@
+// Recording and replay as a user runs them (docs/recording.md), service and
+// operator as processes over loopback:
+// - fovead serve --record-frames on the TUM sequence, then fovead run on the
+//   recording (mcap: camera) gives the TUM camera's foveation, frame for frame and
+//   bit for bit in the last frame's PLY;
+// - fovea-operator --replay of the operator's own recording gives the live run's
+//   figures frame for frame; of the service's recording, every frame the live
+//   operator received whole, with its points;
+// - a recording cut short replays up to where it stops and says where.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/support/process.h"
+#include "tests/support/test_time.h"
+
+namespace fovea {
+namespace {
+
+std::string program(const char* path) {
+  const std::string emulator = FOVEA_EMULATOR;
+  return emulator.empty() ? std::string(path) : emulator + " " + path;
+}
+
+std::string tumPath() {
+  const char* shared = std::getenv("FOVEA_SHARED_DIR");
+  return std::string(shared ? shared : FOVEA_SOURCE_DIR "/../shared") + "/data/tum-fr3-teddy";
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// fovead run's per-frame lines (frame index .. kept), without the timings.
+std::vector<std::string> frameLines(const std::string& output) {
+  std::vector<std::string> lines;
+  std::istringstream in(output);
+  const std::regex frame_line("^\\s+\\d+\\s+\\d+\\s+[0-9.]+ .*\\|");
+  for (std::string line; std::getline(in, line);) {
+    if (std::regex_search(line, frame_line)) lines.push_back(line.substr(0, line.find('|')));
+  }
+  return lines;
+}
+
+// A --frame-log's lines as frame id -> "points,chunks_received,chunks_expected,summary_received".
+std::map<long, std::string> frameFigures(const std::string& path) {
+  std::map<long, std::string> figures;
+  std::istringstream in(readFile(path));
+  std::string line;
+  std::getline(in, line);  // the header
+  while (std::getline(in, line)) {
+    std::vector<std::string> f;
+    std::stringstream cells(line);
+    for (std::string c; std::getline(cells, c, ',');) f.push_back(c);
+    if (f.size() >= 8) figures[std::stol(f[0])] = f[4] + "," + f[5] + "," + f[6] + "," + f[7];
+  }
+  return figures;
+}
+
+TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
+  test::TempDir dir;
+  const int frames = test::repetitions(20, 5);
+  const std::string rec = dir.file("tum.mcap");
+  const test::ProcessResult serve =
+      test::runCommand(program(FOVEAD_PATH) + " serve --camera tum:" + tumPath() + ",loop=off,realtime=on --frames " +
+                       std::to_string(frames) + " --record " + rec + " --record-frames");
+  ASSERT_EQ(serve.exit_code, 0) << serve.output;
+  // Every frame went into the file (a drop would make the two runs differ).
+  EXPECT_NE(serve.output.find("ring full 0, too big 0, disk 0"), std::string::npos) << serve.output;
+  const std::string n = " --frames " + std::to_string(frames);
+  const test::ProcessResult tum = test::runCommand(program(FOVEAD_PATH) + " run --camera tum:" + tumPath() +
+                                                   ",loop=off" + n + " --save-ply " + dir.file("tum.ply"));
+  const test::ProcessResult replay = test::runCommand(program(FOVEAD_PATH) + " run --camera mcap:" + rec +
+                                                      ",loop=off" + n + " --save-ply " + dir.file("mcap.ply"));
+  ASSERT_EQ(tum.exit_code, 0) << tum.output;
+  ASSERT_EQ(replay.exit_code, 0) << replay.output;
+  const std::vector<std::string> a = frameLines(tum.output), b = frameLines(replay.output);
+  ASSERT_EQ(a.size(), static_cast<std::size_t>(frames)) << tum.output;
+  EXPECT_EQ(a, b) << replay.output;
+  const std::string ply_a = readFile(dir.file("tum.ply")), ply_b = readFile(dir.file("mcap.ply"));
+  EXPECT_GT(ply_a.size(), 1000u);
+  EXPECT_TRUE(ply_a == ply_b) << "the last frame's PLY differs";
+}
+
+class StreamRecording : public ::testing::Test {
+ protected:
+  // The service streaming the mock room to an operator, both recording.
+  void SetUp() override {
+    test::BackgroundProcess service(program(FOVEAD_PATH) +
+                                    " serve --camera mock:living-room,size=320x240,fps=15 --listen 127.0.0.1:0 "
+                                    "--insecure --record " +
+                                    dir_.file("service.mcap"));
+    ASSERT_TRUE(service.waitFor("listening on ", 10) && service.waitFor(" (", 2)) << service.output();
+    std::smatch m;
+    const std::string out = service.output();
+    ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
+    test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
+                               " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --quiet --duration 120 --record " +
+                               dir_.file("operator.mcap") + " --frame-log " + dir_.file("live.csv"));
+    ASSERT_TRUE(op.waitFor("connected to", 10)) << op.output();
+    std::this_thread::sleep_for(std::chrono::duration<double>(test::timeScale() > 1 ? 8.0 : 3.0));
+    ASSERT_EQ(service.stop(SIGTERM, 5), 0) << service.output();
+    ASSERT_EQ(op.stop(0, 5), 0) << op.output();  // ends on the service's Bye
+    EXPECT_NE(op.output().find("recording " + dir_.file("operator.mcap")), std::string::npos) << op.output();
+    live_ = frameFigures(dir_.file("live.csv"));
+    ASSERT_GE(live_.size(), 3u) << op.output();
+  }
+
+  test::ProcessResult replay(const std::string& file, const std::string& log) {
+    return test::runCommand(program(FOVEA_OPERATOR_PATH) + " --replay " + file + " --speed 0 --quiet --frame-log " + log);
+  }
+
+  test::TempDir dir_;
+  std::map<long, std::string> live_;
+};
+
+TEST_F(StreamRecording, TheOperatorsRecordingReplaysToTheLiveFiguresFrameForFrame) {
+  const test::ProcessResult r = replay(dir_.file("operator.mcap"), dir_.file("replay.csv"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(frameFigures(dir_.file("replay.csv")), live_) << r.output;
+  EXPECT_EQ(r.output.find("stopped at byte"), std::string::npos) << r.output;
+}
+
+TEST_F(StreamRecording, TheServicesRecordingHoldsEveryFrameTheOperatorGotWhole) {
+  const test::ProcessResult r = replay(dir_.file("service.mcap"), dir_.file("replay.csv"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::map<long, std::string> replayed = frameFigures(dir_.file("replay.csv"));
+  std::size_t whole = 0;
+  for (const auto& [frame, figures] : live_) {
+    std::vector<std::string> f;
+    std::stringstream cells(figures);
+    for (std::string c; std::getline(cells, c, ',');) f.push_back(c);
+    if (f[1] != f[2]) continue;  // the live operator lost part of it
+    ++whole;
+    ASSERT_TRUE(replayed.count(frame)) << "frame " << frame << "\n" << r.output;
+    EXPECT_EQ(replayed.at(frame), figures) << "frame " << frame;
+  }
+  EXPECT_GE(whole, 3u);
+}
+
+TEST_F(StreamRecording, ARecordingCutShortReplaysUpToWhereItStops) {
+  const std::string cut = dir_.file("cut.mcap");
+  std::filesystem::copy_file(dir_.file("operator.mcap"), cut);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) * 6 / 10);
+  const test::ProcessResult r = replay(cut, dir_.file("cut.csv"));
+  EXPECT_NE(r.output.find("stopped at byte"), std::string::npos) << r.output;
+  const std::map<long, std::string> replayed = frameFigures(dir_.file("cut.csv"));
+  EXPECT_LT(replayed.size(), live_.size()) << r.output;
+  // What it played is what was live.
+  for (const auto& [frame, figures] : replayed) {
+    if (std::next(replayed.find(frame)) == replayed.end()) break;  // the last may be cut
+    EXPECT_EQ(figures, live_.at(frame)) << "frame " << frame;
+  }
+  // Not a recording at all: a clear error, not a crash.
+  std::ofstream(dir_.file("junk.mcap")) << "junk, not a recording";
+  const test::ProcessResult junk = replay(dir_.file("junk.mcap"), dir_.file("junk.csv"));
+  EXPECT_NE(junk.exit_code, 0);
+  EXPECT_NE(junk.output.find("wrong magic"), std::string::npos) << junk.output;
+  EXPECT_EQ(test::runCommand(program(FOVEA_OPERATOR_PATH) + " --replay " + cut + " --connect 127.0.0.1:1").exit_code, 2);
+}
+
+}  // namespace
+}  // namespace fovea
