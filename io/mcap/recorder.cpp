@@ -76,6 +76,12 @@ Result<uint16_t> Recorder::addChannel(std::string_view topic, std::string_view m
   return writer_->addChannel(topic, message_encoding, schema_id, metadata);
 }
 
+Status Recorder::setTranscoder(uint16_t channel_id, Transcoder transcoder) {
+  if (started_) return Status(ErrorCode::kInvalidArgument, "recorder: transcoders are set before start()");
+  transcoders_.emplace_back(channel_id, std::move(transcoder));
+  return Status::ok();
+}
+
 RecorderProducer* Recorder::addProducer(std::size_t slots, std::size_t slot_bytes) {
   if (started_) return nullptr;
   producers_.emplace_back(new RecorderProducer(*this, slots ? slots : config_.slots,
@@ -116,12 +122,18 @@ bool Recorder::drainOnce() {
       if (failed_.load(std::memory_order_relaxed)) {
         dropped_disk_writer_.fetch_add(1, std::memory_order_relaxed);
       } else {
-        const std::span<const uint8_t> bytes(producer->arena_.get() + static_cast<std::size_t>(slot) *
-                                                                         producer->slot_bytes_,
-                                             meta.size);
-        const Status s = writer_->write(meta.channel, meta.log_time_ns, meta.log_time_ns, bytes);
+        std::span<const uint8_t> bytes(producer->arena_.get() + static_cast<std::size_t>(slot) * producer->slot_bytes_,
+                                       meta.size);
+        for (const auto& [channel, transcode] : transcoders_) {
+          if (channel == meta.channel) bytes = transcode(bytes, meta.log_time_ns);
+        }
+        const Status s = bytes.empty() && meta.size > 0
+                             ? Status(ErrorCode::kInvalidInput, "transcoded to nothing")
+                             : writer_->write(meta.channel, meta.log_time_ns, meta.log_time_ns, bytes);
         if (s) {
           written_.fetch_add(1, std::memory_order_relaxed);
+        } else if (s.code() == ErrorCode::kInvalidInput) {
+          dropped_transcode_.fetch_add(1, std::memory_order_relaxed);
         } else if (s.code() == ErrorCode::kInvalidArgument) {
           dropped_disk_writer_.fetch_add(1, std::memory_order_relaxed);  // an unknown channel: a caller's bug
         } else {
@@ -184,6 +196,7 @@ RecorderCounters Recorder::counters() const {
   c.messages_written = written_.load(std::memory_order_relaxed);
   c.bytes_written = bytes_written_.load(std::memory_order_relaxed);
   c.dropped_disk = dropped_disk_writer_.load(std::memory_order_relaxed);
+  c.dropped_transcode = dropped_transcode_.load(std::memory_order_relaxed);
   for (const auto& p : producers_) {
     const RingCounters rc = p->ring_.counters();
     c.dropped_ring_full += rc.dropped + rc.acquire_failures;

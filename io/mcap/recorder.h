@@ -47,8 +47,11 @@ struct RecorderCounters {
   uint64_t dropped_too_big = 0;
   uint64_t dropped_disk = 0;
   uint64_t dropped_closed = 0;
+  uint64_t dropped_transcode = 0;  // a channel's transcoder made nothing of a message
   double mb_per_minute = 0;  // file bytes (1e6) per minute since start()
-  uint64_t dropped() const { return dropped_ring_full + dropped_too_big + dropped_disk + dropped_closed; }
+  uint64_t dropped() const {
+    return dropped_ring_full + dropped_too_big + dropped_disk + dropped_closed + dropped_transcode;
+  }
 };
 
 class Recorder;
@@ -92,6 +95,12 @@ class RecorderProducer {
 class Recorder {
  public:
   using LogFn = std::function<void(std::string_view line)>;
+  // Turns what a producer recorded on a channel into the message written, on
+  // the writer thread: a hot path hands over its raw bytes (a cloud's arrays, a
+  // pose) and the costly encoding (Protobuf for Foxglove) happens off it. The
+  // returned bytes stay valid until the next call; empty: dropped and counted
+  // (dropped_transcode).
+  using Transcoder = std::function<std::span<const uint8_t>(std::span<const uint8_t> raw, uint64_t log_time_ns)>;
 
   // Creates the file (an error when it cannot: no such directory, no
   // permission). `log` gets the one line about a failing disk, from the writer
@@ -103,6 +112,8 @@ class Recorder {
 
   // Before start(): schemas, channels and producers.
   Result<uint16_t> addSchema(std::string_view name, std::string_view encoding, std::span<const uint8_t> data);
+  // Before start(): what the writer thread makes of a channel's messages.
+  Status setTranscoder(uint16_t channel_id, Transcoder transcoder);
   Result<uint16_t> addChannel(std::string_view topic, std::string_view message_encoding, uint16_t schema_id,
                               std::span<const std::pair<std::string, std::string>> metadata = {});
   // A producer with its own ring of `slots` slots of `slot_bytes` (0: the
@@ -132,6 +143,8 @@ class Recorder {
   LogFn log_;
   std::unique_ptr<Writer> writer_;
   std::vector<std::unique_ptr<RecorderProducer>> producers_;
+  std::vector<std::pair<uint16_t, Transcoder>> transcoders_;
+  std::atomic<uint64_t> dropped_transcode_{0};
   std::thread thread_;
   bool started_ = false;
   bool closed_ = false;

@@ -215,5 +215,53 @@ TEST(McapRecorder, OpenFailsClearly) {
   EXPECT_NE(missing.status().message().find("No such file"), std::string::npos) << missing.status().message();
 }
 
+// A channel's transcoder runs on the writer thread: what it returns is written,
+// in parts gathered by record(); an empty result is dropped and counted.
+TEST(McapRecorder, TranscodersMakeTheMessagesWrittenOffTheHotPath) {
+  const std::string path = tempPath("transcode.mcap");
+  Log log;
+  RecorderConfig config;
+  config.slots = 64;
+  config.slot_bytes = 64;
+  auto recorder = Recorder::open(path, config, log.fn());
+  ASSERT_TRUE(recorder.isOk());
+  const uint16_t doubled = (*recorder)->addChannel("/doubled", "raw", 0).value();
+  const uint16_t plain = (*recorder)->addChannel("/plain", "raw", 0).value();
+  std::vector<uint8_t> out;  // the writer thread's buffer
+  std::atomic<int> calls{0};
+  ASSERT_TRUE((*recorder)->setTranscoder(doubled, [&](std::span<const uint8_t> raw, uint64_t t) {
+    ++calls;
+    out.clear();
+    if (raw.size() == 1 && raw[0] == 0xFF) return std::span<const uint8_t>();  // nothing to make of it
+    for (uint8_t b : raw) out.insert(out.end(), {b, b});
+    out.push_back(static_cast<uint8_t>(t));
+    return std::span<const uint8_t>(out);
+  }));
+  RecorderProducer* producer = (*recorder)->addProducer();
+  ASSERT_TRUE((*recorder)->start());
+  EXPECT_FALSE((*recorder)->setTranscoder(plain, [](std::span<const uint8_t> raw, uint64_t) { return raw; }));
+  const uint8_t a[] = {1, 2}, b[] = {3}, bad[] = {0xFF};
+  const std::span<const uint8_t> parts[] = {a, b};
+  ASSERT_TRUE(producer->record(doubled, 7, parts));
+  ASSERT_TRUE(producer->record(plain, 8, parts));
+  ASSERT_TRUE(producer->record(doubled, 9, bad));
+  ASSERT_TRUE((*recorder)->close());
+  const RecorderCounters c = (*recorder)->counters();
+  EXPECT_EQ(c.messages_written, 2u);
+  EXPECT_EQ(c.dropped_transcode, 1u);
+  EXPECT_EQ(calls.load(), 2);
+  auto bytes = readFile(path);
+  ASSERT_TRUE(bytes.isOk());
+  Reader reader(*bytes);
+  std::vector<std::vector<uint8_t>> got;
+  for (Reader::Item item = reader.next(); item != Reader::Item::kEnd; item = reader.next()) {
+    if (item == Reader::Item::kMessage) got.emplace_back(reader.message().data.begin(), reader.message().data.end());
+  }
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0], (std::vector<uint8_t>{1, 1, 2, 2, 3, 3, 7}));
+  EXPECT_EQ(got[1], (std::vector<uint8_t>{1, 2, 3}));
+  std::remove(path.c_str());
+}
+
 }  // namespace
 }  // namespace fovea::mcap
