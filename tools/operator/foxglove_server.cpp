@@ -22,7 +22,7 @@ constexpr uint8_t kOpMessageData = 0x01;
 constexpr std::size_t kFrameHeader = 1 + 4 + 8;  // opcode, subscription id, log time
 constexpr std::size_t kMaxTextsQueued = 32;
 // foxglove.websocket.v1 status levels.
-constexpr int kStatusWarning = 1, kStatusError = 2;
+constexpr int kStatusError = 2;  // 0 info, 1 warning, 2 error
 
 void putU32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
@@ -198,7 +198,7 @@ void FoxgloveServer::queueStatus(Client& client, int level, const std::string& m
     ++counters_.statuses_dropped;
     return;
   }
-  client.texts.push_back(nlohmann::json{{"op", "status"}, {"level", level}, {"message", message}}.dump());
+  client.texts.push_back(foxgloveStatusJson(level, message));
   wake_.notify_all();
 }
 
@@ -254,70 +254,53 @@ void FoxgloveServer::sendLoop(Client& client) {
 
 void FoxgloveServer::handleText(Client& client, std::string_view text) {
   // mu_ held by the caller.
-  const nlohmann::json m = nlohmann::json::parse(text, nullptr, false);
   auto refuse = [&](const std::string& why) {
     ++counters_.bad_requests;
     queueStatus(client, kStatusError, why);
   };
-  if (m.is_discarded() || !m.is_object() || !m.contains("op") || !m["op"].is_string()) {
-    refuse("not a foxglove.websocket.v1 message (a JSON object with an \"op\")");
+  Result<FoxgloveRequest> parsed = parseFoxgloveRequest(text);
+  if (!parsed) {
+    refuse(parsed.status().code() == ErrorCode::kParseError && text.size() <= kMaxClientMessageBytes
+               ? "not a foxglove.websocket.v1 message (a JSON object with an \"op\")"
+               : parsed.status().message());
     return;
   }
-  const std::string op = m["op"].get<std::string>();
-  if (op == "subscribe") {
-    if (!m.contains("subscriptions") || !m["subscriptions"].is_array()) {
-      refuse("subscribe: no \"subscriptions\" array");
-      return;
+  const FoxgloveRequest& r = parsed.value();
+  for (const std::string& why : r.refused) refuse(why);
+  for (const FoxgloveSubscription& s : r.subscriptions) {
+    const int index = channelIndex(s.channel_id);
+    if (index < 0) {
+      refuse("subscribe: no channel " + std::to_string(s.channel_id));
+      continue;
     }
-    for (const nlohmann::json& s : m["subscriptions"]) {
-      if (!s.is_object() || !s.contains("id") || !s.contains("channelId") || !s["id"].is_number_unsigned() ||
-          !s["channelId"].is_number_unsigned() || s["id"].get<uint64_t>() > 0xffffffffull) {
-        refuse("subscribe: a subscription is not {\"id\": u32, \"channelId\": u32}");
-        continue;
-      }
-      const uint64_t channel_id = s["channelId"].get<uint64_t>();
-      const auto id = static_cast<uint32_t>(s["id"].get<uint64_t>());
-      const int index = channel_id > 0xffffffffull ? -1 : channelIndex(static_cast<uint32_t>(channel_id));
-      if (index < 0) {
-        refuse("subscribe: no channel " + std::to_string(channel_id));
-        continue;
-      }
-      const bool id_used = std::any_of(client.subs.begin(), client.subs.end(),
-                                       [&](const Subscription& u) { return u.active && u.id == id; });
-      Subscription& sub = client.subs[static_cast<std::size_t>(index)];
-      if (id_used || sub.active) {
-        refuse("subscribe: subscription id " + std::to_string(id) + " is in use, or channel " +
-               std::to_string(channel_id) + " already subscribed");
-        continue;
-      }
-      sub.active = true;
-      sub.id = id;
-      // Starts at the channel's newest message: what was published before is not its drop.
-      sub.sent_seq = 0;
-      ++channels_[static_cast<std::size_t>(index)].subscribers;
-      ++counters_.subscriptions;
+    const bool id_used = std::any_of(client.subs.begin(), client.subs.end(),
+                                     [&](const Subscription& u) { return u.active && u.id == s.id; });
+    Subscription& sub = client.subs[static_cast<std::size_t>(index)];
+    if (id_used || sub.active) {
+      refuse("subscribe: subscription id " + std::to_string(s.id) + " is in use, or channel " +
+             std::to_string(s.channel_id) + " already subscribed");
+      continue;
     }
-    wake_.notify_all();
-  } else if (op == "unsubscribe") {
-    if (!m.contains("subscriptionIds") || !m["subscriptionIds"].is_array()) {
-      refuse("unsubscribe: no \"subscriptionIds\" array");
-      return;
-    }
-    for (const nlohmann::json& id : m["subscriptionIds"]) {
-      bool found = false;
-      for (std::size_t i = 0; i < client.subs.size(); ++i) {
-        Subscription& sub = client.subs[i];
-        if (sub.active && id.is_number_unsigned() && id.get<uint64_t>() == sub.id) {
-          sub.active = false;
-          --channels_[i].subscribers;
-          found = true;
-        }
-      }
-      if (!found) refuse("unsubscribe: no subscription " + id.dump());
-    }
-  } else {
-    refuse("\"" + op.substr(0, 64) + "\": not supported by this server (it only streams; capabilities: none)");
+    sub.active = true;
+    sub.id = s.id;
+    // Starts at the channel's newest message: what was published before is not its drop.
+    sub.sent_seq = 0;
+    ++channels_[static_cast<std::size_t>(index)].subscribers;
+    ++counters_.subscriptions;
   }
+  for (const uint32_t id : r.subscription_ids) {
+    bool found = false;
+    for (std::size_t i = 0; i < client.subs.size(); ++i) {
+      Subscription& sub = client.subs[i];
+      if (sub.active && sub.id == id) {
+        sub.active = false;
+        --channels_[i].subscribers;
+        found = true;
+      }
+    }
+    if (!found) refuse("unsubscribe: no subscription " + std::to_string(id));
+  }
+  wake_.notify_all();
 }
 
 int FoxgloveServer::onHttp(mg_connection* conn, void*) {
@@ -381,13 +364,6 @@ int FoxgloveServer::onWsData(mg_connection* conn, int bits, char* data, std::siz
                       opcode == MG_WEBSOCKET_OPCODE_BINARY
                           ? "binary messages refused: this server advertises no client publishing"
                           : "fragmented messages are not supported");
-    return 1;
-  }
-  if (len > kMaxClientMessageBytes) {
-    ++self->counters_.bad_requests;
-    self->queueStatus(*client, kStatusError,
-                      "message of " + std::to_string(len) + " bytes refused (at most " +
-                          std::to_string(kMaxClientMessageBytes) + ")");
     return 1;
   }
   self->handleText(*client, std::string_view(data, len));

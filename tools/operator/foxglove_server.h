@@ -35,6 +35,7 @@
 
 #include "core/result.h"
 #include "io/foxglove/foxglove.h"
+#include "tools/operator/foxglove_messages.h"
 
 struct mg_context;
 struct mg_connection;
@@ -70,8 +71,6 @@ struct FoxgloveServerCounters {
 
 // The subprotocol clients must ask for.
 inline constexpr const char* kFoxgloveSubprotocol = "foxglove.websocket.v1";
-// The largest text message a client may send (a subscribe of every channel is far smaller).
-inline constexpr std::size_t kMaxClientMessageBytes = 64 * 1024;
 
 // The base64 of bytes (RFC 4648, with padding), for the advertised schemas.
 std::string base64(std::span<const uint8_t> bytes);
