@@ -92,7 +92,7 @@ let op;
 try {
   const address = (await robot.waitFor(/listening on (\S+) \(/, 10))[1];
   op = start(operator, ["--connect", address, "--key-file", key, "--gaze", "fixed:3,0.35,1.55>3,2.25,1.35",
-    "--foxglove", "127.0.0.1:0", "--quiet"]);
+    "--foxglove", "127.0.0.1:0", "--foxglove-clients", "2", "--quiet"]);
   const url = (await op.waitFor(/foxglove: open (ws:\/\/127\.0\.0\.1:\d+)/, 10))[1];
 
   // A client that does not ask for foxglove.websocket.v1 is refused.
@@ -155,6 +155,15 @@ try {
   const cloudId = channels.find((c) => c.topic === "/fovea/cloud").id;
   stalled.send(JSON.stringify({ op: "subscribe", subscriptions: [{ id: 1, channelId: cloudId }] }));
   stalled._socket.pause();
+
+  // A third client is over --foxglove-clients 2: closed with 1008 and a reason.
+  const third = await new Promise((resolve) => {
+    const t = new WebSocket(url, ["foxglove.websocket.v1"]);
+    t.on("close", (code, reason) => resolve({ code, reason: reason.toString() }));
+    t.on("error", () => {});
+  });
+  check(third.code === 1008 && third.reason.includes("too many"), `a third client is refused (${third.code} ${third.reason})`);
+  say(`third client: closed ${third.code} "${third.reason}"`);
 
   const subs = new Map();
   for (const c of channels) subs.set(client.subscribe(c.id), c.id);
@@ -224,9 +233,13 @@ try {
   const summary = op.out.match(/foxglove: (\d+) clients served \((\d+) refused\).*?(\d+) bad requests/);
   check(summary !== null, "the operator's summary has its foxglove line");
   if (summary) {
-    check(Number(summary[1]) >= 2 && Number(summary[2]) >= 1 && Number(summary[3]) >= 6, `summary: ${summary[0]}`);
+    check(Number(summary[1]) === 2 && Number(summary[2]) === 2 && Number(summary[3]) >= 6, `summary: ${summary[0]}`);
     say(`operator: ${op.out.match(/ {2}foxglove: .*/)[0].trim()}`);
   }
+  // A bad --foxglove is the user's error (exit 2), said as such.
+  const bad = start(operator, ["--connect", address, "--key-file", key, "--gaze", "fixed:0,0,0>0,0,1", "--foxglove", "1.2.3:99"]);
+  const badExit = await bad.exited;
+  check(badExit.code === 2 && /--foxglove: '1\.2\.3' is not an IPv4 address/.test(bad.out), `bad --foxglove: ${badExit.code} ${bad.out.trim()}`);
 } catch (e) {
   failures++;
   console.error(`FAIL: ${e.stack ?? e}`);

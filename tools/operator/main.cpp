@@ -43,7 +43,8 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) (--gaze SCRIPT | --view [ADDR:]PORT)\n"
-    "                      [--view [ADDR:]PORT [--view-tabs N]] [--foxglove [ADDR:]PORT] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
+    "                      [--view [ADDR:]PORT [--view-tabs N]] [--foxglove [ADDR:]PORT [--foxglove-clients N]]\n"
+    "                      [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
     "                      [--save-ply DIR] [--save-held FRAME_ID:FILE.ply]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
     "                      [--map-points N] [--map-bricks N]\n"
@@ -67,8 +68,9 @@ const char* kHelp =
     "  --foxglove [ADDR:]PORT  serve the Foxglove WebSocket protocol (foxglove.websocket.v1) on ADDR (default\n"
     "                        127.0.0.1) for the Foxglove app or Lichtblick (docs/foxglove.md): /fovea/cloud\n"
     "                        (foxglove.PointCloud), /fovea/head (foxglove.FrameTransform), /fovea/gaze\n"
-    "                        (foxglove.SceneUpdate), /fovea/log (foxglove.Log); up to 8 clients, each sent\n"
-    "                        the newest message of a channel; the operator reconnects to the robot until stopped\n"
+    "                        (foxglove.SceneUpdate), /fovea/log (foxglove.Log); each client is sent the\n"
+    "                        newest message of a channel; the operator reconnects to the robot until stopped\n"
+    "  --foxglove-clients N  Foxglove clients served at once (default 8, 1 .. 64)\n"
     "  --duration SECONDS    stop after this long (default: until SIGINT/SIGTERM or the robot's bye)\n"
     "  --summary FILE.json   write the whole run's figures as JSON at the end\n"
     "  --frame-log FILE      one CSV line per frame decoded: frame id, capture stamp (robot clock),\n"
@@ -125,6 +127,7 @@ struct Options {
   std::string view;  // --view [ADDR:]PORT; empty: no viewer
   long view_tabs = 4;
   std::string foxglove;  // --foxglove [ADDR:]PORT; empty: no Foxglove server
+  long foxglove_clients = 8;
 };
 
 Result<double> number(const std::string& flag, const char* text) {
@@ -179,6 +182,13 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.view = value;
     } else if (flag == "--foxglove") {
       o.foxglove = value;
+    } else if (flag == "--foxglove-clients") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      if (!(v.value() >= 1 && v.value() <= 64 && v.value() == std::floor(v.value()))) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--foxglove-clients: must be a whole number within 1 .. 64");
+      }
+      o.foxglove_clients = static_cast<long>(v.value());
     } else if (flag == "--view-tabs") {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
@@ -401,6 +411,7 @@ Exit startFoxglove(const Options& opt, Station& station) {
   if (opt.foxglove.empty()) return std::nullopt;
   tools::FoxgloveServerConfig fc;
   fc.listen = opt.foxglove;
+  fc.max_clients = static_cast<std::size_t>(opt.foxglove_clients);
   fc.name = opt.name == "fovea-operator" ? opt.name : "fovea-operator " + opt.name;
   // A cloud's message: 16 bytes a point and its header (frame id, pose, fields).
   const std::size_t cloud_bytes = static_cast<std::size_t>(opt.max_points) * foxglove::kPointStride + 1024;
