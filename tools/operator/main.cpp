@@ -31,6 +31,8 @@
 #include "net/operator_link.h"
 #include "net/stream_channels.h"
 #include "net/udp_socket.h"
+#include "io/foxglove/foxglove.h"
+#include "tools/operator/foxglove_server.h"
 #include "tools/operator/gaze_script.h"
 #include "tools/operator/held_cloud.h"
 #include "tools/operator/map_holder.h"
@@ -46,12 +48,13 @@ constexpr int kExitOk = 0, kExitFailure = 1, kExitUsage = 2;
 
 const char* kHelp =
     "usage: fovea-operator --connect HOST:PORT (--key-file FILE | --insecure) (--gaze SCRIPT | --view [ADDR:]PORT)\n"
-    "       fovea-operator --replay FILE.mcap [--speed X] [--view [ADDR:]PORT] [...]\n"
-    "                      [--view [ADDR:]PORT [--view-tabs N]] [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
+    "                      [--view [ADDR:]PORT [--view-tabs N]] [--foxglove [ADDR:]PORT [--foxglove-clients N]]\n"
+    "                      [--duration SECONDS] [--summary FILE.json] [--frame-log FILE]\n"
     "                      [--save-ply DIR] [--save-held FRAME_ID:FILE.ply]\n"
     "                      [--name NAME] [--budget MBPS] [--mtu BYTES] [--gaze-hz HZ] [--max-points N]\n"
     "                      [--map-points N] [--map-bricks N]\n"
     "                      [--clock auto|shared|estimated] [--record FILE.mcap] [--quiet]\n"
+    "       fovea-operator --replay FILE.mcap [--speed X] [--view [ADDR:]PORT] [--foxglove [ADDR:]PORT] [options above]\n"
     "\n"
     "Connects to fovead run --listen, sends gaze samples from a script, receives and\n"
     "decodes the foveated frames, and prints once a second: frames per second, MB/s\n"
@@ -68,6 +71,12 @@ const char* kHelp =
     "                        every interface) and stream every decoded frame to it; the page's cursor\n"
     "                        is the gaze; the operator reconnects to the robot until stopped\n"
     "  --view-tabs N         viewer tabs served at once (default 4, 1 .. 64)\n"
+    "  --foxglove [ADDR:]PORT  serve the Foxglove WebSocket protocol (foxglove.websocket.v1) on ADDR (default\n"
+    "                        127.0.0.1) for the Foxglove app or Lichtblick (docs/foxglove.md): /fovea/cloud\n"
+    "                        (foxglove.PointCloud), /fovea/head (foxglove.FrameTransform), /fovea/gaze\n"
+    "                        (foxglove.SceneUpdate), /fovea/log (foxglove.Log); each client is sent the\n"
+    "                        newest message of a channel; the operator reconnects to the robot until stopped\n"
+    "  --foxglove-clients N  Foxglove clients served at once (default 8, 1 .. 64)\n"
     "  --duration SECONDS    stop after this long (default: until SIGINT/SIGTERM or the robot's bye)\n"
     "  --summary FILE.json   write the whole run's figures as JSON at the end\n"
     "  --frame-log FILE      one CSV line per frame decoded: frame id, capture stamp (robot clock),\n"
@@ -133,6 +142,8 @@ struct Options {
   std::string replay_path;  // --replay FILE.mcap: no robot
   double speed = 1.0;       // --replay's pace (0: as fast as it reads)
   long view_tabs = 4;
+  std::string foxglove;  // --foxglove [ADDR:]PORT; empty: no Foxglove server
+  long foxglove_clients = 8;
 };
 
 Result<double> number(const std::string& flag, const char* text) {
@@ -194,6 +205,15 @@ Result<Options> parseOptions(int argc, char** argv) {
       o.name = value;
     } else if (flag == "--view") {
       o.view = value;
+    } else if (flag == "--foxglove") {
+      o.foxglove = value;
+    } else if (flag == "--foxglove-clients") {
+      Result<double> v = number(flag, value);
+      if (!v) return v.status();
+      if (!(v.value() >= 1 && v.value() <= 64 && v.value() == std::floor(v.value()))) {
+        return Result<Options>(ErrorCode::kInvalidArgument, "--foxglove-clients: must be a whole number within 1 .. 64");
+      }
+      o.foxglove_clients = static_cast<long>(v.value());
     } else if (flag == "--view-tabs") {
       Result<double> v = number(flag, value);
       if (!v) return v.status();
@@ -351,12 +371,17 @@ struct Station {
   std::optional<net::FrameAssembler> assembler;
   std::optional<tools::MapHolder> map;
   std::unique_ptr<tools::ViewServer> view;
+  std::unique_ptr<tools::FoxgloveServer> foxglove;
   std::ofstream frame_log;
   // --record: the file, its one producer (the receive loop) and channels.
   std::unique_ptr<mcap::Recorder> recorder;
   mcap::RecorderProducer* record_producer = nullptr;
   net::StreamChannels record_channels;
 };
+
+// The Foxglove channels (--foxglove).
+constexpr uint32_t kFoxCloud = 1, kFoxHead = 2, kFoxGaze = 3, kFoxLog = 4;
+constexpr const char* kFoxWorld = "world";
 
 Exit loadGazeScript(const Options& opt, Station& station) {
   if (opt.gaze.empty()) return std::nullopt;
@@ -417,6 +442,30 @@ Exit startViewer(const Options& opt, Station& station) {
   return std::nullopt;
 }
 
+Exit startFoxglove(const Options& opt, Station& station) {
+  if (opt.foxglove.empty()) return std::nullopt;
+  tools::FoxgloveServerConfig fc;
+  fc.listen = opt.foxglove;
+  fc.max_clients = static_cast<std::size_t>(opt.foxglove_clients);
+  fc.name = opt.name == "fovea-operator" ? opt.name : "fovea-operator " + opt.name;
+  // A cloud's message: 16 bytes a point and its header (frame id, pose, fields).
+  const std::size_t cloud_bytes = static_cast<std::size_t>(opt.max_points) * foxglove::kPointStride + 1024;
+  fc.channels = {{kFoxCloud, "/fovea/cloud", foxglove::pointCloudSchema(), cloud_bytes},
+                 {kFoxHead, "/fovea/head", foxglove::frameTransformSchema(), 1024},
+                 {kFoxGaze, "/fovea/gaze", foxglove::sceneUpdateSchema(), 1024},
+                 {kFoxLog, "/fovea/log", foxglove::logSchema(), 4096}};
+  Result<std::unique_ptr<tools::FoxgloveServer>> started = tools::FoxgloveServer::start(fc);
+  if (!started) return startFailure(started.status());
+  station.foxglove = std::move(started.value());
+  if (station.foxglove->url().rfind("ws://127.", 0) != 0 || opt.foxglove.rfind("0.0.0.0", 0) == 0) {
+    std::fprintf(stderr, "fovea-operator: warning: the Foxglove server listens on %s: whoever reaches it sees the stream\n",
+                 opt.foxglove.c_str());
+  }
+  std::printf("foxglove: open %s\n", station.foxglove->url().c_str());
+  std::fflush(stdout);
+  return std::nullopt;
+}
+
 Exit openFrameLog(const Options& opt, std::ofstream& frame_log) {
   if (opt.frame_log_path.empty()) return std::nullopt;
   frame_log.open(opt.frame_log_path);
@@ -465,6 +514,7 @@ Exit setUp(const Options& opt, Station& station) {
   if (!map) return startFailure(map.status());
   station.map.emplace(std::move(map.value()));
   if (Exit e = startViewer(opt, station)) return e;
+  if (Exit e = startFoxglove(opt, station)) return e;
   if (Exit e = openRecording(opt, station)) return e;
   return openFrameLog(opt, station.frame_log);
 }
@@ -495,6 +545,8 @@ class OperatorRun {
         assembler_(*station.assembler),
         map_(*station.map),
         view_(station.view.get()),
+        fox_(station.foxglove.get()),
+        wall_offset_ns_(wallClockOffsetNs()),
         splat_sizer_(net::CodecConfig{}.periphery_step_ratio),
         start_ns_(monotonicNs()),
         end_ns_(opt.duration_s > 0 ? start_ns_ + static_cast<int64_t>(opt.duration_s * 1e9) : INT64_MAX),
@@ -522,6 +574,19 @@ class OperatorRun {
   void handleReady(Session& s);
   void sendBrickAcks(Session& s, int64_t now);
   void publishView(const net::AssembledFrame& f);
+  // --foxglove: the frame's cloud, the gaze sent (ray and head), a log line.
+  void publishFoxgloveCloud(const net::AssembledFrame& f, const Session& s);
+  void publishFoxgloveGaze(const net::GazeSample& g, int64_t now);
+  void foxLog(foxglove::LogLevel level, const std::string& line);
+  uint64_t wallNs(int64_t monotonic_ns) const { return static_cast<uint64_t>(monotonic_ns + wall_offset_ns_); }
+  static int64_t wallClockOffsetNs() {
+    timespec t{};
+    clock_gettime(CLOCK_REALTIME, &t);
+    const int64_t wall = static_cast<int64_t>(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
+    return wall - monotonicNs();
+  }
+  // The robot keeps being tried while a viewer or a Foxglove client may watch.
+  bool persistent() const { return view_ != nullptr || fox_ != nullptr; }
   void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs, int64_t fovea_decoded_ns,
                 const Session& s);
   // When the frame's fovea (region 0) was decoded: the arrival of its last fovea
@@ -554,6 +619,12 @@ class OperatorRun {
   tools::MapTotals map_logged_before_{};  // at the last --frame-log line
   uint64_t view_map_points_left_out_ = 0, view_map_frames_cut_ = 0;
   tools::ViewServer* view_;  // null without --view
+  tools::FoxgloveServer* fox_;  // null without --foxglove
+  const int64_t wall_offset_ns_;  // CLOCK_REALTIME - CLOCK_MONOTONIC, at start (Foxglove's times are Unix time)
+  foxglove::PointCloudEncoder fox_cloud_;
+  foxglove::FrameTransformEncoder fox_head_;
+  foxglove::GazeRayEncoder fox_gaze_;
+  foxglove::LogEncoder fox_log_;
   tools::OperatorStats stats_;
   tools::SplatSizer splat_sizer_;
   const int64_t start_ns_;
@@ -588,9 +659,10 @@ Exit OperatorRun::runSessions() {
       continue;
     }
     runSession(*connected.value());
-    if (!view_ || g_stop != 0 || monotonicNs() >= end_ns_) break;
+    if (!persistent() || g_stop != 0 || monotonicNs() >= end_ns_) break;
     const std::string gone = robot_said_bye_ ? "the robot ended the session" : "the session ended (the robot went silent)";
     std::fprintf(stderr, "fovea-operator: %s; reconnecting\n", gone.c_str());
+    foxLog(foxglove::LogLevel::kWarning, gone + "; reconnecting");
     publishState(tools::LinkState::kRobotGone, gone);
     if (!pause(1000)) break;
   }
@@ -676,13 +748,14 @@ Exit OperatorRun::runReplay() {
 // Without the viewer a failed hello ends the run; with it, only bad arguments do.
 Exit OperatorRun::connectFailed(const Status& status) {
   const std::string& why = status.message();
-  if (!view_) return startFailure(status);
+  if (!persistent()) return startFailure(status);
   if (status.code() == ErrorCode::kInvalidArgument) {
     std::fprintf(stderr, "fovea-operator: %s\n", why.c_str());
     return kExitUsage;
   }
   const bool refused = why.find(" refused (") != std::string::npos;
   std::fprintf(stderr, "fovea-operator: %s; trying again in 1 s\n", why.c_str());
+  foxLog(foxglove::LogLevel::kWarning, why + "; trying again in 1 s");
   publishState(refused ? tools::LinkState::kRefused : tools::LinkState::kConnecting, why);
   return std::nullopt;
 }
@@ -719,6 +792,7 @@ Session OperatorRun::beginSession(net::OperatorLink& link) {
               link.receiveBufferBytes() / 1024,
               s.shared_clock ? "one clock" : "the robot's clock estimated from its status and round trip");
   std::fflush(stdout);
+  foxLog(foxglove::LogLevel::kInfo, "connected to " + robot_address_);
   publishState(tools::LinkState::kStreaming, "");
   s.ip_udp_header_bytes = robot_address_.rfind('[', 0) == 0 ? 40 + 8 : 20 + 8;
   s.max_payload = link.mtuBytes() - net::kDatagramOverhead;
@@ -743,6 +817,7 @@ void OperatorRun::sendGaze(Session& s, int64_t now) {
       const net::GazeSample& g = choice.sample;
       last_gaze_.origin_m = {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z};
       last_gaze_.direction = {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z};
+      if (fox_) publishFoxgloveGaze(g, now);
     }
   }
   s.next_gaze_ns += gaze_period_ns_;
@@ -757,11 +832,15 @@ void OperatorRun::reportLive(Session& s, int64_t now) {
   }
   const tools::LiveFigures live = stats_.takeWindow(static_cast<double>(now - s.live_start_ns) * 1e-9);
   const tools::MapTotals map = map_.totals();
-  if (!opt_.quiet) {
+  if (!opt_.quiet || fox_) {
     // The map's figures once the robot streams bricks (a robot that does not keeps the line as it was).
     const std::string map_text = map.payloads > 0 ? " | " + tools::mapLiveText(map, map_live_before_) : std::string();
-    std::printf("%s%s\n", tools::liveLine(live).c_str(), map_text.c_str());
-    std::fflush(stdout);
+    const std::string line = tools::liveLine(live) + map_text;
+    if (!opt_.quiet) {
+      std::printf("%s\n", line.c_str());
+      std::fflush(stdout);
+    }
+    foxLog(foxglove::LogLevel::kInfo, line);
   }
   map_live_before_ = map;
   if (view_) publishFigures(s, live);
@@ -862,6 +941,7 @@ void OperatorRun::handleReady(Session& s) {
     if (station_.frame_log) logFrame(f, obs, fovea_ns, s);
     s.last_frame_id = f.frame_id;
     if (view_) publishView(f);
+    if (fox_ && f.cloud != nullptr) publishFoxgloveCloud(f, s);
     if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
     if (opt_.held_frame && !held_done_ && f.frame_id >= *opt_.held_frame && tools::frameComplete(f)) saveHeld(f);
   }
@@ -881,6 +961,39 @@ void OperatorRun::publishView(const net::AssembledFrame& f) {
     view_map_points_left_out_ += pack.map_points_left_out;
   }
   view_->publishFrame(pack.bytes);
+}
+
+// The decoded points in the robot's world frame, stamped with their capture
+// (this host's clock when the robot's is known, else the arrival).
+void OperatorRun::publishFoxgloveCloud(const net::AssembledFrame& f, const Session& s) {
+  if (!fox_->subscribed(kFoxCloud)) return;
+  const int64_t local_ns = s.clock_offset_ns ? static_cast<int64_t>(f.capture_time_ns) - *s.clock_offset_ns
+                                             : f.last_chunk_received_ns;
+  const std::span<const uint8_t> bytes = fox_cloud_.encode(f.cloud->points, kFoxWorld, static_cast<int64_t>(wallNs(local_ns)));
+  fox_->publish(kFoxCloud, bytes, wallNs(f.last_chunk_received_ns));
+}
+
+void OperatorRun::publishFoxgloveGaze(const net::GazeSample& g, int64_t now) {
+  const auto stamp = static_cast<int64_t>(wallNs(now));
+  if (fox_->subscribed(kFoxGaze)) {
+    fox_->publish(kFoxGaze,
+                  fox_gaze_.encode(kFoxWorld, {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z},
+                                   {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z}, 2.0, stamp),
+                  wallNs(now));
+  }
+  if (fox_->subscribed(kFoxHead)) {
+    const net::Quat& q = g.hmd_orientation;
+    fox_->publish(kFoxHead,
+                  fox_head_.encode(kFoxWorld, "head", {g.hmd_position_m.x, g.hmd_position_m.y, g.hmd_position_m.z},
+                                   {q.w, q.x, q.y, q.z}, stamp),
+                  wallNs(now));
+  }
+}
+
+void OperatorRun::foxLog(foxglove::LogLevel level, const std::string& line) {
+  if (fox_ == nullptr) return;
+  const int64_t now = monotonicNs();
+  fox_->publish(kFoxLog, fox_log_.encode(level, line, "fovea-operator", static_cast<int64_t>(wallNs(now))), wallNs(now));
 }
 
 int64_t OperatorRun::takeFoveaArrival(const net::AssembledFrame& f) {
@@ -983,6 +1096,15 @@ int OperatorRun::finish() {
       held_result_ = "no frame with id >= " + std::to_string(*opt_.held_frame) + " arrived whole: nothing written";
     }
     std::printf("  --save-held: %s\n", held_result_.c_str());
+  }
+  if (fox_) {
+    const tools::FoxgloveServerCounters fc = fox_->counters();
+    std::printf("  foxglove: %llu clients served (%llu refused), %llu messages published (%llu too large), %llu sent, "
+                "%llu dropped for slow clients, %llu bad requests\n",
+                static_cast<unsigned long long>(fc.clients_served), static_cast<unsigned long long>(fc.clients_refused),
+                static_cast<unsigned long long>(fc.published), static_cast<unsigned long long>(fc.too_large),
+                static_cast<unsigned long long>(fc.sent), static_cast<unsigned long long>(fc.dropped),
+                static_cast<unsigned long long>(fc.bad_requests));
   }
   const std::string view_json = viewerSummary();
   if (Exit e = writeSummaryJson(seconds, view_json)) return *e;
