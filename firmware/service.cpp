@@ -291,6 +291,8 @@ Status Service::allocate() {
     // --record-frames: slots for the camera's frames (as the capture ring's).
     record.frame_width = camera_->info().intrinsics.width;
     record.frame_height = camera_->info().intrinsics.height;
+    // The Foxglove cloud channel: slots for the largest foveated cloud.
+    record.max_cloud_points = foveated_->slot(0).cloud.points.capacity();
     // A datagram's payload is at most the largest MTU a session may have.
     if (streamer_) record.max_datagram_bytes = std::min<std::size_t>(record.max_datagram_bytes, config_.stream.link.max_mtu_bytes);
     Result<std::unique_ptr<SessionRecorder>> recorder = SessionRecorder::create(record, log());

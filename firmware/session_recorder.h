@@ -48,6 +48,10 @@ struct RecordSettings {
   std::size_t frame_record_slots = 8;
   int frame_width = 0;
   int frame_height = 0;
+  // The Foxglove channels (docs/recording.md): the foveated cloud of up to this
+  // many points a frame (0: no foxglove.PointCloud channel).
+  std::size_t max_cloud_points = 0;
+  std::size_t cloud_slots = 4;
 };
 
 class SessionRecorder {
@@ -78,6 +82,10 @@ class SessionRecorder {
   void onStatusLine(std::string_view line);
 
   mcap::RecorderCounters counters() const { return recorder_->counters(); }
+
+  // The Foxglove channels: fovea-foveate records the raw cloud and pose, the
+  // writer thread encodes them (Foxglove's Protobuf) with these (session_recorder.cpp).
+  struct FoxgloveEncoders;
   // "recording FILE: N messages, B MB (R MB/min); dropped: ring full A, too big B, disk C"
   std::string summary() const;
   std::size_t ringBytes() const { return recorder_->ringBytes(); }
@@ -91,6 +99,9 @@ class SessionRecorder {
   mcap::RecorderProducer* status_ = nullptr;
   mcap::RecorderProducer* raw_ = nullptr;  // --record-frames
   uint16_t frames_channel_ = 0;
+  std::unique_ptr<FoxgloveEncoders> foxglove_;
+  mcap::RecorderProducer* cloud_ = nullptr;  // fovea-foveate: the cloud's arrays
+  uint16_t cloud_channel_ = 0, camera_channel_ = 0, gaze_ray_channel_ = 0, log_channel_ = 0;
   net::StreamChannels stream_;
   uint16_t pose_ = 0, status_channel_ = 0;
 };

@@ -29,6 +29,15 @@ struct Schema {
   std::span<const uint8_t> data;           // FileDescriptorSet, with imports
 };
 
+// The topics of Foxglove's messages, one set for every place that publishes
+// them: fovead serve --record's file, fovea-operator --foxglove and --record.
+inline constexpr std::string_view kCloudTopic = "/fovea/cloud";       // foxglove.PointCloud, frame "world"
+inline constexpr std::string_view kCameraTopic = "/fovea/camera";     // foxglove.FrameTransform world -> camera
+inline constexpr std::string_view kHeadTopic = "/fovea/head";         // foxglove.FrameTransform world -> head
+inline constexpr std::string_view kGazeRayTopic = "/fovea/gaze_ray";  // foxglove.SceneUpdate, the gaze as an arrow
+inline constexpr std::string_view kLogTopic = "/fovea/log";           // foxglove.Log
+inline constexpr std::string_view kWorldFrame = "world";
+
 // The message encoding of every message here (MCAP's message_encoding, the
 // WebSocket channel's encoding).
 inline constexpr std::string_view kMessageEncoding = "protobuf";
