@@ -10,11 +10,13 @@
 //        `fovead serve --record` over a short mock run: the four /fovea/
 //        channels, their schemas, message counts against the statistics, and
 //        the chunks channel against the frames
+//        (with --operator FOVEA_OPERATOR: a second run with an operator connected, whose gaze
+//        must be recorded)
 //   node check_mcap.mjs --file F.mcap [--manifest M.json] a given file
 //
 // The packages come from toolchain/node/node_modules (bash toolchain/setup-host).
 import { createRequire } from "node:module";
-import { execFileSync } from "node:child_process";
+import { execFileSync, spawn } from "node:child_process";
 import fs from "node:fs";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
@@ -195,6 +197,42 @@ async function checkFovead(fovead, workdir, frames) {
   console.log(`fovead --record: ${stream.messages.length} messages, ${[...topics.keys()].map((t) => `${t}=${count(t)}`).join(" ")}`);
 }
 
+// fovead serve --record with fovea-operator connected for a few seconds: the
+// gaze it sends (with its HMD pose) is recorded as it came, and the chunks as sent.
+async function checkFoveadWithOperator(fovead, operator, workdir) {
+  const file = path.join(workdir, "fovead-serve-operator.mcap");
+  fs.rmSync(file, { force: true });
+  const service = spawn(fovead, ["serve", "--camera", "mock:living-room,size=320x240,realtime=on", "--duration", "6",
+                                 "--listen", "127.0.0.1:0", "--insecure", "--record", file], { stdio: ["ignore", "pipe", "pipe"] });
+  let out = "";
+  service.stdout.on("data", (d) => { out += d; });
+  service.stderr.on("data", () => {});
+  const exited = new Promise((resolve) => service.on("exit", (code) => resolve(code)));
+  let address;
+  for (let i = 0; i < 200 && !address; i++) {
+    address = (/streaming: listening on (\S+)/.exec(out) ?? [])[1];
+    if (!address) await new Promise((r) => setTimeout(r, 50));
+  }
+  check(address !== undefined, "fovead serve --record started listening");
+  if (address) {
+    try {
+      execFileSync(operator, ["--connect", address, "--insecure", "--quiet", "--duration", "3",
+                              "--gaze", "fixed:0,0,0>0,0,2"], { stdio: "ignore", timeout: 60000 });
+    } catch (e) {
+      check(false, `fovea-operator ran: ${e}`);
+    }
+  }
+  check((await exited) === 0, "fovead serve --record exited 0");
+  const { indexed, stream } = await readBoth(file);
+  const r = indexed.reader;
+  const byTopic = new Map([...r.channelsById.values()].map((c) => [c.topic, c.id]));
+  const gaze = stream.messages.filter((m) => m.channelId === byTopic.get("/fovea/gaze"));
+  check(gaze.length > 10, `/fovea/gaze holds the operator's gaze samples: ${gaze.length}`);
+  const chunks = stream.messages.filter((m) => m.channelId === byTopic.get("/fovea/chunks"));
+  check(chunks.length > 0, `/fovea/chunks holds the chunks sent: ${chunks.length}`);
+  console.log(`fovead --record with an operator: ${gaze.length} gaze samples, ${chunks.length} chunks`);
+}
+
 const a = args();
 try {
   if (a.writer) {
@@ -208,6 +246,7 @@ try {
   } else if (a.fovead) {
     fs.mkdirSync(a.workdir, { recursive: true });
     await checkFovead(a.fovead, a.workdir, Number(a.frames ?? 30));
+    if (a.operator) await checkFoveadWithOperator(a.fovead, a.operator, a.workdir);
   } else if (a.file) {
     if (a.manifest) await compareManifest(a.file, a.manifest);
     else await readBoth(a.file);
