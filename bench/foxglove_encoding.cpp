@@ -39,7 +39,7 @@ void appendBase64(std::string& out, const uint8_t* p, std::size_t n) {
   }
 }
 
-// The point bytes, as the Protobuf encoder lays them out (x, y, z float32, rgba 0xRRGGBBAA).
+// The point bytes, as the Protobuf encoder lays them out (x, y, z float32, rgba 0xAARRGGBB).
 void packPoints(const pipeline::PointCloud& c, std::vector<uint8_t>& data) {
   data.resize(c.size() * foxglove::kPointStride);
   for (std::size_t i = 0; i < c.size(); ++i) {
@@ -48,10 +48,10 @@ void packPoints(const pipeline::PointCloud& c, std::vector<uint8_t>& data) {
     std::memcpy(q + 4, &c.y()[i], 4);
     std::memcpy(q + 8, &c.z()[i], 4);
     const uint32_t rgb = c.rgb()[i];
-    q[12] = 0xff;
-    q[13] = pipeline::rgbBlue(rgb);
-    q[14] = pipeline::rgbGreen(rgb);
-    q[15] = pipeline::rgbRed(rgb);
+    q[12] = pipeline::rgbBlue(rgb);
+    q[13] = pipeline::rgbGreen(rgb);
+    q[14] = pipeline::rgbRed(rgb);
+    q[15] = 0xff;
   }
 }
 

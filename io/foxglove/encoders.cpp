@@ -94,12 +94,13 @@ std::span<const uint8_t> PointCloudEncoder::encode(const pipeline::PointCloud& c
     std::memcpy(q, &x[i], 4);
     std::memcpy(q + 4, &y[i], 4);
     std::memcpy(q + 8, &z[i], 4);
-    // 0xRRGGBBAA as a little-endian uint32: bytes A, B, G, R.
+    // 0xAARRGGBB as a little-endian uint32 (bytes B, G, R, A): how Foxglove's 3D
+    // panel reads a packed "rgba" field (its "BGRA (packed)" colour mode, as rviz).
     const uint32_t c = cloud.has_color ? rgb[i] : 0x808080u;
-    q[12] = 0xff;
-    q[13] = pipeline::rgbBlue(c);
-    q[14] = pipeline::rgbGreen(c);
-    q[15] = pipeline::rgbRed(c);
+    q[12] = pipeline::rgbBlue(c);
+    q[13] = pipeline::rgbGreen(c);
+    q[14] = pipeline::rgbRed(c);
+    q[15] = 0xff;
   }
   return serialize(m, impl_->out);
 }

@@ -50,7 +50,8 @@ Schema sceneUpdateSchema();
 std::span<const uint8_t> schemaData(std::string_view name);
 
 // A point cloud: each point x, y, z (float32, relative to the pose's position)
-// and rgba (uint32, 0xRRGGBBAA: red in the high byte); 16 bytes a point.
+// and rgba (uint32, 0xAARRGGBB, as Foxglove's 3D panel and rviz read a packed
+// "rgba" field: little-endian bytes blue, green, red, alpha); 16 bytes a point.
 inline constexpr uint32_t kPointStride = 16;
 
 class PointCloudEncoder {

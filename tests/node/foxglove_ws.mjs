@@ -200,6 +200,7 @@ try {
         const x = view.getFloat32(i * 16, true), y = view.getFloat32(i * 16 + 4, true), z = view.getFloat32(i * 16 + 8, true);
         const rgba = view.getUint32(i * 16 + 12, true);
         check(Number.isFinite(x) && Number.isFinite(y) && Number.isFinite(z), `point ${i} is finite`);
+        check(rgba >>> 24 === 0xff, `point ${i}: rgba is 0xAARRGGBB, opaque (Foxglove's packed colour)`);
         say(`  point ${i}: x ${x.toFixed(4)} y ${y.toFixed(4)} z ${z.toFixed(4)} rgba 0x${rgba.toString(16).padStart(8, "0")}`);
       }
     } else if (c.topic === "/fovea/head") {

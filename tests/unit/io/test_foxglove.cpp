@@ -82,7 +82,7 @@ TEST(FoxglovePointCloud, DecodesFieldByField) {
     ASSERT_EQ(x, cloud.x()[i]);
     ASSERT_EQ(y, cloud.y()[i]);
     ASSERT_EQ(z, cloud.z()[i]);
-    ASSERT_EQ(rgba, (static_cast<uint32_t>(i) << 24) | 0x80feffu) << i;
+    ASSERT_EQ(rgba, 0xff000000u | (static_cast<uint32_t>(i) << 16) | 0x80feu) << i;  // 0xAARRGGBB
   }
   // A smaller cloud after a larger one: no stale points.
   const auto small = parse<::foxglove::PointCloud>(enc.encode(sampleCloud(3), "map", -1));
