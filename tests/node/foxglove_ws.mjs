@@ -122,7 +122,7 @@ try {
   const expected = {
     "/fovea/cloud": "foxglove.PointCloud",
     "/fovea/head": "foxglove.FrameTransform",
-    "/fovea/gaze": "foxglove.SceneUpdate",
+    "/fovea/gaze_ray": "foxglove.SceneUpdate",
     "/fovea/log": "foxglove.Log",
   };
   const types = new Map();
@@ -206,7 +206,7 @@ try {
     } else if (c.topic === "/fovea/head") {
       check(obj.parent_frame_id === "world" && obj.child_frame_id === "head", "head transform world -> head");
       say(`  ${obj.parent_frame_id} -> ${obj.child_frame_id}: translation (${obj.translation.x}, ${obj.translation.y}, ${obj.translation.z}), rotation w ${obj.rotation.w.toFixed(4)} x ${obj.rotation.x.toFixed(4)} y ${obj.rotation.y.toFixed(4)} z ${obj.rotation.z.toFixed(4)}`);
-    } else if (c.topic === "/fovea/gaze") {
+    } else if (c.topic === "/fovea/gaze_ray") {
       const a = obj.entities[0]?.arrows[0];
       check(obj.entities[0]?.id === "gaze" && a !== undefined, "gaze: an entity with an arrow");
       if (a) say(`  entity "${obj.entities[0].id}" in "${obj.entities[0].frame_id}": arrow from (${a.pose.position.x}, ${a.pose.position.y}, ${a.pose.position.z}), length ${(a.shaft_length + a.head_length).toFixed(2)} m`);

@@ -73,7 +73,7 @@ const char* kHelp =
     "  --view-tabs N         viewer tabs served at once (default 4, 1 .. 64)\n"
     "  --foxglove [ADDR:]PORT  serve the Foxglove WebSocket protocol (foxglove.websocket.v1) on ADDR (default\n"
     "                        127.0.0.1) for the Foxglove app or Lichtblick (docs/foxglove.md): /fovea/cloud\n"
-    "                        (foxglove.PointCloud), /fovea/head (foxglove.FrameTransform), /fovea/gaze\n"
+    "                        (foxglove.PointCloud), /fovea/head (foxglove.FrameTransform), /fovea/gaze_ray\n"
     "                        (foxglove.SceneUpdate), /fovea/log (foxglove.Log); each client is sent the\n"
     "                        newest message of a channel; the operator reconnects to the robot until stopped\n"
     "  --foxglove-clients N  Foxglove clients served at once (default 8, 1 .. 64)\n"
@@ -381,7 +381,7 @@ struct Station {
 
 // The Foxglove channels (--foxglove).
 constexpr uint32_t kFoxCloud = 1, kFoxHead = 2, kFoxGaze = 3, kFoxLog = 4;
-constexpr const char* kFoxWorld = "world";
+constexpr std::string_view kFoxWorld = foxglove::kWorldFrame;
 
 Exit loadGazeScript(const Options& opt, Station& station) {
   if (opt.gaze.empty()) return std::nullopt;
@@ -450,10 +450,10 @@ Exit startFoxglove(const Options& opt, Station& station) {
   fc.name = opt.name == "fovea-operator" ? opt.name : "fovea-operator " + opt.name;
   // A cloud's message: 16 bytes a point and its header (frame id, pose, fields).
   const std::size_t cloud_bytes = static_cast<std::size_t>(opt.max_points) * foxglove::kPointStride + 1024;
-  fc.channels = {{kFoxCloud, "/fovea/cloud", foxglove::pointCloudSchema(), cloud_bytes},
-                 {kFoxHead, "/fovea/head", foxglove::frameTransformSchema(), 1024},
-                 {kFoxGaze, "/fovea/gaze", foxglove::sceneUpdateSchema(), 1024},
-                 {kFoxLog, "/fovea/log", foxglove::logSchema(), 4096}};
+  fc.channels = {{kFoxCloud, std::string(foxglove::kCloudTopic), foxglove::pointCloudSchema(), cloud_bytes},
+                 {kFoxHead, std::string(foxglove::kHeadTopic), foxglove::frameTransformSchema(), 1024},
+                 {kFoxGaze, std::string(foxglove::kGazeRayTopic), foxglove::sceneUpdateSchema(), 1024},
+                 {kFoxLog, std::string(foxglove::kLogTopic), foxglove::logSchema(), 4096}};
   Result<std::unique_ptr<tools::FoxgloveServer>> started = tools::FoxgloveServer::start(fc);
   if (!started) return startFailure(started.status());
   station.foxglove = std::move(started.value());
@@ -579,12 +579,7 @@ class OperatorRun {
   void publishFoxgloveGaze(const net::GazeSample& g, int64_t now);
   void foxLog(foxglove::LogLevel level, const std::string& line);
   uint64_t wallNs(int64_t monotonic_ns) const { return static_cast<uint64_t>(monotonic_ns + wall_offset_ns_); }
-  static int64_t wallClockOffsetNs() {
-    timespec t{};
-    clock_gettime(CLOCK_REALTIME, &t);
-    const int64_t wall = static_cast<int64_t>(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
-    return wall - monotonicNs();
-  }
+  static int64_t wallClockOffsetNs() { return wallClockNs() - monotonicNs(); }
   // The robot keeps being tried while a viewer or a Foxglove client may watch.
   bool persistent() const { return view_ != nullptr || fox_ != nullptr; }
   void logFrame(const net::AssembledFrame& f, const tools::FrameObservation& obs, int64_t fovea_decoded_ns,
