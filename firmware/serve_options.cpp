@@ -14,7 +14,7 @@ const std::vector<std::string>& serveFlags() {
     std::vector<std::string> f = {"--camera",     "--frames",    "--duration",  "--gpio",      "--gpio-lines",
                                   "--ring-depth", "--status-interval-ms",       "--threads",   "--depth-min",
                                   "--depth-max",  "--log-level", "--timing-log",
-                                  "--record",     "--record-slots"};
+                                  "--record",     "--record-slots", "--record-cloud"};
     f.insert(f.end(), kFoveationFlags.begin(), kFoveationFlags.end());
     f.insert(f.end(), kStreamFlags.begin(), kStreamFlags.end());
     return f;
@@ -68,6 +68,10 @@ Result<ServiceConfig> serviceConfigFromArgs(const Args& args, ServiceConfig base
   if (args.has("--record-frames")) {
     if (config.runtime.record.path.empty()) return R(ErrorCode::kInvalidArgument, "--record-frames: only with --record FILE.mcap");
     config.runtime.record.frames = true;
+  }
+  if (const std::string* v = args.get("--record-cloud")) {
+    if (*v != "on" && *v != "off") return R(ErrorCode::kInvalidArgument, "--record-cloud: expected on or off, got '" + *v + "'");
+    config.runtime.record.foxglove_cloud = *v == "on";
   }
   if (const std::string* v = args.get("--record-slots")) {
     Result<long> slots = parseInteger("--record-slots", *v, 16, 1 << 20);

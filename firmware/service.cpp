@@ -292,7 +292,7 @@ Status Service::allocate() {
     record.frame_width = camera_->info().intrinsics.width;
     record.frame_height = camera_->info().intrinsics.height;
     // The Foxglove cloud channel: slots for the largest foveated cloud.
-    record.max_cloud_points = foveated_->slot(0).cloud.points.capacity();
+    record.max_cloud_points = record.foxglove_cloud ? foveated_->slot(0).cloud.points.capacity() : 0;
     // A datagram's payload is at most the largest MTU a session may have.
     if (streamer_) record.max_datagram_bytes = std::min<std::size_t>(record.max_datagram_bytes, config_.stream.link.max_mtu_bytes);
     Result<std::unique_ptr<SessionRecorder>> recorder = SessionRecorder::create(record, log());

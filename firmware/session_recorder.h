@@ -51,6 +51,7 @@ struct RecordSettings {
   // The Foxglove channels (docs/recording.md): the foveated cloud of up to this
   // many points a frame (0: no foxglove.PointCloud channel).
   std::size_t max_cloud_points = 0;
+  bool foxglove_cloud = true;  // --record-cloud off: no /fovea/cloud (16 bytes a point a frame)
   std::size_t cloud_slots = 4;
 };
 

@@ -194,6 +194,37 @@ async function checkFovead(fovead, workdir, frames) {
       check(m.data.byteLength > 0, "a recorded chunk is not empty");
     }
   }
+  // The Foxglove channels: Protobuf with the FileDescriptorSet embedded, decoded
+  // here with protobufjs from the file's own schema (an independent reader).
+  const protobuf = require("protobufjs");
+  require("protobufjs/ext/descriptor");
+  const foxglove = { "/fovea/cloud": "foxglove.PointCloud", "/fovea/camera": "foxglove.FrameTransform",
+                     "/fovea/log": "foxglove.Log", "/fovea/gaze_ray": "foxglove.SceneUpdate" };
+  for (const [topic, name] of Object.entries(foxglove)) {
+    const c = topics.get(topic);
+    check(c !== undefined && c.messageEncoding === "protobuf", `fovead's recording has ${topic} (protobuf)`);
+    if (!c) continue;
+    const schema = r.schemasById.get(c.schemaId);
+    check(schema?.name === name && schema?.encoding === "protobuf", `${topic}'s schema is ${name} (${schema?.name}, ${schema?.encoding})`);
+    if (!schema || topic === "/fovea/gaze_ray") continue;  // no operator here: no gaze
+    const type = protobuf.Root.fromDescriptor(protobuf.descriptor.FileDescriptorSet.decode(schema.data)).lookupType(name);
+    const messages = stream.messages.filter((x) => x.channelId === c.id);
+    check(messages.length > 0, `${topic} has messages (${messages.length})`);
+    if (messages.length === 0) continue;
+    const m = type.toObject(type.decode(messages[messages.length - 1].data), { longs: Number, defaults: true });
+    if (topic === "/fovea/cloud") {
+      const points = m.data.length / Math.max(m.point_stride, 1);
+      check(m.frame_id === "world" && m.point_stride === 16 && points > 1000 && Number.isInteger(points),
+            `/fovea/cloud decodes: frame ${m.frame_id}, stride ${m.point_stride}, ${points} points`);
+      check(m.fields.map((f) => f.name).join(",") === "x,y,z,rgba", `/fovea/cloud's fields are x,y,z,rgba (${m.fields.map((f) => f.name)})`);
+      check(count("/fovea/cloud") === foveated, `/fovea/cloud has one cloud a frame foveated: ${count("/fovea/cloud")} of ${foveated}`);
+    } else if (topic === "/fovea/camera") {
+      check(m.parent_frame_id === "world" && m.child_frame_id === "camera" && m.rotation !== undefined,
+            `/fovea/camera decodes: ${m.parent_frame_id} -> ${m.child_frame_id}`);
+    } else if (topic === "/fovea/log") {
+      check(typeof m.message === "string" && m.message.length > 0, `/fovea/log decodes: "${m.message.slice(0, 40)}"`);
+    }
+  }
   console.log(`fovead --record: ${stream.messages.length} messages, ${[...topics.keys()].map((t) => `${t}=${count(t)}`).join(" ")}`);
 }
 
@@ -230,7 +261,21 @@ async function checkFoveadWithOperator(fovead, operator, workdir) {
   check(gaze.length > 10, `/fovea/gaze holds the operator's gaze samples: ${gaze.length}`);
   const chunks = stream.messages.filter((m) => m.channelId === byTopic.get("/fovea/chunks"));
   check(chunks.length > 0, `/fovea/chunks holds the chunks sent: ${chunks.length}`);
-  console.log(`fovead --record with an operator: ${gaze.length} gaze samples, ${chunks.length} chunks`);
+  // Each gaze sample (confidence > 0) also as Foxglove's arrow, decoded from the file's schema.
+  const rays = stream.messages.filter((m) => m.channelId === byTopic.get("/fovea/gaze_ray"));
+  check(rays.length > 10 && rays.length <= gaze.length, `/fovea/gaze_ray draws the gaze samples: ${rays.length} of ${gaze.length}`);
+  if (rays.length > 0) {
+    const protobuf = require("protobufjs");
+    require("protobufjs/ext/descriptor");
+    const channel = r.channelsById.get(byTopic.get("/fovea/gaze_ray"));
+    const schema = r.schemasById.get(channel.schemaId);
+    const type = protobuf.Root.fromDescriptor(protobuf.descriptor.FileDescriptorSet.decode(schema.data)).lookupType("foxglove.SceneUpdate");
+    const u = type.toObject(type.decode(rays[rays.length - 1].data), { longs: Number, defaults: true });
+    const arrow = u.entities[0]?.arrows[0];
+    check(u.entities[0]?.id === "gaze" && arrow !== undefined, "/fovea/gaze_ray decodes: an entity 'gaze' with an arrow");
+    if (arrow) check(Math.abs(arrow.pose.position.x) < 1e-9 && Math.abs(arrow.pose.position.z) < 1e-9, `the arrow starts at the operator's eye, (0, 0, 0) in its script (x ${arrow.pose.position.x})`);
+  }
+  console.log(`fovead --record with an operator: ${gaze.length} gaze samples, ${rays.length} gaze rays, ${chunks.length} chunks`);
 }
 
 const a = args();
