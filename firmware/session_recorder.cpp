@@ -12,7 +12,7 @@
 
 #include "core/clock.h"
 #include "firmware/frame_record.h"
-#include "io/foxglove/foxglove.h"
+#include "io/foxglove/recording.h"
 #include "net/messages.h"
 #include "net/stream_channels.h"
 
@@ -45,110 +45,6 @@ constexpr const char* kStatusSchema = R"json({
     "line": {"type": "string"}
   }
 })json";
-
-}  // namespace
-
-namespace {
-
-// The raw forms fovea-foveate records for the Foxglove channels (native byte
-// order: they never leave the process; the writer thread encodes them).
-struct CloudRecordHeader {
-  double origin_m[3];
-  uint32_t count;
-  uint32_t has_color;
-};
-struct PoseRecord {
-  double translation_m[3];
-  double rotation_wxyz[4];
-};
-
-std::size_t cloudRecordBytes(std::size_t points) { return sizeof(CloudRecordHeader) + points * 16; }
-
-}  // namespace
-
-struct SessionRecorder::FoxgloveEncoders {
-  explicit FoxgloveEncoders(std::size_t max_points) : points(max_points) {}
-
-  // The cloud's arrays back into a PointCloud, then foxglove.PointCloud.
-  std::span<const uint8_t> cloud(std::span<const uint8_t> raw, uint64_t log_time_ns) {
-    CloudRecordHeader h;
-    if (raw.size() < sizeof h) return {};
-    std::memcpy(&h, raw.data(), sizeof h);
-    if (h.count > points.capacity() || raw.size() != cloudRecordBytes(h.count) || !points.resize(h.count)) return {};
-    const uint8_t* p = raw.data() + sizeof h;
-    std::memcpy(points.x(), p, h.count * 4);
-    std::memcpy(points.y(), p + h.count * 4, h.count * 4);
-    std::memcpy(points.z(), p + h.count * 8, h.count * 4);
-    std::memcpy(points.rgb(), p + h.count * 12, h.count * 4);
-    points.origin_m = {h.origin_m[0], h.origin_m[1], h.origin_m[2]};
-    points.has_color = h.has_color != 0;
-    return cloud_encoder.encode(points, foxglove::kWorldFrame, static_cast<int64_t>(log_time_ns));
-  }
-  std::span<const uint8_t> camera(std::span<const uint8_t> raw, uint64_t log_time_ns) {
-    PoseRecord r;
-    if (raw.size() != sizeof r) return {};
-    std::memcpy(&r, raw.data(), sizeof r);
-    return camera_encoder.encode(foxglove::kWorldFrame, "camera", {r.translation_m[0], r.translation_m[1], r.translation_m[2]},
-                                 {r.rotation_wxyz[0], r.rotation_wxyz[1], r.rotation_wxyz[2], r.rotation_wxyz[3]},
-                                 static_cast<int64_t>(log_time_ns));
-  }
-  // A gaze sample as received: decoded (from an aligned copy), drawn as a 2 m arrow.
-  std::span<const uint8_t> gazeRay(std::span<const uint8_t> raw, uint64_t log_time_ns) {
-    if (raw.size() > gaze_payload.size()) return {};
-    std::memcpy(gaze_payload.data(), raw.data(), raw.size());
-    net::GazeSample g;
-    if (net::decode(std::span<const uint8_t>(gaze_payload.data(), raw.size()), g) || g.confidence <= 0.0f) return {};
-    return gaze_encoder.encode(foxglove::kWorldFrame, {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z},
-                               {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z}, 2.0,
-                               static_cast<int64_t>(log_time_ns));
-  }
-  std::span<const uint8_t> log(std::span<const uint8_t> raw, uint64_t log_time_ns) {
-    const std::string_view line(reinterpret_cast<const char*>(raw.data()), raw.size());
-    return log_encoder.encode(foxglove::LogLevel::kInfo, line, "fovead", static_cast<int64_t>(log_time_ns));
-  }
-
-  pipeline::PointCloud points;
-  foxglove::PointCloudEncoder cloud_encoder;
-  foxglove::FrameTransformEncoder camera_encoder;
-  foxglove::GazeRayEncoder gaze_encoder;
-  foxglove::LogEncoder log_encoder;
-  alignas(net::kPayloadAlignment) std::array<uint8_t, net::kMaxMtu> gaze_payload{};
-};
-
-namespace {
-
-// Adds the Foxglove channels (io/foxglove) with their transcoders.
-Status addFoxgloveChannels(mcap::Recorder& m, SessionRecorder::FoxgloveEncoders& fx, bool cloud, uint16_t& cloud_channel,
-                           uint16_t& camera_channel, uint16_t& gaze_ray_channel, uint16_t& log_channel) {
-  using Fx = SessionRecorder::FoxgloveEncoders;
-  using Method = std::span<const uint8_t> (Fx::*)(std::span<const uint8_t>, uint64_t);
-  struct Spec {
-    std::string_view topic;
-    foxglove::Schema schema;
-    Method method;
-    uint16_t* channel;
-  };
-  const Spec specs[] = {{foxglove::kCloudTopic, foxglove::pointCloudSchema(), &Fx::cloud, &cloud_channel},
-                        {foxglove::kCameraTopic, foxglove::frameTransformSchema(), &Fx::camera, &camera_channel},
-                        {foxglove::kGazeRayTopic, foxglove::sceneUpdateSchema(), &Fx::gazeRay, &gaze_ray_channel},
-                        {foxglove::kLogTopic, foxglove::logSchema(), &Fx::log, &log_channel}};
-  for (const Spec& spec : specs) {
-    if (!cloud && spec.channel == &cloud_channel) continue;
-    Result<uint16_t> schema = m.addSchema(spec.schema.name, spec.schema.encoding, spec.schema.data);
-    if (!schema) return schema.status();
-    Result<uint16_t> channel = m.addChannel(spec.topic, foxglove::kMessageEncoding, *schema);
-    if (!channel) return channel.status();
-    *spec.channel = *channel;
-    const Method method = spec.method;
-    if (Status s = m.setTranscoder(*channel, [&fx, method](std::span<const uint8_t> raw, uint64_t t) {
-          return (fx.*method)(raw, t);
-        });
-        !s) {
-      return s;
-    }
-  }
-  return Status::ok();
-}
 
 }  // namespace
 
@@ -186,16 +82,13 @@ Result<std::unique_ptr<SessionRecorder>> SessionRecorder::create(const RecordSet
   r->send_ = m.addProducer(settings.send_slots, settings.max_datagram_bytes);
   r->frames_ = m.addProducer(settings.frame_slots, 512);
   r->status_ = m.addProducer(settings.status_slots, 2048);
-  // The Foxglove channels, encoded on the writer thread.
-  r->foxglove_ = std::make_unique<FoxgloveEncoders>(settings.max_cloud_points);
-  if (Status s = addFoxgloveChannels(m, *r->foxglove_, settings.max_cloud_points > 0, r->cloud_channel_,
-                                     r->camera_channel_, r->gaze_ray_channel_, r->log_channel_);
-      !s) {
-    return s;
-  }
-  if (settings.max_cloud_points > 0) {
-    r->cloud_ = m.addProducer(settings.cloud_slots, cloudRecordBytes(settings.max_cloud_points));
-  }
+  // The Foxglove channels, encoded on the writer thread (io/foxglove/recording.h).
+  foxglove::RecordingOptions fx;
+  fx.max_cloud_points = settings.max_cloud_points;
+  Result<std::unique_ptr<foxglove::RecordingChannels>> channels = foxglove::RecordingChannels::add(m, fx);
+  if (!channels) return channels.status();
+  r->foxglove_ = std::move(channels.value());
+  if (r->foxglove_->hasCloud()) r->cloud_ = m.addProducer(settings.cloud_slots, r->foxglove_->cloudRecordBytes());
   if (settings.frames) {
     if (settings.frame_width <= 0 || settings.frame_height <= 0) {
       return invalidArgument("--record-frames: the camera's frame size is unknown");
@@ -226,7 +119,16 @@ void SessionRecorder::onReceived(net::MessageType type, std::span<const uint8_t>
   if (type != net::MessageType::kGaze) return;
   const auto now = static_cast<uint64_t>(wallClockNs());
   (void)send_->record(stream_.gaze, now, payload);
-  (void)send_->record(gaze_ray_channel_, now, payload);  // the writer draws it as a ray
+  // Foxglove's arrow of the gaze (decoded here from an aligned copy: a microsecond;
+  // a sample without a gaze, confidence 0, draws none).
+  alignas(net::kPayloadAlignment) std::array<uint8_t, net::kMaxMtu> aligned;
+  if (payload.size() > aligned.size()) return;
+  std::memcpy(aligned.data(), payload.data(), payload.size());
+  net::GazeSample g;
+  if (!net::decode(std::span<const uint8_t>(aligned.data(), payload.size()), g) && g.confidence > 0.0f) {
+    (void)foxglove_->recordRay(*send_, now, {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z},
+                               {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z});
+  }
 }
 
 void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal::RgbdFrame& frame, bool pose_fresh,
@@ -246,22 +148,9 @@ void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal:
   }
   // Foxglove's camera transform and cloud, raw: the writer thread encodes them.
   const auto now = static_cast<uint64_t>(wallClockNs());
-  PoseRecord p{{pose.t_world_cam.x(), pose.t_world_cam.y(), pose.t_world_cam.z()}, {q.w(), q.x(), q.y(), q.z()}};
-  (void)frames_->record(camera_channel_, now, {reinterpret_cast<const uint8_t*>(&p), sizeof p});
-  if (cloud_ != nullptr) {
-    const pipeline::PointCloud& pts = cloud.points;
-    const CloudRecordHeader h{{pts.origin_m.x(), pts.origin_m.y(), pts.origin_m.z()},
-                              static_cast<uint32_t>(pts.size()), pts.has_color ? 1u : 0u};
-    const std::size_t n = pts.size();
-    const std::span<const uint8_t> parts[] = {
-        {reinterpret_cast<const uint8_t*>(&h), sizeof h},
-        {reinterpret_cast<const uint8_t*>(pts.x()), n * 4},
-        {reinterpret_cast<const uint8_t*>(pts.y()), n * 4},
-        {reinterpret_cast<const uint8_t*>(pts.z()), n * 4},
-        {reinterpret_cast<const uint8_t*>(pts.rgb()), n * 4},
-    };
-    (void)cloud_->record(cloud_channel_, now, parts);
-  }
+  (void)foxglove_->recordPose(*frames_, now, {pose.t_world_cam.x(), pose.t_world_cam.y(), pose.t_world_cam.z()},
+                              {q.w(), q.x(), q.y(), q.z()});
+  if (cloud_ != nullptr) (void)foxglove_->recordCloud(*cloud_, now, cloud.points);
 }
 
 void SessionRecorder::onCapture(const hal::RgbdFrame& frame) {
@@ -299,7 +188,7 @@ void SessionRecorder::onStatusLine(std::string_view line) {
   json[n++] = '}';
   const auto now = static_cast<uint64_t>(wallClockNs());
   (void)status_->record(status_channel_, now, {reinterpret_cast<const uint8_t*>(json), n});
-  (void)status_->record(log_channel_, now, {reinterpret_cast<const uint8_t*>(line.data()), std::min<std::size_t>(line.size(), 2048)});
+  (void)foxglove_->recordLog(*status_, now, line.substr(0, 2048));
 }
 
 std::string SessionRecorder::summary() const {

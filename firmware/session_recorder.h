@@ -29,6 +29,7 @@
 #include "core/result.h"
 #include "firmware/log.h"
 #include "hal/frame.h"
+#include "io/foxglove/recording.h"
 #include "io/mcap/recorder.h"
 #include "net/stream_channels.h"
 #include "net/wire.h"
@@ -83,10 +84,6 @@ class SessionRecorder {
   void onStatusLine(std::string_view line);
 
   mcap::RecorderCounters counters() const { return recorder_->counters(); }
-
-  // The Foxglove channels: fovea-foveate records the raw cloud and pose, the
-  // writer thread encodes them (Foxglove's Protobuf) with these (session_recorder.cpp).
-  struct FoxgloveEncoders;
   // "recording FILE: N messages, B MB (R MB/min); dropped: ring full A, too big B, disk C"
   std::string summary() const;
   std::size_t ringBytes() const { return recorder_->ringBytes(); }
@@ -100,9 +97,10 @@ class SessionRecorder {
   mcap::RecorderProducer* status_ = nullptr;
   mcap::RecorderProducer* raw_ = nullptr;  // --record-frames
   uint16_t frames_channel_ = 0;
-  std::unique_ptr<FoxgloveEncoders> foxglove_;
+  // The Foxglove channels (io/foxglove/recording.h), whose transcoders the
+  // writer thread calls: ~SessionRecorder's close() joins it before they go.
+  std::unique_ptr<foxglove::RecordingChannels> foxglove_;
   mcap::RecorderProducer* cloud_ = nullptr;  // fovea-foveate: the cloud's arrays
-  uint16_t cloud_channel_ = 0, camera_channel_ = 0, gaze_ray_channel_ = 0, log_channel_ = 0;
   net::StreamChannels stream_;
   uint16_t pose_ = 0, status_channel_ = 0;
 };

@@ -105,6 +105,12 @@ std::span<const uint8_t> PointCloudEncoder::encode(const pipeline::PointCloud& c
   return serialize(m, impl_->out);
 }
 
+void PointCloudEncoder::reserve(std::size_t points) {
+  impl_->msg.mutable_data()->reserve(points * kPointStride);
+  // The message is its points and a header of a few hundred bytes (frame id, pose, fields).
+  if (impl_->out.size() < points * kPointStride + 1024) impl_->out.resize(points * kPointStride + 1024);
+}
+
 // ---- FrameTransform
 struct FrameTransformEncoder::Impl {
   ::foxglove::FrameTransform msg;
@@ -143,7 +149,14 @@ struct LogEncoder::Impl {
   std::vector<uint8_t> out;
 };
 
-LogEncoder::LogEncoder() : impl_(std::make_unique<Impl>()) { impl_->msg.mutable_timestamp(); }
+// Room for lines of up to 4 KiB (status lines are a few hundred bytes) and
+// names of 64, so that a longer line than the last allocates nothing.
+LogEncoder::LogEncoder() : impl_(std::make_unique<Impl>()) {
+  impl_->msg.mutable_timestamp();
+  impl_->msg.mutable_message()->reserve(4096);
+  impl_->msg.mutable_name()->reserve(64);
+  impl_->out.resize(4096 + 256);
+}
 LogEncoder::~LogEncoder() = default;
 LogEncoder::LogEncoder(LogEncoder&&) noexcept = default;
 LogEncoder& LogEncoder::operator=(LogEncoder&&) noexcept = default;

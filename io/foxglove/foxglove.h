@@ -65,6 +65,9 @@ class PointCloudEncoder {
   // (so the float coordinates are kept as they are), colour from the packed rgb
   // (opaque; grey when the cloud has none).
   std::span<const uint8_t> encode(const pipeline::PointCloud& cloud, std::string_view frame_id, int64_t stamp_ns);
+  // Room for clouds of up to `points` now, so that no later cloud allocates
+  // (a larger cloud than any before would grow the buffers).
+  void reserve(std::size_t points);
 
  private:
   struct Impl;

@@ -20,6 +20,7 @@
 #include <thread>
 #include <vector>
 
+#include "io/mcap/reader.h"
 #include "tests/support/process.h"
 #include "tests/support/test_time.h"
 
@@ -215,6 +216,33 @@ TEST_F(StreamRecording, TheServicesRecordingHoldsEveryFrameTheOperatorGotWhole) 
   }
   EXPECT_GE(live_whole, 3u);
   EXPECT_GE(both_whole, live_whole / 2) << "the service's recorder dropped " << service_drops_;
+}
+
+// The operator's file also holds Foxglove's messages of what it saw: a cloud per
+// frame decoded, its head and gaze per sample sent, its live lines.
+TEST_F(StreamRecording, TheOperatorsRecordingHasFoxglovesChannels) {
+  Result<std::vector<uint8_t>> file = mcap::readFile(dir_.file("operator.mcap"));
+  ASSERT_TRUE(file) << file.status().message();
+  mcap::Reader reader(*file);
+  std::map<uint16_t, std::string> topic;
+  std::map<std::string, std::size_t> count;
+  for (mcap::Reader::Item item = reader.next(); item != mcap::Reader::Item::kEnd; item = reader.next()) {
+    if (item == mcap::Reader::Item::kChannel) {
+      const mcap::SchemaRecord* schema = reader.findSchema(reader.channel().schema_id);
+      topic[reader.channel().id] = reader.channel().topic + " " + (schema ? schema->name : std::string("?"));
+    } else if (item == mcap::Reader::Item::kMessage) {
+      ++count[topic[reader.message().channel_id]];
+    }
+  }
+  EXPECT_TRUE(reader.complete()) << reader.stopReason();
+  if (operator_drops_ == 0) {
+    EXPECT_EQ(count["/fovea/cloud foxglove.PointCloud"], live_.size());
+  }
+  EXPECT_GE(count["/fovea/cloud foxglove.PointCloud"], live_.size() / 2);
+  EXPECT_GT(count["/fovea/head foxglove.FrameTransform"], 10u);
+  EXPECT_EQ(count["/fovea/gaze_ray foxglove.SceneUpdate"], count["/fovea/head foxglove.FrameTransform"]);
+  EXPECT_GE(count["/fovea/log foxglove.Log"], 1u);
+  EXPECT_GT(count["/fovea/chunks fovea.Chunk"], live_.size());
 }
 
 TEST_F(StreamRecording, ARecordingCutShortReplaysUpToWhereItStops) {

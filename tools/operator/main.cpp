@@ -32,6 +32,7 @@
 #include "net/stream_channels.h"
 #include "net/udp_socket.h"
 #include "io/foxglove/foxglove.h"
+#include "io/foxglove/recording.h"
 #include "tools/operator/foxglove_server.h"
 #include "tools/operator/gaze_script.h"
 #include "tools/operator/held_cloud.h"
@@ -373,9 +374,12 @@ struct Station {
   std::unique_ptr<tools::ViewServer> view;
   std::unique_ptr<tools::FoxgloveServer> foxglove;
   std::ofstream frame_log;
-  // --record: the file, its one producer (the receive loop) and channels.
+  // --record: the file, its producers (all the receive loop's) and channels. The
+  // Foxglove channels' transcoders outlive the recorder's writer thread (declared first).
+  std::unique_ptr<foxglove::RecordingChannels> record_foxglove;
   std::unique_ptr<mcap::Recorder> recorder;
   mcap::RecorderProducer* record_producer = nullptr;
+  mcap::RecorderProducer* record_clouds = nullptr;
   net::StreamChannels record_channels;
 };
 
@@ -491,7 +495,17 @@ Exit openRecording(const Options& opt, Station& station) {
   if (!recorder) return failure("--record: ", recorder.status());
   Result<net::StreamChannels> channels = net::addStreamChannels(*recorder.value());
   if (!channels) return failure("--record: ", channels.status());
+  // Foxglove's messages of what the operator sees: the clouds decoded, its head, its gaze, its live lines.
+  foxglove::RecordingOptions fx;
+  fx.max_cloud_points = static_cast<std::size_t>(opt.max_points);
+  fx.pose_topic = foxglove::kHeadTopic;
+  fx.pose_child = "head";
+  fx.log_name = "fovea-operator";
+  Result<std::unique_ptr<foxglove::RecordingChannels>> fox = foxglove::RecordingChannels::add(*recorder.value(), fx);
+  if (!fox) return failure("--record: ", fox.status());
+  station.record_foxglove = std::move(fox.value());
   station.record_producer = recorder.value()->addProducer();
+  station.record_clouds = recorder.value()->addProducer(4, station.record_foxglove->cloudRecordBytes());
   if (Status s = recorder.value()->start(); !s) return failure("--record: ", s);
   station.record_channels = channels.value();
   station.recorder = std::move(recorder.value());
@@ -551,7 +565,9 @@ class OperatorRun {
         start_ns_(monotonicNs()),
         end_ns_(opt.duration_s > 0 ? start_ns_ + static_cast<int64_t>(opt.duration_s * 1e9) : INT64_MAX),
         gaze_period_ns_(static_cast<int64_t>(1e9 / opt.gaze_hz)),
-        robot_address_(opt.connect) {}
+        robot_address_(opt.connect) {
+    if (fox_) fox_cloud_.reserve(static_cast<std::size_t>(opt.max_points));
+  }
 
   // Without the viewer: one session, as before. With it: the page stays up and
   // the operator reconnects until it is stopped (a robot restarting, refusing
@@ -813,6 +829,16 @@ void OperatorRun::sendGaze(Session& s, int64_t now) {
       last_gaze_.origin_m = {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z};
       last_gaze_.direction = {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z};
       if (fox_) publishFoxgloveGaze(g, now);
+      if (station_.record_foxglove) {
+        const auto t = static_cast<uint64_t>(wallClockNs());
+        const net::Quat& q = g.hmd_orientation;
+        (void)station_.record_foxglove->recordRay(*station_.record_producer, t,
+                                                  {g.gaze_origin_m.x, g.gaze_origin_m.y, g.gaze_origin_m.z},
+                                                  {g.gaze_direction.x, g.gaze_direction.y, g.gaze_direction.z});
+        (void)station_.record_foxglove->recordPose(*station_.record_producer, t,
+                                                   {g.hmd_position_m.x, g.hmd_position_m.y, g.hmd_position_m.z},
+                                                   {q.w, q.x, q.y, q.z});
+      }
     }
   }
   s.next_gaze_ns += gaze_period_ns_;
@@ -827,7 +853,7 @@ void OperatorRun::reportLive(Session& s, int64_t now) {
   }
   const tools::LiveFigures live = stats_.takeWindow(static_cast<double>(now - s.live_start_ns) * 1e-9);
   const tools::MapTotals map = map_.totals();
-  if (!opt_.quiet || fox_) {
+  if (!opt_.quiet || fox_ || station_.record_foxglove) {
     // The map's figures once the robot streams bricks (a robot that does not keeps the line as it was).
     const std::string map_text = map.payloads > 0 ? " | " + tools::mapLiveText(map, map_live_before_) : std::string();
     const std::string line = tools::liveLine(live) + map_text;
@@ -836,6 +862,9 @@ void OperatorRun::reportLive(Session& s, int64_t now) {
       std::fflush(stdout);
     }
     foxLog(foxglove::LogLevel::kInfo, line);
+    if (station_.record_foxglove) {
+      (void)station_.record_foxglove->recordLog(*station_.record_producer, static_cast<uint64_t>(wallClockNs()), line);
+    }
   }
   map_live_before_ = map;
   if (view_) publishFigures(s, live);
@@ -937,6 +966,10 @@ void OperatorRun::handleReady(Session& s) {
     s.last_frame_id = f.frame_id;
     if (view_) publishView(f);
     if (fox_ && f.cloud != nullptr) publishFoxgloveCloud(f, s);
+    if (station_.record_clouds != nullptr && f.cloud != nullptr) {
+      (void)station_.record_foxglove->recordCloud(*station_.record_clouds, static_cast<uint64_t>(wallClockNs()),
+                                                  f.cloud->points);
+    }
     if (!opt_.ply_dir.empty() && f.cloud != nullptr) saveFramePly(f);
     if (opt_.held_frame && !held_done_ && f.frame_id >= *opt_.held_frame && tools::frameComplete(f)) saveHeld(f);
   }
