@@ -32,6 +32,12 @@ const require = createRequire(path.join(modules, "..", "package.json"));
 const { McapIndexedReader, McapStreamReader } = require("@mcap/core");
 const { loadDecompressHandlers } = require("@mcap/support");
 
+// A cross build's programs run through its emulator (FOVEA_EMULATOR, e.g. qemu-aarch64).
+const emulator = (process.env.FOVEA_EMULATOR ?? "").split(" ").filter(Boolean);
+function command(cmd, args) {
+  return emulator.length > 0 ? [emulator[0], [...emulator.slice(1), cmd, ...args]] : [cmd, args];
+}
+
 let failures = 0;
 let checks = 0;
 function check(condition, what) {
@@ -161,8 +167,8 @@ async function compareManifest(file, manifestFile) {
 async function checkFovead(fovead, workdir, frames) {
   const file = path.join(workdir, "fovead-serve.mcap");
   fs.rmSync(file, { force: true });
-  const out = execFileSync(fovead, ["serve", "--camera", "mock:living-room,realtime=on", "--frames", String(frames),
-                                    "--listen", "127.0.0.1:0", "--insecure", "--status-interval-ms", "100", "--record", file], { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
+  const out = execFileSync(...command(fovead, ["serve", "--camera", "mock:living-room,realtime=on", "--frames", String(frames),
+                                    "--listen", "127.0.0.1:0", "--insecure", "--status-interval-ms", "100", "--record", file]), { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
   process.stdout.write(out.split("\n").filter((l) => l.includes("record") || l.includes("stopped")).join("\n") + "\n");
   const foveated = Number((/stopped after (\d+) frames foveated/.exec(out) ?? [])[1] ?? -1);
   const { indexed, stream } = await readBoth(file);
@@ -233,8 +239,8 @@ async function checkFovead(fovead, workdir, frames) {
 async function checkFoveadWithOperator(fovead, operator, workdir) {
   const file = path.join(workdir, "fovead-serve-operator.mcap");
   fs.rmSync(file, { force: true });
-  const service = spawn(fovead, ["serve", "--camera", "mock:living-room,size=320x240,realtime=on", "--duration", "6",
-                                 "--listen", "127.0.0.1:0", "--insecure", "--record", file], { stdio: ["ignore", "pipe", "pipe"] });
+  const service = spawn(...command(fovead, ["serve", "--camera", "mock:living-room,size=320x240,realtime=on", "--duration", "6",
+                                 "--listen", "127.0.0.1:0", "--insecure", "--record", file]), { stdio: ["ignore", "pipe", "pipe"] });
   let out = "";
   service.stdout.on("data", (d) => { out += d; });
   service.stderr.on("data", () => {});
@@ -247,8 +253,8 @@ async function checkFoveadWithOperator(fovead, operator, workdir) {
   check(address !== undefined, "fovead serve --record started listening");
   if (address) {
     try {
-      execFileSync(operator, ["--connect", address, "--insecure", "--quiet", "--duration", "3",
-                              "--gaze", "fixed:0,0,0>0,0,2"], { stdio: "ignore", timeout: 60000 });
+      execFileSync(...command(operator, ["--connect", address, "--insecure", "--quiet", "--duration", "3",
+                              "--gaze", "fixed:0,0,0>0,0,2"]), { stdio: "ignore", timeout: 60000 });
     } catch (e) {
       check(false, `fovea-operator ran: ${e}`);
     }
@@ -285,7 +291,7 @@ try {
     for (const compression of ["zstd", "none"]) {
       const file = path.join(a.workdir, `sample-${compression}.mcap`);
       const manifest = path.join(a.workdir, `sample-${compression}.json`);
-      execFileSync(a.writer, [file, manifest, compression], { stdio: "inherit" });
+      execFileSync(...command(a.writer, [file, manifest, compression]), { stdio: "inherit" });
       await compareManifest(file, manifest);
     }
   } else if (a.fovead) {
