@@ -753,6 +753,13 @@ Exit OperatorRun::runReplay() {
   }
   std::printf("replayed %llu messages of %s%s\n", static_cast<unsigned long long>(replayed), opt_.replay_path.c_str(),
               too_big > 0 ? (", " + std::to_string(too_big) + " larger than a datagram skipped").c_str() : "");
+  // A viewer or Foxglove client keeps the last frame on screen until the operator stops.
+  if (persistent() && g_stop == 0 && monotonicNs() < end_ns_) {
+    std::printf("replay finished; the viewer stays until SIGINT or SIGTERM%s\n", opt_.duration_s > 0 ? " (or --duration)" : "");
+    std::fflush(stdout);
+    while (pause(1000)) {
+    }
+  }
   return std::nullopt;
 }
 
