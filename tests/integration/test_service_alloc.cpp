@@ -271,8 +271,16 @@ TEST(ServiceAllocation, ThreeHundredFramesStreamedAndRecordedAllocateNothing) {
     }
   }
   EXPECT_TRUE(reader.complete()) << reader.stopReason();
-  EXPECT_GE(per_topic["/fovea/camera_pose"], 300u);
-  EXPECT_GE(per_topic["/fovea/frame_summary"], count.sent);
+  if (test::timeScale() == 1.0) {
+    EXPECT_GE(per_topic["/fovea/camera_pose"], 300u);
+    EXPECT_GE(per_topic["/fovea/frame_summary"], count.sent);
+  } else {
+    // Under qemu and the sanitizers the writer thread (zstd, the Foxglove cloud's
+    // encoding) falls behind the stages and drops, counted: it never blocks them.
+    EXPECT_GT(per_topic["/fovea/camera_pose"], 0u);
+    EXPECT_GT(per_topic["/fovea/frame_summary"], 0u);
+  }
+  EXPECT_GT(per_topic["/fovea/cloud"], 0u);
   EXPECT_GT(per_topic["/fovea/chunks"], per_topic["/fovea/frame_summary"]);
   EXPECT_GT(per_topic["/fovea/gaze"], 0u);
   if (HasFatalFailure()) return;
