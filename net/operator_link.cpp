@@ -145,12 +145,14 @@ bool OperatorLink::sendGaze(GazeSample sample) {
   sample.feedback.bytes_received = counters_.bytes_received;
   sample.feedback.echo_robot_stamp_ns = echo_robot_stamp_ns_;
   sample.feedback.echo_delay_ns = echo_robot_stamp_ns_ != 0 ? now_ns - echo_received_ns_ : 0;
-  const auto d = channel_.seal(MessageType::kGaze, encoder_.encode(sample), tx_buf_);
+  const std::span<const uint8_t> payload = encoder_.encode(sample);
+  const auto d = channel_.seal(MessageType::kGaze, payload, tx_buf_);
   if (d.empty() || !socket_.sendTo(d, robot_)) {
     ++counters_.send_failures;
     return false;
   }
   ++counters_.gaze_sent;
+  if (send_tap_) send_tap_(send_tap_context_, MessageType::kGaze, payload, now_ns);
   return true;
 }
 

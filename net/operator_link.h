@@ -94,6 +94,15 @@ class OperatorLink {
   const OperatorLinkCounters& counters() const { return counters_; }
   int localPort() const { return socket_.localEndpoint().port(); }
 
+  // Called with each gaze payload sent (plaintext, before sealing), on the
+  // caller's thread: fovea-operator --record keeps them. A plain function and a
+  // context, so a send allocates nothing.
+  using SendTap = void (*)(void* context, MessageType type, std::span<const uint8_t> payload, int64_t now_ns);
+  void setSendTap(SendTap tap, void* context) {
+    send_tap_ = tap;
+    send_tap_context_ = context;
+  }
+
  private:
   OperatorLink() = default;
   std::optional<Received> handle(std::span<const uint8_t> datagram, int64_t now_ns);
@@ -119,6 +128,8 @@ class OperatorLink {
   std::array<uint8_t, kMaxMtu + 1> rx_buf_{};
   PlainBuffer plain_buf_;
   std::array<uint8_t, kMaxMtu> tx_buf_{};
+  SendTap send_tap_ = nullptr;
+  void* send_tap_context_ = nullptr;
 };
 
 }  // namespace fovea::net

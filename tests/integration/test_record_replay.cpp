@@ -241,6 +241,11 @@ TEST_F(StreamRecording, TheOperatorsRecordingHasFoxglovesChannels) {
   EXPECT_GE(count["/fovea/cloud foxglove.PointCloud"], live_.size() / 2);
   EXPECT_GT(count["/fovea/head foxglove.FrameTransform"], 10u);
   EXPECT_EQ(count["/fovea/gaze_ray foxglove.SceneUpdate"], count["/fovea/head foxglove.FrameTransform"]);
+  // The gaze samples as sent (fovea's own message), one a head pose.
+  if (operator_drops_ == 0) {
+    EXPECT_EQ(count["/fovea/gaze fovea.net.wire.Gaze"], count["/fovea/head foxglove.FrameTransform"]);
+  }
+  EXPECT_GT(count["/fovea/gaze fovea.net.wire.Gaze"], 10u);
   EXPECT_GE(count["/fovea/log foxglove.Log"], 1u);
   EXPECT_GT(count["/fovea/chunks fovea.Chunk"], live_.size());
 }

@@ -797,6 +797,17 @@ void OperatorRun::runSession(net::OperatorLink& link) {
 
 Session OperatorRun::beginSession(net::OperatorLink& link) {
   Session s(&link);
+  // --record: the gaze samples as sent, on /fovea/gaze (the link's payload, before sealing).
+  if (station_.recorder) {
+    link.setSendTap(
+        [](void* context, net::MessageType type, std::span<const uint8_t> payload, int64_t) {
+          const Station& station = *static_cast<const Station*>(context);
+          if (const uint16_t channel = station.record_channels.channelOf(type); channel != 0) {
+            (void)station.record_producer->record(channel, static_cast<uint64_t>(wallClockNs()), payload);
+          }
+        },
+        &station_);
+  }
   if (!link.notice().empty()) std::fprintf(stderr, "fovea-operator: *** %s ***\n", link.notice().c_str());
   // Latency compares the robot's capture stamp with this host's arrival time. On
   // one host the clocks are one; across hosts the robot's clock is estimated from
