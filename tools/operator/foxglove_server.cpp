@@ -7,16 +7,12 @@
 #include <civetweb.h>
 #include <nlohmann/json.hpp>
 
+#include "tools/operator/civetweb_start.h"
 #include "tools/operator/view_server.h"
 
 namespace fovea::tools {
 
 namespace {
-
-void initCivetweb() {
-  static const unsigned features = mg_init_library(0);
-  (void)features;
-}
 
 constexpr uint8_t kOpMessageData = 0x01;
 constexpr std::size_t kFrameHeader = 1 + 4 + 8;  // opcode, subscription id, log time
@@ -96,31 +92,11 @@ Result<std::unique_ptr<FoxgloveServer>> FoxgloveServer::start(const FoxgloveServ
                         .dump();
   s->clients_.resize(config.max_clients);
 
-  initCivetweb();
-  const std::string threads = std::to_string(config.max_clients + 2);
-  const char* options[] = {"listening_ports",    listen.value().c_str(),
-                           "num_threads",        threads.c_str(),
-                           "request_timeout_ms", "10000",
-                           "websocket_timeout_ms", "5000",
-                           "enable_websocket_ping_pong", "yes",
-                           nullptr};
-  mg_callbacks callbacks{};
-  mg_init_data init{};
-  init.callbacks = &callbacks;
-  init.user_data = s.get();
-  init.configuration_options = options;
-  unsigned code = 0;
-  char text[256] = {0};
-  mg_error_data error{&code, text, sizeof text};
-  s->ctx_ = mg_start2(&init, &error);
-  if (s->ctx_ == nullptr) {
-    return R(ErrorCode::kUnavailable, "--foxglove: cannot serve on " + listen.value() + ": " + (text[0] ? text : "civetweb failed to start"));
-  }
-  mg_server_port ports[4] = {};
-  if (mg_get_server_ports(s->ctx_, 4, ports) < 1) return R(ErrorCode::kUnavailable, "--foxglove: no listening port");
-  s->port_ = ports[0].port;
-  const std::string host = listen.value().substr(0, listen.value().rfind(':'));
-  s->url_ = "ws://" + (host == "0.0.0.0" ? std::string("127.0.0.1") : host) + ":" + std::to_string(s->port_);
+  Result<CivetwebStarted> started = startCivetweb(listen.value(), config.max_clients + 2, s.get(), "--foxglove");
+  if (!started) return started.status();
+  s->ctx_ = started->ctx;
+  s->port_ = started->port;
+  s->url_ = "ws://" + started->url_host + ":" + std::to_string(s->port_);
   static const char* kProtocols[] = {kFoxgloveSubprotocol};
   static mg_websocket_subprotocols subprotocols{1, kProtocols};
   mg_set_request_handler(s->ctx_, "/", &FoxgloveServer::onHttp, s.get());

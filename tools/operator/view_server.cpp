@@ -6,21 +6,12 @@
 #include <civetweb.h>
 
 #include "core/clock.h"
+#include "tools/operator/civetweb_start.h"
 #include "net/udp_socket.h"
 #include "tools/operator/view_assets.h"
 #include "tools/operator/view_frame.h"
 
 namespace fovea::tools {
-
-namespace {
-
-// civetweb's library set-up is process-wide; the first server does it, once.
-void initCivetweb() {
-  static const unsigned features = mg_init_library(0);
-  (void)features;
-}
-
-}  // namespace
 
 Result<std::string> viewListenAddress(const std::string& text) {
   const std::size_t colon = text.rfind(':');
@@ -53,33 +44,12 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& co
   for (Buffer& b : s->buffers_) b.data.resize(viewFrameBytes(config.max_points));
   s->tabs_.resize(config.max_tabs);
 
-  initCivetweb();
-  // A worker per open tab, plus a few for page loads. Writes to a tab that
-  // reads nothing for request_timeout_ms fail, and that tab is closed.
-  const std::string threads = std::to_string(config.max_tabs + 4);
-  const char* options[] = {"listening_ports",    listen.value().c_str(),
-                           "num_threads",        threads.c_str(),
-                           "request_timeout_ms", "10000",
-                           "websocket_timeout_ms", "5000",
-                           "enable_websocket_ping_pong", "yes",
-                           nullptr};
-  mg_callbacks callbacks{};
-  mg_init_data init{};
-  init.callbacks = &callbacks;
-  init.user_data = s.get();
-  init.configuration_options = options;
-  unsigned code = 0;
-  char text[256] = {0};
-  mg_error_data error{&code, text, sizeof text};
-  s->ctx_ = mg_start2(&init, &error);
-  if (s->ctx_ == nullptr) {
-    return R(ErrorCode::kUnavailable, "--view: cannot serve on " + listen.value() + ": " + (text[0] ? text : "civetweb failed to start"));
-  }
-  mg_server_port ports[4] = {};
-  if (mg_get_server_ports(s->ctx_, 4, ports) < 1) return R(ErrorCode::kUnavailable, "--view: no listening port");
-  s->port_ = ports[0].port;
-  const std::string host = listen.value().substr(0, listen.value().rfind(':'));
-  s->url_ = "http://" + (host == "0.0.0.0" ? std::string("127.0.0.1") : host) + ":" + std::to_string(s->port_) + "/";
+  // A worker per open tab, plus a few for page loads.
+  Result<CivetwebStarted> started = startCivetweb(listen.value(), config.max_tabs + 4, s.get(), "--view");
+  if (!started) return started.status();
+  s->ctx_ = started->ctx;
+  s->port_ = started->port;
+  s->url_ = "http://" + started->url_host + ":" + std::to_string(s->port_) + "/";
   mg_set_request_handler(s->ctx_, "/", &ViewServer::onHttp, s.get());
   mg_set_websocket_handler(s->ctx_, "/ws", &ViewServer::onWsConnect, &ViewServer::onWsReady, &ViewServer::onWsData,
                            &ViewServer::onWsClose, s.get());
