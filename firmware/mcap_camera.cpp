@@ -118,7 +118,6 @@ Status McapCamera::open() {
     stamps.push_back(scratch.stamp_ns);
     ++frame_count_;
   }
-  largest_chunk_bytes_ = static_cast<std::size_t>(reader.largestChunkBytes());
   stop_reason_ = reader.complete() ? std::string() : reader.stopReason();
   if (!have_channel || frame_count_ == 0) {
     const std::string why = !have_channel ? "has no " + std::string(kFramesTopic) + " channel"
@@ -131,17 +130,14 @@ Status McapCamera::open() {
   const int64_t span_ns = stamps.back() - stamps.front();
   const int64_t period_ns =
       stamps.size() > 1 && span_ns > 0 ? span_ns / static_cast<int64_t>(stamps.size() - 1) : 33'333'333;
-  first_stamp_ns_ = stamps.front();
   loop_period_ns_ = span_ns + period_ns;
   info_.fps = 1e9 / static_cast<double>(period_ns);
   info_.model = "fovea recording, " + std::to_string(frame_count_) + " frames" +
                 (bad > 0 ? ", " + std::to_string(bad) + " unreadable (" + first_bad + ")" : std::string()) +
                 (stop_reason_.empty() ? std::string() : "; cut short: " + stop_reason_);
   for (std::size_t i = 0; i < bad; ++i) counters_.badFrame();
-  reader_->reserve(largest_chunk_bytes_);
   reader_->rewind();
   opened_ = true;
-  next_ = 0;
   loops_ = 0;
   start_stamp_known_ = false;
   return Status::ok();
@@ -180,7 +176,6 @@ Status McapCamera::acquire(hal::RgbdFrame& slot, std::chrono::nanoseconds timeou
   if (data.empty() && !nextFrameMessage(data)) {
     // The end of the file (or of what of it is readable): the next pass.
     ++loops_;
-    next_ = 0;
     if (!options_.loop) {
       finished_ = true;
       return Status(ErrorCode::kUnavailable, "end of record");
@@ -225,7 +220,6 @@ Status McapCamera::acquire(hal::RgbdFrame& slot, std::chrono::nanoseconds timeou
   }
   slot.stamp_ns = stamp_ns;
   slot.sequence += static_cast<uint64_t>(loops_) * frame_count_;
-  ++next_;
   counters_.frameDelivered();
   return Status::ok();
 }

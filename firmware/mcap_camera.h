@@ -10,10 +10,10 @@
 //   from them. A file that stops being readable (a power cut, corruption) plays
 //   up to its last readable frame; where and why it stopped is in info().model
 //   and stopReason(). A file without frames says how to record them.
-// - acquire() decodes the next frame straight from the mapped file (the
-//   reader's chunk buffer is sized at start() for the file's largest chunk), so
-//   it does not allocate; a loop's restart re-reads the schemas and channels
-//   (a few small strings), once per pass through the file.
+// - acquire() decodes the next frame straight from the mapped file with the
+//   reader of open()'s pass, rewound: it keeps its chunk buffer (grown to the
+//   file's largest chunk) and the schemas and channels it met, so acquire()
+//   allocates nothing, a loop's restart included.
 // - Time: stamp_ns is the recorded stamp, plus one recording length (and one
 //   mean frame period) per completed loop; realtime=on paces acquire() to those
 //   stamps. The sequence is the recorded one plus the frame count per loop.
@@ -73,10 +73,7 @@ class McapCamera final : public hal::Camera {
   std::unique_ptr<mcap::Reader> reader_;
   uint16_t frames_channel_ = 0;
   std::size_t frame_count_ = 0;
-  std::size_t largest_chunk_bytes_ = 0;
-  std::size_t next_ = 0;  // frames delivered in this pass
   std::span<const uint8_t> pending_;  // a frame read but not delivered (a timeout, a small slot)
-  int64_t first_stamp_ns_ = 0;
   int64_t loop_period_ns_ = 0;
   std::string stop_reason_;
 

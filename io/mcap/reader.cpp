@@ -6,7 +6,6 @@
 #include <zstd.h>
 
 #include <cerrno>
-#include <algorithm>
 #include <cstring>
 
 #include "io/mcap/format.h"
@@ -76,11 +75,6 @@ std::string malformed(const char* record, const char* field) {
 }  // namespace
 
 Reader::Reader(std::span<const uint8_t> file, const ReaderOptions& options) : file_(file), options_(options) {}
-
-void Reader::reserve(std::size_t chunk_bytes) {
-  if (zstd_ == nullptr) zstd_ = ZSTD_createDCtx();
-  if (chunk_.size() < chunk_bytes) chunk_.resize(chunk_bytes);
-}
 
 void Reader::rewind() {
   pos_ = 0;
@@ -235,7 +229,6 @@ Reader::Item Reader::enterChunk(std::span<const uint8_t> content, uint64_t offse
     }
   }
   ++chunks_;
-  largest_chunk_bytes_ = std::max(largest_chunk_bytes_, uncompressed_size);
   in_chunk_ = true;
   chunk_pos_ = 0;
   chunk_offset_ = offset;

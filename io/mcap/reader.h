@@ -84,12 +84,6 @@ class Reader {
   uint64_t messagesRead() const { return messages_; }
   uint64_t chunksRead() const { return chunks_; }
   uint64_t unknownRecordsSkipped() const { return unknown_skipped_; }
-  // The largest chunk read so far, uncompressed.
-  uint64_t largestChunkBytes() const { return largest_chunk_bytes_; }
-
-  // Sizes the chunk buffer and makes the decompression context now, so that
-  // reading chunks up to `chunk_bytes` later allocates nothing.
-  void reserve(std::size_t chunk_bytes);
   // Back to the file's first record, keeping what was learnt: the schemas and
   // channels (met again, they are known and not returned) and the buffers.
   void rewind();
@@ -122,7 +116,6 @@ class Reader {
   uint64_t messages_ = 0;
   uint64_t chunks_ = 0;
   uint64_t unknown_skipped_ = 0;
-  uint64_t largest_chunk_bytes_ = 0;
 };
 
 // A file's bytes, at most max_bytes of them (kCapacityExceeded past it).
