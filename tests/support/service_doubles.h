@@ -22,6 +22,7 @@
 #include "hal/camera.h"
 #include "hal/gpio.h"
 #include "hal/gpio/mock/mock_gpio.h"
+#include "tests/support/test_time.h"
 
 namespace fovea::test {
 
@@ -134,6 +135,18 @@ class FakeNotifySocket {
     }
     return out;
   }
+  // Messages until done(messages) holds or a wait for `expected` ends, scaled and
+  // with test::waitUntil's margin: for what must come, even on a loaded machine,
+  // where a fixed window may hold too few.
+  template <class Predicate>
+  std::vector<std::string> receiveUntil(Predicate&& done, std::chrono::milliseconds expected) {
+    std::vector<std::string> out;
+    const auto end = std::chrono::steady_clock::now() + kWaitMargin * scaled(expected);
+    while (!done(out) && std::chrono::steady_clock::now() < end) {
+      for (std::string& m : receive(20)) out.push_back(std::move(m));
+    }
+    return out;
+  }
 
  private:
   std::string path_;
@@ -148,7 +161,9 @@ inline firmware::ServiceConfig smallServiceConfig(double fps = 60.0) {
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=" + std::to_string(fps);
   config.pipeline.max_points = 160 * 120;
   config.pipeline.max_voxels = 160 * 120;
-  config.camera.stall_timeout_ms = 300;
+  // Scaled: under qemu on a loaded machine a 300 ms gap between frames happens
+  // without any stall, and its fault would race the tests' checks of the lines.
+  config.camera.stall_timeout_ms = static_cast<int64_t>(300 * timeScale());
   config.gpio.lines.heartbeat_line = 0;
   config.gpio.lines.streaming_line = 1;
   config.gpio.lines.fault_line = 2;
