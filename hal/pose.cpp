@@ -74,6 +74,20 @@ Pose poseFromQuaternion(const Eigen::Vector3d& t, const Eigen::Quaterniond& q) {
   return p;
 }
 
+std::size_t formatTumPose(int64_t stamp_ns, const Pose& pose, char* out, std::size_t size) {
+  Eigen::Quaterniond q(pose.R_world_cam);
+  q.normalize();
+  if (q.w() < 0) q.coeffs() = -q.coeffs();  // one of the two: w >= 0, as TUM's files mostly have it
+  const bool negative = stamp_ns < 0;
+  const uint64_t magnitude = negative ? 0 - static_cast<uint64_t>(stamp_ns) : static_cast<uint64_t>(stamp_ns);
+  const uint64_t us = (magnitude + 500) / 1000;  // rounded to the microsecond
+  const int n = std::snprintf(out, size, "%s%llu.%06llu %.6f %.6f %.6f %.7f %.7f %.7f %.7f\n", negative ? "-" : "",
+                              static_cast<unsigned long long>(us / 1'000'000),
+                              static_cast<unsigned long long>(us % 1'000'000), pose.t_world_cam.x(),
+                              pose.t_world_cam.y(), pose.t_world_cam.z(), q.x(), q.y(), q.z(), q.w());
+  return n > 0 && static_cast<std::size_t>(n) < size ? static_cast<std::size_t>(n) : 0;
+}
+
 Pose interpolateBetween(const StampedPose& a, const StampedPose& b, int64_t stamp_ns) {
   const int64_t span = b.stamp_ns - a.stamp_ns;
   const double alpha = span > 0 ? static_cast<double>(stamp_ns - a.stamp_ns) / static_cast<double>(span) : 0.0;

@@ -41,6 +41,13 @@ Result<Eigen::Vector3d> translationFromList(std::span<const double> xyz, std::st
 
 Pose poseFromQuaternion(const Eigen::Vector3d& t, const Eigen::Quaterniond& q);
 
+// One line of a trajectory in the TUM RGB-D benchmark's format,
+// "timestamp tx ty tz qx qy qz qw\n" (seconds with 6 decimals, exactly from the
+// nanoseconds; metres and the unit quaternion with 6 and 7 decimals), what
+// groundtruth.txt holds and the benchmark's evaluate_ate.py reads. Written into
+// out (no allocation); returns its length, 0 when it does not fit.
+std::size_t formatTumPose(int64_t stamp_ns, const Pose& pose, char* out, std::size_t size);
+
 // The pose between a and b at a's stamp + alpha * (b's - a's): translation
 // linearly, rotation by slerp (the shorter arc: q and -q are one rotation).
 Pose interpolateBetween(const StampedPose& a, const StampedPose& b, int64_t stamp_ns);

@@ -17,6 +17,7 @@
 
 #include <gtest/gtest.h>
 
+#include "hal/camera/tum/tum_camera.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/process.h"
 
@@ -116,6 +117,44 @@ TEST(Pose, QuaternionAndRotationChecks) {
   EXPECT_NE(checkRotation(reflection, "R").message().find("determinant -1"), std::string::npos);
   Eigen::Matrix3d scaled = 1.001 * Eigen::Matrix3d::Identity();
   EXPECT_NE(checkRotation(scaled, "R").message().find("R^T R differs from I"), std::string::npos);
+}
+
+// A trajectory line in TUM's format reads back through the ground-truth parser
+// the TUM camera uses: the stamp exactly (to the microsecond), the position to
+// the printed decimals, the rotation as the same rotation (q and -q alike).
+TEST(Pose, TumTrajectoryLineRoundTrips) {
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::string text = "# timestamp tx ty tz qx qy qz qw\n";
+  std::vector<std::pair<int64_t, Pose>> written;
+  int64_t stamp = 1341841873405990000;
+  for (int i = 0; i < 50; ++i) {
+    Eigen::Quaterniond q(u(rng), u(rng), u(rng), u(rng));
+    q.normalize();
+    const Pose p = poseFromQuaternion(Eigen::Vector3d(u(rng) * 100, u(rng), u(rng) * 1e3), q);
+    stamp += 33'333'000 + i;  // microseconds and a few nanoseconds
+    char line[160];
+    const std::size_t n = formatTumPose(stamp, p, line, sizeof line);
+    ASSERT_GT(n, 0u);
+    ASSERT_EQ(line[n - 1], '\n');
+    text.append(line, n);
+    written.emplace_back(stamp, p);
+  }
+  Result<std::vector<StampedPose>> read = tum::parseGroundTruth(text, "trajectory");
+  ASSERT_TRUE(read.isOk()) << read.status().message();
+  ASSERT_EQ(read->size(), written.size());
+  for (std::size_t i = 0; i < written.size(); ++i) {
+    const StampedPose& r = (*read)[i];
+    EXPECT_EQ(r.stamp_ns, (written[i].first + 500) / 1000 * 1000);
+    EXPECT_LT((r.t_world_cam - written[i].second.t_world_cam).cwiseAbs().maxCoeff(), 0.6e-6);
+    EXPECT_LT((r.q_world_cam.toRotationMatrix() - written[i].second.R_world_cam).cwiseAbs().maxCoeff(), 1e-6);
+    EXPECT_GE(r.q_world_cam.w(), 0.0);
+  }
+  char small[20];
+  EXPECT_EQ(formatTumPose(stamp, Pose{}, small, sizeof small), 0u);  // does not fit: nothing claimed
+  char line[160];
+  ASSERT_GT(formatTumPose(-1'500'000, Pose{}, line, sizeof line), 0u);
+  EXPECT_EQ(std::string(line).substr(0, 9), "-0.001500");
 }
 
 TEST(PoseDatagram, ParsesTheDocumentedFormat) {
