@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -122,15 +123,66 @@ Result<std::vector<StampedPose>> parseGroundTruth(std::string_view text, const s
   return poses;
 }
 
+std::vector<TumAssociation> associateTumStamps(const std::vector<int64_t>& rgb_ns, const std::vector<int64_t>& depth_ns,
+                                               int64_t max_difference_ns) {
+  struct Candidate {
+    int64_t difference;
+    std::size_t rgb, depth;
+  };
+  std::vector<Candidate> candidates;
+  // Both lists increase: the colour stamps within reach of a depth stamp are a window.
+  std::size_t first = 0;
+  for (std::size_t d = 0; d < depth_ns.size(); ++d) {
+    while (first < rgb_ns.size() && rgb_ns[first] < depth_ns[d] - max_difference_ns) ++first;
+    for (std::size_t r = first; r < rgb_ns.size() && rgb_ns[r] <= depth_ns[d] + max_difference_ns; ++r) {
+      candidates.push_back({std::abs(rgb_ns[r] - depth_ns[d]), r, d});
+    }
+  }
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.difference < b.difference; });
+  std::vector<uint8_t> rgb_used(rgb_ns.size(), 0), depth_used(depth_ns.size(), 0);
+  std::vector<TumAssociation> pairs;
+  for (const Candidate& c : candidates) {
+    if (rgb_used[c.rgb] || depth_used[c.depth]) continue;
+    rgb_used[c.rgb] = depth_used[c.depth] = 1;
+    pairs.push_back({c.rgb, c.depth});
+  }
+  std::sort(pairs.begin(), pairs.end(), [](const TumAssociation& a, const TumAssociation& b) { return a.depth < b.depth; });
+  return pairs;
+}
+
+namespace {
+
+// rgb.txt or depth.txt: `timestamp filename` per line, stamps increasing.
+Status readTumList(const std::filesystem::path& path, std::vector<int64_t>& stamps, std::vector<std::string>& files) {
+  Result<std::string> text = readWholeFile(path);
+  if (!text) return text.status();
+  return forEachDataLine(text.value(), [&](std::size_t line_number, std::string_view line) -> Status {
+    const std::string where = path.string() + ":" + std::to_string(line_number) + ": ";
+    const std::vector<std::string_view> f = splitFields(line);
+    if (f.size() != 2) {
+      return {ErrorCode::kParseError, where + "expected 2 fields (timestamp file), got " + std::to_string(f.size())};
+    }
+    Result<int64_t> t = parseTumTimestampNs(f[0]);
+    if (!t) return {ErrorCode::kParseError, where + t.status().message()};
+    if (!stamps.empty() && t.value() <= stamps.back()) return {ErrorCode::kParseError, where + "timestamps must increase"};
+    stamps.push_back(t.value());
+    files.emplace_back(f[1]);
+    return Status::ok();
+  });
+}
+
+}  // namespace
+
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
   TumCameraOptions options;
   const SpecTokens tokens = tokenizeSpec(args);
   const std::string_view path = tokens.head.value_or("");
-  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N]");
+  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]");
   options.path = std::string(path);
   for (const auto& [key, value, has_value] : tokens.items) {
     if (!has_value) {
-      return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames)");
+      return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames, groundtruth)");
     }
     if (key == "loop") {
       if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) return s;
@@ -143,16 +195,27 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
         return invalid("frames: expected a positive integer, got '" + std::string(value) + "'");
       }
       options.max_frames = n;
+    } else if (key == "groundtruth") {
+      if (value == "auto") {
+        options.groundtruth = TumCameraOptions::GroundTruth::kAuto;
+      } else if (value == "on") {
+        options.groundtruth = TumCameraOptions::GroundTruth::kOn;
+      } else if (value == "off") {
+        options.groundtruth = TumCameraOptions::GroundTruth::kOff;
+      } else {
+        return invalid("groundtruth: expected auto, on or off, got '" + std::string(value) + "'");
+      }
     } else {
-      return invalid("unknown option '" + std::string(key) + "' (keys: loop, realtime, frames)");
+      return invalid("unknown option '" + std::string(key) + "' (keys: loop, realtime, frames, groundtruth)");
     }
   }
   return options;
 }
 
 std::string tumCameraHelp() {
-  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N]  a TUM RGB-D sequence folder (associations.txt, "
-         "rgb/, depth/, groundtruth.txt); fr3 intrinsics, ground-truth poses; loop=on (default) restarts at the "
+  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]  a TUM RGB-D sequence folder "
+         "(associations.txt or rgb.txt and depth.txt, rgb/, depth/, groundtruth.txt); fr3 intrinsics, ground-truth "
+         "poses (auto: when groundtruth.txt is there, identity poses otherwise); loop=on (default) restarts at the "
          "end, realtime=on paces frames to their timestamps, frames=N keeps the first N (all are decoded into "
          "memory at open, 1.5 MB each)";
 }
@@ -182,23 +245,47 @@ Status TumCamera::open() {
   }
   const fs::path associations_path = folder / "associations.txt";
   const fs::path groundtruth_path = folder / "groundtruth.txt";
-  Result<std::string> associations = readWholeFile(associations_path);
-  if (!associations) {
-    return {associations.status().code(),
-            associations.status().message() +
-                " (make one with TUM's associate.py: python associate.py rgb.txt depth.txt > associations.txt)"};
+  const bool have_associations = fs::exists(associations_path, ec);
+  if (!have_associations && !(fs::exists(folder / "rgb.txt", ec) && fs::exists(folder / "depth.txt", ec))) {
+    return {ErrorCode::kNotFound, "tum: " + associations_path.string() +
+                                      " does not exist, nor do rgb.txt and depth.txt beside it to pair (TUM's "
+                                      "associate.py makes one: python associate.py rgb.txt depth.txt > associations.txt)"};
   }
-  Result<std::string> groundtruth = readWholeFile(groundtruth_path);
-  if (!groundtruth) return groundtruth.status();
-  Result<std::vector<StampedPose>> poses = parseGroundTruth(groundtruth.value(), groundtruth_path.string());
-  if (!poses) return poses.status();
+  bool use_groundtruth = options_.groundtruth == TumCameraOptions::GroundTruth::kOn;
+  if (options_.groundtruth == TumCameraOptions::GroundTruth::kAuto) use_groundtruth = fs::exists(groundtruth_path, ec);
+  std::vector<StampedPose> poses;
+  if (use_groundtruth) {
+    Result<std::string> groundtruth = readWholeFile(groundtruth_path);
+    if (!groundtruth) return groundtruth.status();
+    Result<std::vector<StampedPose>> parsed = parseGroundTruth(groundtruth.value(), groundtruth_path.string());
+    if (!parsed) return parsed.status();
+    poses = std::move(parsed).value();
+  }
+  info_.model = use_groundtruth ? "TUM RGB-D sequence, ground-truth poses"
+                                : "TUM RGB-D sequence without ground truth: every frame's pose is the identity";
 
   struct Entry {
     int64_t depth_ns;
     std::string rgb, depth;
   };
   std::vector<Entry> entries;
-  Status listed = forEachDataLine(associations.value(), [&](std::size_t line_number, std::string_view line) -> Status {
+  if (!have_associations) {
+    std::vector<int64_t> rgb_ns, depth_ns;
+    std::vector<std::string> rgb_files, depth_files;
+    if (Status s = readTumList(folder / "rgb.txt", rgb_ns, rgb_files); !s) return s;
+    if (Status s = readTumList(folder / "depth.txt", depth_ns, depth_files); !s) return s;
+    for (const TumAssociation& a : associateTumStamps(rgb_ns, depth_ns)) {
+      entries.push_back({depth_ns[a.depth], rgb_files[a.rgb], depth_files[a.depth]});
+    }
+    if (entries.empty()) {
+      return {ErrorCode::kParseError, "tum: no depth stamp in " + (folder / "depth.txt").string() +
+                                          " has a colour stamp in rgb.txt within 20 ms"};
+    }
+  }
+  Status listed = !have_associations ? Status::ok() : [&] {
+    Result<std::string> associations = readWholeFile(associations_path);
+    if (!associations) return associations.status();
+    return forEachDataLine(associations.value(), [&](std::size_t line_number, std::string_view line) -> Status {
     const std::string where = associations_path.string() + ":" + std::to_string(line_number) + ": ";
     const std::vector<std::string_view> f = splitFields(line);
     if (f.size() != 4) {
@@ -214,7 +301,8 @@ Status TumCamera::open() {
     }
     entries.push_back({t_depth.value(), std::string(f[1]), std::string(f[3])});
     return Status::ok();
-  });
+    });
+  }();
   if (!listed) return listed;
   if (entries.empty()) {
     return {ErrorCode::kParseError, "tum: " + associations_path.string() + " lists no frames"};
@@ -223,7 +311,7 @@ Status TumCamera::open() {
   for (const Entry& e : entries) {
     if (options_.max_frames != 0 && frames_.size() == options_.max_frames) break;
     Pose pose;
-    if (!interpolatePose(poses.value(), e.depth_ns, kPoseClampNs, pose)) {
+    if (use_groundtruth && !interpolatePose(poses, e.depth_ns, kPoseClampNs, pose)) {
       ++frames_without_pose_;
       continue;
     }

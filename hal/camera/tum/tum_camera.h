@@ -1,8 +1,10 @@
 // A recorded TUM RGB-D sequence as a camera (https://cvg.cit.tum.de/data/datasets/rgbd-dataset).
-// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N]", PATH the sequence folder
-// holding associations.txt (`t_rgb rgb/x.png t_depth depth/y.png` per line),
-// rgb/*.png (8-bit RGB), depth/*.png (16-bit, 5000 units per metre, 0 = no
-// measurement) and groundtruth.txt (`timestamp tx ty tz qx qy qz qw`).
+// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]",
+// PATH the sequence folder holding associations.txt (`t_rgb rgb/x.png t_depth
+// depth/y.png` per line; without it, rgb.txt and depth.txt are paired here as
+// TUM's associate.py pairs them), rgb/*.png (8-bit RGB), depth/*.png (16-bit,
+// 5000 units per metre, 0 = no measurement) and groundtruth.txt (`timestamp tx
+// ty tz qx qy qz qw`; optional unless groundtruth=on).
 //
 // - Intrinsics: Freiburg 3 (fx 535.4, fy 539.2, cx 320.1, cy 247.6, 640x480); the
 //   fr3 images are already undistorted and depth is registered to colour.
@@ -51,7 +53,22 @@ struct TumCameraOptions {
   bool loop = true;
   bool realtime = false;
   std::size_t max_frames = 0;  // 0: all
+  // groundtruth.txt: required (on), not read (off), or read when it is there
+  // (auto, the default: a sequence whose ground truth is withheld, tracked by
+  // fovead map --pose track, still plays; its frames' poses are the identity).
+  enum class GroundTruth : uint8_t { kAuto, kOn, kOff };
+  GroundTruth groundtruth = GroundTruth::kAuto;
 };
+
+// Pairs each depth stamp with the nearest colour stamp within max_difference_ns,
+// one to one, as TUM's associate.py does (candidates by increasing difference,
+// each stamp used once); the pairs in depth order. For a sequence without
+// associations.txt (rgb.txt and depth.txt are what TUM publishes).
+struct TumAssociation {
+  std::size_t rgb = 0, depth = 0;  // indexes into the two lists
+};
+std::vector<TumAssociation> associateTumStamps(const std::vector<int64_t>& rgb_ns, const std::vector<int64_t>& depth_ns,
+                                               int64_t max_difference_ns = 20'000'000);
 
 // Parses "PATH[,loop=on|off,realtime=on|off,frames=N]" (the spec after "tum:").
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args);

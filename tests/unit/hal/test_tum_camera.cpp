@@ -119,6 +119,9 @@ TEST(TumSpec, ParsesOptionsAndRejectsUnknownOnes) {
   EXPECT_EQ(parseTumCameraOptions("/x,loop=maybe").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_EQ(parseTumCameraOptions("/x,colour=on").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_EQ(parseTumCameraOptions("/x,frames=0").status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(parseTumCameraOptions("/x,groundtruth=off")->groundtruth, TumCameraOptions::GroundTruth::kOff);
+  EXPECT_EQ(parseTumCameraOptions("/x")->groundtruth, TumCameraOptions::GroundTruth::kAuto);
+  EXPECT_EQ(parseTumCameraOptions("/x,groundtruth=maybe").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_NE(cameraSpecHelp().find("tum:PATH"), std::string::npos);
 }
 
@@ -205,11 +208,73 @@ TEST(TumCamera, MissingFilesAreNotFoundNamingThem) {
   }
   fs::remove(dir.path() / "groundtruth.txt");
   {
-    TumCamera camera({dir.path().string()});
+    TumCameraOptions options{dir.path().string()};
+    options.groundtruth = TumCameraOptions::GroundTruth::kOn;  // required: its absence is the error
+    TumCamera camera(options);
     const Status s = camera.open();
     EXPECT_EQ(s.code(), ErrorCode::kNotFound);
     EXPECT_NE(s.message().find("groundtruth.txt"), std::string::npos) << s.message();
   }
+  fs::remove(dir.path() / "associations.txt");
+  {
+    TumCamera camera({dir.path().string()});  // nor rgb.txt and depth.txt to pair
+    const Status s = camera.open();
+    EXPECT_EQ(s.code(), ErrorCode::kNotFound);
+    EXPECT_NE(s.message().find("associate.py"), std::string::npos) << s.message();
+  }
+}
+
+// associate.py's rule: the closest pairs first, each stamp once, within the
+// bound; written out here against a brute force over every pairing order.
+TEST(TumAssociate, PairsClosestFirstOneToOneWithinTheBound) {
+  const int64_t ms = 1'000'000;
+  // Colour at 0, 30, 33, 70 ms; depth at 2, 31, 60, 200 ms.
+  const std::vector<int64_t> rgb = {0, 30 * ms, 33 * ms, 70 * ms};
+  const std::vector<int64_t> depth = {2 * ms, 31 * ms, 60 * ms, 200 * ms};
+  const std::vector<TumAssociation> pairs = associateTumStamps(rgb, depth);
+  ASSERT_EQ(pairs.size(), 3u);  // 200 ms has no colour within 20 ms
+  EXPECT_EQ(pairs[0].depth, 0u);
+  EXPECT_EQ(pairs[0].rgb, 0u);
+  EXPECT_EQ(pairs[1].depth, 1u);
+  EXPECT_EQ(pairs[1].rgb, 1u);  // 1 ms beats 33's 2 ms
+  EXPECT_EQ(pairs[2].depth, 2u);
+  EXPECT_EQ(pairs[2].rgb, 3u);  // 70 (10 ms); 33 is 27 ms away
+  EXPECT_TRUE(associateTumStamps({}, depth).empty());
+  EXPECT_TRUE(associateTumStamps(rgb, {}).empty());
+}
+
+// A sequence as TUM publishes it (rgb.txt, depth.txt, no associations.txt):
+// the pairs made here are those of the slice's associations.txt, and without
+// groundtruth.txt (auto) the frames play with identity poses, saying so.
+TEST(TumTeddy, RgbAndDepthListsArePairedLikeItsAssociationsFile) {
+  REQUIRE_TEDDY(teddy);
+  TempDir dir;
+  for (const char* name : {"rgb", "depth", "rgb.txt", "depth.txt"}) {
+    fs::remove_all(dir.path() / name);
+    fs::create_symlink(fs::path(teddy) / name, dir.path() / name);
+  }
+  TumCamera listed({dir.path().string()});
+  ASSERT_TRUE(listed.open().isOk());
+  EXPECT_NE(listed.info().model.find("without ground truth"), std::string::npos) << listed.info().model;
+  TumCamera reference({teddy});
+  ASSERT_TRUE(reference.open().isOk());
+  ASSERT_EQ(listed.frameCount(), reference.frameCount() + reference.framesWithoutPose());
+  ASSERT_TRUE(listed.start().isOk());
+  ASSERT_TRUE(reference.start().isOk());
+  RgbdFrame a(kWidth, kHeight), b(kWidth, kHeight);
+  // The reference skips the frames before its ground truth: line them up by stamp.
+  ASSERT_TRUE(reference.acquire(b, std::chrono::seconds(1)).isOk());
+  std::size_t compared = 0;
+  for (std::size_t i = 0; i < listed.frameCount(); ++i) {
+    ASSERT_TRUE(listed.acquire(a, std::chrono::seconds(1)).isOk());
+    EXPECT_TRUE(a.T_world_cam.R_world_cam.isIdentity() && a.T_world_cam.t_world_cam.isZero());
+    if (a.stamp_ns != b.stamp_ns) continue;
+    EXPECT_TRUE(std::equal(a.depth(), a.depth() + a.pixelCount(), b.depth())) << "frame " << i;
+    EXPECT_TRUE(std::equal(a.rgb(), a.rgb() + 3 * a.pixelCount(), b.rgb())) << "frame " << i;
+    ++compared;
+    if (compared < reference.frameCount()) ASSERT_TRUE(reference.acquire(b, std::chrono::seconds(1)).isOk());
+  }
+  EXPECT_EQ(compared, reference.frameCount());
 }
 
 TEST(TumCamera, CorruptPngIsAParseErrorNamingTheFile) {
