@@ -39,8 +39,11 @@ Result<hal::Pose> posePose(const PoseSettings& p) {
 Status checkCameraGeometry(const CameraSettings& settings) {
   if (Result<std::optional<hal::Pose>> e = inlineExtrinsics(settings); !e) return e.status();
   if (Result<hal::Pose> p = posePose(settings.pose); !p) return p.status();
-  if (settings.pose.source == "socket" && settings.pose.socket.empty()) {
-    return invalidArgument("camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
+  const std::optional<pipeline::map::PoseSourceChoice> choice = pipeline::map::parsePoseSourceChoice(settings.pose.source);
+  if (!choice) return invalidArgument(std::string(kPoseSourceChoices) + " (got '" + settings.pose.source + "')");
+  if (choice->outside == "socket" && settings.pose.socket.empty()) {
+    return invalidArgument("camera.pose.socket: must name the socket's path with camera.pose.source = \"" +
+                           settings.pose.source + "\"");
   }
   return Status::ok();
 }
@@ -74,21 +77,25 @@ Result<std::string> applyCameraCalibration(hal::Camera& camera, const CameraSett
 Result<hal::PoseSourceConfig> poseSourceConfig(const CameraSettings& settings) {
   if (Status s = checkCameraGeometry(settings); !s) return s;
   const PoseSettings& p = settings.pose;
+  const std::string_view outside = pipeline::map::parsePoseSourceChoice(p.source)->outside;  // checked above
   hal::PoseSourceConfig config;
-  if (p.source == "none") {
+  if (outside == "none") {
     config.kind = hal::PoseSourceConfig::Kind::kNone;
-  } else if (p.source == "fixed") {
+  } else if (outside == "fixed") {
     config.kind = hal::PoseSourceConfig::Kind::kFixed;
-  } else if (p.source == "socket") {
-    config.kind = hal::PoseSourceConfig::Kind::kSocket;
   } else {
-    return Status(ErrorCode::kInvalidArgument, "camera.pose.source: must be none, fixed or socket (got '" + p.source + "')");
+    config.kind = hal::PoseSourceConfig::Kind::kSocket;
   }
   config.pose = posePose(p).value();
   config.socket_path = p.socket;
   config.max_age_ns = p.max_age_ms * 1'000'000;
   config.capacity = static_cast<std::size_t>(p.buffer_poses);
   return config;
+}
+
+pipeline::map::PoseTracking poseTracking(const CameraSettings& settings) {
+  const std::optional<pipeline::map::PoseSourceChoice> choice = pipeline::map::parsePoseSourceChoice(settings.pose.source);
+  return choice ? choice->tracking : pipeline::map::PoseTracking::kOff;
 }
 
 Result<std::unique_ptr<hal::PoseSource>> createPoseSource(const CameraSettings& settings) {
@@ -104,7 +111,14 @@ Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
   CameraSettings settings;
   settings.spec = args.getOr("--camera", "mock:living-room");
   settings.calibration_file = args.getOr("--calibration", "");
-  const std::string pose = args.getOr("--pose", "none");
+  std::string pose = args.getOr("--pose", "none");
+  // track, track+fixed:..., track+socket:PATH: the tracker, alone or refining the outside pose.
+  const bool track = pose == "track" || pose.rfind("track+", 0) == 0;
+  if (pose == "track") {
+    pose = "none";
+  } else if (track) {
+    pose.erase(0, 6);
+  }
   if (pose == "none") {
     settings.pose.source = "none";
   } else if (pose.rfind("fixed:", 0) == 0) {
@@ -121,8 +135,9 @@ Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
     settings.pose.socket = pose.substr(7);
   } else {
     return Result<CameraSettings>(ErrorCode::kInvalidArgument,
-                                  "--pose: '" + pose + "' is not none, fixed:X,Y,Z[,QX,QY,QZ,QW] or socket:PATH");
+                                  "--pose: '" + args.getOr("--pose", "") + "' is not " + kPoseFlagForms);
   }
+  if (track) settings.pose.source = settings.pose.source == "none" ? "track" : "track+" + settings.pose.source;
   if (const std::string* v = args.get("--pose-max-age-ms")) {
     Result<long> ms = parseInteger("--pose-max-age-ms", *v, 1, 60'000);
     if (!ms) return ms.status();

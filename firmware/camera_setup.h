@@ -12,6 +12,7 @@
 #include "hal/calibration.h"
 #include "hal/camera.h"
 #include "hal/pose_source.h"
+#include "pipeline/map/pose_tracking.h"
 
 namespace fovea::firmware {
 
@@ -29,7 +30,18 @@ Result<hal::CameraCalibration> loadCameraCalibration(const CameraSettings& setti
 // naming the key. Returns the line to log ("" when nothing is configured).
 Result<std::string> applyCameraCalibration(hal::Camera& camera, const CameraSettings& settings);
 
+// What camera.pose.source takes, and --pose: for the messages and the help.
+inline constexpr const char* kPoseSourceChoices =
+    "camera.pose.source: must be none, fixed, socket, track, track+fixed or track+socket";
+inline constexpr const char* kPoseFlagForms =
+    "none, fixed:X,Y,Z[,QX,QY,QZ,QW], socket:PATH, track, track+fixed:X,Y,Z[,...] or track+socket:PATH";
+
+// The outside pose source camera.pose.source names (track: none; track+X: X).
+// The tracking part is pipeline::map::parsePoseSourceChoice's.
 Result<hal::PoseSourceConfig> poseSourceConfig(const CameraSettings& settings);
+// Whether and how the map tracks the camera (kOff for a source that is not valid:
+// checkCameraGeometry() says why).
+pipeline::map::PoseTracking poseTracking(const CameraSettings& settings);
 // The pose source the configuration asks for (binds the socket for "socket").
 Result<std::unique_ptr<hal::PoseSource>> createPoseSource(const CameraSettings& settings);
 

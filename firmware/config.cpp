@@ -124,7 +124,7 @@ const std::vector<Field>& fields() {
       FOVEA_FLOAT_LIST("camera.extrinsics.rotation_xyzw", camera.extrinsics_rotation_xyzw, -2.0, 2.0),
       FOVEA_FLOAT_LIST("camera.extrinsics.translation_m", camera.extrinsics_translation_m, -10.0, 10.0),
       // [camera.pose]
-      Field{"camera.pose.source", Kind::kChoice, 0, 0, {"none", "fixed", "socket"},
+      Field{"camera.pose.source", Kind::kChoice, 0, 0, {"none", "fixed", "socket", "track", "track+fixed", "track+socket"},
             [](const ServiceConfig& c) -> Value { return c.camera.pose.source; },
             [](ServiceConfig& c, const Value& v) { c.camera.pose.source = std::get<std::string>(v); }},
       FOVEA_FLOAT_LIST("camera.pose.translation_m", camera.pose.translation_m, -1e7, 1e7),
@@ -662,6 +662,11 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
     const std::size_t colon = m.find(':');
     return FieldError{m.substr(0, colon), m.substr(colon + 2),
                       {"camera.extrinsics.rotation_xyzw", "camera.extrinsics.translation_m", "camera.pose.source"}};
+  }
+  if (c.camera.pose.source.rfind("track", 0) == 0 && c.map.source != FoveationSource::kMap) {
+    return FieldError{"camera.pose.source",
+                      "\"" + c.camera.pose.source + "\" tracks the camera against the map: needs foveation.source = \"map\"",
+                      {"foveation.source"}};
   }
   if (c.pipeline.max_voxels > c.pipeline.max_points) {
     return FieldError{"pipeline.max_voxels",

@@ -67,8 +67,24 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
       stage.max_frame_brick_points_ = map.max_frame_brick_points;
       stage.max_frame_bricks_ = map.max_frame_bricks;
     }
+    if (map.tracking != pipeline::map::PoseTracking::kOff) {
+      pipeline::map::TrackerConfig tracker_config = map.tracker;
+      tracker_config.max_width = width;
+      tracker_config.max_height = height;
+      Result<pipeline::map::PoseEstimator> poser = pipeline::map::PoseEstimator::create(map.tracking, tracker_config);
+      if (!poser) return Result<FrameFoveator>(poser.status().code(), "tracking: " + poser.status().message());
+      stage.poser_ = std::make_unique<pipeline::map::PoseEstimator>(std::move(poser.value()));
+    }
+  } else if (map.tracking != pipeline::map::PoseTracking::kOff) {
+    return Result<FrameFoveator>(ErrorCode::kInvalidArgument, "tracking the camera needs the map source");
   }
   return stage;
+}
+
+bool FrameFoveator::trackPose(hal::RgbdFrame& frame, bool outside_pose_valid) {
+  map_figures_.track = {};
+  if (!poser_) return outside_pose_valid;
+  return poser_->poseFrame(frame, outside_pose_valid, map_figures_.track);
 }
 
 Status FrameFoveator::backproject(const hal::RgbdFrame& frame, pipeline::BackprojectCounts& counts, bool pose_valid) {
@@ -79,8 +95,11 @@ Status FrameFoveator::backproject(const hal::RgbdFrame& frame, pipeline::Backpro
     counts.pixels = frame.pixelCount();
     return Status::ok();
   }
+  const pipeline::map::TrackStats track = map_figures_.track;  // trackPose()'s, for this frame
   map_figures_ = {};
+  map_figures_.track = track;
   const pipeline::map::FuseOutcome outcome = map_->fuse(frame, map_figures_.fuse, pose_valid);
+  if (poser_ && outcome == pipeline::map::FuseOutcome::kFused) poser_->fused(frame, *map_);
   if (outcome != pipeline::map::FuseOutcome::kFused) {
     // Not in the map: the operator still sees the frame as it is, beside the map.
     if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) {

@@ -29,6 +29,7 @@
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
 #include "pipeline/map/map_delta.h"
+#include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/point_cloud.h"
 
@@ -58,6 +59,10 @@ struct MapSettings {
   // The points one frame's bricks may carry (BrickBatch's capacity).
   std::size_t max_frame_brick_points = 1u << 18;
   std::size_t max_frame_bricks = 1024;
+  // The map tracks the camera (camera.pose.source = track, track+X; map source
+  // only): pipeline/map/pose_tracking.h, docs/tracking.md.
+  pipeline::map::PoseTracking tracking = pipeline::map::PoseTracking::kOff;
+  pipeline::map::TrackerConfig tracker;
 };
 
 // Bytes a point is estimated to take on the wire, chunk headers included
@@ -67,6 +72,7 @@ inline constexpr double kWireBytesPerPointEstimate = 4.5;
 
 // What the map did with the last frame (map source only).
 struct MapFrameFigures {
+  pipeline::map::TrackStats track;  // with tracking (trackPose())
   pipeline::map::FuseStats fuse;
   pipeline::map::EyeViewStats eye;
   uint32_t frame_points = 0;  // the frame's points in the cloud: unexplained (fused) or all (refused)
@@ -89,6 +95,15 @@ class FrameFoveator {
   static std::size_t cloudCapacity(std::size_t pixels, const MapSettings& map) {
     return map.source == FoveationSource::kMap ? pixels + map.map.max_surfels : pixels;
   }
+
+  // With tracking (MapSettings::tracking), before backproject(): sets
+  // frame.T_world_cam to the tracker's pose (outside_pose_valid: whether the
+  // frame's own pose, from the pose source, is usable, as the prior with
+  // track+X). Returns whether the frame may be fused: false when the tracker
+  // is lost (the frame then carries the last good or the outside pose, to be
+  // shown beside the map). Without tracking: outside_pose_valid, frame untouched.
+  bool trackPose(hal::RgbdFrame& frame, bool outside_pose_valid);
+  const pipeline::map::PoseEstimator* poseEstimator() const { return poser_.get(); }
 
   // Takes a frame in. pyramid source: only keeps `frame`, which must stay valid
   // until foveate(). frame source: back-projects it into cloud()
@@ -143,10 +158,12 @@ class FrameFoveator {
   const pipeline::DepthRange& range() const { return range_; }
   // The map source's map and its figures for the last frame (null / zero otherwise).
   const pipeline::map::SurfelMap* map() const { return map_.get(); }
+  // The last frame's (trackPose() sets .track, backproject() the rest).
   const MapFrameFigures& mapFigures() const { return map_figures_; }
-  // Bytes the map source allocated (the map and the eye's depth buffer).
+  // Bytes the map source allocated (the map, the eye's depth buffer, the bricks, the tracker).
   std::size_t mapMemoryBytes() const {
-    return map_ ? map_->memoryBytes() + eye_->memoryBytes() + (delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0)
+    return map_ ? map_->memoryBytes() + eye_->memoryBytes() + (delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0) +
+                      (poser_ ? poser_->memoryBytes() : 0)
                 : 0;
   }
   const pipeline::map::MapDelta* mapDelta() const { return delta_.get(); }
@@ -173,6 +190,7 @@ class FrameFoveator {
   std::unique_ptr<pipeline::map::EyeView> eye_;
   std::unique_ptr<pipeline::map::MapDelta> delta_;        // map source with bricks
   std::unique_ptr<pipeline::map::BrickSampler> bricks_;
+  std::unique_ptr<pipeline::map::PoseEstimator> poser_;  // map source with tracking
   std::size_t max_frame_brick_points_ = 0, max_frame_bricks_ = 0;
   MapFrameFigures map_figures_;
   std::unique_ptr<pipeline::PyramidSampler> pyramid_;  // pyramid source

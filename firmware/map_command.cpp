@@ -1,7 +1,9 @@
 // fovead map: posed frames of a camera (a recording, a mock path) fused into a
 // surfel map offline (pipeline/map/surfel_map.h), written as PLY.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "firmware/camera_setup.h"
@@ -9,28 +11,39 @@
 #include "firmware/frame_foveator.h"
 #include "firmware/options.h"
 #include "firmware/report.h"
+#include "hal/pose.h"
 #include "io/ply.h"
+#include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
+#include "pipeline/map/tracker.h"
 
 namespace fovea::firmware {
 
 namespace {
 
 const char* kMapHelp =
-    "usage: fovead map --out MAP.ply [--camera SPEC] [--frames N] [--all-surfels]\n"
+    "usage: fovead map [--out MAP.ply] [--trajectory FILE] [--camera SPEC] [--frames N] [--all-surfels]\n"
     "                  [--max-surfels N] [--brick-size M] [--depth-min M] [--depth-max M]\n"
-    "                  [--calibration FILE] [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH]\n"
+    "                  [--calibration FILE]\n"
+    "                  [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH|track|track+fixed:...|track+socket:PATH]\n"
     "\n"
     "Fuses N posed frames of a camera into a surfel map (point-based fusion: docs/map.md)\n"
     "and writes it as binary PLY, one vertex a surfel: x y z (double, world), nx ny nz,\n"
     "red green blue, radius, confidence. Each frame's pose is the camera's own (a TUM\n"
     "recording's ground truth, the mock camera's path) unless --pose gives one; a frame\n"
-    "without a usable pose is refused and counted. A recording ends the run at its end\n"
-    "(tum:PATH,loop=off) or after N frames.\n"
+    "without a usable pose is refused and counted. With --pose track the map tracks the\n"
+    "camera itself (frame-to-model ICP and colour, docs/tracking.md): the camera's own\n"
+    "poses are ignored; track+fixed and track+socket refine an outside pose. A lost frame\n"
+    "is not fused. A recording ends the run at its end (tum:PATH,loop=off) or after N\n"
+    "frames; with --pose track a recording plays once unless its spec says loop=on.\n"
     "\n"
     "  --out FILE          the map's PLY file\n"
+    "  --trajectory FILE   the poses in TUM's format (timestamp tx ty tz qx qy qz qw, the frame's stamp\n"
+    "                      in seconds: a TUM sequence's own), for evaluate_ate.py: with --pose track\n"
+    "                      every frame's (a lost one's is its last good pose), else the fused frames'\n"
+    "                      (one of --out and --trajectory is needed)\n"
     "  --camera SPEC       default mock:living-room,path=orbit ('fovead cameras' lists them)\n"
-    "  --frames N          frames to fuse (default 100)\n"
+    "  --frames N          frames to fuse (default 100; with --pose track and a recording: all)\n"
     "  --all-surfels       write unstable surfels too (default: the stable ones, those the map shows)\n"
     "  --max-surfels N     the pool (default 1048576; 32 bytes a surfel)\n"
     "  --brick-size M      the bricks' edge in metres (default 0.5)\n"
@@ -66,10 +79,27 @@ void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, s
               std::string(kernelSetName(map.config().kernels)).c_str());
 }
 
+// With --pose track, a recording plays once: looping back to its start is a
+// jump the tracker would (rightly) call lost. loop=on in the spec still loops.
+std::string playOnce(std::string spec) {
+  const bool recording = spec.rfind("tum:", 0) == 0 || spec.rfind("mcap:", 0) == 0;
+  if (recording && spec.find("loop") == std::string::npos) spec += spec.rfind("tum:", 0) == 0 ? ",loop=off" : "";
+  return spec;
+}
+
+void printTracking(const pipeline::map::FrameToModelTracker& tracker, const Samples& track_ms) {
+  const pipeline::map::TrackerCounters& t = tracker.counters();
+  std::printf("tracking: %llu frames, %llu tracked, %llu lost (not fused), %llu relocalised; time [ms] median %.2f, "
+              "p90 %.2f, max %.2f (kernels %s, one thread)\n",
+              static_cast<unsigned long long>(t.frames), static_cast<unsigned long long>(t.tracked),
+              static_cast<unsigned long long>(t.lost), static_cast<unsigned long long>(t.relocalised), track_ms.median(),
+              track_ms.quantile(0.9), track_ms.max(), std::string(kernelSetName(tracker.config().kernels)).c_str());
+}
+
 }  // namespace
 
 int mapCommand(int argc, char** argv) {
-  std::vector<std::string> flags = {"--out", "--frames", "--depth-min", "--depth-max"};
+  std::vector<std::string> flags = {"--out", "--trajectory", "--frames", "--depth-min", "--depth-max"};
   flags.insert(flags.end(), kCameraFlags.begin(), kCameraFlags.end());
   flags.insert(flags.end(), kMapFlags.begin(), kMapFlags.end());
   Result<Args> args = Args::parse(argc, argv, 2, flags, {"--help", "-h", "--all-surfels"});
@@ -78,9 +108,9 @@ int mapCommand(int argc, char** argv) {
     std::fputs(kMapHelp, stdout);
     return kExitOk;
   }
-  if (!args->has("--out")) return mapUsage(invalidArgument("--out is required (see --help)"));
-  Result<long> frames = parseInteger("--frames", args->getOr("--frames", "100"), 1, 100000000);
-  if (!frames) return mapUsage(frames.status());
+  if (!args->has("--out") && !args->has("--trajectory")) {
+    return mapUsage(invalidArgument("--out or --trajectory is required (see --help)"));
+  }
   Result<MapSettings> settings_map = mapSettingsFromArgs(args.value());
   if (!settings_map) return mapUsage(settings_map.status());
   Result<pipeline::DepthRange> range = depthRangeFromArgs(args.value());
@@ -90,6 +120,26 @@ int mapCommand(int argc, char** argv) {
   Result<CameraSettings> settings = cameraSettingsFromArgs(args.value());
   if (!settings) return mapUsage(settings.status());
   if (!args->has("--camera")) settings->spec = "mock:living-room,path=orbit";
+  const pipeline::map::PoseTracking tracking = poseTracking(settings.value());
+  const bool tracked = tracking != pipeline::map::PoseTracking::kOff;
+  if (tracked) settings->spec = playOnce(settings->spec);
+  // A recording tracked plays to its end unless --frames says otherwise.
+  const bool recording = settings->spec.rfind("tum:", 0) == 0 || settings->spec.rfind("mcap:", 0) == 0;
+  const char* default_frames = tracked && recording ? "100000000" : "100";
+  Result<long> frames = parseInteger("--frames", args->getOr("--frames", default_frames), 1, 100000000);
+  if (!frames) return mapUsage(frames.status());
+  std::FILE* trajectory = nullptr;
+  if (const std::string* path = args->get("--trajectory")) {
+    trajectory = std::fopen(path->c_str(), "w");
+    if (trajectory == nullptr) return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *path));
+    std::fputs("# timestamp tx ty tz qx qy qz qw (fovead map: camera to world, one line a frame)\n", trajectory);
+  }
+  struct CloseFile {
+    std::FILE* f;
+    ~CloseFile() {
+      if (f) std::fclose(f);
+    }
+  } close_trajectory{trajectory};
 
   Result<OpenedCamera> opened = openConfiguredCamera(settings.value());
   if (!opened) {
@@ -102,10 +152,22 @@ int mapCommand(int argc, char** argv) {
   Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
   if (!created) return mapUsage(created.status());
   pipeline::map::SurfelMap& map = created.value();
+  std::optional<pipeline::map::PoseEstimator> tracker;
+  if (tracked) {
+    pipeline::map::TrackerConfig tracker_config;
+    tracker_config.max_width = k.width;
+    tracker_config.max_height = k.height;
+    Result<pipeline::map::PoseEstimator> made = pipeline::map::PoseEstimator::create(tracking, tracker_config);
+    if (!made) return mapUsage(made.status());
+    tracker.emplace(std::move(made.value()));
+  }
   if (Status s = camera.start(); !s) return mapFailure(s);
 
   hal::RgbdFrame frame(k.width, k.height);
-  Samples fuse_ms(static_cast<std::size_t>(frames.value()));
+  // Samples are sized up front: a recording's frame count when it is known.
+  const std::size_t expected = static_cast<std::size_t>(std::min<long>(frames.value(), 100000));
+  Samples fuse_ms(expected), track_ms(expected);
+  std::size_t trajectory_lines = 0;
   std::size_t read = 0;
   for (long i = 0; i < frames.value(); ++i) {
     if (Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) {
@@ -117,17 +179,45 @@ int mapCommand(int argc, char** argv) {
       return mapFailure(Status(s.code(), "camera " + camera.info().name + ": " + s.message()));
     }
     ++read;
-    const bool pose_fresh = opened->pose_source->apply(frame);
+    bool pose_usable = opened->pose_source->apply(frame);
+    if (tracker) {
+      pipeline::map::TrackStats track;
+      pose_usable = tracker->poseFrame(frame, pose_usable, track);
+      track_ms.add(static_cast<double>(track.track_ns) * 1e-6);
+    }
     pipeline::map::FuseStats stats;
-    if (map.fuse(frame, stats, pose_fresh) == pipeline::map::FuseOutcome::kFused) fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
+    const bool fused = map.fuse(frame, stats, pose_usable) == pipeline::map::FuseOutcome::kFused;
+    if (fused) {
+      fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
+      if (tracker) tracker->fused(frame, map);
+    }
+    // Tracked: every frame's pose, a lost one's too (the last good: its error
+    // counts, as a tracker's failures should); otherwise the fused frames'.
+    if (trajectory && (fused || tracker)) {
+      char line[192];
+      const std::size_t n = hal::formatTumPose(frame.stamp_ns, frame.T_world_cam, line, sizeof line);
+      if (n == 0 || std::fwrite(line, 1, n, trajectory) != n) {
+        camera.stop();
+        return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *args->get("--trajectory")));
+      }
+      ++trajectory_lines;
+    }
   }
   camera.stop();
+  if (trajectory && std::fflush(trajectory) != 0) {
+    return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *args->get("--trajectory")));
+  }
 
-  const std::string& out_path = *args->get("--out");
-  if (Status s = io::writeSurfelPly(out_path, map, !args->has("--all-surfels")); !s) return mapFailure(s);
+  if (const std::string* out_path = args->get("--out")) {
+    if (Status s = io::writeSurfelPly(*out_path, map, !args->has("--all-surfels")); !s) return mapFailure(s);
+  }
   std::printf("camera: %s (%dx%d)\n", camera.info().name.c_str(), k.width, k.height);
   printSummary(map, fuse_ms, read);
-  std::printf("wrote %s surfels to %s\n", args->has("--all-surfels") ? "all" : "the stable", out_path.c_str());
+  if (tracker) printTracking(tracker->tracker(), track_ms);
+  if (const std::string* out_path = args->get("--out")) {
+    std::printf("wrote %s surfels to %s\n", args->has("--all-surfels") ? "all" : "the stable", out_path->c_str());
+  }
+  if (trajectory) std::printf("wrote %zu poses to %s\n", trajectory_lines, args->get("--trajectory")->c_str());
   return map.counters().frames_fused > 0 ? kExitOk : mapFailure(invalidArgument("no frame was fused (see the refusals above)"));
 }
 

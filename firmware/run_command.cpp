@@ -35,7 +35,7 @@ const char* kRunHelp =
     "usage: fovead run [--camera SPEC] [--frames N] [--gaze MODE | --gaze-origin X,Y,Z --gaze-dir X,Y,Z]\n"
     "                  [--preset F1|F2|F3|FREF|ACUITY] [--m SLOPE] [--far-ecc DEG] [--fixation MODE]\n"
     "                  [--depth-min M] [--depth-max M] [--every N] [--save-ply FILE] [--threads N]\n"
-    "                  [--calibration FILE] [--pose none|fixed:X,Y,Z[,QX,QY,QZ,QW]|socket:PATH]\n"
+    "                  [--calibration FILE] [--pose none|fixed:...|socket:PATH|track[+fixed:...|+socket:PATH]]\n"
     "                  [--source frame|map [--max-surfels N] [--brick-size M]]\n"
     "                  [--listen ADDR:PORT (--key-file FILE | --insecure) [stream options]]\n"
     "\n"
@@ -60,7 +60,9 @@ const char* kRunHelp =
     "                           docs/calibration.md), as camera.calibration_file\n"
     "  --pose SPEC              where the camera is (docs/pose.md), as [camera.pose]: none (default: the\n"
     "                           camera's own), fixed:X,Y,Z[,QX,QY,QZ,QW] (metres; quaternion x y z w), or\n"
-    "                           socket:PATH (the robot's poses as datagrams; --pose-max-age-ms MS, default 100)\n"
+    "                           socket:PATH (the robot's poses as datagrams; --pose-max-age-ms MS, default 100);\n"
+    "                           with --source map also track (the map's tracker alone), track+fixed:...,\n"
+    "                           track+socket:PATH (the outside pose as the prior; docs/tracking.md)\n"
     "  --threads N              threads per frame for back-projection and partition (default 1, up to 64;\n"
     "                           SIMD kernels only; the output does not depend on it)\n"
     "  --source frame|map       what is foveated (foveation.source, docs/map.md): each frame's own points\n"
@@ -488,7 +490,8 @@ bool Run::capture(std::size_t i, int64_t slot_start_ns, FrameFigures& f) {
 bool Run::backproject(std::size_t i, FrameFigures& f) {
   const auto t0 = std::chrono::steady_clock::now();
   pipeline::BackprojectCounts counts;
-  if (Status s = stage_.backproject(frame_, counts, pose_fresh_); !s) {
+  const bool pose_usable = stage_.trackPose(frame_, pose_fresh_);  // the map's tracker, with --pose track...
+  if (Status s = stage_.backproject(frame_, counts, pose_usable); !s) {
     std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
     ++stats_.failed_frames;
     return false;
@@ -740,9 +743,14 @@ int runCommand(int argc, char** argv) {
   const hal::CameraInfo& info = camera.camera->info();
   const std::size_t max_points = static_cast<std::size_t>(info.intrinsics.width) * info.intrinsics.height;
   const fovea::KernelSet kernels = fovea::defaultKernelSet();
+  MapSettings map_settings = options->map;
+  map_settings.tracking = poseTracking(options->camera);
+  if (map_settings.tracking != pipeline::map::PoseTracking::kOff && map_settings.source != FoveationSource::kMap) {
+    return usage(invalidArgument("--pose track... tracks the camera against the map: add --source map"));
+  }
   Result<FrameFoveator> stage =
       FrameFoveator::create({max_points, max_points, kernels, options->threads}, options->foveation, options->range,
-                            options->map, info.intrinsics.width, info.intrinsics.height);
+                            map_settings, info.intrinsics.width, info.intrinsics.height);
   if (!stage) return usage(stage.status());
   Run run(options.value(), camera, gaze_choice.value(), stage.value(), kernels);
   if (Exit e = run.start()) return *e;

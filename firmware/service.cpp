@@ -211,8 +211,11 @@ Status Service::allocate() {
               foveated_->slotCount(), delta(before, heapInUse()));
 
   before = heapInUse();
+  MapSettings map_settings = config_.map;
+  map_settings.tracking = poseTracking(config_.camera);
+  tracking_ = map_settings.tracking != pipeline::map::PoseTracking::kOff;
   Result<FrameFoveator> stage =
-      FrameFoveator::create(capacity, config_.foveation, config_.camera.depth, config_.map, k.width, k.height);
+      FrameFoveator::create(capacity, config_.foveation, config_.camera.depth, map_settings, k.width, k.height);
   if (!stage) return stage.status();
   stage_ = std::make_unique<FrameFoveator>(std::move(stage.value()));
   const std::size_t map_bytes = stage_->mapMemoryBytes();
@@ -489,7 +492,7 @@ void Service::foveationLoop() {
       foveate_errors_.fetch_add(1, std::memory_order_relaxed);
       continue;
     }
-    const CapturedFrame& f = frames_->slot(in);
+    CapturedFrame& f = frames_->slot(in);  // this stage's while taken: tracking sets its pose
     FoveatedFrame& o = foveated_->slot(out);
     if (o.bricks_pending) {  // the ring dropped the frame before the send stage took it
       stage_->forgetBatch(o.bricks);
@@ -497,7 +500,9 @@ void Service::foveationLoop() {
     }
     const int64_t t0 = monotonicNs();
     pipeline::BackprojectCounts counts;
-    Status s = stage_->backproject(f.frame, counts, f.pose_fresh);
+    const bool pose_usable = stage_->trackPose(f.frame, f.pose_fresh);
+    if (tracking_) publishTracking();
+    Status s = stage_->backproject(f.frame, counts, pose_usable);
     o.backproject_ns = monotonicNs() - t0;
     if (const pipeline::map::SurfelMap* map = stage_->map()) publishMapFigures(*map);
     GazePolicy::Decision decision;
@@ -570,6 +575,21 @@ void Service::foveationLoop() {
     out_ring.publish(out);
   }
   foveation_alive_.store(false, std::memory_order_release);
+}
+
+void Service::publishTracking() {
+  const pipeline::map::TrackStats& t = stage_->mapFigures().track;
+  track_ns_.store(t.track_ns, std::memory_order_relaxed);
+  if (t.outcome == pipeline::map::TrackOutcome::kLost) {
+    tracking_lost_reason_.store(static_cast<uint8_t>(t.lost_reason), std::memory_order_relaxed);
+    frames_track_lost_.fetch_add(1, std::memory_order_relaxed);
+    tracking_lost_.store(true, std::memory_order_relaxed);
+    return;
+  }
+  if (t.outcome == pipeline::map::TrackOutcome::kRelocalised) frames_relocalised_.fetch_add(1, std::memory_order_relaxed);
+  frames_tracked_.fetch_add(1, std::memory_order_relaxed);
+  prior_disagreement_m_.store(t.prior_disagreement_m, std::memory_order_relaxed);
+  tracking_lost_.store(false, std::memory_order_relaxed);
 }
 
 void Service::publishMapFigures(const pipeline::map::SurfelMap& map) {
@@ -741,7 +761,10 @@ void Service::supervise(int64_t now_ns) {
   inputs.healthy = healthy;
   inputs.operator_connected = operator_connected_.load(std::memory_order_relaxed);
   inputs.gaze_fresh = gaze_ns != 0 && now_ns - gaze_ns <= config_.stream.gaze.timeout_ns;
-  inputs.fault = !healthy || pose_stale;
+  // Tracking: a lost track is a fault; a stale outside pose is then only the
+  // prior's absence (the tracker carries on), shown in the status line.
+  const bool tracking_lost = tracking_lost_.load(std::memory_order_relaxed);
+  inputs.fault = !healthy || (pose_stale && !tracking_) || tracking_lost;
   const bool was_privacy = status_lines_->state().privacy_active;
   const bool was_fault = status_lines_->state().fault;
   const StatusState& state = status_lines_->update(inputs, now_ns);
@@ -757,13 +780,30 @@ void Service::supervise(int64_t now_ns) {
   if (pose_stale != pose_was_stale_) {
     pose_was_stale_ = pose_stale;
     const hal::PoseCounters pc = pose_source_->counters();
-    if (pose_stale) {
+    if (pose_stale && tracking_) {
+      log().log(LogLevel::kWarning,
+                "pose: the outside pose is stale (no pose within camera.pose.max_age_ms of the frame's stamp): "
+                "the tracker goes on alone, without its prior");
+    } else if (pose_stale) {
       log().log(LogLevel::kWarning,
                 "fault: the pose is stale (no pose within camera.pose.max_age_ms of the frame's stamp; %" PRIu64
                 " poses received, %" PRIu64 " malformed, %" PRIu64 " out of order): frames keep the nearest pose",
                 pc.received, pc.malformed, pc.out_of_order);
     } else {
       log().log(LogLevel::kNotice, "pose fresh again (%" PRIu64 " frames had a stale pose)", pc.frames_stale);
+    }
+  }
+  if (tracking_lost != tracking_was_lost_) {
+    tracking_was_lost_ = tracking_lost;
+    if (tracking_lost) {
+      const std::string_view why =
+          pipeline::map::lostReasonName(static_cast<pipeline::map::LostReason>(tracking_lost_reason_.load()));
+      log().log(LogLevel::kWarning,
+                "fault: pose LOST (tracking: %.*s): frames are not fused; relocalising against the map at the last good pose",
+                static_cast<int>(why.size()), why.data());
+    } else {
+      log().log(LogLevel::kNotice, "pose tracked again (%" PRIu64 " frames were lost)",
+                frames_track_lost_.load(std::memory_order_relaxed));
     }
   }
   if (state.fault != was_fault) {
@@ -846,11 +886,21 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   } else {
     std::snprintf(gaze_age, sizeof gaze_age, "%" PRId64 " ms", (now - gaze_ns) / 1'000'000);
   }
-  char pose[64] = "";
+  char pose[192] = "";
+  int pose_used = 0;
   if (pose_source_->config().kind == hal::PoseSourceConfig::Kind::kSocket) {
     const hal::PoseCounters pc = pose_source_->counters();
-    std::snprintf(pose, sizeof pose, " | pose %s, %" PRIu64 " stale frames", pose_stale_.load() ? "STALE" : "fresh",
-                  pc.frames_stale);
+    pose_used = std::snprintf(pose, sizeof pose, " | pose %s, %" PRIu64 " stale frames",
+                              pose_stale_.load() ? "STALE" : "fresh", pc.frames_stale);
+  }
+  if (tracking_ && pose_used >= 0 && static_cast<std::size_t>(pose_used) < sizeof pose) {
+    // "pose LOST" while lost: what an operator greps for.
+    std::snprintf(pose + pose_used, sizeof pose - static_cast<std::size_t>(pose_used),
+                  " | pose %s, track %.1f ms, lost %" PRIu64 " frames, relocalised %" PRIu64 ", prior off by %.1f cm",
+                  tracking_lost_.load(std::memory_order_relaxed) ? "LOST" : "tracked",
+                  static_cast<double>(track_ns_.load(std::memory_order_relaxed)) * 1e-6,
+                  frames_track_lost_.load(std::memory_order_relaxed), frames_relocalised_.load(std::memory_order_relaxed),
+                  prior_disagreement_m_.load(std::memory_order_relaxed) * 100.0);
   }
   // The map: its size, this window's fusion time, and since start the surfels
   // evicted and the frames refused (no pose; anything else).
@@ -990,6 +1040,12 @@ ServiceStats Service::stats() const {
   if (usb_monitor_) s.usb = usb_monitor_->counters();
   s.pose = pose_source_->counters();
   s.pose_stale = pose_stale_.load(std::memory_order_relaxed);
+  s.tracking.enabled = tracking_;
+  s.tracking.lost = tracking_lost_.load(std::memory_order_relaxed);
+  s.tracking.tracked = frames_tracked_.load(std::memory_order_relaxed);
+  s.tracking.lost_frames = frames_track_lost_.load(std::memory_order_relaxed);
+  s.tracking.relocalised = frames_relocalised_.load(std::memory_order_relaxed);
+  s.tracking.prior_disagreement_m = prior_disagreement_m_.load(std::memory_order_relaxed);
   s.map.surfels = map_surfels_.load(std::memory_order_relaxed);
   s.map.frames_fused = map_frames_fused_.load(std::memory_order_relaxed);
   s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);

@@ -141,6 +141,15 @@ struct ServiceStats {
   // The pose source's counts (hal/pose_source.h) and whether the last frame's pose was stale.
   hal::PoseCounters pose;
   bool pose_stale = false;
+  // The map's tracker (camera.pose.source = track, track+X; zero otherwise).
+  struct Tracking {
+    bool enabled = false;
+    bool lost = false;              // the last frame's track was lost
+    uint64_t tracked = 0;           // frames posed by the tracker (first frames and relocalised included)
+    uint64_t lost_frames = 0;       // frames lost (not fused)
+    uint64_t relocalised = 0;       // recoveries
+    double prior_disagreement_m = 0.0;  // the last tracked frame's, against its outside pose (track+X)
+  } tracking;
   // The map (foveation.source = map; zero otherwise).
   struct Map {
     uint64_t surfels = 0;            // live surfels after the last frame
@@ -262,6 +271,7 @@ class Service {
   void foveationLoop();
   // The foveation stage's map figures to the atomics the status line reads.
   void publishMapFigures(const pipeline::map::SurfelMap& map);
+  void publishTracking();  // the tracker's figures of the frame trackPose() just posed
   void sendLoop();
   // Hands the operator's newest gaze to the foveation stage when it changes
   // (the send stage's, also while it paces a frame out).
@@ -326,6 +336,14 @@ class Service {
   std::atomic<bool> capture_failing_{false};
   std::atomic<bool> pose_stale_{false};  // the last frame's pose was stale
   bool pose_was_stale_ = false;          // the supervisor's, for the log line
+  // The tracker (foveation stage writes, any thread reads).
+  bool tracking_ = false;
+  std::atomic<bool> tracking_lost_{false};
+  std::atomic<uint8_t> tracking_lost_reason_{0};  // pipeline::map::LostReason
+  std::atomic<uint64_t> frames_tracked_{0}, frames_track_lost_{0}, frames_relocalised_{0};
+  std::atomic<double> prior_disagreement_m_{0.0};
+  std::atomic<int64_t> track_ns_{0};      // the last frame's tracking time
+  bool tracking_was_lost_ = false;        // the supervisor's, for the log line
   uint64_t window_heartbeat_toggles_ = 0;  // the supervisor's, at the last status line
   std::atomic<uint64_t> frames_over_capacity_{0};
   std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},

@@ -31,7 +31,9 @@ struct ThreadPlacement {
 
 // Where the camera is (hal/pose_source.h, docs/pose.md).
 struct PoseSettings {
-  std::string source = "none";  // "none", "fixed", "socket"
+  // "none", "fixed", "socket"; "track" (the map's tracker alone), "track+fixed",
+  // "track+socket" (the outside pose as the prior the tracker refines; docs/tracking.md).
+  std::string source = "none";
   // fixed: the camera's pose in the world; socket: its mount on the robot.
   std::vector<double> translation_m = {0.0, 0.0, 0.0};
   std::vector<double> rotation_xyzw = {0.0, 0.0, 0.0, 1.0};
