@@ -1,0 +1,262 @@
+// fovea-track: the map's camera tracker (pipeline/map/tracker.h, docs/tracking.md)
+// against ground truth: the absolute trajectory error after TUM's rigid
+// alignment (pipeline/map/trajectory_error.h), the tracking time per frame
+// (median, p90; one thread), and the hard cases with their outcome frame by
+// frame. The ground truth is each camera's own pose (a TUM sequence's
+// groundtruth.txt, interpolated at the depth stamp; the mock camera's path),
+// which the tracker never sees unless a case gives it as the prior.
+//
+//   fovea-track                      the suite: TUM teddy, mock orbit and dolly, the hard cases
+//   fovea-track --camera SPEC [--frames N] [--case NAME] [--kernels ref|simd] [--every K]
+//
+// Cases (--case): plain; skip (every other frame dropped: twice the motion a
+// frame); invalid (frame 30 has no valid depth); wall (frames 30-34 are a flat
+// textureless wall at 1.2 m); object (from frame 20 a box a third of the view
+// wide moves across it at 0.8 m); jump (track+socket: the ground truth as the
+// prior, shifted 0.5 m from frame 30 on, as a socket's pose that jumps);
+// drift (track+socket: the ground truth plus a drift of 1 cm a frame as the
+// prior). An evaluation tool: it allocates freely.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "bench/bench_input.h"
+#include "core/kernel_set.h"
+#include "hal/camera.h"
+#include "pipeline/map/pose_tracking.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/map/tracker.h"
+#include "pipeline/map/trajectory_error.h"
+
+namespace {
+
+using fovea::KernelSet;
+using fovea::hal::RgbdFrame;
+using namespace fovea::pipeline::map;
+
+struct RunOptions {
+  std::string name;
+  std::string camera;
+  int frames = 60;
+  int every = 1;  // keep frame i when i % every == 0
+  std::string hard = "plain";
+  KernelSet kernels = fovea::defaultKernelSet();
+};
+
+struct RunResult {
+  bool ok = false;
+  std::string error;
+  int frames = 0, tracked = 0, lost = 0, relocalised = 0;
+  std::optional<TrajectoryError> ate;
+  double track_median_ms = 0, track_p90_ms = 0, fuse_median_ms = 0;
+  double max_disagreement_m = 0;
+  std::string events;  // the hard case's frames: "30 lost(no-valid-depth) 31 relocalised"
+};
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
+}
+
+// The hard cases' changes to a frame before the tracker sees it.
+void applyHardCase(const std::string& hard, int index, RgbdFrame& frame) {
+  const int w = frame.width(), h = frame.height();
+  const auto raw = [&](double metres) { return static_cast<uint16_t>(std::lround(metres / frame.depth_scale_m)); };
+  if (hard == "invalid" && index == 30) {
+    std::fill(frame.depth(), frame.depth() + frame.pixelCount(), uint16_t{0});
+  } else if (hard == "wall" && index >= 30 && index <= 34) {
+    std::fill(frame.depth(), frame.depth() + frame.pixelCount(), raw(1.2));
+    std::fill(frame.rgb(), frame.rgb() + 3 * frame.pixelCount(), uint8_t{200});
+  } else if (hard == "object" && index >= 20) {
+    // A third of the view wide, the full height, moving 6 pixels a frame, textured.
+    const int box = w / 3;
+    const int x0 = ((index - 20) * 6) % (w - box);
+    for (int v = 0; v < h; ++v) {
+      for (int u = x0; u < x0 + box; ++u) {
+        const std::size_t i = static_cast<std::size_t>(v) * w + u;
+        frame.depth()[i] = raw(0.8 + 0.0005 * (u - x0));
+        const bool check = ((u - x0) / 16 + v / 16) % 2 == 0;
+        frame.rgb()[3 * i] = check ? 220 : 40;
+        frame.rgb()[3 * i + 1] = 60;
+        frame.rgb()[3 * i + 2] = check ? 40 : 200;
+      }
+    }
+  }
+}
+
+RunResult run(const RunOptions& o) {
+  RunResult r;
+  fovea::Result<std::unique_ptr<fovea::hal::Camera>> created = fovea::hal::createCamera(o.camera);
+  if (!created) {
+    r.error = created.status().message();
+    return r;
+  }
+  fovea::hal::Camera& camera = *created.value();
+  if (fovea::Status s = camera.open(); !s) {
+    r.error = s.message();
+    return r;
+  }
+  const fovea::hal::CameraIntrinsics& k = camera.info().intrinsics;
+  SurfelMapConfig map_config;
+  map_config.max_width = k.width;
+  map_config.max_height = k.height;
+  map_config.kernels = o.kernels;
+  fovea::Result<SurfelMap> map = SurfelMap::create(map_config);
+  TrackerConfig tracker_config;
+  tracker_config.max_width = k.width;
+  tracker_config.max_height = k.height;
+  tracker_config.kernels = o.kernels;
+  const bool prior = o.hard == "jump" || o.hard == "drift";
+  fovea::Result<PoseEstimator> poser =
+      PoseEstimator::create(prior ? PoseTracking::kRefine : PoseTracking::kAlone, tracker_config);
+  if (!map || !poser) {
+    r.error = !map ? map.status().message() : poser.status().message();
+    return r;
+  }
+  if (fovea::Status s = camera.start(); !s) {
+    r.error = s.message();
+    return r;
+  }
+  RgbdFrame frame(k.width, k.height);
+  std::vector<Eigen::Vector3d> estimated, truth;
+  std::vector<double> track_ms, fuse_ms;
+  for (int i = 0; r.frames < o.frames; ++i) {
+    if (fovea::Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) break;  // a recording's end
+    if (i % o.every != 0) continue;
+    const fovea::hal::Pose gt = frame.T_world_cam;
+    applyHardCase(o.hard, i, frame);
+    if (o.hard == "jump" && i >= 30) frame.T_world_cam.t_world_cam += Eigen::Vector3d(0.5, 0.0, 0.0);
+    if (o.hard == "drift") frame.T_world_cam.t_world_cam += Eigen::Vector3d(0.01 * i, 0.0, 0.0);
+    ++r.frames;
+    TrackStats stats;
+    const bool usable = poser->poseFrame(frame, /*outside_pose_valid=*/true, stats);
+    track_ms.push_back(static_cast<double>(stats.track_ns) * 1e-6);
+    r.max_disagreement_m = std::max(r.max_disagreement_m, stats.prior_disagreement_m);
+    const bool eventful = o.hard != "plain" && o.hard != "skip" && o.hard != "drift" && i >= 19 && i <= 40;
+    if (stats.outcome == TrackOutcome::kLost) {
+      ++r.lost;
+    } else {
+      ++r.tracked;
+      if (stats.outcome == TrackOutcome::kRelocalised) ++r.relocalised;
+    }
+    if (eventful && (stats.outcome != TrackOutcome::kTracked || i == 19 || i == 40 || (o.hard == "jump" && i == 30))) {
+      char event[160];
+      std::snprintf(event, sizeof event, "%s%d %s%s%s%s", r.events.empty() ? "" : ", ", i,
+                    std::string(trackOutcomeName(stats.outcome)).c_str(),
+                    stats.outcome == TrackOutcome::kLost ? "(" : "",
+                    stats.outcome == TrackOutcome::kLost ? std::string(lostReasonName(stats.lost_reason)).c_str() : "",
+                    stats.outcome == TrackOutcome::kLost ? ")" : "");
+      r.events += event;
+      if (o.hard == "jump" && i == 30) {
+        std::snprintf(event, sizeof event, " (prior off by %.3f m)", stats.prior_disagreement_m);
+        r.events += event;
+      }
+    }
+    if (!usable) continue;  // lost: not fused, not in the trajectory
+    estimated.push_back(frame.T_world_cam.t_world_cam);
+    truth.push_back(gt.t_world_cam);
+    FuseStats fuse;
+    if (map->fuse(frame, fuse, true) == FuseOutcome::kFused) {
+      fuse_ms.push_back(static_cast<double>(fuse.fuse_ns) * 1e-6);
+      poser->fused(frame, map.value());
+    }
+  }
+  camera.stop();
+  fovea::Result<TrajectoryError> ate = absoluteTrajectoryError(estimated, truth);
+  if (ate) r.ate = ate.value();
+  r.track_median_ms = quantile(track_ms, 0.5);
+  r.track_p90_ms = quantile(track_ms, 0.9);
+  r.fuse_median_ms = quantile(fuse_ms, 0.5);
+  r.ok = true;
+  return r;
+}
+
+void printHeader() {
+  std::printf("%-28s %6s %7s %5s %6s %9s %9s %9s %9s %9s\n", "run", "frames", "tracked", "lost", "reloc", "ATE mm",
+              "max mm", "track ms", "p90 ms", "fuse ms");
+}
+
+void printRow(const RunOptions& o, const RunResult& r) {
+  if (!r.ok) {
+    std::printf("%-28s failed: %s\n", o.name.c_str(), r.error.c_str());
+    return;
+  }
+  std::printf("%-28s %6d %7d %5d %6d %9.2f %9.2f %9.2f %9.2f %9.2f\n", o.name.c_str(), r.frames, r.tracked, r.lost,
+              r.relocalised, r.ate ? r.ate->rmse_m * 1e3 : NAN, r.ate ? r.ate->max_m * 1e3 : NAN, r.track_median_ms,
+              r.track_p90_ms, r.fuse_median_ms);
+  if (!r.events.empty()) std::printf("    %s\n", r.events.c_str());
+  if (o.hard == "jump" || o.hard == "drift") {
+    std::printf("    largest disagreement with the prior: %.3f m\n", r.max_disagreement_m);
+  }
+}
+
+std::string teddyPath() {
+  if (const char* shared = std::getenv("FOVEA_SHARED_DIR")) return std::string(shared) + "/data/tum-fr3-teddy";
+  return "../shared/data/tum-fr3-teddy";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      std::puts("usage: fovea-track [--camera SPEC] [--frames N] [--every K] [--case plain|skip|invalid|wall|object|jump|drift]\n"
+                "                   [--kernels ref|simd] [--tum PATH]\n"
+                "Without --camera: the suite (TUM teddy, mock orbit and dolly at 640x480, the hard cases).");
+      return 0;
+    }
+  }
+  const std::optional<KernelSet> kernels = fovea::parseKernelSet(fovea::bench::option(argc, argv, "--kernels", "simd"));
+  if (!kernels) {
+    std::fprintf(stderr, "fovea-track: --kernels ref|simd\n");
+    return 2;
+  }
+  const std::string camera = fovea::bench::option(argc, argv, "--camera", "");
+  printHeader();
+  if (!camera.empty()) {
+    RunOptions o;
+    o.camera = camera;
+    o.name = camera.substr(0, 28);
+    o.frames = std::atoi(fovea::bench::option(argc, argv, "--frames", "60").c_str());
+    o.every = std::max(1, std::atoi(fovea::bench::option(argc, argv, "--every", "1").c_str()));
+    o.hard = fovea::bench::option(argc, argv, "--case", "plain");
+    o.kernels = *kernels;
+    const RunResult r = run(o);
+    printRow(o, r);
+    return r.ok ? 0 : 1;
+  }
+  const std::string tum = "tum:" + fovea::bench::option(argc, argv, "--tum", teddyPath().c_str()) + ",loop=off";
+  const std::string orbit = "mock:living-room,size=640x480,path=orbit";
+  const std::string dolly = "mock:living-room,size=640x480,path=dolly";
+  std::vector<RunOptions> suite = {
+      {"tum-fr3-teddy", tum, 60, 1, "plain", *kernels},
+      {"tum-fr3-teddy (ref kernels)", tum, 60, 1, "plain", KernelSet::kRef},
+      {"mock orbit", orbit, 90, 1, "plain", *kernels},
+      {"mock dolly", dolly, 90, 1, "plain", *kernels},
+      {"hard: orbit, every 2nd", orbit, 45, 2, "skip", *kernels},
+      {"hard: tum, every 2nd", tum, 30, 2, "skip", *kernels},
+      {"hard: invalid depth @30", orbit, 60, 1, "invalid", *kernels},
+      {"hard: wall @30-34", orbit, 60, 1, "wall", *kernels},
+      {"hard: moving object", orbit, 60, 1, "object", *kernels},
+      {"hard: socket jump @30", orbit, 60, 1, "jump", *kernels},
+      {"hard: socket drift 1cm/f", orbit, 60, 1, "drift", *kernels},
+  };
+  int failed = 0;
+  for (const RunOptions& o : suite) {
+    const RunResult r = run(o);
+    printRow(o, r);
+    failed += r.ok ? 0 : 1;
+    std::fflush(stdout);
+  }
+  return failed == 0 ? 0 : 1;
+}
