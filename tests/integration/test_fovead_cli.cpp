@@ -7,6 +7,7 @@
 #include <fstream>
 #include <random>
 #include <regex>
+#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -16,6 +17,7 @@
 
 #include "io/ply.h"
 #include "pipeline/foveator.h"
+#include "pipeline/map/trajectory_error.h"
 #include "tests/support/clouds.h"
 
 namespace fovea {
@@ -152,6 +154,8 @@ TEST(FoveadCli, HelpAndBadArguments) {
                      {"map --out m.ply --max-surfels 0", "--max-surfels"},
                      {"map --out m.ply --brick-size 100", "brick_size_m"},
                      {"map --out m.ply --camera mock:kitchen", "kitchen"},
+                     {"map --trajectory t.txt --pose track+gps:1", "--pose"},
+                     {"run --pose track", "--source map"},
                      {"foveate --in a.ply", "required"},
                      {"foveate --in a.ply --out b.ply --gaze-origin 0,0,0 --gaze-dir 0,0,0", "zero length"},
                      {"foveate --in a.ply --out b.ply --gaze-origin 0,nan,0 --gaze-dir 0,0,1", "--gaze-origin"}};
@@ -200,6 +204,58 @@ TEST(FoveadCli, MapFusesTheTumRecordingWithItsGroundTruth) {
   Result<io::PlyCloud> map = io::readPly(ply);
   ASSERT_TRUE(map.isOk()) << map.status().toString();
   EXPECT_GT(map->points.size(), 50000u);
+}
+
+// fovead map --pose track: the map tracks the camera, the recording's own poses
+// unseen; the trajectory file is TUM's format, a line a frame, and lies within
+// a few centimetres of the ground truth (which fovead map writes too without
+// --pose track) after TUM's alignment. bench/fovea-track measures the figure.
+TEST(FoveadCli, MapTracksTheTumRecordingAndWritesItsTrajectory) {
+  const char* shared = std::getenv("FOVEA_SHARED_DIR");
+  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
+  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
+    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
+  }
+  TempDir dir;
+  const std::string frames = std::to_string(test::repetitions(30, 5));
+  const std::string tracked = dir.file("tracked.txt"), truth = dir.file("truth.txt");
+  ProcessResult r = run(fovead() + " map --camera tum:" + path + " --pose track --frames " + frames +
+                        " --trajectory " + tracked);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracking: " + frames + " frames, " + frames + " tracked, 0 lost"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("wrote " + frames + " poses to"), std::string::npos) << r.output;
+  r = run(fovead() + " map --camera tum:" + path + ",loop=off --frames " + frames + " --trajectory " + truth);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto readTrajectory = [](const std::string& file) {
+    std::ifstream in(file);
+    std::vector<std::pair<std::string, Eigen::Vector3d>> poses;
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream fields(line);
+      std::string stamp;
+      double x, y, z, qx, qy, qz, qw;
+      fields >> stamp >> x >> y >> z >> qx >> qy >> qz >> qw;
+      EXPECT_TRUE(fields) << line;
+      EXPECT_NEAR(qx * qx + qy * qy + qz * qz + qw * qw, 1.0, 1e-5) << line;
+      poses.emplace_back(stamp, Eigen::Vector3d(x, y, z));
+    }
+    return poses;
+  };
+  const auto a = readTrajectory(tracked), b = readTrajectory(truth);
+  ASSERT_EQ(a.size(), static_cast<std::size_t>(std::stoi(frames)));
+  ASSERT_EQ(b.size(), a.size());
+  std::vector<Eigen::Vector3d> pa, pb;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].first, b[i].first) << "the same frames, the recording's stamps";
+    pa.push_back(a[i].second);
+    pb.push_back(b[i].second);
+  }
+  EXPECT_EQ(a[0].first.substr(0, 11), "1341841873.") << "the TUM sequence's own clock";
+  Result<pipeline::map::TrajectoryError> ate = pipeline::map::absoluteTrajectoryError(pa, pb);
+  ASSERT_TRUE(ate.isOk()) << ate.status().message();
+  EXPECT_LT(ate->rmse_m, 0.03) << "ATE " << ate->rmse_m << " m";
 }
 
 // fovead run --source map: the frames fused into the map, the map foveated as

@@ -7,6 +7,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -77,6 +78,8 @@ class LockedGpio final : public hal::Gpio {
 
 // A camera that delegates to another until told to stall; then acquire() waits
 // out its timeout and reports kUnavailable, as a camera that stopped delivering.
+// Told to blind, it delivers frames without a valid depth pixel (a lens covered:
+// what a tracker cannot track).
 class StallableCamera final : public hal::Camera {
  public:
   explicit StallableCamera(std::unique_ptr<hal::Camera> inner) : inner_(std::move(inner)) {}
@@ -87,17 +90,21 @@ class StallableCamera final : public hal::Camera {
       std::this_thread::sleep_for(std::min<std::chrono::nanoseconds>(timeout, std::chrono::milliseconds(20)));
       return {ErrorCode::kUnavailable, "stalled (test)"};
     }
-    return inner_->acquire(slot, timeout);
+    const Status s = inner_->acquire(slot, timeout);
+    if (s && blind_.load()) std::fill(slot.depth(), slot.depth() + slot.pixelCount(), uint16_t{0});
+    return s;
   }
   void stop() override { inner_->stop(); }
   const hal::CameraInfo& info() const override { return inner_->info(); }
   hal::CameraCounters counters() const override { return inner_->counters(); }
 
   void stall(bool on) { stalled_.store(on); }
+  void blind(bool on) { blind_.store(on); }
 
  private:
   std::unique_ptr<hal::Camera> inner_;
   std::atomic<bool> stalled_{false};
+  std::atomic<bool> blind_{false};
 };
 
 // A unix datagram socket bound where NOTIFY_SOCKET points, as systemd's.

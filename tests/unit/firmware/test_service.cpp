@@ -25,6 +25,7 @@
 #include <gtest/gtest.h>
 
 #include "core/sanitizer.h"
+#include "firmware/config.h"
 #include "net/operator_link.h"
 #include "net/udp_socket.h"
 #include "tests/support/process.h"
@@ -601,6 +602,77 @@ TEST(Service, PoseSocketPosesFramesAndAStalePoseRaisesTheFault) {
   EXPECT_GT(stats.pose.frames_stale, 0u);
   EXPECT_FALSE(stats.pose_stale);
   running.stop();
+}
+
+// camera.pose.source = track: the map tracks the camera with no outside pose;
+// a covered lens (no valid depth) loses the track: frames are not fused, the
+// status line says "pose LOST", the fault line rises; the view's return is
+// tracked again against the map and the fault clears.
+TEST(Service, TrackedPoseLostOnACoveredLensRaisesTheFaultAndRecovers) {
+  RecordingSink sink;
+  Logger logger(sink);
+  auto gpio = std::make_unique<test::LockedGpio>();
+  test::LockedGpio& chip = *gpio;
+  auto camera = std::make_unique<test::StallableCamera>(
+      hal::createCamera("mock:living-room,size=160x120,realtime=on,fps=30,path=orbit").value());
+  test::StallableCamera& cam = *camera;
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=30,path=orbit";
+  config.map.source = FoveationSource::kMap;
+  config.map.delta = false;
+  config.map.map.max_surfels = 1u << 16;
+  config.camera.pose.source = "track";
+  ASSERT_TRUE(validate(config).isOk()) << validate(config).toString();
+  Service::Environment environment;
+  environment.gpio = std::move(gpio);
+  environment.camera = std::move(camera);
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().tracking.tracked >= 10; }, 5000ms));
+  ServiceStats stats = running.service->stats();
+  EXPECT_TRUE(stats.tracking.enabled);
+  EXPECT_EQ(stats.tracking.lost_frames, 0u);
+  EXPECT_GE(stats.map.frames_fused, 9u);
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("| pose tracked, track "); }, 3000ms));
+  EXPECT_FALSE(chip.value(2));
+
+  cam.blind(true);
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().fault_line; }, 3000ms));
+  EXPECT_TRUE(waitUntil([&] { return sink.contains("fault: pose LOST (tracking: "); }, 1000ms));
+  ASSERT_TRUE(waitUntil([&] { return sink.contains("| pose LOST,"); }, 3000ms));
+  stats = running.service->stats();
+  EXPECT_TRUE(stats.tracking.lost);
+  EXPECT_GT(stats.tracking.lost_frames, 0u);
+  EXPECT_TRUE(chip.value(2));
+  const uint64_t fused = stats.map.frames_fused;
+  const uint64_t lost = stats.tracking.lost_frames;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().tracking.lost_frames >= lost + 3; }, 3000ms));
+  EXPECT_LE(running.service->stats().map.frames_fused, fused + 1);  // a frame in flight at most: lost ones are not fused
+
+  cam.blind(false);
+  ASSERT_TRUE(waitUntil([&] { return !running.service->stats().tracking.lost; }, 3000ms));
+  ASSERT_TRUE(waitUntil([&] { return !running.service->stats().fault_line; }, 3000ms));
+  EXPECT_TRUE(waitUntil([&] { return sink.contains("pose tracked again"); }, 1000ms));
+  EXPECT_GT(running.service->stats().tracking.relocalised, 0u);
+  const uint64_t fused_again = running.service->stats().map.frames_fused;
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().map.frames_fused >= fused_again + 5; }, 3000ms));
+  running.stop();
+}
+
+// Tracking needs the map: a configuration that asks for it without says so.
+TEST(Service, TrackingWithoutTheMapIsAConfigurationError) {
+  ServiceConfig config = test::smallServiceConfig();
+  config.camera.pose.source = "track";
+  const Status s = validate(config);
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message().find("foveation.source = \"map\""), std::string::npos) << s.message();
+  config.camera.pose.source = "track+socket";
+  config.map.source = FoveationSource::kMap;
+  config.camera.pose.socket.clear();
+  EXPECT_NE(validate(config).message().find("camera.pose.socket"), std::string::npos) << validate(config).message();
+  config.camera.pose.source = "track+gps";
+  EXPECT_NE(validate(config).message().find("track+socket"), std::string::npos) << validate(config).message();
 }
 
 TEST(Service, ACameraThatTakesNoCalibrationWithOneConfiguredIsAStartUpError) {
