@@ -745,9 +745,27 @@ Status applyOverrideTracked(ServiceConfig& config, std::string_view assignment, 
   if (eq == std::string_view::npos || eq == 0) {
     return invalidArgument("--set: '" + std::string(assignment) + "' is not section.key=value");
   }
-  const std::string path(assignment.substr(0, eq));
+  std::string path(assignment.substr(0, eq));
   const std::string text(assignment.substr(eq + 1));
   const Field* field = findField(path);
+  if (!field && path.find('.') != std::string::npos) {
+    // A key short of its outer section, when only one key ends so
+    // (pose.source = camera.pose.source): what the docs' prose says.
+    const Field* only = nullptr;
+    int matches = 0;
+    for (const Field& f : fields()) {
+      const std::string_view full = f.path;
+      if (full.size() > path.size() && full.substr(full.size() - path.size()) == path &&
+          full[full.size() - path.size() - 1] == '.') {
+        only = &f;
+        ++matches;
+      }
+    }
+    if (matches == 1) {
+      field = only;
+      path = only->path;
+    }
+  }
   if (!field) {
     if (sections().count(path)) return invalidArgument("--set: '" + path + "' is a section; set one of its keys");
     return invalidArgument("--set: unknown key '" + path + "'" + suggestion(path, false));

@@ -388,6 +388,12 @@ TEST(Config, SetOverrides) {
   ASSERT_TRUE(applyOverride(config, "stream.listen=").isOk());
   EXPECT_EQ(config.stream.link.listen, "");
   ASSERT_TRUE(applyOverride(config, "gpio.privacy_line=-1").isOk());
+  // A key short of its outer section, when only one key ends so (the "pose.source").
+  ASSERT_TRUE(applyOverride(config, "pose.source=track").isOk());
+  EXPECT_EQ(config.camera.pose.source, "track");
+  EXPECT_EQ(setError("pose.source=gps"), "--set: camera.pose.source: must be one of none, fixed, socket, track, "
+                                         "track+fixed, track+socket (got 'gps')");
+  EXPECT_NE(setError("source=map").find("unknown key 'source'"), std::string::npos);  // no section at all: not guessed
 
   EXPECT_EQ(setError("camera.sepc=mock"), "--set: unknown key 'camera.sepc' (did you mean 'camera.spec'?)");
   EXPECT_EQ(setError("stream.budget_mbps=-3"), "--set: stream.budget_mbps: must be within 0.01 .. 10000 (got -3)");
