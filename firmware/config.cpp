@@ -729,6 +729,16 @@ std::optional<FieldError> findError(const ServiceConfig& c) {
   return std::nullopt;
 }
 
+// What one setting implies for another nobody set: tracking the camera
+// (camera.pose.source = track...) needs the map, so the map is the source then
+// unless foveation.source was set (to something else: validation says so).
+void applyImpliedSettings(ServiceConfig& config, Origins& origins) {
+  if (config.camera.pose.source.rfind("track", 0) == 0 && origins.count("foveation.source") == 0) {
+    config.map.source = FoveationSource::kMap;
+    origins["foveation.source"] = "implied by camera.pose.source";
+  }
+}
+
 Status validateWithOrigins(const ServiceConfig& config, const Origins& origins) {
   std::optional<FieldError> error = findError(config);
   if (!error) return Status::ok();
@@ -796,6 +806,7 @@ Result<ServiceConfig> parseServiceConfig(std::string_view text, const std::strin
   ServiceConfig config = base;
   Origins origins;
   if (Status s = loadTextInto(std::string(text), name, config, origins); !s) return s;
+  applyImpliedSettings(config, origins);
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;
 }
@@ -906,6 +917,7 @@ Result<ServiceConfig> resolveServiceConfig(std::optional<std::string> board, std
   if (const char* force = std::getenv("FOVEA_FORCE_KERNEL"); force && *force) {
     config.pipeline.kernels = fovea::defaultKernelSet();
   }
+  applyImpliedSettings(config, origins);
   if (Status s = validateWithOrigins(config, origins); !s) return s;
   return config;
 }

@@ -581,6 +581,24 @@ TEST(BoardProfiles, DefaultIsHostMock) {
   EXPECT_TRUE(missingBackends(*config).empty());
 }
 
+// `fovead serve --set pose.source=track`: tracking implies the map unless
+// foveation.source was set; set to the frame, it is an error naming both.
+TEST(BoardProfiles, TrackingImpliesTheMapUnlessTheSourceIsSet) {
+  const ScopedBoardDir board_dir(boardDir());
+  const std::vector<std::string> track = {"pose.source=track"};
+  Result<ServiceConfig> config = resolveServiceConfig(std::nullopt, std::nullopt, track);
+  ASSERT_TRUE(config.isOk()) << config.status().message();
+  EXPECT_EQ(config->camera.pose.source, "track");
+  EXPECT_EQ(config->map.source, FoveationSource::kMap);
+  const std::vector<std::string> frame = {"foveation.source=frame", "camera.pose.source=track+fixed"};
+  config = resolveServiceConfig(std::nullopt, std::nullopt, frame);
+  ASSERT_FALSE(config.isOk());
+  EXPECT_NE(config.status().message().find("--set: camera.pose.source: \"track+fixed\" tracks the camera against the "
+                                           "map: needs foveation.source = \"map\""),
+            std::string::npos)
+      << config.status().message();
+}
+
 TEST(BoardProfiles, MissingCameraBackendIsReportedButTheProfileValidates) {
   TempDir dir;
   ServiceConfig config;
