@@ -91,6 +91,43 @@ TEST(ServiceAllocation, ThreeHundredFramesAfterWarmUpWithoutStreaming) {
   EXPECT_GE(service.stats().status_lines, 1u);
 }
 
+// The map tracking the camera (camera.pose.source = track): the tracker's
+// pyramid, its model from the map and its solves allocate nothing either.
+TEST(ServiceAllocation, TheMapTrackingTheCameraAllocatesNothing) {
+  Service::Environment environment;
+  environment.gpio = std::make_unique<hal::mock::MockGpio>(8);
+  ServiceConfig config = allocConfig();
+  config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=60,path=orbit";
+  config.gpio.lines.heartbeat_line = config.gpio.lines.streaming_line = config.gpio.lines.fault_line =
+      StatusLinesConfig::kNoLine;
+  config.map.source = FoveationSource::kMap;
+  config.map.delta = false;
+  config.map.map.max_surfels = 1u << 16;
+  config.camera.pose.source = "track";
+  test::RunningService running;
+  const Status started = running.start(config, std::move(environment));
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  Service& service = *running.service;
+  ASSERT_TRUE(waitForFrames(service, 30, 10s));  // warm-up
+  uint64_t allocations = 0, frames = 0, tracked = 0;
+  {
+    test::AllocationScope scope;
+    const ServiceStats start = service.stats();
+    const uint64_t counted = static_cast<uint64_t>(test::repetitions(120, 30));
+    EXPECT_TRUE(waitForFrames(service, start.frames_foveated + counted, 20s));
+    const ServiceStats end = service.stats();
+    frames = end.frames_foveated - start.frames_foveated;
+    tracked = end.tracking.tracked - start.tracking.tracked;
+    allocations = scope.allocations();
+  }
+  running.stop();
+  std::printf("steady state tracking: %llu frames, %llu tracked, %llu heap allocations\n",
+              static_cast<unsigned long long>(frames), static_cast<unsigned long long>(tracked),
+              static_cast<unsigned long long>(allocations));
+  EXPECT_GT(tracked, frames / 2);
+  EXPECT_EQ(allocations, 0u);
+}
+
 // Counts, without allocating, the log lines that say the gaze source changed.
 class GazeChangeSink final : public firmware::LogSink {
  public:
