@@ -174,15 +174,38 @@ Status readTumList(const std::filesystem::path& path, std::vector<int64_t>& stam
 
 }  // namespace
 
+CameraIntrinsics tumIntrinsics(TumSensor sensor) {
+  switch (sensor) {
+    case TumSensor::kFr1: return {kWidth, kHeight, 517.3, 516.5, 318.6, 255.3};
+    case TumSensor::kFr2: return {kWidth, kHeight, 520.9, 521.0, 325.1, 249.7};
+    case TumSensor::kFr3: return {kWidth, kHeight, kFx, kFy, kCx, kCy};
+    case TumSensor::kRos: return {kWidth, kHeight, 525.0, 525.0, 319.5, 239.5};
+  }
+  return {kWidth, kHeight, kFx, kFy, kCx, kCy};
+}
+
+TumSensor tumSensorForPath(std::string_view path) {
+  // The last folder name that names one: "rgbd_dataset_freiburg1_desk", "fr2_xyz".
+  while (!path.empty() && path.back() == '/') path.remove_suffix(1);
+  const std::size_t slash = path.rfind('/');
+  const std::string_view name = slash == std::string_view::npos ? path : path.substr(slash + 1);
+  for (const auto& [key, sensor] : {std::pair<std::string_view, TumSensor>{"freiburg1", TumSensor::kFr1},
+                                    {"freiburg2", TumSensor::kFr2}, {"freiburg3", TumSensor::kFr3},
+                                    {"fr1", TumSensor::kFr1}, {"fr2", TumSensor::kFr2}, {"fr3", TumSensor::kFr3}}) {
+    if (name.find(key) != std::string_view::npos) return sensor;
+  }
+  return TumSensor::kFr3;
+}
+
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
   TumCameraOptions options;
   const SpecTokens tokens = tokenizeSpec(args);
   const std::string_view path = tokens.head.value_or("");
-  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]");
+  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]");
   options.path = std::string(path);
   for (const auto& [key, value, has_value] : tokens.items) {
     if (!has_value) {
-      return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames, groundtruth)");
+      return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames, groundtruth, intrinsics)");
     }
     if (key == "loop") {
       if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) return s;
@@ -195,6 +218,18 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
         return invalid("frames: expected a positive integer, got '" + std::string(value) + "'");
       }
       options.max_frames = n;
+    } else if (key == "intrinsics") {
+      if (value == "fr1") {
+        options.sensor = TumSensor::kFr1;
+      } else if (value == "fr2") {
+        options.sensor = TumSensor::kFr2;
+      } else if (value == "fr3") {
+        options.sensor = TumSensor::kFr3;
+      } else if (value == "ros") {
+        options.sensor = TumSensor::kRos;
+      } else {
+        return invalid("intrinsics: expected fr1, fr2, fr3 or ros, got '" + std::string(value) + "'");
+      }
     } else if (key == "groundtruth") {
       if (value == "auto") {
         options.groundtruth = TumCameraOptions::GroundTruth::kAuto;
@@ -206,23 +241,24 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
         return invalid("groundtruth: expected auto, on or off, got '" + std::string(value) + "'");
       }
     } else {
-      return invalid("unknown option '" + std::string(key) + "' (keys: loop, realtime, frames, groundtruth)");
+      return invalid("unknown option '" + std::string(key) + "' (keys: loop, realtime, frames, groundtruth, intrinsics)");
     }
   }
   return options;
 }
 
 std::string tumCameraHelp() {
-  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]  a TUM RGB-D sequence folder "
-         "(associations.txt or rgb.txt and depth.txt, rgb/, depth/, groundtruth.txt); fr3 intrinsics, ground-truth "
-         "poses (auto: when groundtruth.txt is there, identity poses otherwise); loop=on (default) restarts at the "
+  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]  a TUM "
+         "RGB-D sequence folder (associations.txt or rgb.txt and depth.txt, rgb/, depth/, groundtruth.txt); the "
+         "intrinsics of the sensor its name says (freiburg1/2/3; fr3 otherwise), ground-truth poses (auto: when "
+         "groundtruth.txt is there, identity poses otherwise); loop=on (default) restarts at the "
          "end, realtime=on paces frames to their timestamps, frames=N keeps the first N (all are decoded into "
          "memory at open, 1.5 MB each)";
 }
 
 TumCamera::TumCamera(TumCameraOptions options) : options_(std::move(options)) {
   info_.name = "tum:" + options_.path;
-  info_.intrinsics = {kWidth, kHeight, kFx, kFy, kCx, kCy};
+  info_.intrinsics = tumIntrinsics(options_.sensor.value_or(tumSensorForPath(options_.path)));
   info_.depth_scale_m = kDepthScaleM;
   info_.fps = 30.0;
 }

@@ -1,12 +1,13 @@
 // A recorded TUM RGB-D sequence as a camera (https://cvg.cit.tum.de/data/datasets/rgbd-dataset).
-// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off]",
+// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]",
 // PATH the sequence folder holding associations.txt (`t_rgb rgb/x.png t_depth
 // depth/y.png` per line; without it, rgb.txt and depth.txt are paired here as
 // TUM's associate.py pairs them), rgb/*.png (8-bit RGB), depth/*.png (16-bit,
 // 5000 units per metre, 0 = no measurement) and groundtruth.txt (`timestamp tx
 // ty tz qx qy qz qw`; optional unless groundtruth=on).
 //
-// - Intrinsics: Freiburg 3 (fx 535.4, fy 539.2, cx 320.1, cy 247.6, 640x480); the
+// - Intrinsics: by the sensor the folder's name says (freiburg1, 2 or 3; fr3 when
+//   none: fx 535.4, fy 539.2, cx 320.1, cy 247.6, 640x480), or intrinsics=...; the
 //   fr3 images are already undistorted and depth is registered to colour.
 // - Pose: groundtruth.txt gives T_world_cam (OpenCV camera axes: x right, y down,
 //   z forward), the convention of hal::Pose. It is interpolated at the depth
@@ -28,6 +29,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -48,6 +50,16 @@ inline constexpr double kCy = 247.6;
 inline constexpr double kDepthScaleM = 1.0 / 5000.0;
 inline constexpr int64_t kPoseClampNs = 20'000'000;  // TUM's own association tolerance
 
+// The benchmark's published colour intrinsics by sensor (depth is registered to
+// colour): Freiburg 1, 2 and 3, and ROS's defaults that TUM suggests when the
+// sensor is unknown. fr1 and fr2 images also have lens distortion, which fovea
+// does not undo (fr3's are already undistorted).
+enum class TumSensor : uint8_t { kFr1, kFr2, kFr3, kRos };
+CameraIntrinsics tumIntrinsics(TumSensor sensor);
+// The sensor a sequence's folder names ("rgbd_dataset_freiburg1_desk": kFr1);
+// kFr3 when none does (the slice in shared/data is fr3).
+TumSensor tumSensorForPath(std::string_view path);
+
 struct TumCameraOptions {
   std::string path;
   bool loop = true;
@@ -58,6 +70,8 @@ struct TumCameraOptions {
   // fovead map --pose track, still plays; its frames' poses are the identity).
   enum class GroundTruth : uint8_t { kAuto, kOn, kOff };
   GroundTruth groundtruth = GroundTruth::kAuto;
+  // intrinsics=fr1|fr2|fr3|ros; unset: by the folder's name (tumSensorForPath).
+  std::optional<TumSensor> sensor;
 };
 
 // Pairs each depth stamp with the nearest colour stamp within max_difference_ns,

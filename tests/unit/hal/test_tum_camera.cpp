@@ -224,6 +224,25 @@ TEST(TumCamera, MissingFilesAreNotFoundNamingThem) {
   }
 }
 
+// Each Freiburg sensor's published intrinsics, by the folder's name or the spec.
+TEST(TumIntrinsics, ByTheFolderNameOrTheSpec) {
+  EXPECT_EQ(tumSensorForPath("/data/rgbd_dataset_freiburg1_desk"), TumSensor::kFr1);
+  EXPECT_EQ(tumSensorForPath("/data/rgbd_dataset_freiburg2_xyz/"), TumSensor::kFr2);
+  EXPECT_EQ(tumSensorForPath("../shared/data/tum-fr3-teddy"), TumSensor::kFr3);
+  EXPECT_EQ(tumSensorForPath("/data/freiburg1_runs/my-sequence"), TumSensor::kFr3);  // the last name only
+  EXPECT_EQ(tumSensorForPath("seq"), TumSensor::kFr3);
+  EXPECT_DOUBLE_EQ(tumIntrinsics(TumSensor::kFr1).fx, 517.3);
+  EXPECT_DOUBLE_EQ(tumIntrinsics(TumSensor::kFr2).cy, 249.7);
+  EXPECT_DOUBLE_EQ(tumIntrinsics(TumSensor::kRos).cx, 319.5);
+  TumCamera by_name({"/data/rgbd_dataset_freiburg2_desk"});
+  EXPECT_DOUBLE_EQ(by_name.info().intrinsics.fx, 520.9);
+  Result<TumCameraOptions> o = parseTumCameraOptions("/data/rgbd_dataset_freiburg2_desk,intrinsics=ros");
+  ASSERT_TRUE(o.isOk());
+  TumCamera by_spec(o.value());
+  EXPECT_DOUBLE_EQ(by_spec.info().intrinsics.fx, 525.0);
+  EXPECT_EQ(parseTumCameraOptions("/x,intrinsics=kinect").status().code(), ErrorCode::kInvalidArgument);
+}
+
 // associate.py's rule: the closest pairs first, each stamp once, within the
 // bound; written out here against a brute force over every pairing order.
 TEST(TumAssociate, PairsClosestFirstOneToOneWithinTheBound) {
