@@ -177,6 +177,15 @@ class SurfelMap {
   uint32_t brickSettledCount(uint16_t brick) const { return brick_settled_[brick]; }
   uint32_t brickChanges(uint16_t brick) const { return brick_changes_[brick]; }
 
+  // The index map of the last fused frame (indexMapWidth() x indexMapHeight(),
+  // row-major; both 0 before the first fused frame): per pixel the slot of the
+  // surfel the frame's pixel saw, rendered at the frame's pose before
+  // association (kNoSurfel: none). The slot's surfel is as merged; it may since
+  // have been removed (check live()). The tracker's model (tracker.h).
+  const uint32_t* indexMap() const { return index_.data(); }
+  int indexMapWidth() const { return fused_width_; }
+  int indexMapHeight() const { return fused_height_; }
+
   const SurfelMapConfig& config() const { return config_; }
   const SurfelMapCounters& counters() const { return counters_; }
   uint32_t frameNumber() const { return frame_; }

@@ -36,6 +36,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "core/kernel_set.h"
 #include "core/result.h"
@@ -55,9 +58,10 @@ struct TrackerConfig {
   // their normals within this angle.
   double icp_max_distance_m = 0.10;
   double icp_max_normal_deg = 30.0;
-  // The photometric term's weight against ICP's (ElasticFusion: 0.1 of ICP's 1,
-  // after scaling intensity to [0, 1] and ICP's residual to metres).
-  double photometric_weight = 0.1;
+  // The photometric term's weight against ICP's (squared residuals: intensity
+  // in [0, 1], ICP's residual in metres). ElasticFusion's 0.1 measured worse on
+  // the mock orbit and dolly than 0.01 (docs/tracking.md).
+  double photometric_weight = 0.01;
   // Lost: fewer than this share of the frame's valid pixels associated at the
   // finest level, ...
   double min_inlier_fraction = 0.15;
@@ -72,6 +76,12 @@ struct TrackerConfig {
   // Relocalisation: tried around the last good pose at these rotation offsets
   // (degrees, about each axis, both signs) besides the pose itself.
   double relocalise_search_deg = 10.0;
+  // A residual jump is only one when the ICP RMS is also above this (a running
+  // median of 1 mm on a still camera must not make 4 mm lost).
+  double residual_jump_floor_m = 0.01;
+  // Photometric residuals beyond this (intensity, 0..1) are occlusions or
+  // specularities, not misalignment: left out.
+  double max_photometric_residual = 0.3;
   // Per-pixel residuals and the reduction: the scalar reference or Highway's.
   KernelSet kernels = defaultKernelSet();
 
@@ -110,6 +120,7 @@ struct TrackStats {
   // Against the prior, when one was given (track+socket, track+fixed).
   double prior_disagreement_m = 0.0;
   double prior_disagreement_deg = 0.0;
+  int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
   int64_t track_ns = 0;             // all of track()
   int64_t pyramid_ns = 0;           // step 1
 };
@@ -144,11 +155,43 @@ class FrameToModelTracker {
 
  private:
   explicit FrameToModelTracker(const TrackerConfig& config);
-  // The implementation's buffers (pyramids, model maps) are members added here.
+
+  static constexpr int kLevels = 3;
+  // One pyramid level (of the new frame or of the model), structure of arrays.
+  struct Level {
+    int width = 0, height = 0;
+    float fx = 0.0f, fy = 0.0f, cx = 0.0f, cy = 0.0f;
+    std::vector<float> x, y, z, nx, ny, nz, intensity, gx, gy;
+    void allocate(std::size_t pixels, bool gradients);
+    std::size_t bytes() const;
+  };
+  // The result of one coarse-to-fine Gauss-Newton run from a start estimate.
+  struct Solve {
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // new camera -> model camera
+    Eigen::Vector3d t = Eigen::Vector3d::Zero();
+    int iterations = 0;
+    uint32_t inliers = 0;
+    double icp_rms = 0.0, photometric_rms = 0.0, min_eigenvalue = 0.0;
+    bool finite = true;
+  };
+  bool buildFramePyramid(const hal::RgbdFrame& frame);  // false: no valid depth
+  Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
+  // The checks of step 3 on a solve from the estimate (R, t of the world pose).
+  LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const;
+  double medianResidual() const;
+
   TrackerConfig config_;
   TrackerCounters counters_;
   bool lost_ = false;
   hal::Pose last_good_;
+  bool have_model_ = false;
+  hal::Pose model_pose_;  // the model's camera (world)
+  std::array<Level, kLevels> frame_;
+  std::array<Level, kLevels> model_;
+  std::vector<uint8_t> model_from_surfel_;  // finest model level: 1 where a surfel gave the pixel
+  std::array<double, 15> residual_history_{};
+  int residual_count_ = 0;
+  uint32_t valid_pixels_ = 0;
 };
 
 }  // namespace fovea::pipeline::map

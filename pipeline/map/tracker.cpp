@@ -1,0 +1,690 @@
+// FrameToModelTracker (tracker.h) and the kernel's scalar reference
+// (tracker_kernels.h). docs/tracking.md describes the method.
+#include "pipeline/map/tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+
+#include "pipeline/map/map_kernels.h"
+#include "pipeline/map/surfel.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/map/tracker_kernels.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
+// The pyramid's 2x2 averages leave out a pixel whose depth differs from the
+// block's first valid one by more than this share of it (a depth step).
+constexpr float kStepShare = 0.05f;
+// Fewer valid pixels than this at the finest level: no valid depth.
+constexpr uint32_t kMinValidPixels = 64;
+
+int64_t nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+double angleDeg(const Eigen::Matrix3d& R) {
+  const double c = std::clamp((R.trace() - 1.0) * 0.5, -1.0, 1.0);
+  return std::acos(c) / kDegToRad;
+}
+
+// exp of a twist [v, w] (left perturbation): a rotation and a translation.
+void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
+  const Eigen::Vector3d v = x.head<3>(), w = x.tail<3>();
+  const double theta = w.norm();
+  Eigen::Matrix3d W;
+  W << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  if (theta < 1e-10) {
+    R = Eigen::Matrix3d::Identity() + W;
+    t = v;
+    return;
+  }
+  const double a = std::sin(theta) / theta, b = (1.0 - std::cos(theta)) / (theta * theta),
+               c = (1.0 - a) / (theta * theta);
+  R = Eigen::Matrix3d::Identity() + a * W + b * W * W;
+  const Eigen::Matrix3d V = Eigen::Matrix3d::Identity() + b * W + c * W * W;
+  t = V * v;
+}
+
+// Normals of a level's vertex map: central differences over `reach` pixels,
+// none across a depth step, facing the camera; `skip` (may be null): pixels
+// whose normal is already set and kept.
+void computeNormals(int w, int h, int reach, const float* x, const float* y, const float* z, float* nx, float* ny,
+                    float* nz, const uint8_t* skip = nullptr) {
+  const float step = static_cast<float>(reach) * 2.0f * kStepShare;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      if (skip != nullptr && skip[i]) continue;
+      nx[i] = ny[i] = nz[i] = 0.0f;
+      if (u < reach || v < reach || u >= w - reach || v >= h - reach || !(z[i] > 0.0f)) continue;
+      const std::size_t rs = static_cast<std::size_t>(reach), rw = static_cast<std::size_t>(reach) * w;
+      const std::size_t l = i - rs, r = i + rs, up = i - rw, dn = i + rw;
+      const float zi = z[i];
+      bool ok = true;
+      for (std::size_t j : {l, r, up, dn}) ok = ok && z[j] > 0.0f && std::abs(z[j] - zi) <= step * zi;
+      if (!ok) continue;
+      const float ax = x[r] - x[l], ay = y[r] - y[l], az = z[r] - z[l];
+      const float bx = x[dn] - x[up], by = y[dn] - y[up], bz = z[dn] - z[up];
+      float cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+      const float n = std::sqrt(cx * cx + cy * cy + cz * cz);
+      if (!(n > 0.0f) || !std::isfinite(n)) continue;
+      cx /= n, cy /= n, cz /= n;
+      if (cx * x[i] + cy * y[i] + cz * zi > 0.0f) cx = -cx, cy = -cy, cz = -cz;
+      nx[i] = cx, ny[i] = cy, nz[i] = cz;
+    }
+  }
+}
+
+// The intensity's gradient per pixel (central differences / 2; zero at the border).
+void computeGradients(int w, int h, const float* in, float* gx, float* gy) {
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      if (u == 0 || v == 0 || u == w - 1 || v == h - 1) {
+        gx[i] = gy[i] = 0.0f;
+        continue;
+      }
+      gx[i] = 0.5f * (in[i + 1] - in[i - 1]);
+      gy[i] = 0.5f * (in[i + w] - in[i - w]);
+    }
+  }
+}
+
+// Level `to` from level `from` (2x2 blocks; vertices averaged over the pixels
+// within kStepShare of the block's first valid depth; intensity over all four;
+// normals averaged and renormalised when `normals`, else recomputed by the caller).
+template <class L>
+void downsample(const L& from, L& to, bool normals) {
+  to.width = from.width / 2;
+  to.height = from.height / 2;
+  to.fx = from.fx * 0.5f;
+  to.fy = from.fy * 0.5f;
+  to.cx = (from.cx + 0.5f) * 0.5f - 0.5f;
+  to.cy = (from.cy + 0.5f) * 0.5f - 0.5f;
+  const int fw = from.width;
+  for (int v = 0; v < to.height; ++v) {
+    for (int u = 0; u < to.width; ++u) {
+      const std::size_t o = static_cast<std::size_t>(v) * to.width + u;
+      const std::size_t s[4] = {static_cast<std::size_t>(2 * v) * fw + 2 * u,
+                                static_cast<std::size_t>(2 * v) * fw + 2 * u + 1,
+                                static_cast<std::size_t>(2 * v + 1) * fw + 2 * u,
+                                static_cast<std::size_t>(2 * v + 1) * fw + 2 * u + 1};
+      float zref = 0.0f;
+      for (std::size_t j : s) {
+        if (from.z[j] > 0.0f) {
+          zref = from.z[j];
+          break;
+        }
+      }
+      float sx = 0, sy = 0, sz = 0, snx = 0, sny = 0, snz = 0, si = 0;
+      int n = 0;
+      for (std::size_t j : s) {
+        si += from.intensity[j];
+        if (zref > 0.0f && from.z[j] > 0.0f && std::abs(from.z[j] - zref) <= kStepShare * zref) {
+          sx += from.x[j], sy += from.y[j], sz += from.z[j];
+          snx += from.nx[j], sny += from.ny[j], snz += from.nz[j];
+          ++n;
+        }
+      }
+      to.intensity[o] = 0.25f * si;
+      if (n == 0) {
+        to.x[o] = to.y[o] = to.z[o] = 0.0f;
+        to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
+        continue;
+      }
+      const float inv = 1.0f / static_cast<float>(n);
+      to.x[o] = sx * inv, to.y[o] = sy * inv, to.z[o] = sz * inv;
+      if (normals) {
+        const float len = std::sqrt(snx * snx + sny * sny + snz * snz);
+        if (len > 0.5f * static_cast<float>(n)) {  // the normals roughly agree
+          to.nx[o] = snx / len, to.ny[o] = sny / len, to.nz[o] = snz / len;
+        } else {
+          to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
+        }
+      }
+    }
+  }
+}
+
+float intensityOf(const uint8_t* rgb) {
+  return (0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]) * (1.0f / 255.0f);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- the kernel's reference
+
+TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, const TrackParams& p, std::size_t i) {
+  TrackPixel out;
+  const float pz = f.z[i];
+  if (!(pz > 0.0f)) return out;
+  const float nfx = f.nx[i], nfy = f.ny[i], nfz = f.nz[i];
+  if (nfx == 0.0f && nfy == 0.0f && nfz == 0.0f) return out;
+  const float px = f.x[i], py = f.y[i];
+  const auto& R = p.R;
+  const float qx = R[0] * px + R[1] * py + R[2] * pz + p.t[0];
+  const float qy = R[3] * px + R[4] * py + R[5] * pz + p.t[1];
+  const float qz = R[6] * px + R[7] * py + R[8] * pz + p.t[2];
+  if (!(qz > 0.0f)) return out;
+  const float fu = m.fx * qx / qz + m.cx;
+  const float fv = m.fy * qy / qz + m.cy;
+  // Inside [-0.5, width - 0.5): also false for NaN and rejects huge values before the cast.
+  if (!(fu >= -0.5f && fu < static_cast<float>(m.width) - 0.5f && fv >= -0.5f &&
+        fv < static_cast<float>(m.height) - 0.5f)) {
+    return out;
+  }
+  const int u = static_cast<int>(fu + 0.5f), v = static_cast<int>(fv + 0.5f);
+  const std::size_t j = static_cast<std::size_t>(v) * m.width + u;
+  const float mz = m.z[j];
+  const float nx = m.nx[j], ny = m.ny[j], nz = m.nz[j];
+  if (!(mz > 0.0f) || (nx == 0.0f && ny == 0.0f && nz == 0.0f)) return out;
+  const float dx = qx - m.x[j], dy = qy - m.y[j], dz = qz - mz;
+  if (!(dx * dx + dy * dy + dz * dz <= p.max_distance * p.max_distance)) return out;
+  const float rnx = R[0] * nfx + R[1] * nfy + R[2] * nfz;
+  const float rny = R[3] * nfx + R[4] * nfy + R[5] * nfz;
+  const float rnz = R[6] * nfx + R[7] * nfy + R[8] * nfz;
+  if (!(rnx * nx + rny * ny + rnz * nz >= p.min_normal_cos)) return out;
+  out.icp = true;
+  out.r_icp = nx * dx + ny * dy + nz * dz;
+  out.j_icp[0] = nx, out.j_icp[1] = ny, out.j_icp[2] = nz;
+  out.j_icp[3] = qy * nz - qz * ny;
+  out.j_icp[4] = qz * nx - qx * nz;
+  out.j_icp[5] = qx * ny - qy * nx;
+  if (p.use_photometric) {
+    // The model's intensity interpolated bilinearly at the projection (nearest
+    // would leave the photometric term's minimum up to half a pixel off).
+    const int u0 = std::clamp(static_cast<int>(std::floor(fu)), 0, m.width - 2);
+    const int v0 = std::clamp(static_cast<int>(std::floor(fv)), 0, m.height - 2);
+    const float au = std::clamp(fu - static_cast<float>(u0), 0.0f, 1.0f);
+    const float av = std::clamp(fv - static_cast<float>(v0), 0.0f, 1.0f);
+    const float* I = m.intensity + static_cast<std::size_t>(v0) * m.width + u0;
+    const float top = I[0] + au * (I[1] - I[0]);
+    const float bottom = I[m.width] + au * (I[m.width + 1] - I[m.width]);
+    const float r = top + av * (bottom - top) - f.intensity[i];
+    if (std::abs(r) <= p.max_photometric_residual) {
+      const float inv_z = 1.0f / qz;
+      const float a = m.gx[j] * m.fx * inv_z, b = m.gy[j] * m.fy * inv_z;
+      const float gx = a, gy = b, gz = -(a * qx + b * qy) * inv_z;
+      const float s = p.photometric_sqrt_weight;
+      out.photometric = true;
+      out.r_photo = s * r;
+      out.j_photo[0] = s * gx, out.j_photo[1] = s * gy, out.j_photo[2] = s * gz;
+      out.j_photo[3] = s * (qy * gz - qz * gy);
+      out.j_photo[4] = s * (qz * gx - qx * gz);
+      out.j_photo[5] = s * (qx * gy - qy * gx);
+    }
+  }
+  return out;
+}
+
+namespace {
+void accumulate(const float* J, float r, double* h, double* b) {
+  int k = 0;
+  for (int a = 0; a < 6; ++a) {
+    const double ja = J[a];
+    for (int c = a; c < 6; ++c) h[k++] += ja * static_cast<double>(J[c]);
+    b[a] += ja * static_cast<double>(r);
+  }
+}
+}  // namespace
+
+void trackLevelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
+                   TrackSums& sums) {
+  sums.clear();
+  for (int v = 0; v < frame.height; ++v) {
+    double h[21] = {}, b[6] = {}, icp_sq = 0.0, photo_sq = 0.0;
+    for (int u = 0; u < frame.width; ++u) {
+      const TrackPixel px = trackPixelRef(frame, model, params, static_cast<std::size_t>(v) * frame.width + u);
+      if (!px.icp) continue;
+      ++sums.inliers;
+      accumulate(px.j_icp, px.r_icp, h, b);
+      icp_sq += static_cast<double>(px.r_icp) * px.r_icp;
+      if (px.photometric) {
+        ++sums.photometric_inliers;
+        accumulate(px.j_photo, px.r_photo, h, b);
+        photo_sq += static_cast<double>(px.r_photo) * px.r_photo;
+      }
+    }
+    for (int k = 0; k < 21; ++k) sums.h[k] += h[k];
+    for (int k = 0; k < 6; ++k) sums.b[k] += b[k];
+    sums.icp_sq += icp_sq;
+    sums.photometric_sq += photo_sq;
+  }
+}
+
+// ---------------------------------------------------------------- names, config
+
+std::string_view trackOutcomeName(TrackOutcome outcome) {
+  switch (outcome) {
+    case TrackOutcome::kFirstFrame: return "first-frame";
+    case TrackOutcome::kTracked: return "tracked";
+    case TrackOutcome::kRelocalised: return "relocalised";
+    case TrackOutcome::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+std::string_view lostReasonName(LostReason reason) {
+  switch (reason) {
+    case LostReason::kNone: return "none";
+    case LostReason::kFewInliers: return "few-inliers";
+    case LostReason::kResidualJump: return "residual-jump";
+    case LostReason::kDegenerate: return "degenerate";
+    case LostReason::kImplausibleMotion: return "implausible-motion";
+    case LostReason::kNoValidDepth: return "no-valid-depth";
+  }
+  return "unknown";
+}
+
+Status TrackerConfig::validate() const {
+  if (max_width < 8 || max_height < 8 || max_width > 8192 || max_height > 8192) {
+    return invalidArgument("tracker: max_width and max_height must be within [8, 8192]");
+  }
+  for (int it : iterations) {
+    if (it < 0 || it > 100) return invalidArgument("tracker: iterations per level must be within [0, 100]");
+  }
+  if (iterations[0] < 1) return invalidArgument("tracker: the finest level needs at least one iteration");
+  auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
+  if (!positive(icp_max_distance_m)) return invalidArgument("tracker: icp_max_distance_m must be > 0");
+  if (!(icp_max_normal_deg > 0.0 && icp_max_normal_deg <= 90.0)) {
+    return invalidArgument("tracker: icp_max_normal_deg must be within (0, 90]");
+  }
+  if (!(std::isfinite(photometric_weight) && photometric_weight >= 0.0)) {
+    return invalidArgument("tracker: photometric_weight must be >= 0");
+  }
+  if (!(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0)) {
+    return invalidArgument("tracker: min_inlier_fraction must be within [0, 1]");
+  }
+  if (!(std::isfinite(max_residual_jump) && max_residual_jump > 1.0)) {
+    return invalidArgument("tracker: max_residual_jump must be > 1");
+  }
+  if (!(std::isfinite(min_eigenvalue) && min_eigenvalue >= 0.0)) {
+    return invalidArgument("tracker: min_eigenvalue must be >= 0");
+  }
+  if (!positive(max_motion_m) || !positive(max_motion_deg) || max_motion_deg > 180.0) {
+    return invalidArgument("tracker: max_motion_m must be > 0 and max_motion_deg within (0, 180]");
+  }
+  if (!(std::isfinite(relocalise_search_deg) && relocalise_search_deg >= 0.0 && relocalise_search_deg <= 90.0)) {
+    return invalidArgument("tracker: relocalise_search_deg must be within [0, 90]");
+  }
+  if (!(std::isfinite(residual_jump_floor_m) && residual_jump_floor_m >= 0.0)) {
+    return invalidArgument("tracker: residual_jump_floor_m must be >= 0");
+  }
+  if (!positive(max_photometric_residual)) return invalidArgument("tracker: max_photometric_residual must be > 0");
+  return Status::ok();
+}
+
+// ---------------------------------------------------------------- the tracker
+
+void FrameToModelTracker::Level::allocate(std::size_t pixels, bool gradients) {
+  for (auto* v : {&x, &y, &z, &nx, &ny, &nz, &intensity}) v->assign(pixels, 0.0f);
+  if (gradients) {
+    gx.assign(pixels, 0.0f);
+    gy.assign(pixels, 0.0f);
+  }
+}
+
+std::size_t FrameToModelTracker::Level::bytes() const {
+  std::size_t n = 0;
+  for (const auto* v : {&x, &y, &z, &nx, &ny, &nz, &intensity, &gx, &gy}) n += v->capacity() * sizeof(float);
+  return n;
+}
+
+FrameToModelTracker::FrameToModelTracker(const TrackerConfig& config) : config_(config) {}
+
+Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& config) {
+  if (Status s = config.validate(); !s.isOk()) return s;
+  FrameToModelTracker t(config);
+  for (int l = 0; l < kLevels; ++l) {
+    const std::size_t pixels =
+        static_cast<std::size_t>(config.max_width >> l) * static_cast<std::size_t>(config.max_height >> l);
+    t.frame_[l].allocate(pixels, false);
+    t.model_[l].allocate(pixels, true);
+  }
+  t.model_from_surfel_.assign(static_cast<std::size_t>(config.max_width) * config.max_height, 0);
+  return t;
+}
+
+std::size_t FrameToModelTracker::memoryBytes() const {
+  std::size_t n = model_from_surfel_.capacity();
+  for (const Level& l : frame_) n += l.bytes();
+  for (const Level& l : model_) n += l.bytes();
+  return n;
+}
+
+void FrameToModelTracker::reset() {
+  have_model_ = false;
+  lost_ = false;
+  last_good_ = hal::Pose{};
+  model_pose_ = hal::Pose{};
+  residual_count_ = 0;
+}
+
+bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
+  const int w = frame.width(), h = frame.height();
+  Level& l0 = frame_[0];
+  l0.width = w;
+  l0.height = h;
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  l0.fx = static_cast<float>(k.fx), l0.fy = static_cast<float>(k.fy);
+  l0.cx = static_cast<float>(k.cx), l0.cy = static_cast<float>(k.cy);
+  const float scale = static_cast<float>(frame.depth_scale_m);
+  const uint16_t* depth = frame.depth();
+  const uint8_t* rgb = frame.rgb();
+  uint32_t valid = 0;
+  for (int v = 0; v < h; ++v) {
+    const float yn = (static_cast<float>(v) - l0.cy) / l0.fy;
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const float z = static_cast<float>(depth[i]) * scale;
+      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f;
+      l0.z[i] = ok ? z : 0.0f;
+      l0.x[i] = ok ? (static_cast<float>(u) - l0.cx) / l0.fx * z : 0.0f;
+      l0.y[i] = ok ? yn * z : 0.0f;
+      l0.intensity[i] = frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f;
+      valid += ok ? 1u : 0u;
+    }
+  }
+  valid_pixels_ = valid;
+  computeNormals(w, h, kNormalReach, l0.x.data(), l0.y.data(), l0.z.data(), l0.nx.data(), l0.ny.data(), l0.nz.data());
+  for (int l = 1; l < kLevels; ++l) {
+    downsample(frame_[l - 1], frame_[l], false);
+    Level& L = frame_[l];
+    computeNormals(L.width, L.height, 1, L.x.data(), L.y.data(), L.z.data(), L.nx.data(), L.ny.data(), L.nz.data());
+  }
+  return valid >= kMinValidPixels;
+}
+
+void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map) {
+  const int w = frame.width(), h = frame.height();
+  if (w > config_.max_width || h > config_.max_height || w < 8 || h < 8) {
+    have_model_ = false;
+    return;
+  }
+  const bool index_ok = map.indexMapWidth() == w && map.indexMapHeight() == h;
+  const uint32_t* index = map.indexMap();
+  Level& l0 = model_[0];
+  l0.width = w;
+  l0.height = h;
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  l0.fx = static_cast<float>(k.fx), l0.fy = static_cast<float>(k.fy);
+  l0.cx = static_cast<float>(k.cx), l0.cy = static_cast<float>(k.cy);
+  const Eigen::Matrix3d Rt = pose.R_world_cam.transpose();
+  const Eigen::Matrix3f Rt_f = Rt.cast<float>();
+  const float scale = static_cast<float>(frame.depth_scale_m);
+  const uint16_t* depth = frame.depth();
+  const uint8_t* rgb = frame.rgb();
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const uint32_t slot = index_ok ? index[i] : SurfelMap::kNoSurfel;
+      if (slot != SurfelMap::kNoSurfel && slot < map.slotCount() && map.live(slot)) {
+        const Surfel& s = map.surfel(slot);
+        const Eigen::Vector3d p = Rt * (map.worldPosition(slot) - pose.t_world_cam);
+        if (p.z() > 0.0) {
+          const Eigen::Vector3f n = Rt_f * decodeNormal(s.normal_radius >> 8);
+          l0.x[i] = static_cast<float>(p.x()), l0.y[i] = static_cast<float>(p.y()), l0.z[i] = static_cast<float>(p.z());
+          l0.nx[i] = n.x(), l0.ny[i] = n.y(), l0.nz[i] = n.z();
+          const uint8_t c[3] = {s.red, s.green, s.blue};
+          l0.intensity[i] = intensityOf(c);
+          model_from_surfel_[i] = 1;
+          continue;
+        }
+      }
+      model_from_surfel_[i] = 0;
+      const float z = static_cast<float>(depth[i]) * scale;
+      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f;
+      l0.z[i] = ok ? z : 0.0f;
+      l0.x[i] = ok ? (static_cast<float>(u) - l0.cx) / l0.fx * z : 0.0f;
+      l0.y[i] = ok ? (static_cast<float>(v) - l0.cy) / l0.fy * z : 0.0f;
+      l0.intensity[i] = frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f;
+    }
+  }
+  // Normals of the pixels without a surfel: from the model's vertex map (the
+  // frame's own measurement there, next to surfels as merged).
+  computeNormals(w, h, kNormalReach, l0.x.data(), l0.y.data(), l0.z.data(), l0.nx.data(), l0.ny.data(), l0.nz.data(),
+                 model_from_surfel_.data());
+  computeGradients(w, h, l0.intensity.data(), l0.gx.data(), l0.gy.data());
+  for (int l = 1; l < kLevels; ++l) {
+    downsample(model_[l - 1], model_[l], true);
+    Level& L = model_[l];
+    computeGradients(L.width, L.height, L.intensity.data(), L.gx.data(), L.gy.data());
+  }
+  model_pose_ = pose;
+  have_model_ = true;
+}
+
+FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0,
+                                                      bool photometric) {
+  Solve s;
+  s.R = R0;
+  s.t = t0;
+  TrackSums sums;
+  const float min_cos = static_cast<float>(std::cos(config_.icp_max_normal_deg * kDegToRad));
+  for (int l = kLevels - 1; l >= 0; --l) {
+    const Level& F = frame_[l];
+    const Level& M = model_[l];
+    const TrackFrameLevel fl{F.width, F.height, F.x.data(), F.y.data(), F.z.data(),
+                             F.nx.data(), F.ny.data(), F.nz.data(), F.intensity.data()};
+    const TrackModelLevel ml{M.width, M.height, M.fx, M.fy, M.cx, M.cy, M.x.data(), M.y.data(), M.z.data(),
+                             M.nx.data(), M.ny.data(), M.nz.data(), M.intensity.data(), M.gx.data(), M.gy.data()};
+    TrackParams p;
+    p.max_distance = static_cast<float>(config_.icp_max_distance_m * (l + 1));
+    p.min_normal_cos = min_cos;
+    p.use_photometric = photometric && config_.photometric_weight > 0.0;
+    p.photometric_sqrt_weight = static_cast<float>(std::sqrt(config_.photometric_weight));
+    p.max_photometric_residual = static_cast<float>(config_.max_photometric_residual);
+    // The finest level runs at least one pass so that the statistics are its own.
+    const int iterations = l == 0 ? std::max(1, config_.iterations[0]) : config_.iterations[l];
+    for (int it = 0; it < iterations; ++it) {
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) p.R[3 * r + c] = static_cast<float>(s.R(r, c));
+        p.t[r] = static_cast<float>(s.t(r));
+      }
+      trackLevel(fl, ml, p, sums, config_.kernels);
+      ++s.iterations;
+      Eigen::Matrix<double, 6, 6> H;
+      Eigen::Matrix<double, 6, 1> b;
+      int k = 0;
+      for (int a = 0; a < 6; ++a) {
+        for (int c = a; c < 6; ++c) H(a, c) = H(c, a) = sums.h[k++];
+        b(a) = sums.b[a];
+      }
+      s.inliers = sums.inliers;
+      const double n = std::max<double>(1.0, sums.inliers);
+      s.icp_rms = std::sqrt(sums.icp_sq / n);
+      s.photometric_rms =
+          sums.photometric_inliers > 0 && p.photometric_sqrt_weight > 0.0f
+              ? std::sqrt(sums.photometric_sq / sums.photometric_inliers) / p.photometric_sqrt_weight
+              : 0.0;
+      if (sums.inliers < 6) {
+        s.min_eigenvalue = 0.0;
+        break;
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(H / n, Eigen::EigenvaluesOnly);
+      s.min_eigenvalue = eig.eigenvalues()(0);
+      const Eigen::Matrix<double, 6, 1> x = H.ldlt().solve(-b);
+      if (!x.allFinite()) {
+        s.finite = false;
+        break;
+      }
+      Eigen::Matrix3d dR;
+      Eigen::Vector3d dt;
+      expTwist(x, dR, dt);
+      s.R = dR * s.R;
+      s.t = dR * s.t + dt;
+      if (x.head<3>().norm() < 1e-6 && x.tail<3>().norm() < 1e-6) break;
+    }
+  }
+  // Re-orthonormalise (float-accumulated rounding over many updates).
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(s.R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  s.R = svd.matrixU() * svd.matrixV().transpose();
+  return s;
+}
+
+double FrameToModelTracker::medianResidual() const {
+  std::array<double, 15> v = residual_history_;
+  const int n = std::min<int>(residual_count_, static_cast<int>(v.size()));
+  std::nth_element(v.begin(), v.begin() + n / 2, v.begin() + n);
+  return v[static_cast<std::size_t>(n / 2)];
+}
+
+LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const {
+  if (!s.finite || !pose.R_world_cam.allFinite() || !pose.t_world_cam.allFinite()) return LostReason::kDegenerate;
+  const double fraction = valid_pixels_ > 0 ? static_cast<double>(s.inliers) / valid_pixels_ : 0.0;
+  if (fraction < config_.min_inlier_fraction || s.inliers < 6) return LostReason::kFewInliers;
+  if (s.min_eigenvalue < config_.min_eigenvalue) return LostReason::kDegenerate;
+  if (residual_count_ >= 5 && s.icp_rms > config_.residual_jump_floor_m &&
+      s.icp_rms > config_.max_residual_jump * medianResidual()) {
+    return LostReason::kResidualJump;
+  }
+  const double dt = (pose.t_world_cam - reference.t_world_cam).norm();
+  const double dr = angleDeg(reference.R_world_cam.transpose() * pose.R_world_cam);
+  if (dt > config_.max_motion_m || dr > config_.max_motion_deg) return LostReason::kImplausibleMotion;
+  return LostReason::kNone;
+}
+
+TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose,
+                                        TrackStats& stats) {
+  const int64_t t_start = nowNs();
+  stats = TrackStats{};
+  ++counters_.frames;
+  const auto lose = [&](LostReason reason) {
+    stats.outcome = TrackOutcome::kLost;
+    stats.lost_reason = reason;
+    pose = prior != nullptr ? *prior : last_good_;
+    if (have_model_) lost_ = true;
+    ++counters_.lost;
+    stats.track_ns = nowNs() - t_start;
+    return stats.outcome;
+  };
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  const bool size_ok = frame.width() >= 8 && frame.height() >= 8 && frame.width() <= config_.max_width &&
+                       frame.height() <= config_.max_height;
+  const bool intrinsics_ok = std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0.0 && k.fy > 0.0 &&
+                             std::isfinite(k.cx) && std::isfinite(k.cy) && std::isfinite(frame.depth_scale_m) &&
+                             frame.depth_scale_m > 0.0;
+  if (!size_ok || !intrinsics_ok) return lose(LostReason::kNoValidDepth);
+  const bool has_depth = buildFramePyramid(frame);
+  stats.valid_pixels = valid_pixels_;
+  stats.pyramid_ns = nowNs() - t_start;
+  if (!has_depth) return lose(LostReason::kNoValidDepth);
+
+  if (!have_model_) {
+    pose = prior != nullptr ? *prior : last_good_;
+    last_good_ = pose;
+    lost_ = false;
+    stats.outcome = TrackOutcome::kFirstFrame;
+    stats.track_ns = nowNs() - t_start;
+    return stats.outcome;
+  }
+  const bool model_size_ok = model_[0].width == frame.width() && model_[0].height == frame.height();
+  if (!model_size_ok) return lose(LostReason::kFewInliers);
+
+  const bool photometric = frame.has_rgb;
+  const Eigen::Matrix3d Rk_t = model_pose_.R_world_cam.transpose();
+  // World pose -> the estimate (new camera -> model camera) and back.
+  const auto toRelative = [&](const hal::Pose& world, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
+    R = Rk_t * world.R_world_cam;
+    t = Rk_t * (world.t_world_cam - model_pose_.t_world_cam);
+  };
+  const auto toWorld = [&](const Solve& s) {
+    hal::Pose p;
+    p.R_world_cam = model_pose_.R_world_cam * s.R;
+    p.t_world_cam = model_pose_.R_world_cam * s.t + model_pose_.t_world_cam;
+    return p;
+  };
+
+  Solve best;
+  hal::Pose best_pose;
+  LostReason reason = LostReason::kNone;
+  if (!lost_) {
+    const hal::Pose start = prior != nullptr ? *prior : last_good_;
+    Eigen::Matrix3d R0;
+    Eigen::Vector3d t0;
+    toRelative(start, R0, t0);
+    best = solve(R0, t0, photometric);
+    best_pose = toWorld(best);
+    reason = check(best, best_pose, last_good_);
+  } else {
+    // Relocalisation: the last good pose (and the prior), then rotations of
+    // +-relocalise_search_deg about each camera axis; the candidate with the
+    // most inliers that passes the checks.
+    std::array<hal::Pose, 8> candidates;
+    int n = 0;
+    candidates[n++] = last_good_;
+    if (prior != nullptr) candidates[n++] = *prior;
+    if (config_.relocalise_search_deg > 0.0) {
+      const double a = config_.relocalise_search_deg * kDegToRad;
+      for (int axis = 0; axis < 3; ++axis) {
+        for (double sign : {-1.0, 1.0}) {
+          hal::Pose c = last_good_;
+          c.R_world_cam = last_good_.R_world_cam *
+                          Eigen::AngleAxisd(sign * a, Eigen::Vector3d::Unit(axis)).toRotationMatrix();
+          if (n < static_cast<int>(candidates.size())) candidates[n++] = c;
+        }
+      }
+    }
+    stats.relocalise_candidates = n;
+    bool found = false;
+    LostReason first_reason = LostReason::kFewInliers;
+    for (int c = 0; c < n; ++c) {
+      Eigen::Matrix3d R0;
+      Eigen::Vector3d t0;
+      toRelative(candidates[c], R0, t0);
+      const Solve s = solve(R0, t0, photometric);
+      const hal::Pose p = toWorld(s);
+      const LostReason r = check(s, p, last_good_);
+      if (c == 0) first_reason = r;
+      stats.iterations += s.iterations;
+      if (r == LostReason::kNone && (!found || s.inliers > best.inliers)) {
+        best = s;
+        best_pose = p;
+        found = true;
+      } else if (!found && c == 0) {
+        best = s;
+        best_pose = p;
+      }
+    }
+    reason = found ? LostReason::kNone : first_reason;
+  }
+
+  stats.iterations = std::max(stats.iterations, best.iterations);
+  stats.inliers = best.inliers;
+  stats.inlier_fraction = valid_pixels_ > 0 ? static_cast<double>(best.inliers) / valid_pixels_ : 0.0;
+  stats.icp_rms_m = best.icp_rms;
+  stats.photometric_rms = best.photometric_rms;
+  stats.min_eigenvalue = best.min_eigenvalue;
+  if (prior != nullptr) {
+    stats.prior_disagreement_m = (best_pose.t_world_cam - prior->t_world_cam).norm();
+    stats.prior_disagreement_deg = angleDeg(prior->R_world_cam.transpose() * best_pose.R_world_cam);
+  }
+  if (reason != LostReason::kNone) return lose(reason);
+
+  stats.outcome = lost_ ? TrackOutcome::kRelocalised : TrackOutcome::kTracked;
+  if (lost_) {
+    ++counters_.relocalised;
+  } else {
+    ++counters_.tracked;
+  }
+  lost_ = false;
+  pose = best_pose;
+  last_good_ = best_pose;
+  residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.icp_rms;
+  ++residual_count_;
+  stats.track_ns = nowNs() - t_start;
+  return stats.outcome;
+}
+
+}  // namespace fovea::pipeline::map

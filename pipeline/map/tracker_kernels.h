@@ -1,0 +1,120 @@
+// The tracker's per-pixel kernel (FrameToModelTracker::track(), one Gauss-Newton
+// iteration at one pyramid level; docs/tracking.md): each pixel's residuals and
+// Jacobians against the model, summed into one 6x6 normal system.
+//   trackLevelRef   the scalar reference, the specification (tracker.cpp);
+//   trackLevelSimd  Highway, dynamic dispatch (tracker_simd.cpp).
+//
+// Per pixel of the frame's level with a vertex p (camera frame of the new frame):
+//   q = R p + t (R, t: the estimate, new camera -> model camera), projected into
+//   the model's level, u' = round(fx qx / qz + cx), v' = round(fy qy / qz + cy);
+//   the model's vertex m, normal n at (u', v') associate when both exist,
+//   |q - m| <= max_distance and (R n_p) . n >= min_normal_cos (n_p: the frame's
+//   normal; a frame pixel without a normal does not associate).
+//   ICP:          r = n . (q - m),  J = [n, q x n]   (twist [v, w], left perturbation
+//                 of the estimate: q -> q + w x q + v).
+//   photometric:  when use_photometric, r = I_model(u', v') - I_frame(p) if
+//                 |r| <= max_photometric_residual, J = g' [I, -[q]x] = [g', q x g'] with
+//                 g' = (gx fx / qz, gy fy / qz, -(gx fx qx + gy fy qy) / qz^2) (gx, gy:
+//                 the model's intensity gradient per pixel at (u', v')); both
+//                 scaled by sqrt(photometric_weight).
+// Every per-pixel quantity is float. The sums (TrackSums): the 21 entries of the
+// upper triangle of J^T J, the 6 of J^T r, and the squared residuals, over every
+// associated pixel.
+//
+// Stable reduction: the reference promotes each product to double (exact: a
+// product of two floats fits a double), sums a row in double and adds the row's
+// sum to the total in double: 640 x 480 terms lose about 1e-13 relative, where a
+// float running sum loses 1e-3 or more (test_tracker.cpp: StableReduction). The
+// fast kernel sums each vector lane of a row in float (a lane sees at most
+// width / lanes terms: 80 at 640 columns and 8 lanes) and adds the row's lanes
+// to the total in double.
+//
+// kSimdTolerance: trackLevelSimd matches trackLevelRef to within this relative
+// bound on each of the 27 sums, relative to the Cauchy-Schwarz scale of the sum
+// (|sum a b| <= sqrt(sum a^2 sum b^2)): for H(i, j), sqrt(H(i, i) H(j, j)); for
+// b(i), sqrt(H(i, i) * residual_sq). The inliers are the same pixels.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+
+#include "core/kernel_set.h"
+
+namespace fovea::pipeline::map {
+
+inline constexpr double kTrackSimdTolerance = 1e-4;
+
+// One pyramid level of the new frame (structure of arrays, width x height).
+struct TrackFrameLevel {
+  int width = 0, height = 0;
+  const float* x = nullptr;  // camera-frame vertex; z = 0: none
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const float* nx = nullptr;  // unit normal towards the camera; zero: none
+  const float* ny = nullptr;
+  const float* nz = nullptr;
+  const float* intensity = nullptr;  // [0, 1]
+};
+
+// One pyramid level of the model, in the model camera's frame.
+struct TrackModelLevel {
+  int width = 0, height = 0;
+  float fx = 0.0f, fy = 0.0f, cx = 0.0f, cy = 0.0f;
+  const float* x = nullptr;  // vertex; z = 0: none
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const float* nx = nullptr;  // unit normal; zero: none
+  const float* ny = nullptr;
+  const float* nz = nullptr;
+  const float* intensity = nullptr;  // [0, 1]
+  const float* gx = nullptr;         // its gradient per pixel (central differences / 2)
+  const float* gy = nullptr;
+};
+
+struct TrackParams {
+  std::array<float, 9> R{};  // row-major, new camera -> model camera
+  std::array<float, 3> t{};
+  float max_distance = 0.1f;
+  float min_normal_cos = 0.866f;
+  bool use_photometric = true;
+  float photometric_sqrt_weight = 0.316f;
+  float max_photometric_residual = 0.3f;
+};
+
+struct TrackSums {
+  std::array<double, 21> h{};  // J^T J upper triangle, row by row: (0,0) (0,1) .. (0,5) (1,1) .. (5,5)
+  std::array<double, 6> b{};   // J^T r
+  double icp_sq = 0.0;         // sum of squared ICP residuals
+  double photometric_sq = 0.0; // ... photometric (weighted)
+  uint32_t inliers = 0;        // pixels with an ICP residual
+  uint32_t photometric_inliers = 0;
+  void clear() { *this = TrackSums{}; }
+};
+
+// One pixel's terms (the specification, shared by the reference and tests).
+struct TrackPixel {
+  bool icp = false;
+  bool photometric = false;
+  float j_icp[6] = {0, 0, 0, 0, 0, 0};
+  float r_icp = 0.0f;
+  float j_photo[6] = {0, 0, 0, 0, 0, 0};
+  float r_photo = 0.0f;
+};
+TrackPixel trackPixelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
+                         std::size_t pixel);
+
+void trackLevelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
+                   TrackSums& sums);
+void trackLevelSimd(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
+                    TrackSums& sums);
+inline void trackLevel(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
+                       TrackSums& sums, KernelSet kernels) {
+  if (kernels == KernelSet::kSimd) {
+    trackLevelSimd(frame, model, params, sums);
+  } else {
+    trackLevelRef(frame, model, params, sums);
+  }
+}
+
+}  // namespace fovea::pipeline::map
