@@ -391,8 +391,8 @@ TEST(Config, SetOverrides) {
   // A key short of its outer section, when only one key ends so (the "pose.source").
   ASSERT_TRUE(applyOverride(config, "pose.source=track").isOk());
   EXPECT_EQ(config.camera.pose.source, "track");
-  EXPECT_EQ(setError("pose.source=gps"), "--set: camera.pose.source: must be one of none, fixed, socket, track, "
-                                         "track+fixed, track+socket (got 'gps')");
+  EXPECT_EQ(setError("pose.source=gps"), "--set: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\", "
+                                         "\"track\", \"track+fixed\", \"track+socket\" (got \"gps\")");
   EXPECT_NE(setError("source=map").find("unknown key 'source'"), std::string::npos);  // no section at all: not guessed
 
   EXPECT_EQ(setError("camera.sepc=mock"), "--set: unknown key 'camera.sepc' (did you mean 'camera.spec'?)");
@@ -760,7 +760,8 @@ TEST(Config, CameraGeometryKeysAreChecked) {
   EXPECT_EQ(loadError("[camera.pose]\nsource = \"socket\"\nsocket = \"\"\n"),
             "fovea.toml:3: camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
   EXPECT_EQ(loadError("[camera.pose]\nsource = \"gps\"\n"),
-            "fovea.toml:2: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\" (got \"gps\")");
+            "fovea.toml:2: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\", \"track\", \"track+fixed\", "
+            "\"track+socket\" (got \"gps\")");
   EXPECT_EQ(loadError("[camera.pose]\nmax_age_ms = 0\n"),
             "fovea.toml:2: camera.pose.max_age_ms: must be within 1 .. 60000 (got 0)");
   EXPECT_EQ(loadError("[camera]\ncalibration_file = \"d435.yaml\"\n[camera.pose]\nsource = \"fixed\"\n"
