@@ -89,7 +89,8 @@ std::string playOnce(std::string spec) {
 
 void printTracking(const pipeline::map::FrameToModelTracker& tracker, const Samples& track_ms) {
   const pipeline::map::TrackerCounters& t = tracker.counters();
-  std::printf("tracking: %llu frames, %llu tracked, %llu lost (not fused), %llu relocalised; time [ms] median %.2f, "
+  std::printf("tracking: %llu frames (the first sets the world), %llu tracked, %llu lost (not fused), %llu relocalised; "
+              "time [ms] median %.2f, "
               "p90 %.2f, max %.2f (kernels %s, one thread)\n",
               static_cast<unsigned long long>(t.frames), static_cast<unsigned long long>(t.tracked),
               static_cast<unsigned long long>(t.lost), static_cast<unsigned long long>(t.relocalised), track_ms.median(),
