@@ -10,8 +10,10 @@
 //   the model's vertex m, normal n at (u', v') associate when both exist,
 //   |q - m| <= max_distance and (R n_p) . n >= min_normal_cos (n_p: the frame's
 //   normal; a frame pixel without a normal does not associate).
-//   ICP:          r = n . (q - m),  J = [n, q x n]   (twist [v, w], left perturbation
-//                 of the estimate: q -> q + w x q + v).
+//   ICP:          r = n' . (q - m),  J = [n', q x n']   (twist [v, w], left perturbation
+//                 of the estimate: q -> q + w x q + v), n' = s n with s = 0.003 /
+//                 (0.0012 + 0.0019 (qz - 0.4)^2) when noise_weighting (the sensor's
+//                 noise at 1 m over its noise at qz, depthSigma() in surfel_map.h), else 1.
 //   photometric:  when use_photometric, r = I_model(u', v') - I_frame(p) if
 //                 |r| <= max_photometric_residual, J = g' [I, -[q]x] = [g', q x g'] with
 //                 g' = (gx fx / qz, gy fy / qz, -(gx fx qx + gy fy qy) / qz^2) (gx, gy:
@@ -77,6 +79,7 @@ struct TrackParams {
   std::array<float, 3> t{};
   float max_distance = 0.1f;
   float min_normal_cos = 0.866f;
+  bool noise_weighting = true;  // ICP residual and Jacobian times depthSigma(1 m) / depthSigma(qz)
   bool use_photometric = true;
   float photometric_sqrt_weight = 0.316f;
   float max_photometric_residual = 0.3f;
