@@ -2,7 +2,8 @@
 // iteration at one pyramid level; docs/tracking.md): each pixel's residuals and
 // Jacobians against the model, summed into one 6x6 normal system.
 //   trackLevelRef   the scalar reference, the specification (tracker.cpp);
-//   trackLevelSimd  Highway, dynamic dispatch (tracker_simd.cpp).
+//   trackLevelSimd  meant for Highway with dynamic dispatch (tracker_simd.cpp);
+//                   NOT YET VECTORISED: today it calls trackLevelRef.
 //
 // Per pixel of the frame's level with a vertex p (camera frame of the new frame):
 //   q = R p + t (R, t: the estimate, new camera -> model camera), projected into
@@ -26,12 +27,13 @@
 // Stable reduction: the reference promotes each product to double (exact: a
 // product of two floats fits a double), sums a row in double and adds the row's
 // sum to the total in double: 640 x 480 terms lose about 1e-13 relative, where a
-// float running sum loses 1e-3 or more (test_tracker.cpp: StableReduction). The
-// fast kernel sums each vector lane of a row in float (a lane sees at most
-// width / lanes terms: 80 at 640 columns and 8 lanes) and adds the row's lanes
-// to the total in double.
+// float running sum loses 1e-3 or more (test_tracker.cpp:
+// TrackerReduction). The planned fast kernel sums each vector lane of a row in
+// float (a lane sees at most width / lanes terms: 80 at 640 columns and 8
+// lanes) and adds the row's lanes to the total in double.
 //
-// kSimdTolerance: trackLevelSimd matches trackLevelRef to within this relative
+// kTrackSimdTolerance (the bound the Highway kernel is to be tested against;
+// no equivalence test exists while it calls the reference): trackLevelSimd matches trackLevelRef to within this relative
 // bound on each of the 27 sums, relative to the Cauchy-Schwarz scale of the sum
 // (|sum a b| <= sqrt(sum a^2 sum b^2)): for H(i, j), sqrt(H(i, i) H(j, j)); for
 // b(i), sqrt(H(i, i) * residual_sq). The inliers are the same pixels.
