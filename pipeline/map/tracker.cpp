@@ -587,6 +587,10 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
                              std::isfinite(k.cx) && std::isfinite(k.cy) && std::isfinite(frame.depth_scale_m) &&
                              frame.depth_scale_m > 0.0;
   if (!size_ok || !intrinsics_ok) return lose(LostReason::kNoValidDepth);
+  if (prior != nullptr && !(prior->R_world_cam.allFinite() && prior->t_world_cam.allFinite())) {
+    prior = nullptr;  // a broken outside pose: not a start, and not what the lost frame reports
+    return lose(LostReason::kImplausibleMotion);
+  }
   const bool has_depth = buildFramePyramid(frame);
   stats.valid_pixels = valid_pixels_;
   stats.pyramid_ns = nowNs() - t_start;

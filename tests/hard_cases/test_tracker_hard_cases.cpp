@@ -98,7 +98,14 @@ TEST(TrackerHardCases, AFrameWithoutDepthIsLostNotACrash) {
   bad = frames[1];
   bad.depth_scale_m = 0.0;
   EXPECT_EQ(rig.step(bad, stats), TrackOutcome::kLost);
-  EXPECT_EQ(rig.tracker.counters().lost, 4u);
+  // A prior of NaN: lost, and the pose reported is the last good one, finite.
+  hal::Pose nan_prior;
+  nan_prior.t_world_cam.x() = std::nan("");
+  hal::Pose pose;
+  EXPECT_EQ(rig.tracker.track(frames[1], &nan_prior, pose, stats), TrackOutcome::kLost);
+  EXPECT_EQ(stats.lost_reason, LostReason::kImplausibleMotion);
+  EXPECT_TRUE(pose.t_world_cam.allFinite());
+  EXPECT_EQ(rig.tracker.counters().lost, 5u);
 }
 
 // A wall of constant colour square to the camera at 2 m: ICP constrains the
