@@ -27,6 +27,8 @@ constexpr double kDegToRad = kPi / 180.0;
 constexpr float kStepShare = 0.05f;
 // Fewer valid pixels than this at the finest level: no valid depth.
 constexpr uint32_t kMinValidPixels = 64;
+// depthSigma(1 m) (surfel_map.h): the ICP weight's unit.
+constexpr float kSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;
 
 int64_t nowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -196,11 +198,16 @@ TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, con
   const float rnz = R[6] * nfx + R[7] * nfy + R[8] * nfz;
   if (!(rnx * nx + rny * ny + rnz * nz >= p.min_normal_cos)) return out;
   out.icp = true;
-  out.r_icp = nx * dx + ny * dy + nz * dz;
-  out.j_icp[0] = nx, out.j_icp[1] = ny, out.j_icp[2] = nz;
-  out.j_icp[3] = qy * nz - qz * ny;
-  out.j_icp[4] = qz * nx - qx * nz;
-  out.j_icp[5] = qx * ny - qy * nx;
+  // Weighted by the sensor's noise at the depth against its noise at 1 m
+  // (depthSigma(), surfel_map.h): far, coarsely quantised depth counts less.
+  const float wz = qz - 0.4f;
+  const float weight = p.noise_weighting ? kSigmaAt1m / (0.0012f + 0.0019f * wz * wz) : 1.0f;
+  const float wnx = weight * nx, wny = weight * ny, wnz = weight * nz;
+  out.r_icp = wnx * dx + wny * dy + wnz * dz;
+  out.j_icp[0] = wnx, out.j_icp[1] = wny, out.j_icp[2] = wnz;
+  out.j_icp[3] = qy * wnz - qz * wny;
+  out.j_icp[4] = qz * wnx - qx * wnz;
+  out.j_icp[5] = qx * wny - qy * wnx;
   if (p.use_photometric) {
     // The model's intensity interpolated bilinearly at the projection (nearest
     // would leave the photometric term's minimum up to half a pixel off).
@@ -321,6 +328,7 @@ Status TrackerConfig::validate() const {
   if (!(std::isfinite(residual_jump_floor_m) && residual_jump_floor_m >= 0.0)) {
     return invalidArgument("tracker: residual_jump_floor_m must be >= 0");
   }
+  if (!(std::isfinite(max_depth_m) && max_depth_m >= 0.0)) return invalidArgument("tracker: max_depth_m must be >= 0");
   if (!positive(max_photometric_residual)) return invalidArgument("tracker: max_photometric_residual must be > 0");
   return Status::ok();
 }
@@ -383,12 +391,14 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
   const uint16_t* depth = frame.depth();
   const uint8_t* rgb = frame.rgb();
   uint32_t valid = 0;
+  const float max_z = config_.max_depth_m > 0.0 ? static_cast<float>(config_.max_depth_m)
+                                                 : std::numeric_limits<float>::infinity();
   for (int v = 0; v < h; ++v) {
     const float yn = (static_cast<float>(v) - l0.cy) / l0.fy;
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
       const float z = static_cast<float>(depth[i]) * scale;
-      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f;
+      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f && z <= max_z;
       l0.z[i] = ok ? z : 0.0f;
       l0.x[i] = ok ? (static_cast<float>(u) - l0.cx) / l0.fx * z : 0.0f;
       l0.y[i] = ok ? yn * z : 0.0f;
@@ -482,6 +492,7 @@ FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0,
     TrackParams p;
     p.max_distance = static_cast<float>(config_.icp_max_distance_m * (l + 1));
     p.min_normal_cos = min_cos;
+    p.noise_weighting = config_.icp_noise_weighting;
     p.use_photometric = photometric && config_.photometric_weight > 0.0;
     p.photometric_sqrt_weight = static_cast<float>(std::sqrt(config_.photometric_weight));
     p.max_photometric_residual = static_cast<float>(config_.max_photometric_residual);
@@ -576,6 +587,10 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
                              std::isfinite(k.cx) && std::isfinite(k.cy) && std::isfinite(frame.depth_scale_m) &&
                              frame.depth_scale_m > 0.0;
   if (!size_ok || !intrinsics_ok) return lose(LostReason::kNoValidDepth);
+  if (prior != nullptr && !(prior->R_world_cam.allFinite() && prior->t_world_cam.allFinite())) {
+    prior = nullptr;  // a broken outside pose: not a start, and not what the lost frame reports
+    return lose(LostReason::kImplausibleMotion);
+  }
   const bool has_depth = buildFramePyramid(frame);
   stats.valid_pixels = valid_pixels_;
   stats.pyramid_ns = nowNs() - t_start;

@@ -59,9 +59,10 @@ struct TrackerConfig {
   double icp_max_distance_m = 0.10;
   double icp_max_normal_deg = 30.0;
   // The photometric term's weight against ICP's (squared residuals: intensity
-  // in [0, 1], ICP's residual in metres). ElasticFusion's 0.1 measured worse on
-  // the mock orbit and dolly than 0.01 (docs/tracking.md).
-  double photometric_weight = 0.01;
+  // in [0, 1], ICP's residual in metres, noise-weighted below). ElasticFusion's
+  // 0.1 measured worse here on the mock orbit and TUM teddy than 0.001
+  // (docs/tracking.md).
+  double photometric_weight = 0.001;
   // Lost: fewer than this share of the frame's valid pixels associated at the
   // finest level, ...
   double min_inlier_fraction = 0.15;
@@ -79,6 +80,13 @@ struct TrackerConfig {
   // A residual jump is only one when the ICP RMS is also above this (a running
   // median of 1 mm on a still camera must not make 4 mm lost).
   double residual_jump_floor_m = 0.01;
+  // Pixels of the new frame farther than this take no part (0: all): a
+  // Kinect-class sensor's depth at 4 m is quantised in 3 cm steps and its noise
+  // is 2.6 cm, which biases point-to-plane ICP (ElasticFusion cuts at 3 m too).
+  double max_depth_m = 0.0;
+  // ICP's residuals weighted by the sensor's noise at their depth against its
+  // noise at 1 m (depthSigma(), surfel_map.h; tracker_kernels.h).
+  bool icp_noise_weighting = true;
   // Photometric residuals beyond this (intensity, 0..1) are occlusions or
   // specularities, not misalignment: left out.
   double max_photometric_residual = 0.3;

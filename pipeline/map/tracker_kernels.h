@@ -2,7 +2,8 @@
 // iteration at one pyramid level; docs/tracking.md): each pixel's residuals and
 // Jacobians against the model, summed into one 6x6 normal system.
 //   trackLevelRef   the scalar reference, the specification (tracker.cpp);
-//   trackLevelSimd  Highway, dynamic dispatch (tracker_simd.cpp).
+//   trackLevelSimd  meant for Highway with dynamic dispatch (tracker_simd.cpp);
+//                   NOT YET VECTORISED: today it calls trackLevelRef.
 //
 // Per pixel of the frame's level with a vertex p (camera frame of the new frame):
 //   q = R p + t (R, t: the estimate, new camera -> model camera), projected into
@@ -10,8 +11,10 @@
 //   the model's vertex m, normal n at (u', v') associate when both exist,
 //   |q - m| <= max_distance and (R n_p) . n >= min_normal_cos (n_p: the frame's
 //   normal; a frame pixel without a normal does not associate).
-//   ICP:          r = n . (q - m),  J = [n, q x n]   (twist [v, w], left perturbation
-//                 of the estimate: q -> q + w x q + v).
+//   ICP:          r = n' . (q - m),  J = [n', q x n']   (twist [v, w], left perturbation
+//                 of the estimate: q -> q + w x q + v), n' = s n with s = 0.003 /
+//                 (0.0012 + 0.0019 (qz - 0.4)^2) when noise_weighting (the sensor's
+//                 noise at 1 m over its noise at qz, depthSigma() in surfel_map.h), else 1.
 //   photometric:  when use_photometric, r = I_model(u', v') - I_frame(p) if
 //                 |r| <= max_photometric_residual, J = g' [I, -[q]x] = [g', q x g'] with
 //                 g' = (gx fx / qz, gy fy / qz, -(gx fx qx + gy fy qy) / qz^2) (gx, gy:
@@ -24,12 +27,13 @@
 // Stable reduction: the reference promotes each product to double (exact: a
 // product of two floats fits a double), sums a row in double and adds the row's
 // sum to the total in double: 640 x 480 terms lose about 1e-13 relative, where a
-// float running sum loses 1e-3 or more (test_tracker.cpp: StableReduction). The
-// fast kernel sums each vector lane of a row in float (a lane sees at most
-// width / lanes terms: 80 at 640 columns and 8 lanes) and adds the row's lanes
-// to the total in double.
+// float running sum loses 1e-3 or more (test_tracker.cpp:
+// TrackerReduction). The planned fast kernel sums each vector lane of a row in
+// float (a lane sees at most width / lanes terms: 80 at 640 columns and 8
+// lanes) and adds the row's lanes to the total in double.
 //
-// kSimdTolerance: trackLevelSimd matches trackLevelRef to within this relative
+// kTrackSimdTolerance (the bound the Highway kernel is to be tested against;
+// no equivalence test exists while it calls the reference): trackLevelSimd matches trackLevelRef to within this relative
 // bound on each of the 27 sums, relative to the Cauchy-Schwarz scale of the sum
 // (|sum a b| <= sqrt(sum a^2 sum b^2)): for H(i, j), sqrt(H(i, i) H(j, j)); for
 // b(i), sqrt(H(i, i) * residual_sq). The inliers are the same pixels.
@@ -77,6 +81,7 @@ struct TrackParams {
   std::array<float, 3> t{};
   float max_distance = 0.1f;
   float min_normal_cos = 0.866f;
+  bool noise_weighting = true;  // ICP residual and Jacobian times depthSigma(1 m) / depthSigma(qz)
   bool use_photometric = true;
   float photometric_sqrt_weight = 0.316f;
   float max_photometric_residual = 0.3f;

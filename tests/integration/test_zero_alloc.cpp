@@ -16,6 +16,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/map/surfel_map.h"
+#include "pipeline/map/tracker.h"
 #include "pipeline/pyramid_sampler.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/clouds.h"
@@ -182,6 +183,61 @@ TEST(ZeroAllocation, FusingMockFramesIntoTheMap) {
     EXPECT_EQ(allocations, 0u);
     EXPECT_GT(map.size(), 0u);
     EXPECT_GT(map.counters().evicted, evicted_before) << "no eviction among the counted frames";
+    cam.stop();
+  }
+}
+
+// Tracking each mock frame against the map's model and fusing it at the
+// tracked pose (pipeline/map/tracker.h): track() and modelFused() allocate
+// nothing, a lost frame (no depth) included; with either kernel set.
+TEST(ZeroAllocation, TrackingMockFramesAgainstTheMap) {
+  for (KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
+    SCOPED_TRACE(std::string("kernels ") + std::string(kernelSetName(kernels)));
+    const std::unique_ptr<hal::Camera> camera = startedCamera("mock:living-room,path=orbit,size=160x120");
+    ASSERT_TRUE(camera);
+    hal::Camera& cam = *camera;
+    const hal::CameraIntrinsics& k = cam.info().intrinsics;
+    hal::RgbdFrame frame(k.width, k.height);
+    pipeline::map::SurfelMapConfig config;
+    config.max_width = k.width;
+    config.max_height = k.height;
+    config.max_surfels = static_cast<std::size_t>(k.width) * k.height * 4;
+    config.kernels = kernels;
+    pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(config).value();
+    pipeline::map::TrackerConfig tc;
+    tc.max_width = k.width;
+    tc.max_height = k.height;
+    tc.kernels = kernels;
+    pipeline::map::FrameToModelTracker tracker = pipeline::map::FrameToModelTracker::create(tc).value();
+    int frames_done = 0;
+    auto trackFrame = [&] {
+      if (!cam.acquire(frame, test::scaled(std::chrono::milliseconds(100))).isOk()) return false;
+      if (frames_done++ % 10 == 9) {  // every tenth frame without depth: lost, then relocalised
+        std::fill(frame.depth(), frame.depth() + frame.pixelCount(), uint16_t{0});
+      }
+      hal::Pose pose;
+      pipeline::map::TrackStats stats;
+      const bool first = frames_done == 1;
+      const pipeline::map::TrackOutcome o = tracker.track(frame, first ? &frame.T_world_cam : nullptr, pose, stats);
+      if (o == pipeline::map::TrackOutcome::kLost) return true;
+      frame.T_world_cam = pose;
+      pipeline::map::FuseStats fs;
+      if (map.fuse(frame, fs) != pipeline::map::FuseOutcome::kFused) return false;
+      tracker.modelFused(frame, pose, map);
+      return true;
+    };
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(trackFrame());  // warm-up
+
+    test::AllocationScope scope;
+    bool all_ok = true;
+    const int frames = framesCounted();
+    for (int i = 0; i < frames; ++i) all_ok = trackFrame() && all_ok;
+    const uint64_t allocations = scope.allocations();
+    EXPECT_TRUE(all_ok);
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_GT(tracker.counters().tracked, 0u);
+    EXPECT_GT(tracker.counters().lost, 0u);
+    EXPECT_GT(tracker.counters().relocalised, 0u);
     cam.stop();
   }
 }

@@ -1,0 +1,257 @@
+// The tracker's hard cases (pipeline/map/tracker.h, docs/tracking.md): a frame
+// without depth, a textureless wall, fast motion (frames dropped), an object
+// moving through a third of the view, and the view returning after a loss.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "hal/camera.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/map/tracker.h"
+#include "tests/support/test_time.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+constexpr int kW = 320, kH = 240;
+
+double translationError(const hal::Pose& a, const hal::Pose& b) { return (a.t_world_cam - b.t_world_cam).norm(); }
+
+std::vector<hal::RgbdFrame> mockFrames(const std::string& spec, int n) {
+  std::vector<hal::RgbdFrame> frames;
+  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(spec);
+  if (!camera.isOk()) {
+    ADD_FAILURE() << camera.status().toString();
+    return frames;
+  }
+  hal::Camera& cam = *camera.value();
+  if (!cam.open().isOk() || !cam.start().isOk()) {
+    ADD_FAILURE() << "cannot start " << spec;
+    return frames;
+  }
+  for (int i = 0; i < n; ++i) {
+    frames.emplace_back(kW, kH);
+    if (!cam.acquire(frames.back(), test::scaled(std::chrono::milliseconds(1000))).isOk()) {
+      ADD_FAILURE() << "acquire " << i;
+      frames.pop_back();
+      break;
+    }
+  }
+  return frames;
+}
+
+struct Rig {
+  SurfelMap map;
+  FrameToModelTracker tracker;
+  static Rig make() {
+    SurfelMapConfig mc;
+    mc.max_width = kW;
+    mc.max_height = kH;
+    mc.max_surfels = 1 << 18;
+    mc.max_bricks = 4096;
+    TrackerConfig tc;
+    tc.max_width = kW;
+    tc.max_height = kH;
+    return Rig{SurfelMap::create(mc).value(), FrameToModelTracker::create(tc).value(), hal::Pose{}};
+  }
+  // Tracks (prior: the first frame's truth, else none) and fuses where tracked.
+  TrackOutcome step(hal::RgbdFrame& frame, TrackStats& stats, const hal::Pose* prior = nullptr) {
+    hal::Pose pose;
+    const TrackOutcome o = tracker.track(frame, prior, pose, stats);
+    if (o != TrackOutcome::kLost) {
+      const hal::Pose truth = frame.T_world_cam;
+      frame.T_world_cam = pose;
+      FuseStats fs;
+      if (map.fuse(frame, fs) == FuseOutcome::kFused) tracker.modelFused(frame, pose, map);
+      frame.T_world_cam = truth;
+      last_pose = pose;
+    }
+    return o;
+  }
+  hal::Pose last_pose;
+};
+
+TEST(TrackerHardCases, AFrameWithoutDepthIsLostNotACrash) {
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 2);
+  ASSERT_EQ(frames.size(), 2u);
+  Rig rig = Rig::make();
+  TrackStats stats;
+  // Before any model: lost too (nothing to start from).
+  hal::RgbdFrame empty = frames[1];
+  std::fill(empty.depth(), empty.depth() + empty.pixelCount(), uint16_t{0});
+  EXPECT_EQ(rig.step(empty, stats), TrackOutcome::kLost);
+  EXPECT_EQ(stats.lost_reason, LostReason::kNoValidDepth);
+  ASSERT_EQ(rig.step(frames[0], stats, &frames[0].T_world_cam), TrackOutcome::kFirstFrame);
+  EXPECT_EQ(rig.step(empty, stats), TrackOutcome::kLost);
+  EXPECT_EQ(stats.lost_reason, LostReason::kNoValidDepth);
+  EXPECT_TRUE(rig.tracker.lost());
+  // Bad intrinsics and a NaN depth scale: lost, counted.
+  hal::RgbdFrame bad = frames[1];
+  bad.intrinsics.fx = std::nan("");
+  EXPECT_EQ(rig.step(bad, stats), TrackOutcome::kLost);
+  bad = frames[1];
+  bad.depth_scale_m = 0.0;
+  EXPECT_EQ(rig.step(bad, stats), TrackOutcome::kLost);
+  // A prior of NaN: lost, and the pose reported is the last good one, finite.
+  hal::Pose nan_prior;
+  nan_prior.t_world_cam.x() = std::nan("");
+  hal::Pose pose;
+  EXPECT_EQ(rig.tracker.track(frames[1], &nan_prior, pose, stats), TrackOutcome::kLost);
+  EXPECT_EQ(stats.lost_reason, LostReason::kImplausibleMotion);
+  EXPECT_TRUE(pose.t_world_cam.allFinite());
+  EXPECT_EQ(rig.tracker.counters().lost, 5u);
+}
+
+// A wall of constant colour square to the camera at 2 m: ICP constrains the
+// depth and two rotations, the photometric term nothing.
+void renderWall(hal::RgbdFrame& frame, double offset_x) {
+  frame.intrinsics = {kW, kH, 262.5, 262.5, (kW - 1) / 2.0, (kH - 1) / 2.0};
+  frame.depth_scale_m = 0.001;
+  frame.T_world_cam = hal::Pose{};
+  frame.T_world_cam.t_world_cam.x() = offset_x;
+  for (std::size_t i = 0; i < frame.pixelCount(); ++i) {
+    frame.depth()[i] = 2000;
+    frame.rgb()[3 * i] = frame.rgb()[3 * i + 1] = frame.rgb()[3 * i + 2] = 200;
+  }
+}
+
+TEST(TrackerHardCases, ATexturelessWallIsDegenerate) {
+  Rig rig = Rig::make();
+  hal::RgbdFrame a(kW, kH), b(kW, kH);
+  ASSERT_TRUE(a.setSize(kW, kH) && b.setSize(kW, kH));
+  renderWall(a, 0.0);
+  renderWall(b, 0.02);
+  b.stamp_ns = 1;
+  TrackStats stats;
+  ASSERT_EQ(rig.step(a, stats, &a.T_world_cam), TrackOutcome::kFirstFrame);
+  EXPECT_EQ(rig.step(b, stats), TrackOutcome::kLost);
+  EXPECT_EQ(stats.lost_reason, LostReason::kDegenerate) << lostReasonName(stats.lost_reason);
+  EXPECT_LT(stats.min_eigenvalue, 1e-6);
+  EXPECT_GT(stats.inlier_fraction, 0.9);  // every pixel associates: it is the axes that are free
+}
+
+// The orbit with every other frame dropped (2.4 cm and 1 degree a step at
+// 30 fps, 15 fps effective): measured tracked throughout, within 5 mm RMS.
+TEST(TrackerHardCases, FastOrbitWithEveryOtherFrameDropped) {
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 41);
+  ASSERT_EQ(frames.size(), 41u);
+  Rig rig = Rig::make();
+  TrackStats stats;
+  double sq = 0.0, worst = 0.0;
+  int n = 0, lost = 0;
+  for (std::size_t i = 0; i < frames.size(); i += 2) {
+    const TrackOutcome o = rig.step(frames[i], stats, i == 0 ? &frames[0].T_world_cam : nullptr);
+    if (o == TrackOutcome::kLost) {
+      ++lost;
+      continue;
+    }
+    const double e = translationError(rig.last_pose, frames[i].T_world_cam);
+    sq += e * e, worst = std::max(worst, e), ++n;
+  }
+  const double rmse = std::sqrt(sq / std::max(n, 1));
+  std::printf("orbit, every other frame: %d tracked, %d lost, RMSE %.2f mm, max %.2f mm\n", n, lost, rmse * 1e3,
+              worst * 1e3);
+  EXPECT_EQ(lost, 0);
+  EXPECT_LT(rmse, 0.005);
+}
+
+// A block 1 m in front of the camera over the left third of every frame,
+// moving with the camera (an object carried along). MEASURED LIMITATION: the
+// block wins. Its frontal plane at 1 m carries about ten times the weight of the
+// room's pixels at 2 to 4 m (the noise weighting), agrees with "no motion" and
+// the map keeps it (it is seen where it was); the pose follows the block:
+// 215.8 mm RMS over 20 frames when this was written. Asserted as measured
+// (docs/tracking.md): a robust kernel or a motion segmentation is the fix.
+TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 20);
+  ASSERT_EQ(frames.size(), 20u);
+  Rig rig = Rig::make();
+  TrackStats stats;
+  double sq = 0.0;
+  int n = 0, lost = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    hal::RgbdFrame& f = frames[i];
+    for (int v = 0; v < kH; ++v) {
+      for (int u = 0; u < kW / 3; ++u) {
+        const std::size_t p = static_cast<std::size_t>(v) * kW + u;
+        f.depth()[p] = static_cast<uint16_t>(1.0 / f.depth_scale_m);
+        f.rgb()[3 * p] = 250, f.rgb()[3 * p + 1] = 20, f.rgb()[3 * p + 2] = 20;
+      }
+    }
+    const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
+    if (o == TrackOutcome::kLost) {
+      ++lost;
+      continue;
+    }
+    const double e = translationError(rig.last_pose, f.T_world_cam);
+    sq += e * e, ++n;
+  }
+  const double rmse = std::sqrt(sq / std::max(n, 1));
+  std::printf("orbit with a carried block over a third: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
+  EXPECT_EQ(lost, 0);
+  EXPECT_GT(rmse, 0.05) << "the carried block no longer hijacks the pose: make this a bound (docs/tracking.md)";
+}
+
+// The balloon scene: a striped balloon of 0.3 m drifting (0.6 m amplitude)
+// before a wall over a floor, on its orbit. MEASURED LIMITATION: the static
+// scene is two planes, which leave the translation along their intersection to
+// the plaster's and tiles' faint texture, while the balloon constrains every
+// axis and moves: the pose follows the balloon, 351 mm RMS over 30 frames when
+// this was written (402 mm without the noise weighting). Nothing flags it: the
+// balloon keeps the system well conditioned. Asserted as measured (docs/tracking.md).
+TEST(TrackerHardCases, AMovingBalloonBeforeTwoPlanesHijacksThePose) {
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:balloon,size=320x240,path=orbit", 30);
+  ASSERT_EQ(frames.size(), 30u);
+  Rig rig = Rig::make();
+  TrackStats stats;
+  double sq = 0.0;
+  int n = 0, lost = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const TrackOutcome o = rig.step(frames[i], stats, i == 0 ? &frames[0].T_world_cam : nullptr);
+    if (o == TrackOutcome::kLost) {
+      ++lost;
+      continue;
+    }
+    const double e = translationError(rig.last_pose, frames[i].T_world_cam);
+    sq += e * e, ++n;
+  }
+  const double rmse = std::sqrt(sq / std::max(n, 1));
+  std::printf("balloon scene, orbit: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
+  EXPECT_GT(rmse, 0.05) << "the balloon no longer hijacks the pose: make this a bound (docs/tracking.md)";
+}
+
+// Tracked, then frames the model cannot explain (no depth, a wall of one
+// colour elsewhere), then the view returns: relocalised against the model.
+TEST(TrackerHardCases, TheViewReturningAfterALossIsRelocalised) {
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 8);
+  ASSERT_EQ(frames.size(), 8u);
+  Rig rig = Rig::make();
+  TrackStats stats;
+  for (std::size_t i = 0; i < 6; ++i) {
+    ASSERT_NE(rig.step(frames[i], stats, i == 0 ? &frames[0].T_world_cam : nullptr), TrackOutcome::kLost) << i;
+  }
+  hal::RgbdFrame wall(kW, kH);
+  ASSERT_TRUE(wall.setSize(kW, kH));
+  renderWall(wall, 0.0);
+  wall.intrinsics = frames[6].intrinsics;
+  EXPECT_EQ(rig.step(wall, stats), TrackOutcome::kLost);
+  EXPECT_TRUE(rig.tracker.lost());
+  hal::RgbdFrame empty = frames[6];
+  std::fill(empty.depth(), empty.depth() + empty.pixelCount(), uint16_t{0});
+  EXPECT_EQ(rig.step(empty, stats), TrackOutcome::kLost);
+  const TrackOutcome back = rig.step(frames[7], stats);
+  EXPECT_EQ(back, TrackOutcome::kRelocalised) << lostReasonName(stats.lost_reason);
+  EXPECT_GT(stats.relocalise_candidates, 1);
+  EXPECT_LT(translationError(rig.last_pose, frames[7].T_world_cam), 0.01);
+  EXPECT_FALSE(rig.tracker.lost());
+  EXPECT_EQ(rig.tracker.counters().relocalised, 1u);
+}
+
+}  // namespace
+}  // namespace fovea::pipeline::map
