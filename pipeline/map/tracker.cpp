@@ -304,6 +304,9 @@ Status TrackerConfig::validate() const {
   if (iterations[0] < 1) return invalidArgument("tracker: the finest level needs at least one iteration");
   auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   if (!positive(icp_max_distance_m)) return invalidArgument("tracker: icp_max_distance_m must be > 0");
+  if (!(std::isfinite(converged_step) && converged_step >= 0.0)) {
+    return invalidArgument("tracker: converged_step must be >= 0");
+  }
   if (!(icp_max_normal_deg > 0.0 && icp_max_normal_deg <= 90.0)) {
     return invalidArgument("tracker: icp_max_normal_deg must be within (0, 90]");
   }
@@ -535,7 +538,7 @@ FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0,
       expTwist(x, dR, dt);
       s.R = dR * s.R;
       s.t = dR * s.t + dt;
-      if (x.head<3>().norm() < 1e-6 && x.tail<3>().norm() < 1e-6) break;
+      if (x.head<3>().norm() < config_.converged_step && x.tail<3>().norm() < config_.converged_step) break;
     }
   }
   // Re-orthonormalise (float-accumulated rounding over many updates).

@@ -1,11 +1,25 @@
-// trackLevelSimd (tracker_kernels.h). NOT YET VECTORISED: it calls the scalar
-// reference, so KernelSet::kSimd tracks exactly as kRef (docs/tracking.md). The
-// Highway kernel (foreach_target.h + HWY_DYNAMIC_DISPATCH, as vertices_simd.cpp)
-// is still to write.
-#include "pipeline/map/tracker_kernels.h"
+// trackLevelSimd (tracker_kernels.h), dynamically dispatched: foreach_target.h
+// re-includes this file once per Highway target, compiling tracker_simd-inl.h
+// for each; HWY_EXPORT builds the table and HWY_DYNAMIC_DISPATCH calls the best
+// supported target (pipeline::forceSimdTarget() restricts it, as for the other kernels).
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "pipeline/map/tracker_simd.cpp"
+#include "hwy/foreach_target.h"  // IWYU pragma: keep
+
+#include "hwy/highway.h"
+#include "pipeline/map/tracker_simd-inl.h"
+
+#if HWY_ONCE
+
 namespace fovea::pipeline::map {
+
+HWY_EXPORT(TrackLevelT);
+
 void trackLevelSimd(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
                     TrackSums& sums) {
-  trackLevelRef(frame, model, params, sums);
+  HWY_DYNAMIC_DISPATCH(TrackLevelT)(frame, model, params, sums);
 }
+
 }  // namespace fovea::pipeline::map
+
+#endif  // HWY_ONCE

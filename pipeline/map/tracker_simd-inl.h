@@ -1,0 +1,212 @@
+// Per-target body of trackLevelSimd (tracker_kernels.h); compiled once per
+// Highway target by tracker_simd.cpp (through hwy/foreach_target.h). Every
+// function that calls a Highway op sits between HWY_BEFORE_NAMESPACE and
+// HWY_AFTER_NAMESPACE (GCC 12 on aarch64 refuses to inline the ops otherwise).
+//
+// The reference's arithmetic per pixel (trackPixelRef, tracker.cpp), a vector
+// of pixels at a time: the model is gathered at each lane's projection; lanes
+// that do not associate are computed too and zeroed before they are summed.
+// The products are summed per lane in float across a row (a lane sees width /
+// lanes terms: 80 at 640 columns and 8 lanes), and each row's lanes are added
+// to the totals in double; the reference sums every product in double, hence
+// kTrackSimdTolerance rather than the same bits. A row's tail runs through the
+// same vector code on a zero-padded copy (depth 0 never associates).
+
+// Per-target include guard (Highway's toggle idiom).
+#if defined(FOVEA_PIPELINE_MAP_TRACKER_SIMD_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef FOVEA_PIPELINE_MAP_TRACKER_SIMD_INL_H_
+#undef FOVEA_PIPELINE_MAP_TRACKER_SIMD_INL_H_
+#else
+#define FOVEA_PIPELINE_MAP_TRACKER_SIMD_INL_H_
+#endif
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+
+#include "hwy/highway.h"
+#include "pipeline/map/tracker_kernels.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace fovea::pipeline::map {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+inline constexpr std::size_t kTrackMaxLanes = HWY_MAX_BYTES / sizeof(float);
+inline constexpr float kTrackSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;  // depthSigma(1 m), as the reference's
+
+// The 29 running sums of a row, one vector each: J^T J's upper triangle, J^T r,
+// the squared ICP and photometric residuals.
+template <class DF>
+struct RowSums {
+  hn::Vec<DF> h[21];
+  hn::Vec<DF> b[6];
+  hn::Vec<DF> icp_sq, photo_sq;
+};
+
+template <class DF>
+HWY_INLINE void AddTerms(DF, const hn::Vec<DF>* J, hn::Vec<DF> r, RowSums<DF>& s) {
+  int k = 0;
+  for (int a = 0; a < 6; ++a) {
+    for (int c = a; c < 6; ++c, ++k) s.h[k] = hn::Add(s.h[k], hn::Mul(J[a], J[c]));
+    s.b[a] = hn::Add(s.b[a], hn::Mul(J[a], r));
+  }
+}
+
+// One vector of pixels (their frame values in fx..fi) against the model.
+template <class DF>
+HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& p, const float* fx_, const float* fy_,
+                            const float* fz_, const float* fnx_, const float* fny_, const float* fnz_,
+                            const float* fi_, RowSums<DF>& s, uint32_t& inliers, uint32_t& photo_inliers) {
+  using V = hn::Vec<DF>;
+  const hn::RebindToSigned<DF> di;
+  const V zero = hn::Zero(df);
+  const V px = hn::LoadU(df, fx_), py = hn::LoadU(df, fy_), pz = hn::LoadU(df, fz_);
+  const V nfx = hn::LoadU(df, fnx_), nfy = hn::LoadU(df, fny_), nfz = hn::LoadU(df, fnz_);
+  auto valid = hn::And(hn::Gt(pz, zero),
+                       hn::Not(hn::And(hn::Eq(nfx, zero), hn::And(hn::Eq(nfy, zero), hn::Eq(nfz, zero)))));
+  const auto& R = p.R;
+  const V qx = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, R[0]), px), hn::Mul(hn::Set(df, R[1]), py)),
+                               hn::Mul(hn::Set(df, R[2]), pz)), hn::Set(df, p.t[0]));
+  const V qy = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, R[3]), px), hn::Mul(hn::Set(df, R[4]), py)),
+                               hn::Mul(hn::Set(df, R[5]), pz)), hn::Set(df, p.t[1]));
+  const V qz = hn::Add(hn::Add(hn::Add(hn::Mul(hn::Set(df, R[6]), px), hn::Mul(hn::Set(df, R[7]), py)),
+                               hn::Mul(hn::Set(df, R[8]), pz)), hn::Set(df, p.t[2]));
+  valid = hn::And(valid, hn::Gt(qz, zero));
+  // Lanes behind the camera divide by a safe 1 (they are masked out anyway).
+  const V safe_qz = hn::IfThenElse(valid, qz, hn::Set(df, 1.0f));
+  V fu = hn::Add(hn::Div(hn::Mul(hn::Set(df, m.fx), qx), safe_qz), hn::Set(df, m.cx));
+  V fv = hn::Add(hn::Div(hn::Mul(hn::Set(df, m.fy), qy), safe_qz), hn::Set(df, m.cy));
+  const V half = hn::Set(df, 0.5f);
+  valid = hn::And(valid, hn::And(hn::Ge(fu, hn::Neg(half)),
+                                 hn::Lt(fu, hn::Set(df, static_cast<float>(m.width) - 0.5f))));
+  valid = hn::And(valid, hn::And(hn::Ge(fv, hn::Neg(half)),
+                                 hn::Lt(fv, hn::Set(df, static_cast<float>(m.height) - 0.5f))));
+  if (hn::AllFalse(df, valid)) return;
+  fu = hn::IfThenElse(valid, fu, zero);  // gathers stay inside the model
+  fv = hn::IfThenElse(valid, fv, zero);
+  const auto ui = hn::ConvertTo(di, hn::Add(fu, half)), vi = hn::ConvertTo(di, hn::Add(fv, half));
+  const auto j = hn::Add(hn::Mul(vi, hn::Set(di, m.width)), ui);
+  const V mx = hn::GatherIndex(df, m.x, j), my = hn::GatherIndex(df, m.y, j), mz = hn::GatherIndex(df, m.z, j);
+  const V nx = hn::GatherIndex(df, m.nx, j), ny = hn::GatherIndex(df, m.ny, j), nz = hn::GatherIndex(df, m.nz, j);
+  valid = hn::And(valid, hn::And(hn::Gt(mz, zero),
+                                 hn::Not(hn::And(hn::Eq(nx, zero), hn::And(hn::Eq(ny, zero), hn::Eq(nz, zero))))));
+  const V dx = hn::Sub(qx, mx), dy = hn::Sub(qy, my), dz = hn::Sub(qz, mz);
+  const V dist2 = hn::Add(hn::Add(hn::Mul(dx, dx), hn::Mul(dy, dy)), hn::Mul(dz, dz));
+  valid = hn::And(valid, hn::Le(dist2, hn::Set(df, p.max_distance * p.max_distance)));
+  const V rnx = hn::Add(hn::Add(hn::Mul(hn::Set(df, R[0]), nfx), hn::Mul(hn::Set(df, R[1]), nfy)),
+                        hn::Mul(hn::Set(df, R[2]), nfz));
+  const V rny = hn::Add(hn::Add(hn::Mul(hn::Set(df, R[3]), nfx), hn::Mul(hn::Set(df, R[4]), nfy)),
+                        hn::Mul(hn::Set(df, R[5]), nfz));
+  const V rnz = hn::Add(hn::Add(hn::Mul(hn::Set(df, R[6]), nfx), hn::Mul(hn::Set(df, R[7]), nfy)),
+                        hn::Mul(hn::Set(df, R[8]), nfz));
+  const V cosine = hn::Add(hn::Add(hn::Mul(rnx, nx), hn::Mul(rny, ny)), hn::Mul(rnz, nz));
+  const auto icp = hn::And(valid, hn::Ge(cosine, hn::Set(df, p.min_normal_cos)));
+  if (hn::AllFalse(df, icp)) return;
+  inliers += static_cast<uint32_t>(hn::CountTrue(df, icp));
+  V weight = hn::Set(df, 1.0f);
+  if (p.noise_weighting) {
+    const V wz = hn::Sub(qz, hn::Set(df, 0.4f));
+    weight = hn::Div(hn::Set(df, kTrackSigmaAt1m),
+                     hn::Add(hn::Set(df, 0.0012f), hn::Mul(hn::Set(df, 0.0019f), hn::Mul(wz, wz))));
+  }
+  const V wnx = hn::Mul(weight, nx), wny = hn::Mul(weight, ny), wnz = hn::Mul(weight, nz);
+  // Every term of a lane that does not associate: zero (selected, not multiplied
+  // by zero: such a lane may hold a NaN or an infinity).
+  const V r_icp = hn::IfThenElseZero(icp, hn::Add(hn::Add(hn::Mul(wnx, dx), hn::Mul(wny, dy)), hn::Mul(wnz, dz)));
+  const V J[6] = {hn::IfThenElseZero(icp, wnx), hn::IfThenElseZero(icp, wny), hn::IfThenElseZero(icp, wnz),
+                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qy, wnz), hn::Mul(qz, wny))),
+                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qz, wnx), hn::Mul(qx, wnz))),
+                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx)))};
+  AddTerms(df, J, r_icp, s);
+  s.icp_sq = hn::Add(s.icp_sq, hn::Mul(r_icp, r_icp));
+  if (!p.use_photometric) return;
+  // The model's intensity, bilinear at the projection.
+  const V fu0 = hn::Min(hn::Max(hn::Floor(fu), zero), hn::Set(df, static_cast<float>(m.width - 2)));
+  const V fv0 = hn::Min(hn::Max(hn::Floor(fv), zero), hn::Set(df, static_cast<float>(m.height - 2)));
+  const V one = hn::Set(df, 1.0f);
+  const V au = hn::Min(hn::Max(hn::Sub(fu, fu0), zero), one);
+  const V av = hn::Min(hn::Max(hn::Sub(fv, fv0), zero), one);
+  const auto i00 = hn::Add(hn::Mul(hn::ConvertTo(di, fv0), hn::Set(di, m.width)), hn::ConvertTo(di, fu0));
+  const auto i01 = hn::Add(i00, hn::Set(di, 1));
+  const auto i10 = hn::Add(i00, hn::Set(di, m.width));
+  const auto i11 = hn::Add(i10, hn::Set(di, 1));
+  const V I00 = hn::GatherIndex(df, m.intensity, i00), I01 = hn::GatherIndex(df, m.intensity, i01);
+  const V I10 = hn::GatherIndex(df, m.intensity, i10), I11 = hn::GatherIndex(df, m.intensity, i11);
+  const V top = hn::Add(I00, hn::Mul(au, hn::Sub(I01, I00)));
+  const V bottom = hn::Add(I10, hn::Mul(au, hn::Sub(I11, I10)));
+  const V r = hn::Sub(hn::Add(top, hn::Mul(av, hn::Sub(bottom, top))), hn::LoadU(df, fi_));
+  const auto photo = hn::And(icp, hn::Le(hn::Abs(r), hn::Set(df, p.max_photometric_residual)));
+  if (hn::AllFalse(df, photo)) return;
+  photo_inliers += static_cast<uint32_t>(hn::CountTrue(df, photo));
+  const V inv_z = hn::Div(one, safe_qz);
+  const V a = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gx, j), hn::Set(df, m.fx)), inv_z);
+  const V b = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gy, j), hn::Set(df, m.fy)), inv_z);
+  const V gz = hn::Mul(hn::Neg(hn::Add(hn::Mul(a, qx), hn::Mul(b, qy))), inv_z);
+  const V sw = hn::Set(df, p.photometric_sqrt_weight);
+  const V gx = hn::Mul(sw, a), gy = hn::Mul(sw, b), gzw = hn::Mul(sw, gz);
+  const V r_photo = hn::IfThenElseZero(photo, hn::Mul(sw, r));
+  const V P[6] = {hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
+                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
+                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
+                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx)))};
+  AddTerms(df, P, r_photo, s);
+  s.photo_sq = hn::Add(s.photo_sq, hn::Mul(r_photo, r_photo));
+}
+
+// The lanes of v summed in double (a row's partial sums into the totals).
+template <class DF>
+HWY_INLINE double LaneSum(DF df, hn::Vec<DF> v) {
+  HWY_ALIGN float lanes[kTrackMaxLanes];
+  hn::Store(v, df, lanes);
+  double sum = 0.0;
+  for (std::size_t k = 0; k < hn::Lanes(df); ++k) sum += lanes[k];
+  return sum;
+}
+
+HWY_NOINLINE void TrackLevelT(const TrackFrameLevel& f, const TrackModelLevel& m, const TrackParams& params,
+                              TrackSums& sums) {
+  using DF = hn::ScalableTag<float>;
+  const DF df;
+  const std::size_t N = hn::Lanes(df);
+  sums.clear();
+  TrackParams p = params;
+  if (m.width < 2 || m.height < 2) p.use_photometric = false;  // no bilinear neighbourhood (tracker.cpp never asks)
+  HWY_ALIGN float pad[7][kTrackMaxLanes];
+  for (int v = 0; v < f.height; ++v) {
+    RowSums<DF> s;
+    for (auto& h : s.h) h = hn::Zero(df);
+    for (auto& b : s.b) b = hn::Zero(df);
+    s.icp_sq = s.photo_sq = hn::Zero(df);
+    uint32_t inliers = 0, photo_inliers = 0;
+    const std::size_t row = static_cast<std::size_t>(v) * f.width;
+    const std::size_t width = static_cast<std::size_t>(f.width);
+    std::size_t u = 0;
+    for (; u + N <= width; u += N) {
+      const std::size_t i = row + u;
+      TrackVector(df, m, p, f.x + i, f.y + i, f.z + i, f.nx + i, f.ny + i, f.nz + i, f.intensity + i, s, inliers,
+                  photo_inliers);
+    }
+    if (u < width) {
+      const std::size_t n = width - u, i = row + u;
+      const float* src[7] = {f.x + i, f.y + i, f.z + i, f.nx + i, f.ny + i, f.nz + i, f.intensity + i};
+      for (int k = 0; k < 7; ++k) {
+        std::fill(pad[k], pad[k] + N, 0.0f);
+        std::memcpy(pad[k], src[k], n * sizeof(float));
+      }
+      TrackVector(df, m, p, pad[0], pad[1], pad[2], pad[3], pad[4], pad[5], pad[6], s, inliers, photo_inliers);
+    }
+    for (int k = 0; k < 21; ++k) sums.h[k] += LaneSum(df, s.h[k]);
+    for (int k = 0; k < 6; ++k) sums.b[k] += LaneSum(df, s.b[k]);
+    sums.icp_sq += LaneSum(df, s.icp_sq);
+    sums.photometric_sq += LaneSum(df, s.photo_sq);
+    sums.inliers += inliers;
+    sums.photometric_inliers += photo_inliers;
+  }
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace fovea::pipeline::map
+HWY_AFTER_NAMESPACE();
+
+#endif  // include guard

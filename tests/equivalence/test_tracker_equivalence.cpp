@@ -1,0 +1,189 @@
+// The tracker's Highway kernel (trackLevelSimd, tracker_simd-inl.h) against its
+// scalar reference (trackLevelRef, tracker.cpp) on every Highway target here:
+// the same inliers, and each of the 27 sums within kTrackSimdTolerance of the
+// reference's, relative to the sum's Cauchy-Schwarz scale (tracker_kernels.h),
+// on random scenes and on adversarial ones (no valid pixel, NaN and huge depth,
+// zero normals, a single valid pixel, rows shorter than a vector).
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include "pipeline/map/tracker_kernels.h"
+#include "tests/support/simd_targets.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+using test::TargetTest;
+
+struct Levels {
+  int w = 0, h = 0;
+  std::vector<float> fx_, fy_, fz_, fnx, fny, fnz, fi;              // frame
+  std::vector<float> mx, my, mz, mnx, mny, mnz, mi, mgx, mgy;       // model
+  TrackFrameLevel frame() const { return {w, h, fx_.data(), fy_.data(), fz_.data(), fnx.data(), fny.data(), fnz.data(), fi.data()}; }
+  TrackModelLevel model() const {
+    return {w, h, 0.8f * w, 0.8f * w, 0.5f * w, 0.5f * h, mx.data(), my.data(), mz.data(), mnx.data(), mny.data(),
+            mnz.data(), mi.data(), mgx.data(), mgy.data()};
+  }
+};
+
+// A wavy surface seen by the model's camera, and the same surface as a frame
+// seen after a small motion (with depth noise), intensities from a texture.
+Levels makeScene(int w, int h, std::mt19937& rng) {
+  Levels L;
+  L.w = w, L.h = h;
+  const std::size_t n = static_cast<std::size_t>(w) * h;
+  for (auto* v : {&L.fx_, &L.fy_, &L.fz_, &L.fnx, &L.fny, &L.fnz, &L.fi, &L.mx, &L.my, &L.mz, &L.mnx, &L.mny, &L.mnz,
+                  &L.mi, &L.mgx, &L.mgy}) {
+    v->assign(n, 0.0f);
+  }
+  std::normal_distribution<float> noise(0.0f, 0.002f);
+  const float f = 0.8f * w, cx = 0.5f * w, cy = 0.5f * h;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const float z = 1.5f + 0.2f * std::sin(0.3f * u) * std::cos(0.2f * v);
+      L.mz[i] = z;
+      L.mx[i] = (u - cx) / f * z;
+      L.my[i] = (v - cy) / f * z;
+      Eigen::Vector3f nrm(-0.06f * std::cos(0.3f * u), 0.04f * std::sin(0.2f * v), -1.0f);
+      nrm.normalize();
+      L.mnx[i] = nrm.x(), L.mny[i] = nrm.y(), L.mnz[i] = nrm.z();
+      L.mi[i] = 0.5f + 0.4f * std::sin(0.5f * u + 0.3f * v);
+      // The frame: the model's points moved by a small motion, noisy.
+      L.fx_[i] = L.mx[i] + 0.01f + noise(rng);
+      L.fy_[i] = L.my[i] - 0.005f + noise(rng);
+      L.fz_[i] = z + 0.02f + noise(rng);
+      L.fnx[i] = nrm.x(), L.fny[i] = nrm.y(), L.fnz[i] = nrm.z();
+      L.fi[i] = L.mi[i] + noise(rng) * 10.0f;
+    }
+  }
+  for (int v = 1; v + 1 < h; ++v) {
+    for (int u = 1; u + 1 < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      L.mgx[i] = 0.5f * (L.mi[i + 1] - L.mi[i - 1]);
+      L.mgy[i] = 0.5f * (L.mi[i + w] - L.mi[i - w]);
+    }
+  }
+  return L;
+}
+
+TrackParams makeParams(std::mt19937& rng, bool photometric, bool noise_weighting) {
+  std::uniform_real_distribution<float> a(-0.03f, 0.03f);
+  const Eigen::Matrix3f R = (Eigen::AngleAxisf(a(rng), Eigen::Vector3f::UnitX()) *
+                             Eigen::AngleAxisf(a(rng), Eigen::Vector3f::UnitY()) *
+                             Eigen::AngleAxisf(a(rng), Eigen::Vector3f::UnitZ()))
+                                .toRotationMatrix();
+  TrackParams p;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) p.R[3 * r + c] = R(r, c);
+    p.t[r] = a(rng);
+  }
+  p.max_distance = 0.1f;
+  p.min_normal_cos = 0.866f;
+  p.noise_weighting = noise_weighting;
+  p.use_photometric = photometric;
+  p.photometric_sqrt_weight = 0.3f;
+  p.max_photometric_residual = 0.3f;
+  return p;
+}
+
+void expectEquivalent(const Levels& L, const TrackParams& p, const char* what) {
+  TrackSums ref, simd;
+  trackLevelRef(L.frame(), L.model(), p, ref);
+  trackLevelSimd(L.frame(), L.model(), p, simd);
+  ASSERT_EQ(simd.inliers, ref.inliers) << what;
+  ASSERT_EQ(simd.photometric_inliers, ref.photometric_inliers) << what;
+  const double r2 = ref.icp_sq + ref.photometric_sq;
+  auto diag = [&](int a) {
+    static constexpr int kDiag[6] = {0, 6, 11, 15, 18, 20};
+    return ref.h[static_cast<std::size_t>(kDiag[a])];
+  };
+  int k = 0;
+  for (int a = 0; a < 6; ++a) {
+    for (int c = a; c < 6; ++c, ++k) {
+      const double scale = std::sqrt(diag(a) * diag(c)) + 1e-30;
+      EXPECT_LE(std::abs(simd.h[static_cast<std::size_t>(k)] - ref.h[static_cast<std::size_t>(k)]) / scale,
+                kTrackSimdTolerance)
+          << what << ": H(" << a << ", " << c << ")";
+    }
+    const double scale = std::sqrt(diag(a) * r2) + 1e-30;
+    EXPECT_LE(std::abs(simd.b[static_cast<std::size_t>(a)] - ref.b[static_cast<std::size_t>(a)]) / scale,
+              kTrackSimdTolerance)
+        << what << ": b(" << a << ")";
+  }
+  EXPECT_LE(std::abs(simd.icp_sq - ref.icp_sq), kTrackSimdTolerance * ref.icp_sq + 1e-30) << what;
+  EXPECT_LE(std::abs(simd.photometric_sq - ref.photometric_sq), kTrackSimdTolerance * ref.photometric_sq + 1e-30)
+      << what;
+}
+
+TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnRandomScenes) {
+  std::mt19937 rng(29);
+  int cases = 0;
+  for (const auto& [w, h] : {std::pair{160, 120}, std::pair{37, 23}, std::pair{5, 9}, std::pair{320, 240}}) {
+    for (int trial = 0; trial < 3; ++trial) {
+      const Levels L = makeScene(w, h, rng);
+      for (bool photometric : {false, true}) {
+        for (bool weighting : {false, true}) {
+          const TrackParams p = makeParams(rng, photometric, weighting);
+          expectEquivalent(L, p, "random scene");
+          ++cases;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(cases, 48);
+}
+
+TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnAdversarialInput) {
+  std::mt19937 rng(7);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  Levels base = makeScene(61, 17, rng);
+  const TrackParams p = makeParams(rng, true, true);
+  {
+    Levels L = base;  // no valid depth at all
+    std::fill(L.fz_.begin(), L.fz_.end(), 0.0f);
+    expectEquivalent(L, p, "no valid depth");
+    TrackSums simd;
+    trackLevelSimd(L.frame(), L.model(), p, simd);
+    EXPECT_EQ(simd.inliers, 0u);
+  }
+  {
+    Levels L = base;  // NaN, infinite and huge depth, zero and NaN normals, sprinkled
+    std::uniform_int_distribution<std::size_t> pick(0, L.fz_.size() - 1);
+    for (int k = 0; k < 200; ++k) {
+      const std::size_t i = pick(rng);
+      switch (k % 6) {
+        case 0: L.fz_[i] = nan; break;
+        case 1: L.fz_[i] = inf; break;
+        case 2: L.fz_[i] = 1e30f; break;
+        case 3: L.fnx[i] = L.fny[i] = L.fnz[i] = 0.0f; break;
+        case 4: L.mz[i] = nan; break;
+        case 5: L.mnx[i] = nan; break;
+      }
+    }
+    expectEquivalent(L, p, "NaN, infinite, huge");
+  }
+  {
+    Levels L = base;  // one valid pixel, in a row's tail
+    std::fill(L.fz_.begin(), L.fz_.end(), 0.0f);
+    L.fz_[5 * 61 + 60] = base.fz_[5 * 61 + 60];
+    expectEquivalent(L, p, "a single pixel");
+  }
+  {
+    Levels L = base;  // everything projects outside the model
+    TrackParams far = p;
+    far.t = {100.0f, 0.0f, 0.0f};
+    expectEquivalent(L, far, "outside the view");
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(test::simdTargetsHere()), test::simdTargetName);
+
+}  // namespace
+}  // namespace fovea::pipeline::map
