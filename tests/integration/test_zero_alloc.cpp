@@ -21,6 +21,7 @@
 #include "tests/support/alloc_counter.h"
 #include "tests/support/clouds.h"
 #include "tests/support/test_time.h"
+#include "tests/support/cameras.h"
 
 namespace fovea {
 namespace {
@@ -31,21 +32,7 @@ namespace {
 // 25 minutes at 100 frames, and 5 of its 50 at 20.
 int framesCounted() { return test::repetitions(100, 10); }
 
-// A camera opened and started, or null with the reason added as a failure.
-std::unique_ptr<hal::Camera> startedCamera(const std::string& spec) {
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(spec);
-  if (!camera.isOk()) {
-    ADD_FAILURE() << spec << ": " << camera.status().toString();
-    return nullptr;
-  }
-  Status s = camera.value()->open();
-  if (s.isOk()) s = camera.value()->start();
-  if (!s.isOk()) {
-    ADD_FAILURE() << spec << ": " << s.toString();
-    return nullptr;
-  }
-  return std::move(camera.value());
-}
+using test::startedCamera;
 
 TEST(ZeroAllocation, CounterSeesAllocations) {
   // The test below means something only if the counter works.

@@ -19,6 +19,7 @@
 #include "pipeline/map/tracker.h"
 #include "pipeline/map/tracker_kernels.h"
 #include "tests/support/test_time.h"
+#include "tests/support/cameras.h"
 
 namespace fovea::pipeline::map {
 namespace {
@@ -33,20 +34,7 @@ double rotationError(const hal::Pose& a, const hal::Pose& b) {
   return angleDeg(a.R_world_cam.transpose() * b.R_world_cam);
 }
 
-std::unique_ptr<hal::Camera> startedCamera(const std::string& spec) {
-  Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(spec);
-  if (!camera.isOk()) {
-    ADD_FAILURE() << spec << ": " << camera.status().toString();
-    return nullptr;
-  }
-  Status s = camera.value()->open();
-  if (s.isOk()) s = camera.value()->start();
-  if (!s.isOk()) {
-    ADD_FAILURE() << spec << ": " << s.toString();
-    return nullptr;
-  }
-  return std::move(camera.value());
-}
+using test::startedCamera;
 
 // The mock camera's frames 0..n-1 (their T_world_cam is the truth).
 std::vector<hal::RgbdFrame> mockFrames(const std::string& spec, int w, int h, int n) {
