@@ -93,6 +93,17 @@ Result<hal::PoseSourceConfig> poseSourceConfig(const CameraSettings& settings) {
   return config;
 }
 
+std::string describePose(const CameraSettings& settings, const hal::PoseSource& source) {
+  switch (poseTracking(settings)) {
+    case pipeline::map::PoseTracking::kAlone:
+      return "track: the map tracks the camera (docs/tracking.md); the world is the first frame's camera frame";
+    case pipeline::map::PoseTracking::kRefine:
+      return settings.pose.source + ": the map's tracker refines the outside pose, " + source.describe();
+    case pipeline::map::PoseTracking::kOff: break;
+  }
+  return source.describe();
+}
+
 pipeline::map::PoseTracking poseTracking(const CameraSettings& settings) {
   const std::optional<pipeline::map::PoseSourceChoice> choice = pipeline::map::parsePoseSourceChoice(settings.pose.source);
   return choice ? choice->tracking : pipeline::map::PoseTracking::kOff;

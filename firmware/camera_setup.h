@@ -39,6 +39,10 @@ inline constexpr const char* kPoseFlagForms =
 // The outside pose source camera.pose.source names (track: none; track+X: X).
 // The tracking part is pipeline::map::parsePoseSourceChoice's.
 Result<hal::PoseSourceConfig> poseSourceConfig(const CameraSettings& settings);
+// The pose line for the log: the pose source's own description, or what the
+// tracker does with it ("track: the map tracks the camera ...").
+std::string describePose(const CameraSettings& settings, const hal::PoseSource& source);
+
 // Whether and how the map tracks the camera (kOff for a source that is not valid:
 // checkCameraGeometry() says why).
 pipeline::map::PoseTracking poseTracking(const CameraSettings& settings);

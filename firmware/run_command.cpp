@@ -399,7 +399,7 @@ void Run::printStartup() const {
               info_.intrinsics.height, info_.fps, options_.range.min_m, options_.range.max_m);
   std::printf("foveation: %s\n", describeFoveation(options_.foveation).c_str());
   if (!calibrated_.empty()) std::printf("camera: %s\n", calibrated_.c_str());
-  std::printf("pose: %s\n", pose_source_.describe().c_str());
+  std::printf("pose: %s\n", describePose(options_.camera, pose_source_).c_str());
   if (kernels_ == fovea::KernelSet::kSimd) {
     std::printf("kernels: simd, target %s, %d thread%s (FOVEA_FORCE_KERNEL=ref for the references)\n",
                 pipeline::simdTargetName(pipeline::activeSimdTarget()), options_.threads,

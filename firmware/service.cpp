@@ -147,7 +147,7 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   }
   service->pose_source_ = std::move(pose_source.value());
   if (!calibrated->empty()) service->log().log(LogLevel::kInfo, "camera: %s", calibrated->c_str());
-  service->log().log(LogLevel::kInfo, "pose: %s", service->pose_source_->describe().c_str());
+  service->log().log(LogLevel::kInfo, "pose: %s", describePose(config.camera, *service->pose_source_).c_str());
   if (Status s = service->allocate(); !s) return s;
   service->log().log(LogLevel::kInfo, "%s", service->memory_.summary().c_str());
   return service;
