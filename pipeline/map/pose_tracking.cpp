@@ -4,18 +4,8 @@
 #include <cmath>
 #include <utility>
 
-#include <Eigen/Geometry>
 
 namespace fovea::pipeline::map {
-
-namespace {
-
-// The rotation angle of R in degrees (0 for the identity), robust near 0 and 180.
-double angleDeg(const Eigen::Matrix3d& R) {
-  return Eigen::AngleAxisd(Eigen::Quaterniond(R).normalized()).angle() * 180.0 / 3.14159265358979323846;
-}
-
-}  // namespace
 
 std::optional<PoseSourceChoice> parsePoseSourceChoice(std::string_view source) {
   PoseSourceChoice choice;
@@ -65,7 +55,7 @@ bool PoseEstimator::poseFrame(hal::RgbdFrame& frame, bool outside_pose_valid, Tr
     const Eigen::Vector3d dt = anchor_.R_world_cam.transpose() * (outside.t_world_cam - anchor_.t_world_cam);
     const TrackerConfig& c = tracker_.config();
     const double frames = static_cast<double>(frames_since_anchor_ + 1);
-    if (dt.norm() <= c.max_motion_m * frames && angleDeg(dR) <= c.max_motion_deg * frames) {
+    if (dt.norm() <= c.max_motion_m * frames && rotationAngleDeg(dR) <= c.max_motion_deg * frames) {
       const hal::Pose& last = tracker_.lastGoodPose();
       start.R_world_cam = last.R_world_cam * dR;
       start.t_world_cam = last.t_world_cam + last.R_world_cam * dt;
@@ -78,7 +68,7 @@ bool PoseEstimator::poseFrame(hal::RgbdFrame& frame, bool outside_pose_valid, Tr
     // Against the outside pose itself, not the starting estimate made from it.
     const hal::Pose& reported = outcome == TrackOutcome::kLost ? tracker_.lastGoodPose() : pose;
     stats.prior_disagreement_m = (reported.t_world_cam - outside.t_world_cam).norm();
-    stats.prior_disagreement_deg = angleDeg(outside.R_world_cam.transpose() * reported.R_world_cam);
+    stats.prior_disagreement_deg = rotationAngleDeg(outside.R_world_cam.transpose() * reported.R_world_cam);
   } else {
     stats.prior_disagreement_m = stats.prior_disagreement_deg = 0.0;
   }

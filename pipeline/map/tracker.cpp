@@ -35,11 +35,6 @@ int64_t nowNs() {
       .count();
 }
 
-double angleDeg(const Eigen::Matrix3d& R) {
-  const double c = std::clamp((R.trace() - 1.0) * 0.5, -1.0, 1.0);
-  return std::acos(c) / kDegToRad;
-}
-
 // exp of a twist [v, w] (left perturbation): a rotation and a translation.
 void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
   const Eigen::Vector3d v = x.head<3>(), w = x.tail<3>();
@@ -271,6 +266,13 @@ void trackLevelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, c
 }
 
 // ---------------------------------------------------------------- names, config
+
+double rotationAngleDeg(const Eigen::Matrix3d& R) {
+  // From the quaternion, 2 atan2(|v|, |w|): accurate near 0 and 180 degrees,
+  // where acos of the trace loses half the digits.
+  const Eigen::Quaterniond q(R);
+  return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w())) / kDegToRad;
+}
 
 std::string_view trackOutcomeName(TrackOutcome outcome) {
   switch (outcome) {
@@ -564,7 +566,7 @@ LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, con
     return LostReason::kResidualJump;
   }
   const double dt = (pose.t_world_cam - reference.t_world_cam).norm();
-  const double dr = angleDeg(reference.R_world_cam.transpose() * pose.R_world_cam);
+  const double dr = rotationAngleDeg(reference.R_world_cam.transpose() * pose.R_world_cam);
   if (dt > config_.max_motion_m || dr > config_.max_motion_deg) return LostReason::kImplausibleMotion;
   return LostReason::kNone;
 }
@@ -686,7 +688,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   stats.min_eigenvalue = best.min_eigenvalue;
   if (prior != nullptr) {
     stats.prior_disagreement_m = (best_pose.t_world_cam - prior->t_world_cam).norm();
-    stats.prior_disagreement_deg = angleDeg(prior->R_world_cam.transpose() * best_pose.R_world_cam);
+    stats.prior_disagreement_deg = rotationAngleDeg(prior->R_world_cam.transpose() * best_pose.R_world_cam);
   }
   if (reason != LostReason::kNone) return lose(reason);
 

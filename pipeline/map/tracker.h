@@ -120,6 +120,9 @@ enum class LostReason : uint8_t {
 };
 std::string_view lostReasonName(LostReason reason);
 
+// The angle of the rotation R in degrees, in [0, 180] (for motions and disagreements).
+double rotationAngleDeg(const Eigen::Matrix3d& R);
+
 struct TrackStats {
   TrackOutcome outcome = TrackOutcome::kFirstFrame;
   LostReason lost_reason = LostReason::kNone;

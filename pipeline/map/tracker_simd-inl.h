@@ -35,29 +35,55 @@ namespace hn = hwy::HWY_NAMESPACE;
 inline constexpr std::size_t kTrackMaxLanes = HWY_MAX_BYTES / sizeof(float);
 inline constexpr float kTrackSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;  // depthSigma(1 m), as the reference's
 
-// The 29 running sums of a row, one vector each: J^T J's upper triangle, J^T r,
-// the squared ICP and photometric residuals.
-template <class DF>
-struct RowSums {
-  hn::Vec<DF> h[21];
-  hn::Vec<DF> b[6];
-  hn::Vec<DF> icp_sq, photo_sq;
-};
+// The 29 running sums of a row, a vector's lanes each, in memory (SVE's
+// vectors are sizeless: no arrays or members of them): J^T J's upper triangle
+// (0..20), J^T r (21..26), the squared ICP (27) and photometric (28) residuals.
+inline constexpr int kTrackSums = 29;
 
 template <class DF>
-HWY_INLINE void AddTerms(DF, const hn::Vec<DF>* J, hn::Vec<DF> r, RowSums<DF>& s) {
-  int k = 0;
-  for (int a = 0; a < 6; ++a) {
-    for (int c = a; c < 6; ++c, ++k) s.h[k] = hn::Add(s.h[k], hn::Mul(J[a], J[c]));
-    s.b[a] = hn::Add(s.b[a], hn::Mul(J[a], r));
-  }
+HWY_INLINE void Accumulate(DF df, float* acc, int k, hn::Vec<DF> term) {
+  const std::size_t N = hn::Lanes(df);
+  float* a = acc + static_cast<std::size_t>(k) * N;
+  hn::Store(hn::Add(hn::Load(df, a), term), df, a);
+}
+
+// One term's J^T J and J^T r into the sums (J = j0..j5, sizeless vectors as arguments).
+template <class DF, class V = hn::Vec<DF>>
+HWY_INLINE void AddTerms(DF df, V j0, V j1, V j2, V j3, V j4, V j5, V r, float* acc) {
+  Accumulate(df, acc, 0, hn::Mul(j0, j0));
+  Accumulate(df, acc, 1, hn::Mul(j0, j1));
+  Accumulate(df, acc, 2, hn::Mul(j0, j2));
+  Accumulate(df, acc, 3, hn::Mul(j0, j3));
+  Accumulate(df, acc, 4, hn::Mul(j0, j4));
+  Accumulate(df, acc, 5, hn::Mul(j0, j5));
+  Accumulate(df, acc, 6, hn::Mul(j1, j1));
+  Accumulate(df, acc, 7, hn::Mul(j1, j2));
+  Accumulate(df, acc, 8, hn::Mul(j1, j3));
+  Accumulate(df, acc, 9, hn::Mul(j1, j4));
+  Accumulate(df, acc, 10, hn::Mul(j1, j5));
+  Accumulate(df, acc, 11, hn::Mul(j2, j2));
+  Accumulate(df, acc, 12, hn::Mul(j2, j3));
+  Accumulate(df, acc, 13, hn::Mul(j2, j4));
+  Accumulate(df, acc, 14, hn::Mul(j2, j5));
+  Accumulate(df, acc, 15, hn::Mul(j3, j3));
+  Accumulate(df, acc, 16, hn::Mul(j3, j4));
+  Accumulate(df, acc, 17, hn::Mul(j3, j5));
+  Accumulate(df, acc, 18, hn::Mul(j4, j4));
+  Accumulate(df, acc, 19, hn::Mul(j4, j5));
+  Accumulate(df, acc, 20, hn::Mul(j5, j5));
+  Accumulate(df, acc, 21, hn::Mul(j0, r));
+  Accumulate(df, acc, 22, hn::Mul(j1, r));
+  Accumulate(df, acc, 23, hn::Mul(j2, r));
+  Accumulate(df, acc, 24, hn::Mul(j3, r));
+  Accumulate(df, acc, 25, hn::Mul(j4, r));
+  Accumulate(df, acc, 26, hn::Mul(j5, r));
 }
 
 // One vector of pixels (their frame values in fx..fi) against the model.
 template <class DF>
 HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& p, const float* fx_, const float* fy_,
                             const float* fz_, const float* fnx_, const float* fny_, const float* fnz_,
-                            const float* fi_, RowSums<DF>& s, uint32_t& inliers, uint32_t& photo_inliers) {
+                            const float* fi_, float* acc, uint32_t& inliers, uint32_t& photo_inliers) {
   using V = hn::Vec<DF>;
   const hn::RebindToSigned<DF> di;
   const V zero = hn::Zero(df);
@@ -114,12 +140,11 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   // Every term of a lane that does not associate: zero (selected, not multiplied
   // by zero: such a lane may hold a NaN or an infinity).
   const V r_icp = hn::IfThenElseZero(icp, hn::Add(hn::Add(hn::Mul(wnx, dx), hn::Mul(wny, dy)), hn::Mul(wnz, dz)));
-  const V J[6] = {hn::IfThenElseZero(icp, wnx), hn::IfThenElseZero(icp, wny), hn::IfThenElseZero(icp, wnz),
-                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qy, wnz), hn::Mul(qz, wny))),
-                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qz, wnx), hn::Mul(qx, wnz))),
-                  hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx)))};
-  AddTerms(df, J, r_icp, s);
-  s.icp_sq = hn::Add(s.icp_sq, hn::Mul(r_icp, r_icp));
+  AddTerms(df, hn::IfThenElseZero(icp, wnx), hn::IfThenElseZero(icp, wny), hn::IfThenElseZero(icp, wnz),
+           hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qy, wnz), hn::Mul(qz, wny))),
+           hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qz, wnx), hn::Mul(qx, wnz))),
+           hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx))), r_icp, acc);
+  Accumulate(df, acc, 27, hn::Mul(r_icp, r_icp));
   if (!p.use_photometric) return;
   // The model's intensity, bilinear at the projection.
   const V fu0 = hn::Min(hn::Max(hn::Floor(fu), zero), hn::Set(df, static_cast<float>(m.width - 2)));
@@ -146,21 +171,17 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   const V sw = hn::Set(df, p.photometric_sqrt_weight);
   const V gx = hn::Mul(sw, a), gy = hn::Mul(sw, b), gzw = hn::Mul(sw, gz);
   const V r_photo = hn::IfThenElseZero(photo, hn::Mul(sw, r));
-  const V P[6] = {hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
-                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
-                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
-                  hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx)))};
-  AddTerms(df, P, r_photo, s);
-  s.photo_sq = hn::Add(s.photo_sq, hn::Mul(r_photo, r_photo));
+  AddTerms(df, hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx))), r_photo, acc);
+  Accumulate(df, acc, 28, hn::Mul(r_photo, r_photo));
 }
 
-// The lanes of v summed in double (a row's partial sums into the totals).
-template <class DF>
-HWY_INLINE double LaneSum(DF df, hn::Vec<DF> v) {
-  HWY_ALIGN float lanes[kTrackMaxLanes];
-  hn::Store(v, df, lanes);
+// A row's lanes of one sum, added in double.
+inline double LaneSum(const float* lanes, std::size_t n) {
   double sum = 0.0;
-  for (std::size_t k = 0; k < hn::Lanes(df); ++k) sum += lanes[k];
+  for (std::size_t k = 0; k < n; ++k) sum += lanes[k];
   return sum;
 }
 
@@ -173,18 +194,16 @@ HWY_NOINLINE void TrackLevelT(const TrackFrameLevel& f, const TrackModelLevel& m
   TrackParams p = params;
   if (m.width < 2 || m.height < 2) p.use_photometric = false;  // no bilinear neighbourhood (tracker.cpp never asks)
   HWY_ALIGN float pad[7][kTrackMaxLanes];
+  HWY_ALIGN float acc[kTrackSums * kTrackMaxLanes];
   for (int v = 0; v < f.height; ++v) {
-    RowSums<DF> s;
-    for (auto& h : s.h) h = hn::Zero(df);
-    for (auto& b : s.b) b = hn::Zero(df);
-    s.icp_sq = s.photo_sq = hn::Zero(df);
+    std::fill(acc, acc + kTrackSums * N, 0.0f);
     uint32_t inliers = 0, photo_inliers = 0;
     const std::size_t row = static_cast<std::size_t>(v) * f.width;
     const std::size_t width = static_cast<std::size_t>(f.width);
     std::size_t u = 0;
     for (; u + N <= width; u += N) {
       const std::size_t i = row + u;
-      TrackVector(df, m, p, f.x + i, f.y + i, f.z + i, f.nx + i, f.ny + i, f.nz + i, f.intensity + i, s, inliers,
+      TrackVector(df, m, p, f.x + i, f.y + i, f.z + i, f.nx + i, f.ny + i, f.nz + i, f.intensity + i, acc, inliers,
                   photo_inliers);
     }
     if (u < width) {
@@ -194,12 +213,12 @@ HWY_NOINLINE void TrackLevelT(const TrackFrameLevel& f, const TrackModelLevel& m
         std::fill(pad[k], pad[k] + N, 0.0f);
         std::memcpy(pad[k], src[k], n * sizeof(float));
       }
-      TrackVector(df, m, p, pad[0], pad[1], pad[2], pad[3], pad[4], pad[5], pad[6], s, inliers, photo_inliers);
+      TrackVector(df, m, p, pad[0], pad[1], pad[2], pad[3], pad[4], pad[5], pad[6], acc, inliers, photo_inliers);
     }
-    for (int k = 0; k < 21; ++k) sums.h[k] += LaneSum(df, s.h[k]);
-    for (int k = 0; k < 6; ++k) sums.b[k] += LaneSum(df, s.b[k]);
-    sums.icp_sq += LaneSum(df, s.icp_sq);
-    sums.photometric_sq += LaneSum(df, s.photo_sq);
+    for (std::size_t k = 0; k < 21; ++k) sums.h[k] += LaneSum(acc + k * N, N);
+    for (std::size_t k = 0; k < 6; ++k) sums.b[k] += LaneSum(acc + (21 + k) * N, N);
+    sums.icp_sq += LaneSum(acc + 27 * N, N);
+    sums.photometric_sq += LaneSum(acc + 28 * N, N);
     sums.inliers += inliers;
     sums.photometric_inliers += photo_inliers;
   }

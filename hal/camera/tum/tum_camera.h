@@ -71,7 +71,7 @@ struct TumCameraOptions {
   enum class GroundTruth : uint8_t { kAuto, kOn, kOff };
   GroundTruth groundtruth = GroundTruth::kAuto;
   // intrinsics=fr1|fr2|fr3|ros; unset: by the folder's name (tumSensorForPath).
-  std::optional<TumSensor> sensor;
+  std::optional<TumSensor> sensor = std::nullopt;
 };
 
 // Pairs each depth stamp with the nearest colour stamp within max_difference_ns,
