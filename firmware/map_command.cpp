@@ -40,7 +40,8 @@ const char* kMapHelp =
     "  --out FILE          the map's PLY file\n"
     "  --trajectory FILE   the poses in TUM's format (timestamp tx ty tz qx qy qz qw, the frame's stamp\n"
     "                      in seconds: a TUM sequence's own), for evaluate_ate.py: with --pose track\n"
-    "                      every frame's (a lost one's is its last good pose), else the fused frames'\n"
+    "                      every frame's (a lost one's is the outside pose with track+X, else the\n"
+    "                      last good one), else the fused frames'\n"
     "                      (one of --out and --trajectory is needed)\n"
     "  --camera SPEC       default mock:living-room,path=orbit ('fovead cameras' lists them)\n"
     "  --frames N          frames to fuse (default 100; with --pose track and a recording: all)\n"
@@ -79,11 +80,11 @@ void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, s
               std::string(kernelSetName(map.config().kernels)).c_str());
 }
 
-// With --pose track, a recording plays once: looping back to its start is a
-// jump the tracker would (rightly) call lost. loop=on in the spec still loops.
+// With --pose track, a TUM recording plays once (mcap: plays once unless told
+// to loop): looping back to its start is a jump the tracker would (rightly)
+// call lost. loop=on in the spec still loops.
 std::string playOnce(std::string spec) {
-  const bool recording = spec.rfind("tum:", 0) == 0 || spec.rfind("mcap:", 0) == 0;
-  if (recording && spec.find("loop") == std::string::npos) spec += spec.rfind("tum:", 0) == 0 ? ",loop=off" : "";
+  if (spec.rfind("tum:", 0) == 0 && spec.find("loop") == std::string::npos) spec += ",loop=off";
   return spec;
 }
 

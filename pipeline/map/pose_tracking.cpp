@@ -4,7 +4,6 @@
 #include <cmath>
 #include <utility>
 
-
 namespace fovea::pipeline::map {
 
 std::optional<PoseSourceChoice> parsePoseSourceChoice(std::string_view source) {
