@@ -613,11 +613,17 @@ TEST(Service, TrackedPoseLostOnACoveredLensRaisesTheFaultAndRecovers) {
   Logger logger(sink);
   auto gpio = std::make_unique<test::LockedGpio>();
   test::LockedGpio& chip = *gpio;
-  auto camera = std::make_unique<test::StallableCamera>(
-      hal::createCamera("mock:living-room,size=160x120,realtime=on,fps=30,path=orbit").value());
+  // Natively the camera orbits; in the slow trees (qemu, the sanitizers) it
+  // stands still: there the stage drops most of the real-time frames, and the
+  // orbit's motion between two frames it takes grows beyond what one frame's
+  // tracking converges from (CI under qemu: nothing tracked in 150 s). The
+  // tracker's accuracy on motion is tested in test_tracker; this is the wiring.
+  const std::string spec = std::string("mock:living-room,size=160x120,realtime=on,fps=30,path=") +
+                           (test::timeScale() > 1.0 ? "static" : "orbit");
+  auto camera = std::make_unique<test::StallableCamera>(hal::createCamera(spec).value());
   test::StallableCamera& cam = *camera;
   ServiceConfig config = test::smallServiceConfig(30.0);
-  config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=30,path=orbit";
+  config.camera.spec = spec;
   config.map.source = FoveationSource::kMap;
   config.map.delta = false;
   config.map.map.max_surfels = 1u << 16;
