@@ -384,31 +384,41 @@ void FrameToModelTracker::reset() {
   residual_count_ = 0;
 }
 
+void FrameToModelTracker::Level::setCamera(int w, int h, const hal::CameraIntrinsics& k) {
+  width = w;
+  height = h;
+  fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
+  cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+}
+
+bool FrameToModelTracker::Level::setMeasured(std::size_t i, int u, int v, uint16_t raw, float scale, float max_z,
+                                             float intensity_value) {
+  const float depth_m = static_cast<float>(raw) * scale;
+  const bool ok = raw != 0 && std::isfinite(depth_m) && depth_m > 0.0f && depth_m <= max_z;
+  z[i] = ok ? depth_m : 0.0f;
+  x[i] = ok ? (static_cast<float>(u) - cx) / fx * depth_m : 0.0f;
+  y[i] = ok ? (static_cast<float>(v) - cy) / fy * depth_m : 0.0f;
+  intensity[i] = intensity_value;
+  return ok;
+}
+
+float FrameToModelTracker::maxDepth() const {
+  return config_.max_depth_m > 0.0 ? static_cast<float>(config_.max_depth_m) : std::numeric_limits<float>::infinity();
+}
+
 bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
   const int w = frame.width(), h = frame.height();
   Level& l0 = frame_[0];
-  l0.width = w;
-  l0.height = h;
-  const hal::CameraIntrinsics& k = frame.intrinsics;
-  l0.fx = static_cast<float>(k.fx), l0.fy = static_cast<float>(k.fy);
-  l0.cx = static_cast<float>(k.cx), l0.cy = static_cast<float>(k.cy);
+  l0.setCamera(w, h, frame.intrinsics);
   const float scale = static_cast<float>(frame.depth_scale_m);
+  const float max_z = maxDepth();
   const uint16_t* depth = frame.depth();
   const uint8_t* rgb = frame.rgb();
   uint32_t valid = 0;
-  const float max_z = config_.max_depth_m > 0.0 ? static_cast<float>(config_.max_depth_m)
-                                                 : std::numeric_limits<float>::infinity();
   for (int v = 0; v < h; ++v) {
-    const float yn = (static_cast<float>(v) - l0.cy) / l0.fy;
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      const float z = static_cast<float>(depth[i]) * scale;
-      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f && z <= max_z;
-      l0.z[i] = ok ? z : 0.0f;
-      l0.x[i] = ok ? (static_cast<float>(u) - l0.cx) / l0.fx * z : 0.0f;
-      l0.y[i] = ok ? yn * z : 0.0f;
-      l0.intensity[i] = frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f;
-      valid += ok ? 1u : 0u;
+      valid += l0.setMeasured(i, u, v, depth[i], scale, max_z, frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f) ? 1u : 0u;
     }
   }
   valid_pixels_ = valid;
@@ -430,14 +440,11 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
   const bool index_ok = map.indexMapWidth() == w && map.indexMapHeight() == h;
   const uint32_t* index = map.indexMap();
   Level& l0 = model_[0];
-  l0.width = w;
-  l0.height = h;
-  const hal::CameraIntrinsics& k = frame.intrinsics;
-  l0.fx = static_cast<float>(k.fx), l0.fy = static_cast<float>(k.fy);
-  l0.cx = static_cast<float>(k.cx), l0.cy = static_cast<float>(k.cy);
+  l0.setCamera(w, h, frame.intrinsics);
   const Eigen::Matrix3d Rt = pose.R_world_cam.transpose();
   const Eigen::Matrix3f Rt_f = Rt.cast<float>();
   const float scale = static_cast<float>(frame.depth_scale_m);
+  const float max_z = maxDepth();
   const uint16_t* depth = frame.depth();
   const uint8_t* rgb = frame.rgb();
   for (int v = 0; v < h; ++v) {
@@ -458,12 +465,7 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
         }
       }
       model_from_surfel_[i] = 0;
-      const float z = static_cast<float>(depth[i]) * scale;
-      const bool ok = depth[i] != 0 && std::isfinite(z) && z > 0.0f;
-      l0.z[i] = ok ? z : 0.0f;
-      l0.x[i] = ok ? (static_cast<float>(u) - l0.cx) / l0.fx * z : 0.0f;
-      l0.y[i] = ok ? (static_cast<float>(v) - l0.cy) / l0.fy * z : 0.0f;
-      l0.intensity[i] = frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f;
+      (void)l0.setMeasured(i, u, v, depth[i], scale, max_z, frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f);
     }
   }
   // Normals of the pixels without a surfel: from the model's vertex map (the

@@ -180,7 +180,13 @@ class FrameToModelTracker {
     std::vector<float> x, y, z, nx, ny, nz, intensity, gx, gy;
     void allocate(std::size_t pixels, bool gradients);
     std::size_t bytes() const;
+    // The finest level's size and camera from a frame's.
+    void setCamera(int w, int h, const hal::CameraIntrinsics& k);
+    // Pixel i = (u, v) from its measurement: the vertex of its raw depth
+    // (zeros, and false, without a valid one up to max_z) and its intensity.
+    bool setMeasured(std::size_t i, int u, int v, uint16_t raw, float scale, float max_z, float intensity_value);
   };
+  float maxDepth() const;  // config_.max_depth_m, infinity when 0 (off)
   // The result of one coarse-to-fine Gauss-Newton run from a start estimate.
   struct Solve {
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // new camera -> model camera
