@@ -321,9 +321,12 @@ TEST(V4l2Vivid, DepthThatNeverMatchesColourIsACountedFault) {
   EXPECT_EQ(s.code(), ErrorCode::kInvalidInput) << s.toString();
   EXPECT_EQ(s.message(), "colour unpaired");
   EXPECT_GE(camera->counters().errors, 1u);
-  EXPECT_EQ(camera->counters().frames_delivered, 0u);
-  EXPECT_GE(dynamic_cast<V4l2Camera*>(camera.get())->pairingCounts().depth_unmatched,
-            static_cast<uint64_t>(kMaxUnpairedDepth));
+  // Two free-running nodes may still be stamped within 1 us of each other by chance
+  // (in CI's loaded qemu one pair met and was delivered), so some frames may pair;
+  // what must hold is that the unmatched ones are counted and raise the fault.
+  const uint64_t unmatched = dynamic_cast<V4l2Camera*>(camera.get())->pairingCounts().depth_unmatched;
+  EXPECT_GE(unmatched, static_cast<uint64_t>(kMaxUnpairedDepth));
+  EXPECT_LT(camera->counters().frames_delivered, unmatched);
   camera->stop();
 }
 
