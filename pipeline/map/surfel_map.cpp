@@ -535,8 +535,9 @@ void SurfelMap::splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_
       for (int o = 0; o < count; ++o) {
         const int x = iu + offsets[o].du, y = iv + offsets[o].dv;
         if (!inside && (x < 0 || x >= w || y < 0 || y >= h)) continue;
-        // Without branches (selects and unconditional stores): which way each
-        // test goes is data.
+        // Written as selects; GCC 12 makes branches of the steep test and of the
+        // depth and index stores, and they predict well: bit selects that force
+        // every store made the index map 1.2 to 2 times slower (measured).
         const float rx = ray_u[x], ry = ray_v[y];
         const float along = nx * rx + (ny * ry + nz);
         const bool steep = along * along > 0.04f * (rx * rx + ry * ry + 1.0f);
