@@ -238,7 +238,10 @@ TEST_F(StreamRecording, TheOperatorsRecordingHasFoxglovesChannels) {
   if (operator_drops_ == 0) {
     EXPECT_EQ(count["/fovea/cloud foxglove.PointCloud"], live_.size());
   }
-  EXPECT_GE(count["/fovea/cloud foxglove.PointCloud"], live_.size() / 2);
+  // A loaded machine's recorder drops (counted, never blocking; CI's amd64-tests kept 83
+  // clouds of 192 frames): every frame's cloud is either in the file or among the drops.
+  EXPECT_GT(count["/fovea/cloud foxglove.PointCloud"], 0u);
+  EXPECT_GE(count["/fovea/cloud foxglove.PointCloud"] + static_cast<std::size_t>(operator_drops_), live_.size());
   EXPECT_GT(count["/fovea/head foxglove.FrameTransform"], 10u);
   EXPECT_EQ(count["/fovea/gaze_ray foxglove.SceneUpdate"], count["/fovea/head foxglove.FrameTransform"]);
   // The gaze samples as sent (fovea's own message), one a head pose.
