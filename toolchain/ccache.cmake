@@ -1,0 +1,51 @@
+# The compiler cache, for every tree (CI's four and a developer's; docs/ci.md).
+# One cache per machine, outside any clone, so that CI's fresh clone in another
+# folder hits what the working tree just built:
+# - CCACHE_BASEDIR is the clone's root: ccache rewrites the absolute paths under
+#   it (sources, -I, the build tree, which lies inside the clone) to relative ones
+#   before hashing, so two clones hash alike.
+# - -ffile-prefix-map: the clone's paths leave __FILE__ and the debug information
+#   (relative paths, as the packages have had), so ccache need not hash the
+#   working directory of a -g compile either.
+# - sloppiness: the tests' precompiled header (GoogleTest, Eigen) is hashed by
+#   its contents, not its time stamps; clang's PCH carries no time stamp.
+# The compiler (its mtime and size: compiler_check's default), every flag and
+# the sanitizer options stay in the hash as ccache does by default, so the
+# sanitizer and cross trees never share an object with the others.
+# FOVEA_CCACHE=OFF builds without it; FOVEA_CCACHE_DIR (or $FOVEA_CCACHE_DIR at
+# configure time) moves the cache; the default is /var/cache/fovea/ccache where
+# it can be written (root, as CI runs), else ccache's own (~/.cache/ccache).
+option(FOVEA_CCACHE "Compile through ccache when it is installed (docs/ci.md)" ON)
+set(_fovea_ccache_default_dir "$ENV{FOVEA_CCACHE_DIR}")
+if(NOT _fovea_ccache_default_dir)
+  file(MAKE_DIRECTORY /var/cache/fovea/ccache RESULT _fovea_mkdir_error)
+  if(NOT _fovea_mkdir_error AND IS_DIRECTORY /var/cache/fovea/ccache)
+    set(_fovea_ccache_default_dir /var/cache/fovea/ccache)
+  endif()
+endif()
+set(FOVEA_CCACHE_DIR "${_fovea_ccache_default_dir}" CACHE PATH "ccache's directory (empty: ccache's default)")
+if(FOVEA_CCACHE)
+  find_program(FOVEA_CCACHE_PROGRAM ccache)
+endif()
+if(FOVEA_CCACHE AND FOVEA_CCACHE_PROGRAM)
+  set(_fovea_ccache_env
+    CCACHE_BASEDIR=${PROJECT_SOURCE_DIR}
+    CCACHE_SLOPPINESS=pch_defines,time_macros,include_file_mtime,include_file_ctime
+    CCACHE_NOHASHDIR=1
+    CCACHE_MAXSIZE=12G)
+  if(FOVEA_CCACHE_DIR)
+    list(APPEND _fovea_ccache_env CCACHE_DIR=${FOVEA_CCACHE_DIR})
+  endif()
+  # env(1) sets ccache's configuration per compile without touching the user's
+  # ccache.conf; CCACHE_STATSLOG (toolchain/ci, one file per stage) passes through.
+  set(CMAKE_CXX_COMPILER_LAUNCHER /usr/bin/env ${_fovea_ccache_env} ${FOVEA_CCACHE_PROGRAM})
+  set(CMAKE_C_COMPILER_LAUNCHER ${CMAKE_CXX_COMPILER_LAUNCHER})
+  add_compile_options(-ffile-prefix-map=${PROJECT_SOURCE_DIR}=.)
+  if(CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
+    # clang writes the header's mtime into the PCH, which ccache cannot share.
+    add_compile_options("SHELL:-Xclang -fno-pch-timestamp")
+  endif()
+  message(STATUS "fovea: compiling through ccache (${FOVEA_CCACHE_PROGRAM}; cache ${FOVEA_CCACHE_DIR})")
+elseif(FOVEA_CCACHE)
+  message(STATUS "fovea: ccache not found: compiling without a cache (toolchain/setup-host installs it)")
+endif()
