@@ -7,7 +7,7 @@
 // each holding the distance to the nearest surface in its direction): it covers
 // every direction, so the head may turn anywhere, and a cell is found with one
 // division, not a trigonometric function. Pass one splats every settled surfel
-// over its footprint (up to 2 cells around its centre) and every point already
+// over its footprint (a radius of up to 2.5 cells around its centre, kMaxSplatCells) and every point already
 // in the cloud (the frame's points the map does not explain: a moving object
 // hides the wall behind it) into its cell; pass two appends each settled surfel
 // that is not farther than its cell's nearest surface by more than the margin.

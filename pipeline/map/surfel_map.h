@@ -252,7 +252,7 @@ class SurfelMap {
   std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
   std::vector<float> ray_u_, ray_v_;        // splatFast(): (u - cx) / fx by column, (v - cy) / fy by row
   std::vector<float> index_depth_;        // the index map's z-buffer
-  std::vector<uint32_t> index_;           // surfel slot seen at the pixel, kNone if none
+  std::vector<uint32_t> index_;           // surfel slot seen at the pixel, or UINT32_MAX if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
   std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth

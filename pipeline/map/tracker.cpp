@@ -3,7 +3,6 @@
 #include "pipeline/map/tracker.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -12,6 +11,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
+#include "core/clock.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/map/surfel_map.h"
@@ -29,11 +29,6 @@ constexpr float kStepShare = 0.05f;
 constexpr uint32_t kMinValidPixels = 64;
 // depthSigma(1 m) (surfel_map.h): the ICP weight's unit.
 constexpr float kSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;
-
-int64_t nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 // exp of a twist [v, w] (left perturbation): a rotation and a translation.
 void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
@@ -575,7 +570,7 @@ LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, con
 
 TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose,
                                         TrackStats& stats) {
-  const int64_t t_start = nowNs();
+  const int64_t t_start = monotonicNs();
   stats = TrackStats{};
   ++counters_.frames;
   const auto lose = [&](LostReason reason) {
@@ -584,7 +579,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
     pose = prior != nullptr ? *prior : last_good_;
     if (have_model_) lost_ = true;
     ++counters_.lost;
-    stats.track_ns = nowNs() - t_start;
+    stats.track_ns = monotonicNs() - t_start;
     return stats.outcome;
   };
   const hal::CameraIntrinsics& k = frame.intrinsics;
@@ -600,7 +595,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   }
   const bool has_depth = buildFramePyramid(frame);
   stats.valid_pixels = valid_pixels_;
-  stats.pyramid_ns = nowNs() - t_start;
+  stats.pyramid_ns = monotonicNs() - t_start;
   if (!has_depth) return lose(LostReason::kNoValidDepth);
 
   if (!have_model_) {
@@ -608,7 +603,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
     last_good_ = pose;
     lost_ = false;
     stats.outcome = TrackOutcome::kFirstFrame;
-    stats.track_ns = nowNs() - t_start;
+    stats.track_ns = monotonicNs() - t_start;
     return stats.outcome;
   }
   const bool model_size_ok = model_[0].width == frame.width() && model_[0].height == frame.height();
@@ -705,7 +700,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   last_good_ = best_pose;
   residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.icp_rms;
   ++residual_count_;
-  stats.track_ns = nowNs() - t_start;
+  stats.track_ns = monotonicNs() - t_start;
   return stats.outcome;
 }
 

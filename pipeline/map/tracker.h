@@ -133,7 +133,8 @@ struct TrackStats {
   double icp_rms_m = 0.0;           // point-to-plane RMS over the inliers
   double photometric_rms = 0.0;     // intensity RMS (0..1) over the inliers
   double min_eigenvalue = 0.0;      // of the normalised J^T J at the last iteration
-  // Against the prior, when one was given (track+socket, track+fixed).
+  // Against the prior, when one was given; PoseEstimator then measures them
+  // against the outside pose itself (track+socket, track+fixed).
   double prior_disagreement_m = 0.0;
   double prior_disagreement_deg = 0.0;
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
@@ -149,10 +150,11 @@ class FrameToModelTracker {
  public:
   static Result<FrameToModelTracker> create(const TrackerConfig& config);
 
-  // The pose of `frame` (camera to world) into `pose`. prior: the outside
-  // pose for this frame (track+socket, track+fixed), the estimate's start and
-  // what the disagreement is measured against; nullptr: the last tracked pose
-  // (tracking alone). The first frame, without a model, takes the prior or the
+  // The pose of `frame` (camera to world) into `pose`. prior: the estimate's
+  // start; PoseEstimator (pose_tracking.h) passes the outside pose itself for
+  // the first frame and after that the last tracked pose moved by the outside
+  // pose's increment since then (track+socket, track+fixed); nullptr: the last
+  // tracked pose (tracking alone, or an implausible increment). The first frame, without a model, takes the prior or the
   // identity. Never allocates.
   TrackOutcome track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose, TrackStats& stats);
 
