@@ -19,6 +19,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/map/trajectory_error.h"
 #include "tests/support/clouds.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea {
 namespace {
@@ -188,11 +189,7 @@ TEST(FoveadCli, MapFusesAMockOrbitIntoAPly) {
 
 // The same on the TUM recording with its ground-truth poses (../shared/data).
 TEST(FoveadCli, MapFusesTheTumRecordingWithItsGroundTruth) {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
-  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
-    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
-  }
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   TempDir dir;
   const std::string ply = dir.file("teddy.ply");
   // A 640x480 frame's fusion takes 1.2 s under ASan: two frames there.
@@ -211,11 +208,7 @@ TEST(FoveadCli, MapFusesTheTumRecordingWithItsGroundTruth) {
 // a few centimetres of the ground truth (which fovead map writes too without
 // --pose track) after TUM's alignment. bench/fovea-track measures the figure.
 TEST(FoveadCli, MapTracksTheTumRecordingAndWritesItsTrajectory) {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
-  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
-    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
-  }
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   TempDir dir;
   const std::string frames = std::to_string(test::repetitions(30, 5));
   const std::string tracked = dir.file("tracked.txt"), truth = dir.file("truth.txt");
@@ -296,11 +289,7 @@ TEST(FoveadCli, RunWithTheMapCountsFramesWithoutAPose) {
 
 // The same on the TUM recording with its ground-truth poses (../shared/data).
 TEST(FoveadCli, RunFoveatesTheMapOfTheTumRecording) {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
-  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
-    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
-  }
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   const ProcessResult r =
       run(fovead() + " run --source map --max-surfels 65536 --camera tum:" + path + ",loop=off --frames 3 --every 0");
   ASSERT_EQ(r.exit_code, 0) << r.output;

@@ -23,6 +23,7 @@
 #include "io/mcap/reader.h"
 #include "tests/support/process.h"
 #include "tests/support/test_time.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea {
 namespace {
@@ -30,11 +31,6 @@ namespace {
 std::string program(const char* path) {
   const std::string emulator = FOVEA_EMULATOR;
   return emulator.empty() ? std::string(path) : emulator + " " + path;
-}
-
-std::string tumPath() {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  return std::string(shared ? shared : FOVEA_SOURCE_DIR "/../shared") + "/data/tum-fr3-teddy";
 }
 
 std::string readFile(const std::string& path) {
@@ -96,11 +92,12 @@ std::map<long, std::string> bySequence(const std::vector<std::string>& lines) {
 }
 
 TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum_path);
   test::TempDir dir;
   const int frames = test::repetitions(20, 5);
   const std::string rec = dir.file("tum.mcap");
   const test::ProcessResult serve =
-      test::runCommand(program(FOVEAD_PATH) + " serve --camera tum:" + tumPath() + ",loop=off,realtime=on --frames " +
+      test::runCommand(program(FOVEAD_PATH) + " serve --camera tum:" + tum_path + ",loop=off,realtime=on --frames " +
                        std::to_string(frames) + " --record " + rec + " --record-frames");
   ASSERT_EQ(serve.exit_code, 0) << serve.output;
   // The recorder never blocks the camera: on a loaded machine its writer may fall
@@ -120,7 +117,7 @@ TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
   // The TUM camera up to the last frame recorded: the same lines, frame by frame,
   // and the same last frame, byte for byte.
   const long last = replayed.rbegin()->first;
-  const test::ProcessResult tum = test::runCommand(program(FOVEAD_PATH) + " run --camera tum:" + tumPath() +
+  const test::ProcessResult tum = test::runCommand(program(FOVEAD_PATH) + " run --camera tum:" + tum_path +
                                                    ",loop=off --frames " + std::to_string(last + 1) + " --save-ply " +
                                                    dir.file("tum.ply"));
   ASSERT_EQ(tum.exit_code, 0) << tum.output;

@@ -22,6 +22,7 @@
 #include "tests/support/clouds.h"
 #include "tests/support/test_time.h"
 #include "tests/support/cameras.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea {
 namespace {
@@ -279,11 +280,7 @@ TEST(ZeroAllocation, FoveatingTheMapAsTheEyeSeesIt) {
 TEST_P(ZeroAllocationKernels, HundredTumFramesAfterWarmUp) {
   const fovea::KernelSet kernels = GetParam().kernels;
   const int threads = GetParam().threads;
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
-  if (path.empty() || !std::ifstream(path + "/associations.txt")) {
-    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
-  }
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   const std::unique_ptr<hal::Camera> camera = startedCamera("tum:" + path + ",loop=on");
   ASSERT_TRUE(camera);
   hal::Camera& cam = *camera;

@@ -17,26 +17,22 @@
 #include "firmware/frame_record.h"
 #include "io/mcap/writer.h"
 #include "tests/support/alloc_counter.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea::firmware {
 namespace {
 
 using namespace std::chrono_literals;
 
-std::string tumPath() {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  return std::string(shared ? shared : "../shared") + "/data/tum-fr3-teddy";
-}
-
 std::string tempPath(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("fovea_mcap_camera_" + std::to_string(::getpid()) + "_" + name))
       .string();
 }
 
-// Records `count` frames of the TUM camera into `path` (as fovead serve
+// Records `count` frames of the TUM camera (the sequence at `tum`) into `path` (as fovead serve
 // --record-frames does: one FrameRecord message each), returning the frames.
-std::vector<hal::RgbdFrame> recordTum(const std::string& path, int count, std::size_t chunk_bytes = 1 << 20) {
-  Result<std::unique_ptr<hal::Camera>> tum = hal::createCamera("tum:" + tumPath() + ",loop=off");
+std::vector<hal::RgbdFrame> recordTum(const std::string& tum, const std::string& path, int count, std::size_t chunk_bytes = 1 << 20) {
+  Result<std::unique_ptr<hal::Camera>> tum = hal::createCamera("tum:" + tum + ",loop=off");
   EXPECT_TRUE(tum) << tum.status().message();
   hal::Camera& camera = *tum.value();
   EXPECT_TRUE(camera.open()) << camera.open().message();
@@ -80,8 +76,9 @@ void expectSame(const hal::RgbdFrame& a, const hal::RgbdFrame& b, int64_t stamp_
 }
 
 TEST(McapCamera, ReplaysTheRecordedTumFramesBitForBitAndLoops) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum);
   const std::string path = tempPath("tum.mcap");
-  const std::vector<hal::RgbdFrame> recorded = recordTum(path, 5);
+  const std::vector<hal::RgbdFrame> recorded = recordTum(tum, path, 5);
   std::unique_ptr<hal::Camera> camera = createCamera("mcap:" + path).value();
   ASSERT_TRUE(camera->open()) << camera->open().message();
   EXPECT_EQ(camera->info().intrinsics.width, 640);
@@ -105,8 +102,9 @@ TEST(McapCamera, ReplaysTheRecordedTumFramesBitForBitAndLoops) {
 }
 
 TEST(McapCamera, WithoutLoopTheEndIsTheEnd) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum);
   const std::string path = tempPath("once.mcap");
-  recordTum(path, 2);
+  recordTum(tum, path, 2);
   std::unique_ptr<hal::Camera> camera = createCamera("mcap:" + path + ",loop=off").value();
   ASSERT_TRUE(camera->open());
   ASSERT_TRUE(camera->start());
@@ -123,8 +121,9 @@ TEST(McapCamera, WithoutLoopTheEndIsTheEnd) {
 // A power cut: the file ends inside its last chunk. What came before plays, and
 // the camera says where the file stopped being readable.
 TEST(McapCamera, ACutOffFilePlaysToItsLastWholeChunk) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum);
   const std::string path = tempPath("cut.mcap");
-  recordTum(path, 4, 1);  // a chunk per message
+  recordTum(tum, path, 4, 1);  // a chunk per message
   const auto size = std::filesystem::file_size(path);
   std::filesystem::resize_file(path, size * 3 / 4);
   std::unique_ptr<hal::Camera> camera = createCamera("mcap:" + path + ",loop=off").value();
@@ -173,8 +172,9 @@ TEST(McapCamera, FilesWithoutFramesAndBadSpecsAreClearErrors) {
 }
 
 TEST(McapCamera, ASlotTooSmallKeepsTheFrameForTheNextCall) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum);
   const std::string path = tempPath("small.mcap");
-  const std::vector<hal::RgbdFrame> recorded = recordTum(path, 1);
+  const std::vector<hal::RgbdFrame> recorded = recordTum(tum, path, 1);
   std::unique_ptr<hal::Camera> camera = createCamera("mcap:" + path).value();
   ASSERT_TRUE(camera->open());
   ASSERT_TRUE(camera->start());
@@ -186,8 +186,9 @@ TEST(McapCamera, ASlotTooSmallKeepsTheFrameForTheNextCall) {
 }
 
 TEST(McapCamera, AcquireAllocatesNothingOnceStarted) {
+  FOVEA_REQUIRE_TUM_TEDDY(tum);
   const std::string path = tempPath("alloc.mcap");
-  recordTum(path, 3);
+  recordTum(tum, path, 3);
   std::unique_ptr<hal::Camera> camera = createCamera("mcap:" + path + ",loop=off").value();
   ASSERT_TRUE(camera->open());
   ASSERT_TRUE(camera->start());

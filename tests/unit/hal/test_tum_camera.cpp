@@ -24,26 +24,13 @@
 #include "hal/camera/tum/png_reader.h"
 #include "hal/camera/tum/tum_camera.h"
 #include "tests/support/alloc_counter.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea::hal::tum {
 namespace {
 
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
-
-// The sequence in the shared data folder, or "" (the test then skips).
-std::string teddyPath() {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  if (shared == nullptr) return "";
-  const fs::path path = fs::path(shared) / "data" / "tum-fr3-teddy";
-  std::error_code ec;
-  if (!fs::exists(path / "associations.txt", ec)) return "";
-  return path.string();
-}
-
-#define REQUIRE_TEDDY(path)                                                         \
-  const std::string path = teddyPath();                                             \
-  if (path.empty()) GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data"
 
 // A fresh temporary folder, removed at the end of the test.
 class TempDir {
@@ -266,7 +253,7 @@ TEST(TumAssociate, PairsClosestFirstOneToOneWithinTheBound) {
 // the pairs made here are those of the slice's associations.txt, and without
 // groundtruth.txt (auto) the frames play with identity poses, saying so.
 TEST(TumTeddy, RgbAndDepthListsArePairedLikeItsAssociationsFile) {
-  REQUIRE_TEDDY(teddy);
+  FOVEA_REQUIRE_TUM_TEDDY(teddy);
   TempDir dir;
   for (const char* name : {"rgb", "depth", "rgb.txt", "depth.txt"}) {
     fs::remove_all(dir.path() / name);
@@ -400,7 +387,7 @@ TEST(TumCamera, WrongSizeOrFormatIsAParseErrorSayingWhat) {
 // The README of the data set: first depth frame 72 % valid, 0.74 - 9.87 m,
 // median 2.12 m. Recomputed here from the decoded frame.
 TEST(TumTeddy, FirstFrameHasTheKnownDepthStatistics) {
-  REQUIRE_TEDDY(path);
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   Result<std::unique_ptr<Camera>> created = createCamera("tum:" + path + ",loop=off");
   ASSERT_TRUE(created.isOk()) << created.status().toString();
   Camera& camera = *created.value();
@@ -445,7 +432,7 @@ TEST(TumTeddy, FirstFrameHasTheKnownDepthStatistics) {
 }
 
 TEST(TumTeddy, AllSixtyFramesLoadAndTheSecondMatchesTheHandComputedPose) {
-  REQUIRE_TEDDY(path);
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   TumCamera camera({path, /*loop=*/false});
   ASSERT_TRUE(camera.open().isOk());
   EXPECT_EQ(camera.frameCount(), 60u);
@@ -471,7 +458,7 @@ TEST(TumTeddy, AllSixtyFramesLoadAndTheSecondMatchesTheHandComputedPose) {
 // the inverted pose (T_cam_world taken for T_world_cam) or with the camera's
 // y and z axes flipped (OpenGL convention) must be far worse.
 TEST(TumTeddy, GroundTruthPosesAlignFramesTwoSecondsApart) {
-  REQUIRE_TEDDY(path);
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   TumCamera camera({path, /*loop=*/false});
   ASSERT_TRUE(camera.open().isOk());
   ASSERT_TRUE(camera.start().isOk());
@@ -536,7 +523,7 @@ TEST(TumTeddy, GroundTruthPosesAlignFramesTwoSecondsApart) {
 }
 
 TEST(TumTeddy, AcquireAllocatesNothingAndLoopingKeepsStampsIncreasing) {
-  REQUIRE_TEDDY(path);
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   TumCamera camera({path + "", /*loop=*/true, /*realtime=*/false, /*max_frames=*/5});
   ASSERT_TRUE(camera.open().isOk());
   EXPECT_EQ(camera.frameCount(), 5u);

@@ -20,6 +20,7 @@
 #include "pipeline/map/tracker_kernels.h"
 #include "tests/support/test_time.h"
 #include "tests/support/cameras.h"
+#include "tests/support/tum_frames.h"
 
 namespace fovea::pipeline::map {
 namespace {
@@ -259,11 +260,7 @@ TEST_P(TrackerKernels, ResetMakesTheNextFrameAFirstFrame) {
 // groundtruth.txt): tracked and fused from the first frame's true pose. The
 // lead's bench/fovea-track measures ATE with alignment; this is the test's bound.
 TEST_P(TrackerKernels, TracksTheTumTeddySlice) {
-  const char* shared = std::getenv("FOVEA_SHARED_DIR");
-  const std::string path = shared ? std::string(shared) + "/data/tum-fr3-teddy" : std::string();
-  if (path.empty() || !std::filesystem::exists(path + "/groundtruth.txt")) {
-    GTEST_SKIP() << "no tum-fr3-teddy under $FOVEA_SHARED_DIR/data";
-  }
+  FOVEA_REQUIRE_TUM_TEDDY(path);
   // 60 frames natively; 15 where a frame costs 10 to 40 times as much (sanitizers, qemu).
   const int n = test::repetitions(60, 15);
   std::vector<hal::RgbdFrame> frames = mockFrames("tum:" + path + ",groundtruth=on", 640, 480, n);
