@@ -18,8 +18,9 @@
 option(FOVEA_CCACHE "Compile through ccache when it is installed (docs/ci.md)" ON)
 set(_fovea_ccache_default_dir "$ENV{FOVEA_CCACHE_DIR}")
 if(NOT _fovea_ccache_default_dir)
-  file(MAKE_DIRECTORY /var/cache/fovea/ccache RESULT _fovea_mkdir_error)
-  if(NOT _fovea_mkdir_error AND IS_DIRECTORY /var/cache/fovea/ccache)
+  execute_process(COMMAND sh -c "mkdir -p /var/cache/fovea/ccache && test -w /var/cache/fovea/ccache"
+                  RESULT_VARIABLE _fovea_ccache_dir_status OUTPUT_QUIET ERROR_QUIET)
+  if(_fovea_ccache_dir_status EQUAL 0)
     set(_fovea_ccache_default_dir /var/cache/fovea/ccache)
   endif()
 endif()
