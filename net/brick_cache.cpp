@@ -188,9 +188,8 @@ BrickCache::Outcome BrickCache::add(const DecodedChunk& chunk, const pipeline::F
     ++counters_.no_room_parts;
     return Outcome::kNoRoom;
   }
-  const BrickKey key{chunk.brick.x, chunk.brick.y, chunk.brick.z};
-  const uint32_t version = chunk.brick.version;
-  const int found = findOrInsert(key, now_ns, entries_.size());
+  const BrickPartId part{BrickKey{chunk.brick.x, chunk.brick.y, chunk.brick.z}, chunk.brick.version, chunk.chunk_index};
+  const int found = findOrInsert(part.key, now_ns, entries_.size());
   if (found < 0) {
     ++counters_.no_room_parts;
     return Outcome::kNoRoom;
@@ -199,24 +198,28 @@ BrickCache::Outcome BrickCache::add(const DecodedChunk& chunk, const pipeline::F
   Entry& e = entries_[slot];
   if (!e.has_current && !e.has_pending) e.anchor = cloud.points.origin_m;
   e.needed_ns = std::max(e.needed_ns, now_ns);
-  auto ack = [&](Outcome outcome) {
-    if (ack_count_ < acks_.size()) {
-      acks_[ack_count_++] = BrickPartId{key, version, chunk.chunk_index};
-    } else {
-      ++counters_.acks_dropped;
-    }
-    return outcome;
-  };
-  if (e.has_current && !serialNewer(version, e.current.version)) {
-    if (version == e.current.version) {
+  if (const std::optional<Outcome> settled = settleVersion(e, part)) return *settled;
+  if (!openPending(slot, e, chunk)) {
+    ++counters_.bad_parts;  // the same version cut into another number of parts: not the robot's
+    return Outcome::kBad;
+  }
+  return storePart(slot, e, part, cloud, first, n);
+}
+
+// A part of the current version or an older one ends here (duplicate or stale);
+// a part of a version newer than the pending one supersedes it. nullopt: the
+// part goes on to the pending version.
+std::optional<BrickCache::Outcome> BrickCache::settleVersion(Entry& e, const BrickPartId& part) {
+  if (e.has_current && !serialNewer(part.version, e.current.version)) {
+    if (part.version == e.current.version) {
       ++counters_.duplicate_parts;
-      return ack(Outcome::kDuplicate);
+      return acknowledge(part, Outcome::kDuplicate);
     }
     ++counters_.stale_parts;
     return Outcome::kStale;
   }
-  if (e.has_pending && version != e.pending.version) {
-    if (!serialNewer(version, e.pending.version)) {
+  if (e.has_pending && part.version != e.pending.version) {
+    if (!serialNewer(part.version, e.pending.version)) {
       ++counters_.stale_parts;
       return Outcome::kStale;
     }
@@ -224,40 +227,61 @@ BrickCache::Outcome BrickCache::add(const DecodedChunk& chunk, const pipeline::F
     e.has_pending = false;
     ++counters_.superseded_versions;
   }
-  uint8_t* bits = partBits(slot);
+  return std::nullopt;
+}
+
+// The pending version the chunk is a part of, begun by its first part; false
+// when the chunk's part count differs from the pending version's.
+bool BrickCache::openPending(std::size_t slot, Entry& e, const DecodedChunk& chunk) {
   if (!e.has_pending) {
     e.pending = Version{};
-    e.pending.version = version;
+    e.pending.version = chunk.brick.version;
     e.pending.parts_needed = chunk.chunk_count;
     e.pending.level = chunk.brick.level;
     e.pending.step_m = chunk.step_m;
-    std::memset(bits, 0, part_bytes_);
+    std::memset(partBits(slot), 0, part_bytes_);
     e.has_pending = true;
-  } else if (chunk.chunk_count != e.pending.parts_needed) {
-    ++counters_.bad_parts;  // the same version cut into another number of parts: not the robot's
-    return Outcome::kBad;
+    return true;
   }
-  const uint8_t mask = static_cast<uint8_t>(1u << (chunk.chunk_index % 8));
-  if (bits[chunk.chunk_index / 8] & mask) {
+  return chunk.chunk_count == e.pending.parts_needed;
+}
+
+// The part's n points (cloud from first on) into the pending version, which
+// becomes the current one with its last part.
+BrickCache::Outcome BrickCache::storePart(std::size_t slot, Entry& e, const BrickPartId& part,
+                                          const pipeline::FoveatedCloud& cloud, std::size_t first, std::size_t n) {
+  uint8_t* bits = partBits(slot);
+  const uint8_t mask = static_cast<uint8_t>(1u << (part.part % 8));
+  if (bits[part.part / 8] & mask) {
     ++counters_.duplicate_parts;
-    return ack(Outcome::kDuplicate);
+    return acknowledge(part, Outcome::kDuplicate);
   }
   // The entry may not move, but eviction may take others: e stays valid (entries are fixed slots).
   if (!appendPoints(slot, e.pending, cloud, first, n)) {
     ++counters_.no_room_parts;
     return Outcome::kNoRoom;
   }
-  bits[chunk.chunk_index / 8] |= mask;
+  bits[part.part / 8] |= mask;
   ++e.pending.parts_received;
   ++counters_.parts;
-  if (e.pending.parts_received < e.pending.parts_needed) return ack(Outcome::kStored);
+  if (e.pending.parts_received < e.pending.parts_needed) return acknowledge(part, Outcome::kStored);
   freeChain(e.current);
   e.current = e.pending;
   e.pending = Version{};
   e.has_current = true;
   e.has_pending = false;
   ++counters_.versions;
-  return ack(Outcome::kCompleted);
+  return acknowledge(part, Outcome::kCompleted);
+}
+
+// Lists the part as received (for the operator's next acknowledgement); outcome.
+BrickCache::Outcome BrickCache::acknowledge(const BrickPartId& part, Outcome outcome) {
+  if (ack_count_ < acks_.size()) {
+    acks_[ack_count_++] = part;
+  } else {
+    ++counters_.acks_dropped;
+  }
+  return outcome;
 }
 
 void BrickCache::touch(const BrickKey& key, int64_t now_ns) {

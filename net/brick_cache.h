@@ -19,6 +19,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -139,6 +140,12 @@ class BrickCache {
   bool appendPoints(std::size_t slot, Version& v, const pipeline::FoveatedCloud& cloud, std::size_t first,
                     std::size_t n);
   uint8_t* partBits(std::size_t slot) { return part_bits_.data() + slot * part_bytes_; }
+  // add()'s steps, in order.
+  std::optional<Outcome> settleVersion(Entry& e, const BrickPartId& part);
+  bool openPending(std::size_t slot, Entry& e, const DecodedChunk& chunk);
+  Outcome storePart(std::size_t slot, Entry& e, const BrickPartId& part, const pipeline::FoveatedCloud& cloud,
+                    std::size_t first, std::size_t n);
+  Outcome acknowledge(const BrickPartId& part, Outcome outcome);
 
   BrickCacheConfig config_;
   std::size_t block_points_ = 0;

@@ -8,128 +8,157 @@ namespace fovea::net {
 
 Result<std::unique_ptr<OperatorLink>> OperatorLink::connect(std::string_view address,
                                                             const OperatorLinkConfig& config) {
-  using R = Result<std::unique_ptr<OperatorLink>>;
   initCrypto();
   std::unique_ptr<OperatorLink> link(new OperatorLink());
-  if (config.key) {
-    link->psk_ = *config.key;
-  } else if (config.insecure) {
-    link->psk_ = insecureKey();
-    link->notice_ = kInsecureWarning;
-  } else {
-    return R(ErrorCode::kInvalidArgument,
-             "operator link: no key configured: give a key file (--key-file FILE), or --insecure for a demo on a "
-             "trusted host");
-  }
-  if (config.name.size() > kMaxOperatorNameBytes) {
-    return R(ErrorCode::kInvalidArgument, "operator link: name '" + config.name + "' is longer than " +
-                                              std::to_string(kMaxOperatorNameBytes) + " bytes");
-  }
-  if (config.mtu_bytes < kMinMtu || config.mtu_bytes > kMaxMtu) {
-    return R(ErrorCode::kInvalidArgument, "operator link: MTU " + std::to_string(config.mtu_bytes) +
-                                              " bytes is outside " + std::to_string(kMinMtu) + ".." +
-                                              std::to_string(kMaxMtu));
-  }
-  Result<Endpoint> robot = Endpoint::parse(address);
-  if (!robot) return R(robot.status().code(), "operator link: connect " + robot.status().message());
-  Result<UdpSocket> socket = UdpSocket::forPeer(robot.value());
-  if (!socket) return R(socket.status());
-  link->robot_ = robot.value();
-  link->socket_ = std::move(socket).value();
-  link->receive_buffer_bytes_ = link->socket_.setReceiveBuffer(config.receive_buffer_bytes);
-  link->handshake_ = handshakeKeys(link->psk_, Role::kOperator);
-  link->channel_ = SessionChannel(link->handshake_, randomU64(), 0);
-
+  if (Status st = link->configure(config); !st) return st;
+  if (Status st = link->openSocket(address, config); !st) return st;
   HelloMsg hello;
   hello.operator_name.assign(config.name);
   hello.budget_bytes_per_s = config.budget_bytes_per_s;
   hello.mtu_bytes = config.mtu_bytes;
   hello.client_nonce = randomNonce128();
+  if (Status st = link->handshake(hello, config); !st) return st;
+  return link;
+}
 
+// The key (or the insecure notice), after checking the configuration.
+Status OperatorLink::configure(const OperatorLinkConfig& config) {
+  if (config.key) {
+    psk_ = *config.key;
+  } else if (config.insecure) {
+    psk_ = insecureKey();
+    notice_ = kInsecureWarning;
+  } else {
+    return {ErrorCode::kInvalidArgument,
+            "operator link: no key configured: give a key file (--key-file FILE), or --insecure for a demo on a "
+            "trusted host"};
+  }
+  if (config.name.size() > kMaxOperatorNameBytes) {
+    return {ErrorCode::kInvalidArgument, "operator link: name '" + config.name + "' is longer than " +
+                                             std::to_string(kMaxOperatorNameBytes) + " bytes"};
+  }
+  if (config.mtu_bytes < kMinMtu || config.mtu_bytes > kMaxMtu) {
+    return {ErrorCode::kInvalidArgument, "operator link: MTU " + std::to_string(config.mtu_bytes) +
+                                             " bytes is outside " + std::to_string(kMinMtu) + ".." +
+                                             std::to_string(kMaxMtu)};
+  }
+  return Status::ok();
+}
+
+// The socket towards the robot at address, and the handshake channel.
+Status OperatorLink::openSocket(std::string_view address, const OperatorLinkConfig& config) {
+  Result<Endpoint> robot = Endpoint::parse(address);
+  if (!robot) return {robot.status().code(), "operator link: connect " + robot.status().message()};
+  Result<UdpSocket> socket = UdpSocket::forPeer(robot.value());
+  if (!socket) return socket.status();
+  robot_ = robot.value();
+  socket_ = std::move(socket).value();
+  receive_buffer_bytes_ = socket_.setReceiveBuffer(config.receive_buffer_bytes);
+  handshake_ = handshakeKeys(psk_, Role::kOperator);
+  channel_ = SessionChannel(handshake_, randomU64(), 0);
+  return Status::ok();
+}
+
+// Says Hello, again with backoff, until the robot accepts it (the session is up)
+// or refuses it, or the connect timeout passes (kUnavailable both).
+Status OperatorLink::handshake(const HelloMsg& hello, const OperatorLinkConfig& config) {
   const int64_t start_ns = monotonicNs();
   const int64_t deadline_ns = start_ns + int64_t{config.connect_timeout_ms} * 1'000'000;
   int64_t retry_ns = int64_t{std::max(config.first_retry_ms, 1)} * 1'000'000;
-  OperatorLink& l = *link;
   for (;;) {
     const int64_t now_ns = monotonicNs();
     if (now_ns >= deadline_ns) break;
-    const auto d = l.channel_.seal(MessageType::kHello, l.encoder_.encode(hello), l.tx_buf_);
-    if (l.socket_.sendTo(d, l.robot_)) {
-      ++l.counters_.hellos_sent;
+    const auto d = channel_.seal(MessageType::kHello, encoder_.encode(hello), tx_buf_);
+    if (socket_.sendTo(d, robot_)) {
+      ++counters_.hellos_sent;
     } else {
-      ++l.counters_.send_failures;
+      ++counters_.send_failures;
     }
     const int64_t retry_at_ns = std::min(now_ns + retry_ns, deadline_ns);
     retry_ns = std::min<int64_t>(retry_ns * 2, 1'000'000'000);
-    for (;;) {
-      const int64_t wait_ns = retry_at_ns - monotonicNs();
-      if (wait_ns <= 0 || !l.socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) break;
-      Endpoint from;
-      long n = -1;
-      while (monotonicNs() < retry_at_ns && (n = l.socket_.receive(l.rx_buf_, from)) >= 0) {
-        ++l.counters_.datagrams_received;
-        if (static_cast<std::size_t>(n) > kMaxMtu) {
-          l.counters_.dropped.add(DropReason::kTooLong);
-          continue;
-        }
-        const std::span<const uint8_t> datagram(l.rx_buf_.data(), static_cast<std::size_t>(n));
-        Header header;
-        if (auto drop = parseHeader(datagram, header)) {
-          l.counters_.dropped.add(*drop);
-          continue;
-        }
-        if (!isSentBy(header.type, Role::kRobot)) {
-          l.counters_.dropped.add(DropReason::kWrongDirection);
-          continue;
-        }
-        if (header.type != MessageType::kAccept && header.type != MessageType::kRefuse) {
-          l.counters_.dropped.add(DropReason::kNoSession);
-          continue;
-        }
-        auto payload = openSealed(l.handshake_.rx, datagram, l.plain_buf_);
-        if (!payload) {
-          l.counters_.dropped.add(DropReason::kAuth);
-          continue;
-        }
-        if (header.type == MessageType::kRefuse) {
-          RefuseMsg refuse;
-          if (auto drop = decode(*payload, refuse)) {
-            l.counters_.dropped.add(*drop);
-            continue;
-          }
-          if (!(refuse.client_nonce == hello.client_nonce)) {
-            l.counters_.dropped.add(DropReason::kSemantic);  // an old refusal, not ours
-            continue;
-          }
-          return R(ErrorCode::kUnavailable, "robot at " + l.robot_.toString() + " refused (" +
-                                                refuseReasonName(refuse.reason) + "): " +
-                                                std::string(refuse.text.view()));
-        }
-        AcceptMsg accept;
-        if (auto drop = decode(*payload, accept)) {
-          l.counters_.dropped.add(*drop);
-          continue;
-        }
-        if (!(accept.client_nonce == hello.client_nonce)) {
-          l.counters_.dropped.add(DropReason::kSemantic);  // an old Accept, not ours
-          continue;
-        }
-        l.counters_.bytes_received += datagram.size();
-        l.channel_.rekey(sessionKeys(l.psk_, Role::kOperator, hello.client_nonce, accept.robot_nonce), header.epoch);
-        l.channel_.window().commit(header.seq);
-        l.highest_robot_seq_ = header.seq;
-        l.mtu_bytes_ = accept.mtu_bytes;
-        l.budget_bytes_per_s_ = accept.budget_bytes_per_s;
-        l.noteRobotStamp(accept.robot_stamp_ns, monotonicNs());
-        l.active_ = true;
-        return link;
+    if (std::optional<Status> answer = awaitAnswer(hello, retry_at_ns)) return *answer;
+  }
+  return {ErrorCode::kUnavailable, "no answer from a robot at " + robot_.toString() + " within " +
+                                       std::to_string(config.connect_timeout_ms) +
+                                       " ms (is fovead listening there, with the same key?)"};
+}
+
+// Receives until retry_at_ns: the answer to hello (ok: accepted; an error: refused),
+// or nullopt when none came. Every other datagram is dropped and counted.
+std::optional<Status> OperatorLink::awaitAnswer(const HelloMsg& hello, int64_t retry_at_ns) {
+  for (;;) {
+    const int64_t wait_ns = retry_at_ns - monotonicNs();
+    if (wait_ns <= 0 || !socket_.waitReadable(static_cast<int>((wait_ns + 999'999) / 1'000'000))) break;
+    Endpoint from;
+    long n = -1;
+    while (monotonicNs() < retry_at_ns && (n = socket_.receive(rx_buf_, from)) >= 0) {
+      ++counters_.datagrams_received;
+      if (static_cast<std::size_t>(n) > kMaxMtu) {
+        counters_.dropped.add(DropReason::kTooLong);
+        continue;
+      }
+      if (std::optional<Status> answer = handleAnswer({rx_buf_.data(), static_cast<std::size_t>(n)}, hello)) {
+        return answer;
       }
     }
   }
-  return R(ErrorCode::kUnavailable,
-           "no answer from a robot at " + link->robot_.toString() + " within " +
-               std::to_string(config.connect_timeout_ms) +
-               " ms (is fovead listening there, with the same key?)");
+  return std::nullopt;
+}
+
+// One datagram while waiting for the robot's answer: an Accept of hello starts
+// the session (ok), a Refuse of it is the error; nullopt for anything else
+// (dropped and counted).
+std::optional<Status> OperatorLink::handleAnswer(std::span<const uint8_t> datagram, const HelloMsg& hello) {
+  Header header;
+  if (auto drop = parseHeader(datagram, header)) {
+    counters_.dropped.add(*drop);
+    return std::nullopt;
+  }
+  if (!isSentBy(header.type, Role::kRobot)) {
+    counters_.dropped.add(DropReason::kWrongDirection);
+    return std::nullopt;
+  }
+  if (header.type != MessageType::kAccept && header.type != MessageType::kRefuse) {
+    counters_.dropped.add(DropReason::kNoSession);
+    return std::nullopt;
+  }
+  auto payload = openSealed(handshake_.rx, datagram, plain_buf_);
+  if (!payload) {
+    counters_.dropped.add(DropReason::kAuth);
+    return std::nullopt;
+  }
+  if (header.type == MessageType::kRefuse) {
+    RefuseMsg refuse;
+    if (auto drop = decode(*payload, refuse)) {
+      counters_.dropped.add(*drop);
+      return std::nullopt;
+    }
+    if (!(refuse.client_nonce == hello.client_nonce)) {
+      counters_.dropped.add(DropReason::kSemantic);  // an old refusal, not ours
+      return std::nullopt;
+    }
+    return Status(ErrorCode::kUnavailable, "robot at " + robot_.toString() + " refused (" +
+                                               refuseReasonName(refuse.reason) + "): " +
+                                               std::string(refuse.text.view()));
+  }
+  AcceptMsg accept;
+  if (auto drop = decode(*payload, accept)) {
+    counters_.dropped.add(*drop);
+    return std::nullopt;
+  }
+  if (!(accept.client_nonce == hello.client_nonce)) {
+    counters_.dropped.add(DropReason::kSemantic);  // an old Accept, not ours
+    return std::nullopt;
+  }
+  counters_.bytes_received += datagram.size();
+  channel_.rekey(sessionKeys(psk_, Role::kOperator, hello.client_nonce, accept.robot_nonce), header.epoch);
+  channel_.window().commit(header.seq);
+  highest_robot_seq_ = header.seq;
+  mtu_bytes_ = accept.mtu_bytes;
+  budget_bytes_per_s_ = accept.budget_bytes_per_s;
+  noteRobotStamp(accept.robot_stamp_ns, monotonicNs());
+  active_ = true;
+  return Status::ok();
 }
 
 OperatorLink::~OperatorLink() {

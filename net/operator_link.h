@@ -105,6 +105,12 @@ class OperatorLink {
 
  private:
   OperatorLink() = default;
+  // connect()'s steps, in order.
+  Status configure(const OperatorLinkConfig& config);
+  Status openSocket(std::string_view address, const OperatorLinkConfig& config);
+  Status handshake(const HelloMsg& hello, const OperatorLinkConfig& config);
+  std::optional<Status> awaitAnswer(const HelloMsg& hello, int64_t retry_at_ns);
+  std::optional<Status> handleAnswer(std::span<const uint8_t> datagram, const HelloMsg& hello);
   std::optional<Received> handle(std::span<const uint8_t> datagram, int64_t now_ns);
   void trackSequence(uint64_t seq);
 

@@ -99,59 +99,79 @@ void RobotLink::handleDatagram(std::span<const uint8_t> datagram, const Endpoint
 
 void RobotLink::handleHello(const Header& header, std::span<const uint8_t> datagram, const Endpoint& from,
                             int64_t now_ns) {
-  std::span<const uint8_t> payload;
-  HelloMsg hello;
   if (session_ && from == session_->info.peer && header.epoch == session_->channel.rxEpoch()) {
-    // The serving operator's Hello again (our Accept was lost): answer it again.
-    // A replay of the very same datagram fails the replay window.
-    if (auto drop = session_->channel.open(header, datagram, plain_buf_, payload, &handshake_.rx)) {
-      counters_.dropped.add(*drop);
-      return;
-    }
-    if (auto drop = decode(payload, hello)) {
-      counters_.dropped.add(*drop);
-      return;
-    }
-    if (!(hello.client_nonce == session_->client_nonce)) {
-      counters_.dropped.add(DropReason::kSemantic);
-      return;
-    }
-    ++counters_.hellos;
-    session_->last_heard_ns = now_ns;
-    sendAccept(now_ns);
+    handleRepeatedHello(header, datagram, now_ns);
     return;
   }
+  HelloMsg hello;
+  if (!openNewHello(header, datagram, hello)) return;
+  ++counters_.hellos;
+  if (refuseUnservable(hello, from)) return;
+  startSession(header, hello, from, now_ns);
+  sendAccept(now_ns);
+}
+
+// The serving operator's Hello again (our Accept was lost): answer it again.
+// A replay of the very same datagram fails the replay window.
+void RobotLink::handleRepeatedHello(const Header& header, std::span<const uint8_t> datagram, int64_t now_ns) {
+  std::span<const uint8_t> payload;
+  HelloMsg hello;
+  if (auto drop = session_->channel.open(header, datagram, plain_buf_, payload, &handshake_.rx)) {
+    counters_.dropped.add(*drop);
+    return;
+  }
+  if (auto drop = decode(payload, hello)) {
+    counters_.dropped.add(*drop);
+    return;
+  }
+  if (!(hello.client_nonce == session_->client_nonce)) {
+    counters_.dropped.add(DropReason::kSemantic);
+    return;
+  }
+  ++counters_.hellos;
+  session_->last_heard_ns = now_ns;
+  sendAccept(now_ns);
+}
+
+// A Hello for a new session, authenticated and decoded into hello; false when
+// it was dropped (and counted).
+bool RobotLink::openNewHello(const Header& header, std::span<const uint8_t> datagram, HelloMsg& hello) {
   if (header.seq == 0) {
     counters_.dropped.add(DropReason::kTooOld);
-    return;
+    return false;
   }
   auto opened = openSealed(handshake_.rx, datagram, plain_buf_);
   if (!opened) {
     counters_.dropped.add(DropReason::kAuth);
-    return;
+    return false;
   }
   if (auto drop = decode(*opened, hello)) {
     counters_.dropped.add(*drop);
-    return;
+    return false;
   }
   if (nonceSeenBefore(hello.client_nonce)) {
     // A recorded Hello of a session this robot already served (or is serving).
     counters_.dropped.add(DropReason::kReplay);
-    return;
+    return false;
   }
-  ++counters_.hellos;
+  return true;
+}
+
+// Refuses a Hello this robot cannot serve (another protocol version, an MTU
+// below the minimum, a session already up); true when it did.
+bool RobotLink::refuseUnservable(const HelloMsg& hello, const Endpoint& from) {
   char text[ShortText::kCapacity + 1];
   if (hello.protocol_version != kProtocolVersion) {
     std::snprintf(text, sizeof text, "version: robot speaks protocol %u, hello asks for %u",
                   static_cast<unsigned>(kProtocolVersion), static_cast<unsigned>(hello.protocol_version));
     refuse(from, hello.client_nonce, RefuseReason::kVersion, text);
-    return;
+    return true;
   }
   if (hello.mtu_bytes < kMinMtu) {
     std::snprintf(text, sizeof text, "bad request: MTU %u bytes is below the minimum %zu",
                   static_cast<unsigned>(hello.mtu_bytes), kMinMtu);
     refuse(from, hello.client_nonce, RefuseReason::kBadRequest, text);
-    return;
+    return true;
   }
   if (session_) {
     char peer[64];
@@ -159,8 +179,13 @@ void RobotLink::handleHello(const Header& header, std::span<const uint8_t> datag
     const std::string_view name = session_->info.operator_name.view();
     std::snprintf(text, sizeof text, "busy: serving %.*s at %s", static_cast<int>(name.size()), name.data(), peer);
     refuse(from, hello.client_nonce, RefuseReason::kBusy, text);
-    return;
+    return true;
   }
+  return false;
+}
+
+// The session hello asked for, within this robot's limits (its Accept is sent next).
+void RobotLink::startSession(const Header& header, const HelloMsg& hello, const Endpoint& from, int64_t now_ns) {
   Session s;
   s.client_nonce = hello.client_nonce;
   s.robot_nonce = randomNonce128();
@@ -181,7 +206,6 @@ void RobotLink::handleHello(const Header& header, std::span<const uint8_t> datag
   last_rtt_ns_ = -1;
   brick_ack_count_ = brick_eviction_count_ = 0;
   ++counters_.sessions_accepted;
-  sendAccept(now_ns);
 }
 
 void RobotLink::handleSessionMessage(const Header& header, std::span<const uint8_t> datagram, const Endpoint& from,

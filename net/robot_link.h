@@ -128,6 +128,11 @@ class RobotLink {
   RobotLink(const RobotLinkConfig& config, const Key& psk, UdpSocket socket);
   void handleDatagram(std::span<const uint8_t> datagram, const Endpoint& from, int64_t now_ns);
   void handleHello(const Header& header, std::span<const uint8_t> datagram, const Endpoint& from, int64_t now_ns);
+  // handleHello()'s steps.
+  void handleRepeatedHello(const Header& header, std::span<const uint8_t> datagram, int64_t now_ns);
+  bool openNewHello(const Header& header, std::span<const uint8_t> datagram, HelloMsg& hello);
+  bool refuseUnservable(const HelloMsg& hello, const Endpoint& from);
+  void startSession(const Header& header, const HelloMsg& hello, const Endpoint& from, int64_t now_ns);
   void handleSessionMessage(const Header& header, std::span<const uint8_t> datagram, const Endpoint& from,
                             int64_t now_ns);
   void sendAccept(int64_t now_ns);
