@@ -237,6 +237,11 @@ struct ColourStream::Impl {
   std::size_t size = 0;
   uint64_t failed = 0;
 
+  // open()'s steps, in order; each leaves what it made for close() to undo.
+  Status selectCamera(const std::string& camera_option);
+  Status configure(const LibcameraCameraOptions& options);
+  Status mapBuffersAndMakeRequests();
+
   void onRequestCompleted(libcamera::Request* request) {
     if (request->status() == libcamera::Request::RequestCancelled) return;  // stop() takes them back
     {
@@ -266,45 +271,59 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
   Result<libcamera::CameraManager*> manager = ManagerHolder::acquire();
   if (!manager) return manager.status();
   d.manager = manager.value();
-  const std::vector<std::shared_ptr<libcamera::Camera>> cameras = d.manager->cameras();
-  if (cameras.empty()) {
+  Status status = d.selectCamera(options.camera);
+  if (status) status = d.configure(options);
+  if (status) status = d.mapBuffersAndMakeRequests();
+  if (!status) {
     close();
-    return {ErrorCode::kNotFound, std::string("libcamera: no camera found: ") + kNoCameraHint};
+    return status;
   }
+  d.ring.assign(d.requests.size(), nullptr);
+  d.head = d.size = 0;
+  d.camera->requestCompleted.connect(impl_.get(), &Impl::onRequestCompleted);
+  return Status::ok();
+}
+
+// The camera the option names (an index into libcamera's list, or an id),
+// acquired for this process.
+Status ColourStream::Impl::selectCamera(const std::string& camera_option) {
+  const std::vector<std::shared_ptr<libcamera::Camera>> cameras = manager->cameras();
+  if (cameras.empty()) return {ErrorCode::kNotFound, std::string("libcamera: no camera found: ") + kNoCameraHint};
   std::size_t index = 0;
-  const char* const first = options.camera.data();
-  const char* const last = first + options.camera.size();
+  const char* const first = camera_option.data();
+  const char* const last = first + camera_option.size();
   const auto [end, ec] = std::from_chars(first, last, index);
   if (ec == std::errc() && end == last) {
     if (index >= cameras.size()) {
-      close();
-      return {ErrorCode::kNotFound, "libcamera: no camera " + options.camera + ": libcamera sees " +
+      return {ErrorCode::kNotFound, "libcamera: no camera " + camera_option + ": libcamera sees " +
                                         std::to_string(cameras.size()) + " (`fovead cameras` lists them)"};
     }
-    d.camera = cameras[index];
+    camera = cameras[index];
   } else {
-    d.camera = d.manager->get(options.camera);
-    if (!d.camera) {
+    camera = manager->get(camera_option);
+    if (!camera) {
       std::string ids;
       for (const auto& c : cameras) ids += "\n  " + c->id();
-      close();
-      return {ErrorCode::kNotFound, "libcamera: no camera with id '" + options.camera + "'; it sees:" + ids};
+      return {ErrorCode::kNotFound, "libcamera: no camera with id '" + camera_option + "'; it sees:" + ids};
     }
   }
-  d.id = d.camera->id();
-  d.model = cameraModel(*d.camera);
-  if (d.camera->acquire() != 0) {
-    close();
-    return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " is in use by another program"};
+  id = camera->id();
+  model = cameraModel(*camera);
+  if (camera->acquire() != 0) {
+    return {ErrorCode::kUnavailable, "libcamera: camera " + id + " is in use by another program"};
   }
-  d.acquired = true;
+  acquired = true;
+  return Status::ok();
+}
 
-  d.config = d.camera->generateConfiguration({libcamera::StreamRole::Viewfinder});
-  if (!d.config || d.config->empty()) {
-    close();
-    return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " offers no viewfinder stream"};
+// A viewfinder stream in the requested format and size (without a format:
+// the first this backend converts), validated and applied to the camera.
+Status ColourStream::Impl::configure(const LibcameraCameraOptions& options) {
+  config = camera->generateConfiguration({libcamera::StreamRole::Viewfinder});
+  if (!config || config->empty()) {
+    return {ErrorCode::kUnavailable, "libcamera: camera " + id + " offers no viewfinder stream"};
   }
-  libcamera::StreamConfiguration& sc = d.config->at(0);
+  libcamera::StreamConfiguration& sc = config->at(0);
   std::string wanted = options.format;
   if (wanted.empty()) {
     for (const char* name : {"BGR888", "RGB888", "XBGR8888", "XRGB8888"}) {
@@ -315,8 +334,7 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
     if (wanted.empty()) {
       std::string offered;
       for (const libcamera::PixelFormat& f : sc.formats().pixelformats()) offered += " " + f.toString();
-      close();
-      return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " offers none of the formats this backend "
+      return {ErrorCode::kUnavailable, "libcamera: camera " + id + " offers none of the formats this backend "
                                            "converts (" + kFormatsWeConvert + "); it offers:" + offered +
                                            " (a UVC camera: use the v4l2 backend)"};
     }
@@ -324,37 +342,36 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
   sc.pixelFormat = libcamera::PixelFormat::fromString(wanted);
   if (options.width > 0) sc.size = libcamera::Size(options.width, options.height);
   sc.bufferCount = static_cast<unsigned int>(options.buffers);
-  const libcamera::CameraConfiguration::Status validated = d.config->validate();
+  const libcamera::CameraConfiguration::Status validated = config->validate();
   if (validated == libcamera::CameraConfiguration::Invalid) {
-    close();
-    return {ErrorCode::kInvalidArgument, "libcamera: camera " + d.id + " cannot stream " + wanted + " " +
+    return {ErrorCode::kInvalidArgument, "libcamera: camera " + id + " cannot stream " + wanted + " " +
                                              sc.size.toString()};
   }
   if (sc.pixelFormat.toString() != wanted ||
       (options.width > 0 && (sc.size.width != static_cast<unsigned>(options.width) ||
                              sc.size.height != static_cast<unsigned>(options.height)))) {
-    const std::string got = sc.toString();
-    close();
-    return {ErrorCode::kInvalidArgument, "libcamera: camera " + d.id + " cannot stream " + wanted + " " +
+    return {ErrorCode::kInvalidArgument, "libcamera: camera " + id + " cannot stream " + wanted + " " +
                                              std::to_string(options.width) + "x" + std::to_string(options.height) +
-                                             "; the nearest it offers is " + got};
+                                             "; the nearest it offers is " + sc.toString()};
   }
-  if (d.camera->configure(d.config.get()) != 0) {
-    close();
-    return {ErrorCode::kUnavailable, "libcamera: camera " + d.id + " refused the configuration " + sc.toString()};
+  if (camera->configure(config.get()) != 0) {
+    return {ErrorCode::kUnavailable, "libcamera: camera " + id + " refused the configuration " + sc.toString()};
   }
-  d.layout = *packedRgbLayout(wanted);
-  d.width = static_cast<int>(sc.size.width);
-  d.height = static_cast<int>(sc.size.height);
-  d.stride = sc.stride;
-  d.stream = sc.stream();
+  layout = *packedRgbLayout(wanted);
+  width = static_cast<int>(sc.size.width);
+  height = static_cast<int>(sc.size.height);
+  stride = sc.stride;
+  stream = sc.stream();
+  return Status::ok();
+}
 
-  d.allocator = std::make_unique<libcamera::FrameBufferAllocator>(d.camera);
-  if (d.allocator->allocate(d.stream) < 0) {
-    close();
-    return {ErrorCode::kUnavailable, "libcamera: cannot allocate buffers for camera " + d.id};
+// The stream's buffers, each dmabuf mapped once, and one request per buffer.
+Status ColourStream::Impl::mapBuffersAndMakeRequests() {
+  allocator = std::make_unique<libcamera::FrameBufferAllocator>(camera);
+  if (allocator->allocate(stream) < 0) {
+    return {ErrorCode::kUnavailable, "libcamera: cannot allocate buffers for camera " + id};
   }
-  for (const std::unique_ptr<libcamera::FrameBuffer>& buffer : d.allocator->buffers(d.stream)) {
+  for (const std::unique_ptr<libcamera::FrameBuffer>& buffer : allocator->buffers(stream)) {
     // Map each dmabuf once, over every plane that lives in it.
     std::map<int, std::size_t> extent;
     for (const libcamera::FrameBuffer::Plane& p : buffer->planes()) {
@@ -362,30 +379,25 @@ Status ColourStream::open(const LibcameraCameraOptions& options) {
       extent[p.fd.get()] = std::max(extent[p.fd.get()], offset + p.length);
     }
     std::map<int, const uint8_t*> bases;
-    for (const auto& [fd, size] : extent) {
-      void* base = mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
+    for (const auto& [fd, bytes] : extent) {
+      void* base = mmap(nullptr, bytes, PROT_READ, MAP_SHARED, fd, 0);
       if (base == MAP_FAILED) {
         const int err = errno;
-        close();
-        return {ErrorCode::kIoError, "libcamera: cannot map a buffer of camera " + d.id + ": " + std::strerror(err)};
+        return {ErrorCode::kIoError, "libcamera: cannot map a buffer of camera " + id + ": " + std::strerror(err)};
       }
-      d.mappings.push_back({base, size});
-      d.mapped_bytes += size;
+      mappings.push_back({base, bytes});
+      mapped_bytes += bytes;
       bases[fd] = static_cast<const uint8_t*>(base);
     }
     const libcamera::FrameBuffer::Plane& p0 = buffer->planes()[0];
-    d.plane0[buffer.get()] =
+    plane0[buffer.get()] =
         bases[p0.fd.get()] + (p0.offset == libcamera::FrameBuffer::Plane::kInvalidOffset ? 0 : p0.offset);
-    std::unique_ptr<libcamera::Request> request = d.camera->createRequest();
-    if (!request || request->addBuffer(d.stream, buffer.get()) != 0) {
-      close();
-      return {ErrorCode::kUnavailable, "libcamera: cannot make a request for camera " + d.id};
+    std::unique_ptr<libcamera::Request> request = camera->createRequest();
+    if (!request || request->addBuffer(stream, buffer.get()) != 0) {
+      return {ErrorCode::kUnavailable, "libcamera: cannot make a request for camera " + id};
     }
-    d.requests.push_back(std::move(request));
+    requests.push_back(std::move(request));
   }
-  d.ring.assign(d.requests.size(), nullptr);
-  d.head = d.size = 0;
-  d.camera->requestCompleted.connect(impl_.get(), &Impl::onRequestCompleted);
   return Status::ok();
 }
 

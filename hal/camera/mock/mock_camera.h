@@ -127,9 +127,19 @@ class MockCamera final : public Camera {
     bool empty() const { return x0 >= x1 || y0 >= y1; }
   };
 
+  // acquire()'s steps; ok means go on, anything else is what acquire() returns.
+  Status waitUntilDue(std::chrono::nanoseconds timeout);
+  Status applyFaults(std::chrono::nanoseconds timeout);
+  // The renderer (render.cpp).
   void renderClean(const Pose& pose, double time_s);
   void renderRect(const Pose& pose, double time_s, SceneLayer layer, const PixelRect& rect,
                   CleanImage& out);
+  // renderRect()'s steps: the culling set-up, then per row the ray cast (its
+  // hits into row_hits_) and the noise model over those hits.
+  void sortShapeRects(const Pose& pose);
+  std::size_t castRow(const Pose& pose, double time_s, int y, const PixelRect& rect,
+                      bool static_layer, bool dynamic_layer, CleanImage& out);
+  void modelRowNoise(int y, std::size_t hit_count, CleanImage& out);
   PixelRect projectBox(const Pose& pose, const Eigen::Vector3d& min_m,
                        const Eigen::Vector3d& max_m) const;
   void copyRect(const CleanImage& from, const PixelRect& rect, CleanImage& to) const;
@@ -169,7 +179,7 @@ class MockCamera final : public Camera {
   std::vector<uint16_t> shape_order_;
   std::vector<uint16_t> row_shapes_;
   std::vector<uint16_t> active_shapes_;
-  // One row's hits, for the sensor model's second pass (see renderRect()).
+  // One row's hits, for the sensor model's second pass (see modelRowNoise()).
   struct RowHit {
     int x;
     float n_dot_d;    // |normal . dir|

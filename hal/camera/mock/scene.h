@@ -181,8 +181,20 @@ class Scene {
 
   bool intersectShape(const Shape& shape, const Eigen::Vector3d& origin, const Eigen::Vector3d& dir,
                       const Eigen::Vector3d& inv_dir, double& t_best, Hit& hit) const;
+  // The built-in scenes (built_in_scenes.cpp).
   static Scene livingRoom();
   static Scene balloon(double gone_from_s = std::numeric_limits<double>::infinity());
+  // livingRoom()'s pieces, added in this order: a material's noise salt is its
+  // index, and the order of the shapes and groups is part of the scene's bits.
+  struct LivingRoomMaterials;
+  LivingRoomMaterials addLivingRoomMaterials();
+  void addLivingRoomShell(const LivingRoomMaterials& m);
+  void addSofaAndPicture(const LivingRoomMaterials& m);
+  void addRugAndCoffeeTable(const LivingRoomMaterials& m);
+  void addBookshelf(const LivingRoomMaterials& m);
+  void addBooks(const LivingRoomMaterials& m);
+  void addCabinetTvWindowAndDoor(const LivingRoomMaterials& m);
+  void addLampAndPlant(const LivingRoomMaterials& m);
 
   int addMaterial(const Material& material);
   // Static shapes are added to the open group; groups are culled by their bounds.

@@ -9,7 +9,11 @@ if(FOVEA_WANT_OPENNI2)
   fovea_optional_found(OPENNI2 "${OPENNI2_FOUND}" "libopenni2 through pkg-config (apt-get install libopenni2-dev pkg-config)")
   if(OPENNI2_FOUND)
     # fovea::hal_openni2: OpenNI2 devices behind hal::Camera.
-    add_library(fovea_hal_openni2 ${CMAKE_CURRENT_LIST_DIR}/openni2_camera.cpp)
+    add_library(fovea_hal_openni2
+      ${CMAKE_CURRENT_LIST_DIR}/openni2_camera.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/openni2_options.cpp
+      ${CMAKE_CURRENT_LIST_DIR}/video_modes.cpp
+    )
     add_library(fovea::hal_openni2 ALIAS fovea_hal_openni2)
     target_link_libraries(fovea_hal_openni2 PUBLIC fovea::hal_types fovea_build_flags Eigen3::Eigen
                           PRIVATE PkgConfig::OPENNI2)

@@ -1,4 +1,3 @@
-#include "hal/spec_options.h"
 #include "core/clock.h"
 #include "core/sanitizer.h"
 #include "hal/camera/openni2/openni2_camera.h"
@@ -12,7 +11,6 @@
 #include <OpenNI.h>
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <mutex>
@@ -41,24 +39,6 @@ constexpr const char* kNoDeviceHint =
     "plug in the camera; `lsusb` should list it (Orbbec 2bc5:..., PrimeSense/Asus 1d27:...); if it is listed, "
     "check USB permission: install the udev rules fovea ships for known camera ids, or add the user to the "
     "group the rules name (video; plugdev on some distributions) (docs/cameras-openni2.md)";
-
-Status invalid(std::string message) { return Status(ErrorCode::kInvalidArgument, "openni2: " + std::move(message)); }
-
-const char* pixelFormatName(int format) {
-  switch (format) {
-    case openni::PIXEL_FORMAT_DEPTH_1_MM: return "DEPTH_1_MM";
-    case openni::PIXEL_FORMAT_DEPTH_100_UM: return "DEPTH_100_UM";
-    case openni::PIXEL_FORMAT_SHIFT_9_2: return "SHIFT_9_2";
-    case openni::PIXEL_FORMAT_SHIFT_9_3: return "SHIFT_9_3";
-    case openni::PIXEL_FORMAT_RGB888: return "RGB888";
-    case openni::PIXEL_FORMAT_YUV422: return "YUV422";
-    case openni::PIXEL_FORMAT_GRAY8: return "GRAY8";
-    case openni::PIXEL_FORMAT_GRAY16: return "GRAY16";
-    case openni::PIXEL_FORMAT_JPEG: return "JPEG";
-    case openni::PIXEL_FORMAT_YUYV: return "YUYV";
-    default: return "format?";
-  }
-}
 
 std::vector<VideoModeDesc> modesOf(const openni::SensorInfo* sensor) {
   std::vector<VideoModeDesc> modes;
@@ -225,113 +205,7 @@ struct OpenNI2Camera::Impl {
 };
 
 // ---------------------------------------------------------------------------
-// Parsing and pure helpers
-
-Result<OpenNI2CameraOptions> parseOpenNI2CameraOptions(std::string_view args) {
-  OpenNI2CameraOptions options;
-  // The URI is optional: a first item with '=' is already an option.
-  const SpecTokens tokens = tokenizeSpec(args, {.head = SpecTokenRules::Head::kFirstItemIfBare, .rest_key = {}, .bare_continues_value = false});
-  options.uri = std::string(tokens.head.value_or(""));
-  for (std::size_t i = 0; i < tokens.items.size(); ++i) {
-    const auto& [key, value, has_value] = tokens.items[i];
-    if (!has_value && key.empty()) {
-      if (i + 1 == tokens.items.size()) break;  // a trailing comma
-      return invalid("empty option in '" + std::string(args) + "'");
-    }
-    if (!has_value) {
-      return invalid("option '" + std::string(key) +
-                     "' is not key=value (keys: size, fps, colour, registration, sync)");
-    }
-    if (key == "size") {
-      if (Status s = parseSpecSize("openni2", key, value, 1, 8192, options.width, options.height); !s) return s;
-    } else if (key == "fps") {
-      int fps = 0;
-      if (!parseSpecInt(value, fps) || fps < 1 || fps > 1000) {
-        return invalid("fps: expected a positive integer, got '" + std::string(value) + "'");
-      }
-      options.fps = fps;
-    } else if (key == "colour" || key == "color") {
-      if (Status s = parseSpecOnOff("openni2", key, value, options.colour); !s) return s;
-    } else if (key == "registration") {
-      if (Status s = parseSpecOnOff("openni2", key, value, options.registration); !s) return s;
-    } else if (key == "sync") {
-      if (Status s = parseSpecOnOff("openni2", key, value, options.sync); !s) return s;
-    } else {
-      return invalid("unknown option '" + std::string(key) + "' (keys: size, fps, colour, registration, sync)");
-    }
-  }
-  return options;
-}
-
-std::string openni2CameraHelp() {
-  return "openni2:[URI][,size=WxH,fps=N,colour=on|off,registration=on|off,sync=on|off]  an OpenNI2 camera "
-         "(PrimeSense, Asus Xtion, Orbbec Astra): no URI takes the first device, URI as `fovead cameras` lists it, "
-         "Dummy is OpenNI2's synthetic 320x240 device; registration=on (default) uses the device's depth-to-colour "
-         "registration; .oni recordings are refused (Debian's OpenNI2 plays them without frames)";
-}
-
-std::string describeVideoMode(const VideoModeDesc& mode) {
-  return std::to_string(mode.width) + "x" + std::to_string(mode.height) + " @ " + std::to_string(mode.fps) + " fps " +
-         pixelFormatName(mode.pixel_format);
-}
-
-Result<int> chooseVideoMode(const std::vector<VideoModeDesc>& modes, const std::vector<int>& formats, int width,
-                            int height, int fps, const VideoModeDesc& preferred, std::string_view sensor) {
-  const auto formatRank = [&](int format) {
-    const auto it = std::find(formats.begin(), formats.end(), format);
-    return it == formats.end() ? -1 : static_cast<int>(it - formats.begin());
-  };
-  int best = -1;
-  for (std::size_t i = 0; i < modes.size(); ++i) {
-    const VideoModeDesc& m = modes[i];
-    const int rank = formatRank(m.pixel_format);
-    if (rank < 0) continue;
-    if (width > 0 && (m.width != width || m.height != height)) continue;
-    if (fps > 0 && m.fps != fps) continue;
-    if (width == 0) {
-      const bool is_preferred = m.width == preferred.width && m.height == preferred.height &&
-                                (fps > 0 || m.fps == preferred.fps);
-      if (is_preferred && (best < 0 || !(modes[best].width == preferred.width &&
-                                         modes[best].height == preferred.height) ||
-                           rank < formatRank(modes[best].pixel_format))) {
-        best = static_cast<int>(i);
-        continue;
-      }
-      if (best >= 0 && modes[best].width == preferred.width && modes[best].height == preferred.height) continue;
-    }
-    if (best < 0 || rank < formatRank(modes[best].pixel_format)) best = static_cast<int>(i);
-  }
-  if (best >= 0) return best;
-  std::string wanted = width > 0 ? std::to_string(width) + "x" + std::to_string(height) : std::string("any size");
-  wanted += fps > 0 ? " @ " + std::to_string(fps) + " fps" : std::string(" at any rate");
-  std::string accepted;
-  for (int f : formats) accepted += (accepted.empty() ? "" : "|") + std::string(pixelFormatName(f));
-  std::string listed;
-  for (const VideoModeDesc& m : modes) listed += "\n  " + describeVideoMode(m);
-  if (modes.empty()) listed = " none";
-  return Result<int>(ErrorCode::kInvalidArgument,
-                     "openni2: the " + std::string(sensor) + " sensor has no mode " + wanted + " in " + accepted +
-                         "; pick size= and fps= from the modes it offers:" + listed);
-}
-
-CameraIntrinsics intrinsicsFromFov(int width, int height, double hfov_rad, double vfov_rad) {
-  CameraIntrinsics k;
-  k.width = width;
-  k.height = height;
-  k.fx = width / (2.0 * std::tan(hfov_rad / 2.0));
-  k.fy = height / (2.0 * std::tan(vfov_rad / 2.0));
-  // OpenNI's CoordinateConverter maps pixel x to (x / w - 0.5) * z * 2 tan(hfov / 2).
-  k.cx = width / 2.0;
-  k.cy = height / 2.0;
-  return k;
-}
-
-bool isOniRecordingUri(std::string_view uri) {
-  if (uri.size() < 4) return false;
-  const std::string_view ext = uri.substr(uri.size() - 4);
-  return ext[0] == '.' && (ext[1] == 'o' || ext[1] == 'O') && (ext[2] == 'n' || ext[2] == 'N') &&
-         (ext[3] == 'i' || ext[3] == 'I');
-}
+// Device time
 
 int64_t DeviceClockMapper::toHostNs(uint64_t device_us, int64_t host_now_ns) {
   const int64_t device_ns = static_cast<int64_t>(std::min<uint64_t>(device_us, INT64_MAX / 1000)) * 1000;
@@ -441,155 +315,21 @@ Status OpenNI2Camera::open() {
   runtime_held_ = true;
   impl_ = std::make_unique<Impl>();
 
-  if (options_.uri.empty()) {
-    openni::Array<openni::DeviceInfo> devices;
-    openni::OpenNI::enumerateDevices(&devices);
-    int usable = -1;
-    for (int i = 0; i < devices.getSize() && usable < 0; ++i) {
-      if (devices[i].getUri() != nullptr && std::string_view(devices[i].getUri()) != "Dummy") usable = i;
-    }
-    if (usable < 0) {
-      close();
-      return {ErrorCode::kNotFound, std::string("no OpenNI2 device found: ") + kNoDeviceHint +
-                                        " (openni2:Dummy is OpenNI2's synthetic device, for trying fovea without one)"};
-    }
-    options_.uri = devices[usable].getUri();
-    info_.name = "openni2:" + options_.uri;
-  }
-  if (impl_->device.open(options_.uri.c_str()) != openni::STATUS_OK) {
-    const std::string why = openni::OpenNI::getExtendedError();
+  Status status = openDevice();
+  if (!status) {
     close();
-    return {ErrorCode::kNotFound, "openni2: cannot open device '" + options_.uri + "': " + why +
-                                      " (is it still plugged in, and not in use by another program? " + kNoDeviceHint +
-                                      ")"};
+    return status;
   }
   const std::string uri = impl_->device.getDeviceInfo().getUri();
   info_.model = deviceModel(impl_->device.getDeviceInfo());
   info_.serial = deviceSerial(impl_->device);
-
-  // Depth stream and mode.
-  if (impl_->depth.create(impl_->device, openni::SENSOR_DEPTH) != openni::STATUS_OK) {
-    const std::string why = openni::OpenNI::getExtendedError();
+  status = openDepthStream(uri);
+  if (status) status = openColourStream(uri);
+  if (status) status = chooseIntrinsics(uri);
+  if (status) status = checkUnregisteredColour(uri);
+  if (!status) {
     close();
-    return {ErrorCode::kUnavailable, "openni2: " + uri + " has no usable depth stream: " + why};
-  }
-  {
-    const std::vector<VideoModeDesc> modes = modesOf(impl_->device.getSensorInfo(openni::SENSOR_DEPTH));
-    Result<int> chosen = chooseVideoMode(
-        modes, {openni::PIXEL_FORMAT_DEPTH_1_MM, openni::PIXEL_FORMAT_DEPTH_100_UM}, options_.width, options_.height,
-        options_.fps, descOf(impl_->depth.getVideoMode()), "depth");
-    if (!chosen) {
-      close();
-      return chosen.status();
-    }
-    depth_mode_ = modes[chosen.value()];
-    const openni::Array<openni::VideoMode>& list = impl_->device.getSensorInfo(openni::SENSOR_DEPTH)->getSupportedVideoModes();
-    // Only when it differs: some drivers (the Dummy) refuse to set any mode.
-    if (!sameMode(descOf(impl_->depth.getVideoMode()), depth_mode_) &&
-        impl_->depth.setVideoMode(list[chosen.value()]) != openni::STATUS_OK) {
-      const std::string why = openni::OpenNI::getExtendedError();
-      close();
-      return {ErrorCode::kUnavailable, "openni2: " + uri + " refused depth mode " + describeVideoMode(depth_mode_) +
-                                           ": " + why};
-    }
-  }
-  info_.depth_scale_m = depth_mode_.pixel_format == openni::PIXEL_FORMAT_DEPTH_100_UM ? 0.0001 : 0.001;
-  info_.fps = depth_mode_.fps > 0 ? depth_mode_.fps : 30.0;
-
-  // Colour stream, at the depth image's size when it offers it.
-  colour_enabled_ = false;
-  hardware_registration_ = false;
-  if (options_.colour) {
-    if (impl_->device.getSensorInfo(openni::SENSOR_COLOR) == nullptr ||
-        impl_->colour.create(impl_->device, openni::SENSOR_COLOR) != openni::STATUS_OK) {
-      close();
-      return {ErrorCode::kUnavailable, "openni2: " + uri + " has no colour stream; use colour=off"};
-    }
-    const std::vector<VideoModeDesc> modes = modesOf(impl_->device.getSensorInfo(openni::SENSOR_COLOR));
-    Result<int> chosen = chooseVideoMode(modes, {openni::PIXEL_FORMAT_RGB888}, depth_mode_.width, depth_mode_.height,
-                                         depth_mode_.fps, depth_mode_, "colour");
-    if (!chosen) {
-      close();
-      return {chosen.status().code(),
-              chosen.status().message() + "\n(the colour image must have the depth image's size, " +
-                  std::to_string(depth_mode_.width) + "x" + std::to_string(depth_mode_.height) +
-                  ", to be registered to it; or use colour=off)"};
-    }
-    colour_mode_ = modes[chosen.value()];
-    const openni::Array<openni::VideoMode>& list = impl_->device.getSensorInfo(openni::SENSOR_COLOR)->getSupportedVideoModes();
-    // Only when it differs: some drivers (the Dummy) refuse to set any mode.
-    if (!sameMode(descOf(impl_->colour.getVideoMode()), colour_mode_) &&
-        impl_->colour.setVideoMode(list[chosen.value()]) != openni::STATUS_OK) {
-      const std::string why = openni::OpenNI::getExtendedError();
-      close();
-      return {ErrorCode::kUnavailable, "openni2: " + uri + " refused colour mode " + describeVideoMode(colour_mode_) +
-                                           ": " + why};
-    }
-    colour_enabled_ = true;
-    if (options_.sync) impl_->device.setDepthColorSyncEnabled(true);  // best effort: many devices lack it
-    if (options_.registration) {
-      if (impl_->device.isImageRegistrationModeSupported(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) &&
-          impl_->device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) == openni::STATUS_OK) {
-        hardware_registration_ = true;
-      }
-    } else {
-      impl_->device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_OFF);
-    }
-  }
-
-  // Intrinsics: with hardware registration the depth image is in the colour
-  // camera's view, so the colour stream's field of view describes it.
-  openni::VideoStream& view = hardware_registration_ ? impl_->colour : impl_->depth;
-  double hfov = view.getHorizontalFieldOfView();
-  double vfov = view.getVerticalFieldOfView();
-  const bool fov_valid = std::isfinite(hfov) && std::isfinite(vfov) && hfov > 0.01 && hfov < 3.0 && vfov > 0.01 &&
-                         vfov < 3.0;
-  if (!fov_valid) {
-    hfov = kNominalHfovRad;
-    vfov = kNominalVfovRad;
-  }
-  info_.intrinsics = intrinsicsFromFov(depth_mode_.width, depth_mode_.height, hfov, vfov);
-  bool calibrated = false;
-  if (calibration_) {
-    if (calibration_->depth) {
-      const CameraIntrinsics& k = calibration_->depth->intrinsics;
-      if (k.width != depth_mode_.width || k.height != depth_mode_.height) {
-        close();
-        return {ErrorCode::kInvalidArgument,
-                "openni2: the calibration from " + calibration_->source + " is for " + std::to_string(k.width) + "x" +
-                    std::to_string(k.height) + " depth images, the camera delivers " +
-                    std::to_string(depth_mode_.width) + "x" + std::to_string(depth_mode_.height) +
-                    ": calibrate at that size or set size=" + std::to_string(k.width) + "x" + std::to_string(k.height)};
-      }
-      info_.intrinsics = k;
-      calibrated = true;
-    }
-    if (calibration_->depth_scale_m) info_.depth_scale_m = *calibration_->depth_scale_m;
-  }
-  if (!fov_valid && !calibrated) {
-    notes_.push_back("openni2: " + uri + " reports no field of view; using the PrimeSense nominal 58 x 45 degrees "
-                     "(give a calibration for accurate geometry)");
-  }
-  if (colour_enabled_ && !hardware_registration_) {
-    const double colour_hfov = impl_->colour.getHorizontalFieldOfView();
-    const double colour_vfov = impl_->colour.getVerticalFieldOfView();
-    const double depth_hfov = impl_->depth.getHorizontalFieldOfView();
-    const double depth_vfov = impl_->depth.getVerticalFieldOfView();
-    const bool same_view = colour_mode_.width == depth_mode_.width && colour_mode_.height == depth_mode_.height &&
-                           std::abs(colour_hfov - depth_hfov) < 1e-3 && std::abs(colour_vfov - depth_vfov) < 1e-3;
-    if (!same_view) {
-      close();
-      return {ErrorCode::kUnavailable,
-              "openni2: " + uri + (options_.registration ? " offers no hardware depth-to-colour registration"
-                                                         : " was asked for registration=off") +
-                  " and its colour camera sees differently from its depth camera (field of view " +
-                  std::to_string(colour_hfov) + " vs " + std::to_string(depth_hfov) +
-                  " rad): use colour=off (depth only)" +
-                  (options_.registration ? std::string() : std::string(", or registration=on"))};
-    }
-    notes_.push_back("openni2: " + uri +
-                     (options_.registration ? " offers no hardware registration" : ": registration=off") +
-                     "; its colour image has the depth image's size and field of view and is delivered unregistered");
+    return status;
   }
 
   // Colour frames wait here for their depth frame: allocated now, never per frame.
@@ -607,6 +347,161 @@ Status OpenNI2Camera::open() {
   openni::OpenNI::addDeviceDisconnectedListener(impl_->listener.get());
   for (const std::string& note : notes_) std::fprintf(stderr, "%s\n", note.c_str());
   opened_ = true;
+  return Status::ok();
+}
+
+// The device the URI names, or without one the first OpenNI2 enumerates
+// (the synthetic Dummy device aside).
+Status OpenNI2Camera::openDevice() {
+  if (options_.uri.empty()) {
+    openni::Array<openni::DeviceInfo> devices;
+    openni::OpenNI::enumerateDevices(&devices);
+    int usable = -1;
+    for (int i = 0; i < devices.getSize() && usable < 0; ++i) {
+      if (devices[i].getUri() != nullptr && std::string_view(devices[i].getUri()) != "Dummy") usable = i;
+    }
+    if (usable < 0) {
+      return {ErrorCode::kNotFound, std::string("no OpenNI2 device found: ") + kNoDeviceHint +
+                                        " (openni2:Dummy is OpenNI2's synthetic device, for trying fovea without one)"};
+    }
+    options_.uri = devices[usable].getUri();
+    info_.name = "openni2:" + options_.uri;
+  }
+  if (impl_->device.open(options_.uri.c_str()) != openni::STATUS_OK) {
+    const std::string why = openni::OpenNI::getExtendedError();
+    return {ErrorCode::kNotFound, "openni2: cannot open device '" + options_.uri + "': " + why +
+                                      " (is it still plugged in, and not in use by another program? " + kNoDeviceHint +
+                                      ")"};
+  }
+  return Status::ok();
+}
+
+// Depth stream and mode.
+Status OpenNI2Camera::openDepthStream(const std::string& uri) {
+  if (impl_->depth.create(impl_->device, openni::SENSOR_DEPTH) != openni::STATUS_OK) {
+    const std::string why = openni::OpenNI::getExtendedError();
+    return {ErrorCode::kUnavailable, "openni2: " + uri + " has no usable depth stream: " + why};
+  }
+  const std::vector<VideoModeDesc> modes = modesOf(impl_->device.getSensorInfo(openni::SENSOR_DEPTH));
+  Result<int> chosen = chooseVideoMode(
+      modes, {openni::PIXEL_FORMAT_DEPTH_1_MM, openni::PIXEL_FORMAT_DEPTH_100_UM}, options_.width, options_.height,
+      options_.fps, descOf(impl_->depth.getVideoMode()), "depth");
+  if (!chosen) return chosen.status();
+  depth_mode_ = modes[chosen.value()];
+  const openni::Array<openni::VideoMode>& list = impl_->device.getSensorInfo(openni::SENSOR_DEPTH)->getSupportedVideoModes();
+  // Only when it differs: some drivers (the Dummy) refuse to set any mode.
+  if (!sameMode(descOf(impl_->depth.getVideoMode()), depth_mode_) &&
+      impl_->depth.setVideoMode(list[chosen.value()]) != openni::STATUS_OK) {
+    const std::string why = openni::OpenNI::getExtendedError();
+    return {ErrorCode::kUnavailable, "openni2: " + uri + " refused depth mode " + describeVideoMode(depth_mode_) +
+                                         ": " + why};
+  }
+  info_.depth_scale_m = depth_mode_.pixel_format == openni::PIXEL_FORMAT_DEPTH_100_UM ? 0.0001 : 0.001;
+  info_.fps = depth_mode_.fps > 0 ? depth_mode_.fps : 30.0;
+  return Status::ok();
+}
+
+// Colour stream, at the depth image's size when it offers it; with it the
+// device's frame sync and registration as the options ask.
+Status OpenNI2Camera::openColourStream(const std::string& uri) {
+  colour_enabled_ = false;
+  hardware_registration_ = false;
+  if (!options_.colour) return Status::ok();
+  if (impl_->device.getSensorInfo(openni::SENSOR_COLOR) == nullptr ||
+      impl_->colour.create(impl_->device, openni::SENSOR_COLOR) != openni::STATUS_OK) {
+    return {ErrorCode::kUnavailable, "openni2: " + uri + " has no colour stream; use colour=off"};
+  }
+  const std::vector<VideoModeDesc> modes = modesOf(impl_->device.getSensorInfo(openni::SENSOR_COLOR));
+  Result<int> chosen = chooseVideoMode(modes, {openni::PIXEL_FORMAT_RGB888}, depth_mode_.width, depth_mode_.height,
+                                       depth_mode_.fps, depth_mode_, "colour");
+  if (!chosen) {
+    return {chosen.status().code(),
+            chosen.status().message() + "\n(the colour image must have the depth image's size, " +
+                std::to_string(depth_mode_.width) + "x" + std::to_string(depth_mode_.height) +
+                ", to be registered to it; or use colour=off)"};
+  }
+  colour_mode_ = modes[chosen.value()];
+  const openni::Array<openni::VideoMode>& list = impl_->device.getSensorInfo(openni::SENSOR_COLOR)->getSupportedVideoModes();
+  // Only when it differs: some drivers (the Dummy) refuse to set any mode.
+  if (!sameMode(descOf(impl_->colour.getVideoMode()), colour_mode_) &&
+      impl_->colour.setVideoMode(list[chosen.value()]) != openni::STATUS_OK) {
+    const std::string why = openni::OpenNI::getExtendedError();
+    return {ErrorCode::kUnavailable, "openni2: " + uri + " refused colour mode " + describeVideoMode(colour_mode_) +
+                                         ": " + why};
+  }
+  colour_enabled_ = true;
+  if (options_.sync) impl_->device.setDepthColorSyncEnabled(true);  // best effort: many devices lack it
+  if (options_.registration) {
+    if (impl_->device.isImageRegistrationModeSupported(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) &&
+        impl_->device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) == openni::STATUS_OK) {
+      hardware_registration_ = true;
+    }
+  } else {
+    impl_->device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_OFF);
+  }
+  return Status::ok();
+}
+
+// Intrinsics: with hardware registration the depth image is in the colour
+// camera's view, so the colour stream's field of view describes it. A
+// calibration's depth intrinsics and depth scale override what the device says.
+Status OpenNI2Camera::chooseIntrinsics(const std::string& uri) {
+  openni::VideoStream& view = hardware_registration_ ? impl_->colour : impl_->depth;
+  double hfov = view.getHorizontalFieldOfView();
+  double vfov = view.getVerticalFieldOfView();
+  const bool fov_valid = std::isfinite(hfov) && std::isfinite(vfov) && hfov > 0.01 && hfov < 3.0 && vfov > 0.01 &&
+                         vfov < 3.0;
+  if (!fov_valid) {
+    hfov = kNominalHfovRad;
+    vfov = kNominalVfovRad;
+  }
+  info_.intrinsics = intrinsicsFromFov(depth_mode_.width, depth_mode_.height, hfov, vfov);
+  bool calibrated = false;
+  if (calibration_) {
+    if (calibration_->depth) {
+      const CameraIntrinsics& k = calibration_->depth->intrinsics;
+      if (k.width != depth_mode_.width || k.height != depth_mode_.height) {
+        return {ErrorCode::kInvalidArgument,
+                "openni2: the calibration from " + calibration_->source + " is for " + std::to_string(k.width) + "x" +
+                    std::to_string(k.height) + " depth images, the camera delivers " +
+                    std::to_string(depth_mode_.width) + "x" + std::to_string(depth_mode_.height) +
+                    ": calibrate at that size or set size=" + std::to_string(k.width) + "x" + std::to_string(k.height)};
+      }
+      info_.intrinsics = k;
+      calibrated = true;
+    }
+    if (calibration_->depth_scale_m) info_.depth_scale_m = *calibration_->depth_scale_m;
+  }
+  if (!fov_valid && !calibrated) {
+    notes_.push_back("openni2: " + uri + " reports no field of view; using the PrimeSense nominal 58 x 45 degrees "
+                     "(give a calibration for accurate geometry)");
+  }
+  return Status::ok();
+}
+
+// Colour without hardware registration is delivered only when its image has
+// the depth image's size and field of view (said once, as a note); otherwise
+// open() refuses and says what to do.
+Status OpenNI2Camera::checkUnregisteredColour(const std::string& uri) {
+  if (!colour_enabled_ || hardware_registration_) return Status::ok();
+  const double colour_hfov = impl_->colour.getHorizontalFieldOfView();
+  const double colour_vfov = impl_->colour.getVerticalFieldOfView();
+  const double depth_hfov = impl_->depth.getHorizontalFieldOfView();
+  const double depth_vfov = impl_->depth.getVerticalFieldOfView();
+  const bool same_view = colour_mode_.width == depth_mode_.width && colour_mode_.height == depth_mode_.height &&
+                         std::abs(colour_hfov - depth_hfov) < 1e-3 && std::abs(colour_vfov - depth_vfov) < 1e-3;
+  if (!same_view) {
+    return {ErrorCode::kUnavailable,
+            "openni2: " + uri + (options_.registration ? " offers no hardware depth-to-colour registration"
+                                                       : " was asked for registration=off") +
+                " and its colour camera sees differently from its depth camera (field of view " +
+                std::to_string(colour_hfov) + " vs " + std::to_string(depth_hfov) +
+                " rad): use colour=off (depth only)" +
+                (options_.registration ? std::string() : std::string(", or registration=on"))};
+  }
+  notes_.push_back("openni2: " + uri +
+                   (options_.registration ? " offers no hardware registration" : ": registration=off") +
+                   "; its colour image has the depth image's size and field of view and is delivered unregistered");
   return Status::ok();
 }
 

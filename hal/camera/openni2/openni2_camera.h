@@ -146,6 +146,13 @@ class OpenNI2Camera final : public Camera {
  private:
   struct Impl;  // the OpenNI2 objects, kept out of this header
   void close();
+  // open()'s steps, in order: each returns why open() fails (open() then
+  // closes what the steps made).
+  Status openDevice();
+  Status openDepthStream(const std::string& uri);
+  Status openColourStream(const std::string& uri);
+  Status chooseIntrinsics(const std::string& uri);
+  Status checkUnregisteredColour(const std::string& uri);
   Status readColour();
   Status readDepth(RgbdFrame& slot, bool& delivered);
   bool deliverOldestPending(RgbdFrame& slot);

@@ -172,6 +172,77 @@ Status readTumList(const std::filesystem::path& path, std::vector<int64_t>& stam
   });
 }
 
+// One frame of a sequence's list: its depth stamp and the files of its two
+// images (relative to the sequence folder).
+struct TumListEntry {
+  int64_t depth_ns;
+  std::string rgb, depth;
+};
+
+// The frames of a sequence without associations.txt: rgb.txt and depth.txt
+// paired by stamp, as TUM's associate.py pairs them.
+Result<std::vector<TumListEntry>> pairTumLists(const std::filesystem::path& folder) {
+  std::vector<int64_t> rgb_ns, depth_ns;
+  std::vector<std::string> rgb_files, depth_files;
+  if (Status s = readTumList(folder / "rgb.txt", rgb_ns, rgb_files); !s) return s;
+  if (Status s = readTumList(folder / "depth.txt", depth_ns, depth_files); !s) return s;
+  std::vector<TumListEntry> entries;
+  for (const TumAssociation& a : associateTumStamps(rgb_ns, depth_ns)) {
+    entries.push_back({depth_ns[a.depth], rgb_files[a.rgb], depth_files[a.depth]});
+  }
+  if (entries.empty()) {
+    return Result<std::vector<TumListEntry>>(
+        ErrorCode::kParseError,
+        "tum: no depth stamp in " + (folder / "depth.txt").string() + " has a colour stamp in rgb.txt within 20 ms");
+  }
+  return entries;
+}
+
+// The frames associations.txt lists: `t_rgb rgb/x.png t_depth depth/y.png`
+// per line, depth stamps increasing.
+Result<std::vector<TumListEntry>> readTumAssociations(const std::filesystem::path& associations_path) {
+  Result<std::string> associations = readWholeFile(associations_path);
+  if (!associations) return associations.status();
+  std::vector<TumListEntry> entries;
+  Status listed = forEachDataLine(associations.value(), [&](std::size_t line_number, std::string_view line) -> Status {
+    const std::string where = associations_path.string() + ":" + std::to_string(line_number) + ": ";
+    const std::vector<std::string_view> f = splitFields(line);
+    if (f.size() != 4) {
+      return {ErrorCode::kParseError,
+              where + "expected 4 fields (t_rgb rgb/x.png t_depth depth/y.png), got " + std::to_string(f.size())};
+    }
+    Result<int64_t> t_rgb = parseTumTimestampNs(f[0]);
+    Result<int64_t> t_depth = parseTumTimestampNs(f[2]);
+    if (!t_rgb) return {ErrorCode::kParseError, where + t_rgb.status().message()};
+    if (!t_depth) return {ErrorCode::kParseError, where + t_depth.status().message()};
+    if (!entries.empty() && t_depth.value() <= entries.back().depth_ns) {
+      return {ErrorCode::kParseError, where + "depth timestamps must increase"};
+    }
+    entries.push_back({t_depth.value(), std::string(f[1]), std::string(f[3])});
+    return Status::ok();
+  });
+  if (!listed) return listed;
+  if (entries.empty()) {
+    return Result<std::vector<TumListEntry>>(ErrorCode::kParseError,
+                                             "tum: " + associations_path.string() + " lists no frames");
+  }
+  return entries;
+}
+
+// Decodes one frame's depth and colour PNGs (kWidth x kHeight) into depth and rgb.
+Status decodeTumImages(const std::filesystem::path& folder, const TumListEntry& entry, std::vector<uint16_t>& depth,
+                       std::vector<uint8_t>& rgb) {
+  depth.resize(static_cast<std::size_t>(kWidth) * kHeight);
+  rgb.resize(static_cast<std::size_t>(kWidth) * kHeight * 3);
+  if (Status s = readDepthPng((folder / entry.depth).string(), kWidth, kHeight, depth.data()); !s) {
+    return {s.code(), "tum: depth " + s.message()};
+  }
+  if (Status s = readRgbPng((folder / entry.rgb).string(), kWidth, kHeight, rgb.data()); !s) {
+    return {s.code(), "tum: rgb " + s.message()};
+  }
+  return Status::ok();
+}
+
 }  // namespace
 
 CameraIntrinsics tumIntrinsics(TumSensor sensor) {
@@ -299,76 +370,8 @@ Status TumCamera::open() {
   }
   info_.model = use_groundtruth ? "TUM RGB-D sequence, ground-truth poses"
                                 : "TUM RGB-D sequence without ground truth: every frame's pose is the identity";
+  if (Status s = readFrames(folder, have_associations, use_groundtruth ? &poses : nullptr); !s) return s;
 
-  struct Entry {
-    int64_t depth_ns;
-    std::string rgb, depth;
-  };
-  std::vector<Entry> entries;
-  if (!have_associations) {
-    std::vector<int64_t> rgb_ns, depth_ns;
-    std::vector<std::string> rgb_files, depth_files;
-    if (Status s = readTumList(folder / "rgb.txt", rgb_ns, rgb_files); !s) return s;
-    if (Status s = readTumList(folder / "depth.txt", depth_ns, depth_files); !s) return s;
-    for (const TumAssociation& a : associateTumStamps(rgb_ns, depth_ns)) {
-      entries.push_back({depth_ns[a.depth], rgb_files[a.rgb], depth_files[a.depth]});
-    }
-    if (entries.empty()) {
-      return {ErrorCode::kParseError, "tum: no depth stamp in " + (folder / "depth.txt").string() +
-                                          " has a colour stamp in rgb.txt within 20 ms"};
-    }
-  }
-  Status listed = !have_associations ? Status::ok() : [&] {
-    Result<std::string> associations = readWholeFile(associations_path);
-    if (!associations) return associations.status();
-    return forEachDataLine(associations.value(), [&](std::size_t line_number, std::string_view line) -> Status {
-    const std::string where = associations_path.string() + ":" + std::to_string(line_number) + ": ";
-    const std::vector<std::string_view> f = splitFields(line);
-    if (f.size() != 4) {
-      return {ErrorCode::kParseError,
-              where + "expected 4 fields (t_rgb rgb/x.png t_depth depth/y.png), got " + std::to_string(f.size())};
-    }
-    Result<int64_t> t_rgb = parseTumTimestampNs(f[0]);
-    Result<int64_t> t_depth = parseTumTimestampNs(f[2]);
-    if (!t_rgb) return {ErrorCode::kParseError, where + t_rgb.status().message()};
-    if (!t_depth) return {ErrorCode::kParseError, where + t_depth.status().message()};
-    if (!entries.empty() && t_depth.value() <= entries.back().depth_ns) {
-      return {ErrorCode::kParseError, where + "depth timestamps must increase"};
-    }
-    entries.push_back({t_depth.value(), std::string(f[1]), std::string(f[3])});
-    return Status::ok();
-    });
-  }();
-  if (!listed) return listed;
-  if (entries.empty()) {
-    return {ErrorCode::kParseError, "tum: " + associations_path.string() + " lists no frames"};
-  }
-
-  for (const Entry& e : entries) {
-    if (options_.max_frames != 0 && frames_.size() == options_.max_frames) break;
-    Pose pose;
-    if (use_groundtruth && !interpolatePose(poses, e.depth_ns, kPoseClampNs, pose)) {
-      ++frames_without_pose_;
-      continue;
-    }
-    Frame frame;
-    frame.depth_stamp_ns = e.depth_ns;
-    frame.pose = pose;
-    frame.depth.resize(static_cast<std::size_t>(kWidth) * kHeight);
-    frame.rgb.resize(static_cast<std::size_t>(kWidth) * kHeight * 3);
-    if (Status s = readDepthPng((folder / e.depth).string(), kWidth, kHeight, frame.depth.data()); !s) {
-      return {s.code(), "tum: depth " + s.message()};
-    }
-    if (Status s = readRgbPng((folder / e.rgb).string(), kWidth, kHeight, frame.rgb.data()); !s) {
-      return {s.code(), "tum: rgb " + s.message()};
-    }
-    frames_.push_back(std::move(frame));
-  }
-  if (frames_.empty()) {
-    return {ErrorCode::kNotFound, "tum: none of the " + std::to_string(entries.size()) + " frames in " +
-                                      associations_path.string() + " lies within the ground truth's time span (" +
-                                      groundtruth_path.string() + ")"};
-  }
   const int64_t span_ns = frames_.back().depth_stamp_ns - frames_.front().depth_stamp_ns;
   const int64_t period_ns = frames_.size() > 1 ? span_ns / static_cast<int64_t>(frames_.size() - 1) : 33'333'333;
   loop_period_ns_ = span_ns + period_ns;
@@ -377,6 +380,36 @@ Status TumCamera::open() {
   next_ = 0;
   loops_ = 0;
   finished_ = false;
+  return Status::ok();
+}
+
+// open()'s second half: the sequence's list of frames (associations.txt, or
+// rgb.txt and depth.txt paired), then every frame decoded into frames_ (up to
+// max_frames; with ground truth, only those it gives a pose).
+Status TumCamera::readFrames(const std::filesystem::path& folder, bool have_associations,
+                             const std::vector<StampedPose>* poses) {
+  const std::filesystem::path associations_path = folder / "associations.txt";
+  Result<std::vector<TumListEntry>> entries =
+      have_associations ? readTumAssociations(associations_path) : pairTumLists(folder);
+  if (!entries) return entries.status();
+  for (const TumListEntry& e : entries.value()) {
+    if (options_.max_frames != 0 && frames_.size() == options_.max_frames) break;
+    Pose pose;
+    if (poses != nullptr && !interpolatePose(*poses, e.depth_ns, kPoseClampNs, pose)) {
+      ++frames_without_pose_;
+      continue;
+    }
+    Frame frame;
+    frame.depth_stamp_ns = e.depth_ns;
+    frame.pose = pose;
+    if (Status s = decodeTumImages(folder, e, frame.depth, frame.rgb); !s) return s;
+    frames_.push_back(std::move(frame));
+  }
+  if (frames_.empty()) {
+    return {ErrorCode::kNotFound, "tum: none of the " + std::to_string(entries.value().size()) + " frames in " +
+                                      associations_path.string() + " lies within the ground truth's time span (" +
+                                      (folder / "groundtruth.txt").string() + ")"};
+  }
   return Status::ok();
 }
 

@@ -28,6 +28,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -123,6 +124,9 @@ class TumCamera final : public Camera {
     std::vector<uint16_t> depth;
     std::vector<uint8_t> rgb;
   };
+  // open()'s list-and-decode step; poses is nullptr without ground truth.
+  Status readFrames(const std::filesystem::path& folder, bool have_associations,
+                    const std::vector<StampedPose>* poses);
 
   TumCameraOptions options_;
   CameraInfo info_;

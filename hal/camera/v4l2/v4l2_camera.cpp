@@ -586,9 +586,7 @@ Status V4l2Camera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     counters_.error();
     return {ErrorCode::kUnavailable, "not started"};
   }
-  const int w = depth_.width();
-  const int h = depth_.height();
-  if (!slot.setSize(w, h)) {
+  if (!slot.setSize(depth_.width(), depth_.height())) {
     counters_.error();
     return {ErrorCode::kCapacityExceeded, "slot too small"};
   }
@@ -598,110 +596,139 @@ Status V4l2Camera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
       std::chrono::steady_clock::now() + std::clamp<std::chrono::nanoseconds>(timeout, std::chrono::nanoseconds(0),
                                                                               std::chrono::hours(24));
   for (;;) {
-    if (colour) {
-      if (const int err = drainColour(); err != 0) {
-        if (err == ENODEV) return gone();
-        counters_.error();
-        return {ErrorCode::kIoError, "colour dqbuf"};
-      }
-    }
-    if (!pending_) {
-      const int err = depth_.dequeue(pending_depth_);
-      if (err == ENODEV) return gone();
-      if (err != 0 && err != EAGAIN) {
-        counters_.error();
-        return {ErrorCode::kIoError, "depth dqbuf"};
-      }
-      if (err == 0) {
-        const bool size_ok =
-            pending_depth_.bytesused >= packedFrameBytes(depth_.bytesPerLine(), static_cast<std::size_t>(w) * 2, h);
-        if (pending_depth_.error_flag || !size_ok) {
-          if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
-          counters_.badFrame();
-          return {ErrorCode::kInvalidInput, pending_depth_.error_flag ? "frame error" : "bad frame size"};
-        }
-        pending_ = true;
-      }
-    }
+    if (Status s = takeReadyFrames(colour); !s) return s;
     int64_t wait_for_colour_ns = 0;  // > 0: the pending depth frame waits this long more for colour
     if (pending_) {
       std::optional<int> colour_slot;
       if (colour) {
-        // A colour frame later than the depth frame means no later one can be
-        // nearer; otherwise wait for the colour that may still be in flight.
-        const int64_t give_up_ns = pending_depth_.stamp_ns + pairer_->toleranceNs() + 2 * colour_period_ns_;
-        const int64_t now_ns = monotonicNs();
-        if ((!have_colour_ || latest_colour_stamp_ns_ < pending_depth_.stamp_ns) && now_ns < give_up_ns) {
-          wait_for_colour_ns = give_up_ns - now_ns;
-        } else {
-          colour_slot = pairer_->pairDepth(pending_depth_.stamp_ns);
-          if (!colour_slot) {
-            pending_ = false;
-            if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
-            if (++consecutive_unpaired_ >= kMaxUnpairedDepth) {
-              consecutive_unpaired_ = 0;
-              counters_.error();
-              return {ErrorCode::kInvalidInput, "colour unpaired"};
-            }
-            continue;
-          }
-        }
+        bool dropped = false;
+        if (Status s = pairPendingDepth(colour_slot, wait_for_colour_ns, dropped); !s) return s;
+        if (dropped) continue;
       }
-      if (wait_for_colour_ns == 0) {
-        pending_ = false;
-        const bool ok = depth16ToDepth(pending_depth_.data, pending_depth_.bytesused, depth_.bytesPerLine(), w, h,
-                                       slot.depth());
-        const int64_t stamp_ns = pending_depth_.stamp_ns;
-        if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
-        if (!ok) {
-          counters_.badFrame();
-          return {ErrorCode::kInvalidInput, "bad frame size"};
-        }
-        if (colour) {
-          consecutive_unpaired_ = 0;
-          (void)registration_->apply(slot.depth(), colour_rgb_[static_cast<std::size_t>(*colour_slot)].data(),
-                                     slot.rgb());
-        }
-        slot.intrinsics = info_.intrinsics;
-        slot.depth_scale_m = info_.depth_scale_m;
-        slot.T_world_cam = Pose{};
-        slot.has_rgb = colour;
-        slot.stamp_ns = stamp_ns;
-        slot.sequence = sequence_++;
-        stalled_ = false;
-        counters_.frameDelivered();
-        return Status::ok();
-      }
+      if (wait_for_colour_ns == 0) return deliverPendingDepth(slot, colour_slot);
     }
     // Nothing to deliver yet: wait for either node.
-    const auto now = std::chrono::steady_clock::now();
-    if (now >= deadline) {
-      counters_.timeout();
-      if (!stalled_) counters_.stall();
-      stalled_ = true;
-      return {ErrorCode::kUnavailable, "timeout"};
-    }
-    int64_t wait_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline - now).count();
-    if (wait_for_colour_ns > 0) wait_ns = std::min(wait_ns, wait_for_colour_ns);
-    pollfd fds[2] = {{depth_.fd(), static_cast<short>(pending_ ? 0 : POLLIN), 0}, {colour_.fd(), POLLIN, 0}};
-    const int wait_ms = static_cast<int>(std::min<int64_t>((wait_ns + 999'999) / 1'000'000, 60'000));
-    const int r = ::poll(fds, colour ? 2 : 1, wait_ms);
-    if (r < 0 && errno != EINTR) {
+    if (Status s = waitForNodes(deadline, wait_for_colour_ns, colour); !s) return s;
+  }
+}
+
+// Takes the colour frames that are ready into the pairer and, unless a depth
+// frame is already pending, dequeues the next depth frame if there is one.
+Status V4l2Camera::takeReadyFrames(bool colour) {
+  if (colour) {
+    if (const int err = drainColour(); err != 0) {
+      if (err == ENODEV) return gone();
       counters_.error();
-      return {ErrorCode::kIoError, "poll failed"};
-    }
-    for (int i = 0; i < (colour ? 2 : 1) && r > 0; ++i) {
-      if ((fds[i].revents & POLLNVAL) != 0) return gone();
-      // POLLERR without POLLIN: the node was unregistered (unplugged, driver
-      // unloaded), or the queue failed; QUERYCAP's ENODEV says which.
-      if ((fds[i].revents & (POLLERR | POLLHUP)) != 0 && (fds[i].revents & POLLIN) == 0) {
-        if (i == 0 && pending_) continue;  // depth was not polled for input
-        if (!(i == 0 ? depth_ : colour_).present()) return gone();
-        counters_.error();
-        return {ErrorCode::kIoError, "poll error"};
-      }
+      return {ErrorCode::kIoError, "colour dqbuf"};
     }
   }
+  if (pending_) return Status::ok();
+  const int err = depth_.dequeue(pending_depth_);
+  if (err == ENODEV) return gone();
+  if (err != 0 && err != EAGAIN) {
+    counters_.error();
+    return {ErrorCode::kIoError, "depth dqbuf"};
+  }
+  if (err == 0) {
+    const bool size_ok = pending_depth_.bytesused >=
+                         packedFrameBytes(depth_.bytesPerLine(), static_cast<std::size_t>(depth_.width()) * 2,
+                                          depth_.height());
+    if (pending_depth_.error_flag || !size_ok) {
+      if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
+      counters_.badFrame();
+      return {ErrorCode::kInvalidInput, pending_depth_.error_flag ? "frame error" : "bad frame size"};
+    }
+    pending_ = true;
+  }
+  return Status::ok();
+}
+
+// Decides the pending depth frame's colour: its colour slot, or a time to
+// wait for the colour that may still be in flight (wait_for_colour_ns > 0),
+// or no colour at all (the depth frame is given back: dropped).
+Status V4l2Camera::pairPendingDepth(std::optional<int>& colour_slot, int64_t& wait_for_colour_ns, bool& dropped) {
+  // A colour frame later than the depth frame means no later one can be
+  // nearer; otherwise wait for the colour that may still be in flight.
+  const int64_t give_up_ns = pending_depth_.stamp_ns + pairer_->toleranceNs() + 2 * colour_period_ns_;
+  const int64_t now_ns = monotonicNs();
+  if ((!have_colour_ || latest_colour_stamp_ns_ < pending_depth_.stamp_ns) && now_ns < give_up_ns) {
+    wait_for_colour_ns = give_up_ns - now_ns;
+    return Status::ok();
+  }
+  colour_slot = pairer_->pairDepth(pending_depth_.stamp_ns);
+  if (colour_slot) return Status::ok();
+  pending_ = false;
+  dropped = true;
+  if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
+  if (++consecutive_unpaired_ >= kMaxUnpairedDepth) {
+    consecutive_unpaired_ = 0;
+    counters_.error();
+    return {ErrorCode::kInvalidInput, "colour unpaired"};
+  }
+  return Status::ok();
+}
+
+// Converts the pending depth frame into the slot, registers the paired colour
+// frame (colour_slot, with colour) to it and gives the depth buffer back.
+Status V4l2Camera::deliverPendingDepth(RgbdFrame& slot, const std::optional<int>& colour_slot) {
+  const bool colour = hasColour();
+  pending_ = false;
+  const bool ok = depth16ToDepth(pending_depth_.data, pending_depth_.bytesused, depth_.bytesPerLine(), depth_.width(),
+                                 depth_.height(), slot.depth());
+  const int64_t stamp_ns = pending_depth_.stamp_ns;
+  if (depth_.requeue(pending_depth_.index) == ENODEV) return gone();
+  if (!ok) {
+    counters_.badFrame();
+    return {ErrorCode::kInvalidInput, "bad frame size"};
+  }
+  if (colour) {
+    consecutive_unpaired_ = 0;
+    (void)registration_->apply(slot.depth(), colour_rgb_[static_cast<std::size_t>(*colour_slot)].data(), slot.rgb());
+  }
+  slot.intrinsics = info_.intrinsics;
+  slot.depth_scale_m = info_.depth_scale_m;
+  slot.T_world_cam = Pose{};
+  slot.has_rgb = colour;
+  slot.stamp_ns = stamp_ns;
+  slot.sequence = sequence_++;
+  stalled_ = false;
+  counters_.frameDelivered();
+  return Status::ok();
+}
+
+// Polls the depth node (unless a depth frame is pending) and the colour node
+// until one is ready, the deadline passes (a timeout) or wait_for_colour_ns, if
+// given, is over; ok to look again.
+Status V4l2Camera::waitForNodes(std::chrono::steady_clock::time_point deadline, int64_t wait_for_colour_ns,
+                                bool colour) {
+  const auto now = std::chrono::steady_clock::now();
+  if (now >= deadline) {
+    counters_.timeout();
+    if (!stalled_) counters_.stall();
+    stalled_ = true;
+    return {ErrorCode::kUnavailable, "timeout"};
+  }
+  int64_t wait_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline - now).count();
+  if (wait_for_colour_ns > 0) wait_ns = std::min(wait_ns, wait_for_colour_ns);
+  pollfd fds[2] = {{depth_.fd(), static_cast<short>(pending_ ? 0 : POLLIN), 0}, {colour_.fd(), POLLIN, 0}};
+  const int wait_ms = static_cast<int>(std::min<int64_t>((wait_ns + 999'999) / 1'000'000, 60'000));
+  const int r = ::poll(fds, colour ? 2 : 1, wait_ms);
+  if (r < 0 && errno != EINTR) {
+    counters_.error();
+    return {ErrorCode::kIoError, "poll failed"};
+  }
+  for (int i = 0; i < (colour ? 2 : 1) && r > 0; ++i) {
+    if ((fds[i].revents & POLLNVAL) != 0) return gone();
+    // POLLERR without POLLIN: the node was unregistered (unplugged, driver
+    // unloaded), or the queue failed; QUERYCAP's ENODEV says which.
+    if ((fds[i].revents & (POLLERR | POLLHUP)) != 0 && (fds[i].revents & POLLIN) == 0) {
+      if (i == 0 && pending_) continue;  // depth was not polled for input
+      if (!(i == 0 ? depth_ : colour_).present()) return gone();
+      counters_.error();
+      return {ErrorCode::kIoError, "poll error"};
+    }
+  }
+  return Status::ok();
 }
 
 }  // namespace fovea::hal::v4l2

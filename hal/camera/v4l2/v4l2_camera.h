@@ -111,6 +111,11 @@ class V4l2Camera final : public Camera {
   Result<std::string> resolveColourPath();
   // Takes every colour frame ready now into the pairer; 0 or an errno.
   int drainColour();
+  // acquire()'s steps; ok means go on, anything else is what acquire() returns.
+  Status takeReadyFrames(bool colour);
+  Status pairPendingDepth(std::optional<int>& colour_slot, int64_t& wait_for_colour_ns, bool& dropped);
+  Status deliverPendingDepth(RgbdFrame& slot, const std::optional<int>& colour_slot);
+  Status waitForNodes(std::chrono::steady_clock::time_point deadline, int64_t wait_for_colour_ns, bool colour);
   Status gone();
   void closeNodes();
 
