@@ -34,7 +34,7 @@ std::string program(const char* path) {
   return emulator.empty() ? std::string(path) : emulator + " " + path;
 }
 
-// The mock living room's camera position and scene centre (hal/camera/mock/scene.cpp).
+// The mock living room's camera position and scene centre (hal/camera/mock/built_in_scenes.cpp).
 // Quoted for the shell (">" would redirect).
 constexpr const char* kGazeScript = "'fixed:3,0.35,1.55>3,2.25,1.35'";
 
