@@ -95,76 +95,94 @@ Result<RegionModel> RegionModel::create(const AcuityConfig& config) {
     case Preset::kCustom: table_bounds = -1; break;
     case Preset::kAcuity: table_bounds = -2; break;
   }
+  Status regions;
   if (table_bounds == -2) {
-    // Levels 1 .. kMaxRegions - 1 of the nested lattice; region 0 holds the raw points.
-    const double v = config.level_voxel_m;
-    if (!std::isfinite(v) || !(v >= 1e-4 && v <= 1.0)) {
-      return invalid("level_voxel_m", formatDouble(v) + " is outside [0.0001, 1] m");
-    }
-    const double f = config.floor_m;
-    if (!std::isfinite(f) || !(f >= 0.0 && f <= 1.0)) return invalid("floor_m", formatDouble(f) + " is outside [0, 1] m");
-    const double k = config.level_margin;
-    if (!std::isfinite(k) || !(k >= 0.1 && k <= 10.0)) return invalid("level_margin", formatDouble(k) + " is outside [0.1, 10]");
-    model.level_voxel_m_ = v;
-    model.floor_m_ = f;
-    const double q = config.floor_per_m2;
-    if (!std::isfinite(q) || !(q >= 0.0 && q <= 1.0)) {
-      return invalid("floor_per_m2", formatDouble(q) + " is outside [0, 1] m per square metre");
-    }
-    model.floor_per_m2_ = q;
-    model.level_margin_ = k;
-    if (config.refine_passes < 0 || config.refine_passes > kMaxRefinePasses) {
-      return invalid("refine_passes", std::to_string(config.refine_passes) + " is outside [0, " +
-                                          std::to_string(kMaxRefinePasses) + "]");
-    }
-    model.refine_passes_ = config.refine_passes;
-    const double c = config.view_cull_deg;
-    if (!std::isfinite(c) || !(c > 0.0 && c <= 180.0)) {
-      return invalid("view_cull_deg", formatDouble(c) + " is outside (0, 180] degrees");
-    }
-    model.view_cull_ = config.view_cull;
-    model.view_cull_deg_ = c;
-    model.region_count_ = kMaxRegions;
-    for (int n = 0; n < kMaxRegions; ++n) model.names_[n] = kLevelNames[n];
+    regions = model.setAcuityLevels(config);
   } else if (table_bounds >= 0) {
-    for (int n = 0; n < table_bounds; ++n) model.bound_deg_[n] = kTableIBoundsDeg[n];
-    model.region_count_ = table_bounds + 1;
-    for (int n = 0; n < table_bounds; ++n) model.names_[n] = kTableINames[n];
-    // The outermost region is "the rest", sampled like the far periphery.
-    model.names_[table_bounds] = table_bounds == 0 ? "all" : (table_bounds == 5 ? "far-periphery" : "rest");
+    model.setTableIRegions(table_bounds);
   } else {
-    const auto& bounds = config.custom_bounds_deg;
-    if (bounds.size() > kMaxRegions - 1) {
-      return invalid("bounds_deg", "at most " + std::to_string(kMaxRegions - 1) + " bounds, got " +
-                                       std::to_string(bounds.size()));
-    }
-    for (std::size_t i = 0; i < bounds.size(); ++i) {
-      // The field's name only on error: a valid configuration is applied on the
-      // frame path (Foveator::setConfig), which must not build strings.
-      auto field = [i] { return "bounds_deg[" + std::to_string(i) + "]"; };
-      const double b = bounds[i];
-      if (!std::isfinite(b)) return invalid(field(), "must be a finite number, got " + formatDouble(b));
-      if (!(b > 0.0 && b < 180.0)) return invalid(field(), formatDouble(b) + " is outside (0, 180) degrees");
-      if (i > 0 && !(b > bounds[i - 1])) {
-        return invalid(field(), formatDouble(b) + " is not greater than the previous bound " +
-                                    formatDouble(bounds[i - 1]) + " (bounds must increase strictly)");
-      }
-      model.bound_deg_[i] = b;
-    }
-    model.region_count_ = static_cast<int>(bounds.size()) + 1;
-    for (int n = 0; n < model.region_count_; ++n) model.names_[n] = kCustomNames[n];
+    regions = model.setCustomRegions(config.custom_bounds_deg);
   }
+  if (!regions) return regions;
+  if (Status far = model.setFarEccentricity(config.far_ecc_deg); !far) return far;
+  return model;
+}
 
-  const double far = config.far_ecc_deg;
+Status RegionModel::setAcuityLevels(const AcuityConfig& config) {
+  // Levels 1 .. kMaxRegions - 1 of the nested lattice; region 0 holds the raw points.
+  const double v = config.level_voxel_m;
+  if (!std::isfinite(v) || !(v >= 1e-4 && v <= 1.0)) {
+    return invalid("level_voxel_m", formatDouble(v) + " is outside [0.0001, 1] m");
+  }
+  const double f = config.floor_m;
+  if (!std::isfinite(f) || !(f >= 0.0 && f <= 1.0)) return invalid("floor_m", formatDouble(f) + " is outside [0, 1] m");
+  const double k = config.level_margin;
+  if (!std::isfinite(k) || !(k >= 0.1 && k <= 10.0)) return invalid("level_margin", formatDouble(k) + " is outside [0.1, 10]");
+  level_voxel_m_ = v;
+  floor_m_ = f;
+  const double q = config.floor_per_m2;
+  if (!std::isfinite(q) || !(q >= 0.0 && q <= 1.0)) {
+    return invalid("floor_per_m2", formatDouble(q) + " is outside [0, 1] m per square metre");
+  }
+  floor_per_m2_ = q;
+  level_margin_ = k;
+  if (config.refine_passes < 0 || config.refine_passes > kMaxRefinePasses) {
+    return invalid("refine_passes", std::to_string(config.refine_passes) + " is outside [0, " +
+                                        std::to_string(kMaxRefinePasses) + "]");
+  }
+  refine_passes_ = config.refine_passes;
+  const double c = config.view_cull_deg;
+  if (!std::isfinite(c) || !(c > 0.0 && c <= 180.0)) {
+    return invalid("view_cull_deg", formatDouble(c) + " is outside (0, 180] degrees");
+  }
+  view_cull_ = config.view_cull;
+  view_cull_deg_ = c;
+  region_count_ = kMaxRegions;
+  for (int n = 0; n < kMaxRegions; ++n) names_[n] = kLevelNames[n];
+  return Status::ok();
+}
+
+void RegionModel::setTableIRegions(int table_bounds) {
+  for (int n = 0; n < table_bounds; ++n) bound_deg_[n] = kTableIBoundsDeg[n];
+  region_count_ = table_bounds + 1;
+  for (int n = 0; n < table_bounds; ++n) names_[n] = kTableINames[n];
+  // The outermost region is "the rest", sampled like the far periphery.
+  names_[table_bounds] = table_bounds == 0 ? "all" : (table_bounds == 5 ? "far-periphery" : "rest");
+}
+
+Status RegionModel::setCustomRegions(const std::vector<double>& bounds) {
+  if (bounds.size() > kMaxRegions - 1) {
+    return invalid("bounds_deg", "at most " + std::to_string(kMaxRegions - 1) + " bounds, got " +
+                                     std::to_string(bounds.size()));
+  }
+  for (std::size_t i = 0; i < bounds.size(); ++i) {
+    // The field's name only on error: a valid configuration is applied on the
+    // frame path (Foveator::setConfig), which must not build strings.
+    auto field = [i] { return "bounds_deg[" + std::to_string(i) + "]"; };
+    const double b = bounds[i];
+    if (!std::isfinite(b)) return invalid(field(), "must be a finite number, got " + formatDouble(b));
+    if (!(b > 0.0 && b < 180.0)) return invalid(field(), formatDouble(b) + " is outside (0, 180) degrees");
+    if (i > 0 && !(b > bounds[i - 1])) {
+      return invalid(field(), formatDouble(b) + " is not greater than the previous bound " +
+                                  formatDouble(bounds[i - 1]) + " (bounds must increase strictly)");
+    }
+    bound_deg_[i] = b;
+  }
+  region_count_ = static_cast<int>(bounds.size()) + 1;
+  for (int n = 0; n < region_count_; ++n) names_[n] = kCustomNames[n];
+  return Status::ok();
+}
+
+Status RegionModel::setFarEccentricity(double far) {
   if (!std::isfinite(far)) return invalid("far_ecc_deg", "must be a finite number, got " + formatDouble(far));
   if (!(far > 0.0 && far <= 180.0)) return invalid("far_ecc_deg", formatDouble(far) + " is outside (0, 180] degrees");
-  if (model.region_count_ > 1 && far < model.bound_deg_[model.region_count_ - 2]) {
+  if (region_count_ > 1 && far < bound_deg_[region_count_ - 2]) {
     return invalid("far_ecc_deg", formatDouble(far) + " is below the last region bound " +
-                                      formatDouble(model.bound_deg_[model.region_count_ - 2]) +
+                                      formatDouble(bound_deg_[region_count_ - 2]) +
                                       " (the outermost voxels would be smaller than the next inner ones)");
   }
-  model.far_ecc_deg_ = far;
-  return model;
+  far_ecc_deg_ = far;
+  return Status::ok();
 }
 
 double RegionModel::voxelEccDeg(int n) const {

@@ -118,6 +118,12 @@ class RegionModel {
 
  private:
   RegionModel() = default;
+  // The steps of create(): the regions of one kind of preset (ACUITY's levels, Table
+  // I's regions, custom bounds), then the far eccentricity they all share.
+  Status setAcuityLevels(const AcuityConfig& config);
+  void setTableIRegions(int table_bounds);
+  Status setCustomRegions(const std::vector<double>& bounds);
+  Status setFarEccentricity(double far);
   Preset preset_ = Preset::kFRef;
   int region_count_ = 1;
   std::array<double, kMaxRegions - 1> bound_deg_{};

@@ -70,6 +70,39 @@ PyramidSampler::PyramidSampler(int max_width, int max_height, int levels, Kernel
   column_xn_.assign(padded, 0.0f);
 }
 
+namespace {
+
+// The colour sums (sr, sg, sb) of row j of level 1's cells (PyramidSampler::
+// buildFirstLevel), from a w x h colour image, over the valid pixels of each 2 x 2
+// square (va, vb: the validity of pixel rows 2j and 2j + 1), exact in float (at most
+// 4 x 255), for the emitted cells' means. Byte loads, so a loop of its own; row b
+// past the image reads row a's bytes with no valid pixel to count.
+inline void sumFirstLevelColours(const uint8_t* rgb, int w, int h, int j, int cells, const float* __restrict va,
+                                 const float* __restrict vb, float* __restrict sr, float* __restrict sg,
+                                 float* __restrict sb) {
+  const uint8_t* ca = rgb + 3 * static_cast<std::size_t>(2 * j) * w;
+  const uint8_t* cb = 2 * j + 1 < h ? ca + 3 * static_cast<std::size_t>(w) : ca;
+  const int pairs = w / 2;  // cells with both columns in the image
+  for (int i = 0; i < pairs; ++i) {
+    const int u = 2 * i;
+    const uint8_t* pa = ca + 3 * u;
+    const uint8_t* pb = cb + 3 * u;
+    sr[i] = (va[u] * pa[0] + va[u + 1] * pa[3]) + (vb[u] * pb[0] + vb[u + 1] * pb[3]);
+    sg[i] = (va[u] * pa[1] + va[u + 1] * pa[4]) + (vb[u] * pb[1] + vb[u + 1] * pb[4]);
+    sb[i] = (va[u] * pa[2] + va[u + 1] * pa[5]) + (vb[u] * pb[2] + vb[u + 1] * pb[5]);
+  }
+  if (pairs < cells) {  // an odd width: the last cell has one column
+    const int u = 2 * pairs;
+    const uint8_t* pa = ca + 3 * u;
+    const uint8_t* pb = cb + 3 * u;
+    sr[pairs] = va[u] * pa[0] + vb[u] * pb[0];
+    sg[pairs] = va[u] * pa[1] + vb[u] * pb[1];
+    sb[pairs] = va[u] * pa[2] + vb[u] * pb[2];
+  }
+}
+
+}  // namespace
+
 // Level 1 straight from the depth image, two rows at a time: per row a loop over
 // pixels (x, z and validity, 0 when invalid), then one over cells adding each 2 x 2
 // square; both are plain loops over arrays that the compiler vectorises. y is summed
@@ -144,31 +177,8 @@ void PyramidSampler::buildFirstLevel(const hal::RgbdFrame& frame, const RawDepth
       zmax[i] = std::max(std::max(a0, a1), std::max(b0, b1));
     }
     if (frame.has_rgb) {
-      // The square's colour sums over its valid pixels (exact in float: at most
-      // 4 x 255), for the emitted cells' means. Byte loads, so a loop of its own;
-      // row b past the image reads row a's bytes with no valid pixel to count.
-      const uint8_t* ca = frame.rgb() + 3 * static_cast<std::size_t>(2 * j) * w;
-      const uint8_t* cb = 2 * j + 1 < h ? ca + 3 * static_cast<std::size_t>(w) : ca;
-      float* __restrict sr = level.cr.data() + row0;
-      float* __restrict sg = level.cg.data() + row0;
-      float* __restrict sb = level.cb.data() + row0;
-      const int pairs = w / 2;  // cells with both columns in the image
-      for (int i = 0; i < pairs; ++i) {
-        const int u = 2 * i;
-        const uint8_t* pa = ca + 3 * u;
-        const uint8_t* pb = cb + 3 * u;
-        sr[i] = (va[u] * pa[0] + va[u + 1] * pa[3]) + (vb[u] * pb[0] + vb[u + 1] * pb[3]);
-        sg[i] = (va[u] * pa[1] + va[u + 1] * pa[4]) + (vb[u] * pb[1] + vb[u + 1] * pb[4]);
-        sb[i] = (va[u] * pa[2] + va[u + 1] * pa[5]) + (vb[u] * pb[2] + vb[u + 1] * pb[5]);
-      }
-      if (pairs < cells) {  // an odd width: the last cell has one column
-        const int u = 2 * pairs;
-        const uint8_t* pa = ca + 3 * u;
-        const uint8_t* pb = cb + 3 * u;
-        sr[pairs] = va[u] * pa[0] + vb[u] * pb[0];
-        sg[pairs] = va[u] * pa[1] + vb[u] * pb[1];
-        sb[pairs] = va[u] * pa[2] + vb[u] * pb[2];
-      }
+      sumFirstLevelColours(frame.rgb(), w, h, j, cells, va, vb, level.cr.data() + row0, level.cg.data() + row0,
+                           level.cb.data() + row0);
     }
   }
   level.clearPadding();

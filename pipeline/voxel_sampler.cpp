@@ -25,7 +25,106 @@ struct AxisRange {
 
 const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
 
+// Voxel index ranges per region and axis.
+using RegionIndexRanges = std::array<std::array<AxisRange, 3>, kMaxRegions>;
+
+// Pass 1: counts.in per region, index ranges per region and axis, and the range
+// check of every index.
+Status measureIndexRanges(const PointCloud& in, const uint8_t* region, int region_count,
+                          const std::array<double, kMaxRegions>& inv_voxel, SampleCounts& counts,
+                          RegionIndexRanges& range) {
+  const std::size_t n = in.size();
+  const float* coord[3] = {in.x(), in.y(), in.z()};
+  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = region[i];
+    if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
+    ++counts.in[r];
+    if (r == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const double k = voxelIndex(origin[a], coord[a][i], inv_voxel[r]);
+      if (!(std::fabs(k) < kMaxAbsIndex)) {
+        return {ErrorCode::kRangeExceeded,
+                "voxel sampler: region " + std::to_string(r) + " point " + std::to_string(i) + " has voxel index " +
+                    std::to_string(k) + " along " + axisName(a) + " (not a finite coordinate within range)"};
+      }
+      range[r][a].add(static_cast<int64_t>(k));
+    }
+  }
+  return Status::ok();
+}
+
+// Every occupied region's span along every axis fits the packed key.
+Status checkVoxelSpans(const RegionIndexRanges& range, const SampleCounts& counts, int region_count,
+                       const std::array<double, kMaxRegions>& voxel_size_m) {
+  for (int r = 1; r < region_count; ++r) {
+    if (counts.in[r] == 0) continue;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t span = range[r][a].hi - range[r][a].lo + 1;
+      if (span > kMaxVoxelSpan) {
+        return {ErrorCode::kRangeExceeded,
+                "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) +
+                    " voxels of " + std::to_string(voxel_size_m[r]) + " m along " + axisName(a) + ", more than " +
+                    std::to_string(kMaxVoxelSpan) + ": crop the cloud or raise fixation.min_m"};
+      }
+    }
+  }
+  return Status::ok();
+}
+
+// Pass 2: packed keys (region, i, j, k) of the non-fovea points, with their
+// indexes; returns how many.
+std::size_t packVoxelKeys(const PointCloud& in, const uint8_t* region, int region_count,
+                          const std::array<double, kMaxRegions>& inv_voxel, const RegionIndexRanges& range,
+                          uint64_t* keys, uint32_t* index) {
+  const std::size_t n = in.size();
+  const float* coord[3] = {in.x(), in.y(), in.z()};
+  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
+  std::size_t m = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint8_t r = region[i];
+    if (r == 0 || r >= region_count) continue;
+    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
+    for (int a = 0; a < 3; ++a) {
+      const auto k = static_cast<int64_t>(voxelIndex(origin[a], coord[a][i], inv_voxel[r]));
+      key |= static_cast<uint64_t>(k - range[r][a].lo) << ((2 - a) * kVoxelAxisBits);
+    }
+    keys[m] = key;
+    index[m] = static_cast<uint32_t>(i);
+    ++m;
+  }
+  return m;
+}
+
+// One centroid per run of equal keys of the m sorted ones, written from out index o
+// on; returns the index after the last.
+std::size_t reduceVoxelRuns(const PointCloud& in, const uint64_t* keys, const uint32_t* index, std::size_t m,
+                            std::size_t o, FoveatedCloud& out, SampleCounts& counts, uint32_t* representative) {
+  for (std::size_t s = 0; s < m;) {
+    std::size_t e = s + 1;
+    while (e < m && keys[e] == keys[s]) ++e;
+    const auto r = static_cast<uint8_t>(keys[s] >> (3 * kVoxelAxisBits));
+    reduceVoxel(in, index + s, e - s, r, o, out, representative);
+    ++counts.out[r];
+    ++o;
+    s = e;
+  }
+  return o;
+}
+
 }  // namespace
+
+Status inverseVoxelSizes(int region_count, const std::array<double, kMaxRegions>& voxel_size_m, double* inv_voxel) {
+  for (int r = 1; r < region_count; ++r) {
+    const double v = voxel_size_m[r];
+    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
+      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) +
+                                               " voxel size " + std::to_string(v) + " m is not a positive number"};
+    }
+    inv_voxel[r] = 1.0 / v;
+  }
+  return Status::ok();
+}
 
 VoxelSampler::VoxelSampler(std::size_t max_points, std::size_t max_voxels)
     : max_voxels_(max_voxels),
@@ -127,62 +226,15 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
   }
 
   std::array<double, kMaxRegions> inv_voxel{};
-  for (int r = 1; r < region_count; ++r) {
-    const double v = voxel_size_m[r];
-    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
-      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) +
-                                               " voxel size " + std::to_string(v) + " m is not a positive number"};
-    }
-    inv_voxel[r] = 1.0 / v;
-  }
-
-  const float* coord[3] = {in.x(), in.y(), in.z()};
-  const double origin[3] = {in.origin_m.x(), in.origin_m.y(), in.origin_m.z()};
+  if (Status s = inverseVoxelSizes(region_count, voxel_size_m, inv_voxel.data()); !s) return s;
 
   // Pass 1: index ranges per region and axis, and the range check.
-  std::array<std::array<AxisRange, 3>, kMaxRegions> range{};
-  for (std::size_t i = 0; i < n; ++i) {
-    const uint8_t r = region[i];
-    if (r >= region_count) continue;  // kRegionInvalid: already counted by the partition
-    ++counts.in[r];
-    if (r == 0) continue;
-    for (int a = 0; a < 3; ++a) {
-      const double k = voxelIndex(origin[a], coord[a][i], inv_voxel[r]);
-      if (!(std::fabs(k) < kMaxAbsIndex)) {
-        return {ErrorCode::kRangeExceeded,
-                "voxel sampler: region " + std::to_string(r) + " point " + std::to_string(i) + " has voxel index " +
-                    std::to_string(k) + " along " + axisName(a) + " (not a finite coordinate within range)"};
-      }
-      range[r][a].add(static_cast<int64_t>(k));
-    }
-  }
-  for (int r = 1; r < region_count; ++r) {
-    if (counts.in[r] == 0) continue;
-    for (int a = 0; a < 3; ++a) {
-      const int64_t span = range[r][a].hi - range[r][a].lo + 1;
-      if (span > kMaxVoxelSpan) {
-        return {ErrorCode::kRangeExceeded,
-                "voxel sampler: region " + std::to_string(r) + " spans " + std::to_string(span) +
-                    " voxels of " + std::to_string(voxel_size_m[r]) + " m along " + axisName(a) + ", more than " +
-                    std::to_string(kMaxVoxelSpan) + ": crop the cloud or raise fixation.min_m"};
-      }
-    }
-  }
+  RegionIndexRanges range{};
+  if (Status s = measureIndexRanges(in, region, region_count, inv_voxel, counts, range); !s) return s;
+  if (Status s = checkVoxelSpans(range, counts, region_count, voxel_size_m); !s) return s;
 
   // Pass 2: packed keys (region, i, j, k) of the non-fovea points.
-  std::size_t m = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const uint8_t r = region[i];
-    if (r == 0 || r >= region_count) continue;
-    uint64_t key = uint64_t{r} << (3 * kVoxelAxisBits);
-    for (int a = 0; a < 3; ++a) {
-      const auto k = static_cast<int64_t>(voxelIndex(origin[a], coord[a][i], inv_voxel[r]));
-      key |= static_cast<uint64_t>(k - range[r][a].lo) << ((2 - a) * kVoxelAxisBits);
-    }
-    keys_[m] = key;
-    index_[m] = static_cast<uint32_t>(i);
-    ++m;
-  }
+  const std::size_t m = packVoxelKeys(in, region, region_count, inv_voxel, range, keys_.data(), index_.data());
   radixSortPairs(keys_.data(), index_.data(), keys_scratch_.data(), index_scratch_.data(), m);
 
   std::size_t voxels = 0;
@@ -202,15 +254,7 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
   counts.out[0] = static_cast<uint32_t>(fovea);
 
   // One centroid per run of equal keys.
-  for (std::size_t s = 0; s < m;) {
-    std::size_t e = s + 1;
-    while (e < m && keys_[e] == keys_[s]) ++e;
-    const auto r = static_cast<uint8_t>(keys_[s] >> (3 * kVoxelAxisBits));
-    reduceVoxel(in, index_.data() + s, e - s, r, o, out, representative);
-    ++counts.out[r];
-    ++o;
-    s = e;
-  }
+  o = reduceVoxelRuns(in, keys_.data(), index_.data(), m, o, out, counts, representative);
   (void)out.points.resize(o);
   return Status::ok();
 }

@@ -39,6 +39,11 @@ struct SampleCounts {
   std::array<uint32_t, kMaxRegions> out{};  // output points per region
 };
 
+// 1 / voxel size of regions 1 .. region_count - 1 into inv_voxel[1 .. region_count)
+// (the other entries untouched); kInvalidArgument naming the region when a size is
+// not a positive number with a finite inverse. Shared by the voxel samplers.
+Status inverseVoxelSizes(int region_count, const std::array<double, kMaxRegions>& voxel_size_m, double* inv_voxel);
+
 // World voxel index along one axis; the specification shared by every kernel.
 inline double voxelIndex(double origin_m, float coord, double inv_voxel_m) {
   return std::floor((origin_m + static_cast<double>(coord)) * inv_voxel_m);

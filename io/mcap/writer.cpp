@@ -341,16 +341,23 @@ Status Writer::close() {
   if (closed_) return Status(ErrorCode::kInvalidArgument, "mcap: the writer is closed");
   if (Status s = flushChunk(); !s) return s;
   closed_ = true;
+  if (Status s = emitDataEnd(); !s) return s;
+  stageSummary(offset_);
+  if (Status s = emitStaged(false); !s) return s;
+  return closeFile();
+}
+
+Status Writer::emitDataEnd() {
   Builder b(staged_);
-  // DataEnd.
-  {
-    const uint32_t crc = data_crc_;
-    const std::size_t at = b.begin(kOpDataEnd);
-    b.u32(crc);
-    b.end(at);
-    if (Status s = emitStaged(false); !s) return s;
-  }
-  const uint64_t summary_start = offset_;
+  const uint32_t crc = data_crc_;
+  const std::size_t at = b.begin(kOpDataEnd);
+  b.u32(crc);
+  b.end(at);
+  return emitStaged(false);
+}
+
+void Writer::stageSummary(uint64_t summary_start) {
+  Builder b(staged_);
   struct Group {
     uint8_t opcode;
     uint64_t start;
@@ -368,26 +375,50 @@ Status Writer::close() {
   for (const auto& record : channel_records_) b.bytes(record);
   group(kOpChannel, from);
   from = b.size();
-  {
-    const std::size_t at = b.begin(kOpStatistics);
-    b.u64(stats_.messages);
-    b.u16(static_cast<uint16_t>(schema_records_.size()));
-    b.u32(static_cast<uint32_t>(channel_records_.size()));
-    b.u32(0);  // attachments
-    b.u32(0);  // metadata
-    b.u32(static_cast<uint32_t>(chunk_indexes_.size()));
-    b.u64(message_start_time_);
-    b.u64(message_end_time_);
-    const std::size_t map_at = b.beginU32();
-    for (std::size_t i = 0; i < channels_.size(); ++i) {
-      b.u16(static_cast<uint16_t>(i + 1));
-      b.u64(channels_[i].messages);
-    }
-    b.endU32(map_at);
-    b.end(at);
-  }
+  stageStatistics();
   group(kOpStatistics, from);
   from = b.size();
+  stageChunkIndexes();
+  group(kOpChunkIndex, from);
+  const uint64_t summary_offset_start = summary_start + b.size();
+  for (int i = 0; i < group_count; ++i) {
+    const std::size_t at = b.begin(kOpSummaryOffset);
+    b.u8(groups[i].opcode);
+    b.u64(groups[i].start);
+    b.u64(groups[i].length);
+    b.end(at);
+  }
+  // Footer: its CRC covers the summary, the offsets and the footer up to the CRC.
+  b.u8(kOpFooter);
+  b.u64(8 + 8 + 4);
+  b.u64(summary_start);
+  b.u64(summary_offset_start);
+  b.u32(crc32Update(0, staged_));
+  b.bytes(kMagic);
+}
+
+void Writer::stageStatistics() {
+  Builder b(staged_);
+  const std::size_t at = b.begin(kOpStatistics);
+  b.u64(stats_.messages);
+  b.u16(static_cast<uint16_t>(schema_records_.size()));
+  b.u32(static_cast<uint32_t>(channel_records_.size()));
+  b.u32(0);  // attachments
+  b.u32(0);  // metadata
+  b.u32(static_cast<uint32_t>(chunk_indexes_.size()));
+  b.u64(message_start_time_);
+  b.u64(message_end_time_);
+  const std::size_t map_at = b.beginU32();
+  for (std::size_t i = 0; i < channels_.size(); ++i) {
+    b.u16(static_cast<uint16_t>(i + 1));
+    b.u64(channels_[i].messages);
+  }
+  b.endU32(map_at);
+  b.end(at);
+}
+
+void Writer::stageChunkIndexes() {
+  Builder b(staged_);
   for (const ChunkIndexEntry& entry : chunk_indexes_) {
     const std::size_t at = b.begin(kOpChunkIndex);
     b.u64(entry.start_time);
@@ -406,34 +437,19 @@ Status Writer::close() {
     b.u64(entry.uncompressed_size);
     b.end(at);
   }
-  group(kOpChunkIndex, from);
-  const uint64_t summary_offset_start = summary_start + b.size();
-  for (int i = 0; i < group_count; ++i) {
-    const std::size_t at = b.begin(kOpSummaryOffset);
-    b.u8(groups[i].opcode);
-    b.u64(groups[i].start);
-    b.u64(groups[i].length);
-    b.end(at);
+}
+
+Status Writer::closeFile() {
+  if (fd_ < 0) return Status::ok();
+  const int fd = fd_;
+  fd_ = -1;
+  if (::fsync(fd) != 0 && errno != EINVAL && errno != EROFS) {
+    const int e = errno;
+    ::close(fd);
+    return fail(Status(ErrorCode::kIoError, "mcap: syncing " + path_ + ": " + std::strerror(e)));
   }
-  // Footer: its CRC covers the summary, the offsets and the footer up to the CRC.
-  b.u8(kOpFooter);
-  b.u64(8 + 8 + 4);
-  b.u64(summary_start);
-  b.u64(summary_offset_start);
-  b.u32(crc32Update(0, staged_));
-  b.bytes(kMagic);
-  if (Status s = emitStaged(false); !s) return s;
-  if (fd_ >= 0) {
-    const int fd = fd_;
-    fd_ = -1;
-    if (::fsync(fd) != 0 && errno != EINVAL && errno != EROFS) {
-      const int e = errno;
-      ::close(fd);
-      return fail(Status(ErrorCode::kIoError, "mcap: syncing " + path_ + ": " + std::strerror(e)));
-    }
-    if (::close(fd) != 0) {
-      return fail(Status(ErrorCode::kIoError, "mcap: closing " + path_ + ": " + std::strerror(errno)));
-    }
+  if (::close(fd) != 0) {
+    return fail(Status(ErrorCode::kIoError, "mcap: closing " + path_ + ": " + std::strerror(errno)));
   }
   return Status::ok();
 }

@@ -97,6 +97,14 @@ class Writer {
   Status emit(std::span<const uint8_t> bytes, bool data_section);
   Status emitStaged(bool data_section);
   Status fail(Status status);
+  // The steps of close(): DataEnd written; the summary, its offsets and the
+  // Footer staged (the Statistics and ChunkIndex records by their own steps);
+  // the file synced and closed.
+  Status emitDataEnd();
+  void stageSummary(uint64_t summary_start);
+  void stageStatistics();
+  void stageChunkIndexes();
+  Status closeFile();
 
   WriterOptions options_;
   std::string path_;

@@ -1,12 +1,25 @@
 // Dynamic dispatch of the SIMD kernels: foreach_target.h re-includes this file
-// once per Highway target, compiling foveation_simd-inl.h for each; HWY_EXPORT
+// once per Highway target, compiling the kernels' -inl headers for each; HWY_EXPORT
 // builds the tables and HWY_DYNAMIC_DISPATCH calls the best supported target.
+//
+// The -inl headers hold the per-target bodies, one header a concern:
+// back-projection, the gaze's cones (partition, hit cone), ACUITY's model (levels,
+// pyramid merge, refinement) and the samplers' voxel indices and keys. In all of
+// them, every function that calls a Highway op sits between HWY_BEFORE_NAMESPACE
+// and HWY_AFTER_NAMESPACE (GCC 12 on aarch64 refuses to inline the ops otherwise).
+//
+// Bit-exactness rules followed there: only Mul, Add, Sub, Neg, Sqrt, Floor and
+// conversions, in the reference's order; never MulAdd (an FMA on AVX2/NEON).
+// Tails shorter than a vector run through the same vector code on a padded copy.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/kernels/foveation_simd.cpp"
 #include "hwy/foreach_target.h"  // IWYU pragma: keep
 
 #include "hwy/highway.h"
-#include "pipeline/kernels/foveation_simd-inl.h"
+#include "pipeline/kernels/foveation_simd_backproject-inl.h"
+#include "pipeline/kernels/foveation_simd_gaze-inl.h"
+#include "pipeline/kernels/foveation_simd_acuity-inl.h"
+#include "pipeline/kernels/foveation_simd_voxel-inl.h"
 
 #if HWY_ONCE
 

@@ -267,25 +267,6 @@ struct HashVoxelSampler::VoxelOrder {
   uint64_t slot_mask = 0;
 };
 
-namespace {
-
-// 1 / voxel size per region; regions outside [1, region_count) get 0: their
-// indices are computed and ignored.
-Status inverseVoxelSizes(int region_count, const std::array<double, kMaxRegions>& voxel_size_m,
-                         std::array<double, 256>& inv_voxel) {
-  for (int r = 1; r < region_count; ++r) {
-    const double v = voxel_size_m[r];
-    if (!(std::isfinite(v) && v > 0.0) || !std::isfinite(1.0 / v)) {
-      return {ErrorCode::kInvalidArgument, "voxel sampler: region " + std::to_string(r) + " voxel size " +
-                                               std::to_string(v) + " m is not a positive number"};
-    }
-    inv_voxel[r] = 1.0 / v;
-  }
-  return Status::ok();
-}
-
-}  // namespace
-
 Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                                 SampleCounts& counts, uint32_t* representative) {
@@ -301,9 +282,11 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   if (region_count < 1 || region_count > kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};
   }
-  // Kept here: the key states point to it while the keys are computed.
+  // 1 / voxel size per region; regions outside [1, region_count) get 0: their
+  // indices are computed and ignored. Kept here: the key states point to it while
+  // the keys are computed.
   std::array<double, 256> inv_voxel{};
-  if (Status s = inverseVoxelSizes(region_count, voxel_size_m, inv_voxel); !s) return s;
+  if (Status s = inverseVoxelSizes(region_count, voxel_size_m, inv_voxel.data()); !s) return s;
   startFrame(in, region_count, inv_voxel);
 
   // 1-2. Keys and checks, then accumulation in place. The first bad point in point
