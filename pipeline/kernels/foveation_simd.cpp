@@ -8,8 +8,9 @@
 // them, every function that calls a Highway op sits between HWY_BEFORE_NAMESPACE
 // and HWY_AFTER_NAMESPACE (GCC 12 on aarch64 refuses to inline the ops otherwise).
 //
-// Bit-exactness rules followed there: only Mul, Add, Sub, Neg, Sqrt, Floor and
-// conversions, in the reference's order; never MulAdd (an FMA on AVX2/NEON).
+// Bit-exactness rules followed there: only correctly rounded IEEE operations
+// (Mul, Add, Sub, Neg, Div, Sqrt, Floor) and conversions, in the reference's
+// order; never MulAdd (an FMA on AVX2/NEON) nor an approximate reciprocal.
 // Tails shorter than a vector run through the same vector code on a padded copy.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/kernels/foveation_simd.cpp"
