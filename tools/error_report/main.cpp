@@ -11,10 +11,12 @@
 
 #include "firmware/mcap_camera.h"
 #include "tools/error_report/config_run.h"
+#include "tools/error_report/dynamics.h"
 #include "tools/error_report/exit_code.h"
 #include "tools/error_report/measure.h"
 #include "tools/error_report/options.h"
 #include "tools/error_report/output.h"
+#include "tools/error_report/report.h"
 
 namespace fovea::tools {
 namespace {
