@@ -1,13 +1,16 @@
 #include "tools/error_report/dynamics.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <limits>
 #include <numbers>
+#include <span>
 #include <sstream>
+#include <utility>
 
 #include <Eigen/Geometry>
 
@@ -120,32 +123,40 @@ std::vector<DynamicsConfig> dynamicsConfigs(double slope, const std::vector<Acui
   return configs;
 }
 
-Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<DynamicsConfig>& configs,
-                                       const DynamicsOptions& options) {
-  DynamicsReport report;
-  report.options = options;
-  const hal::CameraInfo& info = camera.info();
-  const int width = info.intrinsics.width, height = info.intrinsics.height;
-  const std::size_t max_points = static_cast<std::size_t>(width) * height;
-  // The SIMD kernels: their output is the reference's (docs/kernels.md), and the
-  // coverage figure foveates twice per simulated frame.
-  Result<pipeline::Foveator> foveator =
-      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kSimd, 1}, configs.front().config);
-  if (!foveator) return foveator.status();
-  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
-  if (!encoder) return encoder.status();
-  hal::RgbdFrame frame(width, height);
-  pipeline::PointCloud cloud(max_points);
-  pipeline::FoveatedCloud out(max_points);
-  pipeline::FoveationStats stats;
-  const pipeline::DepthRange range;
+namespace {
 
-  // ---- temporal stability ----
+// What both figures use, sized once for the camera. The SIMD kernels: their
+// output is the reference's (docs/kernels.md), and the coverage figure foveates
+// twice per simulated frame.
+struct DynamicsRig {
+  pipeline::Foveator foveator;
+  net::ChunkEncoder encoder;
+  pipeline::PointCloud cloud;
+  pipeline::FoveatedCloud out;
+  pipeline::FoveationStats stats;
+  pipeline::DepthRange range;  // fovead's defaults
+};
+
+// The eye on the stability figure's first frame (where it is, where it looks,
+// the world's up) and that frame, which the coverage figure replays.
+struct StabilityStart {
+  Eigen::Vector3d eye = Eigen::Vector3d::Zero(), look = Eigen::Vector3d::UnitZ(), up = -Eigen::Vector3d::UnitY();
+  hal::RgbdFrame first;
+};
+
+// Temporal stability: each configuration on the camera's next frames with a
+// fixed and a drifting gaze, into report.stability.
+Status measureStability(hal::Camera& camera, const std::vector<DynamicsConfig>& configs,
+                        const DynamicsOptions& options, DynamicsRig& rig, StabilityStart& start,
+                        DynamicsReport& report) {
+  const hal::CameraInfo& info = camera.info();
+  hal::RgbdFrame frame(info.intrinsics.width, info.intrinsics.height);
   const std::size_t n = configs.size();
   std::vector<std::vector<uint64_t>> previous(2 * n), current(2 * n);
   std::vector<double> changed(2 * n, 0.0), points(n, 0.0);
-  Eigen::Vector3d eye = Eigen::Vector3d::Zero(), look = Eigen::Vector3d::UnitZ(), up = -Eigen::Vector3d::UnitY();
-  hal::RgbdFrame first(width, height);
+  Eigen::Vector3d& eye = start.eye;
+  Eigen::Vector3d& look = start.look;
+  Eigen::Vector3d& up = start.up;
   int pairs = 0;
   for (int f = 0; f < options.stability_frames; ++f) {
     if (Status s = camera.acquire(frame, std::chrono::seconds(2)); !s) return s;
@@ -154,22 +165,22 @@ Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<Dy
       look = info.focus_point_m ? Eigen::Vector3d(*info.focus_point_m - eye)
                                 : Eigen::Vector3d(frame.T_world_cam.R_world_cam.col(2));
       up = -frame.T_world_cam.R_world_cam.col(1);
-      first = frame;
+      start.first = frame;
     }
     pipeline::BackprojectCounts counts;
-    if (Status s = pipeline::backprojectRef(frame, range, cloud, counts); !s) return s;
+    if (Status s = pipeline::backprojectRef(frame, rig.range, rig.cloud, counts); !s) return s;
     for (int mode = 0; mode < 2; ++mode) {
       pipeline::Gaze gaze;
       gaze.origin_m = eye;
       const double drift_deg = mode == 1 ? options.drift_deg_s * f / options.fps : 0.0;
       gaze.direction = Eigen::AngleAxisd(drift_deg * kDegToRad, up.normalized()) * look;
       for (std::size_t c = 0; c < n; ++c) {
-        if (Status s = foveator->setConfig(configs[c].config); !s) return s;
-        if (Status s = foveator->foveate(cloud, gaze, out, stats); !s) return s;
+        if (Status s = rig.foveator.setConfig(configs[c].config); !s) return s;
+        if (Status s = rig.foveator.foveate(rig.cloud, gaze, rig.out, rig.stats); !s) return s;
         std::vector<uint64_t>& keys = current[mode * n + c];
-        outputKeys(out, stats, frame, keys);
+        outputKeys(rig.out, rig.stats, frame, keys);
         if (f > 0) changed[mode * n + c] += changedShare(previous[mode * n + c], keys);
-        if (mode == 0) points[c] += static_cast<double>(out.size());
+        if (mode == 0) points[c] += static_cast<double>(rig.out.size());
         std::swap(keys, previous[mode * n + c]);
       }
     }
@@ -184,97 +195,149 @@ Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<Dy
     r.points_fixed = options.stability_frames ? points[c] / options.stability_frames : kNaN;
     report.stability.push_back(r);
   }
+  return Status::ok();
+}
 
-  // ---- latency-corrected fovea coverage, on the first frame (a static scene) ----
-  pipeline::BackprojectCounts counts;
-  if (Status s = pipeline::backprojectRef(first, range, cloud, counts); !s) return s;
-  const double distance = look.norm();
-  const Eigen::Vector3d forward = look.normalized();
-  const Eigen::Vector3d side = up.normalized().cross(forward).normalized();
+// The coverage figure's scan, as fovea-operator --gaze takes it: four fixations
+// around the scene's centre, 24 degrees apart across and 12 up and down.
+std::string coverageScript(const StabilityStart& start) {
+  const double distance = start.look.norm();
+  const Eigen::Vector3d forward = start.look.normalized();
+  const Eigen::Vector3d side = start.up.normalized().cross(forward).normalized();
   const Eigen::Vector3d lift = forward.cross(side).normalized();
-  // Four fixations around the scene's centre, 24 degrees apart across and 12 up and down.
-  std::string script = "scan:" + point(eye) + ">";
+  std::string script = "scan:" + point(start.eye) + ">";
   const double offsets[4][2] = {{-12, 6}, {12, 6}, {12, -6}, {-12, -6}};
   for (int t = 0; t < 4; ++t) {
     const Eigen::Vector3d d = Eigen::AngleAxisd(offsets[t][1] * kDegToRad, side) *
                               (Eigen::AngleAxisd(offsets[t][0] * kDegToRad, lift) * forward);
-    script += (t ? ";" : "") + point(eye + distance * d);
+    script += (t ? ";" : "") + point(start.eye + distance * d);
   }
   script += "@400/50";
-  Result<GazeScript> scan = GazeScript::parse(script);
-  if (!scan) return scan.status();
-  report.script = script;
+  return script;
+}
 
+// Of the cloud's points within the radius (cos_radius) of where the eye is when
+// the frame is shown, those `sent` at least as finely as `needed` there: `within`
+// and `covered` counted.
+void countCovered(const pipeline::PointCloud& cloud, const std::vector<uint8_t>& sent,
+                  const std::vector<uint8_t>& needed, const GazePoint& shown, double cos_radius, uint64_t& within,
+                  uint64_t& covered) {
+  const Eigen::Vector3d e = shown.direction.normalized();
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    if (sent[i] >= pipeline::kMaxRegions || needed[i] >= pipeline::kMaxRegions) continue;
+    const Eigen::Vector3d v = cloud.world(i) - shown.origin_m;
+    const double norm = v.norm();
+    if (!(norm > 0.0) || v.dot(e) < norm * cos_radius) continue;
+    ++within;
+    covered += sent[i] <= needed[i];
+  }
+}
+
+// Latency-corrected fovea coverage of one configuration over the scan, on the
+// cloud in rig (the first frame's: a static scene). sent and needed: scratch, a
+// byte per point.
+Result<CoverageResult> measureCoverage(const DynamicsConfig& dc, const GazeScript& scan,
+                                       const DynamicsOptions& options, DynamicsRig& rig, std::vector<uint8_t>& sent,
+                                       std::vector<uint8_t>& needed) {
   const auto ns = [](double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); };
   const int64_t period_ns = static_cast<int64_t>(std::llround(1e9 / options.gaze_hz));
   const int64_t up_ns = ns(options.up_ms), down_ns = ns(options.down_ms), lead_ns = ns(options.lead_ms);
   const int frames = static_cast<int>(std::floor(options.coverage_seconds * options.fps));
-  std::vector<uint8_t> sent(max_points), needed(max_points);
   const double cos_radius = std::cos(options.coverage_radius_deg * kDegToRad);
-  for (const DynamicsConfig& dc : configs) {
-    if (Status s = foveator->setConfig(dc.config); !s) return s;
-    pipeline::EyeSpeed eye_speed;
-    CoverageResult r;
-    r.name = dc.name;
-    uint64_t within = 0, covered = 0, within_moving = 0, covered_moving = 0;
-    double bytes = 0.0, growth_sum = 0.0;
-    r.worst_frame = 1.0;
-    for (int f = 0; f < frames; ++f) {
-      // Captured at t (a capture at time 0 would have no sample yet: start a frame in).
-      const int64_t t_ns = static_cast<int64_t>(std::llround((f + 1) * 1e9 / options.fps));
-      // The newest sample that has reached the robot, stamped at a multiple of the period.
-      const int64_t stamp_ns = (t_ns - up_ns) / period_ns * period_ns;
-      const GazePoint sample = scan->at(stamp_ns);
-      eye_speed.observe(sample.direction, stamp_ns);
-      pipeline::Gaze gaze;
-      gaze.origin_m = sample.origin_m;
-      gaze.direction = sample.direction;
-      if (dc.growth) {
-        gaze.fovea_growth_deg =
-            pipeline::foveaGrowthDeg(eye_speed.speedDegS(), t_ns - (stamp_ns + up_ns), lead_ns, options.growth_max_deg);
-      }
-      growth_sum += gaze.fovea_growth_deg;
-      if (Status s = foveator->foveate(cloud, gaze, out, stats); !s) return s;
-      std::copy(foveator->lastRegions(), foveator->lastRegions() + cloud.size(), sent.begin());
-      std::array<double, pipeline::kMaxRegions> voxel_m{};
-      for (int reg = 0; reg < stats.region_count; ++reg) voxel_m[reg] = stats.regions[reg].voxel_size_m;
-      if (Status s = encoder->encode(out, std::span<const double>(voxel_m.data(), stats.region_count), 0, 0); !s) {
-        return s;
-      }
-      for (std::size_t i = 0; i < encoder->chunkCount(); ++i) bytes += encoder->chunk(i).size() + net::kDatagramOverhead;
-      // Where the eye is when the frame is shown, and what a gaze there would send.
-      const GazePoint shown = scan->at(t_ns + down_ns);
-      pipeline::Gaze truth;
-      truth.origin_m = shown.origin_m;
-      truth.direction = shown.direction;
-      if (Status s = foveator->foveate(cloud, truth, out, stats); !s) return s;
-      std::copy(foveator->lastRegions(), foveator->lastRegions() + cloud.size(), needed.begin());
-      const bool moving = angleDeg(sample.direction, shown.direction) > 1.0;
-      uint64_t w = 0, c = 0;
-      const Eigen::Vector3d e = shown.direction.normalized();
-      for (std::size_t i = 0; i < cloud.size(); ++i) {
-        if (sent[i] >= pipeline::kMaxRegions || needed[i] >= pipeline::kMaxRegions) continue;
-        const Eigen::Vector3d v = cloud.world(i) - shown.origin_m;
-        const double norm = v.norm();
-        if (!(norm > 0.0) || v.dot(e) < norm * cos_radius) continue;
-        ++w;
-        c += sent[i] <= needed[i];
-      }
-      within += w;
-      covered += c;
-      if (moving) {
-        within_moving += w;
-        covered_moving += c;
-        ++r.moving_frames;
-      }
-      if (w > 0) r.worst_frame = std::min(r.worst_frame, static_cast<double>(c) / static_cast<double>(w));
-      ++r.frames;
+  pipeline::Foveator& foveator = rig.foveator;
+  const pipeline::PointCloud& cloud = rig.cloud;
+  if (Status s = foveator.setConfig(dc.config); !s) return s;
+  pipeline::EyeSpeed eye_speed;
+  CoverageResult r;
+  r.name = dc.name;
+  uint64_t within = 0, covered = 0, within_moving = 0, covered_moving = 0;
+  double bytes = 0.0, growth_sum = 0.0;
+  r.worst_frame = 1.0;
+  for (int f = 0; f < frames; ++f) {
+    // Captured at t (a capture at time 0 would have no sample yet: start a frame in).
+    const int64_t t_ns = static_cast<int64_t>(std::llround((f + 1) * 1e9 / options.fps));
+    // The newest sample that has reached the robot, stamped at a multiple of the period.
+    const int64_t stamp_ns = (t_ns - up_ns) / period_ns * period_ns;
+    const GazePoint sample = scan.at(stamp_ns);
+    eye_speed.observe(sample.direction, stamp_ns);
+    pipeline::Gaze gaze;
+    gaze.origin_m = sample.origin_m;
+    gaze.direction = sample.direction;
+    if (dc.growth) {
+      gaze.fovea_growth_deg =
+          pipeline::foveaGrowthDeg(eye_speed.speedDegS(), t_ns - (stamp_ns + up_ns), lead_ns, options.growth_max_deg);
     }
-    r.coverage_all = within ? static_cast<double>(covered) / static_cast<double>(within) : kNaN;
-    r.coverage_moving = within_moving ? static_cast<double>(covered_moving) / static_cast<double>(within_moving) : kNaN;
-    r.bytes_per_frame = frames ? bytes / frames : kNaN;
-    r.growth_mean_deg = frames ? growth_sum / frames : kNaN;
-    report.coverage.push_back(r);
+    growth_sum += gaze.fovea_growth_deg;
+    if (Status s = foveator.foveate(cloud, gaze, rig.out, rig.stats); !s) return s;
+    std::copy(foveator.lastRegions(), foveator.lastRegions() + cloud.size(), sent.begin());
+    std::array<double, pipeline::kMaxRegions> voxel_m{};
+    for (int reg = 0; reg < rig.stats.region_count; ++reg) voxel_m[reg] = rig.stats.regions[reg].voxel_size_m;
+    if (Status s = rig.encoder.encode(rig.out, std::span<const double>(voxel_m.data(), rig.stats.region_count), 0, 0);
+        !s) {
+      return s;
+    }
+    for (std::size_t i = 0; i < rig.encoder.chunkCount(); ++i) bytes += rig.encoder.chunk(i).size() + net::kDatagramOverhead;
+    // Where the eye is when the frame is shown, and what a gaze there would send.
+    const GazePoint shown = scan.at(t_ns + down_ns);
+    pipeline::Gaze truth;
+    truth.origin_m = shown.origin_m;
+    truth.direction = shown.direction;
+    if (Status s = foveator.foveate(cloud, truth, rig.out, rig.stats); !s) return s;
+    std::copy(foveator.lastRegions(), foveator.lastRegions() + cloud.size(), needed.begin());
+    const bool moving = angleDeg(sample.direction, shown.direction) > 1.0;
+    uint64_t w = 0, c = 0;
+    countCovered(cloud, sent, needed, shown, cos_radius, w, c);
+    within += w;
+    covered += c;
+    if (moving) {
+      within_moving += w;
+      covered_moving += c;
+      ++r.moving_frames;
+    }
+    if (w > 0) r.worst_frame = std::min(r.worst_frame, static_cast<double>(c) / static_cast<double>(w));
+    ++r.frames;
+  }
+  r.coverage_all = within ? static_cast<double>(covered) / static_cast<double>(within) : kNaN;
+  r.coverage_moving = within_moving ? static_cast<double>(covered_moving) / static_cast<double>(within_moving) : kNaN;
+  r.bytes_per_frame = frames ? bytes / frames : kNaN;
+  r.growth_mean_deg = frames ? growth_sum / frames : kNaN;
+  return r;
+}
+
+}  // namespace
+
+Result<DynamicsReport> measureDynamics(hal::Camera& camera, const std::vector<DynamicsConfig>& configs,
+                                       const DynamicsOptions& options) {
+  DynamicsReport report;
+  report.options = options;
+  const hal::CameraInfo& info = camera.info();
+  const int width = info.intrinsics.width, height = info.intrinsics.height;
+  const std::size_t max_points = static_cast<std::size_t>(width) * height;
+  Result<pipeline::Foveator> foveator =
+      pipeline::Foveator::create({max_points, max_points, fovea::KernelSet::kSimd, 1}, configs.front().config);
+  if (!foveator) return foveator.status();
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(net::CodecConfig{}, max_points);
+  if (!encoder) return encoder.status();
+  DynamicsRig rig{std::move(foveator.value()), std::move(encoder.value()), pipeline::PointCloud(max_points),
+                  pipeline::FoveatedCloud(max_points), {}, {}};
+
+  // ---- temporal stability ----
+  StabilityStart start;
+  start.first = hal::RgbdFrame(width, height);
+  if (Status s = measureStability(camera, configs, options, rig, start, report); !s) return s;
+
+  // ---- latency-corrected fovea coverage, on the first frame (a static scene) ----
+  pipeline::BackprojectCounts counts;
+  if (Status s = pipeline::backprojectRef(start.first, rig.range, rig.cloud, counts); !s) return s;
+  const std::string script = coverageScript(start);
+  Result<GazeScript> scan = GazeScript::parse(script);
+  if (!scan) return scan.status();
+  report.script = script;
+  std::vector<uint8_t> sent(max_points), needed(max_points);
+  for (const DynamicsConfig& dc : configs) {
+    Result<CoverageResult> r = measureCoverage(dc, *scan, options, rig, sent, needed);
+    if (!r) return r.status();
+    report.coverage.push_back(std::move(r.value()));
   }
   return report;
 }

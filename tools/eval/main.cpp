@@ -457,18 +457,10 @@ std::string minutes(double s) {
   return buf;
 }
 
-int run(int argc, char** argv) {
-  bool help = false;
-  Result<Options> parsed = parseOptions(argc, argv, help);
-  if (help) {
-    std::printf("%s", kHelp);
-    return kExitOk;
-  }
-  if (!parsed) {
-    std::fprintf(stderr, "fovea-eval: %s\n", parsed.status().message().c_str());
-    return kExitUsage;
-  }
-  Options o = parsed.value();
+// The datasets to run: every default one there is (TUM when its sequence is
+// there) and a recording (--mcap), the recording alone unless --datasets names
+// others. kExitOk, or kExitUsage said on standard error.
+int chooseDatasets(const Options& o, std::vector<Dataset>& datasets) {
   std::error_code ec;
   const bool have_tum = fs::exists(o.tum + "/associations.txt", ec);
   if (o.tum_given && !have_tum) {
@@ -483,7 +475,7 @@ int run(int argc, char** argv) {
     }
     available.push_back({"recording", "", "mcap:" + fs::absolute(o.mcap).string() + ",realtime=on,loop=on"});
   }
-  std::vector<Dataset> datasets = available;
+  datasets = available;
   if (!o.mcap.empty() && o.datasets.empty()) datasets = {available.back()};
   if (!o.datasets.empty()) {
     Result<std::vector<Dataset>> d = selectDatasets(available, o.datasets);
@@ -493,15 +485,13 @@ int run(int argc, char** argv) {
     }
     datasets = d.value();
   }
-  Result<std::vector<Condition>> conditions = selectConditions(o.conditions);
-  if (!conditions) {
-    std::fprintf(stderr, "fovea-eval: %s\n", conditions.status().message().c_str());
-    return kExitUsage;
-  }
-  if (o.quality_frame < 0) o.quality_frame = defaultQualityFrame(conditions.value());
-  const std::string fovead = findProgram(o.fovead, "fovead", {".", "../firmware", "../../firmware"});
-  const std::string op = findProgram(o.op, "fovea-operator", {".", ".."});
+  return kExitOk;
+}
 
+// DIR/runs (emptied first with --fresh) and DIR/images. kExitOk, or
+// kExitFailure said on standard error.
+int prepareOutDir(const Options& o) {
+  std::error_code ec;
   const fs::path out(o.out_dir);
   if (o.fresh) fs::remove_all(out / "runs", ec);
   fs::create_directories(out / "runs", ec);
@@ -510,21 +500,19 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "fovea-eval: %s: %s\n", o.out_dir.c_str(), ec.message().c_str());
     return kExitFailure;
   }
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
+  return kExitOk;
+}
 
-  // The plan: per dataset its positions, then every condition at each position
-  // (so that a change in the machine's load hits all conditions alike).
-  ReportInput report;
-  report.options_line = "fovea-eval";
-  for (int i = 1; i < argc; ++i) report.options_line += std::string(" ") + argv[i];
-  report.frames = o.frames;
-  report.seed = o.seed;
-  report.conditions = conditions.value();
-  std::vector<RunSpec> plan;
-  std::map<std::string, DatasetScene> scenes;
+// The plan: per dataset its positions, then every condition (report.conditions)
+// at each position (so that a change in the machine's load hits all conditions
+// alike); each dataset's scene opened for the quality measures, and its
+// positions into report. kExitOk, or kExitFailure said on standard error.
+int planEvaluation(const Options& o, const std::vector<Dataset>& datasets, std::vector<RunSpec>& plan,
+                   std::map<std::string, DatasetScene>& scenes, ReportInput& report) {
+  const fs::path out(o.out_dir);
+  const std::vector<Condition>& conditions = report.conditions;
   for (const Dataset& d : datasets) {
-    const bool with_map = std::any_of(conditions->begin(), conditions->end(),
+    const bool with_map = std::any_of(conditions.begin(), conditions.end(),
                                       [](const Condition& c) { return c.source == "map"; });
     Result<DatasetScene> scene = openScene(d, o.quality_frame, with_map);
     if (!scene) {
@@ -535,7 +523,7 @@ int run(int argc, char** argv) {
     report.datasets.push_back({d, scene->geometry, positions});
     for (std::size_t k = 0; k < positions.size(); ++k) {
       const HmdPosition& p = positions[k];
-      for (const Condition& c : conditions.value()) {
+      for (const Condition& c : conditions) {
         // MAP-DELTA's quality comes from what its operator drew at the quality frame.
         const int held_frame = c.map_delta && static_cast<int>(k) < qualityCount(o, positions.size()) ? o.quality_frame : -1;
         plan.push_back({d, c, p, (out / "runs" / runName(d, c, p)).string(), held_frame});
@@ -543,25 +531,40 @@ int run(int argc, char** argv) {
     }
     scenes.emplace(d.name, std::move(scene.value()));
   }
+  return kExitOk;
+}
 
-  // Streaming runs.
-  const auto started = std::chrono::steady_clock::now();
+// A run an earlier invocation finished with these settings (its `done` file
+// says so, its logs hold the frames), read back into report: true; false when
+// it is to be run.
+bool resumeRun(const RunSpec& r, const Options& o, ReportInput& report) {
+  if (readFile(r.dir + "/done") != runSignature(r, o)) return false;
+  Result<RunResult> again = readRun(r.dir, o.frames);
+  if (!again || again->frames < o.frames) return false;
+  again->dataset = r.dataset.name;
+  again->condition = r.condition.name;
+  again->position = r.position.index;
+  report.runs.push_back(std::move(again.value()));
+  ++report.resumed_runs;
+  return true;
+}
+
+double meanLatencyMs(const RunResult& result) {
+  if (result.end_to_end_ms.empty()) return 0.0;
+  double s = 0;
+  for (double v : result.end_to_end_ms) s += v;
+  return s / static_cast<double>(result.end_to_end_ms.size());
+}
+
+// The streaming runs of the plan, in order, until a stop (g_stop): each either
+// resumed or run, its result into report. Returns the runs that failed.
+int streamRuns(const std::vector<RunSpec>& plan, const Options& o, const std::string& fovead, const std::string& op,
+               ReportInput& report) {
   double measured_s = 0.0;
   int measured = 0, failed = 0;
   for (std::size_t k = 0; k < plan.size() && !g_stop; ++k) {
     const RunSpec& r = plan[k];
-    const std::string done = r.dir + "/done";
-    if (readFile(done) == runSignature(r, o)) {
-      Result<RunResult> again = readRun(r.dir, o.frames);
-      if (again && again->frames >= o.frames) {
-        again->dataset = r.dataset.name;
-        again->condition = r.condition.name;
-        again->position = r.position.index;
-        report.runs.push_back(std::move(again.value()));
-        ++report.resumed_runs;
-        continue;
-      }
-    }
+    if (resumeRun(r, o, report)) continue;
     const std::size_t left = plan.size() - k;
     const double per_run = measured > 0 ? measured_s / measured : (o.frames + 45) / 30.0 + 1.0;
     std::printf("[%zu/%zu] %s %s position %d (%.2f m from the centre): %d frames (%zu of %zu done); about %s left\n",
@@ -579,110 +582,177 @@ int run(int argc, char** argv) {
       ++failed;
       continue;
     }
-    std::ofstream(done) << runSignature(r, o);
-    std::printf("    %.3f MB/s, latency %.1f ms mean, %d frames\n", result->mb_per_s,
-                result->end_to_end_ms.empty() ? 0.0 : [&] {
-                  double s = 0;
-                  for (double v : result->end_to_end_ms) s += v;
-                  return s / static_cast<double>(result->end_to_end_ms.size());
-                }(),
+    std::ofstream(r.dir + "/done") << runSignature(r, o);
+    std::printf("    %.3f MB/s, latency %.1f ms mean, %d frames\n", result->mb_per_s, meanLatencyMs(*result),
                 result->frames);
     report.runs.push_back(std::move(result.value()));
   }
+  return failed;
+}
+
+// The quality measures' evaluator, with room for the largest scene's cloud.
+Result<std::unique_ptr<QualityEvaluator>> createQualityEvaluator(const std::map<std::string, DatasetScene>& scenes) {
+  std::size_t max_points = 0;
+  for (const auto& [name, s] : scenes) {
+    max_points = std::max(max_points, s.map ? s.map->cloud().capacity() : s.quality_frame.pixelCount());
+  }
+  return QualityEvaluator::create(max_points);
+}
+
+// MAP-DELTA's positions may be measured at a later frame than the quality frame
+// (the first whole one its operator received from it on): what its operator
+// held at position k into `held`, and then every condition of that position
+// drawn from that frame, its scene opened again here (kept in later_scenes) and
+// into `scene`. kExitOk, or kExitFailure said on standard error.
+int loadHeld(const Options& o, const ReportDataset& d, int k, const std::vector<Condition>& conditions,
+             std::map<std::pair<std::string, int>, DatasetScene>& later_scenes, DatasetScene*& scene,
+             std::optional<tools::HeldCloud>& held) {
+  const fs::path out(o.out_dir);
+  std::error_code ec;
+  for (const Condition& c : conditions) {
+    if (!c.map_delta) continue;
+    const fs::path run_dir = out / "runs" / runName(d.dataset, c, d.positions[k]);
+    const std::string path = (run_dir / kHeldFile).string();
+    // Only a run in the table: a failed one's last attempt may have saved a cloud too.
+    Result<tools::HeldCloud> loaded = fs::exists(run_dir / "done", ec)
+                                          ? tools::loadHeldCloud(path)
+                                          : Result<tools::HeldCloud>(ErrorCode::kNotFound, "its run failed");
+    if (!loaded) {
+      std::printf("quality: %s position %d: %s not measured: %s\n", d.dataset.name.c_str(), d.positions[k].index,
+                  c.name.c_str(), loaded.status().message().c_str());
+      continue;
+    }
+    held = std::move(loaded.value());
+    const int frame = static_cast<int>(held->info.frame_id);
+    if (frame == o.quality_frame) continue;
+    auto it = later_scenes.find({d.dataset.name, frame});
+    if (it == later_scenes.end()) {
+      std::printf("quality: %s position %d: %s's operator saved frame %d: every condition drawn from it\n",
+                  d.dataset.name.c_str(), d.positions[k].index, c.name.c_str(), frame);
+      std::fflush(stdout);
+      Result<DatasetScene> later = openScene(d.dataset, frame, scene->map != nullptr);
+      if (!later) {
+        std::fprintf(stderr, "fovea-eval: quality %s frame %d: %s\n", d.dataset.name.c_str(), frame,
+                     later.status().message().c_str());
+        return kExitFailure;
+      }
+      it = later_scenes.emplace(std::make_pair(d.dataset.name, frame), std::move(later.value())).first;
+    }
+    scene = &it->second;
+  }
+  return kExitOk;
+}
+
+// The quality rows of dataset d's position k into report (side-by-side images
+// of the first position only: enough to look at). kExitOk, or kExitFailure said
+// on standard error.
+int measurePositionQuality(QualityEvaluator& evaluator, const Options& o, const ReportDataset& d, int k,
+                           std::map<std::string, DatasetScene>& scenes,
+                           std::map<std::pair<std::string, int>, DatasetScene>& later_scenes, ReportInput& report) {
+  const fs::path out(o.out_dir);
+  QualityOptions q = report.quality_options;
+  if (k == 0) q.image_path_prefix = (out / "images" / (d.dataset.name + "_p1")).string();
+  DatasetScene* scene = &scenes.at(d.dataset.name);
+  std::optional<tools::HeldCloud> held;
+  if (const int code = loadHeld(o, d, k, report.conditions, later_scenes, scene, held); code != kExitOk) return code;
+  if (scene->quality_frame.sequence != static_cast<uint64_t>(held ? held->info.frame_id : o.quality_frame)) {
+    // The frame id on the wire is the camera's sequence number; opened here
+    // without pacing, the camera numbers its frames 0, 1, 2, ...
+    std::fprintf(stderr, "fovea-eval: quality %s: the camera numbered the frame %llu, not %d\n", d.dataset.name.c_str(),
+                 static_cast<unsigned long long>(scene->quality_frame.sequence),
+                 held ? static_cast<int>(held->info.frame_id) : o.quality_frame);
+    return kExitFailure;
+  }
+  std::printf("quality: %s position %d, frame %llu\n", d.dataset.name.c_str(), d.positions[k].index,
+              static_cast<unsigned long long>(scene->quality_frame.sequence));
+  std::fflush(stdout);
+  Result<std::vector<QualityRow>> rows = evaluator.evaluate(scene->quality_frame, d.dataset, d.positions[k],
+                                                            report.conditions, q, scene->map.get(),
+                                                            held ? &*held : nullptr);
+  if (!rows) {
+    std::fprintf(stderr, "fovea-eval: quality %s position %d: %s\n", d.dataset.name.c_str(), d.positions[k].index,
+                 rows.status().message().c_str());
+    return kExitFailure;
+  }
+  std::error_code ec;
+  for (QualityRow& row : rows.value()) {
+    if (!row.image.empty()) row.image = fs::relative(row.image, out, ec).string();
+    report.quality.push_back(std::move(row));
+  }
+  return kExitOk;
+}
+
+// Quality: the images of each dataset's first positions (qualityCount), until a
+// stop. kExitOk, or kExitFailure said on standard error.
+int measureQuality(const Options& o, std::map<std::string, DatasetScene>& scenes, ReportInput& report) {
+  Result<std::unique_ptr<QualityEvaluator>> evaluator = createQualityEvaluator(scenes);
+  if (!evaluator) {
+    std::fprintf(stderr, "fovea-eval: %s\n", evaluator.status().message().c_str());
+    return kExitFailure;
+  }
+  report.quality_options = QualityOptions{};
+  report.quality_frame = o.quality_frame;
+  std::map<std::pair<std::string, int>, DatasetScene> later_scenes;
+  for (const ReportDataset& d : report.datasets) {
+    const int count = qualityCount(o, d.positions.size());
+    for (int k = 0; k < count && !g_stop; ++k) {
+      if (const int code = measurePositionQuality(**evaluator, o, d, k, scenes, later_scenes, report); code != kExitOk) {
+        return code;
+      }
+    }
+  }
+  return kExitOk;
+}
+
+int run(int argc, char** argv) {
+  bool help = false;
+  Result<Options> parsed = parseOptions(argc, argv, help);
+  if (help) {
+    std::printf("%s", kHelp);
+    return kExitOk;
+  }
+  if (!parsed) {
+    std::fprintf(stderr, "fovea-eval: %s\n", parsed.status().message().c_str());
+    return kExitUsage;
+  }
+  Options o = parsed.value();
+  std::vector<Dataset> datasets;
+  if (const int code = chooseDatasets(o, datasets); code != kExitOk) return code;
+  Result<std::vector<Condition>> conditions = selectConditions(o.conditions);
+  if (!conditions) {
+    std::fprintf(stderr, "fovea-eval: %s\n", conditions.status().message().c_str());
+    return kExitUsage;
+  }
+  if (o.quality_frame < 0) o.quality_frame = defaultQualityFrame(conditions.value());
+  const std::string fovead = findProgram(o.fovead, "fovead", {".", "../firmware", "../../firmware"});
+  const std::string op = findProgram(o.op, "fovea-operator", {".", ".."});
+  if (const int code = prepareOutDir(o); code != kExitOk) return code;
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  ReportInput report;
+  report.options_line = "fovea-eval";
+  for (int i = 1; i < argc; ++i) report.options_line += std::string(" ") + argv[i];
+  report.frames = o.frames;
+  report.seed = o.seed;
+  report.conditions = conditions.value();
+  std::vector<RunSpec> plan;
+  std::map<std::string, DatasetScene> scenes;
+  if (const int code = planEvaluation(o, datasets, plan, scenes, report); code != kExitOk) return code;
+
+  const auto started = std::chrono::steady_clock::now();
+  const int failed = streamRuns(plan, o, fovead, op, report);
   if (g_stop) {
     std::printf("interrupted: %zu runs are kept in %s/runs; the same command resumes\n", report.runs.size(),
                 o.out_dir.c_str());
     return kExitInterrupted;
   }
-
-  // Quality: the images of each dataset's first positions.
-  Result<std::unique_ptr<QualityEvaluator>> evaluator = [&]() -> Result<std::unique_ptr<QualityEvaluator>> {
-    std::size_t max_points = 0;
-    for (const auto& [name, s] : scenes) {
-      max_points = std::max(max_points, s.map ? s.map->cloud().capacity() : s.quality_frame.pixelCount());
-    }
-    return QualityEvaluator::create(max_points);
-  }();
-  if (!evaluator) {
-    std::fprintf(stderr, "fovea-eval: %s\n", evaluator.status().message().c_str());
-    return kExitFailure;
-  }
-  QualityOptions quality;
-  report.quality_options = quality;
-  report.quality_frame = o.quality_frame;
-  // MAP-DELTA's positions may be measured at a later frame than the quality frame
-  // (the first whole one its operator received from it on): every condition of
-  // that position is then drawn from that frame, opened again here.
-  std::map<std::pair<std::string, int>, DatasetScene> later_scenes;
-  for (const ReportDataset& d : report.datasets) {
-    const int count = qualityCount(o, d.positions.size());
-    for (int k = 0; k < count && !g_stop; ++k) {
-      QualityOptions q = quality;
-      // Side-by-side images of the first position only: enough to look at.
-      if (k == 0) q.image_path_prefix = (out / "images" / (d.dataset.name + "_p1")).string();
-      DatasetScene* scene = &scenes.at(d.dataset.name);
-      std::optional<tools::HeldCloud> held;
-      for (const Condition& c : report.conditions) {
-        if (!c.map_delta) continue;
-        const fs::path run_dir = out / "runs" / runName(d.dataset, c, d.positions[k]);
-        const std::string path = (run_dir / kHeldFile).string();
-        // Only a run in the table: a failed one's last attempt may have saved a cloud too.
-        Result<tools::HeldCloud> loaded = fs::exists(run_dir / "done", ec)
-                                              ? tools::loadHeldCloud(path)
-                                              : Result<tools::HeldCloud>(ErrorCode::kNotFound, "its run failed");
-        if (!loaded) {
-          std::printf("quality: %s position %d: %s not measured: %s\n", d.dataset.name.c_str(), d.positions[k].index,
-                      c.name.c_str(), loaded.status().message().c_str());
-          continue;
-        }
-        held = std::move(loaded.value());
-        const int frame = static_cast<int>(held->info.frame_id);
-        if (frame == o.quality_frame) continue;
-        auto it = later_scenes.find({d.dataset.name, frame});
-        if (it == later_scenes.end()) {
-          std::printf("quality: %s position %d: %s's operator saved frame %d: every condition drawn from it\n",
-                      d.dataset.name.c_str(), d.positions[k].index, c.name.c_str(), frame);
-          std::fflush(stdout);
-          Result<DatasetScene> later = openScene(d.dataset, frame, scene->map != nullptr);
-          if (!later) {
-            std::fprintf(stderr, "fovea-eval: quality %s frame %d: %s\n", d.dataset.name.c_str(), frame,
-                         later.status().message().c_str());
-            return kExitFailure;
-          }
-          it = later_scenes.emplace(std::make_pair(d.dataset.name, frame), std::move(later.value())).first;
-        }
-        scene = &it->second;
-      }
-      if (scene->quality_frame.sequence != static_cast<uint64_t>(held ? held->info.frame_id : o.quality_frame)) {
-        // The frame id on the wire is the camera's sequence number; opened here
-        // without pacing, the camera numbers its frames 0, 1, 2, ...
-        std::fprintf(stderr, "fovea-eval: quality %s: the camera numbered the frame %llu, not %d\n", d.dataset.name.c_str(),
-                     static_cast<unsigned long long>(scene->quality_frame.sequence),
-                     held ? static_cast<int>(held->info.frame_id) : o.quality_frame);
-        return kExitFailure;
-      }
-      std::printf("quality: %s position %d, frame %llu\n", d.dataset.name.c_str(), d.positions[k].index,
-                  static_cast<unsigned long long>(scene->quality_frame.sequence));
-      std::fflush(stdout);
-      Result<std::vector<QualityRow>> rows =
-          (*evaluator)->evaluate(scene->quality_frame, d.dataset, d.positions[k], report.conditions, q, scene->map.get(),
-                                 held ? &*held : nullptr);
-      if (!rows) {
-        std::fprintf(stderr, "fovea-eval: quality %s position %d: %s\n", d.dataset.name.c_str(), d.positions[k].index,
-                     rows.status().message().c_str());
-        return kExitFailure;
-      }
-      for (QualityRow& row : rows.value()) {
-        if (!row.image.empty()) row.image = fs::relative(row.image, out, ec).string();
-        report.quality.push_back(std::move(row));
-      }
-    }
-  }
+  if (const int code = measureQuality(o, scenes, report); code != kExitOk) return code;
   if (g_stop) return kExitInterrupted;
 
   report.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   report.failed_runs = failed;
-  if (Status s = writeReport(out.string(), report, o.plot); !s) {
+  if (Status s = writeReport(o.out_dir, report, o.plot); !s) {
     std::fprintf(stderr, "fovea-eval: %s\n", s.message().c_str());
     return kExitFailure;
   }

@@ -136,10 +136,10 @@ PaperFigures paperTableII(const std::string& paper_dataset, const std::string& c
   return {kNaN, kNaN};
 }
 
-Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
-  const std::vector<ConditionSummary> summary = summarise(in.runs);
+namespace {
 
-  // --- CSV files -------------------------------------------------------------
+// runs.csv, table2.csv, stages.csv and quality.csv: the tables behind report.md.
+Status writeCsvFiles(const std::string& dir, const ReportInput& in, const std::vector<ConditionSummary>& summary) {
   std::string runs_csv = runCsvHeader();
   for (const RunResult& r : in.runs) runs_csv += runCsvLine(r);
   std::string table_csv =
@@ -177,8 +177,13 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
                                    {"table2.csv", table_csv}, {"stages.csv", stages_csv}, {"quality.csv", quality_csv}}) {
     if (Status s = writeFile(dir + "/" + name, text); !s) return s;
   }
+  return Status::ok();
+}
 
-  // --- plots -----------------------------------------------------------------
+// bandwidth.dat, bandwidth.gp, stages.dat and stages.gp, and, with plot, the PNGs
+// gnuplot draws from them (have_bw, have_st: drawn).
+Status writePlots(const std::string& dir, const ReportInput& in, const std::vector<ConditionSummary>& summary, bool plot,
+                  bool& have_bw, bool& have_st) {
   // bandwidth.dat: one line per condition, a column per dataset (MB/s, then its SD).
   std::string bw_dat = "condition";
   for (const ReportDataset& d : in.datasets) bw_dat += " " + d.dataset.name + " " + d.dataset.name + "_sd";
@@ -237,14 +242,15 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
                                    {"stages.dat", st_dat}, {"stages.gp", st_gp}}) {
     if (Status s = writeFile(dir + "/" + name, text); !s) return s;
   }
-  bool have_bw = false, have_st = false;
   if (plot) {
     have_bw = drawWithGnuplot(dir, "bandwidth.gp", "bandwidth.png");
     have_st = drawWithGnuplot(dir, "stages.gp", "stages.png");
   }
+  return Status::ok();
+}
 
-  // --- report.md ---------------------------------------------------------------
-  std::ostringstream md;
+// The title, the command, the host and what each figure measures.
+void writeIntroMarkdown(std::ostream& md, const ReportInput& in) {
   char date[64];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
@@ -274,7 +280,10 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
      << "- reductions are against FREF of the same dataset; p: Welch's t-test (two-sided) between the condition's "
         "per-position means and FREF's (tools/eval/statistics.h: the t distribution from the regularised incomplete "
         "beta function, DLMF 8.17.22)\n\n";
+}
 
+// Each dataset's scene and HMD positions.
+void writeDatasetsMarkdown(std::ostream& md, const ReportInput& in) {
   md << "## Datasets and HMD positions\n\n"
      << "| dataset | paper | camera | scene centre [m] | position | eye [m] | distance to centre [m] | fixations |\n"
      << "|---|---|---|---|---:|---|---:|---:|\n";
@@ -288,7 +297,11 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
   md << "\nThe gaze of each position: `fovea-operator --gaze scan:EYE>T1;...@400/50`, fixations of 400 ms on the "
         "scene's centre and four seeded points within 0.5 m of it, saccades of 50 ms between them (runs/*/operator.log "
         "and the positions above).\n\n";
+}
 
+// Table II per dataset: bandwidth and latency, their reductions against FREF.
+void writeTableIIMarkdown(std::ostream& md, const ReportInput& in, const std::vector<ConditionSummary>& summary,
+                          bool have_bw) {
   md << "## Table II: bandwidth and latency\n\n"
      << "Mean over the HMD positions (SD across positions); latency p99 over every frame of the condition.\n\n";
   for (const ReportDataset& d : in.datasets) {
@@ -309,7 +322,10 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     md << "\n";
   }
   if (have_bw) md << "![bandwidth per condition](bandwidth.png)\n\n";
+}
 
+// The paper's own Table II beside fovea's reductions.
+void writePaperMarkdown(std::ostream& md, const ReportInput& in, const std::vector<ConditionSummary>& summary) {
   md << "### Beside the paper's (theirs: different hardware, a different encoder, a different network)\n\n"
      << "The paper's Table II as published (MB/s; ms), and the reductions against its FREF, with fovea's reductions "
         "on the matching dataset:\n\n"
@@ -335,7 +351,11 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     }
   }
   md << "\n";
+}
 
+// The latency of each stage per dataset and condition.
+void writeStagesMarkdown(std::ostream& md, const ReportInput& in, const std::vector<ConditionSummary>& summary,
+                         bool have_st) {
   md << "## Latency per stage\n\n"
      << "Mean (p99) per frame, ms. *acquire* is the camera call, which waits for the next frame at 30 fps: it comes "
         "before capture and is not part of the end-to-end latency. The rest add up to capture-to-decoded.\n\n";
@@ -361,7 +381,11 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     md << "\n\n";
   }
   if (have_st) md << "![latency per stage](stages.png)\n\n";
+}
 
+// The quality measures: what they are, and their means per dataset and condition.
+void writeQualityMarkdown(std::ostream& md, const ReportInput& in) {
+  const std::vector<double>& edges = in.quality_options.ring_edges_deg;
   md << "## Visual quality: an objective stand-in for the paper's user study\n\n"
      << "**These are objective proxies, not a user study.** The paper asked 24 people to rate each condition against "
         "FREF (DSIS, a 5-point impairment scale). Here, for frame " << in.quality_frame << " of each dataset (with "
@@ -408,7 +432,10 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     }
     md << "\n";
   }
-  // Per ring, the first dataset's first position.
+}
+
+// Per ring, the first dataset's first position.
+void writeRingsMarkdown(std::ostream& md, const ReportInput& in) {
   if (!in.quality.empty()) {
     const QualityRow& first = in.quality.front();
     md << "Per ring, " << first.dataset << " position " << first.position << " (PSNR dB / SSIM; the ring's weight):\n\n"
@@ -428,6 +455,10 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     }
     md << "\n";
   }
+}
+
+// The side-by-side images, listed, and F1's shown.
+void writeSideBySideMarkdown(std::ostream& md, const ReportInput& in) {
   md << "### Side by side\n\nReference (FREF) | condition | difference x4, from position 1's eye (4x smaller than "
         "rendered). On the difference: the condition's region borders (its cones, those within 90 degrees) in cyan, or "
         "for ACUITY, which has none, the measuring rings; the gaze is the magenta cross.\n\n";
@@ -443,6 +474,10 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
     }
   }
   md << ")\n\n";
+}
+
+// How a real study like the paper's would be run.
+void writeStudyMarkdown(std::ostream& md) {
   md << "### A real study\n\n"
      << "A DSIS study like the paper's can be run with fovea's browser viewer (docs/viewer.md): `fovead serve` streams "
         "the dataset, `fovea-operator --view 8080` serves the page, and each subject watches the FREF stream, then "
@@ -450,7 +485,25 @@ Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
         "`--preset`), in randomised order, and rates the second on the 5-point impairment scale (ITU-R BT.500). The "
         "viewer's cursor (or an eye tracker feeding `--gaze csv:`) supplies the gaze. Nothing here replaces that: the "
         "measures above say where the images differ and by how much, not whether people mind.\n";
+}
 
+}  // namespace
+
+Status writeReport(const std::string& dir, const ReportInput& in, bool plot) {
+  const std::vector<ConditionSummary> summary = summarise(in.runs);
+  if (Status s = writeCsvFiles(dir, in, summary); !s) return s;
+  bool have_bw = false, have_st = false;
+  if (Status s = writePlots(dir, in, summary, plot, have_bw, have_st); !s) return s;
+  std::ostringstream md;
+  writeIntroMarkdown(md, in);
+  writeDatasetsMarkdown(md, in);
+  writeTableIIMarkdown(md, in, summary, have_bw);
+  writePaperMarkdown(md, in, summary);
+  writeStagesMarkdown(md, in, summary, have_st);
+  writeQualityMarkdown(md, in);
+  writeRingsMarkdown(md, in);
+  writeSideBySideMarkdown(md, in);
+  writeStudyMarkdown(md);
   return writeFile(dir + "/report.md", md.str());
 }
 
