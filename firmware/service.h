@@ -310,9 +310,11 @@ class Service {
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> sent_gaze_stamp_ns_{0};
-  int64_t last_plan_ns_ = 0;
-  bool sent_gaze_valid_ = false;        // the send stage's: the gaze it last handed on
-  int64_t sent_gaze_received_ns_ = -1;  // the foveation stage's: when it planned the last frame's bricks
+  int64_t last_plan_ns_ = 0;  // the foveation stage's: when it planned the last frame's bricks (0: none yet)
+  // The send stage's: the operator's gaze it last handed on to the foveation
+  // stage, whether valid and when it arrived (a gaze that arrived since is new).
+  bool sent_gaze_valid_ = false;
+  int64_t sent_gaze_received_ns_ = -1;
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;
