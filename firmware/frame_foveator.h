@@ -1,15 +1,18 @@
 // One frame's way through the pipeline, shared by `fovead run` (one thread) and
-// the service's foveation stage. Two sources (foveation.source, docs/map.md):
+// the service's foveation stage. Three sources (foveation.source, FoveationSource):
 //  - frame: back-projection into the stage's own cloud, foveated as it is;
-//  - map: the frame is fused into the surfel map; the cloud is then the frame's
-//    points the map does not explain yet (a moving object, new surface) and,
-//    once the gaze is known, the map's stable surfels the operator's eye can
-//    see (pipeline/map/eye_view.h), all foveated together;
-//  - map with bricks (MapSettings::delta, the service's default for the map
-//    source): the operator keeps the map, so the cloud is only the frame's
+//  - map (docs/map.md): the frame is fused into the surfel map; the cloud is
+//    then the frame's points the map does not explain yet (a moving object, new
+//    surface) and, once the gaze is known, the map's stable surfels the
+//    operator's eye can see (pipeline/map/eye_view.h), all foveated together.
+//    With bricks (MapSettings::delta, the service's default for the map
+//    source) the operator keeps the map, so the cloud is only the frame's
 //    points the map does not explain (the live points), and planBricks() fills
 //    a batch with the map's bricks the operator's eye needs and lacks
-//    (pipeline/map/map_delta.h, docs/map-delta.md), which the streamer sends.
+//    (pipeline/map/map_delta.h, docs/map-delta.md), which the streamer sends;
+//  - pyramid: the frame's image pyramid sampled by ACUITY's rule on pixel cells
+//    (pipeline/pyramid_sampler.h), without back-projecting it; another preset
+//    (the gaze policy's fallback, say) back-projects the frame as frame does.
 // The foveation configuration the gaze policy chose is applied only when it
 // changes. Everything is allocated by create(); a frame allocates nothing.
 #pragma once

@@ -42,7 +42,9 @@
 #include "core/ring.h"
 #include "firmware/frame_foveator.h"
 #include "firmware/gaze_policy.h"
+#include "firmware/latency_histogram.h"
 #include "firmware/log.h"
+#include "firmware/memory_budget.h"
 #include "firmware/session_recorder.h"
 #include "firmware/service_config.h"
 #include "firmware/status_lines.h"
@@ -64,46 +66,6 @@ namespace fovea::firmware {
 inline constexpr const char* kTimingLogHeader =
     "frame_id,captured_ns,acquire_us,queue_us,backproject_us,partition_us,sample_us,handoff_us,encode_us,send_us,"
     "captured_to_sent_us,points_out,chunks_sent,bytes_sent,completed\n";
-
-// The memory the service allocated at start-up, pool by pool.
-struct MemoryPool {
-  const char* name = "";
-  std::size_t count = 0;  // items (slots, buffers)
-  std::size_t bytes = 0;  // all of them together
-};
-
-struct MemoryBudget {
-  static constexpr std::size_t kMaxPools = 12;
-  std::array<MemoryPool, kMaxPools> pools{};
-  std::size_t pool_count = 0;
-
-  void add(const char* name, std::size_t count, std::size_t bytes);
-  std::size_t totalBytes() const;
-  // "memory: 41.2 MiB in 7 pools"
-  std::string summary() const;
-  // One line per pool: "  frame slots      4 x   1.17 MiB =   4.69 MiB"
-  std::string breakdown() const;
-};
-
-// Latency of one stage as a histogram of 0.1 ms buckets (the last one: 200 ms
-// and more), written by the stage's thread with relaxed atomics, read by the
-// supervisor as the difference between two snapshots.
-class LatencyHistogram {
- public:
-  static constexpr std::size_t kBuckets = 2001;
-  static constexpr int64_t kBucketNs = 100'000;
-  void add(int64_t ns) {
-    const std::size_t b = ns <= 0 ? 0 : std::min<std::size_t>(static_cast<std::size_t>(ns / kBucketNs), kBuckets - 1);
-    counts_[b].store(counts_[b].load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
-  }
-  // Copies the counts into `into` (kBuckets entries).
-  void snapshot(uint64_t* into) const {
-    for (std::size_t i = 0; i < kBuckets; ++i) into[i] = counts_[i].load(std::memory_order_relaxed);
-  }
-
- private:
-  std::array<std::atomic<uint64_t>, kBuckets> counts_{};
-};
 
 // The parameters SIGHUP reloads, from the supervisor to the stage threads.
 struct ReloadedParameters {
@@ -265,24 +227,71 @@ class Service {
   void logTiming(const FoveatedFrame& f, int64_t send_start_ns, const FrameSendReport& sent);
 
   Service(const ServiceConfig& config, Environment environment, int64_t period_ns);
-  Status allocate();
 
+  // Start-up (service_memory.cpp): allocate() and its steps, in its order; each
+  // step adds what it allocated to memory_, pool by pool.
+  Status allocate();
+  void allocateFrameSlots(const hal::CameraIntrinsics& k, std::size_t depth);
+  void allocateFoveatedSlots(std::size_t points, std::size_t depth);
+  Status allocateFoveator(const pipeline::PipelineCapacity& capacity, const hal::CameraIntrinsics& k);
+  Status allocateStreamer(std::size_t points);
+  void allocateSupervisorState();
+  Status openTimingLog();
+  Status allocateRecorder();
+
+  // The stage threads (service_stages.cpp).
+  void placeThread(const char* name, const ThreadPlacement& placement);
   void captureLoop();
   void foveationLoop();
+  // One frame through the foveation stage, its slots taken: tracking,
+  // back-projection, the gaze, foveation and (map bricks) the bricks' plan.
+  Status foveateFrame(CapturedFrame& f, FoveatedFrame& o);
+  // The gaze policy's decision for the frame, from the operator's newest gaze.
+  GazePolicy::Decision decideGaze(const hal::RgbdFrame& frame);
+  Status planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o);
+  // A frame the foveation stage dropped: counted and logged (rate-limited).
+  void countFoveationError(const Status& s, const FoveatedFrame& o);
   // The foveation stage's map figures to the atomics the status line reads.
   void publishMapFigures(const pipeline::map::SurfelMap& map);
   void publishTracking();  // the tracker's figures of the frame trackPose() just posed
   void sendLoop();
+  // The send stage's link work between frames (streaming only): a reloaded
+  // budget cap, the link's datagrams, the operator's gaze, the bricks' budget.
+  void pollOperator();
+  // A frame to the operator (streaming, not paused for privacy), then the
+  // counters the status line reads.
+  void sendToOperator(FoveatedFrame& f);
+  void publishSendCounters(const FoveatedFrame& f);
+  // Sends the operator a status report once next_report_ns has come; returns
+  // when the next is due.
+  int64_t sendStatusReportWhenDue(int64_t next_report_ns);
   // Hands the operator's newest gaze to the foveation stage when it changes
   // (the send stage's, also while it paces a frame out).
   void publishOperatorGaze();
+
+  // The supervisor (service_supervisor.cpp): supervise() every few ms and its steps.
   void supervise(int64_t now_ns);
+  void publishStatusState(const StatusState& state);
+  void logPoseChange(bool pose_stale);
+  void logTrackingChange(bool tracking_lost);
+  void logFaultChange(bool fault, bool healthy, bool frames_flow, bool pose_stale, int64_t now_ns);
+  void keepWatchdogAlive(bool healthy, int64_t now_ns);
   void applyReload();
   // USB hot-plug (supervisor only): start logs whether it runs, drain logs each
   // arrival and removal of a known camera.
   void startUsbMonitor();
   void drainUsbEvents();
-  void placeThread(const char* name, const ThreadPlacement& placement);
+
+  // The status line (service_status.cpp): written to the log, the recording and
+  // systemd every status_interval_ms.
+  void writeStatusLine(int64_t now_ns);
+  // formatStatusLine's fields: p50/p99 per histogram (capture, foveate, send,
+  // fuse) over the window, "-" when empty; the pose's and the map's parts.
+  using LatencyTexts = char[4][24];
+  void formatWindowLatencies(LatencyTexts& text);
+  void formatPoseFields(char* out, std::size_t size) const;
+  void formatMapFields(const char* fuse_latency, char* out, std::size_t size) const;
+
   Logger& log() { return *logger_; }
 
   ServiceConfig config_;
@@ -310,9 +319,11 @@ class Service {
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> sent_gaze_stamp_ns_{0};
-  int64_t last_plan_ns_ = 0;
-  bool sent_gaze_valid_ = false;        // the send stage's: the gaze it last handed on
-  int64_t sent_gaze_received_ns_ = -1;  // the foveation stage's: when it planned the last frame's bricks
+  int64_t last_plan_ns_ = 0;  // the foveation stage's: when it planned the last frame's bricks (0: none yet)
+  // The send stage's: the operator's gaze it last handed on to the foveation
+  // stage, whether valid and when it arrived (a gaze that arrived since is new).
+  bool sent_gaze_valid_ = false;
+  int64_t sent_gaze_received_ns_ = -1;
   std::unique_ptr<StatusLines> status_lines_;  // the supervisor's
   std::unique_ptr<hal::usb::UsbMonitor> usb_monitor_;  // its thread, drained by the supervisor
   SystemdNotifier notifier_;

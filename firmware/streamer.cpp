@@ -13,12 +13,6 @@ namespace fovea::firmware {
 
 namespace {
 
-int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 // Milliseconds to wait in poll() for a wait of wait_ns: rounded up, so a
 // loop never spins on a zero timeout while it has time to wait.
 int pollMs(int64_t wait_ns) {
@@ -279,14 +273,8 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
 Status Streamer::tapUnsent(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
                            uint32_t frame_id, int64_t capture_ns) {
   if (!encoder_) return Status::ok();
-  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
-  for (int r = 0; r < stats.region_count; ++r) voxel_size_m[r] = stats.regions[r].voxel_size_m;
-  if (Status s = encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
-                                  static_cast<uint64_t>(capture_ns));
-      !s) {
-    return s;
-  }
-  std::array<uint16_t, pipeline::kMaxRegions> planned{}, cut{};
+  if (Status s = encodeFrame(cloud, stats, frame_id, capture_ns); !s) return s;
+  RegionCounts planned{}, cut{};
   const std::size_t chunks = encoder_->chunkCount();
   for (std::size_t i = 0; i < chunks; ++i) {
     send_tap_(send_tap_context_, net::MessageType::kChunk, encoder_->chunk(i), frame_id, capture_ns);
@@ -295,6 +283,14 @@ Status Streamer::tapUnsent(const pipeline::FoveatedCloud& cloud, const pipeline:
   send_tap_(send_tap_context_, net::MessageType::kFrameSummary, encoder_->encodeSummary(frame_id, planned, cut),
             frame_id, capture_ns);
   return Status::ok();
+}
+
+Status Streamer::encodeFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
+                             uint32_t frame_id, int64_t capture_ns) {
+  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
+  for (int r = 0; r < stats.region_count; ++r) voxel_size_m[r] = stats.regions[r].voxel_size_m;
+  return encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
+                          static_cast<uint64_t>(capture_ns));
 }
 
 Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud,
@@ -313,13 +309,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   }
   report.had_session = true;
   int64_t now = monotonicNs();
-  if (interval_ns > 0 && interval_ns != frame_interval_ns_) {
-    // The burst follows the frame period (burst_ms 0): set again when it changes.
-    frame_interval_ns_ = interval_ns;
-    if (config_.burst_ms <= 0.0 && link_->session()->started_ns == session_started_ns_) {
-      if (Status s = applyBudget(now); !s) return s;
-    }
-  }
+  if (Status s = followFrameInterval(interval_ns, now); !s) return s;
   if (link_->session()->started_ns != session_started_ns_) {
     if (Status s = beginSession(now); !s) {
       if (bricks) discardBricks(*bricks);
@@ -328,49 +318,12 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   }
   takeBrickAcks();
 
-  std::array<double, pipeline::kMaxRegions> voxel_size_m{};
-  for (int r = 0; r < stats.region_count; ++r) voxel_size_m[r] = stats.regions[r].voxel_size_m;
   const int64_t t0 = monotonicNs();
-  // The send order: the fovea's bricks (region 0, never cut), the frame's live
-  // chunks (fovea first), then the other bricks and the resends as the
-  // outermost region, which the budget cuts first.
-  constexpr auto kLast = static_cast<uint8_t>(pipeline::kMaxRegions - 1);
-  outgoing_count_ = 0;
-  brick_store_staged_ = 0;
-  if (bricks) {
-    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
-      if (e.fovea) (void)stageBrick(*bricks, e, 0, frame_id, now, report);
-    }
-  }
-  if (Status s = encoder_->encode(cloud, std::span<const double>(voxel_size_m.data(), stats.region_count), frame_id,
-                                  static_cast<uint64_t>(capture_ns));
-      !s) {
-    if (bricks) discardBricks(*bricks);
-    return s;
-  }
-  const std::size_t live_first = outgoing_count_;
-  const std::size_t chunks = encoder_->chunkCount();
-  for (std::size_t i = 0; i < chunks; ++i) stage(encoder_->chunk(i), net::MessageType::kChunk, encoder_->chunkRegion(i));
-  const std::size_t live_end = outgoing_count_;
-  if (bricks) {
-    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
-      if (!e.fovea) (void)stageBrick(*bricks, e, kLast, frame_id, now, report);
-    }
-  }
-  if (brick_sender_) {
-    const std::size_t room = std::min(config_.max_resend_parts, outgoing_.size() - outgoing_count_);
-    report.brick_resends = static_cast<uint32_t>(brick_sender_->collectResends(
-        now, room,
-        [&](uint16_t, uint16_t, std::span<const uint8_t> payload) {
-          stage(payload, net::MessageType::kBrickChunk, kLast);
-        },
-        [&](uint16_t brick) {
-          if (feedback_) feedback_->forget(brick);
-        }));
-  }
+  LiveChunks live;
+  if (Status s = stageFrame(cloud, stats, frame_id, capture_ns, bricks, now, report, live); !s) return s;
   now = monotonicNs();
   report.encode_ns = now - t0;
-  report.chunks = static_cast<uint32_t>(chunks);
+  report.chunks = static_cast<uint32_t>(encoder_->chunkCount());
   // A frame that comes late (the pipeline took longer than a frame period) still
   // gets a quarter period: its fovea goes out, the periphery is cut to fit.
   deadline_ns = std::max(deadline_ns, now + interval_ns / 4);
@@ -381,23 +334,85 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
       !s) {
     return s;
   }
+  RegionCounts planned{}, cut{};
+  countPlanned(live, planned, cut, report);
+  const uint64_t bytes_before = scheduler_.counters().bytes_sent;
+  const int64_t send_start = now;
+  paceFrame(frame_id, capture_ns, deadline_ns, now, planned, cut, report);
+  takeBrickAcks();
+  report.send_ns = monotonicNs() - send_start;
+  report.bytes_sent = scheduler_.counters().bytes_sent - bytes_before;
+  return report;
+}
+
+// The burst follows the frame period (burst_ms 0): set again when it changes.
+Status Streamer::followFrameInterval(int64_t interval_ns, int64_t now_ns) {
+  if (interval_ns <= 0 || interval_ns == frame_interval_ns_) return Status::ok();
+  frame_interval_ns_ = interval_ns;
+  if (config_.burst_ms <= 0.0 && link_->session()->started_ns == session_started_ns_) return applyBudget(now_ns);
+  return Status::ok();
+}
+
+Status Streamer::stageFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats,
+                            uint32_t frame_id, int64_t capture_ns, const pipeline::map::BrickBatch* bricks,
+                            int64_t now_ns, FrameSendReport& report, LiveChunks& live) {
+  // The send order: the fovea's bricks (region 0, never cut), the frame's live
+  // chunks (fovea first), then the other bricks and the resends as the
+  // outermost region, which the budget cuts first.
+  constexpr auto kLast = static_cast<uint8_t>(pipeline::kMaxRegions - 1);
+  outgoing_count_ = 0;
+  brick_store_staged_ = 0;
+  if (bricks) {
+    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
+      if (e.fovea) (void)stageBrick(*bricks, e, 0, frame_id, now_ns, report);
+    }
+  }
+  if (Status s = encodeFrame(cloud, stats, frame_id, capture_ns); !s) {
+    if (bricks) discardBricks(*bricks);
+    return s;
+  }
+  live.first = outgoing_count_;
+  const std::size_t chunks = encoder_->chunkCount();
+  for (std::size_t i = 0; i < chunks; ++i) stage(encoder_->chunk(i), net::MessageType::kChunk, encoder_->chunkRegion(i));
+  live.end = outgoing_count_;
+  if (bricks) {
+    for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) {
+      if (!e.fovea) (void)stageBrick(*bricks, e, kLast, frame_id, now_ns, report);
+    }
+  }
+  if (brick_sender_) {
+    const std::size_t room = std::min(config_.max_resend_parts, outgoing_.size() - outgoing_count_);
+    report.brick_resends = static_cast<uint32_t>(brick_sender_->collectResends(
+        now_ns, room,
+        [&](uint16_t, uint16_t, std::span<const uint8_t> payload) {
+          stage(payload, net::MessageType::kBrickChunk, kLast);
+        },
+        [&](uint16_t brick) {
+          if (feedback_) feedback_->forget(brick);
+        }));
+  }
+  return Status::ok();
+}
+
+void Streamer::countPlanned(const LiveChunks& live, RegionCounts& planned, RegionCounts& cut,
+                            FrameSendReport& report) const {
   // The frame summary counts the frame's own chunks only (a brick part is no
   // part of a frame): planned are those before the plan's end.
-  std::array<uint16_t, pipeline::kMaxRegions> planned{}, cut{};
-  for (std::size_t i = live_first; i < live_end; ++i) {
+  for (std::size_t i = live.first; i < live.end; ++i) {
     ++(i < scheduler_.plannedChunks() ? planned : cut)[chunk_regions_[i]];
   }
   for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) report.chunks_cut += cut[r];
+}
 
+void Streamer::paceFrame(uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t now_ns,
+                         const RegionCounts& planned, const RegionCounts& cut, FrameSendReport& report) {
   // The send order begins with everything of region 0 (the fovea's bricks, the
   // frame's fovea): the fovea is out once that many steps were sent.
   std::size_t fovea_chunks = 0;
   while (fovea_chunks < outgoing_count_ && chunk_regions_[fovea_chunks] == 0) ++fovea_chunks;
   std::size_t steps_sent = 0;
   report.fovea_completed = fovea_chunks == 0;
-  const uint64_t bytes_before = scheduler_.counters().bytes_sent;
-  const int64_t send_start = now;
-  while (now < deadline_ns && link_->hasSession()) {
+  for (int64_t now = now_ns; now < deadline_ns && link_->hasSession(); now = monotonicNs()) {
     const net::UplinkScheduler::Step step = scheduler_.next(now);
     if (step.kind == net::UplinkScheduler::Step::Kind::kDone) {
       const std::span<const uint8_t> summary = encoder_->encodeSummary(frame_id, planned, cut);
@@ -410,35 +425,33 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
       break;
     }
     if (step.kind == net::UplinkScheduler::Step::Kind::kWait) {
-      // Gaze keeps arriving while the uplink waits for tokens. poll() counts
-      // in milliseconds and a datagram's tokens often take less: sleep those.
-      const int64_t wait_ns = std::min(step.wait_ns, deadline_ns - now);
-      if (wait_ns >= 1'000'000) {
-        link_->poll(static_cast<int>(wait_ns / 1'000'000));
+      waitForTokens(std::min(step.wait_ns, deadline_ns - now));
+      continue;
+    }
+    report.fovea_completed = ++steps_sent >= fovea_chunks;
+    const Outgoing& o = outgoing_[step.chunk];
+    if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {
+      if (send_tap_) send_tap_(send_tap_context_, o.type, {o.data, o.size}, frame_id, capture_ns);
+      if (o.type == net::MessageType::kChunk) {
+        ++report.chunks_sent;
       } else {
-        link_->poll(0);
-        const timespec pause{0, static_cast<long>(wait_ns)};
-        nanosleep(&pause, nullptr);
-      }
-      if (poll_hook_) poll_hook_(poll_hook_context_);
-    } else {
-      report.fovea_completed = ++steps_sent >= fovea_chunks;
-      const Outgoing& o = outgoing_[step.chunk];
-      if (link_->send(o.type, std::span<const uint8_t>(o.data, o.size)) == net::SendResult::kSent) {
-        if (send_tap_) send_tap_(send_tap_context_, o.type, {o.data, o.size}, frame_id, capture_ns);
-        if (o.type == net::MessageType::kChunk) {
-          ++report.chunks_sent;
-        } else {
-          ++report.brick_parts_sent;
-        }
+        ++report.brick_parts_sent;
       }
     }
-    now = monotonicNs();
   }
-  takeBrickAcks();
-  report.send_ns = monotonicNs() - send_start;
-  report.bytes_sent = scheduler_.counters().bytes_sent - bytes_before;
-  return report;
+}
+
+void Streamer::waitForTokens(int64_t wait_ns) {
+  // Gaze keeps arriving while the uplink waits for tokens. poll() counts
+  // in milliseconds and a datagram's tokens often take less: sleep those.
+  if (wait_ns >= 1'000'000) {
+    link_->poll(static_cast<int>(wait_ns / 1'000'000));
+  } else {
+    link_->poll(0);
+    const timespec pause{0, static_cast<long>(wait_ns)};
+    nanosleep(&pause, nullptr);
+  }
+  if (poll_hook_) poll_hook_(poll_hook_context_);
 }
 
 net::StatusReport Streamer::statusReport(uint64_t frames_captured, uint64_t frames_sent, uint64_t frames_dropped,

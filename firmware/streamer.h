@@ -6,6 +6,8 @@
 // when it starts; a frame allocates nothing.
 #pragma once
 
+#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -202,6 +204,32 @@ class Streamer {
   std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
   BrickFeedback* feedback_ = nullptr;
+  // sendFrame's steps. The frame's chunks per region, planned and cut (its summary's).
+  using RegionCounts = std::array<uint16_t, pipeline::kMaxRegions>;
+  // Where the frame's own chunks are among outgoing_: [first, end).
+  struct LiveChunks {
+    std::size_t first = 0;
+    std::size_t end = 0;
+  };
+  // Encodes the frame with encoder_ (its regions' voxel sizes from stats).
+  Status encodeFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats, uint32_t frame_id,
+                     int64_t capture_ns);
+  // Notes the frame period sendFrame was given; with burst_ms 0 a change sets
+  // the session's burst again.
+  Status followFrameInterval(int64_t interval_ns, int64_t now_ns);
+  // Queues the frame's datagrams in send order (the bricks' and the resends'
+  // with them); an encoding error discards the bricks.
+  Status stageFrame(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats, uint32_t frame_id,
+                    int64_t capture_ns, const pipeline::map::BrickBatch* bricks, int64_t now_ns,
+                    FrameSendReport& report, LiveChunks& live);
+  // Counts the frame's chunks the plan kept and cut, per region.
+  void countPlanned(const LiveChunks& live, RegionCounts& planned, RegionCounts& cut, FrameSendReport& report) const;
+  // Sends the plan's steps as the budget allows until everything planned is
+  // out (then the frame summary) or deadline_ns passes.
+  void paceFrame(uint32_t frame_id, int64_t capture_ns, int64_t deadline_ns, int64_t now_ns,
+                 const RegionCounts& planned, const RegionCounts& cut, FrameSendReport& report);
+  // Waits wait_ns for the uplink's tokens, handling datagrams meanwhile.
+  void waitForTokens(int64_t wait_ns);
   // Encodes a frame without a session for the send tap (record_unsent).
   Status tapUnsent(const pipeline::FoveatedCloud& cloud, const pipeline::FoveationStats& stats, uint32_t frame_id,
                    int64_t capture_ns);
