@@ -150,14 +150,18 @@ void Service::foveationLoop() {
     CapturedFrame& f = frames_->slot(in);  // this stage's while taken: tracking sets its pose
     FoveatedFrame& o = foveated_->slot(out);
     const Status s = foveateFrame(f, o);
-    (void)in_ring.release(in);
     if (!s) {
+      (void)in_ring.release(in);
       out_ring.cancel(out);
       countFoveationError(s, o);
       continue;
     }
     // The recording's per-frame channels: the frame's pose and points are here.
+    // It reads the captured frame, so the slot goes back to the capture stage
+    // only after it (released first, the capture stage could refill the slot
+    // while the recorder copied it).
     if (recorder_) recorder_->onFrame(o.frame_id, f.captured_ns, f.frame, f.pose_fresh, o.cloud);
+    (void)in_ring.release(in);
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - o.foveation_start_ns);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
