@@ -1,6 +1,6 @@
 // The camera's calibration and pose from the configuration ([camera]
 // calibration_file, [camera.extrinsics], [camera.pose]): the one place that
-// both the service (firmware/service.cpp) and `fovead run` use.
+// both the service (firmware/service*.cpp) and `fovead run` use.
 #pragma once
 
 #include <memory>
