@@ -1,7 +1,7 @@
 // The configuration file of fovead (TOML, read with toml11) and the board
 // profiles (board/*.toml, the same format): every field of ServiceConfig by a
-// "section.key" name, one table of fields in config.cpp that loading, --set,
-// validation and printing all use. board/README.md lists the keys.
+// "section.key" name, one table of fields (config_fields.cpp) that loading,
+// --set, validation and printing all use. board/README.md lists the keys.
 //
 // Errors name the place, the field and the fix, e.g.
 //   board/rpi5.toml:12: stream.budget_mbps: must be within 0.01 .. 10000 (got -3)

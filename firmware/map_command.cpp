@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "firmware/camera_setup.h"
 #include "firmware/commands.h"
@@ -12,6 +14,7 @@
 #include "firmware/options.h"
 #include "firmware/report.h"
 #include "hal/pose.h"
+#include "hal/pose_source.h"
 #include "io/ply.h"
 #include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
@@ -98,6 +101,156 @@ void printTracking(const pipeline::map::FrameToModelTracker& tracker, const Samp
               track_ms.quantile(0.9), track_ms.max(), std::string(kernelSetName(tracker.config().kernels)).c_str());
 }
 
+// What the command line asks for: the map, the camera, the tracking and how
+// many frames. Every error here is a usage error.
+struct MapPlan {
+  pipeline::map::SurfelMapConfig map;
+  CameraSettings camera;
+  pipeline::map::PoseTracking tracking = pipeline::map::PoseTracking::kOff;
+  long frames = 0;
+};
+
+Result<MapPlan> mapPlanFromArgs(const Args& args) {
+  MapPlan plan;
+  Result<MapSettings> settings_map = mapSettingsFromArgs(args);
+  if (!settings_map) return settings_map.status();
+  Result<pipeline::DepthRange> range = depthRangeFromArgs(args);
+  if (!range) return range.status();
+  plan.map = settings_map->map;
+  plan.map.depth = range.value();
+  Result<CameraSettings> settings = cameraSettingsFromArgs(args);
+  if (!settings) return settings.status();
+  plan.camera = std::move(settings.value());
+  if (!args.has("--camera")) plan.camera.spec = "mock:living-room,path=orbit";
+  plan.tracking = poseTracking(plan.camera);
+  const bool tracked = plan.tracking != pipeline::map::PoseTracking::kOff;
+  if (tracked) plan.camera.spec = playOnce(plan.camera.spec);
+  // A recording tracked plays to its end unless --frames says otherwise.
+  const bool recording = plan.camera.spec.rfind("tum:", 0) == 0 || plan.camera.spec.rfind("mcap:", 0) == 0;
+  const char* default_frames = tracked && recording ? "100000000" : "100";
+  Result<long> frames = parseInteger("--frames", args.getOr("--frames", default_frames), 1, 100000000);
+  if (!frames) return frames.status();
+  plan.frames = frames.value();
+  return plan;
+}
+
+// --trajectory FILE, open for the run's poses and closed at the end.
+class TrajectoryFile {
+ public:
+  TrajectoryFile() = default;
+  TrajectoryFile(const TrajectoryFile&) = delete;
+  TrajectoryFile& operator=(const TrajectoryFile&) = delete;
+  ~TrajectoryFile() {
+    if (file_) std::fclose(file_);
+  }
+
+  // Opens `path` and writes the header line.
+  Status open(const std::string& path) {
+    path_ = path;
+    file_ = std::fopen(path.c_str(), "w");
+    if (file_ == nullptr) return cannotWrite();
+    std::fputs("# timestamp tx ty tz qx qy qz qw (fovead map: camera to world, one line a frame)\n", file_);
+    return Status::ok();
+  }
+  bool isOpen() const { return file_ != nullptr; }
+  const std::string& path() const { return path_; }
+  std::size_t lines() const { return lines_; }
+
+  Status write(const hal::RgbdFrame& frame) {
+    char line[192];
+    const std::size_t n = hal::formatTumPose(frame.stamp_ns, frame.T_world_cam, line, sizeof line);
+    if (n == 0 || std::fwrite(line, 1, n, file_) != n) return cannotWrite();
+    ++lines_;
+    return Status::ok();
+  }
+  Status flush() { return std::fflush(file_) != 0 ? cannotWrite() : Status::ok(); }
+
+ private:
+  Status cannotWrite() const { return Status(ErrorCode::kIoError, "--trajectory: cannot write " + path_); }
+
+  std::FILE* file_ = nullptr;
+  std::string path_;
+  std::size_t lines_ = 0;
+};
+
+// The map's tracker with --pose track..., sized for the camera; none otherwise.
+Result<std::optional<pipeline::map::PoseEstimator>> createMapTracker(pipeline::map::PoseTracking tracking,
+                                                                     const hal::CameraIntrinsics& k) {
+  if (tracking == pipeline::map::PoseTracking::kOff) return std::optional<pipeline::map::PoseEstimator>();
+  pipeline::map::TrackerConfig tracker_config;
+  tracker_config.max_width = k.width;
+  tracker_config.max_height = k.height;
+  Result<pipeline::map::PoseEstimator> made = pipeline::map::PoseEstimator::create(tracking, tracker_config);
+  if (!made) return made.status();
+  return std::optional<pipeline::map::PoseEstimator>(std::move(made.value()));
+}
+
+// What the fusion loop measured.
+struct MapFusion {
+  explicit MapFusion(std::size_t expected) : fuse_ms(expected), track_ms(expected) {}
+  Samples fuse_ms;
+  Samples track_ms;
+  std::size_t read = 0;
+};
+
+// Poses one frame (the pose source, then the tracker) and fuses it; true when fused.
+bool poseAndFuse(hal::RgbdFrame& frame, hal::PoseSource& poses, pipeline::map::SurfelMap& map,
+                 std::optional<pipeline::map::PoseEstimator>& tracker, MapFusion& fusion) {
+  bool pose_usable = poses.apply(frame);
+  if (tracker) {
+    pipeline::map::TrackStats track;
+    pose_usable = tracker->poseFrame(frame, pose_usable, track);
+    fusion.track_ms.add(static_cast<double>(track.track_ns) * 1e-6);
+  }
+  pipeline::map::FuseStats stats;
+  const bool fused = map.fuse(frame, stats, pose_usable) == pipeline::map::FuseOutcome::kFused;
+  if (fused) {
+    fusion.fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
+    if (tracker) tracker->fused(frame, map);
+  }
+  return fused;
+}
+
+// Reads up to `frames` frames of the started camera into the map; a recording
+// that ends early ends the run. The error of a camera or of the trajectory file.
+Status fuseMapFrames(hal::Camera& camera, hal::PoseSource& poses, pipeline::map::SurfelMap& map,
+                     std::optional<pipeline::map::PoseEstimator>& tracker, long frames, TrajectoryFile& trajectory,
+                     MapFusion& fusion) {
+  const hal::CameraIntrinsics& k = camera.info().intrinsics;
+  hal::RgbdFrame frame(k.width, k.height);
+  for (long i = 0; i < frames; ++i) {
+    if (Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) {
+      if (s.code() == ErrorCode::kUnavailable && fusion.read > 0) {
+        std::printf("camera: %s after %zu frames\n", s.message().c_str(), fusion.read);
+        break;
+      }
+      return Status(s.code(), "camera " + camera.info().name + ": " + s.message());
+    }
+    ++fusion.read;
+    const bool fused = poseAndFuse(frame, poses, map, tracker, fusion);
+    // Tracked: every frame's pose, a lost one's too (the last good: its error
+    // counts, as a tracker's failures should); otherwise the fused frames'.
+    if (trajectory.isOpen() && (fused || tracker)) {
+      if (Status s = trajectory.write(frame); !s) return s;
+    }
+  }
+  return Status::ok();
+}
+
+// What the run made: the camera, the map's counters, the tracking, the files written.
+void printMapReport(const Args& args, const hal::Camera& camera, const pipeline::map::SurfelMap& map,
+                    const std::optional<pipeline::map::PoseEstimator>& tracker, const MapFusion& fusion,
+                    const TrajectoryFile& trajectory) {
+  const hal::CameraIntrinsics& k = camera.info().intrinsics;
+  std::printf("camera: %s (%dx%d)\n", camera.info().name.c_str(), k.width, k.height);
+  printSummary(map, fusion.fuse_ms, fusion.read);
+  if (tracker) printTracking(tracker->tracker(), fusion.track_ms);
+  if (const std::string* out_path = args.get("--out")) {
+    std::printf("wrote %s surfels to %s\n", args.has("--all-surfels") ? "all" : "the stable", out_path->c_str());
+  }
+  if (trajectory.isOpen()) std::printf("wrote %zu poses to %s\n", trajectory.lines(), trajectory.path().c_str());
+}
+
 }  // namespace
 
 int mapCommand(int argc, char** argv) {
@@ -113,113 +266,42 @@ int mapCommand(int argc, char** argv) {
   if (!args->has("--out") && !args->has("--trajectory")) {
     return mapUsage(invalidArgument("--out or --trajectory is required (see --help)"));
   }
-  Result<MapSettings> settings_map = mapSettingsFromArgs(args.value());
-  if (!settings_map) return mapUsage(settings_map.status());
-  Result<pipeline::DepthRange> range = depthRangeFromArgs(args.value());
-  if (!range) return mapUsage(range.status());
-  pipeline::map::SurfelMapConfig config = settings_map->map;
-  config.depth = range.value();
-  Result<CameraSettings> settings = cameraSettingsFromArgs(args.value());
-  if (!settings) return mapUsage(settings.status());
-  if (!args->has("--camera")) settings->spec = "mock:living-room,path=orbit";
-  const pipeline::map::PoseTracking tracking = poseTracking(settings.value());
-  const bool tracked = tracking != pipeline::map::PoseTracking::kOff;
-  if (tracked) settings->spec = playOnce(settings->spec);
-  // A recording tracked plays to its end unless --frames says otherwise.
-  const bool recording = settings->spec.rfind("tum:", 0) == 0 || settings->spec.rfind("mcap:", 0) == 0;
-  const char* default_frames = tracked && recording ? "100000000" : "100";
-  Result<long> frames = parseInteger("--frames", args->getOr("--frames", default_frames), 1, 100000000);
-  if (!frames) return mapUsage(frames.status());
-  std::FILE* trajectory = nullptr;
+  Result<MapPlan> plan = mapPlanFromArgs(args.value());
+  if (!plan) return mapUsage(plan.status());
+  TrajectoryFile trajectory;
   if (const std::string* path = args->get("--trajectory")) {
-    trajectory = std::fopen(path->c_str(), "w");
-    if (trajectory == nullptr) return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *path));
-    std::fputs("# timestamp tx ty tz qx qy qz qw (fovead map: camera to world, one line a frame)\n", trajectory);
+    if (Status s = trajectory.open(*path); !s) return mapFailure(s);
   }
-  struct CloseFile {
-    std::FILE* f;
-    ~CloseFile() {
-      if (f) std::fclose(f);
-    }
-  } close_trajectory{trajectory};
 
-  Result<OpenedCamera> opened = openConfiguredCamera(settings.value());
+  Result<OpenedCamera> opened = openConfiguredCamera(plan->camera);
   if (!opened) {
     return opened.status().code() == ErrorCode::kInvalidArgument ? mapUsage(opened.status()) : mapFailure(opened.status());
   }
   hal::Camera& camera = *opened->camera;
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
+  pipeline::map::SurfelMapConfig config = plan->map;
   config.max_width = k.width;
   config.max_height = k.height;
   Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
   if (!created) return mapUsage(created.status());
   pipeline::map::SurfelMap& map = created.value();
-  std::optional<pipeline::map::PoseEstimator> tracker;
-  if (tracked) {
-    pipeline::map::TrackerConfig tracker_config;
-    tracker_config.max_width = k.width;
-    tracker_config.max_height = k.height;
-    Result<pipeline::map::PoseEstimator> made = pipeline::map::PoseEstimator::create(tracking, tracker_config);
-    if (!made) return mapUsage(made.status());
-    tracker.emplace(std::move(made.value()));
-  }
+  Result<std::optional<pipeline::map::PoseEstimator>> tracker = createMapTracker(plan->tracking, k);
+  if (!tracker) return mapUsage(tracker.status());
   if (Status s = camera.start(); !s) return mapFailure(s);
 
-  hal::RgbdFrame frame(k.width, k.height);
   // Samples are sized up front: a recording's frame count when it is known.
-  const std::size_t expected = static_cast<std::size_t>(std::min<long>(frames.value(), 100000));
-  Samples fuse_ms(expected), track_ms(expected);
-  std::size_t trajectory_lines = 0;
-  std::size_t read = 0;
-  for (long i = 0; i < frames.value(); ++i) {
-    if (Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) {
-      if (s.code() == ErrorCode::kUnavailable && read > 0) {
-        std::printf("camera: %s after %zu frames\n", s.message().c_str(), read);
-        break;
-      }
-      camera.stop();
-      return mapFailure(Status(s.code(), "camera " + camera.info().name + ": " + s.message()));
-    }
-    ++read;
-    bool pose_usable = opened->pose_source->apply(frame);
-    if (tracker) {
-      pipeline::map::TrackStats track;
-      pose_usable = tracker->poseFrame(frame, pose_usable, track);
-      track_ms.add(static_cast<double>(track.track_ns) * 1e-6);
-    }
-    pipeline::map::FuseStats stats;
-    const bool fused = map.fuse(frame, stats, pose_usable) == pipeline::map::FuseOutcome::kFused;
-    if (fused) {
-      fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
-      if (tracker) tracker->fused(frame, map);
-    }
-    // Tracked: every frame's pose, a lost one's too (the last good: its error
-    // counts, as a tracker's failures should); otherwise the fused frames'.
-    if (trajectory && (fused || tracker)) {
-      char line[192];
-      const std::size_t n = hal::formatTumPose(frame.stamp_ns, frame.T_world_cam, line, sizeof line);
-      if (n == 0 || std::fwrite(line, 1, n, trajectory) != n) {
-        camera.stop();
-        return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *args->get("--trajectory")));
-      }
-      ++trajectory_lines;
-    }
-  }
+  MapFusion fusion(static_cast<std::size_t>(std::min<long>(plan->frames, 100000)));
+  const Status fused = fuseMapFrames(camera, *opened->pose_source, map, *tracker, plan->frames, trajectory, fusion);
   camera.stop();
-  if (trajectory && std::fflush(trajectory) != 0) {
-    return mapFailure(Status(ErrorCode::kIoError, "--trajectory: cannot write " + *args->get("--trajectory")));
+  if (!fused) return mapFailure(fused);
+  if (trajectory.isOpen()) {
+    if (Status s = trajectory.flush(); !s) return mapFailure(s);
   }
 
   if (const std::string* out_path = args->get("--out")) {
     if (Status s = io::writeSurfelPly(*out_path, map, !args->has("--all-surfels")); !s) return mapFailure(s);
   }
-  std::printf("camera: %s (%dx%d)\n", camera.info().name.c_str(), k.width, k.height);
-  printSummary(map, fuse_ms, read);
-  if (tracker) printTracking(tracker->tracker(), track_ms);
-  if (const std::string* out_path = args->get("--out")) {
-    std::printf("wrote %s surfels to %s\n", args->has("--all-surfels") ? "all" : "the stable", out_path->c_str());
-  }
-  if (trajectory) std::printf("wrote %zu poses to %s\n", trajectory_lines, args->get("--trajectory")->c_str());
+  printMapReport(args.value(), camera, map, tracker.value(), fusion, trajectory);
   return map.counters().frames_fused > 0 ? kExitOk : mapFailure(invalidArgument("no frame was fused (see the refusals above)"));
 }
 

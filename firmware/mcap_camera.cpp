@@ -58,6 +58,18 @@ void McapCamera::unmap() {
   file_ = mcap::MappedFile();
 }
 
+// What open()'s pass through the file found, beside what it sets on the camera
+// (the frames channel, the frame count, the first frame's intrinsics).
+struct McapCamera::Scan {
+  hal::RgbdFrame scratch;  // sized for the largest frame
+  std::size_t scratch_pixels = 0;
+  std::vector<int64_t> stamps;
+  bool have_channel = false;
+  std::size_t bad = 0;
+  std::string first_bad;
+  int max_width = 0, max_height = 0;
+};
+
 Status McapCamera::open() {
   unmap();
   opened_ = started_ = finished_ = false;
@@ -71,76 +83,90 @@ Status McapCamera::open() {
   // The reader stays for the replay: it keeps the schemas, channels and its
   // chunk buffer from this pass, so acquire() allocates nothing.
   reader_ = std::make_unique<mcap::Reader>(file_.bytes());
+  Scan scan;
+  if (Status s = scanFrames(scan); !s) {
+    unmap();
+    return s;
+  }
+  stop_reason_ = reader_->complete() ? std::string() : reader_->stopReason();
+  if (!scan.have_channel || frame_count_ == 0) {
+    unmap();
+    return noFramesError(scan);
+  }
+  describeRecording(scan);
+  for (std::size_t i = 0; i < scan.bad; ++i) counters_.badFrame();
+  reader_->rewind();
+  opened_ = true;
+  loops_ = 0;
+  start_stamp_known_ = false;
+  return Status::ok();
+}
+
+Status McapCamera::scanFrames(Scan& scan) {
   mcap::Reader& reader = *reader_;
-  hal::RgbdFrame scratch;  // sized below for the largest frame
-  std::size_t scratch_pixels = 0;
-  std::vector<int64_t> stamps;
-  bool have_channel = false;
-  std::size_t bad = 0;
-  std::string first_bad;
-  int max_width = 0, max_height = 0;
   for (mcap::Reader::Item item = reader.next(); item != mcap::Reader::Item::kEnd; item = reader.next()) {
     if (item == mcap::Reader::Item::kChannel && reader.channel().topic == kFramesTopic) {
       const mcap::SchemaRecord* schema = reader.findSchema(reader.channel().schema_id);
       if (schema == nullptr || schema->name != kFrameRecordSchemaName) {
-        unmap();
         return {ErrorCode::kInvalidInput, "mcap: '" + options_.path + "': channel " + std::string(kFramesTopic) +
                                               " is not of schema " + kFrameRecordSchemaName};
       }
       frames_channel_ = reader.channel().id;
-      have_channel = true;
+      scan.have_channel = true;
       continue;
     }
-    if (item != mcap::Reader::Item::kMessage || !have_channel || reader.message().channel_id != frames_channel_) continue;
-    const std::span<const uint8_t> data = reader.message().data;
-    // A slot for the frame's size (open() may allocate; the record's own checks follow).
-    if (data.size() >= kFrameRecordHeaderBytes) {
-      uint32_t w = 0, h = 0;
-      std::memcpy(&w, data.data() + 8, 4);
-      std::memcpy(&h, data.data() + 12, 4);
-      if (w > 0 && h > 0 && w <= 16384 && h <= 16384 && std::size_t{w} * h > scratch_pixels) {
-        scratch = hal::RgbdFrame(static_cast<int>(w), static_cast<int>(h));
-        scratch_pixels = std::size_t{w} * h;
-      }
-    }
-    if (Status s = decodeFrameRecord(data, scratch); !s) {
-      if (bad++ == 0) first_bad = s.message();
-      continue;
-    }
-    if (scratch.width() * scratch.height() > max_width * max_height) {
-      max_width = scratch.width();
-      max_height = scratch.height();
-    }
-    if (frame_count_ == 0) {
-      info_.intrinsics = scratch.intrinsics;
-      info_.depth_scale_m = scratch.depth_scale_m;
-    }
-    stamps.push_back(scratch.stamp_ns);
-    ++frame_count_;
+    if (item != mcap::Reader::Item::kMessage || !scan.have_channel || reader.message().channel_id != frames_channel_) continue;
+    scanFrame(reader.message().data, scan);
   }
-  stop_reason_ = reader.complete() ? std::string() : reader.stopReason();
-  if (!have_channel || frame_count_ == 0) {
-    const std::string why = !have_channel ? "has no " + std::string(kFramesTopic) + " channel"
-                                          : "has no readable frame" + (bad > 0 ? " (" + first_bad + ")" : std::string());
-    unmap();
-    return {ErrorCode::kNotFound, "mcap: '" + options_.path + "' " + why +
-                                      (stop_reason_.empty() ? "" : "; " + stop_reason_) +
-                                      ": record the camera with fovead serve --record FILE --record-frames"};
+  return Status::ok();
+}
+
+void McapCamera::scanFrame(std::span<const uint8_t> data, Scan& scan) {
+  // A slot for the frame's size (open() may allocate; the record's own checks follow).
+  if (data.size() >= kFrameRecordHeaderBytes) {
+    uint32_t w = 0, h = 0;
+    std::memcpy(&w, data.data() + 8, 4);
+    std::memcpy(&h, data.data() + 12, 4);
+    if (w > 0 && h > 0 && w <= 16384 && h <= 16384 && std::size_t{w} * h > scan.scratch_pixels) {
+      scan.scratch = hal::RgbdFrame(static_cast<int>(w), static_cast<int>(h));
+      scan.scratch_pixels = std::size_t{w} * h;
+    }
   }
+  hal::RgbdFrame& scratch = scan.scratch;
+  if (Status s = decodeFrameRecord(data, scratch); !s) {
+    if (scan.bad++ == 0) scan.first_bad = s.message();
+    return;
+  }
+  if (scratch.width() * scratch.height() > scan.max_width * scan.max_height) {
+    scan.max_width = scratch.width();
+    scan.max_height = scratch.height();
+  }
+  if (frame_count_ == 0) {
+    info_.intrinsics = scratch.intrinsics;
+    info_.depth_scale_m = scratch.depth_scale_m;
+  }
+  scan.stamps.push_back(scratch.stamp_ns);
+  ++frame_count_;
+}
+
+Status McapCamera::noFramesError(const Scan& scan) const {
+  const std::string why = !scan.have_channel
+                              ? "has no " + std::string(kFramesTopic) + " channel"
+                              : "has no readable frame" + (scan.bad > 0 ? " (" + scan.first_bad + ")" : std::string());
+  return {ErrorCode::kNotFound, "mcap: '" + options_.path + "' " + why + (stop_reason_.empty() ? "" : "; " + stop_reason_) +
+                                    ": record the camera with fovead serve --record FILE --record-frames"};
+}
+
+void McapCamera::describeRecording(const Scan& scan) {
+  const std::vector<int64_t>& stamps = scan.stamps;
   const int64_t span_ns = stamps.back() - stamps.front();
   const int64_t period_ns =
       stamps.size() > 1 && span_ns > 0 ? span_ns / static_cast<int64_t>(stamps.size() - 1) : 33'333'333;
   loop_period_ns_ = span_ns + period_ns;
   info_.fps = 1e9 / static_cast<double>(period_ns);
   info_.model = "fovea recording, " + std::to_string(frame_count_) + " frames" +
-                (bad > 0 ? ", " + std::to_string(bad) + " unreadable (" + first_bad + ")" : std::string()) +
+                (scan.bad > 0 ? ", " + std::to_string(scan.bad) + " unreadable (" + scan.first_bad + ")" : std::string()) +
                 (stop_reason_.empty() ? std::string() : "; cut short: " + stop_reason_);
-  for (std::size_t i = 0; i < bad; ++i) counters_.badFrame();
-  reader_->rewind();
-  opened_ = true;
-  loops_ = 0;
-  start_stamp_known_ = false;
-  return Status::ok();
 }
 
 Status McapCamera::start() {

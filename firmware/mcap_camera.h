@@ -66,6 +66,13 @@ class McapCamera final : public hal::Camera {
   void unmap();
   // The next frame message of the frames channel; false at the end of the file.
   bool nextFrameMessage(std::span<const uint8_t>& data);
+  // open()'s steps: the pass through the file (each frame checked and counted),
+  // the error of a file without frames, then the frame rate and info().model.
+  struct Scan;
+  Status scanFrames(Scan& scan);
+  void scanFrame(std::span<const uint8_t> data, Scan& scan);
+  Status noFramesError(const Scan& scan) const;
+  void describeRecording(const Scan& scan);
 
   McapCameraOptions options_;
   hal::CameraInfo info_;

@@ -152,52 +152,63 @@ Result<Eigen::Vector3d> parseVector3(std::string_view flag, std::string_view tex
   return Eigen::Vector3d((*values)[0], (*values)[1], (*values)[2]);
 }
 
-Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipeline::FoveationConfig base) {
-  pipeline::FoveationConfig config = std::move(base);
+namespace {
+
+// --preset, --bounds (a custom region list), --m and --far-ecc.
+Status applyRegionFlags(const Args& args, pipeline::AcuityConfig& acuity) {
   if (const std::string* preset = args.get("--preset")) {
     Result<pipeline::Preset> p = pipeline::parsePreset(*preset);
     if (!p) return p.status();
-    config.acuity.preset = p.value();
+    acuity.preset = p.value();
   }
   if (const std::string* bounds = args.get("--bounds")) {
-    if (args.has("--preset") && config.acuity.preset != pipeline::Preset::kCustom) {
-      return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument,
-                                               "--bounds: defines a custom region list; drop --preset or say --preset custom");
+    if (args.has("--preset") && acuity.preset != pipeline::Preset::kCustom) {
+      return Status(ErrorCode::kInvalidArgument,
+                    "--bounds: defines a custom region list; drop --preset or say --preset custom");
     }
     Result<std::vector<double>> list = parseDoubleList("--bounds", *bounds);
     if (!list) return list.status();
-    config.acuity.preset = pipeline::Preset::kCustom;
-    config.acuity.custom_bounds_deg = list.value();
-  } else if (config.acuity.preset == pipeline::Preset::kCustom && config.acuity.custom_bounds_deg.empty()) {
-    return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument, "--preset custom: needs --bounds E1,E2,...");
+    acuity.preset = pipeline::Preset::kCustom;
+    acuity.custom_bounds_deg = list.value();
+  } else if (acuity.preset == pipeline::Preset::kCustom && acuity.custom_bounds_deg.empty()) {
+    return Status(ErrorCode::kInvalidArgument, "--preset custom: needs --bounds E1,E2,...");
   }
   if (const std::string* m = args.get("--m")) {
     Result<double> v = parseDouble("--m", *m);
     if (!v) return v.status();
-    config.acuity.slope = v.value();
+    acuity.slope = v.value();
   }
   if (const std::string* far = args.get("--far-ecc")) {
     Result<double> v = parseDouble("--far-ecc", *far);
     if (!v) return v.status();
-    config.acuity.far_ecc_deg = v.value();
+    acuity.far_ecc_deg = v.value();
   }
-  if (const std::string* fixation = args.get("--fixation")) {
-    if (fixation->rfind("fixed:", 0) == 0) {
-      Result<double> d0 = parseDouble("--fixation fixed:D0", fixation->substr(6));
-      if (!d0) return d0.status();
-      config.fixation.mode = pipeline::FixationMode::kFixed;
-      config.fixation.fixed_m = d0.value();
-    } else {
-      Result<pipeline::FixationMode> mode = pipeline::parseFixationMode(*fixation);
-      if (!mode) return mode.status();
-      if (mode.value() == pipeline::FixationMode::kFixed) {
-        return Result<pipeline::FoveationConfig>(ErrorCode::kInvalidArgument, "--fixation fixed: say fixed:D0 with D0 in metres");
-      }
-      config.fixation.mode = mode.value();
+  return Status::ok();
+}
+
+// --fixation hit|centroid|fixed:D0.
+Status applyFixationFlag(const Args& args, pipeline::FixationConfig& fixation_config) {
+  const std::string* fixation = args.get("--fixation");
+  if (fixation == nullptr) return Status::ok();
+  if (fixation->rfind("fixed:", 0) == 0) {
+    Result<double> d0 = parseDouble("--fixation fixed:D0", fixation->substr(6));
+    if (!d0) return d0.status();
+    fixation_config.mode = pipeline::FixationMode::kFixed;
+    fixation_config.fixed_m = d0.value();
+  } else {
+    Result<pipeline::FixationMode> mode = pipeline::parseFixationMode(*fixation);
+    if (!mode) return mode.status();
+    if (mode.value() == pipeline::FixationMode::kFixed) {
+      return Status(ErrorCode::kInvalidArgument, "--fixation fixed: say fixed:D0 with D0 in metres");
     }
+    fixation_config.mode = mode.value();
   }
-  // ACUITY's own settings (the configuration keys of the same names); with
-  // another preset they would silently do nothing, so they are refused.
+  return Status::ok();
+}
+
+// ACUITY's own settings (the configuration keys of the same names); with
+// another preset they would silently do nothing, so they are refused.
+Status applyAcuityFlags(const Args& args, pipeline::AcuityConfig& acuity) {
   const auto acuityDouble = [&](const char* flag, double& field) -> Status {
     const std::string* text = args.get(flag);
     if (text == nullptr) return Status();
@@ -206,30 +217,39 @@ Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipe
     field = v.value();
     return Status();
   };
-  if (Status s = acuityDouble("--level-voxel-m", config.acuity.level_voxel_m); !s) return s;
-  if (Status s = acuityDouble("--floor-m", config.acuity.floor_m); !s) return s;
-  if (Status s = acuityDouble("--floor-per-m2", config.acuity.floor_per_m2); !s) return s;
-  if (Status s = acuityDouble("--level-margin", config.acuity.level_margin); !s) return s;
+  if (Status s = acuityDouble("--level-voxel-m", acuity.level_voxel_m); !s) return s;
+  if (Status s = acuityDouble("--floor-m", acuity.floor_m); !s) return s;
+  if (Status s = acuityDouble("--floor-per-m2", acuity.floor_per_m2); !s) return s;
+  if (Status s = acuityDouble("--level-margin", acuity.level_margin); !s) return s;
   if (const std::string* passes = args.get("--refine-passes")) {
     Result<long> v = parseInteger("--refine-passes", *passes, 0, pipeline::kMaxRefinePasses);
     if (!v) return v.status();
-    config.acuity.refine_passes = static_cast<int>(v.value());
+    acuity.refine_passes = static_cast<int>(v.value());
   }
   if (const std::string* cull = args.get("--view-cull")) {
     Result<pipeline::ViewCull> v = pipeline::parseViewCull(*cull);
     if (!v) return v.status();
-    config.acuity.view_cull = v.value();
+    acuity.view_cull = v.value();
   }
-  if (Status s = acuityDouble("--view-cull-deg", config.acuity.view_cull_deg); !s) return s;
+  if (Status s = acuityDouble("--view-cull-deg", acuity.view_cull_deg); !s) return s;
   std::string named;  // the ACUITY flags given
   for (const std::string& flag : kAcuityFlags) {
     if (args.get(flag) != nullptr) named += (named.empty() ? "" : ", ") + flag;
   }
-  if (!named.empty() && config.acuity.preset != pipeline::Preset::kAcuity) {
-    return Result<pipeline::FoveationConfig>(
-        ErrorCode::kInvalidArgument, named + ": ACUITY's settings: say --preset ACUITY (the foveation is " +
-                                         std::string(pipeline::presetName(config.acuity.preset)) + ")");
+  if (!named.empty() && acuity.preset != pipeline::Preset::kAcuity) {
+    return Status(ErrorCode::kInvalidArgument, named + ": ACUITY's settings: say --preset ACUITY (the foveation is " +
+                                                   std::string(pipeline::presetName(acuity.preset)) + ")");
   }
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<pipeline::FoveationConfig> foveationConfigFromArgs(const Args& args, pipeline::FoveationConfig base) {
+  pipeline::FoveationConfig config = std::move(base);
+  if (Status s = applyRegionFlags(args, config.acuity); !s) return s;
+  if (Status s = applyFixationFlag(args, config.fixation); !s) return s;
+  if (Status s = applyAcuityFlags(args, config.acuity); !s) return s;
   // Validate here so that the error names the flags, before any work starts.
   Result<pipeline::RegionModel> model = pipeline::RegionModel::create(config.acuity);
   if (!model) return model.status();
