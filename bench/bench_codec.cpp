@@ -8,13 +8,15 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "bench/bench_input.h"
 #include "bench/codec_baselines.h"
+#include "bench/foveated_frame.h"
 #include "net/codec.h"
-#include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 
 namespace fovea::bench {
@@ -95,62 +97,49 @@ int usage() {
   return 2;
 }
 
-int run(int argc, char** argv) {
+struct CodecOptions {
   int runs = 25;
   std::string only;  // run only the codecs whose name starts with this
   pipeline::FoveationConfig config;
+};
+
+// Returns the exit status of a usage error, else nothing.
+std::optional<int> parseOptions(int argc, char** argv, CodecOptions& options) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--runs" && i + 1 < argc) {
-      runs = std::atoi(argv[++i]);
-      if (runs < 1) return usage();
+      options.runs = std::atoi(argv[++i]);
+      if (options.runs < 1) return usage();
     } else if (arg == "--only" && i + 1 < argc) {
-      only = argv[++i];
+      options.only = argv[++i];
     } else if (arg == "--preset" && i + 1 < argc) {
       Result<pipeline::Preset> p = pipeline::parsePreset(argv[++i]);
       if (!p) return usage();
-      config.acuity.preset = p.value();
+      options.config.acuity.preset = p.value();
     } else {
       return usage();
     }
   }
-  Result<FrameInput> input = mockLivingRoom(640, 480);
-  if (!input) {
-    std::fprintf(stderr, "fovea-bench-codec: %s\n", input.status().toString().c_str());
-    return 1;
-  }
-  const hal::RgbdFrame& frame = input->frame;
-  const std::size_t pixels = static_cast<std::size_t>(frame.width()) * frame.height();
-  pipeline::PointCloud cloud(pixels);
-  pipeline::BackprojectCounts counts;
-  if (Status s = pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, counts); !s) {
-    std::fprintf(stderr, "fovea-bench-codec: %s\n", s.toString().c_str());
-    return 1;
-  }
-  Result<pipeline::Foveator> foveator = pipeline::Foveator::create({pixels, pixels}, config);
-  if (!foveator) {
-    std::fprintf(stderr, "fovea-bench-codec: %s\n", foveator.status().toString().c_str());
-    return 1;
-  }
-  pipeline::FoveatedCloud fov(pixels);
-  pipeline::FoveationStats stats;
-  if (Status s = foveator->foveate(cloud, input->gaze, fov, stats); !s) {
-    std::fprintf(stderr, "fovea-bench-codec: %s\n", s.toString().c_str());
-    return 1;
-  }
-  std::vector<double> voxel;
-  for (int r = 0; r < stats.region_count; ++r) voxel.push_back(stats.regions[static_cast<std::size_t>(r)].voxel_size_m);
-  const double n = static_cast<double>(fov.size());
-  std::printf("input: %s, preset %s: %zu foveated points (", input->description.c_str(),
-              std::string(pipeline::presetName(config.acuity.preset)).c_str(), fov.size());
+  return std::nullopt;
+}
+
+// The input line: the frame, the preset, each region's points and voxel.
+void printInput(const FrameInput& input, const FoveatedFrame& frame, const std::vector<double>& voxel,
+                const CodecOptions& options) {
+  const pipeline::FoveationStats& stats = frame.stats;
+  std::printf("input: %s, preset %s: %zu foveated points (", input.description.c_str(),
+              std::string(pipeline::presetName(options.config.acuity.preset)).c_str(), frame.cloud.size());
   for (int r = 0; r < stats.region_count; ++r) {
     std::printf("%sregion %d: %u pts, voxel %.1f mm", r ? "; " : "", r, stats.regions[static_cast<std::size_t>(r)].points_out,
                 voxel[static_cast<std::size_t>(r)] * 1e3);
   }
-  std::printf("), %d rounds (each codec once per round, after its own warm-up run), medians of thread CPU time\n\n", runs);
+  std::printf("), %d rounds (each codec once per round, after its own warm-up run), medians of thread CPU time\n\n",
+              options.runs);
+}
 
-  const double draco11 = dracoStep(fov, 11);
-  std::vector<Row> rows;
+// fovea's codec in its configurations: as it ships, then on Draco 11-bit's grid.
+void addFoveaRows(std::vector<Row>& rows, const pipeline::FoveatedCloud& fov, const std::vector<double>& voxel,
+                  double draco11, const std::string& only) {
   auto fovea = [&](const std::string& name, const net::CodecConfig& c, std::span<const double> v, const std::string& note) {
     if (name.rfind(only, 0) != 0) return;
     const std::vector<double> sizes(v.begin(), v.end());
@@ -179,12 +168,16 @@ int run(int argc, char** argv) {
   net::CodecConfig matched_half = matched;
   matched_half.halve_peripheral_chroma = true;
   fovea("fovea @ draco-11, half chroma", matched_half, grid, "as above, chroma per pair outside the fovea");
+}
 
+// The baselines that were built: Draco and PCL's octree codec.
+void addBaselineRows(std::vector<Row>& rows, const pipeline::FoveatedCloud& fov, double draco11, const std::string& only) {
   const bool draco = haveDraco() && std::string("draco").rfind(only, 0) == 0;
   if (draco) {
     addRow(rows, "draco 11-bit", "kd-tree, speed 10, 8-bit colour",
            [&fov](std::size_t&) { return runDraco(fov, 11, 1); });
     // Draco at fovea's foveal precision: the fewest bits whose step is <= 1 mm.
+    const net::CodecConfig def;
     int bits = 11;
     while (bits < 30 && dracoStep(fov, bits) > def.fovea_step_m) ++bits;
     addRow(rows, "draco " + std::to_string(bits) + "-bit", "as above, step <= fovea's 1 mm everywhere",
@@ -201,7 +194,9 @@ int run(int argc, char** argv) {
   } else if (!havePclOctree()) {
     std::printf("pcl octree codec: not built (PCL not found)\n");
   }
+}
 
+void runRounds(std::vector<Row>& rows, int runs) {
   // Rounds: each codec once per round, so a change in machine load hits every codec alike.
   for (int round = 0; round < runs; ++round) {
     for (Row& row : rows) {
@@ -215,7 +210,10 @@ int run(int argc, char** argv) {
     row.run.encode_ms = median(row.encode_ms);
     row.run.decode_ms = median(row.decode_ms);
   }
+}
 
+// The table, against Draco 11-bit where it ran, and its legend; n: the foveated points.
+void printTable(const std::vector<Row>& rows, double n) {
   const CodecRun* draco_ref = nullptr;
   for (const Row& r : rows) {
     if (r.name == "draco 11-bit" && r.run.error.empty()) draco_ref = &r.run;
@@ -243,12 +241,45 @@ int run(int argc, char** argv) {
               "B vs draco: bytes relative to Draco 11-bit (below 1 is smaller); enc x draco: Draco 11-bit's encode time\n"
               "divided by this codec's (above 1 is faster).\n\n",
               net::kDatagramOverhead);
+}
+
+// One `codec="..." bytes=...` line per codec that ran.
+void printMachineLines(const std::vector<Row>& rows, std::size_t points) {
   for (const Row& r : rows) {
     if (!r.run.error.empty()) continue;
     std::printf("codec=\"%s\" bytes=%zu points=%zu points_out=%zu datagrams=%zu enc_ms=%.4f dec_ms=%.4f max_err_m=%.6f  # %s\n",
-                r.name.c_str(), r.run.bytes, fov.size(), r.run.points_out, r.datagrams, r.run.encode_ms, r.run.decode_ms,
+                r.name.c_str(), r.run.bytes, points, r.run.points_out, r.datagrams, r.run.encode_ms, r.run.decode_ms,
                 r.run.max_error_m, r.note.c_str());
   }
+}
+
+int run(int argc, char** argv) {
+  CodecOptions options;
+  if (std::optional<int> stop = parseOptions(argc, argv, options)) return *stop;
+  Result<FrameInput> input = mockLivingRoom(640, 480);
+  if (!input) {
+    std::fprintf(stderr, "fovea-bench-codec: %s\n", input.status().toString().c_str());
+    return 1;
+  }
+  Result<FoveatedFrame> frame = foveateFrame(input.value(), options.config);
+  if (!frame) {
+    std::fprintf(stderr, "fovea-bench-codec: %s\n", frame.status().toString().c_str());
+    return 1;
+  }
+  const pipeline::FoveatedCloud& fov = frame->cloud;
+  std::vector<double> voxel;
+  for (int r = 0; r < frame->stats.region_count; ++r) {
+    voxel.push_back(frame->stats.regions[static_cast<std::size_t>(r)].voxel_size_m);
+  }
+  printInput(input.value(), frame.value(), voxel, options);
+
+  const double draco11 = dracoStep(fov, 11);
+  std::vector<Row> rows;
+  addFoveaRows(rows, fov, voxel, draco11, options.only);
+  addBaselineRows(rows, fov, draco11, options.only);
+  runRounds(rows, options.runs);
+  printTable(rows, static_cast<double>(fov.size()));
+  printMachineLines(rows, fov.size());
   return 0;
 }
 

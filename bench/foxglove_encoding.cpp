@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,8 +17,8 @@
 
 #include "bench/bench_input.h"
 #include "bench/codec_baselines.h"
+#include "bench/foveated_frame.h"
 #include "io/foxglove/foxglove.h"
-#include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 
 namespace fovea::bench {
@@ -100,90 +101,104 @@ int usage() {
   return 2;
 }
 
-}  // namespace
-}  // namespace fovea::bench
-
-int main(int argc, char** argv) {
-  using namespace fovea;
-  using namespace fovea::bench;
+struct FoxgloveOptions {
   int runs = 200;
   std::string tum;
   int tum_frame = 10;
+};
+
+// Returns the exit status of a usage error, else nothing.
+std::optional<int> parseOptions(int argc, char** argv, FoxgloveOptions& options) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) return usage();
     if (a == "--runs") {
-      runs = std::atoi(argv[++i]);
-      if (runs < 1) return usage();
+      options.runs = std::atoi(argv[++i]);
+      if (options.runs < 1) return usage();
     } else if (a == "--tum") {
-      tum = argv[++i];
+      options.tum = argv[++i];
     } else if (a == "--frame") {
-      tum_frame = std::atoi(argv[++i]);
+      options.tum_frame = std::atoi(argv[++i]);
     } else {
       return usage();
     }
   }
-  Result<FrameInput> input = tum.empty() ? mockLivingRoom(640, 480) : tumFrame(tum, tum_frame);
-  if (!input) {
-    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", input.status().toString().c_str());
-    return 1;
-  }
-  const hal::RgbdFrame& frame = input->frame;
-  const std::size_t pixels = static_cast<std::size_t>(frame.width()) * frame.height();
-  pipeline::PointCloud cloud(pixels);
-  pipeline::BackprojectCounts counts;
-  pipeline::FoveationConfig config;
-  Result<pipeline::Foveator> foveator = pipeline::Foveator::create({pixels, pixels}, config);
-  pipeline::FoveatedCloud fov(pixels);
-  pipeline::FoveationStats stats;
-  if (Status s = pipeline::backprojectRef(frame, pipeline::DepthRange{}, cloud, counts); !s) {
-    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", s.toString().c_str());
-    return 1;
-  }
-  if (!foveator) {
-    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", foveator.status().toString().c_str());
-    return 1;
-  }
-  if (Status s = foveator->foveate(cloud, input->gaze, fov, stats); !s) {
-    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", s.toString().c_str());
-    return 1;
-  }
-  const pipeline::PointCloud& pts = fov.points;
-  std::printf("input: %s, preset %s: %zu foveated points; %d rounds (each encoding once per round, after a warm-up), "
-              "medians of thread CPU time\n\n",
-              input->description.c_str(), std::string(pipeline::presetName(config.acuity.preset)).c_str(), pts.size(), runs);
+  return std::nullopt;
+}
 
+// Each encoding's bytes and median encode time, over `runs` rounds.
+struct Encodings {
+  std::size_t proto_bytes = 0, direct_bytes = 0, library_bytes = 0;
+  double proto_ms = 0, direct_ms = 0, library_ms = 0;
+};
+
+Encodings timeEncodings(const pipeline::PointCloud& pts, int runs) {
   foxglove::PointCloudEncoder proto;
   std::vector<uint8_t> data;
   std::string json_direct, json_library;
   const int64_t stamp = 1'764'000'000'123'456'789;
-  std::size_t proto_bytes = proto.encode(pts, "world", stamp).size();
-  std::size_t direct_bytes = encodeJsonDirect(pts, stamp, data, json_direct);
-  std::size_t library_bytes = encodeJsonLibrary(pts, stamp, data, json_library);
+  Encodings e;
+  e.proto_bytes = proto.encode(pts, "world", stamp).size();
+  e.direct_bytes = encodeJsonDirect(pts, stamp, data, json_direct);
+  e.library_bytes = encodeJsonLibrary(pts, stamp, data, json_library);
   std::vector<double> t_proto, t_direct, t_library;
   using Clock = ThreadCpuClock;
   auto ms = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
   for (int r = 0; r < runs; ++r) {
     const auto t0 = Clock::now();
-    proto_bytes = proto.encode(pts, "world", stamp + r).size();
+    e.proto_bytes = proto.encode(pts, "world", stamp + r).size();
     const auto t1 = Clock::now();
-    direct_bytes = encodeJsonDirect(pts, stamp + r, data, json_direct);
+    e.direct_bytes = encodeJsonDirect(pts, stamp + r, data, json_direct);
     const auto t2 = Clock::now();
-    library_bytes = encodeJsonLibrary(pts, stamp + r, data, json_library);
+    e.library_bytes = encodeJsonLibrary(pts, stamp + r, data, json_library);
     const auto t3 = Clock::now();
     t_proto.push_back(ms(t0, t1));
     t_direct.push_back(ms(t1, t2));
     t_library.push_back(ms(t2, t3));
   }
-  const double n = static_cast<double>(pts.size());
-  const double mp = median(t_proto), md = median(t_direct), ml = median(t_library);
+  e.proto_ms = median(t_proto);
+  e.direct_ms = median(t_direct);
+  e.library_ms = median(t_library);
+  return e;
+}
+
+void printTable(const Encodings& e, std::size_t points) {
+  const double n = static_cast<double>(points);
+  const double mp = e.proto_ms;
   std::printf("%-40s %12s %10s %12s %10s %8s\n", "encoding", "bytes", "B/point", "encode ms", "ns/point", "x proto");
   auto row = [&](const char* name, std::size_t bytes, double m) {
     std::printf("%-40s %12zu %10.2f %12.3f %10.1f %8.2f\n", name, bytes, static_cast<double>(bytes) / n, m, m * 1e6 / n,
                 m / mp);
   };
-  row("protobuf (io/foxglove, libprotobuf)", proto_bytes, mp);
-  row("json, written by hand, data base64", direct_bytes, md);
-  row("json, nlohmann-json, data base64", library_bytes, ml);
+  row("protobuf (io/foxglove, libprotobuf)", e.proto_bytes, mp);
+  row("json, written by hand, data base64", e.direct_bytes, e.direct_ms);
+  row("json, nlohmann-json, data base64", e.library_bytes, e.library_ms);
+}
+
+int run(int argc, char** argv) {
+  FoxgloveOptions options;
+  if (std::optional<int> stop = parseOptions(argc, argv, options)) return *stop;
+  Result<FrameInput> input = options.tum.empty() ? mockLivingRoom(640, 480) : tumFrame(options.tum, options.tum_frame);
+  if (!input) {
+    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", input.status().toString().c_str());
+    return 1;
+  }
+  const pipeline::FoveationConfig config;
+  Result<FoveatedFrame> frame = foveateFrame(input.value(), config);
+  if (!frame) {
+    std::fprintf(stderr, "fovea-bench-foxglove: %s\n", frame.status().toString().c_str());
+    return 1;
+  }
+  const pipeline::PointCloud& pts = frame->cloud.points;
+  std::printf("input: %s, preset %s: %zu foveated points; %d rounds (each encoding once per round, after a warm-up), "
+              "medians of thread CPU time\n\n",
+              input->description.c_str(), std::string(pipeline::presetName(config.acuity.preset)).c_str(), pts.size(),
+              options.runs);
+  printTable(timeEncodings(pts, options.runs), pts.size());
   return 0;
 }
+
+}  // namespace
+}  // namespace fovea::bench
+
+int main(int argc, char** argv) { return fovea::bench::run(argc, argv); }

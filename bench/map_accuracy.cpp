@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "bench/bench_input.h"
+#include "bench/mock_scene.h"
 #include "hal/camera.h"
 #include "pipeline/map/surfel_map.h"
 
@@ -142,35 +143,21 @@ void evaluate(const SurfelMap& map, const RgbdFrame& noisy, const RgbdFrame& tru
   }
 }
 
-}  // namespace
+// Each frame's fusion time and its steps' (FuseStats' *_ns), in ms.
+struct FuseTimes {
+  std::vector<double> fuse_ms, vertices_ms, index_map_ms, associate_ms, add_ms;
+  void add(const fovea::pipeline::map::FuseStats& stats) {
+    fuse_ms.push_back(static_cast<double>(stats.fuse_ns) * 1e-6);
+    vertices_ms.push_back(static_cast<double>(stats.vertices_ns) * 1e-6);
+    index_map_ms.push_back(static_cast<double>(stats.index_map_ns) * 1e-6);
+    associate_ms.push_back(static_cast<double>(stats.associate_ns) * 1e-6);
+    add_ms.push_back(static_cast<double>(stats.add_ns) * 1e-6);
+  }
+};
 
-int main(int argc, char** argv) {
-  const std::string scene = option(argc, argv, "--scene", "living-room");
-  const std::string path = option(argc, argv, "--path", "orbit");
-  const std::string size = option(argc, argv, "--size", "640x480");
-  const int frames = std::atoi(option(argc, argv, "--frames", "60").c_str());
-  const int every = std::atoi(option(argc, argv, "--every", "10").c_str());
-  if (frames < 1 || every < 1) {
-    std::fprintf(stderr, "fovea-map-accuracy: --frames and --every must be at least 1\n");
-    return 2;
-  }
-  const std::string spec = "mock:" + scene + ",path=" + path + ",size=" + size;
-  auto noisy_cam = fovea::hal::createCamera(spec);
-  auto truth_cam = fovea::hal::createCamera(spec + ",noise=off");
-  if (!noisy_cam || !truth_cam) {
-    std::fprintf(stderr, "fovea-map-accuracy: %s\n", (noisy_cam ? truth_cam.status() : noisy_cam.status()).message().c_str());
-    return 2;
-  }
-  fovea::hal::Camera& a = *noisy_cam.value();
-  fovea::hal::Camera& b = *truth_cam.value();
-  if (!a.open() || !a.start() || !b.open() || !b.start()) {
-    std::fprintf(stderr, "fovea-map-accuracy: the mock camera did not start\n");
-    return 1;
-  }
-  const fovea::hal::CameraIntrinsics& k = a.info().intrinsics;
-  fovea::pipeline::map::SurfelMapConfig config;
-  config.max_width = k.width;
-  config.max_height = k.height;
+// --stable, --cap, --unstable-frames and --kernels onto the map's configuration.
+// Returns 0, or the exit status 2 after printing why.
+int readMapOptions(int argc, char** argv, fovea::pipeline::map::SurfelMapConfig& config) {
   if (const std::string c = option(argc, argv, "--stable", ""); !c.empty()) config.stable_confidence = std::atof(c.c_str());
   if (const std::string c = option(argc, argv, "--cap", ""); !c.empty()) config.confidence_cap = std::atof(c.c_str());
   if (const std::string n = option(argc, argv, "--unstable-frames", ""); !n.empty()) {
@@ -184,15 +171,15 @@ int main(int argc, char** argv) {
     }
     config.kernels = *set;
   }
-  fovea::Result<SurfelMap> created = SurfelMap::create(config);
-  if (!created) {
-    std::fprintf(stderr, "fovea-map-accuracy: %s\n", created.status().message().c_str());
-    return 2;
-  }
-  SurfelMap& map = created.value();
+  return 0;
+}
+
+// Fuses `frames` frames of the noisy camera, comparing the map with the twin's
+// view every `every` frames and at the last. Returns 0, or the exit status 1.
+int fuseFrames(fovea::hal::Camera& a, fovea::hal::Camera& b, SurfelMap& map, int frames, int every, Totals& totals,
+               FuseTimes& times) {
+  const fovea::hal::CameraIntrinsics& k = a.info().intrinsics;
   RgbdFrame noisy(k.width, k.height), truth(k.width, k.height);
-  Totals totals;
-  std::vector<double> fuse_ms, vertices_ms, index_map_ms, associate_ms, add_ms;
   for (int i = 0; i < frames; ++i) {
     if (!a.acquire(noisy, std::chrono::seconds(5)) || !b.acquire(truth, std::chrono::seconds(5))) {
       std::fprintf(stderr, "fovea-map-accuracy: frame %d did not arrive\n", i);
@@ -204,13 +191,14 @@ int main(int argc, char** argv) {
                    std::string(fovea::pipeline::map::fuseOutcomeName(stats.outcome)).c_str());
       return 1;
     }
-    fuse_ms.push_back(static_cast<double>(stats.fuse_ns) * 1e-6);
-    vertices_ms.push_back(static_cast<double>(stats.vertices_ns) * 1e-6);
-    index_map_ms.push_back(static_cast<double>(stats.index_map_ns) * 1e-6);
-    associate_ms.push_back(static_cast<double>(stats.associate_ns) * 1e-6);
-    add_ms.push_back(static_cast<double>(stats.add_ns) * 1e-6);
+    times.add(stats);
     if ((i + 1) % every == 0 || i + 1 == frames) evaluate(map, noisy, truth, totals);
   }
+  return 0;
+}
+
+// The map's surfels, and its depth error and coverage against the single frame's.
+void printAccuracy(const std::string& spec, int frames, int every, const SurfelMap& map, Totals& totals) {
   const double map_rms = totals.map_n ? std::sqrt(totals.map_sq / static_cast<double>(totals.map_n)) : 0.0;
   const double frame_rms = totals.frame_n ? std::sqrt(totals.frame_sq / static_cast<double>(totals.frame_n)) : 0.0;
   double confidence = 0.0;
@@ -233,13 +221,46 @@ int main(int argc, char** argv) {
   std::printf("stable surfels in the last view more than 5 cm in front of the true surface: %.3f %% (%zu of %zu)\n",
               totals.in_view ? 100.0 * static_cast<double>(totals.ghosts) / static_cast<double>(totals.in_view) : 0.0,
               totals.ghosts, totals.in_view);
+}
+
+void printFuseTimes(FuseTimes& times, fovea::KernelSet kernels) {
   auto middle = [](std::vector<double>& v) {
     std::sort(v.begin(), v.end());
     return v[v.size() / 2];
   };
   std::printf("fusion time per frame [ms]: median %.2f (kernels %s, one thread); steps' medians: vertices %.2f, "
               "index map %.2f, associate %.2f, evict and add %.2f\n",
-              middle(fuse_ms), std::string(fovea::kernelSetName(config.kernels)).c_str(), middle(vertices_ms),
-              middle(index_map_ms), middle(associate_ms), middle(add_ms));
+              middle(times.fuse_ms), std::string(fovea::kernelSetName(kernels)).c_str(), middle(times.vertices_ms),
+              middle(times.index_map_ms), middle(times.associate_ms), middle(times.add_ms));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string spec = fovea::bench::mockSceneSpec(argc, argv, "orbit");
+  const int frames = std::atoi(option(argc, argv, "--frames", "60").c_str());
+  const int every = std::atoi(option(argc, argv, "--every", "10").c_str());
+  if (frames < 1 || every < 1) {
+    std::fprintf(stderr, "fovea-map-accuracy: --frames and --every must be at least 1\n");
+    return 2;
+  }
+  fovea::bench::MockTwins twins;
+  if (int status = fovea::bench::openMockTwins("fovea-map-accuracy", spec, twins); status != 0) return status;
+  const fovea::hal::CameraIntrinsics& k = twins.noisy->info().intrinsics;
+  fovea::pipeline::map::SurfelMapConfig config;
+  config.max_width = k.width;
+  config.max_height = k.height;
+  if (int status = readMapOptions(argc, argv, config); status != 0) return status;
+  fovea::Result<SurfelMap> created = SurfelMap::create(config);
+  if (!created) {
+    std::fprintf(stderr, "fovea-map-accuracy: %s\n", created.status().message().c_str());
+    return 2;
+  }
+  SurfelMap& map = created.value();
+  Totals totals;
+  FuseTimes times;
+  if (int status = fuseFrames(*twins.noisy, *twins.truth, map, frames, every, totals, times); status != 0) return status;
+  printAccuracy(spec, frames, every, map, totals);
+  printFuseTimes(times, config.kernels);
   return 0;
 }

@@ -36,6 +36,7 @@
 #include <initializer_list>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -43,6 +44,7 @@
 #include <Eigen/Geometry>
 
 #include "bench/bench_input.h"
+#include "bench/mock_scene.h"
 #include "hal/camera.h"
 #include "net/brick_cache.h"
 #include "net/codec.h"
@@ -156,256 +158,377 @@ struct Stream {
   std::size_t bytes_steady = 0;  // after the first second
 };
 
-}  // namespace
+struct DeltaOptions {
+  std::string spec;  // the mock camera's (mock_scene.h)
+  int frames = 90;
+  double budget_mbps = 12.5;
+  int fps = 30;
+  int dwell = 9;
+  int eval_every = 15;
+};
 
-int main(int argc, char** argv) {
-  const std::string scene = option(argc, argv, "--scene", "living-room");
-  const std::string path = option(argc, argv, "--path", "static");
-  const std::string size = option(argc, argv, "--size", "640x480");
-  const int frames = std::atoi(option(argc, argv, "--frames", "90").c_str());
-  const double budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
-  const int fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
-  const int dwell = std::atoi(option(argc, argv, "--dwell-frames", "9").c_str());
-  const int eval_every = std::atoi(option(argc, argv, "--eval-every", "15").c_str());
-  if (frames < 1 || fps < 1 || dwell < 1 || eval_every < 1 || !(budget_mbps > 0.0)) {
+// Returns the options, or nothing after printing why they are refused.
+std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
+  DeltaOptions o;
+  o.spec = bench::mockSceneSpec(argc, argv, "static");
+  o.frames = std::atoi(option(argc, argv, "--frames", "90").c_str());
+  o.budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
+  o.fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
+  o.dwell = std::atoi(option(argc, argv, "--dwell-frames", "9").c_str());
+  o.eval_every = std::atoi(option(argc, argv, "--eval-every", "15").c_str());
+  if (o.frames < 1 || o.fps < 1 || o.dwell < 1 || o.eval_every < 1 || !(o.budget_mbps > 0.0)) {
     std::fprintf(stderr,
                  "fovea-map-delta: --frames, --fps, --dwell-frames, --eval-every and --budget-mbps must be positive\n");
-    return 2;
+    return std::nullopt;
   }
-  const std::string spec = "mock:" + scene + ",path=" + path + ",size=" + size;
-  auto created_cam = hal::createCamera(spec);
-  auto created_truth = hal::createCamera(spec + ",noise=off");  // the same path, noiseless: the true surface
-  if (!created_cam || !created_truth) {
-    std::fprintf(stderr, "fovea-map-delta: %s\n",
-                 (created_cam ? created_truth.status() : created_cam.status()).message().c_str());
-    return 2;
-  }
-  hal::Camera& camera = *created_cam.value();
-  hal::Camera& truth_camera = *created_truth.value();
-  if (!camera.open() || !camera.start() || !truth_camera.open() || !truth_camera.start()) {
-    std::fprintf(stderr, "fovea-map-delta: the mock camera did not start\n");
-    return 1;
-  }
-  const hal::CameraIntrinsics& k = camera.info().intrinsics;
-  const std::size_t pixels = static_cast<std::size_t>(k.width) * k.height;
-  const Eigen::Vector3d focus = camera.info().focus_point_m.value_or(Eigen::Vector3d(0, 0, 2));
+  return o;
+}
 
+// What one frame's steps share: its gaze, stamp and what is left of its budget.
+struct FrameStep {
+  int f = 0;
+  bool steady = false;  // after the first second
+  pipeline::Gaze gaze;
+  uint32_t frame_id = 0;
+  int64_t now_ns = 0;
+  double left = 0.0;    // bytes left of the frame's share of the budget
+  bool live_sent = false;
+};
+
+// The run: the camera and its twin, the map and its stream of changes, the
+// encoder, the operator's side, and the figures gathered frame by frame.
+class DeltaBench {
+ public:
+  DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera& truth_camera);
+  // Every frame, the plan's worst case, then the report. Returns the exit status.
+  int run();
+
+ private:
+  int step(int f);
+  int sendFrameStreams(const FrameStep& s);
+  int sendMapDelta(FrameStep& s);
+  bool sendBrick(const pipeline::map::BrickDue& due, FrameStep& s);
+  void sendLive(FrameStep& s);
+  int evaluate(const FrameStep& s);
+  int coldPlan(std::vector<double>& cold_ms);
+  void printBytes() const;
+  void printQuality(const std::vector<double>& cold_ms) const;
+  void count(Stream& stream, std::size_t bytes, bool steady) {
+    stream.bytes += bytes;
+    if (steady) stream.bytes_steady += bytes;
+  }
+
+  // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
+  static constexpr std::size_t kMaxBrickPoints = 1 << 18;
+
+  const DeltaOptions& o_;
+  hal::Camera& camera_;
+  hal::Camera& truth_camera_;
+  const hal::CameraIntrinsics& k_;
+  const std::size_t pixels_;
+  const Eigen::Vector3d focus_;
+  pipeline::map::SurfelMapConfig map_config_;
+  pipeline::map::SurfelMap map_;
+  const pipeline::map::MapDeltaConfig delta_config_;
+  pipeline::map::MapDelta delta_;
+  pipeline::Foveator f1_foveator_;
+  pipeline::Foveator live_foveator_;
+  net::ChunkEncoder encoder_;
+  pipeline::map::BrickSampler brick_sampler_;
+  pipeline::map::BrickBatch batch_;
+  pipeline::PointCloud cloud_, live_;
+  pipeline::FoveatedCloud out_;
+  // The operator's side: the bricks it holds (no loss here), and the last
+  // frame's decoded F1 and live points.
+  net::BrickCache cache_;
+  pipeline::FoveatedCloud decoded_;
+  std::vector<Eigen::Vector3d> f1_held_, live_held_;
+  hal::RgbdFrame truth_;
+  pipeline::PointCloud truth_cloud_;
+  std::vector<double> above_mar_[3], held_points_, f1_points_;  // FREF, F1, MAP-DELTA held
+  std::size_t missing_points_[3] = {};
+
+  Stream fref_{"FREF"}, f1_stream_{"F1"}, bricks_{"MAP-DELTA bricks"}, live_stream_{"MAP-DELTA live"};
+  const double budget_per_frame_;
+  std::vector<double> plan_ms_, brick_encode_ms_;
+  std::size_t live_points_ = 0;  // after the first second
+  std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
+  hal::RgbdFrame frame_;
+};
+
+pipeline::map::SurfelMapConfig mapConfigFor(const hal::CameraIntrinsics& k) {
   pipeline::map::SurfelMapConfig map_config;
   map_config.max_width = k.width;
   map_config.max_height = k.height;
-  pipeline::map::SurfelMap map = pipeline::map::SurfelMap::create(map_config).value();
-  const pipeline::map::MapDeltaConfig delta_config;
-  pipeline::map::MapDelta delta = pipeline::map::MapDelta::create(delta_config, map_config.max_bricks).value();
+  return map_config;
+}
 
+pipeline::Foveator foveatorFor(std::size_t pixels, const pipeline::FoveationConfig& config) {
   pipeline::PipelineCapacity capacity;
   capacity.max_points = capacity.max_voxels = pixels;
+  return pipeline::Foveator::create(capacity, config).value();
+}
+
+pipeline::FoveationConfig f1Config() {
   pipeline::FoveationConfig f1;
   f1.acuity.preset = pipeline::Preset::kF1;
+  return f1;
+}
+
+pipeline::FoveationConfig acuityConfig(const pipeline::map::MapDeltaConfig& delta_config) {
   pipeline::FoveationConfig acuity;
   acuity.acuity = delta_config.acuity;
-  pipeline::Foveator f1_foveator = pipeline::Foveator::create(capacity, f1).value();
-  pipeline::Foveator live_foveator = pipeline::Foveator::create(capacity, acuity).value();
-  // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
-  constexpr std::size_t kMaxBrickPoints = 1 << 18;
-  net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, std::max(pixels, kMaxBrickPoints)).value();
-  pipeline::map::BrickSampler brick_sampler =
-      pipeline::map::BrickSampler::create(delta_config.acuity, kMaxBrickPoints).value();
-  pipeline::map::BrickBatch batch(kMaxBrickPoints, 1);
-  pipeline::PointCloud cloud(pixels), live(pixels);
-  pipeline::FoveatedCloud out(pixels);
-  // The operator's side: the bricks it holds (no loss here), and the last
-  // frame's decoded F1 and live points.
+  return acuity;
+}
+
+net::BrickCache operatorCache() {
   net::BrickCacheConfig cache_config;
   cache_config.max_points = std::size_t{1} << 23;
-  net::BrickCache cache = net::BrickCache::create(cache_config).value();
-  pipeline::FoveatedCloud decoded(std::max(pixels, kMaxBrickPoints));
-  std::vector<Eigen::Vector3d> f1_held, live_held;
-  hal::RgbdFrame truth(k.width, k.height);
-  pipeline::PointCloud truth_cloud(pixels);
-  std::vector<double> above_mar[3], held_points, f1_points;  // FREF, F1, MAP-DELTA held
-  std::size_t missing_points[3] = {};
+  return net::BrickCache::create(cache_config).value();
+}
 
-  Stream fref{"FREF"}, f1_stream{"F1"}, bricks{"MAP-DELTA bricks"}, live_stream{"MAP-DELTA live"};
-  const double budget_per_frame = budget_mbps * 1e6 / fps;
-  std::vector<double> plan_ms, brick_encode_ms;
-  std::size_t live_points = 0;  // after the first second
-  std::size_t bricks_sent = 0, bricks_waited = 0, brick_points_sent = 0;
-  hal::RgbdFrame frame(k.width, k.height);
-  const Eigen::Vector3d offsets[5] = {{0, 0, 0}, {0.4, 0.25, 0}, {-0.4, 0.25, 0}, {-0.4, -0.25, 0}, {0.4, -0.25, 0}};
-  for (int f = 0; f < frames; ++f) {
-    if (!camera.acquire(frame, std::chrono::seconds(5)) || !truth_camera.acquire(truth, std::chrono::seconds(5))) {
-      std::fprintf(stderr, "fovea-map-delta: frame %d did not arrive\n", f);
-      return 1;
-    }
-    const bool steady = f >= fps;
-    pipeline::Gaze gaze;
-    gaze.origin_m = frame.T_world_cam.t_world_cam;
-    const Eigen::Vector3d target = focus + frame.T_world_cam.R_world_cam * offsets[(f / dwell) % 5];
-    gaze.direction = (target - gaze.origin_m).normalized();
-    const auto frame_id = static_cast<uint32_t>(f);
-    const int64_t now_ns = static_cast<int64_t>(f) * 1'000'000'000 / fps;
-    auto count = [&](Stream& s, std::size_t bytes) {
-      s.bytes += bytes;
-      if (steady) s.bytes_steady += bytes;
-    };
+DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera& truth_camera)
+    : o_(options),
+      camera_(camera),
+      truth_camera_(truth_camera),
+      k_(camera.info().intrinsics),
+      pixels_(static_cast<std::size_t>(k_.width) * k_.height),
+      focus_(camera.info().focus_point_m.value_or(Eigen::Vector3d(0, 0, 2))),
+      map_config_(mapConfigFor(k_)),
+      map_(pipeline::map::SurfelMap::create(map_config_).value()),
+      delta_(pipeline::map::MapDelta::create(delta_config_, map_config_.max_bricks).value()),
+      f1_foveator_(foveatorFor(pixels_, f1Config())),
+      live_foveator_(foveatorFor(pixels_, acuityConfig(delta_config_))),
+      encoder_(net::ChunkEncoder::create(net::CodecConfig{}, std::max(pixels_, kMaxBrickPoints)).value()),
+      brick_sampler_(pipeline::map::BrickSampler::create(delta_config_.acuity, kMaxBrickPoints).value()),
+      batch_(kMaxBrickPoints, 1),
+      cloud_(pixels_),
+      live_(pixels_),
+      out_(pixels_),
+      cache_(operatorCache()),
+      decoded_(std::max(pixels_, kMaxBrickPoints)),
+      truth_(k_.width, k_.height),
+      truth_cloud_(pixels_),
+      budget_per_frame_(o_.budget_mbps * 1e6 / o_.fps),
+      frame_(k_.width, k_.height) {}
 
-    // The frame-by-frame streams: FREF (every point) and F1.
-    pipeline::BackprojectCounts bp;
-    cloud.clear();
-    if (!pipeline::backprojectRef(frame, map_config.depth, cloud, bp)) return 1;
-    out.points.origin_m = cloud.origin_m;
-    std::copy_n(cloud.x(), cloud.size(), out.points.x());
-    std::copy_n(cloud.y(), cloud.size(), out.points.y());
-    std::copy_n(cloud.z(), cloud.size(), out.points.z());
-    std::copy_n(cloud.rgb(), cloud.size(), out.points.rgb());
-    std::fill_n(out.region.begin(), cloud.size(), uint8_t{0});
-    std::fill_n(out.weight.begin(), cloud.size(), 1u);
-    if (!out.points.resize(cloud.size())) return 1;
-    const double fovea_only[1] = {0.0};
-    if (!encoder.encode(out, fovea_only, frame_id, 0)) return 1;
-    count(fref, datagramBytes(encoder));
-    pipeline::FoveationStats fs;
-    if (!f1_foveator.foveate(cloud, gaze, out, fs)) return 1;
-    double sizes[pipeline::kMaxRegions] = {};
-    for (int r = 0; r < fs.region_count; ++r) sizes[r] = fs.regions[r].voxel_size_m;
-    if (!encoder.encode(out, std::span<const double>(sizes, static_cast<std::size_t>(fs.region_count)), frame_id, 0)) {
-      return 1;
-    }
-    count(f1_stream, datagramBytes(encoder));
-    f1_held.clear();
-    decodeAll(encoder, nullptr, &f1_held, decoded, now_ns);
-
-    // MAP-DELTA.
-    pipeline::map::FuseStats fuse;
-    if (map.fuse(frame, fuse) != pipeline::map::FuseOutcome::kFused) {
-      std::fprintf(stderr, "fovea-map-delta: frame %d: %s\n", f,
-                   std::string(pipeline::map::fuseOutcomeName(fuse.outcome)).c_str());
-      return 1;
-    }
-    pipeline::map::MapDeltaStats ds;
-    auto plan = delta.plan(map, gaze, ds);
-    if (!plan) return 1;
-    plan_ms.push_back(static_cast<double>(ds.ns) * 1e-6);
-    double left = budget_per_frame;
-    bool live_sent = false;
-    auto sendLive = [&] {
-      live_sent = true;
-      live_held.clear();
-      live.clear();
-      live.origin_m = cloud.origin_m;
-      map.appendUnexplained(frame, live);
-      if (steady) live_points += live.size();
-      pipeline::FoveationStats ls;
-      if (live.size() == 0 || !live_foveator.foveate(live, gaze, out, ls)) return;
-      double live_sizes[pipeline::kMaxRegions] = {};
-      for (int r = 0; r < ls.region_count; ++r) live_sizes[r] = ls.regions[r].voxel_size_m;
-      if (!encoder.encode(out, std::span<const double>(live_sizes, static_cast<std::size_t>(ls.region_count)),
-                          frame_id, 0)) {
-        return;
-      }
-      const std::size_t bytes = datagramBytes(encoder);
-      count(live_stream, bytes);
-      left -= static_cast<double>(bytes);
-      decodeAll(encoder, nullptr, &live_held, decoded, now_ns);
-    };
-    const auto encode_start = std::chrono::steady_clock::now();
-    for (const pipeline::map::BrickDue& due : plan.value()) {
-      if (!due.fovea && !live_sent) sendLive();
-      if (left <= 0.0) {
-        ++bricks_waited;
-        continue;
-      }
-      // One brick at a time through the service's sampler (pipeline/map/brick_batch.h).
-      uint32_t version = delta.version(due.brick) + 1;
-      if (version == 0) version = 1;
-      batch.clear(map.brickOrigin(due.brick));
-      if (!brick_sampler.append(map, due.brick, due.level, version, due.fovea, batch)) return 1;
-      const pipeline::map::BrickBatchEntry& e = batch.entries()[0];
-      const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
-      if (!encoder.encode(batch.points, std::span<const double>(batch.level_step_m.data(), due.level + 1u), frame_id, 0,
-                          &tag)) {
-        return 1;
-      }
-      const std::size_t bytes = datagramBytes(encoder);
-      decodeAll(encoder, &cache, nullptr, decoded, now_ns);
-      count(bricks, bytes);
-      left -= static_cast<double>(bytes);
-      brick_points_sent += batch.points.size();
-      ++bricks_sent;
-      delta.markSent(map, due.brick, due.level);
-    }
-    if (!live_sent) sendLive();
-    brick_encode_ms.push_back(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - encode_start).count());
-
-    // Every --eval-every frames after the first second, and at the last: what
-    // the operator holds when it draws this frame (its bricks and this frame's
-    // live points), against the true surface the frame sees, from this gaze;
-    // FREF's and F1's frame the same way.
-    if ((f >= fps && (f - fps) % eval_every == 0) || f == frames - 1) {
-      pipeline::BackprojectCounts truth_counts;
-      truth_cloud.clear();
-      if (!pipeline::backprojectRef(truth, map_config.depth, truth_cloud, truth_counts)) return 1;
-      std::vector<Eigen::Vector3d> held = live_held;
-      for (std::size_t s = 0; s < cache.slotCount(); ++s) {
-        if (!cache.held(s)) continue;
-        cache.forEachPoint(s, [&](const Eigen::Vector3d& p, uint32_t) { held.push_back(p); });
-      }
-      std::vector<Eigen::Vector3d> fref_held(cloud.size());
-      for (std::size_t i = 0; i < cloud.size(); ++i) fref_held[i] = cloud.world(i);
-      std::size_t missing = 0;
-      above_mar[0].push_back(100.0 * shareAboveMar(fref_held, truth_cloud, gaze, pipeline::kDefaultSlope, missing));
-      missing_points[0] += missing;
-      above_mar[1].push_back(100.0 * shareAboveMar(f1_held, truth_cloud, gaze, pipeline::kDefaultSlope, missing));
-      missing_points[1] += missing;
-      above_mar[2].push_back(100.0 * shareAboveMar(held, truth_cloud, gaze, pipeline::kDefaultSlope, missing));
-      missing_points[2] += missing;
-      held_points.push_back(static_cast<double>(held.size()));
-      f1_points.push_back(static_cast<double>(f1_held.size()));
-    }
+int DeltaBench::run() {
+  for (int f = 0; f < o_.frames; ++f) {
+    if (int status = step(f); status != 0) return status;
   }
-
-  // The plan's worst case on the final map: an operator that holds nothing
-  // (every brick due, all sorted), median of 21.
   std::vector<double> cold_ms;
-  {
-    pipeline::map::MapDelta cold = pipeline::map::MapDelta::create(delta_config, map_config.max_bricks).value();
-    pipeline::Gaze gaze;
-    gaze.origin_m = frame.T_world_cam.t_world_cam;
-    gaze.direction = (focus - gaze.origin_m).normalized();
-    for (int i = 0; i < 21; ++i) {
-      cold.forgetAll();
-      pipeline::map::MapDeltaStats ds;
-      if (!cold.plan(map, gaze, ds)) return 1;
-      cold_ms.push_back(static_cast<double>(ds.ns) * 1e-6);
-    }
+  if (int status = coldPlan(cold_ms); status != 0) return status;
+  printBytes();
+  printQuality(cold_ms);
+  return 0;
+}
+
+// One frame: the gaze's fixation, the frame-by-frame streams, MAP-DELTA, and
+// (when due) what the operator then holds against the true surface.
+int DeltaBench::step(int f) {
+  if (!camera_.acquire(frame_, std::chrono::seconds(5)) || !truth_camera_.acquire(truth_, std::chrono::seconds(5))) {
+    std::fprintf(stderr, "fovea-map-delta: frame %d did not arrive\n", f);
+    return 1;
   }
-  const double seconds = static_cast<double>(frames) / fps;
-  const double steady_seconds = static_cast<double>(std::max(0, frames - fps)) / fps;
+  static const Eigen::Vector3d offsets[5] = {{0, 0, 0}, {0.4, 0.25, 0}, {-0.4, 0.25, 0}, {-0.4, -0.25, 0}, {0.4, -0.25, 0}};
+  FrameStep s;
+  s.f = f;
+  s.steady = f >= o_.fps;
+  s.gaze.origin_m = frame_.T_world_cam.t_world_cam;
+  const Eigen::Vector3d target = focus_ + frame_.T_world_cam.R_world_cam * offsets[(f / o_.dwell) % 5];
+  s.gaze.direction = (target - s.gaze.origin_m).normalized();
+  s.frame_id = static_cast<uint32_t>(f);
+  s.now_ns = static_cast<int64_t>(f) * 1'000'000'000 / o_.fps;
+  if (int status = sendFrameStreams(s); status != 0) return status;
+  if (int status = sendMapDelta(s); status != 0) return status;
+  // Every --eval-every frames after the first second, and at the last: what
+  // the operator holds when it draws this frame (its bricks and this frame's
+  // live points), against the true surface the frame sees, from this gaze;
+  // FREF's and F1's frame the same way.
+  if ((f >= o_.fps && (f - o_.fps) % o_.eval_every == 0) || f == o_.frames - 1) return evaluate(s);
+  return 0;
+}
+
+// The frame-by-frame streams: FREF (every point) and F1.
+int DeltaBench::sendFrameStreams(const FrameStep& s) {
+  pipeline::BackprojectCounts bp;
+  cloud_.clear();
+  if (!pipeline::backprojectRef(frame_, map_config_.depth, cloud_, bp)) return 1;
+  out_.points.origin_m = cloud_.origin_m;
+  std::copy_n(cloud_.x(), cloud_.size(), out_.points.x());
+  std::copy_n(cloud_.y(), cloud_.size(), out_.points.y());
+  std::copy_n(cloud_.z(), cloud_.size(), out_.points.z());
+  std::copy_n(cloud_.rgb(), cloud_.size(), out_.points.rgb());
+  std::fill_n(out_.region.begin(), cloud_.size(), uint8_t{0});
+  std::fill_n(out_.weight.begin(), cloud_.size(), 1u);
+  if (!out_.points.resize(cloud_.size())) return 1;
+  const double fovea_only[1] = {0.0};
+  if (!encoder_.encode(out_, fovea_only, s.frame_id, 0)) return 1;
+  count(fref_, datagramBytes(encoder_), s.steady);
+  pipeline::FoveationStats fs;
+  if (!f1_foveator_.foveate(cloud_, s.gaze, out_, fs)) return 1;
+  double sizes[pipeline::kMaxRegions] = {};
+  for (int r = 0; r < fs.region_count; ++r) sizes[r] = fs.regions[r].voxel_size_m;
+  if (!encoder_.encode(out_, std::span<const double>(sizes, static_cast<std::size_t>(fs.region_count)), s.frame_id, 0)) {
+    return 1;
+  }
+  count(f1_stream_, datagramBytes(encoder_), s.steady);
+  f1_held_.clear();
+  decodeAll(encoder_, nullptr, &f1_held_, decoded_, s.now_ns);
+  return 0;
+}
+
+// MAP-DELTA: fuse, plan, then the fovea's due bricks, the live points and the
+// other due bricks while the frame's share of the budget lasts.
+int DeltaBench::sendMapDelta(FrameStep& s) {
+  pipeline::map::FuseStats fuse;
+  if (map_.fuse(frame_, fuse) != pipeline::map::FuseOutcome::kFused) {
+    std::fprintf(stderr, "fovea-map-delta: frame %d: %s\n", s.f,
+                 std::string(pipeline::map::fuseOutcomeName(fuse.outcome)).c_str());
+    return 1;
+  }
+  pipeline::map::MapDeltaStats ds;
+  auto plan = delta_.plan(map_, s.gaze, ds);
+  if (!plan) return 1;
+  plan_ms_.push_back(static_cast<double>(ds.ns) * 1e-6);
+  s.left = budget_per_frame_;
+  s.live_sent = false;
+  const auto encode_start = std::chrono::steady_clock::now();
+  for (const pipeline::map::BrickDue& due : plan.value()) {
+    if (!due.fovea && !s.live_sent) sendLive(s);
+    if (s.left <= 0.0) {
+      ++bricks_waited_;
+      continue;
+    }
+    if (!sendBrick(due, s)) return 1;
+  }
+  if (!s.live_sent) sendLive(s);
+  brick_encode_ms_.push_back(
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - encode_start).count());
+  return 0;
+}
+
+// One brick at a time through the service's sampler (pipeline/map/brick_batch.h).
+bool DeltaBench::sendBrick(const pipeline::map::BrickDue& due, FrameStep& s) {
+  uint32_t version = delta_.version(due.brick) + 1;
+  if (version == 0) version = 1;
+  batch_.clear(map_.brickOrigin(due.brick));
+  if (!brick_sampler_.append(map_, due.brick, due.level, version, due.fovea, batch_)) return false;
+  const pipeline::map::BrickBatchEntry& e = batch_.entries()[0];
+  const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
+  if (!encoder_.encode(batch_.points, std::span<const double>(batch_.level_step_m.data(), due.level + 1u), s.frame_id,
+                       0, &tag)) {
+    return false;
+  }
+  const std::size_t bytes = datagramBytes(encoder_);
+  decodeAll(encoder_, &cache_, nullptr, decoded_, s.now_ns);
+  count(bricks_, bytes, s.steady);
+  s.left -= static_cast<double>(bytes);
+  brick_points_sent_ += batch_.points.size();
+  ++bricks_sent_;
+  delta_.markSent(map_, due.brick, due.level);
+  return true;
+}
+
+// The frame's points the map does not explain, ACUITY-foveated.
+void DeltaBench::sendLive(FrameStep& s) {
+  s.live_sent = true;
+  live_held_.clear();
+  live_.clear();
+  live_.origin_m = cloud_.origin_m;
+  map_.appendUnexplained(frame_, live_);
+  if (s.steady) live_points_ += live_.size();
+  pipeline::FoveationStats ls;
+  if (live_.size() == 0 || !live_foveator_.foveate(live_, s.gaze, out_, ls)) return;
+  double live_sizes[pipeline::kMaxRegions] = {};
+  for (int r = 0; r < ls.region_count; ++r) live_sizes[r] = ls.regions[r].voxel_size_m;
+  if (!encoder_.encode(out_, std::span<const double>(live_sizes, static_cast<std::size_t>(ls.region_count)), s.frame_id,
+                       0)) {
+    return;
+  }
+  const std::size_t bytes = datagramBytes(encoder_);
+  count(live_stream_, bytes, s.steady);
+  s.left -= static_cast<double>(bytes);
+  decodeAll(encoder_, nullptr, &live_held_, decoded_, s.now_ns);
+}
+
+int DeltaBench::evaluate(const FrameStep& s) {
+  pipeline::BackprojectCounts truth_counts;
+  truth_cloud_.clear();
+  if (!pipeline::backprojectRef(truth_, map_config_.depth, truth_cloud_, truth_counts)) return 1;
+  std::vector<Eigen::Vector3d> held = live_held_;
+  for (std::size_t slot = 0; slot < cache_.slotCount(); ++slot) {
+    if (!cache_.held(slot)) continue;
+    cache_.forEachPoint(slot, [&](const Eigen::Vector3d& p, uint32_t) { held.push_back(p); });
+  }
+  std::vector<Eigen::Vector3d> fref_held(cloud_.size());
+  for (std::size_t i = 0; i < cloud_.size(); ++i) fref_held[i] = cloud_.world(i);
+  std::size_t missing = 0;
+  above_mar_[0].push_back(100.0 * shareAboveMar(fref_held, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  missing_points_[0] += missing;
+  above_mar_[1].push_back(100.0 * shareAboveMar(f1_held_, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  missing_points_[1] += missing;
+  above_mar_[2].push_back(100.0 * shareAboveMar(held, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  missing_points_[2] += missing;
+  held_points_.push_back(static_cast<double>(held.size()));
+  f1_points_.push_back(static_cast<double>(f1_held_.size()));
+  return 0;
+}
+
+// The plan's worst case on the final map: an operator that holds nothing
+// (every brick due, all sorted), median of 21.
+int DeltaBench::coldPlan(std::vector<double>& cold_ms) {
+  pipeline::map::MapDelta cold = pipeline::map::MapDelta::create(delta_config_, map_config_.max_bricks).value();
+  pipeline::Gaze gaze;
+  gaze.origin_m = frame_.T_world_cam.t_world_cam;
+  gaze.direction = (focus_ - gaze.origin_m).normalized();
+  for (int i = 0; i < 21; ++i) {
+    cold.forgetAll();
+    pipeline::map::MapDeltaStats ds;
+    if (!cold.plan(map_, gaze, ds)) return 1;
+    cold_ms.push_back(static_cast<double>(ds.ns) * 1e-6);
+  }
+  return 0;
+}
+
+// Each stream's rate against FREF's, over all frames and after the first second.
+void DeltaBench::printBytes() const {
+  const double seconds = static_cast<double>(o_.frames) / o_.fps;
+  const double steady_seconds = static_cast<double>(std::max(0, o_.frames - o_.fps)) / o_.fps;
   std::printf("fovea-map-delta: %s, %d frames at %d fps, gaze: 5 fixations of %d frames, budget %.1f MB/s\n",
-              spec.c_str(), frames, fps, dwell, budget_mbps);
+              o_.spec.c_str(), o_.frames, o_.fps, o_.dwell, o_.budget_mbps);
   std::printf("  %-18s %10s %10s %16s %12s\n", "stream", "MB/s", "vs FREF", "MB/s after 1 s", "vs FREF");
-  const Stream delta_total{"MAP-DELTA", bricks.bytes + live_stream.bytes, bricks.bytes_steady + live_stream.bytes_steady};
-  for (const Stream* s : std::initializer_list<const Stream*>{&fref, &f1_stream, &delta_total, &bricks, &live_stream}) {
+  const Stream delta_total{"MAP-DELTA", bricks_.bytes + live_stream_.bytes,
+                           bricks_.bytes_steady + live_stream_.bytes_steady};
+  for (const Stream* s :
+       std::initializer_list<const Stream*>{&fref_, &f1_stream_, &delta_total, &bricks_, &live_stream_}) {
     const double rate = static_cast<double>(s->bytes) / seconds * 1e-6;
     const double steady_rate = steady_seconds > 0 ? static_cast<double>(s->bytes_steady) / steady_seconds * 1e-6 : 0.0;
-    const double vs = 100.0 * (1.0 - static_cast<double>(s->bytes) / static_cast<double>(fref.bytes));
+    const double vs = 100.0 * (1.0 - static_cast<double>(s->bytes) / static_cast<double>(fref_.bytes));
     const double vs_steady =
-        fref.bytes_steady > 0 ? 100.0 * (1.0 - static_cast<double>(s->bytes_steady) / static_cast<double>(fref.bytes_steady))
-                              : 0.0;
+        fref_.bytes_steady > 0
+            ? 100.0 * (1.0 - static_cast<double>(s->bytes_steady) / static_cast<double>(fref_.bytes_steady))
+            : 0.0;
     std::printf("  %-18s %10.3f %9.1f%% %16.3f %11.1f%%\n", s->name, rate, vs, steady_rate, vs_steady);
   }
-  std::printf("  live points after 1 s: %.0f a frame\n", frames > fps ? static_cast<double>(live_points) / (frames - fps) : 0.0);
-  std::printf("  bricks sent %zu (%zu points), waited %zu brick-frames; map %zu surfels in %zu bricks\n",
-              bricks_sent, brick_points_sent, bricks_waited, map.size(), map.brickCount());
+}
+
+// The live points, the bricks, the plan's time and what the operator holds.
+void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
+  const int frames = o_.frames, fps = o_.fps;
+  std::printf("  live points after 1 s: %.0f a frame\n",
+              frames > fps ? static_cast<double>(live_points_) / (frames - fps) : 0.0);
+  std::printf("  bricks sent %zu (%zu points), waited %zu brick-frames; map %zu surfels in %zu bricks\n", bricks_sent_,
+              brick_points_sent_, bricks_waited_, map_.size(), map_.brickCount());
   std::printf("  plan: median %.3f ms, max %.3f ms a frame; brick sampling and encoding: median %.3f ms a frame\n",
-              median(plan_ms), *std::max_element(plan_ms.begin(), plan_ms.end()), median(brick_encode_ms));
+              median(plan_ms_), *std::max_element(plan_ms_.begin(), plan_ms_.end()), median(brick_encode_ms_));
   std::printf("  plan with every brick due (an operator that holds nothing): median %.3f ms\n", median(cold_ms));
   auto mean = [](const std::vector<double>& v) {
     double sum = 0.0;
     for (double x : v) sum += x;
     return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
   };
+  const std::vector<double>* above_mar = above_mar_;
   std::printf("  what the operator holds, against the true surface (the noiseless twin), %zu frames from the second on:\n",
               above_mar[0].size());
   std::printf("    share above the MAR (m %.3f), mean [min, max]: FREF %.2f %% [%.2f, %.2f], F1 %.2f %% [%.2f, %.2f], "
@@ -418,6 +541,16 @@ int main(int argc, char** argv) {
               *std::max_element(above_mar[2].begin(), above_mar[2].end()));
   std::printf("    points drawn, mean: F1 %.0f, MAP-DELTA held %.0f; true points with nothing within 10 cm: FREF %zu, F1 %zu, "
               "MAP-DELTA %zu\n",
-              mean(f1_points), mean(held_points), missing_points[0], missing_points[1], missing_points[2]);
-  return 0;
+              mean(f1_points_), mean(held_points_), missing_points_[0], missing_points_[1], missing_points_[2]);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::optional<DeltaOptions> options = parseOptions(argc, argv);
+  if (!options) return 2;
+  bench::MockTwins twins;
+  if (int status = bench::openMockTwins("fovea-map-delta", options->spec, twins); status != 0) return status;
+  DeltaBench delta_bench(*options, *twins.noisy, *twins.truth);
+  return delta_bench.run();
 }

@@ -43,6 +43,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -50,6 +51,7 @@
 #include <Eigen/Geometry>
 
 #include "bench/bench_input.h"
+#include "bench/mock_scene.h"
 #include "core/clock.h"
 #include "firmware/service.h"
 #include "hal/camera.h"
@@ -85,6 +87,13 @@ struct Operator {
   std::atomic<uint64_t> frame_chunks{0}, bytes{0};
   std::thread thread;
 
+  ~Operator() {
+    stop.store(true);
+    if (thread.joinable()) thread.join();
+  }
+  void start() {
+    thread = std::thread([this] { run(); });
+  }
   void run() {
     uint64_t sequence = 0;
     int sent_target = -1;
@@ -124,60 +133,81 @@ struct Operator {
   }
 };
 
-}  // namespace
+struct LinkOptions {
+  std::string experiment;
+  std::string spec;  // the mock camera's (mock_scene.h), with fps
+  int fps = 30;
+  double budget_mbps = 12.5;
+  int saccades = 12;
+  int dwell_ms = 1500;
+  double loss = 0.1;
+  double loss_seconds = 6;
+  double join_after = 8;
+  uint64_t seed = 1;
+  std::string source = "map";
+  std::string preset = "F1";
+};
 
-int main(int argc, char** argv) {
-  const std::string experiment = option(argc, argv, "--experiment", "");
-  const std::string scene = option(argc, argv, "--scene", "living-room");
-  const std::string path = option(argc, argv, "--path", "static");
-  const std::string size = option(argc, argv, "--size", "640x480");
-  const int fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
-  const double budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
-  const int saccades = std::atoi(option(argc, argv, "--saccades", "12").c_str());
-  const int dwell_ms = std::atoi(option(argc, argv, "--dwell-ms", "1500").c_str());
-  const double loss = std::atof(option(argc, argv, "--loss", "0.1").c_str());
-  const double loss_seconds = std::atof(option(argc, argv, "--loss-seconds", "6").c_str());
-  const double join_after = std::atof(option(argc, argv, "--join-after", "8").c_str());
-  const auto seed = static_cast<uint64_t>(std::atoll(option(argc, argv, "--seed", "1").c_str()));
-  const std::string source = option(argc, argv, "--source", "map");
-  const std::string preset = option(argc, argv, "--preset", "F1");
-  if ((experiment != "gaze" && experiment != "loss" && experiment != "join") || fps < 1 || !(budget_mbps > 0) ||
-      saccades < 1 || dwell_ms < 100 || !(loss >= 0 && loss <= 0.5) || !(loss_seconds > 0) || !(join_after >= 0) ||
-      (source != "map" && source != "frame") || (source == "frame" && experiment != "gaze") ||
-      !pipeline::parsePreset(preset)) {
+// Returns the options, or nothing after printing the usage.
+std::optional<LinkOptions> parseOptions(int argc, char** argv) {
+  LinkOptions o;
+  o.experiment = option(argc, argv, "--experiment", "");
+  o.fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
+  o.budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
+  o.saccades = std::atoi(option(argc, argv, "--saccades", "12").c_str());
+  o.dwell_ms = std::atoi(option(argc, argv, "--dwell-ms", "1500").c_str());
+  o.loss = std::atof(option(argc, argv, "--loss", "0.1").c_str());
+  o.loss_seconds = std::atof(option(argc, argv, "--loss-seconds", "6").c_str());
+  o.join_after = std::atof(option(argc, argv, "--join-after", "8").c_str());
+  o.seed = static_cast<uint64_t>(std::atoll(option(argc, argv, "--seed", "1").c_str()));
+  o.source = option(argc, argv, "--source", "map");
+  o.preset = option(argc, argv, "--preset", "F1");
+  if ((o.experiment != "gaze" && o.experiment != "loss" && o.experiment != "join") || o.fps < 1 ||
+      !(o.budget_mbps > 0) || o.saccades < 1 || o.dwell_ms < 100 || !(o.loss >= 0 && o.loss <= 0.5) ||
+      !(o.loss_seconds > 0) || !(o.join_after >= 0) || (o.source != "map" && o.source != "frame") ||
+      (o.source == "frame" && o.experiment != "gaze") || !pipeline::parsePreset(o.preset)) {
     std::fprintf(stderr,
                  "usage: fovea-map-link --experiment gaze|loss|join [--scene S] [--path P] [--size WxH] [--fps N]\n"
                  "                      [--budget-mbps MBPS] [--saccades N] [--dwell-ms MS] [--loss SHARE]\n"
                  "                      [--loss-seconds S] [--join-after S] [--seed N] [--source map|frame]\n"
                  "                      [--preset NAME] (--source frame: gaze only)\n");
-    return 2;
+    return std::nullopt;
   }
-  const std::string spec = "mock:" + scene + ",path=" + path + ",size=" + size + ",fps=" + std::to_string(fps);
+  o.spec = bench::mockSceneSpec(argc, argv, "static") + ",fps=" + std::to_string(o.fps);
+  return o;
+}
 
-  // Where the operator's eye is and what it looks at: the camera's first pose and
-  // the scene's focus, from a camera of the same spec in this process.
+// Where the operator's eye is and what it looks at: the camera's first pose and
+// the scene's focus, from a camera of the same spec in this process.
+struct View {
   Eigen::Vector3d eye, focus;
   Eigen::Matrix3d camera_axes;
-  {
-    auto cam = hal::createCamera(spec);
-    if (!cam || !cam.value()->open() || !cam.value()->start()) {
-      std::fprintf(stderr, "fovea-map-link: %s: the camera did not start\n", spec.c_str());
-      return 1;
-    }
-    hal::RgbdFrame first(cam.value()->info().intrinsics.width, cam.value()->info().intrinsics.height);
-    if (!cam.value()->acquire(first, std::chrono::seconds(5))) return 1;
-    eye = first.T_world_cam.t_world_cam;
-    camera_axes = first.T_world_cam.R_world_cam;
-    focus = cam.value()->info().focus_point_m.value_or(eye + camera_axes.col(2) * 2.5);
-  }
+};
 
+int firstView(const std::string& spec, View& view) {
+  auto cam = hal::createCamera(spec);
+  if (!cam || !cam.value()->open() || !cam.value()->start()) {
+    std::fprintf(stderr, "fovea-map-link: %s: the camera did not start\n", spec.c_str());
+    return 1;
+  }
+  hal::RgbdFrame first(cam.value()->info().intrinsics.width, cam.value()->info().intrinsics.height);
+  if (!cam.value()->acquire(first, std::chrono::seconds(5))) return 1;
+  view.eye = first.T_world_cam.t_world_cam;
+  view.camera_axes = first.T_world_cam.R_world_cam;
+  view.focus = cam.value()->info().focus_point_m.value_or(view.eye + view.camera_axes.col(2) * 2.5);
+  return 0;
+}
+
+// The service on the mock camera, foveating from the map (or frame by frame),
+// listening on loopback; nullptr after printing why it could not be made.
+std::unique_ptr<firmware::Service> createService(const LinkOptions& o) {
   firmware::ServiceConfig config;
-  config.camera.spec = spec + ",realtime=on";
-  if (source == "map") {
+  config.camera.spec = o.spec + ",realtime=on";
+  if (o.source == "map") {
     config.map.source = firmware::FoveationSource::kMap;
     config.map.delta = true;
   } else {
-    config.foveation.acuity.preset = pipeline::parsePreset(preset).value();
+    config.foveation.acuity.preset = pipeline::parsePreset(o.preset).value();
   }
   config.stream.link.listen = "127.0.0.1:0";
   config.stream.link.insecure = true;
@@ -189,100 +219,116 @@ int main(int argc, char** argv) {
   Result<std::unique_ptr<firmware::Service>> created = firmware::Service::create(config, std::move(environment));
   if (!created) {
     std::fprintf(stderr, "fovea-map-link: %s\n", created.status().message().c_str());
-    return 1;
+    return nullptr;
   }
-  firmware::Service& service = *created.value();
-  if (Status s = service.start(); !s) {
-    std::fprintf(stderr, "fovea-map-link: %s\n", s.message().c_str());
-    return 1;
-  }
-  std::thread supervisor([&] { service.run(); });
-  struct Stopper {
-    firmware::Service& service;
-    std::thread& thread;
-    ~Stopper() {
-      service.requestStop();
-      if (thread.joinable()) thread.join();
-    }
-  } stopper{service, supervisor};
+  return std::move(created.value());
+}
 
-  // The link: direct, or through the relay (loss).
-  std::unique_ptr<tools::LossyRelay> relay;
-  std::atomic<bool> relay_stop{false};
-  std::thread relay_thread;
-  net::Endpoint robot = service.localEndpoint();
-  if (experiment == "loss") {
+// The service's supervisor thread, asked to stop and joined on destruction.
+class Supervisor {
+ public:
+  explicit Supervisor(firmware::Service& service) : service_(service), thread_([this] { service_.run(); }) {}
+  ~Supervisor() {
+    service_.requestStop();
+    if (thread_.joinable()) thread_.join();
+  }
+  Supervisor(const Supervisor&) = delete;
+  Supervisor& operator=(const Supervisor&) = delete;
+
+ private:
+  firmware::Service& service_;
+  std::thread thread_;
+};
+
+// The loss experiment's LossyRelay between the operator and the robot, pumped by
+// its own thread until destruction; recover() lifts the loss.
+class Relay {
+ public:
+  Relay() = default;
+  ~Relay() {
+    stop_.store(true);
+    if (thread_.joinable()) thread_.join();
+  }
+  Relay(const Relay&) = delete;
+  Relay& operator=(const Relay&) = delete;
+
+  // Starts the relay in front of `robot`; false after printing why it did not.
+  bool start(const net::Endpoint& robot, const LinkOptions& o) {
     tools::LossyRelayConfig rc;
     rc.listen = net::Endpoint::parse("127.0.0.1:0").value();
     rc.server = robot;
-    rc.up = rc.down = {loss, 0.01, 0.01};
-    rc.seed = seed;
+    rc.up = rc.down = {o.loss, 0.01, 0.01};
+    rc.seed = o.seed;
     Result<tools::LossyRelay> r = tools::LossyRelay::create(rc);
     if (!r) {
       std::fprintf(stderr, "fovea-map-link: relay: %s\n", r.status().message().c_str());
-      return 1;
+      return false;
     }
-    relay = std::make_unique<tools::LossyRelay>(std::move(r.value()));
-    robot = relay->localEndpoint();
-  }
-  std::atomic<bool> recover{false};
-  if (relay) {
-    relay_thread = std::thread([&] {
+    relay_ = std::make_unique<tools::LossyRelay>(std::move(r.value()));
+    thread_ = std::thread([this] {
       bool recovered = false;
-      while (!relay_stop.load()) {
-        if (!recovered && recover.load()) {
-          (void)relay->setShares({}, {});
+      while (!stop_.load()) {
+        if (!recovered && recover_.load()) {
+          (void)relay_->setShares({}, {});
           recovered = true;
         }
-        relay->pump(2);
+        relay_->pump(2);
       }
     });
+    return true;
   }
-  struct RelayStopper {
-    std::atomic<bool>& stop;
-    std::thread& thread;
-    ~RelayStopper() {
-      stop.store(true);
-      if (thread.joinable()) thread.join();
-    }
-  } relay_stopper{relay_stop, relay_thread};
+  void recover() { recover_.store(true); }
+  const tools::LossyRelay& relay() const { return *relay_; }
 
-  if (experiment == "join") std::this_thread::sleep_for(std::chrono::duration<double>(join_after));
-  const firmware::ServiceStats before_join = service.stats();
+ private:
+  std::unique_ptr<tools::LossyRelay> relay_;
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> recover_{false};
+  std::thread thread_;
+};
 
+// Connects the operator to `robot` (hello_ns: when it said hello), its fixations
+// the focus and then a grid around it, and starts its thread; nullptr after
+// printing why it could not connect.
+std::unique_ptr<Operator> connectOperator(const LinkOptions& o, const net::Endpoint& robot, const View& view,
+                                          int64_t& hello_ns) {
   net::OperatorLinkConfig op_config;
   op_config.insecure = true;
-  op_config.budget_bytes_per_s = static_cast<uint64_t>(budget_mbps * 1e6);
-  const int64_t hello_ns = monotonicNs();
+  op_config.budget_bytes_per_s = static_cast<uint64_t>(o.budget_mbps * 1e6);
+  hello_ns = monotonicNs();
   Result<std::unique_ptr<net::OperatorLink>> link = net::OperatorLink::connect(robot.toString(), op_config);
   if (!link) {
     std::fprintf(stderr, "fovea-map-link: connect: %s\n", link.status().message().c_str());
-    return 1;
+    return nullptr;
   }
   net::BrickCacheConfig cache;
   cache.max_points = std::size_t{1} << 21;
-  Operator op(std::move(link.value()), tools::MapHolder::create(cache).value(), eye);
+  auto op = std::make_unique<Operator>(std::move(link.value()), tools::MapHolder::create(cache).value(), view.eye);
   // Fixations: the focus, then a grid of points around it (camera-relative
   // offsets, 4 x 3 over 2.4 m x 1.2 m), each new.
-  op.targets.push_back(focus);
-  for (int k = 0; k < saccades; ++k) {
+  op->targets.push_back(view.focus);
+  for (int k = 0; k < o.saccades; ++k) {
     const double u = -1.2 + 0.8 * static_cast<double>(k % 4), v = -0.6 + 0.6 * static_cast<double>((k / 4) % 3);
-    op.targets.push_back(focus + camera_axes * Eigen::Vector3d(u, v, 0.0));
+    op->targets.push_back(view.focus + view.camera_axes * Eigen::Vector3d(u, v, 0.0));
   }
-  op.thread = std::thread([&] { op.run(); });
-  struct OperatorStopper {
-    Operator& op;
-    ~OperatorStopper() {
-      op.stop.store(true);
-      if (op.thread.joinable()) op.thread.join();
-    }
-  } operator_stopper{op};
+  op->start();
+  return op;
+}
+
+// What the experiments watch: the service's figures and the operator's.
+struct Session {
+  const LinkOptions& o;
+  firmware::Service& service;
+  Operator& op;
+  Relay& relay;
+  int64_t hello_ns;
+  firmware::ServiceStats before_join;
 
   // Waits up to timeout_s until the robot has sent the fovea of a frame foveated
   // for the gaze whose first sample was stamped `since` (or a later one) and, with
   // `everything`, nothing is waiting nor unacknowledged, else nothing of the
   // fovea's is waiting. Returns the time from `from_ns`, or -1.
-  auto heldAfter = [&](int64_t since, int64_t from_ns, double timeout_s, bool everything = true) -> double {
+  double heldAfter(int64_t since, int64_t from_ns, double timeout_s, bool everything = true) const {
     const int64_t end = monotonicNs() + static_cast<int64_t>(timeout_s * 1e9);
     while (monotonicNs() < end) {
       const firmware::ServiceStats s = service.stats();
@@ -299,93 +345,136 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(s.map.fovea_bricks_waiting),
                 static_cast<unsigned long long>(s.map.bricks_in_flight));
     return -1.0;
-  };
-  auto waitStamp = [&] {
+  }
+  int64_t waitStamp() const {
     while (op.target_stamp_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     return op.target_stamp_ns.load();
-  };
-
-  std::printf("fovea-map-link: %s, %s, %s, budget %.1f MB/s\n", experiment.c_str(), spec.c_str(),
-              source == "map" ? "the map's bricks (foveation.source = map, map.delta)" : ("frame by frame, " + preset).c_str(),
-              budget_mbps);
-  int status = 0;
-  if (experiment == "gaze") {
-    const double warm = heldAfter(waitStamp(), hello_ns, 30.0);
-    std::printf("  warm-up: the operator held what the first fixation needs after %.0f ms\n", warm);
-    std::this_thread::sleep_for(std::chrono::seconds(3));  // the map settles (map.settle_frames) and goes out
-    std::vector<double> fovea_latency, all_latency;
-    int failed = 0;
-    for (int k = 1; k <= saccades; ++k) {
-      const uint64_t planned_before = service.stats().map.bricks_planned;
-      op.target_stamp_ns.store(0);
-      op.target_index.store(k);
-      const int64_t stamp = waitStamp();
-      const double fovea_ms = heldAfter(stamp, stamp, dwell_ms * 1e-3, false);
-      const double all_ms = fovea_ms >= 0 && source == "map" ? heldAfter(stamp, stamp, dwell_ms * 1e-3) : fovea_ms;
-      const uint64_t planned = service.stats().map.bricks_planned - planned_before;
-      if (fovea_ms < 0 || all_ms < 0) {
-        ++failed;
-        std::printf("  saccade %2d: not within the dwell\n", k);
-      } else {
-        fovea_latency.push_back(fovea_ms);
-        all_latency.push_back(all_ms);
-        std::printf("  saccade %2d: the fovea's detail sent after %.0f ms; everything it needs acknowledged after %.0f ms "
-                    "(%llu bricks planned meanwhile)\n",
-                    k, fovea_ms, all_ms, static_cast<unsigned long long>(planned));
-      }
-      const int64_t dwell_end = stamp + static_cast<int64_t>(dwell_ms) * 1'000'000;
-      while (monotonicNs() < dwell_end) std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
-    std::printf("  gaze shift to the fovea's detail (the fovea of a frame for the new gaze sent, nothing of the fovea waiting): "
-                "p50 %.1f ms, p99 %.1f ms; to everything the gaze needs acknowledged: p50 %.1f ms, p99 %.1f ms; "
-                "%zu saccades (%d not within %d ms)\n",
-                percentile(fovea_latency, 0.5), percentile(fovea_latency, 0.99), percentile(all_latency, 0.5),
-                percentile(all_latency, 0.99), fovea_latency.size(), failed, dwell_ms);
-    status = failed > 0 ? 1 : 0;
-  } else if (experiment == "loss") {
-    const int64_t start = monotonicNs();
-    std::this_thread::sleep_for(std::chrono::duration<double>(loss_seconds));
-    const firmware::ServiceStats lossy = service.stats();
-    recover.store(true);
-    const int64_t recovered_ns = monotonicNs();
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the relay's next pump takes the new shares
-    // A gaze sample sent after the recovery: the plans from then on.
-    const int64_t since = monotonicNs();
-    const double ms = heldAfter(since, recovered_ns, 10.0);
-    const firmware::ServiceStats end = service.stats();
-    const tools::MapTotals held = op.holder.totals();
-    std::printf("  %.1f s at %.0f %% loss (1 %% duplicated, 1 %% reordered), then none: dropped up %llu down %llu, "
-                "duplicated %llu down\n",
-                static_cast<double>(recovered_ns - start) * 1e-9, loss * 100,
-                static_cast<unsigned long long>(relay->up().dropped),
-                static_cast<unsigned long long>(relay->down().dropped),
-                static_cast<unsigned long long>(relay->down().duplicated));
-    std::printf("  robot: %llu versions, %llu lost on the way (sent again), %llu parts resent (%llu during the loss)\n",
-                static_cast<unsigned long long>(end.map.brick_versions),
-                static_cast<unsigned long long>(end.map.brick_versions_lost),
-                static_cast<unsigned long long>(end.map.brick_resends),
-                static_cast<unsigned long long>(lossy.map.brick_resends));
-    std::printf("  operator: %zu bricks, %zu points held; %llu versions completed, %llu duplicate parts, %llu stale\n",
-                held.bricks_held, held.points_held, static_cast<unsigned long long>(held.versions),
-                static_cast<unsigned long long>(held.duplicate_parts), static_cast<unsigned long long>(held.stale_parts));
-    if (ms >= 0) {
-      std::printf("  after the loss stopped the operator held what its gaze needs in %.0f ms\n", ms);
-    } else {
-      std::printf("  the operator did not hold what its gaze needs within 10 s of the loss stopping\n");
-      status = 1;
-    }
-  } else {
-    const double ms = heldAfter(waitStamp(), hello_ns, 30.0);
-    const tools::MapTotals held = op.holder.totals();
-    std::printf("  the map after %.1f s alone: %llu surfels; the operator joined asking %.1f MB/s\n", join_after,
-                static_cast<unsigned long long>(before_join.map.surfels), budget_mbps);
-    if (ms >= 0) {
-      std::printf("  it held what its gaze needs (%zu bricks, %zu points) %.0f ms after its hello, %.2f MB received\n",
-                  held.bricks_held, held.points_held, ms, static_cast<double>(op.bytes.load()) * 1e-6);
-    } else {
-      std::printf("  it did not hold what its gaze needs within 30 s\n");
-      status = 1;
-    }
   }
-  return status;
+};
+
+// gaze: the warm-up, then each saccade: the fovea's detail sent, everything acknowledged.
+int runGaze(const Session& x) {
+  const LinkOptions& o = x.o;
+  const double warm = x.heldAfter(x.waitStamp(), x.hello_ns, 30.0);
+  std::printf("  warm-up: the operator held what the first fixation needs after %.0f ms\n", warm);
+  std::this_thread::sleep_for(std::chrono::seconds(3));  // the map settles (map.settle_frames) and goes out
+  std::vector<double> fovea_latency, all_latency;
+  int failed = 0;
+  for (int k = 1; k <= o.saccades; ++k) {
+    const uint64_t planned_before = x.service.stats().map.bricks_planned;
+    x.op.target_stamp_ns.store(0);
+    x.op.target_index.store(k);
+    const int64_t stamp = x.waitStamp();
+    const double fovea_ms = x.heldAfter(stamp, stamp, o.dwell_ms * 1e-3, false);
+    const double all_ms = fovea_ms >= 0 && o.source == "map" ? x.heldAfter(stamp, stamp, o.dwell_ms * 1e-3) : fovea_ms;
+    const uint64_t planned = x.service.stats().map.bricks_planned - planned_before;
+    if (fovea_ms < 0 || all_ms < 0) {
+      ++failed;
+      std::printf("  saccade %2d: not within the dwell\n", k);
+    } else {
+      fovea_latency.push_back(fovea_ms);
+      all_latency.push_back(all_ms);
+      std::printf("  saccade %2d: the fovea's detail sent after %.0f ms; everything it needs acknowledged after %.0f ms "
+                  "(%llu bricks planned meanwhile)\n",
+                  k, fovea_ms, all_ms, static_cast<unsigned long long>(planned));
+    }
+    const int64_t dwell_end = stamp + static_cast<int64_t>(o.dwell_ms) * 1'000'000;
+    while (monotonicNs() < dwell_end) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  std::printf("  gaze shift to the fovea's detail (the fovea of a frame for the new gaze sent, nothing of the fovea waiting): "
+              "p50 %.1f ms, p99 %.1f ms; to everything the gaze needs acknowledged: p50 %.1f ms, p99 %.1f ms; "
+              "%zu saccades (%d not within %d ms)\n",
+              percentile(fovea_latency, 0.5), percentile(fovea_latency, 0.99), percentile(all_latency, 0.5),
+              percentile(all_latency, 0.99), fovea_latency.size(), failed, o.dwell_ms);
+  return failed > 0 ? 1 : 0;
+}
+
+// loss: --loss-seconds of loss, then none: the time to hold what the gaze needs.
+int runLoss(const Session& x) {
+  const LinkOptions& o = x.o;
+  const int64_t start = monotonicNs();
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.loss_seconds));
+  const firmware::ServiceStats lossy = x.service.stats();
+  x.relay.recover();
+  const int64_t recovered_ns = monotonicNs();
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the relay's next pump takes the new shares
+  // A gaze sample sent after the recovery: the plans from then on.
+  const int64_t since = monotonicNs();
+  const double ms = x.heldAfter(since, recovered_ns, 10.0);
+  const firmware::ServiceStats end = x.service.stats();
+  const tools::MapTotals held = x.op.holder.totals();
+  const tools::LossyRelay& relay = x.relay.relay();
+  std::printf("  %.1f s at %.0f %% loss (1 %% duplicated, 1 %% reordered), then none: dropped up %llu down %llu, "
+              "duplicated %llu down\n",
+              static_cast<double>(recovered_ns - start) * 1e-9, o.loss * 100,
+              static_cast<unsigned long long>(relay.up().dropped), static_cast<unsigned long long>(relay.down().dropped),
+              static_cast<unsigned long long>(relay.down().duplicated));
+  std::printf("  robot: %llu versions, %llu lost on the way (sent again), %llu parts resent (%llu during the loss)\n",
+              static_cast<unsigned long long>(end.map.brick_versions),
+              static_cast<unsigned long long>(end.map.brick_versions_lost),
+              static_cast<unsigned long long>(end.map.brick_resends),
+              static_cast<unsigned long long>(lossy.map.brick_resends));
+  std::printf("  operator: %zu bricks, %zu points held; %llu versions completed, %llu duplicate parts, %llu stale\n",
+              held.bricks_held, held.points_held, static_cast<unsigned long long>(held.versions),
+              static_cast<unsigned long long>(held.duplicate_parts), static_cast<unsigned long long>(held.stale_parts));
+  if (ms >= 0) {
+    std::printf("  after the loss stopped the operator held what its gaze needs in %.0f ms\n", ms);
+    return 0;
+  }
+  std::printf("  the operator did not hold what its gaze needs within 10 s of the loss stopping\n");
+  return 1;
+}
+
+// join: from the operator's hello to when it holds what its gaze needs.
+int runJoin(const Session& x) {
+  const double ms = x.heldAfter(x.waitStamp(), x.hello_ns, 30.0);
+  const tools::MapTotals held = x.op.holder.totals();
+  std::printf("  the map after %.1f s alone: %llu surfels; the operator joined asking %.1f MB/s\n", x.o.join_after,
+              static_cast<unsigned long long>(x.before_join.map.surfels), x.o.budget_mbps);
+  if (ms >= 0) {
+    std::printf("  it held what its gaze needs (%zu bricks, %zu points) %.0f ms after its hello, %.2f MB received\n",
+                held.bricks_held, held.points_held, ms, static_cast<double>(x.op.bytes.load()) * 1e-6);
+    return 0;
+  }
+  std::printf("  it did not hold what its gaze needs within 30 s\n");
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::optional<LinkOptions> parsed = parseOptions(argc, argv);
+  if (!parsed) return 2;
+  const LinkOptions& o = *parsed;
+  View view;
+  if (int status = firstView(o.spec, view); status != 0) return status;
+  const std::unique_ptr<firmware::Service> service = createService(o);
+  if (!service) return 1;
+  if (Status s = service->start(); !s) {
+    std::fprintf(stderr, "fovea-map-link: %s\n", s.message().c_str());
+    return 1;
+  }
+  const Supervisor supervisor(*service);
+
+  // The link: direct, or through the relay (loss).
+  Relay relay;
+  net::Endpoint robot = service->localEndpoint();
+  if (o.experiment == "loss") {
+    if (!relay.start(robot, o)) return 1;
+    robot = relay.relay().localEndpoint();
+  }
+
+  if (o.experiment == "join") std::this_thread::sleep_for(std::chrono::duration<double>(o.join_after));
+  const firmware::ServiceStats before_join = service->stats();
+  int64_t hello_ns = 0;
+  const std::unique_ptr<Operator> op = connectOperator(o, robot, view, hello_ns);
+  if (!op) return 1;
+
+  std::printf("fovea-map-link: %s, %s, %s, budget %.1f MB/s\n", o.experiment.c_str(), o.spec.c_str(),
+              o.source == "map" ? "the map's bricks (foveation.source = map, map.delta)" : ("frame by frame, " + o.preset).c_str(),
+              o.budget_mbps);
+  const Session session{o, *service, *op, relay, hello_ns, before_join};
+  if (o.experiment == "gaze") return runGaze(session);
+  if (o.experiment == "loss") return runLoss(session);
+  return runJoin(session);
 }

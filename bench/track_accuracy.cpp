@@ -93,6 +93,42 @@ void applyHardCase(const std::string& hard, int index, RgbdFrame& frame) {
   }
 }
 
+// A frame's outcome into the counts and, in the hard case's frames (19-40), the
+// events: every frame not tracked, the first and last, and the jump.
+void countOutcome(const RunOptions& o, int i, const TrackStats& stats, RunResult& r) {
+  const bool eventful = o.hard != "plain" && o.hard != "skip" && o.hard != "drift" && i >= 19 && i <= 40;
+  if (stats.outcome == TrackOutcome::kLost) {
+    ++r.lost;
+  } else {
+    ++r.tracked;
+    if (stats.outcome == TrackOutcome::kRelocalised) ++r.relocalised;
+  }
+  if (eventful && (stats.outcome != TrackOutcome::kTracked || i == 19 || i == 40 || (o.hard == "jump" && i == 30))) {
+    char event[160];
+    std::snprintf(event, sizeof event, "%s%d %s%s%s%s", r.events.empty() ? "" : ", ", i,
+                  std::string(trackOutcomeName(stats.outcome)).c_str(),
+                  stats.outcome == TrackOutcome::kLost ? "(" : "",
+                  stats.outcome == TrackOutcome::kLost ? std::string(lostReasonName(stats.lost_reason)).c_str() : "",
+                  stats.outcome == TrackOutcome::kLost ? ")" : "");
+    r.events += event;
+    if (o.hard == "jump" && i == 30) {
+      std::snprintf(event, sizeof event, " (prior off by %.3f m)", stats.prior_disagreement_m);
+      r.events += event;
+    }
+  }
+}
+
+// The trajectory's error after the alignment, and the times' quantiles.
+void finishResult(const std::vector<Eigen::Vector3d>& estimated, const std::vector<Eigen::Vector3d>& truth,
+                  const std::vector<double>& track_ms, const std::vector<double>& fuse_ms, RunResult& r) {
+  fovea::Result<TrajectoryError> ate = absoluteTrajectoryError(estimated, truth);
+  if (ate) r.ate = ate.value();
+  r.track_median_ms = quantile(track_ms, 0.5);
+  r.track_p90_ms = quantile(track_ms, 0.9);
+  r.fuse_median_ms = quantile(fuse_ms, 0.5);
+  r.ok = true;
+}
+
 RunResult run(const RunOptions& o) {
   RunResult r;
   fovea::Result<std::unique_ptr<fovea::hal::Camera>> created = fovea::hal::createCamera(o.camera);
@@ -141,26 +177,7 @@ RunResult run(const RunOptions& o) {
     const bool usable = poser->poseFrame(frame, /*outside_pose_valid=*/true, stats);
     track_ms.push_back(static_cast<double>(stats.track_ns) * 1e-6);
     r.max_disagreement_m = std::max(r.max_disagreement_m, stats.prior_disagreement_m);
-    const bool eventful = o.hard != "plain" && o.hard != "skip" && o.hard != "drift" && i >= 19 && i <= 40;
-    if (stats.outcome == TrackOutcome::kLost) {
-      ++r.lost;
-    } else {
-      ++r.tracked;
-      if (stats.outcome == TrackOutcome::kRelocalised) ++r.relocalised;
-    }
-    if (eventful && (stats.outcome != TrackOutcome::kTracked || i == 19 || i == 40 || (o.hard == "jump" && i == 30))) {
-      char event[160];
-      std::snprintf(event, sizeof event, "%s%d %s%s%s%s", r.events.empty() ? "" : ", ", i,
-                    std::string(trackOutcomeName(stats.outcome)).c_str(),
-                    stats.outcome == TrackOutcome::kLost ? "(" : "",
-                    stats.outcome == TrackOutcome::kLost ? std::string(lostReasonName(stats.lost_reason)).c_str() : "",
-                    stats.outcome == TrackOutcome::kLost ? ")" : "");
-      r.events += event;
-      if (o.hard == "jump" && i == 30) {
-        std::snprintf(event, sizeof event, " (prior off by %.3f m)", stats.prior_disagreement_m);
-        r.events += event;
-      }
-    }
+    countOutcome(o, i, stats, r);
     if (!usable) continue;  // lost: not fused, not in the trajectory
     estimated.push_back(frame.T_world_cam.t_world_cam);
     truth.push_back(gt.t_world_cam);
@@ -171,12 +188,7 @@ RunResult run(const RunOptions& o) {
     }
   }
   camera.stop();
-  fovea::Result<TrajectoryError> ate = absoluteTrajectoryError(estimated, truth);
-  if (ate) r.ate = ate.value();
-  r.track_median_ms = quantile(track_ms, 0.5);
-  r.track_p90_ms = quantile(track_ms, 0.9);
-  r.fuse_median_ms = quantile(fuse_ms, 0.5);
-  r.ok = true;
+  finishResult(estimated, truth, track_ms, fuse_ms, r);
   return r;
 }
 
