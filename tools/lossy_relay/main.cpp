@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 
 #include "core/clock.h"
@@ -73,13 +74,57 @@ void printCounters(const char* what, const tools::LossyRelay& relay) {
   std::fflush(stdout);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// The command line's values (kHelp gives the defaults).
+struct RelayOptions {
   std::string listen = "127.0.0.1:0", to;
   double loss = 0.02, reorder = 0.001, loss_up = -1, loss_down = -1, stats_interval_s = 60, duplicate = 0.0,
          loss_seconds = -1;
   unsigned long long seed = 1;
+};
+
+// One option and its value; false (said on stderr) when the value is bad or the
+// option unknown.
+bool takeOption(const std::string& flag, const char* value, RelayOptions& o) {
+  bool ok = true;
+  if (flag == "--to") {
+    o.to = value;
+  } else if (flag == "--listen") {
+    o.listen = value;
+  } else if (flag == "--loss") {
+    ok = parseShare("--loss", value, o.loss);
+  } else if (flag == "--loss-up") {
+    ok = parseShare("--loss-up", value, o.loss_up);
+  } else if (flag == "--loss-down") {
+    ok = parseShare("--loss-down", value, o.loss_down);
+  } else if (flag == "--reorder") {
+    ok = parseShare("--reorder", value, o.reorder);
+  } else if (flag == "--duplicate") {
+    ok = parseShare("--duplicate", value, o.duplicate);
+  } else if (flag == "--loss-seconds") {
+    char* end = nullptr;
+    o.loss_seconds = std::strtod(value, &end);
+    ok = end != value && *end == '\0' && o.loss_seconds >= 0.0 && o.loss_seconds <= 1e6;
+    if (!ok) std::fprintf(stderr, "fovea-lossy-relay: --loss-seconds: '%s' is not a number of seconds\n", value);
+  } else if (flag == "--seed" || flag == "--stats-interval") {
+    char* end = nullptr;
+    const double v = std::strtod(value, &end);
+    ok = end != value && *end == '\0' && v >= 0 && v <= 1.8e19;
+    if (!ok) std::fprintf(stderr, "fovea-lossy-relay: %s: '%s' is not a non-negative number\n", flag.c_str(), value);
+    if (flag == "--seed") {
+      o.seed = std::strtoull(value, nullptr, 10);
+    } else {
+      o.stats_interval_s = v;
+    }
+  } else {
+    std::fprintf(stderr, "fovea-lossy-relay: unknown argument '%s' (see --help)\n", flag.c_str());
+    return false;
+  }
+  return ok;
+}
+
+// Reads the command line in order (--help where it stands); an exit code when
+// the program ends here, nullopt to run.
+std::optional<int> parseOptions(int argc, char** argv, RelayOptions& o) {
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (flag == "--help" || flag == "-h") {
@@ -91,75 +136,36 @@ int main(int argc, char** argv) {
       return kExitUsage;
     }
     const char* value = argv[++i];
-    bool ok = true;
-    if (flag == "--to") {
-      to = value;
-    } else if (flag == "--listen") {
-      listen = value;
-    } else if (flag == "--loss") {
-      ok = parseShare("--loss", value, loss);
-    } else if (flag == "--loss-up") {
-      ok = parseShare("--loss-up", value, loss_up);
-    } else if (flag == "--loss-down") {
-      ok = parseShare("--loss-down", value, loss_down);
-    } else if (flag == "--reorder") {
-      ok = parseShare("--reorder", value, reorder);
-    } else if (flag == "--duplicate") {
-      ok = parseShare("--duplicate", value, duplicate);
-    } else if (flag == "--loss-seconds") {
-      char* end = nullptr;
-      loss_seconds = std::strtod(value, &end);
-      ok = end != value && *end == '\0' && loss_seconds >= 0.0 && loss_seconds <= 1e6;
-      if (!ok) std::fprintf(stderr, "fovea-lossy-relay: --loss-seconds: '%s' is not a number of seconds\n", value);
-    } else if (flag == "--seed" || flag == "--stats-interval") {
-      char* end = nullptr;
-      const double v = std::strtod(value, &end);
-      ok = end != value && *end == '\0' && v >= 0 && v <= 1.8e19;
-      if (!ok) std::fprintf(stderr, "fovea-lossy-relay: %s: '%s' is not a non-negative number\n", flag.c_str(), value);
-      if (flag == "--seed") {
-        seed = std::strtoull(value, nullptr, 10);
-      } else {
-        stats_interval_s = v;
-      }
-    } else {
-      std::fprintf(stderr, "fovea-lossy-relay: unknown argument '%s' (see --help)\n", flag.c_str());
-      return kExitUsage;
-    }
-    if (!ok) return kExitUsage;
+    if (!takeOption(flag, value, o)) return kExitUsage;
   }
-  if (to.empty()) {
+  if (o.to.empty()) {
     std::fprintf(stderr, "fovea-lossy-relay: --to HOST:PORT is required\n");
     return kExitUsage;
   }
+  return std::nullopt;
+}
+
+// The relay's configuration from the options, or why an address does not parse.
+Result<tools::LossyRelayConfig> relayConfig(const RelayOptions& o) {
   tools::LossyRelayConfig config;
-  Result<net::Endpoint> listen_ep = net::Endpoint::parse(listen);
-  Result<net::Endpoint> to_ep = net::Endpoint::parse(to);
-  if (!listen_ep || !to_ep) {
-    std::fprintf(stderr, "fovea-lossy-relay: %s\n", (!listen_ep ? listen_ep : to_ep).status().message().c_str());
-    return kExitUsage;
-  }
+  Result<net::Endpoint> listen_ep = net::Endpoint::parse(o.listen);
+  Result<net::Endpoint> to_ep = net::Endpoint::parse(o.to);
+  if (!listen_ep || !to_ep) return (!listen_ep ? listen_ep : to_ep).status();
   config.listen = listen_ep.value();
   config.server = to_ep.value();
-  config.up = {loss_up >= 0 ? loss_up : loss, reorder, duplicate};
-  config.down = {loss_down >= 0 ? loss_down : loss, reorder, duplicate};
-  config.seed = seed;
-  Result<tools::LossyRelay> created = tools::LossyRelay::create(config);
-  if (!created) {
-    std::fprintf(stderr, "fovea-lossy-relay: %s\n", created.status().message().c_str());
-    return created.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
-  }
-  tools::LossyRelay& relay = created.value();
-  std::signal(SIGINT, onStopSignal);
-  std::signal(SIGTERM, onStopSignal);
-  std::printf("relay: listening on %s, forwarding to %s, loss up %.4f down %.4f, reorder %.4f, seed %llu\n",
-              relay.localEndpoint().toString().c_str(), config.server.toString().c_str(), config.up.drop,
-              config.down.drop, reorder, seed);
-  std::fflush(stdout);
+  config.up = {o.loss_up >= 0 ? o.loss_up : o.loss, o.reorder, o.duplicate};
+  config.down = {o.loss_down >= 0 ? o.loss_down : o.loss, o.reorder, o.duplicate};
+  config.seed = o.seed;
+  return config;
+}
 
-  const int64_t interval_ns = static_cast<int64_t>(stats_interval_s * 1e9);
+// Relays until SIGINT or SIGTERM: the counters every --stats-interval, and the
+// loss stopped after --loss-seconds.
+void relayUntilStopped(tools::LossyRelay& relay, const RelayOptions& o) {
+  const int64_t interval_ns = static_cast<int64_t>(o.stats_interval_s * 1e9);
   const int64_t started_ns = monotonicNs();
   int64_t next_stats_ns = started_ns + interval_ns;
-  int64_t recover_ns = loss_seconds >= 0 ? started_ns + static_cast<int64_t>(loss_seconds * 1e9) : INT64_MAX;
+  int64_t recover_ns = o.loss_seconds >= 0 ? started_ns + static_cast<int64_t>(o.loss_seconds * 1e9) : INT64_MAX;
   while (!g_stop) {
     relay.pump(recover_ns == INT64_MAX ? 100 : static_cast<int>(std::clamp<int64_t>((recover_ns - monotonicNs()) / 1'000'000, 0, 100)));
     if (monotonicNs() >= recover_ns) {
@@ -173,6 +179,31 @@ int main(int argc, char** argv) {
       next_stats_ns += interval_ns;
     }
   }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  RelayOptions options;
+  if (const std::optional<int> exit_code = parseOptions(argc, argv, options)) return *exit_code;
+  Result<tools::LossyRelayConfig> config = relayConfig(options);
+  if (!config) {
+    std::fprintf(stderr, "fovea-lossy-relay: %s\n", config.status().message().c_str());
+    return kExitUsage;
+  }
+  Result<tools::LossyRelay> created = tools::LossyRelay::create(config.value());
+  if (!created) {
+    std::fprintf(stderr, "fovea-lossy-relay: %s\n", created.status().message().c_str());
+    return created.status().code() == ErrorCode::kInvalidArgument ? kExitUsage : kExitFailure;
+  }
+  tools::LossyRelay& relay = created.value();
+  std::signal(SIGINT, onStopSignal);
+  std::signal(SIGTERM, onStopSignal);
+  std::printf("relay: listening on %s, forwarding to %s, loss up %.4f down %.4f, reorder %.4f, seed %llu\n",
+              relay.localEndpoint().toString().c_str(), config->server.toString().c_str(), config->up.drop,
+              config->down.drop, options.reorder, options.seed);
+  std::fflush(stdout);
+  relayUntilStopped(relay, options);
   relay.flush();
   printCounters("stopped", relay);
   return kExitOk;

@@ -63,90 +63,98 @@ Eigen::Vector3d slerp(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double
 }  // namespace
 
 Result<GazeScript> GazeScript::parse(std::string_view text) {
-  GazeScript script;
   const auto colon = text.find(':');
   if (colon == std::string_view::npos) {
     return Result<GazeScript>(ErrorCode::kInvalidArgument,
                               "--gaze: '" + std::string(text) + "' is not fixed:EYE>TARGET, scan:EYE>T1;T2;... or csv:FILE");
   }
   const std::string_view kind = text.substr(0, colon);
-  std::string_view body = text.substr(colon + 1);
-  if (kind == "fixed" || kind == "scan") {
-    script.kind_ = kind == "fixed" ? Kind::kFixed : Kind::kScan;
-    if (kind == "scan") {
-      if (const auto at = body.find('@'); at != std::string_view::npos) {
-        std::string timing(body.substr(at + 1));
-        std::replace(timing.begin(), timing.end(), '/', ',');
-        Result<std::vector<double>> times = parseNumbers(timing, "--gaze scan timing");
-        if (!times) return times.status();
-        // Up to an hour each, so the times stay far inside int64 nanoseconds.
-        constexpr double kMaxMs = 3.6e6;
-        if (times->empty() || times->size() > 2 || !((*times)[0] > 0 && (*times)[0] <= kMaxMs) ||
-            (times->size() == 2 && !((*times)[1] >= 0 && (*times)[1] <= kMaxMs))) {
-          return Result<GazeScript>(ErrorCode::kInvalidArgument,
-                                    "--gaze scan: timing is @DWELL_MS[/SACCADE_MS], positive, up to an hour");
-        }
-        script.dwell_ns_ = static_cast<int64_t>((*times)[0] * 1e6);
-        if (times->size() == 2) script.saccade_ns_ = static_cast<int64_t>((*times)[1] * 1e6);
-        body = body.substr(0, at);
-      }
-    }
-    const auto arrow = body.find('>');
-    if (arrow == std::string_view::npos) {
-      return Result<GazeScript>(ErrorCode::kInvalidArgument, "--gaze " + std::string(kind) + ": expected EYE>TARGET");
-    }
-    Result<Eigen::Vector3d> eye = parsePoint(body.substr(0, arrow), "--gaze eye");
-    if (!eye) return eye.status();
-    std::string targets(body.substr(arrow + 1));
-    std::stringstream stream(targets);
-    std::string target_text;
-    while (std::getline(stream, target_text, ';')) {
-      Result<Eigen::Vector3d> target = parsePoint(target_text, "--gaze target");
-      if (!target) return target.status();
-      Result<GazePoint> g = gazeTowards(eye.value(), target.value(), "--gaze");
-      if (!g) return g.status();
-      script.keys_.push_back({0, g.value()});
-    }
-    if (script.keys_.empty() || (kind == "fixed" && script.keys_.size() != 1)) {
-      return Result<GazeScript>(ErrorCode::kInvalidArgument,
-                                "--gaze " + std::string(kind) + (kind == "fixed" ? ": exactly one target" : ": at least one target"));
-    }
-    return script;
-  }
-  if (kind == "csv") {
-    script.kind_ = Kind::kTrace;
-    const std::string path(body);
-    std::ifstream file(path);
-    if (!file) return Result<GazeScript>(ErrorCode::kNotFound, "--gaze csv: cannot open '" + path + "'");
-    std::string line;
-    int line_no = 0;
-    while (std::getline(file, line)) {
-      ++line_no;
-      if (line.empty() || line[0] == '#') continue;
-      if (line_no == 1 && !line.empty() && (std::isalpha(static_cast<unsigned char>(line[0])) != 0)) continue;  // header
-      const std::string where = path + ":" + std::to_string(line_no);
-      Result<std::vector<double>> v = parseNumbers(line, where);
-      if (!v) return v.status();
-      if (v->size() != 7) {
-        return Result<GazeScript>(ErrorCode::kParseError, where + ": expected t_s,ox,oy,oz,dx,dy,dz");
-      }
-      const Eigen::Vector3d d((*v)[4], (*v)[5], (*v)[6]);
-      if (!(d.norm() > 1e-9)) return Result<GazeScript>(ErrorCode::kParseError, where + ": zero gaze direction");
-      // Up to a year: far inside int64 nanoseconds.
-      if (!((*v)[0] >= 0 && (*v)[0] <= 3.2e7)) {
-        return Result<GazeScript>(ErrorCode::kParseError, where + ": t_s must be within 0 .. 3.2e7 s");
-      }
-      const auto t_ns = static_cast<int64_t>((*v)[0] * 1e9);
-      if (!script.keys_.empty() && t_ns < script.keys_.back().t_ns) {
-        return Result<GazeScript>(ErrorCode::kParseError, where + ": time goes backwards");
-      }
-      script.keys_.push_back({t_ns, GazePoint{Eigen::Vector3d((*v)[1], (*v)[2], (*v)[3]), d.normalized()}});
-    }
-    if (script.keys_.empty()) return Result<GazeScript>(ErrorCode::kParseError, "--gaze csv: '" + path + "' has no samples");
-    return script;
-  }
+  const std::string_view body = text.substr(colon + 1);
+  if (kind == "fixed" || kind == "scan") return parseFixations(kind, body);
+  if (kind == "csv") return parseTrace(std::string(body));
   return Result<GazeScript>(ErrorCode::kInvalidArgument,
                             "--gaze: unknown script kind '" + std::string(kind) + "' (fixed, scan, csv)");
+}
+
+Result<GazeScript> GazeScript::parseFixations(std::string_view kind, std::string_view body) {
+  GazeScript script;
+  script.kind_ = kind == "fixed" ? Kind::kFixed : Kind::kScan;
+  if (kind == "scan") {
+    if (const auto at = body.find('@'); at != std::string_view::npos) {
+      if (Status s = script.takeScanTiming(body.substr(at + 1)); !s) return s;
+      body = body.substr(0, at);
+    }
+  }
+  const auto arrow = body.find('>');
+  if (arrow == std::string_view::npos) {
+    return Result<GazeScript>(ErrorCode::kInvalidArgument, "--gaze " + std::string(kind) + ": expected EYE>TARGET");
+  }
+  Result<Eigen::Vector3d> eye = parsePoint(body.substr(0, arrow), "--gaze eye");
+  if (!eye) return eye.status();
+  std::string targets(body.substr(arrow + 1));
+  std::stringstream stream(targets);
+  std::string target_text;
+  while (std::getline(stream, target_text, ';')) {
+    Result<Eigen::Vector3d> target = parsePoint(target_text, "--gaze target");
+    if (!target) return target.status();
+    Result<GazePoint> g = gazeTowards(eye.value(), target.value(), "--gaze");
+    if (!g) return g.status();
+    script.keys_.push_back({0, g.value()});
+  }
+  if (script.keys_.empty() || (kind == "fixed" && script.keys_.size() != 1)) {
+    return Result<GazeScript>(ErrorCode::kInvalidArgument,
+                              "--gaze " + std::string(kind) + (kind == "fixed" ? ": exactly one target" : ": at least one target"));
+  }
+  return script;
+}
+
+Status GazeScript::takeScanTiming(std::string_view text) {
+  std::string timing(text);
+  std::replace(timing.begin(), timing.end(), '/', ',');
+  Result<std::vector<double>> times = parseNumbers(timing, "--gaze scan timing");
+  if (!times) return times.status();
+  // Up to an hour each, so the times stay far inside int64 nanoseconds.
+  constexpr double kMaxMs = 3.6e6;
+  if (times->empty() || times->size() > 2 || !((*times)[0] > 0 && (*times)[0] <= kMaxMs) ||
+      (times->size() == 2 && !((*times)[1] >= 0 && (*times)[1] <= kMaxMs))) {
+    return Status(ErrorCode::kInvalidArgument, "--gaze scan: timing is @DWELL_MS[/SACCADE_MS], positive, up to an hour");
+  }
+  dwell_ns_ = static_cast<int64_t>((*times)[0] * 1e6);
+  if (times->size() == 2) saccade_ns_ = static_cast<int64_t>((*times)[1] * 1e6);
+  return Status::ok();
+}
+
+Result<GazeScript> GazeScript::parseTrace(const std::string& path) {
+  GazeScript script;
+  script.kind_ = Kind::kTrace;
+  std::ifstream file(path);
+  if (!file) return Result<GazeScript>(ErrorCode::kNotFound, "--gaze csv: cannot open '" + path + "'");
+  std::string line;
+  int line_no = 0;
+  while (std::getline(file, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    if (line_no == 1 && !line.empty() && (std::isalpha(static_cast<unsigned char>(line[0])) != 0)) continue;  // header
+    const std::string where = path + ":" + std::to_string(line_no);
+    Result<std::vector<double>> v = parseNumbers(line, where);
+    if (!v) return v.status();
+    if (v->size() != 7) {
+      return Result<GazeScript>(ErrorCode::kParseError, where + ": expected t_s,ox,oy,oz,dx,dy,dz");
+    }
+    const Eigen::Vector3d d((*v)[4], (*v)[5], (*v)[6]);
+    if (!(d.norm() > 1e-9)) return Result<GazeScript>(ErrorCode::kParseError, where + ": zero gaze direction");
+    // Up to a year: far inside int64 nanoseconds.
+    if (!((*v)[0] >= 0 && (*v)[0] <= 3.2e7)) {
+      return Result<GazeScript>(ErrorCode::kParseError, where + ": t_s must be within 0 .. 3.2e7 s");
+    }
+    const auto t_ns = static_cast<int64_t>((*v)[0] * 1e9);
+    if (!script.keys_.empty() && t_ns < script.keys_.back().t_ns) {
+      return Result<GazeScript>(ErrorCode::kParseError, where + ": time goes backwards");
+    }
+    script.keys_.push_back({t_ns, GazePoint{Eigen::Vector3d((*v)[1], (*v)[2], (*v)[3]), d.normalized()}});
+  }
+  if (script.keys_.empty()) return Result<GazeScript>(ErrorCode::kParseError, "--gaze csv: '" + path + "' has no samples");
+  return script;
 }
 
 GazePoint GazeScript::at(int64_t t_ns) const {

@@ -38,6 +38,11 @@ class GazeScript {
   GazePoint at(int64_t t_ns) const;
 
  private:
+  // parse's steps: fixed: and scan: (EYE>TARGETS, after a scan's timing), csv:FILE.
+  static Result<GazeScript> parseFixations(std::string_view kind, std::string_view body);
+  Status takeScanTiming(std::string_view timing);  // a scan's DWELL_MS[/SACCADE_MS]
+  static Result<GazeScript> parseTrace(const std::string& path);
+
   struct Key {
     int64_t t_ns;
     GazePoint gaze;
