@@ -29,10 +29,11 @@ std::string tempPath(const std::string& name) {
       .string();
 }
 
-// Records `count` frames of the TUM camera (the sequence at `tum`) into `path` (as fovead serve
+// Records `count` frames of the TUM camera (the sequence at `sequence`) into `path` (as fovead serve
 // --record-frames does: one FrameRecord message each), returning the frames.
-std::vector<hal::RgbdFrame> recordTum(const std::string& tum, const std::string& path, int count, std::size_t chunk_bytes = 1 << 20) {
-  Result<std::unique_ptr<hal::Camera>> tum = hal::createCamera("tum:" + tum + ",loop=off");
+std::vector<hal::RgbdFrame> recordTum(const std::string& sequence, const std::string& path, int count,
+                                      std::size_t chunk_bytes = 1 << 20) {
+  Result<std::unique_ptr<hal::Camera>> tum = hal::createCamera("tum:" + sequence + ",loop=off");
   EXPECT_TRUE(tum) << tum.status().message();
   hal::Camera& camera = *tum.value();
   EXPECT_TRUE(camera.open()) << camera.open().message();
