@@ -110,14 +110,7 @@ std::optional<Status> OperatorLink::awaitAnswer(const HelloMsg& hello, int64_t r
 // (dropped and counted).
 std::optional<Status> OperatorLink::handleAnswer(std::span<const uint8_t> datagram, const HelloMsg& hello) {
   Header header;
-  if (auto drop = parseHeader(datagram, header)) {
-    counters_.dropped.add(*drop);
-    return std::nullopt;
-  }
-  if (!isSentBy(header.type, Role::kRobot)) {
-    counters_.dropped.add(DropReason::kWrongDirection);
-    return std::nullopt;
-  }
+  if (!readRobotHeader(datagram, header)) return std::nullopt;
   if (header.type != MessageType::kAccept && header.type != MessageType::kRefuse) {
     counters_.dropped.add(DropReason::kNoSession);
     return std::nullopt;
@@ -235,16 +228,21 @@ std::optional<Received> OperatorLink::receive(int timeout_ms) {
   }
 }
 
-std::optional<Received> OperatorLink::handle(std::span<const uint8_t> datagram, int64_t now_ns) {
-  Header header;
+bool OperatorLink::readRobotHeader(std::span<const uint8_t> datagram, Header& header) {
   if (auto drop = parseHeader(datagram, header)) {
     counters_.dropped.add(*drop);
-    return std::nullopt;
+    return false;
   }
   if (!isSentBy(header.type, Role::kRobot)) {
     counters_.dropped.add(DropReason::kWrongDirection);
-    return std::nullopt;
+    return false;
   }
+  return true;
+}
+
+std::optional<Received> OperatorLink::handle(std::span<const uint8_t> datagram, int64_t now_ns) {
+  Header header;
+  if (!readRobotHeader(datagram, header)) return std::nullopt;
   if (!active_) {
     counters_.dropped.add(DropReason::kNoSession);
     return std::nullopt;

@@ -112,6 +112,9 @@ class OperatorLink {
   std::optional<Status> awaitAnswer(const HelloMsg& hello, int64_t retry_at_ns);
   std::optional<Status> handleAnswer(std::span<const uint8_t> datagram, const HelloMsg& hello);
   std::optional<Received> handle(std::span<const uint8_t> datagram, int64_t now_ns);
+  // The datagram's header, when it parses and comes from a robot; else the
+  // drop is counted and false returned.
+  bool readRobotHeader(std::span<const uint8_t> datagram, Header& header);
   void trackSequence(uint64_t seq);
 
   Key psk_;
