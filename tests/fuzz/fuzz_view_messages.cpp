@@ -168,7 +168,7 @@ void checkSame(const ViewerMessage& got, const ViewerMessage& want, double toler
 
 // ---------------------------------------------------------------- the oracles
 
-// What parses, written as the page writes it (viewer.js sendGaze / setGazeMode),
+// What parses, written as the page writes it (viewer_link.js sendGaze / setGazeMode),
 // parses again to the same value.
 void checkRoundTrip(const ViewerMessage& m) {
   json written;

@@ -42,12 +42,19 @@ void publish(ViewServer& server, std::size_t bytes, uint8_t fill) {
   server.publishFrame(bytes);
 }
 
-// An HTTP request; returns the status code and fills body.
-int httpGet(int port, const std::string& request, std::string& body) {
+// An HTTP request; returns the status code and fills body (and the Content-Type, if asked).
+int httpGet(int port, const std::string& request, std::string& body, std::string* content_type = nullptr) {
   char error[256] = {0};
   mg_connection* c = mg_download("127.0.0.1", port, 0, error, sizeof error, "%s", request.c_str());
   if (c == nullptr) return -1;
-  const int status = mg_get_response_info(c)->status_code;
+  const mg_response_info* info = mg_get_response_info(c);
+  const int status = info->status_code;
+  if (content_type != nullptr) {
+    content_type->clear();
+    for (int i = 0; i < info->num_headers; ++i) {
+      if (mg_strcasecmp(info->http_headers[i].name, "Content-Type") == 0) *content_type = info->http_headers[i].value;
+    }
+  }
   body.clear();
   char buf[4096];
   for (int n; (n = mg_read(c, buf, sizeof buf)) > 0;) body.append(buf, static_cast<std::size_t>(n));
@@ -81,6 +88,27 @@ TEST(ViewServer, ServesThePageItsFilesAndNothingElse) {
   EXPECT_EQ(httpGet(server->port(), "GET /missing.js HTTP/1.0\r\n\r\n", body), 404);
   EXPECT_EQ(httpGet(server->port(), "POST / HTTP/1.0\r\nContent-Length: 0\r\n\r\n", body), 405);
   EXPECT_GE(server->counters().http_not_found, 2u);
+}
+
+// The page is several plain scripts (index.html's <script src>): each must be in
+// FOVEA_VIEWER_FILES and served as JavaScript, or the browser would not run it.
+TEST(ViewServer, EveryScriptThePageLoadsIsServedAsJavaScript) {
+  auto server = startServer();
+  ASSERT_TRUE(server);
+  std::string html;
+  ASSERT_EQ(httpGet(server->port(), "GET /index.html HTTP/1.0\r\n\r\n", html), 200);
+  int scripts = 0;
+  for (std::size_t at = html.find("<script src=\""); at != std::string::npos; at = html.find("<script src=\"", at + 1)) {
+    const std::size_t start = at + std::strlen("<script src=\"");
+    const std::string name = html.substr(start, html.find('"', start) - start);
+    std::string body;
+    std::string type;
+    ASSERT_EQ(httpGet(server->port(), "GET /" + name + " HTTP/1.0\r\n\r\n", body, &type), 200) << name;
+    EXPECT_EQ(type, "text/javascript; charset=utf-8") << name;
+    EXPECT_NE(body.find("'use strict';"), std::string::npos) << name;
+    ++scripts;
+  }
+  EXPECT_GE(scripts, 1);
 }
 
 TEST(ViewServer, ATabGetsHelloStateFiguresAndTheNewestFrame) {
