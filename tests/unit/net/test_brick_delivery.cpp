@@ -41,120 +41,168 @@ struct Datagram {
   std::vector<uint8_t> payload;  // a chunk: 8-byte aligned when copied into an aligned buffer
 };
 
-TEST(BrickDelivery, TenPercentLossDuplicatesAndReorderingConvergeToTheLastVersions) {
-  constexpr int kBricks = 12;
-  BrickSenderConfig sender_config;
-  sender_config.store_bytes = 1 << 20;
-  sender_config.max_bricks = kBricks;
-  sender_config.resend_after_ns = 30 * kMs;
-  BrickSender sender = BrickSender::create(sender_config).value();
-  BrickCacheConfig cache_config;
-  cache_config.max_bricks = 64;
-  cache_config.max_points = 1 << 16;
-  BrickCache cache = BrickCache::create(cache_config).value();
-  ChunkEncoder encoder = ChunkEncoder::create(CodecConfig{}, 4096).value();
-  pipeline::FoveatedCloud points(4096), decoded(4096);
-  std::mt19937 rng(1026);
-  std::deque<Datagram> to_operator;
-  std::deque<BrickPartId> to_robot;
-  std::vector<uint32_t> version(kBricks, 0);
-  alignas(8) uint8_t aligned[kMaxMtu];
-  bool lossy = true;
-  auto send = [&](std::span<const uint8_t> payload) {
-    if (lossy && rng() % 10 == 0) return;  // lost
-    to_operator.push_back({{payload.begin(), payload.end()}});
-    if (lossy && rng() % 10 == 0) to_operator.push_back({{payload.begin(), payload.end()}});  // duplicated
-    if (lossy && to_operator.size() > 1 && rng() % 4 == 0) {
-      std::swap(to_operator.back(), to_operator[rng() % to_operator.size()]);  // reordered
-    }
-  };
-  auto sendVersion = [&](int b, int64_t now) {
-    ++version[b];
-    brickPoints(b, version[b], points);
+// The robot's BrickSender and the operator's BrickCache over a simulated link
+// that loses, duplicates and reorders datagrams (and loses acknowledgements)
+// while `lossy`, on a simulated clock (`now`).
+class LossyBrickLink {
+ public:
+  static constexpr int kBricks = 12;
+
+  LossyBrickLink()
+      : sender_(BrickSender::create(senderConfig()).value()),
+        cache_(BrickCache::create(cacheConfig()).value()),
+        encoder_(ChunkEncoder::create(CodecConfig{}, 4096).value()) {}
+
+  // The robot sends a new version of brick `b`, every part through the link.
+  void sendVersion(int b) {
+    ++version_[b];
+    brickPoints(b, version_[b], points_);
     const double fovea[1] = {0.0};
-    const BrickTag tag{b, 0, 2, version[b], 0};
-    ASSERT_TRUE(encoder.encode(points, fovea, 0, 0, &tag));
+    const BrickTag tag{b, 0, 2, version_[b], 0};
+    ASSERT_TRUE(encoder_.encode(points_, fovea, 0, 0, &tag));
     int lost = -2;
-    ASSERT_TRUE(sender.begin(static_cast<uint16_t>(b), version[b], static_cast<uint16_t>(encoder.chunkCount()), now, &lost));
+    ASSERT_TRUE(sender_.begin(static_cast<uint16_t>(b), version_[b], static_cast<uint16_t>(encoder_.chunkCount()), now_, &lost));
     EXPECT_EQ(lost, -1);
-    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) {
-      ASSERT_TRUE(sender.addPart(static_cast<uint16_t>(i), encoder.chunk(i)));
-      send(encoder.chunk(i));
+    for (std::size_t i = 0; i < encoder_.chunkCount(); ++i) {
+      ASSERT_TRUE(sender_.addPart(static_cast<uint16_t>(i), encoder_.chunk(i)));
+      send(encoder_.chunk(i));
     }
-  };
-  auto operatorReceives = [&](int64_t now) {
-    while (!to_operator.empty()) {
-      const Datagram d = std::move(to_operator.front());
-      to_operator.pop_front();
-      std::copy(d.payload.begin(), d.payload.end(), aligned);
-      decoded.clear();
-      Result<DecodedChunk> chunk = decodeChunk(std::span<const uint8_t>(aligned, d.payload.size()), decoded);
-      ASSERT_TRUE(chunk) << chunk.status().toString();
-      cache.add(chunk.value(), decoded, 0, now);
-    }
-    for (const BrickPartId& id : cache.received()) {
-      if (lossy && rng() % 10 == 0) continue;  // the acknowledgement is lost
-      to_robot.push_back(id);
-    }
-    cache.clearReceived();
-  };
-  auto robotReceives = [&] {
-    while (!to_robot.empty()) {
-      const BrickPartId id = to_robot.front();
-      to_robot.pop_front();
-      sender.acknowledge(static_cast<uint16_t>(id.key.x), id.version, id.part);
-    }
-  };
-  int64_t now = 0;
-  std::size_t lost_versions = 0;
-  auto resendRound = [&] {
-    sender.collectResends(now, 10'000, [&](uint16_t, uint16_t, std::span<const uint8_t> payload) { send(payload); },
-                          [&](uint16_t) { ++lost_versions; });
-  };
-  // 50 rounds of 10 ms: every brick gets a few versions, all with loss.
-  for (int round = 0; round < 50; ++round, now += 10 * kMs) {
-    if (round % 5 == 0) {
-      for (int b = 0; b < kBricks; ++b) {
-        if (rng() % 2 == 0) sendVersion(b, now);
-      }
-    }
-    operatorReceives(now);
+  }
+
+  // One round of 10 ms: the operator takes what arrived and acknowledges it,
+  // the robot takes the acknowledgements and resends what is overdue.
+  void exchangeRound() {
+    operatorReceives();
     robotReceives();
     resendRound();
   }
-  // The loss stops: within 20 rounds (200 ms, resend_after 30 ms) the operator draws every brick's last version.
-  lossy = false;
-  int rounds = 0;
-  auto converged = [&] {
+  // The last acknowledgements, with no resends after them.
+  void deliverAcknowledgements() {
+    operatorReceives();
+    robotReceives();
+  }
+
+  void advance() { now_ += 10 * kMs; }
+  void stopLoss() { lossy_ = false; }
+  std::mt19937::result_type nextRandom() { return rng_(); }
+
+  // Whether the operator draws every sent brick's last version.
+  bool converged() const {
     for (int b = 0; b < kBricks; ++b) {
-      if (version[b] == 0) continue;
-      const int slot = cache.find({b, 0, 2});
-      if (slot < 0 || !cache.held(static_cast<std::size_t>(slot)) ||
-          cache.version(static_cast<std::size_t>(slot)) != version[b]) {
+      if (version_[b] == 0) continue;
+      const int slot = cache_.find({b, 0, 2});
+      if (slot < 0 || !cache_.held(static_cast<std::size_t>(slot)) ||
+          cache_.version(static_cast<std::size_t>(slot)) != version_[b]) {
         return false;
       }
     }
     return true;
-  };
-  for (; rounds < 20 && !converged(); ++rounds, now += 10 * kMs) {
-    operatorReceives(now);
-    robotReceives();
-    resendRound();
   }
-  EXPECT_TRUE(converged()) << "after " << rounds << " rounds without loss";
-  EXPECT_EQ(lost_versions, 0u) << "the store holds every part in flight";
-  EXPECT_GT(sender.counters().resends, 0u);
-  EXPECT_GT(cache.counters().duplicate_parts, 0u);
-  // Every version done once its acknowledgements arrive.
-  operatorReceives(now);
-  robotReceives();
-  EXPECT_EQ(sender.inFlight(), 0u);
+
   // Each drawn brick holds exactly its last version's points.
-  for (int b = 0; b < kBricks; ++b) {
-    if (version[b] == 0) continue;
-    brickPoints(b, version[b], points);
-    EXPECT_EQ(cache.pointCount(static_cast<std::size_t>(cache.find({b, 0, 2}))), points.size()) << "brick " << b;
+  void expectEachBrickHoldsItsLastVersion() {
+    for (int b = 0; b < kBricks; ++b) {
+      if (version_[b] == 0) continue;
+      brickPoints(b, version_[b], points_);
+      EXPECT_EQ(cache_.pointCount(static_cast<std::size_t>(cache_.find({b, 0, 2}))), points_.size()) << "brick " << b;
+    }
   }
+
+  const BrickSender& sender() const { return sender_; }
+  const BrickCache& cache() const { return cache_; }
+  std::size_t lostVersions() const { return lost_versions_; }
+
+ private:
+  static BrickSenderConfig senderConfig() {
+    BrickSenderConfig config;
+    config.store_bytes = 1 << 20;
+    config.max_bricks = kBricks;
+    config.resend_after_ns = 30 * kMs;
+    return config;
+  }
+  static BrickCacheConfig cacheConfig() {
+    BrickCacheConfig config;
+    config.max_bricks = 64;
+    config.max_points = 1 << 16;
+    return config;
+  }
+
+  void send(std::span<const uint8_t> payload) {
+    if (lossy_ && rng_() % 10 == 0) return;  // lost
+    to_operator_.push_back({{payload.begin(), payload.end()}});
+    if (lossy_ && rng_() % 10 == 0) to_operator_.push_back({{payload.begin(), payload.end()}});  // duplicated
+    if (lossy_ && to_operator_.size() > 1 && rng_() % 4 == 0) {
+      std::swap(to_operator_.back(), to_operator_[rng_() % to_operator_.size()]);  // reordered
+    }
+  }
+
+  void operatorReceives() {
+    while (!to_operator_.empty()) {
+      const Datagram d = std::move(to_operator_.front());
+      to_operator_.pop_front();
+      std::copy(d.payload.begin(), d.payload.end(), aligned_);
+      decoded_.clear();
+      Result<DecodedChunk> chunk = decodeChunk(std::span<const uint8_t>(aligned_, d.payload.size()), decoded_);
+      ASSERT_TRUE(chunk) << chunk.status().toString();
+      cache_.add(chunk.value(), decoded_, 0, now_);
+    }
+    for (const BrickPartId& id : cache_.received()) {
+      if (lossy_ && rng_() % 10 == 0) continue;  // the acknowledgement is lost
+      to_robot_.push_back(id);
+    }
+    cache_.clearReceived();
+  }
+
+  void robotReceives() {
+    while (!to_robot_.empty()) {
+      const BrickPartId id = to_robot_.front();
+      to_robot_.pop_front();
+      sender_.acknowledge(static_cast<uint16_t>(id.key.x), id.version, id.part);
+    }
+  }
+
+  void resendRound() {
+    sender_.collectResends(now_, 10'000, [&](uint16_t, uint16_t, std::span<const uint8_t> payload) { send(payload); },
+                           [&](uint16_t) { ++lost_versions_; });
+  }
+
+  BrickSender sender_;
+  BrickCache cache_;
+  ChunkEncoder encoder_;
+  pipeline::FoveatedCloud points_{4096}, decoded_{4096};
+  std::mt19937 rng_{1026};
+  std::deque<Datagram> to_operator_;
+  std::deque<BrickPartId> to_robot_;
+  std::vector<uint32_t> version_ = std::vector<uint32_t>(kBricks, 0);
+  alignas(8) uint8_t aligned_[kMaxMtu];
+  bool lossy_ = true;
+  int64_t now_ = 0;
+  std::size_t lost_versions_ = 0;
+};
+
+TEST(BrickDelivery, TenPercentLossDuplicatesAndReorderingConvergeToTheLastVersions) {
+  LossyBrickLink link;
+  // 50 rounds of 10 ms: every brick gets a few versions, all with loss.
+  for (int round = 0; round < 50; ++round, link.advance()) {
+    if (round % 5 == 0) {
+      for (int b = 0; b < LossyBrickLink::kBricks; ++b) {
+        if (link.nextRandom() % 2 == 0) link.sendVersion(b);
+      }
+    }
+    link.exchangeRound();
+  }
+  // The loss stops: within 20 rounds (200 ms, resend_after 30 ms) the operator draws every brick's last version.
+  link.stopLoss();
+  int rounds = 0;
+  for (; rounds < 20 && !link.converged(); ++rounds, link.advance()) link.exchangeRound();
+  EXPECT_TRUE(link.converged()) << "after " << rounds << " rounds without loss";
+  EXPECT_EQ(link.lostVersions(), 0u) << "the store holds every part in flight";
+  EXPECT_GT(link.sender().counters().resends, 0u);
+  EXPECT_GT(link.cache().counters().duplicate_parts, 0u);
+  // Every version done once its acknowledgements arrive.
+  link.deliverAcknowledgements();
+  EXPECT_EQ(link.sender().inFlight(), 0u);
+  link.expectEachBrickHoldsItsLastVersion();
 }
 
 TEST(BrickDelivery, PartsOverwrittenBeforeTheirAcknowledgementLoseTheVersion) {

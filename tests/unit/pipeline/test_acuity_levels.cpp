@@ -4,6 +4,7 @@
 // by the error metrics), monotonicity, the sensor floor, hard cases, and the
 // model's validation.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -469,122 +470,187 @@ TEST(AcuityRefinement, ConvergedRefinementLeavesNoPointAboveItsMar) {
   }
 }
 
+// ---- one refinement pass against a brute force ----
+
+// One trial's configuration: the margin, the floors, the slope and the view cull vary with it.
+AcuityConfig refineTrialConfig(int trial) {
+  // A constant floor of 32 mm (level 5) holds many points that would move.
+  AcuityConfig a = acuityConfig(trial % 2 ? 0.12 : 0.4, trial % 4 == 1 ? 0.032 : 0.0, trial % 5 == 3 ? 0.1 : kDefaultSlope);
+  a.floor_per_m2 = trial % 3 == 1 ? 0.002 : 0.0;
+  a.view_cull = trial % 4 == 3 ? ViewCull::kCoarsest : ViewCull::kOff;
+  a.view_cull_deg = 40.0;
+  return a;
+}
+
+// One trial's gaze at the cloud, with a known head; some trials grow the fovea.
+Gaze refineTrialGaze(const PointCloud& cloud, int trial, std::mt19937_64& rng) {
+  Gaze raw;
+  raw.origin_m = cloud.origin_m + Eigen::Vector3d(0.5, 0.2, -3.0);
+  raw.direction = Eigen::Vector3d(0.05, -0.1, 1.0) + 0.2 * test::randomUnit(rng);
+  raw.fovea_growth_deg = trial % 3 == 0 ? 4.0 : 0.0;
+  raw.view_known = true;
+  raw.view_forward = raw.direction + 0.5 * test::randomUnit(rng);
+  return normalizeGaze(raw).value();
+}
+
+// The brute force's view of point P drawn at R (its representative): the angle
+// between P - H and R - H, its MAR, whether the view cull holds it, the lowest
+// level its floors allow, and whether the decision is too close to call.
+struct PointReference {
+  LD alpha = 0, mar = 0;
+  bool outside = false;
+  int lowest = 0;
+  bool too_close = false;
+};
+
+PointReference pointReference(const PointCloud& cloud, std::size_t i, const Eigen::Vector3d& drawn, const Gaze& gaze,
+                              const AcuityConfig& a, const std::array<double, kMaxRegions>& voxel) {
+  PointReference ref;
+  const Eigen::Vector3d p = cloud.world(i);
+  const Eigen::Vector3d a3 = p - gaze.origin_m, b3 = drawn - gaze.origin_m;
+  const LD ax = a3.x(), ay = a3.y(), az = a3.z(), bx = b3.x(), by = b3.y(), bz = b3.z();
+  const LD cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+  ref.alpha = std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz) * 180 /
+              std::numbers::pi_v<LD>;
+  const LD r = std::sqrt(ax * ax + ay * ay + az * az);
+  const LD cosine = (ax * gaze.direction.x() + ay * gaze.direction.y() + az * gaze.direction.z()) / r;
+  LD ecc = std::acos(std::max<LD>(-1, std::min<LD>(1, cosine))) * 180 / std::numbers::pi_v<LD>;
+  ecc = std::max<LD>(0, ecc - static_cast<LD>(gaze.fovea_growth_deg));
+  ref.mar = static_cast<LD>(a.slope) * ecc + static_cast<LD>(1.0 / 60.0);
+  const LD head = (ax * gaze.view_forward.x() + ay * gaze.view_forward.y() + az * gaze.view_forward.z()) / r;
+  const LD head_deg = std::acos(std::max<LD>(-1, std::min<LD>(1, head))) * 180 / std::numbers::pi_v<LD>;
+  ref.outside = a.view_cull != ViewCull::kOff && head_deg > static_cast<LD>(a.view_cull_deg);
+  // The floors: the level of the first voxel that reaches each.
+  const LD floor_b = a.floor_m + a.floor_per_m2 * static_cast<LD>(cloud.x()[i] * cloud.x()[i] + cloud.y()[i] * cloud.y()[i] + cloud.z()[i] * cloud.z()[i]);
+  for (int k = 1; k < kMaxRegions; ++k) {
+    if (a.floor_m > 0 && ref.lowest == 0 && voxel[k] >= a.floor_m) ref.lowest = k;
+  }
+  if (a.floor_m > 0 && ref.lowest == 0) ref.lowest = kMaxRegions - 1;
+  if (a.floor_per_m2 > 0) {
+    int lift = 1;
+    for (int k = 1; k < kMaxRegions; ++k) lift += voxel[k] < floor_b ? 1 : 0;
+    ref.lowest = std::max(ref.lowest, std::min(lift, kMaxRegions - 1));
+  }
+  // Decisions within float's reach of a tie, or of the cull's cone, are not judged.
+  ref.too_close = std::fabs(ref.alpha / ref.mar - 1) < 1e-3 || std::fabs(head_deg - static_cast<LD>(a.view_cull_deg)) < 1e-3;
+  return ref;
+}
+
+// What the trials add up, so that the test is not vacuous.
+struct RefineTally {
+  int moved_total = 0, held_by_floor = 0, held_by_cull = 0;
+};
+
+// A trial's cloud, its levels, its sampling and the refinement's judgement.
+struct RefineTrial {
+  const PointCloud& cloud;
+  const Gaze& gaze;
+  const AcuityConfig& a;
+  const std::array<double, kMaxRegions>& voxel;
+  const std::vector<uint8_t>& level;
+  const FoveatedCloud& out;
+  const std::vector<uint32_t>& rep;
+  const std::vector<uint8_t>& state;
+};
+
+// Each point's state as the brute force has it (stay, within or beyond), and the
+// count refineTestRef returned (`beyond`); returns how many points the pass judged beyond.
+std::size_t expectStatesMatchTheReference(int trial, const RefineTrial& t, std::size_t beyond, RefineTally& tally) {
+  std::size_t expected_beyond = 0, judged_beyond = 0;
+  for (std::size_t i = 0; i < t.cloud.size(); ++i) {
+    const int n = t.level[i];
+    if (n == 0 || n >= kMaxRegions) {
+      EXPECT_EQ(t.state[i], kRefineStay);
+      continue;
+    }
+    const PointReference ref = pointReference(t.cloud, i, t.out.points.world(t.rep[i]), t.gaze, t.a, t.voxel);
+    if (ref.too_close) continue;
+    const LD alpha = ref.alpha, mar = ref.mar;
+    const bool movable = n > ref.lowest && !ref.outside;
+    if (alpha > mar && n <= ref.lowest) ++tally.held_by_floor;
+    if (alpha > mar && n > ref.lowest && ref.outside) ++tally.held_by_cull;
+    const uint8_t expected = !movable ? kRefineStay : alpha > mar ? kRefineBeyond : kRefineWithin;
+    expected_beyond += expected == kRefineBeyond;
+    judged_beyond += t.state[i] == kRefineBeyond;
+    EXPECT_EQ(t.state[i], expected) << "trial " << trial << " point " << i << " alpha/MAR " << static_cast<double>(alpha / mar);
+  }
+  std::size_t counted = 0;
+  for (uint8_t st : t.state) counted += st == kRefineBeyond;
+  EXPECT_EQ(beyond, counted) << trial;
+  EXPECT_GE(beyond, expected_beyond) << trial;
+  return judged_beyond;
+}
+
+// The move: every point that can move goes one level down when any point of its
+// voxel (its representative) is beyond; the others stay. The counts follow the moves.
+void expectMovesFollowTheBeyondVoxels(int trial, const RefineTrial& t, const PartitionCounts& counts,
+                                      std::size_t judged_beyond, RefineTally& tally) {
+  std::vector<bool> voxel_beyond(t.out.size(), false);
+  for (std::size_t i = 0; i < t.cloud.size(); ++i) {
+    if (t.state[i] == kRefineBeyond) voxel_beyond[t.rep[i]] = true;
+  }
+  std::vector<uint8_t> refined = t.level;
+  std::vector<uint8_t> scratch(t.out.size(), 0xCD);
+  PartitionCounts after = counts;
+  const std::size_t moved = moveRefinedVoxels(t.state.data(), t.rep.data(), t.cloud.size(), t.out.size(), scratch.data(),
+                                              refined.data(), after);
+  std::size_t expected_moves = 0, whole_voxel_moves = 0;
+  for (std::size_t i = 0; i < t.cloud.size(); ++i) {
+    const bool move = t.state[i] != kRefineStay && voxel_beyond[t.rep[i]];
+    expected_moves += move;
+    whole_voxel_moves += move && t.state[i] == kRefineWithin;
+    EXPECT_EQ(refined[i], move ? t.level[i] - 1 : t.level[i]) << "trial " << trial << " point " << i;
+  }
+  EXPECT_EQ(moved, expected_moves) << trial;
+  tally.moved_total += static_cast<int>(moved);
+  if (judged_beyond > 100) {
+    EXPECT_GT(whole_voxel_moves, 0u) << trial;  // points within their MAR moved with their voxel
+  }
+  // The counts follow the moves.
+  std::array<uint32_t, kMaxRegions> per_level{};
+  for (uint8_t r : refined) {
+    if (r < kMaxRegions) ++per_level[r];
+  }
+  for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(after.per_region[r], per_level[r]) << r;
+}
+
+// One trial: a random cloud's levels and sampling, one pass judged against the
+// brute force, then the move.
+void runRefineTrial(int trial, std::mt19937_64& rng, RefineTally& tally) {
+  PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(trial % 3 == 2 ? 1e4 : 3.0, -2.0, 1.0), 4.0f, rng());
+  const AcuityConfig a = refineTrialConfig(trial);
+  const RegionModel model = RegionModel::create(a).value();
+  const LevelBounds bounds = LevelBounds::fromModel(model);
+  const Gaze gaze = refineTrialGaze(cloud, trial, rng);
+  std::vector<uint8_t> level(cloud.size());
+  PartitionCounts counts;
+  assignLevelsRef(cloud, gaze, bounds, level.data(), counts);
+  std::array<double, kMaxRegions> voxel{};
+  for (int n = 1; n < kMaxRegions; ++n) voxel[n] = model.voxelSizeM(n, 0.0);
+  VoxelSampler sampler(cloud.size(), cloud.size());
+  FoveatedCloud out(cloud.size());
+  SampleCounts sc;
+  std::vector<uint32_t> rep(cloud.size());
+  ASSERT_TRUE(sampler.sample(cloud, level.data(), kMaxRegions, voxel, out, sc, rep.data()).isOk());
+  std::vector<uint8_t> state(cloud.size());
+  const std::size_t beyond = refineTestRef(cloud, gaze, bounds, out.points, rep.data(), level.data(), state.data());
+  const RefineTrial t{cloud, gaze, a, voxel, level, out, rep, state};
+  const std::size_t judged_beyond = expectStatesMatchTheReference(trial, t, beyond, tally);
+  expectMovesFollowTheBeyondVoxels(trial, t, counts, judged_beyond, tally);
+}
+
 // One pass against a brute force written here in long double: a point is beyond when
 // the angle between P - H and R - H exceeds the MAR at its eccentricity (less the
 // growth), and it stays when its floor or the view cull holds it; then every point that
 // can move goes one level down with its voxel when any point of the voxel is beyond.
 TEST(AcuityRefinement, OnePassMatchesAnIndependentReference) {
   std::mt19937_64 rng(11);
-  int moved_total = 0, held_by_floor = 0, held_by_cull = 0;
-  for (int trial = 0; trial < 12; ++trial) {
-    PointCloud cloud = test::randomCloud(20000, Eigen::Vector3d(trial % 3 == 2 ? 1e4 : 3.0, -2.0, 1.0), 4.0f, rng());
-    // A constant floor of 32 mm (level 5) holds many points that would move.
-    AcuityConfig a = acuityConfig(trial % 2 ? 0.12 : 0.4, trial % 4 == 1 ? 0.032 : 0.0, trial % 5 == 3 ? 0.1 : kDefaultSlope);
-    a.floor_per_m2 = trial % 3 == 1 ? 0.002 : 0.0;
-    a.view_cull = trial % 4 == 3 ? ViewCull::kCoarsest : ViewCull::kOff;
-    a.view_cull_deg = 40.0;
-    const RegionModel model = RegionModel::create(a).value();
-    const LevelBounds bounds = LevelBounds::fromModel(model);
-    Gaze raw;
-    raw.origin_m = cloud.origin_m + Eigen::Vector3d(0.5, 0.2, -3.0);
-    raw.direction = Eigen::Vector3d(0.05, -0.1, 1.0) + 0.2 * test::randomUnit(rng);
-    raw.fovea_growth_deg = trial % 3 == 0 ? 4.0 : 0.0;
-    raw.view_known = true;
-    raw.view_forward = raw.direction + 0.5 * test::randomUnit(rng);
-    const Gaze gaze = normalizeGaze(raw).value();
-    std::vector<uint8_t> level(cloud.size());
-    PartitionCounts counts;
-    assignLevelsRef(cloud, gaze, bounds, level.data(), counts);
-    std::array<double, kMaxRegions> voxel{};
-    for (int n = 1; n < kMaxRegions; ++n) voxel[n] = model.voxelSizeM(n, 0.0);
-    VoxelSampler sampler(cloud.size(), cloud.size());
-    FoveatedCloud out(cloud.size());
-    SampleCounts sc;
-    std::vector<uint32_t> rep(cloud.size());
-    ASSERT_TRUE(sampler.sample(cloud, level.data(), kMaxRegions, voxel, out, sc, rep.data()).isOk());
-    std::vector<uint8_t> state(cloud.size());
-    const std::size_t beyond = refineTestRef(cloud, gaze, bounds, out.points, rep.data(), level.data(), state.data());
-    std::size_t expected_beyond = 0, judged_beyond = 0;
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      const int n = level[i];
-      if (n == 0 || n >= kMaxRegions) {
-        EXPECT_EQ(state[i], kRefineStay);
-        continue;
-      }
-      const Eigen::Vector3d p = cloud.world(i);
-      const Eigen::Vector3d a3 = p - gaze.origin_m, b3 = out.points.world(rep[i]) - gaze.origin_m;
-      const LD ax = a3.x(), ay = a3.y(), az = a3.z(), bx = b3.x(), by = b3.y(), bz = b3.z();
-      const LD cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
-      const LD alpha = std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz) * 180 /
-                       std::numbers::pi_v<LD>;
-      const LD r = std::sqrt(ax * ax + ay * ay + az * az);
-      const LD cosine = (ax * gaze.direction.x() + ay * gaze.direction.y() + az * gaze.direction.z()) / r;
-      LD ecc = std::acos(std::max<LD>(-1, std::min<LD>(1, cosine))) * 180 / std::numbers::pi_v<LD>;
-      ecc = std::max<LD>(0, ecc - static_cast<LD>(gaze.fovea_growth_deg));
-      const LD mar = static_cast<LD>(a.slope) * ecc + static_cast<LD>(1.0 / 60.0);
-      const LD head = (ax * gaze.view_forward.x() + ay * gaze.view_forward.y() + az * gaze.view_forward.z()) / r;
-      const LD head_deg = std::acos(std::max<LD>(-1, std::min<LD>(1, head))) * 180 / std::numbers::pi_v<LD>;
-      const bool outside = a.view_cull != ViewCull::kOff && head_deg > static_cast<LD>(a.view_cull_deg);
-      // The floors: the level of the first voxel that reaches each.
-      int lowest = 0;
-      const LD floor_b = a.floor_m + a.floor_per_m2 * static_cast<LD>(cloud.x()[i] * cloud.x()[i] + cloud.y()[i] * cloud.y()[i] + cloud.z()[i] * cloud.z()[i]);
-      for (int k = 1; k < kMaxRegions; ++k) {
-        if (a.floor_m > 0 && lowest == 0 && voxel[k] >= a.floor_m) lowest = k;
-      }
-      if (a.floor_m > 0 && lowest == 0) lowest = kMaxRegions - 1;
-      if (a.floor_per_m2 > 0) {
-        int lift = 1;
-        for (int k = 1; k < kMaxRegions; ++k) lift += voxel[k] < floor_b ? 1 : 0;
-        lowest = std::max(lowest, std::min(lift, kMaxRegions - 1));
-      }
-      // Decisions within float's reach of a tie, or of the cull's cone, are not judged.
-      if (std::fabs(alpha / mar - 1) < 1e-3 || std::fabs(head_deg - static_cast<LD>(a.view_cull_deg)) < 1e-3) continue;
-      const bool movable = n > lowest && !outside;
-      if (alpha > mar && n <= lowest) ++held_by_floor;
-      if (alpha > mar && n > lowest && outside) ++held_by_cull;
-      const uint8_t expected = !movable ? kRefineStay : alpha > mar ? kRefineBeyond : kRefineWithin;
-      expected_beyond += expected == kRefineBeyond;
-      judged_beyond += state[i] == kRefineBeyond;
-      EXPECT_EQ(state[i], expected) << "trial " << trial << " point " << i << " alpha/MAR " << static_cast<double>(alpha / mar);
-    }
-    std::size_t counted = 0;
-    for (uint8_t st : state) counted += st == kRefineBeyond;
-    EXPECT_EQ(beyond, counted) << trial;
-    EXPECT_GE(beyond, expected_beyond) << trial;
-    // The move: every point that can move goes one level down when any point of its
-    // voxel (its representative) is beyond; the others stay.
-    std::vector<bool> voxel_beyond(out.size(), false);
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      if (state[i] == kRefineBeyond) voxel_beyond[rep[i]] = true;
-    }
-    std::vector<uint8_t> refined = level;
-    std::vector<uint8_t> scratch(out.size(), 0xCD);
-    PartitionCounts after = counts;
-    const std::size_t moved =
-        moveRefinedVoxels(state.data(), rep.data(), cloud.size(), out.size(), scratch.data(), refined.data(), after);
-    std::size_t expected_moves = 0, whole_voxel_moves = 0;
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      const bool move = state[i] != kRefineStay && voxel_beyond[rep[i]];
-      expected_moves += move;
-      whole_voxel_moves += move && state[i] == kRefineWithin;
-      EXPECT_EQ(refined[i], move ? level[i] - 1 : level[i]) << "trial " << trial << " point " << i;
-    }
-    EXPECT_EQ(moved, expected_moves) << trial;
-    moved_total += static_cast<int>(moved);
-    if (judged_beyond > 100) {
-      EXPECT_GT(whole_voxel_moves, 0u) << trial;  // points within their MAR moved with their voxel
-    }
-    // The counts follow the moves.
-    std::array<uint32_t, kMaxRegions> per_level{};
-    for (uint8_t r : refined) {
-      if (r < kMaxRegions) ++per_level[r];
-    }
-    for (int r = 0; r < kMaxRegions; ++r) EXPECT_EQ(after.per_region[r], per_level[r]) << r;
-  }
+  RefineTally tally;
+  for (int trial = 0; trial < 12; ++trial) ASSERT_NO_FATAL_FAILURE(runRefineTrial(trial, rng, tally));
   // Not vacuous: points moved, and the floor and the cull held some.
-  EXPECT_GT(moved_total, 300);
-  EXPECT_GT(held_by_floor, 0);
-  EXPECT_GT(held_by_cull, 0);
+  EXPECT_GT(tally.moved_total, 300);
+  EXPECT_GT(tally.held_by_floor, 0);
+  EXPECT_GT(tally.held_by_cull, 0);
 }
 
 // Points at the eye, non-finite ones, ones without a representative and a far

@@ -58,35 +58,33 @@ class HeldCloudTest : public ::testing::Test {
       (void)map.add(std::span<const uint8_t>(aligned_, p.size()), 1);
     }
   }
+  // Two bricks held: 300 points at level 0 and 120 at level 3.
+  void addTwoBricks(MapHolder& map) {
+    net::BrickTag a{};
+    a.x = 2;
+    a.y = -1;
+    a.z = 3;
+    a.version = 1;
+    a.level = 0;
+    net::BrickTag b = a;
+    b.x = -4;
+    b.level = 3;
+    addBrick(map, a, 300);
+    addBrick(map, b, 120);
+    ASSERT_EQ(map.cache().bricksHeld(), 2u);
+  }
   std::filesystem::path dir_;
   alignas(8) uint8_t aligned_[net::kMaxMtu];
 };
 
-TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
-  net::BrickCacheConfig config;
-  config.max_bricks = 16;
-  config.max_points = 1 << 14;
-  MapHolder map = MapHolder::create(config).value();
-  net::BrickTag a{};
-  a.x = 2;
-  a.y = -1;
-  a.z = 3;
-  a.version = 1;
-  a.level = 0;
-  net::BrickTag b = a;
-  b.x = -4;
-  b.level = 3;
-  addBrick(map, a, 300);
-  addBrick(map, b, 120);
-  ASSERT_EQ(map.cache().bricksHeld(), 2u);
+// The live frame's regions: 0 and 2.
+constexpr uint8_t kLiveRegions[5] = {0, 0, 2, 2, 2};
 
-  // A frame of 5 live points in regions 0 and 2, whole.
-  pipeline::FoveatedCloud live(5);
+// A frame of 5 live points in regions 0 and 2, whole.
+void makeWholeLiveFrame(pipeline::FoveatedCloud& live, net::AssembledFrame& f) {
   live.points.origin_m = Eigen::Vector3d(10.0, 20.0, 30.0);
   for (int i = 0; i < 5; ++i) ASSERT_TRUE(live.points.push(0.1f * static_cast<float>(i), 0.0f, 1.0f, 0xff0000u + static_cast<uint32_t>(i)));
-  const uint8_t regions[5] = {0, 0, 2, 2, 2};
-  std::copy(regions, regions + 5, live.region.begin());
-  net::AssembledFrame f;
+  std::copy(kLiveRegions, kLiveRegions + 5, live.region.begin());
   f.frame_id = 93;
   f.summary_received = true;
   f.points = {2, 0, 3};
@@ -94,9 +92,11 @@ TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
   f.chunks_expected = {1, 0, 1};
   f.step_m[2] = 0.0005;
   f.cloud = &live;
-  EXPECT_TRUE(frameComplete(f));
+}
 
-  const HeldCloud held = heldCloud(f, map.cache());
+// The held cloud of that frame and the two bricks: the live points first, in
+// world coordinates and with their regions, then the cache's points of each brick.
+void expectLivePointsThenTheBricks(const HeldCloud& held, const MapHolder& map) {
   EXPECT_EQ(held.info.frame_id, 93u);
   EXPECT_EQ(held.info.live_points, 5u);
   EXPECT_EQ(held.info.map_points, 420u);
@@ -106,7 +106,7 @@ TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
   ASSERT_EQ(held.region.size(), 425u);
   // The live points first, in world coordinates and with their regions.
   for (int i = 0; i < 5; ++i) {
-    EXPECT_EQ(held.region[i], regions[i]);
+    EXPECT_EQ(held.region[i], kLiveRegions[i]);
     EXPECT_NEAR((held.points.world(i) - Eigen::Vector3d(10.0 + 0.1 * i, 20.0, 31.0)).norm(), 0.0, 1e-5);
   }
   // Then each brick's points: 8 + its level, where the cache has them.
@@ -125,9 +125,10 @@ TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
   for (std::size_t i = 0; i < cached.size(); ++i) EXPECT_NEAR((held.points.world(5 + i) - cached[i]).norm(), 0.0, 2e-5) << i;
   EXPECT_GT(held.info.map_step_m[3], 0.0);
   EXPECT_EQ(held.info.map_step_m[1], 0.0);  // no brick at level 1
+}
 
-  // Saved and read back: the same points (double coordinates), colours, regions and text.
-  const std::string path = (dir_ / "held.ply").string();
+// Saved and read back: the same points (double coordinates), colours, regions and text.
+void expectSavedAndReadBackTheSame(const std::string& path, const HeldCloud& held) {
   ASSERT_TRUE(saveHeldCloud(path, held));
   Result<HeldCloud> back = loadHeldCloud(path);
   ASSERT_TRUE(back) << back.status().message();
@@ -144,6 +145,23 @@ TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
     EXPECT_NEAR((back->points.world(i) - held.points.world(i)).norm(), 0.0, 1e-5) << i;
     EXPECT_EQ(back->points.rgb()[i], held.points.rgb()[i]) << i;
   }
+}
+
+TEST_F(HeldCloudTest, TheFramesPointsThenEveryHeldBrickReadBackAsWritten) {
+  net::BrickCacheConfig config;
+  config.max_bricks = 16;
+  config.max_points = 1 << 14;
+  MapHolder map = MapHolder::create(config).value();
+  ASSERT_NO_FATAL_FAILURE(addTwoBricks(map));
+
+  pipeline::FoveatedCloud live(5);
+  net::AssembledFrame f;
+  ASSERT_NO_FATAL_FAILURE(makeWholeLiveFrame(live, f));
+  EXPECT_TRUE(frameComplete(f));
+
+  const HeldCloud held = heldCloud(f, map.cache());
+  ASSERT_NO_FATAL_FAILURE(expectLivePointsThenTheBricks(held, map));
+  ASSERT_NO_FATAL_FAILURE(expectSavedAndReadBackTheSame((dir_ / "held.ply").string(), held));
 }
 
 TEST_F(HeldCloudTest, AFrameIsWholeWithItsSummaryAndEveryChunk) {
