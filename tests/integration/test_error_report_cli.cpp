@@ -44,6 +44,141 @@ std::string readAll(const std::string& path) {
 const std::string kTool =
     std::string(FOVEA_EMULATOR).empty() ? FOVEA_ERROR_REPORT_PATH : std::string(FOVEA_EMULATOR) + " " + FOVEA_ERROR_REPORT_PATH;
 
+// A CSV's column index by name.
+using Columns = std::map<std::string, std::size_t>;
+
+// Regions per preset, plus one "all" row: F1 4, F2 5, F3 6, FREF 1; ACUITY's 8
+// levels once per default level margin and per default refined row.
+const std::map<std::string, int> kTinyRunRegions = {{"F1", 4},
+                                                    {"F2", 5},
+                                                    {"F3", 6},
+                                                    {"FREF", 1},
+                                                    {"ACUITY k=1.73", 8},
+                                                    {"ACUITY k=0.70", 8},
+                                                    {"ACUITY k=0.50", 8},
+                                                    {"ACUITY k=0.42", 8},
+                                                    {"ACUITY k=0.30 refined 1", 8},
+                                                    {"ACUITY k=0.12 refined 2", 8},
+                                                    {"ACUITY k=0.15 refined 7", 8}};
+
+// What the tiny run's rows add up to.
+struct TinyRunRows {
+  std::set<std::string> seen;
+  std::map<std::string, double> fref_rms, f1_points, fref_points;
+  std::map<std::string, double> all_bytes, region_bytes_sum;  // per preset/m
+};
+
+// The header's columns, every one the report promises among them.
+void readTinyRunHeader(std::ifstream& csv, std::vector<std::string>& header, Columns& column) {
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  header = splitCsvLine(line);
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  for (const char* name : {"preset", "m", "region", "region_name", "points_out", "bytes_per_frame", "raw_bytes_per_frame", "time_ms_median",
+                           "rms_mm", "max_mm", "rms_over_voxel", "share_above_mar", "ratio_median"}) {
+    ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
+  }
+}
+
+// One row: its sizes and, for a frame's "all" row, its time and errors; what
+// the totals need is added to `rows`.
+void checkTinyRunRow(const std::string& line, std::size_t header_size, Columns& column, TinyRunRows& rows) {
+  const std::vector<std::string> f = splitCsvLine(line);
+  ASSERT_EQ(f.size(), header_size) << line;
+  const std::string key = f[column["preset"]] + "/" + f[column["m"]] + "/" + f[column["region"]];
+  EXPECT_TRUE(rows.seen.insert(key).second) << "duplicate row " << key;
+  ASSERT_TRUE(kTinyRunRegions.count(f[column["preset"]])) << line;
+  const std::string config = f[column["preset"]] + "/" + f[column["m"]];
+  const double bytes = std::stod(f[column["bytes_per_frame"]]);
+  const double points_out = std::stod(f[column["points_out"]]);
+  EXPECT_DOUBLE_EQ(std::stod(f[column["raw_bytes_per_frame"]]), 15.0 * points_out) << line;
+  // On the wire: the codec's few bytes a point plus 36 bytes of framing per 1200-byte
+  // datagram, and at least one chunk's table (about 100 bytes) for a region of a few
+  // points (ACUITY's sparse levels).
+  if (points_out > 0) {
+    EXPECT_GT(bytes, 1.0 * points_out) << line;
+    EXPECT_LT(bytes, 15.0 * points_out + 200.0) << line;
+  }
+  if (f[column["region"]] == "all") {
+    rows.all_bytes[config] = bytes;
+  } else {
+    rows.region_bytes_sum[config] += bytes;
+  }
+  if (f[column["region"]] == "all") {
+    EXPECT_FALSE(f[column["time_ms_median"]].empty()) << line;
+    const double points = points_out;
+    if (f[column["preset"]] == "FREF") {
+      rows.fref_rms[f[column["m"]]] = std::stod(f[column["rms_mm"]]);
+      rows.fref_points[f[column["m"]]] = points;
+      EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
+    }
+    if (f[column["preset"]] == "F1") rows.f1_points[f[column["m"]]] = points;
+    // The diagonal margin keeps every point under its MAR, and so does refinement to the end.
+    if (f[column["preset"]] == "ACUITY k=1.73" || f[column["preset"]] == "ACUITY k=0.15 refined 7") {
+      EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
+    }
+  } else {
+    EXPECT_LT(std::stoi(f[column["region"]]), kTinyRunRegions.at(f[column["preset"]])) << line;
+  }
+}
+
+// Every preset's rows once per slope, a frame's bytes its regions' bytes, and
+// FREF exact with more points than F1.
+void expectEveryRowOnce(TinyRunRows& rows) {
+  // A frame's bytes are its regions' bytes.
+  for (const auto& [config, bytes] : rows.all_bytes) EXPECT_NEAR(rows.region_bytes_sum[config], bytes, 1e-6 * bytes) << config;
+  std::size_t expected_rows = 0;
+  for (const auto& [preset, count] : kTinyRunRegions) expected_rows += 3 * static_cast<std::size_t>(count + 1);
+  EXPECT_EQ(rows.seen.size(), expected_rows);
+  for (const char* m : {"0.022", "0.028", "0.034"}) {
+    for (const auto& [preset, count] : kTinyRunRegions) {
+      EXPECT_TRUE(rows.seen.count(preset + "/" + m + "/all")) << preset << " m " << m;
+      for (int r = 0; r < count; ++r) EXPECT_TRUE(rows.seen.count(preset + "/" + m + "/" + std::to_string(r)));
+    }
+    EXPECT_EQ(rows.fref_rms[m], 0.0);
+    EXPECT_GT(rows.fref_points[m], 1000.0);
+    EXPECT_LT(rows.f1_points[m], rows.fref_points[m]);
+  }
+}
+
+// --replot-from writes the same plot files again from report.csv and report.md alone.
+void expectReplotWritesTheSamePlots(const TempDir& dir) {
+  const std::vector<std::string> plot_files = {"report.gp", "report_plot.dat", "report_acuity.gp", "report_acuity_plot.dat"};
+  std::string plots_before;
+  for (const std::string& name : plot_files) {
+    plots_before += readAll(dir.file(name));
+    std::filesystem::remove(dir.file(name));
+  }
+  const ProcessResult replot = run(kTool + " --replot-from " + dir.path() + " --no-plot");
+  ASSERT_EQ(replot.exit_code, 0) << replot.output;
+  std::string plots_after;
+  for (const std::string& name : plot_files) plots_after += readAll(dir.file(name));
+  EXPECT_EQ(plots_after, plots_before);
+  EXPECT_EQ(run(kTool + " --replot-from " + dir.path() + "/nowhere --no-plot").exit_code, 1);
+}
+
+// report.md's tables and text; the frame is the only source by default: no map
+// section, no nearest-point columns.
+void expectTheFrameAloneReported(const TempDir& dir, std::size_t header_size, Columns& column) {
+  const std::string md = readAll(dir.file("report.md"));
+  for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "fovea's chunk codec", "15 bytes per output point",
+                               "Steps at region borders", "--frames 1"}) {
+    EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
+  }
+  // The frame is the only source by default: no map section, no nearest-point columns.
+  EXPECT_EQ(md.find("Frame against map"), std::string::npos);
+  std::ifstream again(dir.file("report.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(again, line));
+  ASSERT_TRUE(column.count("source") && column.count("share_above_mar_surface")) << line;
+  while (std::getline(again, line)) {
+    const std::vector<std::string> f = splitCsvLine(line);
+    ASSERT_EQ(f.size(), header_size) << line;
+    EXPECT_EQ(f[column["source"]], "frame") << line;
+    EXPECT_EQ(f[column["share_above_mar_surface"]], "") << line;
+  }
+}
+
 TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
   TempDir dir;
   const ProcessResult r =
@@ -58,114 +193,14 @@ TEST(ErrorReportCli, TinyRunWritesTheExpectedRows) {
       << r.output;
 
   std::ifstream csv(dir.file("report.csv"));
-  std::string line;
-  ASSERT_TRUE(std::getline(csv, line));
-  const std::vector<std::string> header = splitCsvLine(line);
-  std::map<std::string, std::size_t> column;
-  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
-  for (const char* name : {"preset", "m", "region", "region_name", "points_out", "bytes_per_frame", "raw_bytes_per_frame", "time_ms_median",
-                           "rms_mm", "max_mm", "rms_over_voxel", "share_above_mar", "ratio_median"}) {
-    ASSERT_TRUE(column.count(name)) << "missing column " << name << " in " << line;
-  }
-  // Regions per preset, plus one "all" row: F1 4, F2 5, F3 6, FREF 1; ACUITY's 8
-  // levels once per default level margin and per default refined row.
-  const std::map<std::string, int> regions = {{"F1", 4},
-                                              {"F2", 5},
-                                              {"F3", 6},
-                                              {"FREF", 1},
-                                              {"ACUITY k=1.73", 8},
-                                              {"ACUITY k=0.70", 8},
-                                              {"ACUITY k=0.50", 8},
-                                              {"ACUITY k=0.42", 8},
-                                              {"ACUITY k=0.30 refined 1", 8},
-                                              {"ACUITY k=0.12 refined 2", 8},
-                                              {"ACUITY k=0.15 refined 7", 8}};
-  std::set<std::string> seen;
-  std::map<std::string, double> fref_rms, f1_points, fref_points;
-  std::map<std::string, double> all_bytes, region_bytes_sum;  // per preset/m
-  while (std::getline(csv, line)) {
-    const std::vector<std::string> f = splitCsvLine(line);
-    ASSERT_EQ(f.size(), header.size()) << line;
-    const std::string key = f[column["preset"]] + "/" + f[column["m"]] + "/" + f[column["region"]];
-    EXPECT_TRUE(seen.insert(key).second) << "duplicate row " << key;
-    ASSERT_TRUE(regions.count(f[column["preset"]])) << line;
-    const std::string config = f[column["preset"]] + "/" + f[column["m"]];
-    const double bytes = std::stod(f[column["bytes_per_frame"]]);
-    const double points_out = std::stod(f[column["points_out"]]);
-    EXPECT_DOUBLE_EQ(std::stod(f[column["raw_bytes_per_frame"]]), 15.0 * points_out) << line;
-    // On the wire: the codec's few bytes a point plus 36 bytes of framing per 1200-byte
-    // datagram, and at least one chunk's table (about 100 bytes) for a region of a few
-    // points (ACUITY's sparse levels).
-    if (points_out > 0) {
-      EXPECT_GT(bytes, 1.0 * points_out) << line;
-      EXPECT_LT(bytes, 15.0 * points_out + 200.0) << line;
-    }
-    if (f[column["region"]] == "all") {
-      all_bytes[config] = bytes;
-    } else {
-      region_bytes_sum[config] += bytes;
-    }
-    if (f[column["region"]] == "all") {
-      EXPECT_FALSE(f[column["time_ms_median"]].empty()) << line;
-      const double points = points_out;
-      if (f[column["preset"]] == "FREF") {
-        fref_rms[f[column["m"]]] = std::stod(f[column["rms_mm"]]);
-        fref_points[f[column["m"]]] = points;
-        EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
-      }
-      if (f[column["preset"]] == "F1") f1_points[f[column["m"]]] = points;
-      // The diagonal margin keeps every point under its MAR, and so does refinement to the end.
-      if (f[column["preset"]] == "ACUITY k=1.73" || f[column["preset"]] == "ACUITY k=0.15 refined 7") {
-        EXPECT_EQ(std::stod(f[column["share_above_mar"]]), 0.0) << line;
-      }
-    } else {
-      EXPECT_LT(std::stoi(f[column["region"]]), regions.at(f[column["preset"]])) << line;
-    }
-  }
-  // A frame's bytes are its regions' bytes.
-  for (const auto& [config, bytes] : all_bytes) EXPECT_NEAR(region_bytes_sum[config], bytes, 1e-6 * bytes) << config;
-  std::size_t expected_rows = 0;
-  for (const auto& [preset, count] : regions) expected_rows += 3 * static_cast<std::size_t>(count + 1);
-  EXPECT_EQ(seen.size(), expected_rows);
-  for (const char* m : {"0.022", "0.028", "0.034"}) {
-    for (const auto& [preset, count] : regions) {
-      EXPECT_TRUE(seen.count(preset + "/" + m + "/all")) << preset << " m " << m;
-      for (int r = 0; r < count; ++r) EXPECT_TRUE(seen.count(preset + "/" + m + "/" + std::to_string(r)));
-    }
-    EXPECT_EQ(fref_rms[m], 0.0);
-    EXPECT_GT(fref_points[m], 1000.0);
-    EXPECT_LT(f1_points[m], fref_points[m]);
-  }
-  // --replot-from writes the same plot files again from report.csv and report.md alone.
-  const std::vector<std::string> plot_files = {"report.gp", "report_plot.dat", "report_acuity.gp", "report_acuity_plot.dat"};
-  std::string plots_before;
-  for (const std::string& name : plot_files) {
-    plots_before += readAll(dir.file(name));
-    std::filesystem::remove(dir.file(name));
-  }
-  const ProcessResult replot = run(kTool + " --replot-from " + dir.path() + " --no-plot");
-  ASSERT_EQ(replot.exit_code, 0) << replot.output;
-  std::string plots_after;
-  for (const std::string& name : plot_files) plots_after += readAll(dir.file(name));
-  EXPECT_EQ(plots_after, plots_before);
-  EXPECT_EQ(run(kTool + " --replot-from " + dir.path() + "/nowhere --no-plot").exit_code, 1);
-
-  const std::string md = readAll(dir.file("report.md"));
-  for (const char* expected : {"| F1 | 0.022 |", "| FREF | 0.034 |", "scalar reference", "fovea's chunk codec", "15 bytes per output point",
-                               "Steps at region borders", "--frames 1"}) {
-    EXPECT_NE(md.find(expected), std::string::npos) << "missing '" << expected << "' in report.md";
-  }
-  // The frame is the only source by default: no map section, no nearest-point columns.
-  EXPECT_EQ(md.find("Frame against map"), std::string::npos);
-  std::ifstream again(dir.file("report.csv"));
-  ASSERT_TRUE(std::getline(again, line));
-  ASSERT_TRUE(column.count("source") && column.count("share_above_mar_surface")) << line;
-  while (std::getline(again, line)) {
-    const std::vector<std::string> f = splitCsvLine(line);
-    ASSERT_EQ(f.size(), header.size()) << line;
-    EXPECT_EQ(f[column["source"]], "frame") << line;
-    EXPECT_EQ(f[column["share_above_mar_surface"]], "") << line;
-  }
+  std::vector<std::string> header;
+  Columns column;
+  ASSERT_NO_FATAL_FAILURE(readTinyRunHeader(csv, header, column));
+  TinyRunRows rows;
+  for (std::string line; std::getline(csv, line);) ASSERT_NO_FATAL_FAILURE(checkTinyRunRow(line, header.size(), column, rows));
+  expectEveryRowOnce(rows);
+  ASSERT_NO_FATAL_FAILURE(expectReplotWritesTheSamePlots(dir));
+  ASSERT_NO_FATAL_FAILURE(expectTheFrameAloneReported(dir, header.size(), column));
 }
 
 // --sources frame,map on a tiny orbit: the map's rows beside the frame's, both

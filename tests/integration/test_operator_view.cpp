@@ -116,66 +116,63 @@ TEST_F(OperatorView, WithoutARobotThePageStaysUpAndSaysSo) {
   EXPECT_NE(op.output().find("viewer: 1 tabs served (0 refused)"), std::string::npos) << op.output();
 }
 
-// A robot that streams bricks: three brick versions (one of several parts), a
-// bad brick payload and a few live frames, while it takes the acknowledgements.
-TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
-  net::RobotLinkConfig rc;
-  rc.listen = "127.0.0.1:0";
-  rc.insecure = true;
-  std::unique_ptr<net::RobotLink> robot = net::RobotLink::create(rc).value();
-  const std::string address = "127.0.0.1:" + std::to_string(robot->localEndpoint().port());
-  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address +
-                             " --insecure --view 127.0.0.1:0 --quiet --map-points 65536 --map-bricks 64 --frame-log " +
-                             dir_.file("frames.csv") + " --summary " + dir_.file("summary.json") + " --save-held 11:" +
-                             dir_.file("held.ply"));
-  const int port = viewerPort(op);
-  ASSERT_GT(port, 0) << op.output();
-  test::Tab tab(port);
-  ASSERT_TRUE(tab.connected()) << tab.error();
-  ASSERT_TRUE(waitUntil([&] {
-    robot->poll(10);
-    return robot->hasSession();
-  }, 10s)) << op.output();
-
-  // The points of a slab at a brick (or the live frame), encoded as the robot's service would.
-  net::ChunkEncoder encoder = net::ChunkEncoder::create(net::CodecConfig{}, 4096).value();
-  pipeline::FoveatedCloud cloud(4096);
-  auto encode = [&](int points, Eigen::Vector3d origin, const net::BrickTag* tag, uint32_t frame_id) {
-    cloud.clear();
-    cloud.points.origin_m = origin;
+// The points of a slab at a brick (or the live frame), encoded as the robot's service would.
+class SlabEncoder {
+ public:
+  void encode(int points, Eigen::Vector3d origin, const net::BrickTag* tag, uint32_t frame_id) {
+    cloud_.clear();
+    cloud_.points.origin_m = origin;
     for (int i = 0; i < points; ++i) {
-      ASSERT_TRUE(cloud.points.push(0.004f * static_cast<float>(i % 60), 0.004f * static_cast<float>(i / 60), 0.0f, 0x40a0c0u));
+      ASSERT_TRUE(cloud_.points.push(0.004f * static_cast<float>(i % 60), 0.004f * static_cast<float>(i / 60), 0.0f, 0x40a0c0u));
     }
-    std::fill_n(cloud.region.begin(), cloud.size(), uint8_t{0});
-    std::fill_n(cloud.weight.begin(), cloud.size(), 1u);
+    std::fill_n(cloud_.region.begin(), cloud_.size(), uint8_t{0});
+    std::fill_n(cloud_.weight.begin(), cloud_.size(), 1u);
     const double fovea[1] = {0.0};
-    ASSERT_TRUE(encoder.encode(cloud, fovea, frame_id, static_cast<uint64_t>(monotonicNs()), tag));
-  };
-  std::set<std::tuple<int, uint32_t, uint16_t>> sent_parts, acked;
+    ASSERT_TRUE(encoder_.encode(cloud_, fovea, frame_id, static_cast<uint64_t>(monotonicNs()), tag));
+  }
+  net::ChunkEncoder& encoder() { return encoder_; }
+
+ private:
+  net::ChunkEncoder encoder_ = net::ChunkEncoder::create(net::CodecConfig{}, 4096).value();
+  pipeline::FoveatedCloud cloud_{4096};
+};
+
+// A brick part as the robot sent it and the operator acknowledged it: brick x, version, part.
+using PartKey = std::tuple<int, uint32_t, uint16_t>;
+
+// The three brick versions (the first of several parts), then a bad brick
+// payload; returns the map's points, and each part sent in `sent_parts`.
+void sendThreeBricksAndABadOne(net::RobotLink& robot, SlabEncoder& slabs, std::set<PartKey>& sent_parts, int& map_points) {
   const std::vector<std::pair<net::BrickTag, int>> bricks = {{{0, 4, 2, 1, 0}, 1500}, {{1, 4, 2, 3, 0}, 200}, {{2, 4, 2, 1, 0}, 100}};
-  int map_points = 0;
+  map_points = 0;
   for (const auto& [tag, points] : bricks) {
-    encode(points, Eigen::Vector3d(0.5 * tag.x, 0.5 * tag.y, 0.5 * tag.z), &tag, 1);
-    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) {
-      ASSERT_EQ(robot->send(net::MessageType::kBrickChunk, encoder.chunk(i)), net::SendResult::kSent);
+    ASSERT_NO_FATAL_FAILURE(slabs.encode(points, Eigen::Vector3d(0.5 * tag.x, 0.5 * tag.y, 0.5 * tag.z), &tag, 1));
+    for (std::size_t i = 0; i < slabs.encoder().chunkCount(); ++i) {
+      ASSERT_EQ(robot.send(net::MessageType::kBrickChunk, slabs.encoder().chunk(i)), net::SendResult::kSent);
       sent_parts.insert({tag.x, tag.version, static_cast<uint16_t>(i)});
     }
     map_points += points;
   }
   ASSERT_GT(sent_parts.size(), 3u) << "the first brick comes in several parts";
   const uint8_t garbage[64] = {1, 2, 3};
-  ASSERT_EQ(robot->send(net::MessageType::kBrickChunk, garbage), net::SendResult::kSent);
-  // Live frames, until every part is acknowledged and the page has drawn the map.
+  ASSERT_EQ(robot.send(net::MessageType::kBrickChunk, garbage), net::SendResult::kSent);
+}
+
+// Live frames, until every part is acknowledged and the page has drawn the map;
+// the page's last frame in `frame`.
+void streamUntilAcknowledgedAndDrawn(net::RobotLink& robot, SlabEncoder& slabs, test::Tab& tab, test::BackgroundProcess& op,
+                                     const std::set<PartKey>& sent_parts, int map_points, std::vector<uint8_t>& frame) {
+  std::set<PartKey> acked;
   uint32_t frame_id = 10;
-  std::vector<uint8_t> frame;
   const bool done = waitUntil([&] {
-    encode(300, Eigen::Vector3d(1.0, 3.0, 1.0), nullptr, ++frame_id);
-    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) (void)robot->send(net::MessageType::kChunk, encoder.chunk(i));
+    slabs.encode(300, Eigen::Vector3d(1.0, 3.0, 1.0), nullptr, ++frame_id);
+    net::ChunkEncoder& encoder = slabs.encoder();
+    for (std::size_t i = 0; i < encoder.chunkCount(); ++i) (void)robot.send(net::MessageType::kChunk, encoder.chunk(i));
     const uint16_t chunks[1] = {static_cast<uint16_t>(encoder.chunkCount())}, cut[1] = {0};
-    (void)robot->send(net::MessageType::kFrameSummary, encoder.encodeSummary(frame_id, chunks, cut));
-    robot->poll(30);
-    for (const net::BrickPartId& id : robot->brickAcks()) acked.insert({id.key.x, id.version, id.part});
-    robot->takeBrickAcks();
+    (void)robot.send(net::MessageType::kFrameSummary, encoder.encodeSummary(frame_id, chunks, cut));
+    robot.poll(30);
+    for (const net::BrickPartId& id : robot.brickAcks()) acked.insert({id.key.x, id.version, id.part});
+    robot.takeBrickAcks();
     frame = tab.frames() > 0 ? tab.lastFrame() : std::vector<uint8_t>{};
     uint32_t m = 0;
     if (frame.size() >= 16) std::memcpy(&m, frame.data() + 12, 4);
@@ -183,24 +180,32 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
   }, 15s);
   EXPECT_TRUE(done) << acked.size() << " of " << sent_parts.size() << " parts acknowledged\n" << op.output();
   EXPECT_EQ(acked, sent_parts);
+}
+
+// The page's frame: every held brick's points, then the live frame's.
+void expectTheFrameHoldsTheMapThenTheLivePoints(const std::vector<uint8_t>& frame, int map_points) {
   ASSERT_GE(frame.size(), 136u);
   uint32_t n = 0, m = 0;
   std::memcpy(&n, frame.data() + 8, 4);
   std::memcpy(&m, frame.data() + 12, 4);
   EXPECT_EQ(m, static_cast<uint32_t>(map_points)) << "the page's frame holds every held brick's points";
   EXPECT_EQ(n, m + 300) << "after the live frame's";
+}
 
-  EXPECT_EQ(op.stop(SIGTERM, 20), 0) << op.output();
-  const std::string out = op.output();
+// The operator's log and its summary count the three bricks, their versions and the bad part.
+void expectTheMapCounted(const std::string& out, const std::string& summary_path, int map_points) {
   EXPECT_NE(out.find("map: 3 bricks and " + std::to_string(map_points) + " points held"), std::string::npos) << out;
   std::stringstream summary;
-  summary << std::ifstream(dir_.file("summary.json")).rdbuf();
+  summary << std::ifstream(summary_path).rdbuf();
   EXPECT_NE(summary.str().find("\"map\": {\"bricks_held\": 3, \"points_held\": " + std::to_string(map_points)),
             std::string::npos) << summary.str();
   EXPECT_NE(summary.str().find("\"versions_completed\": 3"), std::string::npos) << summary.str();
   EXPECT_NE(summary.str().find("\"bad_parts\": 1"), std::string::npos) << summary.str();
-  // The frame log's header ends with the map's columns, and its last line holds the whole map.
-  std::ifstream log(dir_.file("frames.csv"));
+}
+
+// The frame log's header ends with the map's columns, and its last line holds the whole map.
+void expectTheFrameLogHoldsTheMap(const std::string& log_path, int map_points, std::size_t parts_sent) {
+  std::ifstream log(log_path);
   std::string header, line, last;
   std::getline(log, header);
   EXPECT_NE(header.find(",summary_received,map_bricks,map_points,brick_parts,brick_versions,fovea_decoded_ns,fovea_latency_us"),
@@ -231,21 +236,59 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
     }
   }
   EXPECT_NE(last.find(",3," + std::to_string(map_points) + ","), std::string::npos) << last;
-  EXPECT_LE(parts_logged, sent_parts.size()) << "parts since the previous line add up to at most all of them";
+  EXPECT_LE(parts_logged, parts_sent) << "parts since the previous line add up to at most all of them";
+}
 
-  // --save-held 11: the first live frame (whole, after every brick's parts) and the
-  // three bricks, as fovea-eval's MAP-DELTA reads them (tools/operator/held_cloud.h).
+// --save-held 11: the first live frame (whole, after every brick's parts) and the
+// three bricks, as fovea-eval's MAP-DELTA reads them (tools/operator/held_cloud.h).
+void expectTheHeldCloudSaved(const std::string& out, const std::string& ply_path, int map_points) {
   const std::string saved = "--save-held: frame 11 (300 live points, " + std::to_string(map_points) + " map points in 3 bricks)";
   EXPECT_NE(out.find(saved), std::string::npos) << out;
   std::stringstream text;
-  text << std::ifstream(dir_.file("held.ply") + ".txt").rdbuf();
+  text << std::ifstream(ply_path + ".txt").rdbuf();
   EXPECT_EQ(text.str().rfind("frame_id 11\nlive_points 300\nmap_points " + std::to_string(map_points) + "\nmap_bricks 3\n", 0), 0u)
       << text.str();
-  std::ifstream ply(dir_.file("held.ply"), std::ios::binary);
+  std::ifstream ply(ply_path, std::ios::binary);
   std::string ply_header, ply_line;
   while (std::getline(ply, ply_line) && ply_line != "end_header") ply_header += ply_line + "\n";
   EXPECT_NE(ply_header.find("element vertex " + std::to_string(300 + map_points) + "\n"), std::string::npos) << ply_header;
   EXPECT_NE(ply_header.find("property uchar region"), std::string::npos) << ply_header;
+}
+
+// A robot that streams bricks: three brick versions (one of several parts), a
+// bad brick payload and a few live frames, while it takes the acknowledgements.
+TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
+  net::RobotLinkConfig rc;
+  rc.listen = "127.0.0.1:0";
+  rc.insecure = true;
+  std::unique_ptr<net::RobotLink> robot = net::RobotLink::create(rc).value();
+  const std::string address = "127.0.0.1:" + std::to_string(robot->localEndpoint().port());
+  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address +
+                             " --insecure --view 127.0.0.1:0 --quiet --map-points 65536 --map-bricks 64 --frame-log " +
+                             dir_.file("frames.csv") + " --summary " + dir_.file("summary.json") + " --save-held 11:" +
+                             dir_.file("held.ply"));
+  const int port = viewerPort(op);
+  ASSERT_GT(port, 0) << op.output();
+  test::Tab tab(port);
+  ASSERT_TRUE(tab.connected()) << tab.error();
+  ASSERT_TRUE(waitUntil([&] {
+    robot->poll(10);
+    return robot->hasSession();
+  }, 10s)) << op.output();
+
+  SlabEncoder slabs;
+  std::set<PartKey> sent_parts;
+  int map_points = 0;
+  ASSERT_NO_FATAL_FAILURE(sendThreeBricksAndABadOne(*robot, slabs, sent_parts, map_points));
+  std::vector<uint8_t> frame;
+  streamUntilAcknowledgedAndDrawn(*robot, slabs, tab, op, sent_parts, map_points, frame);
+  ASSERT_NO_FATAL_FAILURE(expectTheFrameHoldsTheMapThenTheLivePoints(frame, map_points));
+
+  EXPECT_EQ(op.stop(SIGTERM, 20), 0) << op.output();
+  const std::string out = op.output();
+  expectTheMapCounted(out, dir_.file("summary.json"), map_points);
+  ASSERT_NO_FATAL_FAILURE(expectTheFrameLogHoldsTheMap(dir_.file("frames.csv"), map_points, sent_parts.size()));
+  expectTheHeldCloudSaved(out, dir_.file("held.ply"), map_points);
 }
 
 TEST_F(OperatorView, BadViewAddressesAreUsageErrors) {

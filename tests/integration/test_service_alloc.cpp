@@ -151,17 +151,9 @@ struct StreamingCount {
   uint64_t brick_versions = 0, brick_versions_done = 0;  // during the count (map bricks)
 };
 
-// The service streaming to an operator on loopback, 300 frames counted after
-// warm-up. The operator sends its gaze every 10 ms; with `gaps`, it falls
-// silent for 250 ms after every 150 ms, longer than the gaze timeout (100 ms),
-// so the service keeps switching between the operator's foveation and the
-// fallback's (firmware/gaze_policy.h) during the count.
-// With `map_bricks` the service fuses the map and streams its bricks
-// (foveation.source = map, map.delta), and the operator keeps them in a
-// BrickCache and acknowledges them: the planner, the sampler, the brick
-// encoder, the sender's store, the acknowledgements and the feedback run
-// during the count.
-void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = false, const std::string& record = "") {
+// The service's configuration for the streaming counts: a 100 fps camera, the
+// link on loopback without encryption, the map's bricks with `map_bricks`.
+ServiceConfig streamingConfig(bool map_bricks, const std::string& record) {
   ServiceConfig config = allocConfig();
   config.runtime.record.path = record;  // --record: the recorder's rings and writer thread too
   if (map_bricks) {
@@ -174,6 +166,116 @@ void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = fal
   config.camera.spec = "mock:living-room,size=160x120,realtime=on,fps=100";
   config.stream.link.listen = "127.0.0.1:0";
   config.stream.link.insecure = true;
+  return config;
+}
+
+// The operator, on a thread of its own from construction to stop() (or the
+// destructor, so that a failed ASSERT does not leave the thread joinable): it
+// sends its gaze every 10 ms (with `gaps`, silent for 250 ms after every
+// 150 ms), keeps the bricks it receives and acknowledges them. Its own
+// allocations are not the service's: it runs before and after the count, and
+// during it only sends and receives into fixed buffers.
+class PlayedOperator {
+ public:
+  PlayedOperator(net::OperatorLink& link, bool gaps)
+      : link_(link), gaps_(gaps), cache_(net::BrickCache::create(cacheConfig()).value()), thread_([this] { run(); }) {}
+  ~PlayedOperator() { stop(); }
+  PlayedOperator(const PlayedOperator&) = delete;
+  PlayedOperator& operator=(const PlayedOperator&) = delete;
+
+  void stop() {
+    stop_.store(true);
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  // An operator with room for a few bricks only: it evicts all the time and
+  // tells the robot, which sends them again, so bricks flow throughout the count
+  // however early the map settled (the eviction path runs too).
+  static net::BrickCacheConfig cacheConfig() {
+    net::BrickCacheConfig cache_config;
+    cache_config.max_points = 4096;
+    cache_config.max_bricks = 8;
+    return cache_config;
+  }
+
+  void run() {
+    const auto begin = std::chrono::steady_clock::now();
+    auto next = begin;
+    alignas(16) static uint8_t aligned[net::kMaxMtu];
+    while (!stop_.load()) {
+      const auto now = std::chrono::steady_clock::now();
+      const bool silent = gaps_ && (now - begin) % 400ms >= 150ms;
+      if (now >= next) {
+        if (!silent) {
+          net::GazeSample g;
+          g.gaze_origin_m = {3.0, 0.35, 1.55};
+          g.gaze_direction = {0.6, 0.8, 0.0};
+          (void)link_.sendGaze(g);
+        }
+        next += 10ms;
+      }
+      const std::optional<net::Received> r = link_.receive(2);
+      if (r && r->type == net::MessageType::kBrickChunk) {
+        std::memcpy(aligned, r->payload.data(), r->payload.size());
+        decoded_.clear();
+        Result<net::DecodedChunk> d = net::decodeChunk(std::span<const uint8_t>(aligned, r->payload.size()), decoded_);
+        if (d) (void)cache_.add(d.value(), decoded_, 0, monotonicNs());
+      }
+      if (!cache_.received().empty() || !cache_.evicted().empty()) acknowledgeBricks();
+    }
+  }
+
+  void acknowledgeBricks() {
+    ack_.part_count = ack_.evicted_count = 0;
+    for (const net::BrickPartId& id : cache_.received()) {
+      if (ack_.part_count < 60) ack_.parts[ack_.part_count++] = id;
+    }
+    for (const net::BrickKey& key : cache_.evicted()) {
+      if (ack_.evicted_count < net::BrickAckMsg::kMaxEvicted) ack_.evicted[ack_.evicted_count++] = key;
+    }
+    (void)link_.sendBrickAck(ack_);
+    cache_.clearReceived();
+    cache_.clearEvicted();
+  }
+
+  net::OperatorLink& link_;
+  const bool gaps_;
+  std::atomic<bool> stop_{false};
+  net::BrickCache cache_;
+  pipeline::FoveatedCloud decoded_{1u << 14};
+  net::BrickAckMsg ack_;
+  std::thread thread_;  // last: it starts once everything it uses is made
+};
+
+// The count itself, after warm-up: the frames foveated and sent, the gaze
+// source's changes, the bricks and the heap allocations while countedFrames() pass.
+void countSteadyState(const Service& service, const GazeChangeSink& sink, StreamingCount& count) {
+  test::AllocationScope scope;
+  const ServiceStats start = service.stats();
+  const uint64_t changes_before = sink.changes.load();
+  EXPECT_TRUE(waitForFrames(service, start.frames_foveated + countedFrames(), 20s));
+  const ServiceStats end = service.stats();
+  count.frames = end.frames_foveated - start.frames_foveated;
+  count.sent = end.frames_sent - start.frames_sent;
+  count.gaze_changes = sink.changes.load() - changes_before;
+  count.allocations = scope.allocations();
+  count.brick_versions = end.map.brick_versions - start.map.brick_versions;
+  count.brick_versions_done = end.map.brick_versions_done - start.map.brick_versions_done;
+}
+
+// The service streaming to an operator on loopback, 300 frames counted after
+// warm-up. The operator sends its gaze every 10 ms; with `gaps`, it falls
+// silent for 250 ms after every 150 ms, longer than the gaze timeout (100 ms),
+// so the service keeps switching between the operator's foveation and the
+// fallback's (firmware/gaze_policy.h) during the count.
+// With `map_bricks` the service fuses the map and streams its bricks
+// (foveation.source = map, map.delta), and the operator keeps them in a
+// BrickCache and acknowledges them: the planner, the sampler, the brick
+// encoder, the sender's store, the acknowledgements and the feedback run
+// during the count.
+void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = false, const std::string& record = "") {
+  const ServiceConfig config = streamingConfig(map_bricks, record);
   GazeChangeSink sink;
   firmware::Logger logger(sink);
   Service::Environment environment;
@@ -191,81 +293,12 @@ void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = fal
   op_config.receive_buffer_bytes = 0;
   Result<std::unique_ptr<net::OperatorLink>> op = net::OperatorLink::connect(service.localEndpoint().toString(), op_config);
   ASSERT_TRUE(op.isOk()) << op.status().toString();
-  // The operator (its own allocations are not the service's: it runs before
-  // and after the count, and during it only sends and receives into fixed buffers).
-  std::atomic<bool> stop{false};
-  // An operator with room for a few bricks only: it evicts all the time and
-  // tells the robot, which sends them again, so bricks flow throughout the count
-  // however early the map settled (the eviction path runs too).
-  net::BrickCacheConfig cache_config;
-  cache_config.max_points = 4096;
-  cache_config.max_bricks = 8;
-  net::BrickCache cache = net::BrickCache::create(cache_config).value();
-  pipeline::FoveatedCloud decoded(1u << 14);
-  net::BrickAckMsg ack;
-  std::thread operator_thread([&] {
-    const auto begin = std::chrono::steady_clock::now();
-    auto next = begin;
-    alignas(16) static uint8_t aligned[net::kMaxMtu];
-    while (!stop.load()) {
-      const auto now = std::chrono::steady_clock::now();
-      const bool silent = gaps && (now - begin) % 400ms >= 150ms;
-      if (now >= next) {
-        if (!silent) {
-          net::GazeSample g;
-          g.gaze_origin_m = {3.0, 0.35, 1.55};
-          g.gaze_direction = {0.6, 0.8, 0.0};
-          (void)op.value()->sendGaze(g);
-        }
-        next += 10ms;
-      }
-      const std::optional<net::Received> r = op.value()->receive(2);
-      if (r && r->type == net::MessageType::kBrickChunk) {
-        std::memcpy(aligned, r->payload.data(), r->payload.size());
-        decoded.clear();
-        Result<net::DecodedChunk> d = net::decodeChunk(std::span<const uint8_t>(aligned, r->payload.size()), decoded);
-        if (d) (void)cache.add(d.value(), decoded, 0, monotonicNs());
-      }
-      if (!cache.received().empty() || !cache.evicted().empty()) {
-        ack.part_count = ack.evicted_count = 0;
-        for (const net::BrickPartId& id : cache.received()) {
-          if (ack.part_count < 60) ack.parts[ack.part_count++] = id;
-        }
-        for (const net::BrickKey& key : cache.evicted()) {
-          if (ack.evicted_count < net::BrickAckMsg::kMaxEvicted) ack.evicted[ack.evicted_count++] = key;
-        }
-        (void)op.value()->sendBrickAck(ack);
-        cache.clearReceived();
-        cache.clearEvicted();
-      }
-    }
-  });
-  struct JoinOnExit {  // a failed ASSERT below must not leave the thread joinable
-    std::atomic<bool>& stop;
-    std::thread& thread;
-    ~JoinOnExit() {
-      stop.store(true);
-      if (thread.joinable()) thread.join();
-    }
-  } join_operator{stop, operator_thread};
+  PlayedOperator played_operator(*op.value(), gaps);
   ASSERT_TRUE(waitForFrames(service, 50, 10s));  // warm-up: the session's encoder is made here
   ASSERT_GT(service.stats().frames_sent, 0u);
 
-  {
-    test::AllocationScope scope;
-    const ServiceStats start = service.stats();
-    const uint64_t changes_before = sink.changes.load();
-    EXPECT_TRUE(waitForFrames(service, start.frames_foveated + countedFrames(), 20s));
-    const ServiceStats end = service.stats();
-    count.frames = end.frames_foveated - start.frames_foveated;
-    count.sent = end.frames_sent - start.frames_sent;
-    count.gaze_changes = sink.changes.load() - changes_before;
-    count.allocations = scope.allocations();
-    count.brick_versions = end.map.brick_versions - start.map.brick_versions;
-    count.brick_versions_done = end.map.brick_versions_done - start.map.brick_versions_done;
-  }
-  stop.store(true);
-  operator_thread.join();
+  countSteadyState(service, sink, count);
+  played_operator.stop();
   running.stop();
   std::printf("steady state streaming%s: %llu frames, %llu sent, %llu gaze source changes, %llu heap allocations\n",
               gaps ? " (gaze with gaps)" : "", static_cast<unsigned long long>(count.frames),
