@@ -5,11 +5,11 @@
 #include <charconv>
 #include <cmath>
 #include <limits>
-#include <thread>
 #include <utility>
 
 #include "hal/camera/mock/hash.h"
 #include "hal/camera/mock/sensor_model.h"
+#include "hal/camera/pacing.h"
 
 namespace fovea::hal::mock {
 
@@ -366,16 +366,7 @@ Status MockCamera::waitUntilDue(std::chrono::nanoseconds timeout) {
   const double elapsed_s = std::chrono::duration<double>(now - start_time_).count();
   const uint64_t latest = start_sequence_ + static_cast<uint64_t>(elapsed_s * options_.fps);
   if (latest > sequence_) sequence_ = latest;  // the consumer was slow: frames dropped
-  const Clock::time_point due = dueAt(sequence_);
-  if (due > now) {
-    if (due - now > timeout) {
-      std::this_thread::sleep_for(timeout);
-      counters_.timeout();
-      return Status(ErrorCode::kUnavailable, "timeout");
-    }
-    std::this_thread::sleep_until(due);
-  }
-  return Status::ok();
+  return waitForFrameDue(dueAt(sequence_), now, timeout, counters_);
 }
 
 // The injected faults' effect on this acquire(): those due fire, a stall

@@ -8,9 +8,9 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <thread>
 #include <utility>
 
+#include "hal/camera/pacing.h"
 #include "hal/camera/tum/png_reader.h"
 
 namespace fovea::hal::tum {
@@ -440,15 +440,7 @@ Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   if (options_.realtime) {
     using Clock = std::chrono::steady_clock;
     const Clock::time_point due = start_time_ + std::chrono::nanoseconds(stamp_ns - start_stamp_ns_);
-    const Clock::time_point now = Clock::now();
-    if (due > now) {
-      if (due - now > timeout) {
-        std::this_thread::sleep_for(timeout);
-        counters_.timeout();
-        return Status(ErrorCode::kUnavailable, "timeout");
-      }
-      std::this_thread::sleep_until(due);
-    }
+    if (Status s = waitForFrameDue(due, Clock::now(), timeout, counters_); !s) return s;
   }
   std::copy(frame.depth.begin(), frame.depth.end(), slot.depth());
   std::copy(frame.rgb.begin(), frame.rgb.end(), slot.rgb());
