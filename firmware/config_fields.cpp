@@ -182,7 +182,8 @@ std::vector<Field> mapFields() {
     FOVEA_BOOL("map.delta", map.delta),
     FOVEA_FLOAT("map.change_fraction", map.delta_config.change_fraction, 0.0, 1.0),
     FOVEA_INT("map.max_brick_surfels", map.max_brick_surfels, 1, 1 << 24),
-    FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 1, 1 << 26),
+    // 0: what the link's largest budget pays for in a frame (frameBrickPoints()).
+    FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 0, 1 << 26),
     FOVEA_FLOAT("map.carve_weight", map.map.carve_weight, 0.0, 100.0),
     FOVEA_FLOAT("map.max_pose_jump_m", map.map.max_pose_jump_m, 0.001, 1000.0),
     FOVEA_INT("map.eye_face_cells", map.eye.face_cells, 8, 2048),

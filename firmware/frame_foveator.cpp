@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 namespace fovea::firmware {
 
@@ -21,6 +22,11 @@ std::optional<FoveationSource> parseFoveationSource(std::string_view name) {
   return std::nullopt;
 }
 
+std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::size_t max_brick_surfels) {
+  const double points = std::ceil(max_budget_bytes_per_s / std::max(fps, 1.0) / kWireBytesPerPointEstimate);
+  return std::max(max_brick_surfels, static_cast<std::size_t>(std::min(points, 1e9)));
+}
+
 Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& capacity,
                                             const pipeline::FoveationConfig& config,
                                             const pipeline::DepthRange& range, const MapSettings& map, int width,
@@ -28,7 +34,7 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
   if (Status s = range.validate(); !s) return s;
   pipeline::PipelineCapacity sized = capacity;
   sized.max_points = cloudCapacity(capacity.max_points, map);
-  if (map.source == FoveationSource::kMap) {
+  if (appendsMapToCloud(map)) {
     sized.max_voxels = std::min(sized.max_points, capacity.max_voxels + map.map.max_surfels);
   }
   Result<pipeline::Foveator> foveator = pipeline::Foveator::create(sized, config);
@@ -49,13 +55,14 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
     map_config.max_height = height;
     Result<pipeline::map::SurfelMap> fused = pipeline::map::SurfelMap::create(map_config);
     if (!fused) return fused.status();
-    Result<pipeline::map::EyeView> eye = pipeline::map::EyeView::create(map.eye, map_config.max_bricks);
-    if (!eye) return eye.status();
     stage.map_ = std::make_unique<pipeline::map::SurfelMap>(std::move(fused.value()));
-    stage.eye_ = std::make_unique<pipeline::map::EyeView>(std::move(eye.value()));
-    if (map.delta) {
+    if (appendsMapToCloud(map)) {
+      Result<pipeline::map::EyeView> eye = pipeline::map::EyeView::create(map.eye, map_config.max_bricks);
+      if (!eye) return eye.status();
+      stage.eye_ = std::make_unique<pipeline::map::EyeView>(std::move(eye.value()));
+    } else {
       if (map.max_frame_brick_points == 0 || map.max_frame_bricks == 0) {
-        return Result<FrameFoveator>(ErrorCode::kInvalidArgument, "map: a frame's bricks need room (max_frame_brick_points, max_frame_bricks)");
+        return Result<FrameFoveator>(ErrorCode::kInvalidArgument, "map: a frame's bricks need room (max_frame_brick_points, max_frame_bricks; 0 points is the service's to resolve)");
       }
       Result<pipeline::map::MapDelta> delta = pipeline::map::MapDelta::create(map.delta_config, map_config.max_bricks);
       if (!delta) return delta.status();

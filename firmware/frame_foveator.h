@@ -59,8 +59,10 @@ struct MapSettings {
   pipeline::map::MapDeltaConfig delta_config;
   // A brick's settled surfels sampled at most (the rest are left out, counted).
   std::size_t max_brick_surfels = 1u << 16;
-  // The points one frame's bricks may carry (BrickBatch's capacity).
-  std::size_t max_frame_brick_points = 1u << 18;
+  // The points one frame's bricks may carry (BrickBatch's capacity); 0: what
+  // the link's largest budget pays for in a frame (frameBrickPoints(), which
+  // the service applies; 2^18 before, three times that at 30 fps).
+  std::size_t max_frame_brick_points = 0;
   std::size_t max_frame_bricks = 1024;
   // The map tracks the camera (camera.pose.source = track, track+X; map source
   // only): pipeline/map/pose_tracking.h, docs/tracking.md.
@@ -72,6 +74,11 @@ struct MapSettings {
 // (docs/protocol-chunks.md: about 4), for planning a frame's bricks within
 // the budget before they are encoded; the pacing holds the real budget.
 inline constexpr double kWireBytesPerPointEstimate = 4.5;
+
+// The points a frame's bricks can carry at most: what the link's largest
+// budget pays for in one frame period at kWireBytesPerPointEstimate (92 593
+// at 12.5 MB/s and 30 fps), and at least one brick whole.
+std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::size_t max_brick_surfels);
 
 // What the map did with the last frame (map source only).
 struct MapFrameFigures {
@@ -88,16 +95,21 @@ struct MapFrameFigures {
 
 class FrameFoveator {
  public:
-  // capacity.max_points: the frame's pixels; the map source adds the map's
-  // max_surfels to the cloud's capacity itself (cloudCapacity()).
+  // capacity.max_points: the frame's pixels; the map source without bricks
+  // adds the map's max_surfels to the cloud's capacity itself (cloudCapacity()).
   static Result<FrameFoveator> create(const pipeline::PipelineCapacity& capacity,
                                       const pipeline::FoveationConfig& config, const pipeline::DepthRange& range,
                                       const MapSettings& map = {}, int width = 640, int height = 480);
   // The points a cloud may hold for this source: the pixels, plus the map's
-  // surfels for the map source (what the foveated output must hold too).
+  // surfels for the map source without bricks, whose cloud carries the eye's
+  // view of the map (what the foveated output must hold too). With bricks the
+  // cloud is only the frame's points, as for the frame source.
   static std::size_t cloudCapacity(std::size_t pixels, const MapSettings& map) {
-    return map.source == FoveationSource::kMap ? pixels + map.map.max_surfels : pixels;
+    return appendsMapToCloud(map) ? pixels + map.map.max_surfels : pixels;
   }
+  static bool appendsMapToCloud(const MapSettings& map) { return map.source == FoveationSource::kMap && !map.delta; }
+  // The map source with bricks: the cloud carries the frame's live points only.
+  static bool streamsLiveOnly(const MapSettings& map) { return map.source == FoveationSource::kMap && map.delta; }
 
   // With tracking (MapSettings::tracking), before backproject(): sets
   // frame.T_world_cam to the tracker's pose (outside_pose_valid: whether the
@@ -163,12 +175,24 @@ class FrameFoveator {
   const pipeline::map::SurfelMap* map() const { return map_.get(); }
   // The last frame's (trackPose() sets .track, backproject() the rest).
   const MapFrameFigures& mapFigures() const { return map_figures_; }
-  // Bytes the map source allocated (the map, the eye's depth buffer, the bricks, the tracker).
-  std::size_t mapMemoryBytes() const {
-    return map_ ? map_->memoryBytes() + eye_->memoryBytes() + (delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0) +
-                      (poser_ ? poser_->memoryBytes() : 0)
-                : 0;
+  // Bytes the map source allocated, by part (all 0 for the other sources).
+  struct MapMemory {
+    pipeline::map::SurfelMapMemory map;
+    std::size_t eye = 0;      // the eye's depth buffer (without bricks)
+    std::size_t delta = 0;    // with bricks: what the operator holds, the plan, the brick sampler
+    std::size_t tracker = 0;  // with tracking: the pyramids
+    std::size_t total() const { return map.total() + eye + delta + tracker; }
+  };
+  MapMemory mapMemory() const {
+    MapMemory m;
+    if (!map_) return m;
+    m.map = map_->memoryParts();
+    m.eye = eye_ ? eye_->memoryBytes() : 0;
+    m.delta = delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0;
+    m.tracker = poser_ ? poser_->memoryBytes() : 0;
+    return m;
   }
+  std::size_t mapMemoryBytes() const { return mapMemory().total(); }
   const pipeline::map::MapDelta* mapDelta() const { return delta_.get(); }
   // Bytes the pyramid source allocated (0 for the others).
   std::size_t pyramidMemoryBytes() const { return pyramid_ ? pyramid_->memoryBytes() : 0; }
@@ -190,7 +214,7 @@ class FrameFoveator {
   const pipeline::FoveationConfig* in_use_ = nullptr;
   FoveationSource source_ = FoveationSource::kFrame;
   std::unique_ptr<pipeline::map::SurfelMap> map_;
-  std::unique_ptr<pipeline::map::EyeView> eye_;
+  std::unique_ptr<pipeline::map::EyeView> eye_;          // map source without bricks
   std::unique_ptr<pipeline::map::MapDelta> delta_;        // map source with bricks
   std::unique_ptr<pipeline::map::BrickSampler> bricks_;
   std::unique_ptr<pipeline::map::PoseEstimator> poser_;  // map source with tracking

@@ -234,6 +234,7 @@ class Service {
   void allocateFrameSlots(const hal::CameraIntrinsics& k, std::size_t depth);
   void allocateFoveatedSlots(std::size_t points, std::size_t depth);
   Status allocateFoveator(const pipeline::PipelineCapacity& capacity, const hal::CameraIntrinsics& k);
+  void addMapMemory(const FrameFoveator::MapMemory& m);
   Status allocateStreamer(std::size_t points);
   void allocateSupervisorState();
   Status openTimingLog();

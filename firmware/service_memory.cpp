@@ -33,14 +33,17 @@ Result<pipeline::PipelineCapacity> frameCapacity(pipeline::PipelineCapacity capa
 
 // The foveated output: the fovea whole and a point per voxel, at most
 // pipeline.max_output_points (0: the pixels). A preset that keeps every point
-// (FREF) needs the pixels; the map source foveates the map's surfels too, so
-// its clouds hold them (the map's memory on top of the frame's). The pyramid
+// (FREF) needs the pixels; the map source without bricks foveates the map's
+// surfels too, so its clouds hold them (the map's memory on top of the
+// frame's); with bricks its clouds are the frame's live points, capped as the
+// frame source's, and the map goes in the brick slots. The pyramid
 // source keeps the pixels too: at ACUITY's default margin it sends more points
 // than the voxel methods, and with the cap (0.35 of the pixels) the mock room's
 // scan lost 18 frames in 10 s as over capacity (toolchain/run-latency).
 std::size_t foveatedCloudPoints(const ServiceConfig& config, std::size_t pixels) {
   std::size_t points = FrameFoveator::cloudCapacity(pixels, config.map);
-  if (config.map.source == FoveationSource::kFrame && config.foveation.acuity.preset != pipeline::Preset::kFRef &&
+  const bool frame_points_only = config.map.source == FoveationSource::kFrame || FrameFoveator::streamsLiveOnly(config.map);
+  if (frame_points_only && config.foveation.acuity.preset != pipeline::Preset::kFRef &&
       config.max_output_points > 0) {
     points = std::min(points, config.max_output_points);
   }
@@ -58,6 +61,10 @@ Status Service::allocate() {
   allocateFrameSlots(k, depth);
   const std::size_t points = foveatedCloudPoints(config_, pixels);
   map_bricks_ = config_.map.source == FoveationSource::kMap && config_.map.delta;
+  if (map_bricks_ && config_.map.max_frame_brick_points == 0) {
+    config_.map.max_frame_brick_points = frameBrickPoints(static_cast<double>(config_.stream.link.max_budget_bytes_per_s),
+                                                          camera_->info().fps, config_.map.max_brick_surfels);
+  }
   allocateFoveatedSlots(points, depth);
   if (Status s = allocateFoveator(capacity.value(), k); !s) return s;
   if (!config_.stream.link.listen.empty()) {
@@ -107,11 +114,8 @@ Status Service::allocateFoveator(const pipeline::PipelineCapacity& capacity, con
       FrameFoveator::create(capacity, config_.foveation, config_.camera.depth, map_settings, k.width, k.height);
   if (!stage) return stage.status();
   stage_ = std::make_unique<FrameFoveator>(std::move(stage.value()));
-  const std::size_t map_bytes = stage_->mapMemoryBytes();
-  if (map_bytes > 0) {
-    memory_.add("surfel map (pool, bricks, scratch, eye depth buffer)", 1, map_bytes);
-    before += map_bytes;  // the foveator's line below is the rest
-  }
+  addMapMemory(stage_->mapMemory());
+  before += stage_->mapMemoryBytes();  // the foveator's line below is the rest
   if (const std::size_t pyramid_bytes = stage_->pyramidMemoryBytes(); pyramid_bytes > 0) {
     memory_.add("image pyramid (cell sums, scratch)", 1, pyramid_bytes);
     before += pyramid_bytes;
@@ -123,6 +127,22 @@ Status Service::allocateFoveator(const pipeline::PipelineCapacity& capacity, con
   memory_.add("point cloud (back-projection)", 1, std::min(cloud_bytes, stage_bytes));
   memory_.add("foveator (partition, sampler, workers)", 1, stage_bytes - std::min(cloud_bytes, stage_bytes));
   return Status::ok();
+}
+
+// The map's parts, a line each (those it has).
+void Service::addMapMemory(const FrameFoveator::MapMemory& m) {
+  const std::pair<const char*, std::size_t> parts[] = {
+      {"map: surfel pool (32 B a surfel, 8 B its links)", m.map.pool},
+      {"map: bricks (table, culling, lists, counts)", m.map.bricks},
+      {"map: fusion's per-pixel scratch", m.map.pixels},
+      {"map: eviction histogram", m.map.eviction},
+      {"map: eye depth buffer", m.eye},
+      {"map: bricks the operator holds, plan, sampler", m.delta},
+      {"map: tracker (frame and model pyramids)", m.tracker},
+  };
+  for (const auto& [name, bytes] : parts) {
+    if (bytes > 0) memory_.add(name, 1, bytes);
+  }
 }
 
 // The streamer (config.stream.link.listen set), with the key from key_file

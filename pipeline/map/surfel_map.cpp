@@ -13,6 +13,7 @@
 
 #include "core/clock.h"
 #include "core/grid_hash.h"
+#include "pipeline/map/lowest_keys.h"
 
 namespace fovea::pipeline::map {
 
@@ -66,8 +67,7 @@ std::string_view fuseOutcomeName(FuseOutcome outcome) {
 SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   const std::size_t pixels = static_cast<std::size_t>(config.max_width) * config.max_height;
   surfels_.resize(config.max_surfels);
-  free_.resize(config.max_surfels);
-  eviction_.resize(config.max_surfels);
+  key_histogram_.resize(kKeyHistogramSize);
   brick_keys_.resize(config.max_bricks);
   brick_table_.assign(nextPowerOfTwo(2 * config.max_bricks), 0);
   brick_cam_.resize(config.max_bricks);
@@ -98,15 +98,21 @@ Result<SurfelMap> SurfelMap::create(const SurfelMapConfig& config) {
 }
 
 std::size_t SurfelMap::memoryBytes() const {
-  return surfels_.capacity() * sizeof(Surfel) + free_.capacity() * sizeof(uint32_t) +
-         eviction_.capacity() * sizeof(uint64_t) + brick_keys_.capacity() * sizeof(BrickKey) +
-         brick_table_.capacity() * sizeof(int32_t) + brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
-         brick_visible_.capacity() +
-         (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity() + link_next_.capacity() +
-          link_prev_.capacity()) * sizeof(uint32_t) +
-         (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
-          weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() + index_depth_.capacity() + normal_cos_.capacity()) * sizeof(float) +
-         index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
+  return memoryParts().total();
+}
+
+SurfelMapMemory SurfelMap::memoryParts() const {
+  SurfelMapMemory m;
+  m.pool = surfels_.capacity() * sizeof(Surfel) + (link_next_.capacity() + link_prev_.capacity()) * sizeof(uint32_t);
+  m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.capacity() * sizeof(int32_t) +
+             brick_cam_.capacity() * sizeof(Eigen::Vector3f) + brick_visible_.capacity() +
+             (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
+  m.pixels = (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
+              weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() + index_depth_.capacity() +
+              normal_cos_.capacity()) * sizeof(float) +
+             index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
+  m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
+  return m;
 }
 
 void SurfelMap::clear() {
@@ -115,6 +121,7 @@ void SurfelMap::clear() {
   std::fill(brick_head_.begin(), brick_head_.end(), kNoSurfel);
   std::fill(brick_settled_.begin(), brick_settled_.end(), 0);
   std::fill(brick_changes_.begin(), brick_changes_.end(), 0);
+  free_head_ = kNone;
   free_count_ = high_water_ = live_ = brick_count_ = 0;
   frame_ = 0;
   have_last_ = false;
@@ -251,7 +258,20 @@ void SurfelMap::detachSurfel(uint32_t slot) {
 
 void SurfelMap::removeSurfel(uint32_t slot) {
   detachSurfel(slot);
-  free_[free_count_++] = slot;
+  pushFree(slot);
+}
+
+uint32_t SurfelMap::popFree() {
+  const uint32_t slot = free_head_;
+  free_head_ = link_next_[slot];
+  --free_count_;
+  return slot;
+}
+
+void SurfelMap::pushFree(uint32_t slot) {
+  link_next_[slot] = free_head_;
+  free_head_ = slot;
+  ++free_count_;
 }
 
 void SurfelMap::markSettled(Surfel& s) {
@@ -278,19 +298,21 @@ void SurfelMap::makeRoom(std::size_t wanted, FuseStats& stats) {
   // its surfels once every several frames rather than every frame.
   const std::size_t target = std::min(live_, wanted - available + surfels_.size() / 16);
   // Usefulness: the confidence, halved for every 30 frames unseen; the score's
-  // float bits order like the float (it is >= 0), so slot and score share a word.
-  std::size_t n = 0;
-  for (std::size_t slot = 0; slot < high_water_; ++slot) {
+  // float bits order like the float (it is >= 0). The `target` least useful go,
+  // ties in slot order (lowest_keys.h: no per-surfel scratch).
+  auto score_key = [this](std::size_t slot, uint32_t& key) {
     const Surfel& s = surfels_[slot];
-    if (!(s.flags & kSurfelLive)) continue;
+    if (!(s.flags & kSurfelLive)) return false;
     const float unseen = static_cast<float>(frame_ - s.last_seen);
-    const float score = decodeConfidence(s.confidence) * std::exp2(-unseen / 30.0f);
-    eviction_[n++] = (static_cast<uint64_t>(std::bit_cast<uint32_t>(score)) << 32) | slot;
+    key = std::bit_cast<uint32_t>(decodeConfidence(s.confidence) * std::exp2(-unseen / 30.0f));
+    return true;
+  };
+  const KeyThreshold threshold = kthSmallestKey(high_water_, target, score_key, key_histogram_);
+  std::size_t taken_at_key = 0;
+  for (std::size_t slot = 0; slot < high_water_; ++slot) {
+    uint32_t key = 0;
+    if (score_key(slot, key) && threshold.takes(key, taken_at_key)) removeSurfel(static_cast<uint32_t>(slot));
   }
-  const auto end = eviction_.begin() + static_cast<std::ptrdiff_t>(n);
-  const auto nth = eviction_.begin() + static_cast<std::ptrdiff_t>(target);
-  std::nth_element(eviction_.begin(), nth, end);
-  for (auto it = eviction_.begin(); it != nth; ++it) removeSurfel(static_cast<uint32_t>(*it & 0xffffffffu));
   stats.evicted += static_cast<uint32_t>(target);
 }
 
@@ -562,7 +584,7 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
   if (free_count_ == 0 && high_water_ == surfels_.size()) return false;
   const int brick = findOrAddBrick(p_world);
   if (brick < 0) return false;
-  const uint32_t slot = free_count_ > 0 ? free_[--free_count_] : static_cast<uint32_t>(high_water_++);
+  const uint32_t slot = free_count_ > 0 ? popFree() : static_cast<uint32_t>(high_water_++);
   Surfel& s = surfels_[slot];
   const Eigen::Vector3d rel = p_world - brickOrigin(static_cast<uint16_t>(brick));
   s.x = static_cast<float>(rel.x());
@@ -628,6 +650,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   // Surfels carved away stay out of the free list until every pixel is
   // associated: the index map may still name them at other pixels.
   std::size_t carved_away = 0;
+  uint32_t carved_head = kNone, carved_tail = kNone;
   std::size_t to_add = 0;
   const std::size_t pixels = frame.pixelCount();
   constexpr std::size_t kPrefetchPixels = 16;
@@ -656,7 +679,12 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
           // The camera sees through the surfel: free space where it is.
           if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
             detachSurfel(slot);
-            eviction_[carved_away++] = slot;
+            // Freed after the loop (the index map may name it at other pixels):
+            // a chain through the links, in the order the surfels went.
+            link_next_[slot] = carved_head;
+            carved_head = slot;
+            if (carved_tail == kNone) carved_tail = slot;
+            ++carved_away;
           }
           continue;
         }
@@ -708,7 +736,11 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
       ++to_add;
     }
   }
-  for (std::size_t k = 0; k < carved_away; ++k) free_[free_count_++] = static_cast<uint32_t>(eviction_[k]);
+  if (carved_head != kNone) {
+    link_next_[carved_tail] = free_head_;
+    free_head_ = carved_head;
+    free_count_ += carved_away;
+  }
   return to_add;
 }
 

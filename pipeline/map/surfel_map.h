@@ -25,8 +25,10 @@
 //  5. evicts the least useful surfels (lowest confidence, longest unseen) when
 //     the pool has no room for the new ones, then adds them, unstable.
 //
-// Memory: the pool of surfels (32 bytes each), the brick table and the per-
-// pixel scratch are allocated by create(); fuse() allocates nothing.
+// Memory: the pool of surfels (32 bytes each and 8 for their brick list, the
+// free list threaded through the same links: 40 bytes a surfel of capacity),
+// the brick table and the per-pixel scratch are allocated by create(); fuse()
+// allocates nothing.
 #pragma once
 
 #include <cstddef>
@@ -123,6 +125,15 @@ struct FuseStats {
   int64_t add_ns = 0;        // 5. eviction (makeRoom) and the new surfels (addNew)
 };
 
+// What create() allocated, by what it grows with.
+struct SurfelMapMemory {
+  std::size_t pool = 0;      // max_surfels: the surfels (32 bytes) and their brick lists' links (8)
+  std::size_t bricks = 0;    // max_bricks: keys, hash table, per-frame culling, lists' heads, counts
+  std::size_t pixels = 0;    // max_width x max_height: the per-pixel scratch of a frame's fusion
+  std::size_t eviction = 0;  // fixed: makeRoom()'s histogram
+  std::size_t total() const { return pool + bricks + pixels + eviction; }
+};
+
 struct SurfelMapCounters {
   uint64_t frames_fused = 0;
   uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0, refused_no_pose = 0;
@@ -189,8 +200,9 @@ class SurfelMap {
   const SurfelMapConfig& config() const { return config_; }
   const SurfelMapCounters& counters() const { return counters_; }
   uint32_t frameNumber() const { return frame_; }
-  // Bytes allocated by create(), all of it.
+  // Bytes allocated by create(), all of it, and by part.
   std::size_t memoryBytes() const;
+  SurfelMapMemory memoryParts() const;
 
   // Empties the map (keeps the memory).
   void clear();
@@ -216,6 +228,8 @@ class SurfelMap {
   bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
                  const uint8_t* rgb);
   void removeSurfel(uint32_t slot);
+  void pushFree(uint32_t slot);
+  uint32_t popFree();  // free_count_ > 0
   // Takes a surfel out of the map's bookkeeping (flags, brick list, counts) but
   // not into the free list: removeSurfel() does both.
   void detachSurfel(uint32_t slot);
@@ -227,7 +241,7 @@ class SurfelMap {
 
   SurfelMapConfig config_;
   std::vector<Surfel> surfels_;
-  std::vector<uint32_t> free_;        // a stack of free slots below high_water_
+  uint32_t free_head_ = kNoSurfel;    // a stack of free slots below high_water_, through link_next_
   std::size_t free_count_ = 0;
   std::size_t high_water_ = 0;
   std::size_t live_ = 0;
@@ -240,7 +254,8 @@ class SurfelMap {
   std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
   std::vector<uint32_t> brick_settled_;   // ... its settled surfels
   std::vector<uint32_t> brick_changes_;   // ... changes to its settled set (wrapping)
-  std::vector<uint32_t> link_next_, link_prev_;  // per slot: the brick list's neighbours
+  // Per slot: the brick list's neighbours; a free slot's link_next_ is the next free one.
+  std::vector<uint32_t> link_next_, link_prev_;
 
   // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
   // map_kernels.h), structure of arrays; weight is negated by associate() for a
@@ -254,7 +269,7 @@ class SurfelMap {
   std::vector<float> index_depth_;        // the index map's z-buffer
   std::vector<uint32_t> index_;           // surfel slot seen at the pixel, or UINT32_MAX if none
   std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
-  std::vector<uint64_t> eviction_;        // scratch: (score << 32 | slot)
+  std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
   std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
   float normal_cos_f_px_ = 0.0f;          // ... for this focal length (0: not made yet)

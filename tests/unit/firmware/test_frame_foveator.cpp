@@ -68,6 +68,14 @@ TEST(FrameFoveator, SourceNamesParse) {
   EXPECT_EQ(foveationSourceName(FoveationSource::kMap), "map");
   EXPECT_EQ(FrameFoveator::cloudCapacity(100, MapSettings{}), 100u);
   EXPECT_EQ(FrameFoveator::cloudCapacity(100, mapSource(50)), 150u);
+  // With bricks the operator keeps the map: the cloud is the frame's live points.
+  MapSettings bricks = mapSource(50);
+  bricks.delta = true;
+  EXPECT_EQ(FrameFoveator::cloudCapacity(100, bricks), 100u);
+  // A frame's bricks: what the largest budget pays for in a frame, at least one brick.
+  EXPECT_EQ(frameBrickPoints(12.5e6, 30.0, 1 << 16), 92593u);
+  EXPECT_EQ(frameBrickPoints(12.5e6, 30.0, 1 << 17), std::size_t{1} << 17);
+  EXPECT_EQ(frameBrickPoints(12.5e6, 0.0, 1), 2777778u);  // no rate: as at 1 fps
 }
 
 // The frame source is the plain pipeline: the same points out as a
@@ -245,6 +253,7 @@ TEST(FrameFoveator, PlanBricksSendsWhatTheOperatorLacksWithinTheBudget) {
   ASSERT_TRUE(rig.camera);
   MapSettings settings = mapSource();
   settings.delta = true;
+  settings.max_frame_brick_points = std::size_t{1} << 18;  // the service derives it from the link's budget
   settings.map.settle_frames = 2;
   Result<FrameFoveator> stage = FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1}, {}, {},
                                                       settings, rig.width, rig.height);

@@ -6,9 +6,11 @@
 // view of the map (eye_view.h) and what an operator who keeps the map needs
 // next (map_delta.h).
 #include <algorithm>
+#include <bit>
 #include <cstdio>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <random>
@@ -22,6 +24,7 @@
 #include "pipeline/acuity_levels.h"
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
+#include "pipeline/map/lowest_keys.h"
 #include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
 #include "tests/support/test_time.h"
@@ -512,6 +515,82 @@ TEST(SurfelMap, AFullPoolEvictsTheLeastUsefulAndCountsIt) {
   EXPECT_EQ(map.counters().evicted, evicted);
   // Eviction takes what is needed and a sixteenth of the pool, not the map.
   EXPECT_GT(map.size(), config.max_surfels / 2);
+}
+
+// The eviction's selection (lowest_keys.h) against a sort of (key, index):
+// the same set, ties taken in index order, on random keys and on hard ones
+// (all equal, two values, keys that differ only in the low or the high half,
+// the extremes, skipped indices, k of 0, 1, all and more than all).
+std::vector<std::size_t> lowestBySort(const std::vector<std::optional<uint32_t>>& keys, std::size_t k) {
+  std::vector<std::pair<uint32_t, std::size_t>> sorted;
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    if (keys[i]) sorted.emplace_back(*keys[i], i);
+  }
+  std::sort(sorted.begin(), sorted.end());
+  std::vector<std::size_t> taken;
+  for (std::size_t j = 0; j < std::min(k, sorted.size()); ++j) taken.push_back(sorted[j].second);
+  std::sort(taken.begin(), taken.end());
+  return taken;
+}
+
+std::vector<std::size_t> lowestBySelect(const std::vector<std::optional<uint32_t>>& keys, std::size_t k) {
+  std::vector<uint32_t> histogram(kKeyHistogramSize);
+  auto key_at = [&](std::size_t i, uint32_t& key) {
+    if (!keys[i]) return false;
+    key = *keys[i];
+    return true;
+  };
+  const KeyThreshold t = kthSmallestKey(keys.size(), k, key_at, histogram);
+  std::vector<std::size_t> taken;
+  std::size_t at_key = 0;
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    if (keys[i] && t.takes(*keys[i], at_key)) taken.push_back(i);
+  }
+  return taken;
+}
+
+TEST(LowestKeys, TakesExactlyTheKSmallestWithTiesInIndexOrder) {
+  std::mt19937 rng(7);
+  const std::vector<std::function<uint32_t(std::size_t)>> makers = {
+      [&](std::size_t) { return static_cast<uint32_t>(rng()); },
+      [](std::size_t) { return 42u; },
+      [&](std::size_t) { return rng() % 2 ? 0u : 0xffffffffu; },
+      [&](std::size_t) { return 0x12340000u | (rng() % 5); },        // only the low half differs
+      [&](std::size_t) { return (static_cast<uint32_t>(rng() % 5) << 16) | 0xbeefu; },  // only the high half
+      [&](std::size_t i) { return std::bit_cast<uint32_t>(static_cast<float>(i % 7) * 0.25f); },  // scores
+  };
+  for (std::size_t m = 0; m < makers.size(); ++m) {
+    for (const std::size_t n : {std::size_t{1}, std::size_t{17}, std::size_t{1000}}) {
+      std::vector<std::optional<uint32_t>> keys(n);
+      std::size_t present = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (rng() % 5 != 0) {
+          keys[i] = makers[m](i);
+          ++present;
+        }
+      }
+      for (const std::size_t k : {std::size_t{0}, std::size_t{1}, present / 3, present, present + 5}) {
+        SCOPED_TRACE(testing::Message() << "keys " << m << ", n " << n << ", k " << k);
+        EXPECT_EQ(lowestBySelect(keys, k), lowestBySort(keys, k));
+      }
+    }
+  }
+}
+
+// Memory to the surfel (issue 41): the pool is 40 bytes a surfel of capacity
+// (the surfel and its two links; the free list and the eviction need none),
+// whatever the other parts are sized for.
+TEST(SurfelMap, ThePoolIsFortyBytesASurfelOfCapacity) {
+  for (const std::size_t surfels : {std::size_t{1000}, std::size_t{1} << 20}) {
+    SurfelMapConfig config = smallConfig(40, 30);
+    config.max_surfels = surfels;
+    const SurfelMap map = SurfelMap::create(config).value();
+    const SurfelMapMemory m = map.memoryParts();
+    EXPECT_EQ(m.pool, 40 * surfels);
+    EXPECT_EQ(m.total(), map.memoryBytes());
+    EXPECT_LT(m.bricks, 64 * config.max_bricks);
+    EXPECT_LT(m.pixels, 48u * 40 * 30 + 4096 + 16 * 70);
+  }
 }
 
 TEST(SurfelMap, AFullBrickTableDropsAndCountsWhatItCannotPlace) {
