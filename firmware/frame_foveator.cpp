@@ -56,6 +56,10 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
     Result<pipeline::map::SurfelMap> fused = pipeline::map::SurfelMap::create(map_config);
     if (!fused) return fused.status();
     stage.map_ = std::make_unique<pipeline::map::SurfelMap>(std::move(fused.value()));
+    if (!(map.fuse_budget_ms >= 0.0 && map.fuse_budget_ms <= 1e4)) {
+      return Result<FrameFoveator>(ErrorCode::kInvalidArgument, "map.fuse_budget_ms: must be in [0, 10000]");
+    }
+    stage.budget_ = pipeline::map::FusionBudget(std::llround(map.fuse_budget_ms * 1e6));
     if (appendsMapToCloud(map)) {
       Result<pipeline::map::EyeView> eye = pipeline::map::EyeView::create(map.eye, map_config.max_bricks);
       if (!eye) return eye.status();
@@ -105,10 +109,17 @@ Status FrameFoveator::backproject(const hal::RgbdFrame& frame, pipeline::Backpro
   const pipeline::map::TrackStats track = map_figures_.track;  // trackPose()'s, for this frame
   map_figures_ = {};
   map_figures_.track = track;
-  const pipeline::map::FuseOutcome outcome = map_->fuse(frame, map_figures_.fuse, pose_valid);
-  if (poser_ && outcome == pipeline::map::FuseOutcome::kFused) poser_->fused(frame, *map_);
-  if (outcome != pipeline::map::FuseOutcome::kFused) {
-    // Not in the map: the operator still sees the frame as it is, beside the map.
+  bool fused = false;
+  if (budget_.admit()) {
+    fused = map_->fuse(frame, map_figures_.fuse, pose_valid) == pipeline::map::FuseOutcome::kFused;
+    budget_.spent(map_figures_.fuse.fuse_ns);
+  } else {
+    map_figures_.fusion_skipped = true;
+  }
+  if (poser_ && fused) poser_->fused(frame, *map_);
+  if (!fused) {
+    // Not in the map (refused, or over the time budget): the operator still
+    // sees the frame as it is, beside the map.
     if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) {
       cloud_.clear();
       return s;

@@ -31,6 +31,7 @@
 #include "pipeline/kernels/backprojector.h"
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
+#include "pipeline/map/fusion_budget.h"
 #include "pipeline/map/map_delta.h"
 #include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
@@ -64,6 +65,9 @@ struct MapSettings {
   // the service applies; 2^18 before, three times that at 30 fps).
   std::size_t max_frame_brick_points = 0;
   std::size_t max_frame_bricks = 1024;
+  // Fusion's average time a frame at most (pipeline/map/fusion_budget.h); the
+  // frames it does not fuse go whole, counted. 0: every frame is fused.
+  double fuse_budget_ms = 0.0;
   // The map tracks the camera (camera.pose.source = track, track+X; map source
   // only): pipeline/map/pose_tracking.h, docs/tracking.md.
   pipeline::map::PoseTracking tracking = pipeline::map::PoseTracking::kOff;
@@ -85,7 +89,9 @@ struct MapFrameFigures {
   pipeline::map::TrackStats track;  // with tracking (trackPose())
   pipeline::map::FuseStats fuse;
   pipeline::map::EyeViewStats eye;
-  uint32_t frame_points = 0;  // the frame's points in the cloud: unexplained (fused) or all (refused)
+  bool fusion_skipped = false;  // the time budget left the frame unfused (fuse is then not filled)
+  bool fused() const { return !fusion_skipped && fuse.outcome == pipeline::map::FuseOutcome::kFused; }
+  uint32_t frame_points = 0;  // the frame's points in the cloud: unexplained (fused) or all (refused, skipped)
   pipeline::map::MapDeltaStats delta;  // planBricks()'s
   uint32_t bricks_planned = 0;         // into the batch
   uint32_t brick_points = 0;
@@ -175,6 +181,9 @@ class FrameFoveator {
   const pipeline::map::SurfelMap* map() const { return map_.get(); }
   // The last frame's (trackPose() sets .track, backproject() the rest).
   const MapFrameFigures& mapFigures() const { return map_figures_; }
+  // Frames the time budget left unfused so far (map source).
+  uint64_t fusionSkipped() const { return budget_.skipped(); }
+  bool hasFusionBudget() const { return budget_.budgetNs() > 0; }
   // Bytes the map source allocated, by part (all 0 for the other sources).
   struct MapMemory {
     pipeline::map::SurfelMapMemory map;
@@ -220,6 +229,7 @@ class FrameFoveator {
   std::unique_ptr<pipeline::map::PoseEstimator> poser_;  // map source with tracking
   std::size_t max_frame_brick_points_ = 0, max_frame_bricks_ = 0;
   MapFrameFigures map_figures_;
+  pipeline::map::FusionBudget budget_;
   std::unique_ptr<pipeline::PyramidSampler> pyramid_;  // pyramid source
   pipeline::PyramidRule pyramid_rule_;
   const hal::RgbdFrame* frame_ = nullptr;  // pyramid source: the last backproject()'s

@@ -497,7 +497,7 @@ bool Run::backproject(std::size_t i, FrameFigures& f) {
     return false;
   }
   f.backproject_ms = msSince(t0);
-  if (stage_.map() != nullptr && stage_.mapFigures().fuse.outcome == pipeline::map::FuseOutcome::kFused) {
+  if (stage_.map() != nullptr && stage_.mapFigures().fused()) {
     stats_.fuse_ms.add(static_cast<double>(stage_.mapFigures().fuse.fuse_ns) * 1e-6);
   }
   return true;
@@ -668,6 +668,10 @@ void Run::printSummary() const {
                 static_cast<unsigned long long>(c.refused_no_pose),
                 static_cast<unsigned long long>(c.refused() - c.refused_no_pose), last.frame_points, last.eye.appended,
                 last.eye.hidden);
+    if (stage_.hasFusionBudget()) {
+      std::printf("map: %llu frames left unfused by map.fuse_budget_ms (sent whole)\n",
+                  static_cast<unsigned long long>(stage_.fusionSkipped()));
+    }
   }
 }
 

@@ -151,6 +151,10 @@ void Service::stop() {
                 "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; refused %" PRIu64
                 " frames without a pose, %" PRIu64 " for another reason",
                 s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
+      if (stage_->hasFusionBudget()) {
+        log().log(LogLevel::kInfo, "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent whole)",
+                  s.map.unfused);
+      }
       if (map_bricks_) {
         log().log(LogLevel::kInfo,
                   "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64
@@ -200,6 +204,7 @@ ServiceStats Service::stats() const {
   s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);
   s.map.refused_other = map_refused_other_.load(std::memory_order_relaxed);
   s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
+  s.map.unfused = map_fusion_skipped_.load(std::memory_order_relaxed);
   s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);
   s.map.brick_versions = brick_versions_.load(std::memory_order_relaxed);
   s.map.brick_parts = brick_parts_.load(std::memory_order_relaxed);

@@ -119,6 +119,7 @@ struct ServiceStats {
     uint64_t refused_no_pose = 0;    // frames without a pose (stale, none yet)
     uint64_t refused_other = 0;      // bad pose, pose jump, clock, size
     uint64_t evicted = 0;            // surfels evicted from a full pool
+    uint64_t unfused = 0;            // frames the time budget left unfused (map.fuse_budget_ms)
     // Its bricks (map.delta, docs/map-delta.md): put in frames by the planner,
     // versions and parts sent, parts resent, versions the operator took whole,
     // versions lost on the way (due again), acknowledgements for nothing in flight.
@@ -367,7 +368,7 @@ class Service {
   LatencyHistogram capture_latency_, foveate_latency_, send_latency_;
   LatencyHistogram fuse_latency_;  // the map's fusion (a part of foveate_latency_)
   std::atomic<uint64_t> map_surfels_{0}, map_frames_fused_{0}, map_refused_no_pose_{0}, map_refused_other_{0},
-      map_evicted_{0};
+      map_evicted_{0}, map_fusion_skipped_{0};
   std::vector<std::thread> threads_;
 
   // Supervisor state (one thread).

@@ -273,7 +273,8 @@ void Service::publishTracking() {
 
 void Service::publishMapFigures(const pipeline::map::SurfelMap& map) {
   const MapFrameFigures& figures = stage_->mapFigures();
-  if (figures.fuse.outcome == pipeline::map::FuseOutcome::kFused) fuse_latency_.add(figures.fuse.fuse_ns);
+  if (figures.fused()) fuse_latency_.add(figures.fuse.fuse_ns);
+  map_fusion_skipped_.store(stage_->fusionSkipped(), std::memory_order_relaxed);
   const pipeline::map::SurfelMapCounters& c = map.counters();
   map_surfels_.store(map.size(), std::memory_order_relaxed);
   map_frames_fused_.store(c.frames_fused, std::memory_order_relaxed);

@@ -202,6 +202,24 @@ TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
   EXPECT_LE(std::stoul(bricks[3].str()), std::stoul(bricks[2].str())) << serve_out;
 }
 
+// Fusion slowed on purpose against its time budget (a microsecond a frame):
+// the frames it leaves unfused are counted in the status line and at the stop.
+TEST(FoveadServe, FramesOverTheFusionBudgetAreCountedAndStillFoveated) {
+  const test::ProcessResult r = test::runCommand(
+      fovead() + " serve" + kSmallCamera +
+      " --set foveation.source=map --set map.max_surfels=65536 --set map.fuse_budget_ms=0.001 --frames 12"
+      " --status-interval-ms 100");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  std::smatch unfused;
+  ASSERT_TRUE(std::regex_search(r.output, unfused, std::regex("map: ([0-9]+) frames left unfused by map.fuse_budget_ms")))
+      << r.output;
+  EXPECT_GE(std::stoul(unfused[1].str()), 1u) << r.output;
+  std::smatch fused;
+  ASSERT_TRUE(std::regex_search(r.output, fused, std::regex("map: [0-9]+ surfels from ([0-9]+) fused frames"))) << r.output;
+  EXPECT_GE(std::stoul(fused[1].str()), 1u) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("unfused [0-9]+ \\(budget\\)"))) << r.output;
+}
+
 TEST(FoveadServe, FrameLimitAndBadFlags) {
   const test::ProcessResult done = test::runCommand(fovead() + " serve" + kSmallCamera + " --frames 10");
   EXPECT_EQ(done.exit_code, 0) << done.output;

@@ -271,6 +271,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "map.change_fraction=0.05",
     "map.max_brick_surfels=4096",
     "map.max_frame_brick_points=100000",
+    "map.fuse_budget_ms=12.5",
     "map.carve_weight=1.5",
     "map.max_pose_jump_m=0.5",
     "map.eye_face_cells=192",

@@ -243,6 +243,47 @@ TEST(FrameFoveator, AFrameWithoutAPoseIsCountedAndStillShown) {
   EXPECT_EQ(stage->cloud().size(), 0u);
 }
 
+// Fusion slowed on purpose against its budget (a budget of a microsecond, far
+// below any fusion): the first frame is fused, the next ones are not, each
+// counted and back-projected whole, and the map does not change for them.
+TEST(FrameFoveator, FramesOverTheFusionBudgetAreCountedAndSentWhole) {
+  Rig rig = openRig();
+  ASSERT_TRUE(rig.camera);
+  MapSettings settings = mapSource();
+  settings.fuse_budget_ms = 0.001;
+  Result<FrameFoveator> stage = FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1}, {}, {},
+                                                      settings, rig.width, rig.height);
+  ASSERT_TRUE(stage.isOk()) << stage.status().toString();
+  EXPECT_TRUE(stage->hasFusionBudget());
+  pipeline::FoveatedCloud out(FrameFoveator::cloudCapacity(rig.pixels, settings));
+  std::size_t surfels_after_first = 0;
+  for (int i = 0; i < 5; ++i) {
+    ASSERT_TRUE(rig.camera->acquire(rig.frame, test::scaled(std::chrono::seconds(1))).isOk());
+    pipeline::BackprojectCounts counts;
+    pipeline::FoveationStats stats;
+    ASSERT_TRUE(stage->backproject(rig.frame, counts).isOk());
+    ASSERT_TRUE(stage->foveate(gazeFor(rig.frame), out, stats).isOk());
+    const MapFrameFigures& figures = stage->mapFigures();
+    if (i == 0) {
+      EXPECT_TRUE(figures.fused());
+      surfels_after_first = stage->map()->size();
+      EXPECT_GT(surfels_after_first, 0u);
+      continue;
+    }
+    EXPECT_TRUE(figures.fusion_skipped);
+    EXPECT_FALSE(figures.fused());
+    EXPECT_EQ(figures.frame_points, counts.valid) << "the whole frame goes";
+    EXPECT_GT(counts.valid, rig.pixels / 2);
+    EXPECT_EQ(stage->map()->size(), surfels_after_first);
+    EXPECT_EQ(stage->fusionSkipped(), static_cast<uint64_t>(i));
+  }
+  EXPECT_EQ(stage->map()->counters().frames_fused, 1u);
+  settings.fuse_budget_ms = -1.0;
+  EXPECT_FALSE(FrameFoveator::create({rig.pixels, rig.pixels, fovea::defaultKernelSet(), 1}, {}, {}, settings,
+                                     rig.width, rig.height)
+                   .isOk());
+}
+
 // With bricks (map.delta) the frame carries only the live points, and
 // planBricks fills the batch with what the operator lacks: everything due at
 // first, nothing once it holds it all, a forgotten brick again, everything

@@ -24,6 +24,7 @@
 #include "pipeline/acuity_levels.h"
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/eye_view.h"
+#include "pipeline/map/fusion_budget.h"
 #include "pipeline/map/lowest_keys.h"
 #include "pipeline/map/map_delta.h"
 #include "pipeline/map/surfel_map.h"
@@ -590,6 +591,36 @@ TEST(SurfelMap, ThePoolIsFortyBytesASurfelOfCapacity) {
     EXPECT_EQ(m.total(), map.memoryBytes());
     EXPECT_LT(m.bricks, 64 * config.max_bricks);
     EXPECT_LT(m.pixels, 48u * 40 * 30 + 4096 + 16 * 70);
+  }
+}
+
+// Fusion's time budget (fusion_budget.h): fusion slower than its budget runs
+// on the share of the frames the budget pays for, each skip counted; faster
+// fusion, or no budget, fuses every frame.
+TEST(FusionBudget, FusionKeepsToItsShareOfTheFramesAndCountsTheRest) {
+  struct Case {
+    int64_t budget_ns, fuse_ns;
+    int fused_min, fused_max;  // of 300 frames
+  };
+  for (const Case& c : {Case{10'000'000, 35'000'000, 85, 87}, Case{10'000'000, 9'000'000, 300, 300},
+                        Case{0, 60'000'000, 300, 300}, Case{1, 60'000'000, 1, 1}}) {
+    SCOPED_TRACE(testing::Message() << "budget " << c.budget_ns << " ns, fusion " << c.fuse_ns << " ns");
+    FusionBudget budget(c.budget_ns);
+    int fused = 0;
+    int64_t spent = 0;
+    for (int frame = 0; frame < 300; ++frame) {
+      if (!budget.admit()) continue;
+      ++fused;
+      spent += c.fuse_ns;
+      budget.spent(c.fuse_ns);
+      // Never more than the budget paid for, plus the one fusion in progress.
+      if (c.budget_ns > 0) {
+        EXPECT_LE(spent, (frame + 1) * c.budget_ns + c.fuse_ns);
+      }
+    }
+    EXPECT_GE(fused, c.fused_min);
+    EXPECT_LE(fused, c.fused_max);
+    EXPECT_EQ(budget.skipped(), static_cast<uint64_t>(300 - fused));
   }
 }
 
