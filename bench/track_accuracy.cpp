@@ -31,7 +31,7 @@
 #include "bench/bench_input.h"
 #include "core/kernel_set.h"
 #include "hal/camera.h"
-#include "pipeline/map/pose_tracking.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/map/tracker.h"
 #include "pipeline/map/trajectory_error.h"
@@ -142,20 +142,16 @@ RunResult run(const RunOptions& o) {
     return r;
   }
   const fovea::hal::CameraIntrinsics& k = camera.info().intrinsics;
-  SurfelMapConfig map_config;
-  map_config.max_width = k.width;
-  map_config.max_height = k.height;
-  map_config.kernels = o.kernels;
-  fovea::Result<SurfelMap> map = SurfelMap::create(map_config);
-  TrackerConfig tracker_config;
-  tracker_config.max_width = k.width;
-  tracker_config.max_height = k.height;
-  tracker_config.kernels = o.kernels;
+  MapperConfig config;
+  config.map.max_width = k.width;
+  config.map.max_height = k.height;
+  config.map.kernels = o.kernels;
+  config.tracker.kernels = o.kernels;
   const bool prior = o.hard == "jump" || o.hard == "drift";
-  fovea::Result<PoseEstimator> poser =
-      PoseEstimator::create(prior ? PoseTracking::kRefine : PoseTracking::kAlone, tracker_config);
-  if (!map || !poser) {
-    r.error = !map ? map.status().message() : poser.status().message();
+  config.tracking = prior ? PoseTracking::kRefine : PoseTracking::kAlone;
+  fovea::Result<Mapper> mapper = Mapper::create(config);
+  if (!mapper) {
+    r.error = mapper.status().message();
     return r;
   }
   if (fovea::Status s = camera.start(); !s) {
@@ -173,19 +169,15 @@ RunResult run(const RunOptions& o) {
     if (o.hard == "jump" && i >= 30) frame.T_world_cam.t_world_cam += Eigen::Vector3d(0.5, 0.0, 0.0);
     if (o.hard == "drift") frame.T_world_cam.t_world_cam += Eigen::Vector3d(0.01 * i, 0.0, 0.0);
     ++r.frames;
-    TrackStats stats;
-    const bool usable = poser->poseFrame(frame, /*outside_pose_valid=*/true, stats);
-    track_ms.push_back(static_cast<double>(stats.track_ns) * 1e-6);
-    r.max_disagreement_m = std::max(r.max_disagreement_m, stats.prior_disagreement_m);
-    countOutcome(o, i, stats, r);
-    if (!usable) continue;  // lost: not fused, not in the trajectory
+    MapperFrame figures;
+    const bool fused = mapper->addFrame(frame, /*outside_pose_valid=*/true, figures);
+    track_ms.push_back(static_cast<double>(figures.track.track_ns) * 1e-6);
+    r.max_disagreement_m = std::max(r.max_disagreement_m, figures.track.prior_disagreement_m);
+    countOutcome(o, i, figures.track, r);
+    if (!figures.pose_usable) continue;  // lost: not fused, not in the trajectory
     estimated.push_back(frame.T_world_cam.t_world_cam);
     truth.push_back(gt.t_world_cam);
-    FuseStats fuse;
-    if (map->fuse(frame, fuse, true) == FuseOutcome::kFused) {
-      fuse_ms.push_back(static_cast<double>(fuse.fuse_ns) * 1e-6);
-      poser->fused(frame, map.value());
-    }
+    if (fused) fuse_ms.push_back(static_cast<double>(figures.fuse.fuse_ns) * 1e-6);
   }
   camera.stop();
   finishResult(estimated, truth, track_ms, fuse_ms, r);

@@ -29,12 +29,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/pyramid_sampler.h"
 #include "pipeline/kernels/backprojector.h"
-#include "pipeline/map/brick_batch.h"
-#include "pipeline/map/eye_view.h"
-#include "pipeline/map/fusion_budget.h"
-#include "pipeline/map/map_delta.h"
-#include "pipeline/map/pose_tracking.h"
-#include "pipeline/map/surfel_map.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::firmware {
@@ -74,29 +69,19 @@ struct MapSettings {
   pipeline::map::TrackerConfig tracker;
 };
 
-// Bytes a point is estimated to take on the wire, chunk headers included
-// (docs/protocol-chunks.md: about 4), for planning a frame's bricks within
-// the budget before they are encoded; the pacing holds the real budget.
-inline constexpr double kWireBytesPerPointEstimate = 4.5;
+using pipeline::map::kWireBytesPerPointEstimate;
 
 // The points a frame's bricks can carry at most: what the link's largest
 // budget pays for in one frame period at kWireBytesPerPointEstimate (92 593
 // at 12.5 MB/s and 30 fps), and at least one brick whole.
 std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::size_t max_brick_surfels);
 
-// What the map did with the last frame (map source only).
-struct MapFrameFigures {
-  pipeline::map::TrackStats track;  // with tracking (trackPose())
-  pipeline::map::FuseStats fuse;
+// What the map did with the last frame (map source only): the mapper's
+// frame (track, fuse, fusion_skipped, fused()), the eye's view, and the plan.
+struct MapFrameFigures : pipeline::map::MapperFrame {
   pipeline::map::EyeViewStats eye;
-  bool fusion_skipped = false;  // the time budget left the frame unfused (fuse is then not filled)
-  bool fused() const { return !fusion_skipped && fuse.outcome == pipeline::map::FuseOutcome::kFused; }
   uint32_t frame_points = 0;  // the frame's points in the cloud: unexplained (fused) or all (refused, skipped)
-  pipeline::map::MapDeltaStats delta;  // planBricks()'s
-  uint32_t bricks_planned = 0;         // into the batch
-  uint32_t brick_points = 0;
-  uint32_t bricks_waiting = 0;         // due but not in the batch (the budget): they wait
-  uint32_t fovea_bricks_waiting = 0;   // ... of them the fovea's
+  pipeline::map::MapperPlan plan;  // planBricks()'s
 };
 
 class FrameFoveator {
@@ -117,22 +102,17 @@ class FrameFoveator {
   // The map source with bricks: the cloud carries the frame's live points only.
   static bool streamsLiveOnly(const MapSettings& map) { return map.source == FoveationSource::kMap && map.delta; }
 
-  // With tracking (MapSettings::tracking), before backproject(): sets
-  // frame.T_world_cam to the tracker's pose (outside_pose_valid: whether the
-  // frame's own pose, from the pose source, is usable, as the prior with
-  // track+X). Returns whether the frame may be fused: false when the tracker
-  // is lost (the frame then carries the last good or the outside pose, to be
-  // shown beside the map). Without tracking: outside_pose_valid, frame untouched.
-  bool trackPose(hal::RgbdFrame& frame, bool outside_pose_valid);
-  const pipeline::map::PoseEstimator* poseEstimator() const { return poser_.get(); }
+  const pipeline::map::PoseEstimator* poseEstimator() const { return mapper_ ? mapper_->poseEstimator() : nullptr; }
 
   // Takes a frame in. pyramid source: only keeps `frame`, which must stay valid
   // until foveate(). frame source: back-projects it into cloud()
-  // (kCapacityExceeded for a frame larger than the capacity). map source: fuses
-  // it (a refused frame is counted in the map's counters; pose_valid false is
-  // the pose source's "no pose for this stamp") and puts the points the map does
-  // not explain into cloud(); a frame the map refused is back-projected whole.
-  Status backproject(const hal::RgbdFrame& frame, pipeline::BackprojectCounts& counts, bool pose_valid = true);
+  // (kCapacityExceeded for a frame larger than the capacity). map source: the
+  // mapper poses it (with tracking: frame.T_world_cam becomes the tracker's) and
+  // fuses it (a refused frame is counted in the map's counters; pose_valid
+  // false is the pose source's "no pose for this stamp"), and puts the points
+  // the map does not explain into cloud(); a frame not fused (refused, lost,
+  // over the time budget) is back-projected whole.
+  Status backproject(hal::RgbdFrame& frame, pipeline::BackprojectCounts& counts, bool pose_valid = true);
   // Makes `config` the foveation in use. The gaze policy hands out pointers to
   // its own configurations, so a pointer equal to the one in use means no change
   // (invalidate() forces the next call to apply, e.g. after the policy's
@@ -155,21 +135,25 @@ class FrameFoveator {
   // are the pyramid's levels, 0 = pixels; sample_ns its time).
   Status foveate(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out, pipeline::FoveationStats& stats);
 
-  // Bricks (streamsBricks() only). Fills `batch` (cleared first) with the
-  // bricks due for the eye at `gaze`, in the plan's order, while the estimated
-  // bytes fit `budget_bytes`; `live_bytes` (the frame's live points) are
-  // charged after the fovea's bricks, so those go first. Each brick put in the
-  // batch is taken as sent (MapDelta::markSent): a brick that then never
-  // reaches the operator must be forgotten (forgetBrick, forgetBatch).
+  // Bricks (streamsBricks() only): Mapper::planBricks for the eye at `gaze`,
+  // the batch's points relative to the cloud's origin; mapFigures().plan says
+  // what went in. A brick put in the batch is taken as sent: one that then
+  // never reaches the operator must be forgotten (forgetBrick, forgetBatch).
   Status planBricks(const pipeline::Gaze& gaze, double budget_bytes, double live_bytes,
                     pipeline::map::BrickBatch& batch);
-  bool streamsBricks() const { return delta_ != nullptr; }
+  bool streamsBricks() const { return mapper_ && mapper_->output() == pipeline::map::MapOutput::kBricks; }
   // The operator does not hold `brick` (lost, evicted): due again.
-  void forgetBrick(uint16_t brick);
+  void forgetBrick(uint16_t brick) {
+    if (mapper_) mapper_->forgetBrick(brick);
+  }
   // A batch whose bricks never went out (a dropped frame): all due again.
-  void forgetBatch(const pipeline::map::BrickBatch& batch);
+  void forgetBatch(const pipeline::map::BrickBatch& batch) {
+    if (mapper_) mapper_->forgetBatch(batch);
+  }
   // The operator holds nothing (a new session).
-  void forgetAllBricks();
+  void forgetAllBricks() {
+    if (mapper_) mapper_->forgetAll();
+  }
   // A batch sized for this stage (empty when it does not stream bricks).
   pipeline::map::BrickBatch makeBrickBatch() const;
 
@@ -177,32 +161,18 @@ class FrameFoveator {
   const pipeline::PointCloud& cloud() const { return cloud_; }
   pipeline::Foveator& foveator() { return foveator_; }
   const pipeline::DepthRange& range() const { return range_; }
-  // The map source's map and its figures for the last frame (null / zero otherwise).
-  const pipeline::map::SurfelMap* map() const { return map_.get(); }
-  // The last frame's (trackPose() sets .track, backproject() the rest).
+  // The map source's mapper, map and figures for the last frame (null / zero otherwise).
+  const pipeline::map::Mapper* mapper() const { return mapper_.get(); }
+  const pipeline::map::SurfelMap* map() const { return mapper_ ? &mapper_->map() : nullptr; }
+  // The last frame's (backproject() the frame's, foveate() the eye's, planBricks() the plan).
   const MapFrameFigures& mapFigures() const { return map_figures_; }
   // Frames the time budget left unfused so far (map source).
-  uint64_t fusionSkipped() const { return budget_.skipped(); }
-  bool hasFusionBudget() const { return budget_.budgetNs() > 0; }
+  uint64_t fusionSkipped() const { return mapper_ ? mapper_->fusionSkipped() : 0; }
+  bool hasFusionBudget() const { return mapper_ && mapper_->hasFusionBudget(); }
   // Bytes the map source allocated, by part (all 0 for the other sources).
-  struct MapMemory {
-    pipeline::map::SurfelMapMemory map;
-    std::size_t eye = 0;      // the eye's depth buffer (without bricks)
-    std::size_t delta = 0;    // with bricks: what the operator holds, the plan, the brick sampler
-    std::size_t tracker = 0;  // with tracking: the pyramids
-    std::size_t total() const { return map.total() + eye + delta + tracker; }
-  };
-  MapMemory mapMemory() const {
-    MapMemory m;
-    if (!map_) return m;
-    m.map = map_->memoryParts();
-    m.eye = eye_ ? eye_->memoryBytes() : 0;
-    m.delta = delta_ ? delta_->memoryBytes() + bricks_->memoryBytes() : 0;
-    m.tracker = poser_ ? poser_->memoryBytes() : 0;
-    return m;
-  }
+  pipeline::map::MapperMemory mapMemory() const { return mapper_ ? mapper_->memory() : pipeline::map::MapperMemory{}; }
   std::size_t mapMemoryBytes() const { return mapMemory().total(); }
-  const pipeline::map::MapDelta* mapDelta() const { return delta_.get(); }
+  const pipeline::map::MapDelta* mapDelta() const { return mapper_ ? mapper_->delta() : nullptr; }
   // Bytes the pyramid source allocated (0 for the others).
   std::size_t pyramidMemoryBytes() const { return pyramid_ ? pyramid_->memoryBytes() : 0; }
 
@@ -222,14 +192,9 @@ class FrameFoveator {
   pipeline::DepthRange range_;
   const pipeline::FoveationConfig* in_use_ = nullptr;
   FoveationSource source_ = FoveationSource::kFrame;
-  std::unique_ptr<pipeline::map::SurfelMap> map_;
-  std::unique_ptr<pipeline::map::EyeView> eye_;          // map source without bricks
-  std::unique_ptr<pipeline::map::MapDelta> delta_;        // map source with bricks
-  std::unique_ptr<pipeline::map::BrickSampler> bricks_;
-  std::unique_ptr<pipeline::map::PoseEstimator> poser_;  // map source with tracking
+  std::unique_ptr<pipeline::map::Mapper> mapper_;  // map source
   std::size_t max_frame_brick_points_ = 0, max_frame_bricks_ = 0;
   MapFrameFigures map_figures_;
-  pipeline::map::FusionBudget budget_;
   std::unique_ptr<pipeline::PyramidSampler> pyramid_;  // pyramid source
   pipeline::PyramidRule pyramid_rule_;
   const hal::RgbdFrame* frame_ = nullptr;  // pyramid source: the last backproject()'s

@@ -16,7 +16,7 @@
 #include "hal/pose.h"
 #include "hal/pose_source.h"
 #include "io/ply.h"
-#include "pipeline/map/pose_tracking.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/map/tracker.h"
 
@@ -173,18 +173,6 @@ class TrajectoryFile {
   std::size_t lines_ = 0;
 };
 
-// The map's tracker with --pose track..., sized for the camera; none otherwise.
-Result<std::optional<pipeline::map::PoseEstimator>> createMapTracker(pipeline::map::PoseTracking tracking,
-                                                                     const hal::CameraIntrinsics& k) {
-  if (tracking == pipeline::map::PoseTracking::kOff) return std::optional<pipeline::map::PoseEstimator>();
-  pipeline::map::TrackerConfig tracker_config;
-  tracker_config.max_width = k.width;
-  tracker_config.max_height = k.height;
-  Result<pipeline::map::PoseEstimator> made = pipeline::map::PoseEstimator::create(tracking, tracker_config);
-  if (!made) return made.status();
-  return std::optional<pipeline::map::PoseEstimator>(std::move(made.value()));
-}
-
 // What the fusion loop measured.
 struct MapFusion {
   explicit MapFusion(std::size_t expected) : fuse_ms(expected), track_ms(expected) {}
@@ -193,29 +181,20 @@ struct MapFusion {
   std::size_t read = 0;
 };
 
-// Poses one frame (the pose source, then the tracker) and fuses it; true when fused.
-bool poseAndFuse(hal::RgbdFrame& frame, hal::PoseSource& poses, pipeline::map::SurfelMap& map,
-                 std::optional<pipeline::map::PoseEstimator>& tracker, MapFusion& fusion) {
-  bool pose_usable = poses.apply(frame);
-  if (tracker) {
-    pipeline::map::TrackStats track;
-    pose_usable = tracker->poseFrame(frame, pose_usable, track);
-    fusion.track_ms.add(static_cast<double>(track.track_ns) * 1e-6);
-  }
-  pipeline::map::FuseStats stats;
-  const bool fused = map.fuse(frame, stats, pose_usable) == pipeline::map::FuseOutcome::kFused;
-  if (fused) {
-    fusion.fuse_ms.add(static_cast<double>(stats.fuse_ns) * 1e-6);
-    if (tracker) tracker->fused(frame, map);
-  }
+// Poses one frame (the pose source, then the mapper's tracker) and fuses it; true when fused.
+bool poseAndFuse(hal::RgbdFrame& frame, hal::PoseSource& poses, pipeline::map::Mapper& mapper, MapFusion& fusion) {
+  const bool outside_pose_valid = poses.apply(frame);
+  pipeline::map::MapperFrame figures;
+  const bool fused = mapper.addFrame(frame, outside_pose_valid, figures);
+  if (mapper.poseEstimator()) fusion.track_ms.add(static_cast<double>(figures.track.track_ns) * 1e-6);
+  if (fused) fusion.fuse_ms.add(static_cast<double>(figures.fuse.fuse_ns) * 1e-6);
   return fused;
 }
 
 // Reads up to `frames` frames of the started camera into the map; a recording
 // that ends early ends the run. The error of a camera or of the trajectory file.
-Status fuseMapFrames(hal::Camera& camera, hal::PoseSource& poses, pipeline::map::SurfelMap& map,
-                     std::optional<pipeline::map::PoseEstimator>& tracker, long frames, TrajectoryFile& trajectory,
-                     MapFusion& fusion) {
+Status fuseMapFrames(hal::Camera& camera, hal::PoseSource& poses, pipeline::map::Mapper& mapper, long frames,
+                     TrajectoryFile& trajectory, MapFusion& fusion) {
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
   hal::RgbdFrame frame(k.width, k.height);
   for (long i = 0; i < frames; ++i) {
@@ -227,10 +206,10 @@ Status fuseMapFrames(hal::Camera& camera, hal::PoseSource& poses, pipeline::map:
       return Status(s.code(), "camera " + camera.info().name + ": " + s.message());
     }
     ++fusion.read;
-    const bool fused = poseAndFuse(frame, poses, map, tracker, fusion);
+    const bool fused = poseAndFuse(frame, poses, mapper, fusion);
     // Tracked: every frame's pose, a lost one's too (the last good: its error
     // counts, as a tracker's failures should); otherwise the fused frames'.
-    if (trajectory.isOpen() && (fused || tracker)) {
+    if (trajectory.isOpen() && (fused || mapper.poseEstimator())) {
       if (Status s = trajectory.write(frame); !s) return s;
     }
   }
@@ -238,13 +217,12 @@ Status fuseMapFrames(hal::Camera& camera, hal::PoseSource& poses, pipeline::map:
 }
 
 // What the run made: the camera, the map's counters, the tracking, the files written.
-void printMapReport(const Args& args, const hal::Camera& camera, const pipeline::map::SurfelMap& map,
-                    const std::optional<pipeline::map::PoseEstimator>& tracker, const MapFusion& fusion,
-                    const TrajectoryFile& trajectory) {
+void printMapReport(const Args& args, const hal::Camera& camera, const pipeline::map::Mapper& mapper,
+                    const MapFusion& fusion, const TrajectoryFile& trajectory) {
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
   std::printf("camera: %s (%dx%d)\n", camera.info().name.c_str(), k.width, k.height);
-  printSummary(map, fusion.fuse_ms, fusion.read);
-  if (tracker) printTracking(tracker->tracker(), fusion.track_ms);
+  printSummary(mapper.map(), fusion.fuse_ms, fusion.read);
+  if (const pipeline::map::PoseEstimator* poser = mapper.poseEstimator()) printTracking(poser->tracker(), fusion.track_ms);
   if (const std::string* out_path = args.get("--out")) {
     std::printf("wrote %s surfels to %s\n", args.has("--all-surfels") ? "all" : "the stable", out_path->c_str());
   }
@@ -279,19 +257,19 @@ int mapCommand(int argc, char** argv) {
   }
   hal::Camera& camera = *opened->camera;
   const hal::CameraIntrinsics& k = camera.info().intrinsics;
-  pipeline::map::SurfelMapConfig config = plan->map;
-  config.max_width = k.width;
-  config.max_height = k.height;
-  Result<pipeline::map::SurfelMap> created = pipeline::map::SurfelMap::create(config);
+  pipeline::map::MapperConfig config;
+  config.map = plan->map;
+  config.map.max_width = k.width;
+  config.map.max_height = k.height;
+  config.tracking = plan->tracking;
+  Result<pipeline::map::Mapper> created = pipeline::map::Mapper::create(config);
   if (!created) return mapUsage(created.status());
-  pipeline::map::SurfelMap& map = created.value();
-  Result<std::optional<pipeline::map::PoseEstimator>> tracker = createMapTracker(plan->tracking, k);
-  if (!tracker) return mapUsage(tracker.status());
+  pipeline::map::Mapper& mapper = created.value();
   if (Status s = camera.start(); !s) return mapFailure(s);
 
   // Samples are sized up front: a recording's frame count when it is known.
   MapFusion fusion(static_cast<std::size_t>(std::min<long>(plan->frames, 100000)));
-  const Status fused = fuseMapFrames(camera, *opened->pose_source, map, *tracker, plan->frames, trajectory, fusion);
+  const Status fused = fuseMapFrames(camera, *opened->pose_source, mapper, plan->frames, trajectory, fusion);
   camera.stop();
   if (!fused) return mapFailure(fused);
   if (trajectory.isOpen()) {
@@ -299,10 +277,10 @@ int mapCommand(int argc, char** argv) {
   }
 
   if (const std::string* out_path = args->get("--out")) {
-    if (Status s = io::writeSurfelPly(*out_path, map, !args->has("--all-surfels")); !s) return mapFailure(s);
+    if (Status s = io::writeSurfelPly(*out_path, mapper.map(), !args->has("--all-surfels")); !s) return mapFailure(s);
   }
-  printMapReport(args.value(), camera, map, tracker.value(), fusion, trajectory);
-  return map.counters().frames_fused > 0 ? kExitOk : mapFailure(invalidArgument("no frame was fused (see the refusals above)"));
+  printMapReport(args.value(), camera, mapper, fusion, trajectory);
+  return mapper.map().counters().frames_fused > 0 ? kExitOk : mapFailure(invalidArgument("no frame was fused (see the refusals above)"));
 }
 
 }  // namespace fovea::firmware

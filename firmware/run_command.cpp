@@ -490,8 +490,8 @@ bool Run::capture(std::size_t i, int64_t slot_start_ns, FrameFigures& f) {
 bool Run::backproject(std::size_t i, FrameFigures& f) {
   const auto t0 = std::chrono::steady_clock::now();
   pipeline::BackprojectCounts counts;
-  const bool pose_usable = stage_.trackPose(frame_, pose_fresh_);  // the map's tracker, with --pose track...
-  if (Status s = stage_.backproject(frame_, counts, pose_usable); !s) {
+  // With --pose track... the map's tracker poses the frame first.
+  if (Status s = stage_.backproject(frame_, counts, pose_fresh_); !s) {
     std::fprintf(stderr, "frame %zu: backproject: %s\n", i, s.toString().c_str());
     ++stats_.failed_frames;
     return false;

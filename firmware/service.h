@@ -235,7 +235,7 @@ class Service {
   void allocateFrameSlots(const hal::CameraIntrinsics& k, std::size_t depth);
   void allocateFoveatedSlots(std::size_t points, std::size_t depth);
   Status allocateFoveator(const pipeline::PipelineCapacity& capacity, const hal::CameraIntrinsics& k);
-  void addMapMemory(const FrameFoveator::MapMemory& m);
+  void addMapMemory(const pipeline::map::MapperMemory& m);
   Status allocateStreamer(std::size_t points);
   void allocateSupervisorState();
   Status openTimingLog();
@@ -255,7 +255,7 @@ class Service {
   void countFoveationError(const Status& s, const FoveatedFrame& o);
   // The foveation stage's map figures to the atomics the status line reads.
   void publishMapFigures(const pipeline::map::SurfelMap& map);
-  void publishTracking();  // the tracker's figures of the frame trackPose() just posed
+  void publishTracking();  // the tracker's figures of the frame backproject() just posed
   void sendLoop();
   // The send stage's link work between frames (streaming only): a reloaded
   // budget cap, the link's datagrams, the operator's gaze, the bricks' budget.

@@ -178,9 +178,8 @@ Status Service::foveateFrame(CapturedFrame& f, FoveatedFrame& o) {
   }
   const int64_t t0 = monotonicNs();
   pipeline::BackprojectCounts counts;
-  const bool pose_usable = stage_->trackPose(f.frame, f.pose_fresh);
+  Status s = stage_->backproject(f.frame, counts, f.pose_fresh);  // with tracking, it poses the frame first
   if (tracking_) publishTracking();
-  Status s = stage_->backproject(f.frame, counts, pose_usable);
   o.backproject_ns = monotonicNs() - t0;
   if (const pipeline::map::SurfelMap* map = stage_->map()) publishMapFigures(*map);
   GazePolicy::Decision decision;
@@ -232,9 +231,9 @@ Status Service::planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o) {
       stage_->planBricks(gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate, o.bricks);
   if (s) {
     const MapFrameFigures& figures = stage_->mapFigures();
-    bricks_planned_.fetch_add(figures.bricks_planned, std::memory_order_relaxed);
-    o.bricks_waiting = figures.bricks_waiting;
-    o.fovea_bricks_waiting = figures.fovea_bricks_waiting;
+    bricks_planned_.fetch_add(figures.plan.bricks_planned, std::memory_order_relaxed);
+    o.bricks_waiting = figures.plan.bricks_waiting;
+    o.fovea_bricks_waiting = figures.plan.fovea_bricks_waiting;
   } else {
     stage_->forgetBatch(o.bricks);
   }

@@ -318,7 +318,7 @@ TEST(FrameFoveator, PlanBricksSendsWhatTheOperatorLacksWithinTheBudget) {
   ASSERT_TRUE(stage->planBricks(gaze, kAll, 0.0, batch).isOk());
   const std::size_t bricks = batch.entries().size();
   ASSERT_GT(bricks, 2u);
-  EXPECT_EQ(stage->mapFigures().bricks_waiting, 0u);
+  EXPECT_EQ(stage->mapFigures().plan.bricks_waiting, 0u);
   uint64_t settled = 0;
   for (std::size_t b = 0; b < stage->map()->brickCount(); ++b) settled += stage->map()->brickSettledCount(static_cast<uint16_t>(b));
   for (const pipeline::map::BrickBatchEntry& e : batch.entries()) EXPECT_EQ(e.version, 1u);
@@ -343,17 +343,17 @@ TEST(FrameFoveator, PlanBricksSendsWhatTheOperatorLacksWithinTheBudget) {
   ASSERT_TRUE(stage->planBricks(gaze, 1.0, 0.0, batch).isOk());
   ASSERT_EQ(batch.entries().size(), 1u);
   EXPECT_TRUE(batch.entries()[0].fovea);
-  EXPECT_EQ(stage->mapFigures().bricks_waiting, bricks - 1);
+  EXPECT_EQ(stage->mapFigures().plan.bricks_waiting, bricks - 1);
   // Live points costing more than the budget: only the fovea's bricks go before them.
   stage->forgetAllBricks();
   ASSERT_TRUE(stage->planBricks(gaze, 1e6, 2e6, batch).isOk());
   for (const pipeline::map::BrickBatchEntry& e : batch.entries()) EXPECT_TRUE(e.fovea);
-  EXPECT_GT(stage->mapFigures().bricks_waiting, 0u);
+  EXPECT_GT(stage->mapFigures().plan.bricks_waiting, 0u);
   // No budget: nothing.
   stage->forgetAllBricks();
   ASSERT_TRUE(stage->planBricks(gaze, 0.0, 0.0, batch).isOk());
   EXPECT_EQ(batch.entries().size(), 0u);
-  EXPECT_EQ(stage->mapFigures().bricks_waiting, bricks);
+  EXPECT_EQ(stage->mapFigures().plan.bricks_waiting, bricks);
   // A bad gaze is an error, and nothing is taken as sent.
   pipeline::Gaze bad = gaze;
   bad.direction = Eigen::Vector3d::Zero();

@@ -15,6 +15,8 @@
 #include <gtest/gtest.h>
 
 #include "hal/camera.h"
+#include "pipeline/map/mapper.h"
+#include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/map/tracker.h"
 #include "pipeline/map/tracker_kernels.h"
@@ -280,6 +282,51 @@ INSTANTIATE_TEST_SUITE_P(Kernels, TrackerKernels, ::testing::Values(KernelSet::k
 // The reference's reduction against a long-double sum of the same per-pixel
 // terms (trackPixelRef), and a naive float running sum against the same: the
 // reference keeps ~1e-9 relative where float does not.
+// The mapper's one call a frame is the sequence its callers wrote by hand
+// before (pose by the estimator, fuse with that pose, give the tracker its
+// model): the same poses and the same map, frame by frame. Without an output
+// it plans no bricks and holds no eye view or brick state.
+TEST(Mapper, OneCallAFrameIsThePoseFuseModelSequence) {
+  const std::vector<hal::RgbdFrame> frames =
+      mockFrames("mock:living-room,size=320x240,path=orbit", kW, kH, test::repetitions(12, 6));
+  ASSERT_GE(frames.size(), 3u);
+  const TrackerConfig tracker = trackerConfig(kW, kH, KernelSet::kSimd);
+  auto poser = PoseEstimator::create(PoseTracking::kAlone, tracker).value();
+  auto map = SurfelMap::create(mapConfig(kW, kH)).value();
+  MapperConfig config;
+  config.map = mapConfig(kW, kH);
+  config.tracking = PoseTracking::kAlone;
+  config.tracker = tracker;
+  Mapper mapper = Mapper::create(config).value();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    SCOPED_TRACE(testing::Message() << "frame " << i);
+    hal::RgbdFrame by_hand = frames[i], by_mapper = frames[i];
+    TrackStats track;
+    const bool usable = poser.poseFrame(by_hand, true, track);
+    FuseStats fuse;
+    const bool fused = map.fuse(by_hand, fuse, usable) == FuseOutcome::kFused;
+    if (fused) poser.fused(by_hand, map);
+    MapperFrame figures;
+    EXPECT_EQ(mapper.addFrame(by_mapper, true, figures), fused);
+    EXPECT_EQ(figures.pose_usable, usable);
+    EXPECT_EQ(figures.track.outcome, track.outcome);
+    EXPECT_EQ(by_mapper.T_world_cam.t_world_cam, by_hand.T_world_cam.t_world_cam);
+    EXPECT_EQ(by_mapper.T_world_cam.R_world_cam, by_hand.T_world_cam.R_world_cam);
+    EXPECT_EQ(mapper.map().size(), map.size());
+    EXPECT_EQ(figures.fuse.merged, fuse.merged);
+  }
+  EXPECT_GT(mapper.map().size(), 0u);
+  BrickBatch batch(64, 4);
+  MapperPlan plan;
+  EXPECT_FALSE(mapper.planBricks(Gaze{}, 1e6, 0.0, Eigen::Vector3d::Zero(), batch, plan).isOk());
+  const MapperMemory m = mapper.memory();
+  EXPECT_EQ(m.map.total(), mapper.map().memoryBytes());
+  EXPECT_GT(m.tracker, 0u);
+  EXPECT_EQ(m.eye + m.delta, 0u);
+  config.fuse_budget_ms = -1.0;
+  EXPECT_FALSE(Mapper::create(config).isOk());
+}
+
 TEST(TrackerReduction, ReferenceIsStableWhereAFloatSumIsNot) {
   constexpr int w = 640, h = 480;
   const std::size_t n = static_cast<std::size_t>(w) * h;

@@ -1,0 +1,136 @@
+// The map's work in one object (issue 41, part 6; docs/map.md, "The mapper"):
+// the surfel map, the camera's tracking against it, fusion's time budget and
+// what the operator gets of it. One call a frame (addFrame: pose, then fuse)
+// and, for an operator who keeps the map, one plan a gaze (planBricks). The
+// service's foveation stage and `fovead run` (firmware/frame_foveator.h),
+// `fovead map` and the tracking bench each drive one.
+//
+// What the operator gets (MapperConfig::output):
+//  - kNone: nothing (`fovead map`, the benches: the map is the product);
+//  - kEyeView: the map's settled surfels the eye can see, appended to the
+//    frame's cloud every frame (pipeline/map/eye_view.h);
+//  - kBricks: the operator keeps the map; planBricks() lists the bricks its eye
+//    needs and lacks (pipeline/map/map_delta.h) and samples them into a batch
+//    (pipeline/map/brick_batch.h).
+//
+// Memory: everything is sized by create() from the configuration; addFrame(),
+// appendVisible() and planBricks() allocate nothing.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "core/result.h"
+#include "hal/frame.h"
+#include "pipeline/partition.h"
+#include "pipeline/map/brick_batch.h"
+#include "pipeline/map/eye_view.h"
+#include "pipeline/map/fusion_budget.h"
+#include "pipeline/map/map_delta.h"
+#include "pipeline/map/pose_tracking.h"
+#include "pipeline/map/surfel_map.h"
+#include "pipeline/point_cloud.h"
+
+namespace fovea::pipeline::map {
+
+enum class MapOutput : uint8_t { kNone, kEyeView, kBricks };
+
+struct MapperConfig {
+  // Its max_width x max_height size the tracker too.
+  SurfelMapConfig map;
+  PoseTracking tracking = PoseTracking::kOff;
+  TrackerConfig tracker;
+  // Fusion's average time a frame at most (fusion_budget.h); 0: every frame.
+  double fuse_budget_ms = 0.0;
+  MapOutput output = MapOutput::kNone;
+  EyeViewConfig eye;               // kEyeView
+  MapDeltaConfig delta;            // kBricks
+  std::size_t max_brick_surfels = 1u << 16;  // kBricks: a brick's settled surfels sampled at most
+};
+
+// What addFrame() did with a frame.
+struct MapperFrame {
+  TrackStats track;             // with tracking
+  FuseStats fuse;               // unless fusion_skipped
+  bool pose_usable = false;     // the pose source's or the tracker's pose may be fused
+  bool fusion_skipped = false;  // the time budget left the frame unfused
+  bool fused() const { return !fusion_skipped && fuse.outcome == FuseOutcome::kFused; }
+};
+
+// What planBricks() put in the batch.
+struct MapperPlan {
+  MapDeltaStats delta;
+  uint32_t bricks_planned = 0;        // into the batch
+  uint32_t brick_points = 0;
+  uint32_t bricks_waiting = 0;        // due but not in the batch (the budget): they wait
+  uint32_t fovea_bricks_waiting = 0;  // ... of them the fovea's
+};
+
+// What create() allocated, by part.
+struct MapperMemory {
+  SurfelMapMemory map;
+  std::size_t eye = 0;      // kEyeView: the eye's depth buffer
+  std::size_t delta = 0;    // kBricks: what the operator holds, the plan, the brick sampler
+  std::size_t tracker = 0;  // with tracking: the pyramids
+  std::size_t total() const { return map.total() + eye + delta + tracker; }
+};
+
+// Bytes a point is estimated to take on the wire, chunk headers included
+// (docs/protocol-chunks.md: about 4), for planning a frame's bricks within
+// the budget before they are encoded; the pacing holds the real budget.
+inline constexpr double kWireBytesPerPointEstimate = 4.5;
+
+class Mapper {
+ public:
+  static Result<Mapper> create(const MapperConfig& config);
+
+  // Poses `frame` (frame.T_world_cam: with tracking, the tracker's pose, or
+  // when it is lost the outside or last good pose, to be shown by) and fuses
+  // it when the pose may be fused and the time budget allows. outside_pose_valid:
+  // the pose source had a pose for the frame's stamp. Returns out.fused().
+  bool addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFrame& out);
+
+  // The last fused frame's points no settled surfel explains (SurfelMap::appendUnexplained).
+  std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
+    return map_->appendUnexplained(frame, out);
+  }
+  // kEyeView: appends the settled surfels an eye at `eye_m` sees (EyeView::appendVisible).
+  void appendVisible(const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats);
+
+  // kBricks. Fills `batch` (cleared first, origin `origin_m`) with the bricks
+  // due for the eye at `gaze`, in the plan's order, while the estimated bytes
+  // fit `budget_bytes`; `live_bytes` (the frame's live points) are charged after
+  // the fovea's bricks, so those go first. A brick put in the batch is taken as
+  // sent: one that never reaches the operator must be forgotten.
+  Status planBricks(const Gaze& gaze, double budget_bytes, double live_bytes, const Eigen::Vector3d& origin_m,
+                    BrickBatch& batch, MapperPlan& plan);
+  // The operator does not hold `brick` (lost, evicted), the batch's bricks
+  // (never sent), or anything (a new session): due again.
+  void forgetBrick(uint16_t brick);
+  void forgetBatch(const BrickBatch& batch);
+  void forgetAll();
+
+  MapOutput output() const { return output_; }
+  const SurfelMap& map() const { return *map_; }
+  const PoseEstimator* poseEstimator() const { return poser_.get(); }
+  const MapDelta* delta() const { return delta_.get(); }
+  const BrickSampler* sampler() const { return sampler_.get(); }
+  uint64_t fusionSkipped() const { return budget_.skipped(); }
+  bool hasFusionBudget() const { return budget_.budgetNs() > 0; }
+  MapperMemory memory() const;
+
+ private:
+  Mapper() = default;
+
+  MapOutput output_ = MapOutput::kNone;
+  std::unique_ptr<SurfelMap> map_;
+  std::unique_ptr<PoseEstimator> poser_;    // with tracking
+  std::unique_ptr<EyeView> eye_;            // kEyeView
+  std::unique_ptr<MapDelta> delta_;         // kBricks
+  std::unique_ptr<BrickSampler> sampler_;   // kBricks
+  FusionBudget budget_;
+};
+
+}  // namespace fovea::pipeline::map
