@@ -38,6 +38,7 @@
 
 #include <Eigen/Core>
 
+#include "core/depth_noise.h"
 #include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
@@ -48,10 +49,8 @@
 
 namespace fovea::pipeline::map {
 
-// The depth sensor's noise (standard deviation, metres) at depth z: Nguyen,
-// Izadi and Lovell 2012, measured on a Kinect; structured-light and ToF
-// cameras of that class are within a factor of two.
-inline float depthSigma(float z) { return 0.0012f + 0.0019f * (z - 0.4f) * (z - 0.4f); }
+// The depth sensor's noise at depth z (core/depth_noise.h).
+using fovea::depthSigma;
 
 struct SurfelMapConfig {
   std::size_t max_surfels = std::size_t{1} << 20;

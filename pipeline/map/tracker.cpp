@@ -12,6 +12,7 @@
 #include <Eigen/SVD>
 
 #include "core/clock.h"
+#include "core/depth_noise.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/map/surfel_map.h"
@@ -27,8 +28,8 @@ constexpr double kDegToRad = kPi / 180.0;
 constexpr float kStepShare = 0.05f;
 // Fewer valid pixels than this at the finest level: no valid depth.
 constexpr uint32_t kMinValidPixels = 64;
-// depthSigma(1 m) (surfel_map.h): the ICP weight's unit.
-constexpr float kSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;
+// depthSigma(1 m) (core/depth_noise.h): the ICP weight's unit.
+constexpr float kSigmaAt1m = depthSigma(1.0f);
 
 // exp of a twist [v, w] (left perturbation): a rotation and a translation.
 void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
@@ -190,8 +191,7 @@ TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, con
   out.icp = true;
   // Weighted by the sensor's noise at the depth against its noise at 1 m
   // (depthSigma(), surfel_map.h): far, coarsely quantised depth counts less.
-  const float wz = qz - 0.4f;
-  const float weight = p.noise_weighting ? kSigmaAt1m / (0.0012f + 0.0019f * wz * wz) : 1.0f;
+  const float weight = p.noise_weighting ? kSigmaAt1m / depthSigma(qz) : 1.0f;
   const float wnx = weight * nx, wny = weight * ny, wnz = weight * nz;
   out.r_icp = wnx * dx + wny * dy + wnz * dz;
   out.j_icp[0] = wnx, out.j_icp[1] = wny, out.j_icp[2] = wnz;

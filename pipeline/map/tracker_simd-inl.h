@@ -25,6 +25,7 @@
 #include <cstring>
 
 #include "hwy/highway.h"
+#include "core/depth_noise.h"
 #include "pipeline/map/tracker_kernels.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -33,7 +34,7 @@ namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
 inline constexpr std::size_t kTrackMaxLanes = HWY_MAX_BYTES / sizeof(float);
-inline constexpr float kTrackSigmaAt1m = 0.0012f + 0.0019f * 0.6f * 0.6f;  // depthSigma(1 m), as the reference's
+inline constexpr float kTrackSigmaAt1m = depthSigma(1.0f);  // as the reference's
 
 // The 29 running sums of a row, a vector's lanes each, in memory (SVE's
 // vectors are sizeless: no arrays or members of them): J^T J's upper triangle
@@ -132,9 +133,10 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   inliers += static_cast<uint32_t>(hn::CountTrue(df, icp));
   V weight = hn::Set(df, 1.0f);
   if (p.noise_weighting) {
-    const V wz = hn::Sub(qz, hn::Set(df, 0.4f));
+    // depthSigma(qz) (core/depth_noise.h), in its order of operations.
+    const V wz = hn::Sub(qz, hn::Set(df, kDepthNoiseOffsetF));
     weight = hn::Div(hn::Set(df, kTrackSigmaAt1m),
-                     hn::Add(hn::Set(df, 0.0012f), hn::Mul(hn::Set(df, 0.0019f), hn::Mul(wz, wz))));
+                     hn::Add(hn::Set(df, kDepthNoiseBaseF), hn::Mul(hn::Set(df, kDepthNoiseQuadraticF), hn::Mul(wz, wz))));
   }
   const V wnx = hn::Mul(weight, nx), wny = hn::Mul(weight, ny), wnz = hn::Mul(weight, nz);
   // Every term of a lane that does not associate: zero (selected, not multiplied

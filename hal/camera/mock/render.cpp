@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "hal/camera/mock/hash.h"
+#include "core/depth_noise.h"
 #include "hal/camera/mock/sensor_model.h"
 
 namespace fovea::hal::mock {
@@ -178,7 +179,7 @@ void MockCamera::modelRowNoise(int y, std::size_t hit_count, CleanImage& out) {
     const double theta_rad = acosUnit(cos_incidence);
     const double theta_capped = std::min(theta_rad, kSigmaAngleCapRad);
     const double angle_ratio = theta_capped / (std::numbers::pi / 2.0 - theta_capped);
-    const double sigma_m = kSigmaBaseM + kSigmaQuadraticPerM * (z_m - 0.4) * (z_m - 0.4) +
+    const double sigma_m = depthSigma(z_m) +
                            kSigmaAngleM / std::sqrt(z_m) * angle_ratio * angle_ratio;
     const double theta_deg = theta_rad * (180.0 / std::numbers::pi);
     const double p_grazing = std::clamp(

@@ -13,9 +13,8 @@ inline constexpr double kFocalAt640 = 525.0;
 inline constexpr double kDepthScaleM = 0.001;
 inline constexpr double kMinRangeM = 0.4;
 inline constexpr double kMaxRangeM = 8.0;
-// Nguyen, Izadi, Lovell 2012, axial noise.
-inline constexpr double kSigmaBaseM = 0.0012;
-inline constexpr double kSigmaQuadraticPerM = 0.0019;
+// Nguyen, Izadi, Lovell 2012, axial noise: depthSigma() (core/depth_noise.h),
+// plus a term that grows with the angle of incidence.
 inline constexpr double kSigmaAngleM = 0.0001;
 inline constexpr double kSigmaAngleCapRad = 80.0 * std::numbers::pi / 180.0;
 // Dropout: incidence ramp, random speckle, discontinuity bands.
