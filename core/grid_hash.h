@@ -1,6 +1,6 @@
 // The hash of an integer grid cell (x, y, z) for open-addressing tables: three
-// large primes, XORed (Teschner et al. 2003), as voxel-hashing maps do. Used
-// by the map's brick table and the operator's brick cache.
+// large primes, XORed (Teschner et al. 2003), as voxel-hashing maps do. GridTable's
+// (core/grid_table.h).
 #pragma once
 
 #include <cstddef>

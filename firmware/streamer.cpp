@@ -7,7 +7,7 @@
 #include <Eigen/Geometry>
 
 #include "core/clock.h"
-#include "core/grid_hash.h"
+#include "core/grid_table.h"
 
 namespace fovea::firmware {
 
@@ -63,9 +63,7 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
     streamer->brick_sender_.emplace(std::move(sender.value()));
     streamer->brick_cloud_ = pipeline::FoveatedCloud(config.max_brick_points);
     streamer->slot_key_.resize(config.brick_sender.max_bricks);
-    std::size_t cells = 1;
-    while (cells < 2 * config.brick_sender.max_bricks) cells *= 2;
-    streamer->slot_index_.assign(cells, 0);
+    streamer->slot_index_ = GridTable(config.brick_sender.max_bricks);
   }
   return streamer;
 }
@@ -171,23 +169,16 @@ uint64_t Streamer::sessionBudgetBytesPerS() const {
 }
 
 int Streamer::brickSlot(const net::BrickKey& key) const {
-  const std::size_t mask = slot_index_.size() - 1;
-  for (std::size_t i = gridHash(key.x, key.y, key.z) & mask;; i = (i + 1) & mask) {
-    const int32_t e = slot_index_[i];
-    if (e == 0) return -1;
-    if (slot_key_[static_cast<std::size_t>(e - 1)] == key) return e - 1;
-  }
+  return slot_index_.find(key, [this](uint32_t slot) -> const net::BrickKey& { return slot_key_[slot]; });
 }
 
 void Streamer::rememberBrickSlot(uint16_t slot, const net::BrickKey& key) {
   if (brickSlot(key) == slot) return;
   // The map never gives a slot another key (its bricks are never freed), so
-  // the index holds at most max_bricks entries in 2 * max_bricks cells.
+  // the index holds at most max_bricks entries.
   slot_key_[slot] = key;
-  const std::size_t mask = slot_index_.size() - 1;
-  std::size_t i = gridHash(key.x, key.y, key.z) & mask;
-  while (slot_index_[i] != 0 && slot_index_[i] != slot + 1) i = (i + 1) & mask;
-  slot_index_[i] = slot + 1;
+  const std::size_t cell = slot_index_.probe(key, [this](uint32_t s) -> const net::BrickKey& { return slot_key_[s]; });
+  slot_index_.place(cell, slot);
 }
 
 void Streamer::takeBrickAcks() {

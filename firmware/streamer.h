@@ -13,6 +13,7 @@
 #include <optional>
 #include <string>
 
+#include "core/grid_table.h"
 #include "core/result.h"
 #include "firmware/brick_feedback.h"
 #include "firmware/gaze_policy.h"
@@ -201,7 +202,7 @@ class Streamer {
   std::optional<net::ChunkEncoder> brick_encoder_;  // made with encoder_
   pipeline::FoveatedCloud brick_cloud_;             // one brick's points, for its encoder
   std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
-  std::vector<int32_t> slot_index_;                 // open addressing over keys: slot + 1, 0 = empty
+  GridTable slot_index_;                            // key -> the map slot it was sent from
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
   BrickFeedback* feedback_ = nullptr;
   // sendFrame's steps. The frame's chunks per region, planned and cut (its summary's).

@@ -5,15 +5,7 @@
 #include <cstring>
 #include <limits>
 
-#include "core/grid_hash.h"
-
 namespace fovea::net {
-
-namespace {
-
-std::size_t keyHash(const BrickKey& k) { return gridHash(k.x, k.y, k.z); }
-
-}  // namespace
 
 Status BrickCacheConfig::validate() const {
   auto bad = [](const char* what) { return Status(ErrorCode::kInvalidArgument, std::string("brick_cache.") + what); };
@@ -38,7 +30,7 @@ BrickCache::BrickCache(const BrickCacheConfig& config) : config_(config), block_
   free_entries_.resize(config.max_bricks);
   for (std::size_t i = 0; i < config.max_bricks; ++i) free_entries_[i] = static_cast<uint32_t>(config.max_bricks - 1 - i);
   free_entry_count_ = config.max_bricks;
-  index_.assign(std::bit_ceil(2 * config.max_bricks), 0);
+  index_ = GridTable(config.max_bricks);
   part_bits_.assign(config.max_bricks * part_bytes_, 0);
   const std::size_t blocks = config.max_points / config.block_points;
   const std::size_t points = blocks * config.block_points;
@@ -56,27 +48,21 @@ BrickCache::BrickCache(const BrickCacheConfig& config) : config_(config), block_
 
 std::size_t BrickCache::memoryBytes() const {
   return entries_.capacity() * sizeof(Entry) + free_entries_.capacity() * sizeof(uint32_t) +
-         index_.capacity() * sizeof(int32_t) + part_bits_.capacity() +
+         index_.memoryBytes() + part_bits_.capacity() +
          (x_.capacity() + y_.capacity() + z_.capacity()) * sizeof(float) + rgb_.capacity() * sizeof(uint32_t) +
          (next_block_.capacity() + free_blocks_.capacity()) * sizeof(uint32_t) +
          acks_.capacity() * sizeof(BrickPartId) + evicted_.capacity() * sizeof(BrickKey);
 }
 
 std::size_t BrickCache::probe(const BrickKey& key) const {
-  const std::size_t mask = index_.size() - 1;
-  std::size_t i = keyHash(key) & mask;
-  while (index_[i] != 0 && !(entries_[static_cast<std::size_t>(index_[i] - 1)].key == key)) i = (i + 1) & mask;
-  return i;
+  return index_.probe(key, [this](uint32_t slot) -> const BrickKey& { return entries_[slot].key; });
 }
 
-int BrickCache::find(const BrickKey& key) const {
-  const int32_t cell = index_[probe(key)];
-  return cell == 0 ? -1 : cell - 1;
-}
+int BrickCache::find(const BrickKey& key) const { return index_.slotAt(probe(key)); }
 
 int BrickCache::findOrInsert(const BrickKey& key, int64_t now_ns, std::size_t keep_slot) {
   std::size_t cell = probe(key);
-  if (index_[cell] != 0) return index_[cell] - 1;
+  if (const int32_t slot = index_.slotAt(cell); slot >= 0) return slot;
   if (free_entry_count_ == 0) {
     if (!evictOne(keep_slot)) return -1;
     cell = probe(key);  // the eviction moved cells
@@ -87,7 +73,7 @@ int BrickCache::findOrInsert(const BrickKey& key, int64_t now_ns, std::size_t ke
   e.used = true;
   e.key = key;
   e.needed_ns = now_ns;
-  index_[cell] = static_cast<int32_t>(slot + 1);
+  index_.place(cell, slot);
   ++used_entries_;
   return static_cast<int>(slot);
 }
@@ -107,20 +93,7 @@ void BrickCache::erase(std::size_t slot) {
   Entry& e = entries_[slot];
   freeChain(e.current);
   freeChain(e.pending);
-  // Backward-shift deletion: the cells after it that would probe through it move up.
-  const std::size_t mask = index_.size() - 1;
-  std::size_t hole = probe(e.key);
-  index_[hole] = 0;
-  for (std::size_t j = (hole + 1) & mask; index_[j] != 0; j = (j + 1) & mask) {
-    const std::size_t home = keyHash(entries_[static_cast<std::size_t>(index_[j] - 1)].key) & mask;
-    // The entry at j may fill the hole when its home is not in (hole, j] (cyclically).
-    const bool home_between = hole <= j ? (home > hole && home <= j) : (home > hole || home <= j);
-    if (!home_between) {
-      index_[hole] = index_[j];
-      index_[j] = 0;
-      hole = j;
-    }
-  }
+  index_.erase(e.key, [this](uint32_t s) -> const BrickKey& { return entries_[s].key; });
   e.used = false;
   e.has_current = e.has_pending = false;
   free_entries_[free_entry_count_++] = static_cast<uint32_t>(slot);

@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "core/grid_table.h"
 #include "core/result.h"
 #include "net/codec.h"
 #include "net/messages.h"
@@ -153,7 +154,7 @@ class BrickCache {
   std::vector<Entry> entries_;            // fixed slots; free ones have used == false
   std::vector<uint32_t> free_entries_;
   std::size_t free_entry_count_ = 0;
-  std::vector<int32_t> index_;            // open addressing over entries: slot + 1, 0 = empty
+  GridTable index_;                       // key -> entry
   std::vector<uint8_t> part_bits_;        // per entry: max_parts bits of the pending version
   std::vector<float> x_, y_, z_;
   std::vector<uint32_t> rgb_;

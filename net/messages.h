@@ -13,6 +13,7 @@
 
 #include <flatbuffers/flatbuffers.h>
 
+#include "core/grid_table.h"
 #include "net/secure_channel.h"
 
 namespace fovea::net {
@@ -111,10 +112,7 @@ struct StatusReport {
 };
 
 // A map brick's grid key (pipeline/map/surfel_map.h: origin = key * brick size).
-struct BrickKey {
-  int32_t x = 0, y = 0, z = 0;
-  bool operator==(const BrickKey&) const = default;
-};
+using BrickKey = GridKey;
 
 // One part of a brick version (net/brick_cache.h, net/brick_sender.h).
 struct BrickPartId {

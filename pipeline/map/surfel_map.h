@@ -39,6 +39,7 @@
 #include <Eigen/Core>
 
 #include "core/depth_noise.h"
+#include "core/grid_table.h"
 #include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
@@ -170,10 +171,7 @@ class SurfelMap {
   Eigen::Vector3d brickOrigin(uint16_t brick) const;
 
   // A brick's place on the grid: its origin is key * brick_size_m.
-  struct BrickKey {
-    int32_t x = 0, y = 0, z = 0;
-    bool operator==(const BrickKey&) const = default;
-  };
+  using BrickKey = GridKey;
   const BrickKey& brickKey(uint16_t brick) const { return brick_keys_[brick]; }
 
   // Per brick, for the stream of changes (issue 26): the live surfels as a
@@ -219,10 +217,26 @@ class SurfelMap {
   }
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
-  // renderIndexMap()'s splatting when config_.kernels is not the reference (the same bits).
+  // renderIndexMap()'s steps: the bricks' camera-frame origins and visibility,
+  // then the splatting (the reference, or splatFast()).
+  void cullBricks(const hal::RgbdFrame& frame);
+  void splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
+  // renderIndexMap()'s splatting when config_.kernels is not the reference
+  // (the same bits), and its steps (surfel_map.cpp).
   void splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
+  struct SplatView;
+  struct SplatBatch;
+  SplatView splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f);
+  void planSplats(const SplatView& view, std::size_t b0, std::size_t count, SplatBatch& batch) const;
+  void applySplats(const SplatView& view, std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats);
+  void splatFootprint(const SplatView& view, const SplatBatch& batch, std::size_t j, uint32_t slot);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
   std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
+  // associate()'s normal test (its tolerance by depth, for this focal length) and merge.
+  void updateNormalTolerance(float f_px);
+  float normalCosTolerance(float z) const;
+  void mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
+                 const Eigen::Vector3f& n_surfel, float weight, const uint8_t* rgb);
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
                  const uint8_t* rgb);
@@ -246,7 +260,7 @@ class SurfelMap {
   std::size_t live_ = 0;
 
   std::vector<BrickKey> brick_keys_;      // by slot
-  std::vector<int32_t> brick_table_;      // open addressing: slot + 1, 0 = empty
+  GridTable brick_table_;                 // key -> brick
   std::size_t brick_count_ = 0;
   std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
   std::vector<uint8_t> brick_visible_;
