@@ -85,8 +85,7 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
   const int64_t start_ns = monotonicNs();
   stats = {};
   std::fill(nearest_.begin(), nearest_.end(), std::numeric_limits<float>::infinity());
-  const std::size_t frame_points = cloud.size();
-  stats.frame_points = static_cast<uint32_t>(frame_points);
+  stats.frame_points = static_cast<uint32_t>(cloud.size());
   // Everything relative to the cloud's origin in float: a map spans metres to
   // kilometres around it, and the differences below are taken in double first.
   const Eigen::Vector3f eye = (eye_m - cloud.origin_m).cast<float>();
@@ -94,13 +93,21 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
   for (std::size_t b = 0; b < bricks; ++b) {
     brick_rel_[b] = (map.brickOrigin(static_cast<uint16_t>(b)) - eye_m).cast<float>();
   }
-  const float half = 0.5f * static_cast<float>(face_cells_);
+  // Pass one: the nearest distance of every direction, from the frame's points
+  // and the map's settled surfels; pass two: the surfels not behind it.
+  splatFramePoints(cloud, eye);
+  splatSurfels(map, bricks, stats);
+  appendUnhidden(map, bricks, eye, cloud, stats);
+  stats.ns = monotonicNs() - start_ns;
+}
 
-  // Pass one: the frame's points, each in its cell.
+// The frame's points already in the cloud, each in its cell (a moving object
+// hides the wall behind it).
+void EyeView::splatFramePoints(const PointCloud& cloud, const Eigen::Vector3f& eye) {
   const float* px = cloud.x();
   const float* py = cloud.y();
   const float* pz = cloud.z();
-  for (std::size_t i = 0; i < frame_points; ++i) {
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
     const Eigen::Vector3f d(px[i] - eye.x(), py[i] - eye.y(), pz[i] - eye.z());
     const float dist = d.norm();
     if (!(dist >= kMinEyeDistanceM) || !std::isfinite(dist)) continue;
@@ -108,9 +115,13 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     float& held = nearest_[indexOf(c, c.u, c.v)];
     held = std::min(held, dist);
   }
-  // ... and the map's settled surfels over their footprints (on their own face:
-  // a footprint that crosses a cube edge leaves the other face's cells as they
-  // were, which can only show more, never hide).
+}
+
+// The map's settled surfels over their footprints (on their own face: a
+// footprint that crosses a cube edge leaves the other face's cells as they
+// were, which can only show more, never hide).
+void EyeView::splatSurfels(const SurfelMap& map, std::size_t bricks, EyeViewStats& stats) {
+  const float half = 0.5f * static_cast<float>(face_cells_);
   const std::size_t slots = map.slotCount();
   for (std::size_t slot = 0; slot < slots; ++slot) {
     if (!map.live(slot)) continue;
@@ -134,25 +145,34 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     // so a radius under one cell means surfels at most 0.71 cells apart: every
     // cell of the surface then holds a surfel of its own (a disc of radius 0.5,
     // the lattice's covering radius, fits in a cell). Most surfels take this path.
-    if (radius < 1.0f) continue;
-    // Only the cells whose centre (u + 0.5) can lie within the radius.
-    const int u0 = std::max(0, -floorCell(radius + 0.5f - c.fu));
-    const int u1 = std::min(face_cells_ - 1, floorCell(c.fu + radius - 0.5f));
-    const int v0 = std::max(0, -floorCell(radius + 0.5f - c.fv));
-    const int v1 = std::min(face_cells_ - 1, floorCell(c.fv + radius - 0.5f));
-    for (int v = v0; v <= v1; ++v) {
-      const float dv = static_cast<float>(v) + 0.5f - c.fv;
-      for (int u = u0; u <= u1; ++u) {
-        const float du = static_cast<float>(u) + 0.5f - c.fu;
-        if (du * du + dv * dv > radius * radius) continue;
-        float& held = nearest_[indexOf(c, u, v)];
-        held = std::min(held, dist);
-      }
+    if (radius >= 1.0f) splatDisc(c, radius, dist);
+  }
+}
+
+// The cells of c's face whose centre lies within `radius` cells of the
+// surfel's position take `dist` where it is nearer.
+void EyeView::splatDisc(const Cell& c, float radius, float dist) {
+  // Only the cells whose centre (u + 0.5) can lie within the radius.
+  const int u0 = std::max(0, -floorCell(radius + 0.5f - c.fu));
+  const int u1 = std::min(face_cells_ - 1, floorCell(c.fu + radius - 0.5f));
+  const int v0 = std::max(0, -floorCell(radius + 0.5f - c.fv));
+  const int v1 = std::min(face_cells_ - 1, floorCell(c.fv + radius - 0.5f));
+  for (int v = v0; v <= v1; ++v) {
+    const float dv = static_cast<float>(v) + 0.5f - c.fv;
+    for (int u = u0; u <= u1; ++u) {
+      const float du = static_cast<float>(u) + 0.5f - c.fu;
+      if (du * du + dv * dv > radius * radius) continue;
+      float& held = nearest_[indexOf(c, u, v)];
+      held = std::min(held, dist);
     }
   }
+}
 
-  // Pass two: the surfels not behind their cell's nearest surface.
+// Pass two: the settled surfels not behind their cell's nearest surface, into the cloud.
+void EyeView::appendUnhidden(const SurfelMap& map, std::size_t bricks, const Eigen::Vector3f& eye, PointCloud& cloud,
+                             EyeViewStats& stats) const {
   const auto margin = static_cast<float>(config_.occlusion_margin);
+  const std::size_t slots = map.slotCount();
   for (std::size_t slot = 0; slot < slots; ++slot) {
     if (!map.live(slot)) continue;
     const Surfel& s = map.surfel(slot);
@@ -173,7 +193,6 @@ void EyeView::appendVisible(const SurfelMap& map, const Eigen::Vector3d& eye_m, 
     }
     ++stats.appended;
   }
-  stats.ns = monotonicNs() - start_ns;
 }
 
 }  // namespace fovea::pipeline::map

@@ -79,6 +79,12 @@ class EyeView {
     float axis = 0.0f;           // |d| along the face's axis
   };
   Cell cellOf(const Eigen::Vector3f& d) const;
+  // appendVisible()'s steps.
+  void splatFramePoints(const PointCloud& cloud, const Eigen::Vector3f& eye);
+  void splatSurfels(const SurfelMap& map, std::size_t bricks, EyeViewStats& stats);
+  void splatDisc(const Cell& c, float radius, float dist);
+  void appendUnhidden(const SurfelMap& map, std::size_t bricks, const Eigen::Vector3f& eye, PointCloud& cloud,
+                      EyeViewStats& stats) const;
   std::size_t indexOf(const Cell& c, int u, int v) const {
     return (static_cast<std::size_t>(c.face) * face_cells_ + static_cast<std::size_t>(v)) * face_cells_ +
            static_cast<std::size_t>(u);

@@ -568,27 +568,99 @@ LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, con
   return LostReason::kNone;
 }
 
-TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose,
-                                        TrackStats& stats) {
-  const int64_t t_start = monotonicNs();
-  stats = TrackStats{};
-  ++counters_.frames;
-  const auto lose = [&](LostReason reason) {
-    stats.outcome = TrackOutcome::kLost;
-    stats.lost_reason = reason;
-    pose = prior != nullptr ? *prior : last_good_;
-    if (have_model_) lost_ = true;
-    ++counters_.lost;
-    stats.track_ns = monotonicNs() - t_start;
-    return stats.outcome;
-  };
+// A solve from a world pose: the estimate is the new camera in the model camera.
+FrameToModelTracker::Attempt FrameToModelTracker::attemptFrom(const hal::Pose& start, bool photometric) {
+  const Eigen::Matrix3d Rk_t = model_pose_.R_world_cam.transpose();
+  Attempt a;
+  a.solve = solve(Rk_t * start.R_world_cam, Rk_t * (start.t_world_cam - model_pose_.t_world_cam), photometric);
+  a.pose.R_world_cam = model_pose_.R_world_cam * a.solve.R;
+  a.pose.t_world_cam = model_pose_.R_world_cam * a.solve.t + model_pose_.t_world_cam;
+  a.reason = check(a.solve, a.pose, last_good_);
+  return a;
+}
+
+// Relocalisation: the last good pose (and the prior), then rotations of
+// +-relocalise_search_deg about each camera axis; the candidate with the most
+// inliers that passes the checks, else the first candidate's attempt and reason.
+FrameToModelTracker::Attempt FrameToModelTracker::relocalise(const hal::Pose* prior, bool photometric,
+                                                             TrackStats& stats) {
+  std::array<hal::Pose, 8> candidates;
+  int n = 0;
+  candidates[n++] = last_good_;
+  if (prior != nullptr) candidates[n++] = *prior;
+  if (config_.relocalise_search_deg > 0.0) {
+    const double a = config_.relocalise_search_deg * kDegToRad;
+    for (int axis = 0; axis < 3; ++axis) {
+      for (double sign : {-1.0, 1.0}) {
+        hal::Pose c = last_good_;
+        c.R_world_cam =
+            last_good_.R_world_cam * Eigen::AngleAxisd(sign * a, Eigen::Vector3d::Unit(axis)).toRotationMatrix();
+        if (n < static_cast<int>(candidates.size())) candidates[n++] = c;
+      }
+    }
+  }
+  stats.relocalise_candidates = n;
+  Attempt best;
+  bool found = false;
+  LostReason first_reason = LostReason::kFewInliers;
+  for (int c = 0; c < n; ++c) {
+    const Attempt attempt = attemptFrom(candidates[c], photometric);
+    if (c == 0) first_reason = attempt.reason;
+    stats.iterations += attempt.solve.iterations;
+    if (attempt.reason == LostReason::kNone && (!found || attempt.solve.inliers > best.solve.inliers)) {
+      best = attempt;
+      found = true;
+    } else if (!found && c == 0) {
+      best = attempt;
+    }
+  }
+  best.reason = found ? LostReason::kNone : first_reason;
+  return best;
+}
+
+// The chosen attempt's figures, and its disagreement with the prior.
+void FrameToModelTracker::recordAttempt(const Attempt& best, const hal::Pose* prior, TrackStats& stats) const {
+  stats.iterations = std::max(stats.iterations, best.solve.iterations);
+  stats.inliers = best.solve.inliers;
+  stats.inlier_fraction = valid_pixels_ > 0 ? static_cast<double>(best.solve.inliers) / valid_pixels_ : 0.0;
+  stats.icp_rms_m = best.solve.icp_rms;
+  stats.photometric_rms = best.solve.photometric_rms;
+  stats.min_eigenvalue = best.solve.min_eigenvalue;
+  if (prior != nullptr) {
+    stats.prior_disagreement_m = (best.pose.t_world_cam - prior->t_world_cam).norm();
+    stats.prior_disagreement_deg = rotationAngleDeg(prior->R_world_cam.transpose() * best.pose.R_world_cam);
+  }
+}
+
+// A frame whose size and intrinsics the tracker can take.
+bool FrameToModelTracker::frameUsable(const hal::RgbdFrame& frame) const {
   const hal::CameraIntrinsics& k = frame.intrinsics;
   const bool size_ok = frame.width() >= 8 && frame.height() >= 8 && frame.width() <= config_.max_width &&
                        frame.height() <= config_.max_height;
   const bool intrinsics_ok = std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0.0 && k.fy > 0.0 &&
                              std::isfinite(k.cx) && std::isfinite(k.cy) && std::isfinite(frame.depth_scale_m) &&
                              frame.depth_scale_m > 0.0;
-  if (!size_ok || !intrinsics_ok) return lose(LostReason::kNoValidDepth);
+  return size_ok && intrinsics_ok;
+}
+
+TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose,
+                                        TrackStats& stats) {
+  const int64_t t_start = monotonicNs();
+  stats = TrackStats{};
+  ++counters_.frames;
+  const auto finish = [&](TrackOutcome outcome) {
+    stats.outcome = outcome;
+    stats.track_ns = monotonicNs() - t_start;
+    return outcome;
+  };
+  const auto lose = [&](LostReason reason) {
+    stats.lost_reason = reason;
+    pose = prior != nullptr ? *prior : last_good_;
+    if (have_model_) lost_ = true;
+    ++counters_.lost;
+    return finish(TrackOutcome::kLost);
+  };
+  if (!frameUsable(frame)) return lose(LostReason::kNoValidDepth);
   if (prior != nullptr && !(prior->R_world_cam.allFinite() && prior->t_world_cam.allFinite())) {
     prior = nullptr;  // a broken outside pose: not a start, and not what the lost frame reports
     return lose(LostReason::kImplausibleMotion);
@@ -597,111 +669,28 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   stats.valid_pixels = valid_pixels_;
   stats.pyramid_ns = monotonicNs() - t_start;
   if (!has_depth) return lose(LostReason::kNoValidDepth);
-
   if (!have_model_) {
     pose = prior != nullptr ? *prior : last_good_;
     last_good_ = pose;
     lost_ = false;
-    stats.outcome = TrackOutcome::kFirstFrame;
-    stats.track_ns = monotonicNs() - t_start;
-    return stats.outcome;
+    return finish(TrackOutcome::kFirstFrame);
   }
   const bool model_size_ok = model_[0].width == frame.width() && model_[0].height == frame.height();
   if (!model_size_ok) return lose(LostReason::kFewInliers);
 
   const bool photometric = frame.has_rgb;
-  const Eigen::Matrix3d Rk_t = model_pose_.R_world_cam.transpose();
-  // World pose -> the estimate (new camera -> model camera) and back.
-  const auto toRelative = [&](const hal::Pose& world, Eigen::Matrix3d& R, Eigen::Vector3d& t) {
-    R = Rk_t * world.R_world_cam;
-    t = Rk_t * (world.t_world_cam - model_pose_.t_world_cam);
-  };
-  const auto toWorld = [&](const Solve& s) {
-    hal::Pose p;
-    p.R_world_cam = model_pose_.R_world_cam * s.R;
-    p.t_world_cam = model_pose_.R_world_cam * s.t + model_pose_.t_world_cam;
-    return p;
-  };
-
-  Solve best;
-  hal::Pose best_pose;
-  LostReason reason = LostReason::kNone;
-  if (!lost_) {
-    const hal::Pose start = prior != nullptr ? *prior : last_good_;
-    Eigen::Matrix3d R0;
-    Eigen::Vector3d t0;
-    toRelative(start, R0, t0);
-    best = solve(R0, t0, photometric);
-    best_pose = toWorld(best);
-    reason = check(best, best_pose, last_good_);
-  } else {
-    // Relocalisation: the last good pose (and the prior), then rotations of
-    // +-relocalise_search_deg about each camera axis; the candidate with the
-    // most inliers that passes the checks.
-    std::array<hal::Pose, 8> candidates;
-    int n = 0;
-    candidates[n++] = last_good_;
-    if (prior != nullptr) candidates[n++] = *prior;
-    if (config_.relocalise_search_deg > 0.0) {
-      const double a = config_.relocalise_search_deg * kDegToRad;
-      for (int axis = 0; axis < 3; ++axis) {
-        for (double sign : {-1.0, 1.0}) {
-          hal::Pose c = last_good_;
-          c.R_world_cam = last_good_.R_world_cam *
-                          Eigen::AngleAxisd(sign * a, Eigen::Vector3d::Unit(axis)).toRotationMatrix();
-          if (n < static_cast<int>(candidates.size())) candidates[n++] = c;
-        }
-      }
-    }
-    stats.relocalise_candidates = n;
-    bool found = false;
-    LostReason first_reason = LostReason::kFewInliers;
-    for (int c = 0; c < n; ++c) {
-      Eigen::Matrix3d R0;
-      Eigen::Vector3d t0;
-      toRelative(candidates[c], R0, t0);
-      const Solve s = solve(R0, t0, photometric);
-      const hal::Pose p = toWorld(s);
-      const LostReason r = check(s, p, last_good_);
-      if (c == 0) first_reason = r;
-      stats.iterations += s.iterations;
-      if (r == LostReason::kNone && (!found || s.inliers > best.inliers)) {
-        best = s;
-        best_pose = p;
-        found = true;
-      } else if (!found && c == 0) {
-        best = s;
-        best_pose = p;
-      }
-    }
-    reason = found ? LostReason::kNone : first_reason;
-  }
-
-  stats.iterations = std::max(stats.iterations, best.iterations);
-  stats.inliers = best.inliers;
-  stats.inlier_fraction = valid_pixels_ > 0 ? static_cast<double>(best.inliers) / valid_pixels_ : 0.0;
-  stats.icp_rms_m = best.icp_rms;
-  stats.photometric_rms = best.photometric_rms;
-  stats.min_eigenvalue = best.min_eigenvalue;
-  if (prior != nullptr) {
-    stats.prior_disagreement_m = (best_pose.t_world_cam - prior->t_world_cam).norm();
-    stats.prior_disagreement_deg = rotationAngleDeg(prior->R_world_cam.transpose() * best_pose.R_world_cam);
-  }
-  if (reason != LostReason::kNone) return lose(reason);
-
-  stats.outcome = lost_ ? TrackOutcome::kRelocalised : TrackOutcome::kTracked;
-  if (lost_) {
-    ++counters_.relocalised;
-  } else {
-    ++counters_.tracked;
-  }
+  const Attempt best =
+      lost_ ? relocalise(prior, photometric, stats) : attemptFrom(prior != nullptr ? *prior : last_good_, photometric);
+  recordAttempt(best, prior, stats);
+  if (best.reason != LostReason::kNone) return lose(best.reason);
+  const TrackOutcome outcome = lost_ ? TrackOutcome::kRelocalised : TrackOutcome::kTracked;
+  ++(lost_ ? counters_.relocalised : counters_.tracked);
   lost_ = false;
-  pose = best_pose;
-  last_good_ = best_pose;
-  residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.icp_rms;
+  pose = best.pose;
+  last_good_ = best.pose;
+  residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.solve.icp_rms;
   ++residual_count_;
-  stats.track_ns = monotonicNs() - t_start;
-  return stats.outcome;
+  return finish(outcome);
 }
 
 }  // namespace fovea::pipeline::map

@@ -202,6 +202,17 @@ class FrameToModelTracker {
   Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const;
+  // track()'s steps: a solve from a start pose with its world pose and checks,
+  // relocalisation's search over starts, the stats of the attempt taken.
+  struct Attempt {
+    Solve solve;
+    hal::Pose pose;
+    LostReason reason = LostReason::kNone;
+  };
+  bool frameUsable(const hal::RgbdFrame& frame) const;
+  Attempt attemptFrom(const hal::Pose& start, bool photometric);
+  Attempt relocalise(const hal::Pose* prior, bool photometric, TrackStats& stats);
+  void recordAttempt(const Attempt& best, const hal::Pose* prior, TrackStats& stats) const;
   double medianResidual() const;
 
   TrackerConfig config_;

@@ -80,6 +80,47 @@ HWY_INLINE void AddTerms(DF df, V j0, V j1, V j2, V j3, V j4, V j5, V r, float* 
   Accumulate(df, acc, 26, hn::Mul(j5, r));
 }
 
+// TrackVector()'s photometric term for the lanes that associate (icp): the
+// model's intensity, bilinear at the projection (fu, fv), against the frame's
+// (fi_), with its gradient's Jacobian.
+template <class DF, class VI, class M>
+HWY_INLINE void PhotometricTerms(DF df, const TrackModelLevel& m, const TrackParams& p, hn::Vec<DF> fu, hn::Vec<DF> fv,
+                                 hn::Vec<DF> qx, hn::Vec<DF> qy, hn::Vec<DF> qz, hn::Vec<DF> safe_qz, VI j, M icp,
+                                 const float* fi_, float* acc, uint32_t& photo_inliers) {
+  using V = hn::Vec<DF>;
+  const hn::RebindToSigned<DF> di;
+  const V zero = hn::Zero(df);
+  const V fu0 = hn::Min(hn::Max(hn::Floor(fu), zero), hn::Set(df, static_cast<float>(m.width - 2)));
+  const V fv0 = hn::Min(hn::Max(hn::Floor(fv), zero), hn::Set(df, static_cast<float>(m.height - 2)));
+  const V one = hn::Set(df, 1.0f);
+  const V au = hn::Min(hn::Max(hn::Sub(fu, fu0), zero), one);
+  const V av = hn::Min(hn::Max(hn::Sub(fv, fv0), zero), one);
+  const auto i00 = hn::Add(hn::Mul(hn::ConvertTo(di, fv0), hn::Set(di, m.width)), hn::ConvertTo(di, fu0));
+  const auto i01 = hn::Add(i00, hn::Set(di, 1));
+  const auto i10 = hn::Add(i00, hn::Set(di, m.width));
+  const auto i11 = hn::Add(i10, hn::Set(di, 1));
+  const V I00 = hn::GatherIndex(df, m.intensity, i00), I01 = hn::GatherIndex(df, m.intensity, i01);
+  const V I10 = hn::GatherIndex(df, m.intensity, i10), I11 = hn::GatherIndex(df, m.intensity, i11);
+  const V top = hn::Add(I00, hn::Mul(au, hn::Sub(I01, I00)));
+  const V bottom = hn::Add(I10, hn::Mul(au, hn::Sub(I11, I10)));
+  const V r = hn::Sub(hn::Add(top, hn::Mul(av, hn::Sub(bottom, top))), hn::LoadU(df, fi_));
+  const auto photo = hn::And(icp, hn::Le(hn::Abs(r), hn::Set(df, p.max_photometric_residual)));
+  if (hn::AllFalse(df, photo)) return;
+  photo_inliers += static_cast<uint32_t>(hn::CountTrue(df, photo));
+  const V inv_z = hn::Div(one, safe_qz);
+  const V a = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gx, j), hn::Set(df, m.fx)), inv_z);
+  const V b = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gy, j), hn::Set(df, m.fy)), inv_z);
+  const V gz = hn::Mul(hn::Neg(hn::Add(hn::Mul(a, qx), hn::Mul(b, qy))), inv_z);
+  const V sw = hn::Set(df, p.photometric_sqrt_weight);
+  const V gx = hn::Mul(sw, a), gy = hn::Mul(sw, b), gzw = hn::Mul(sw, gz);
+  const V r_photo = hn::IfThenElseZero(photo, hn::Mul(sw, r));
+  AddTerms(df, hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx))), r_photo, acc);
+  Accumulate(df, acc, 28, hn::Mul(r_photo, r_photo));
+}
+
 // One vector of pixels (their frame values in fx..fi) against the model.
 template <class DF>
 HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& p, const float* fx_, const float* fy_,
@@ -148,36 +189,7 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
            hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx))), r_icp, acc);
   Accumulate(df, acc, 27, hn::Mul(r_icp, r_icp));
   if (!p.use_photometric) return;
-  // The model's intensity, bilinear at the projection.
-  const V fu0 = hn::Min(hn::Max(hn::Floor(fu), zero), hn::Set(df, static_cast<float>(m.width - 2)));
-  const V fv0 = hn::Min(hn::Max(hn::Floor(fv), zero), hn::Set(df, static_cast<float>(m.height - 2)));
-  const V one = hn::Set(df, 1.0f);
-  const V au = hn::Min(hn::Max(hn::Sub(fu, fu0), zero), one);
-  const V av = hn::Min(hn::Max(hn::Sub(fv, fv0), zero), one);
-  const auto i00 = hn::Add(hn::Mul(hn::ConvertTo(di, fv0), hn::Set(di, m.width)), hn::ConvertTo(di, fu0));
-  const auto i01 = hn::Add(i00, hn::Set(di, 1));
-  const auto i10 = hn::Add(i00, hn::Set(di, m.width));
-  const auto i11 = hn::Add(i10, hn::Set(di, 1));
-  const V I00 = hn::GatherIndex(df, m.intensity, i00), I01 = hn::GatherIndex(df, m.intensity, i01);
-  const V I10 = hn::GatherIndex(df, m.intensity, i10), I11 = hn::GatherIndex(df, m.intensity, i11);
-  const V top = hn::Add(I00, hn::Mul(au, hn::Sub(I01, I00)));
-  const V bottom = hn::Add(I10, hn::Mul(au, hn::Sub(I11, I10)));
-  const V r = hn::Sub(hn::Add(top, hn::Mul(av, hn::Sub(bottom, top))), hn::LoadU(df, fi_));
-  const auto photo = hn::And(icp, hn::Le(hn::Abs(r), hn::Set(df, p.max_photometric_residual)));
-  if (hn::AllFalse(df, photo)) return;
-  photo_inliers += static_cast<uint32_t>(hn::CountTrue(df, photo));
-  const V inv_z = hn::Div(one, safe_qz);
-  const V a = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gx, j), hn::Set(df, m.fx)), inv_z);
-  const V b = hn::Mul(hn::Mul(hn::GatherIndex(df, m.gy, j), hn::Set(df, m.fy)), inv_z);
-  const V gz = hn::Mul(hn::Neg(hn::Add(hn::Mul(a, qx), hn::Mul(b, qy))), inv_z);
-  const V sw = hn::Set(df, p.photometric_sqrt_weight);
-  const V gx = hn::Mul(sw, a), gy = hn::Mul(sw, b), gzw = hn::Mul(sw, gz);
-  const V r_photo = hn::IfThenElseZero(photo, hn::Mul(sw, r));
-  AddTerms(df, hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
-           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
-           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
-           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx))), r_photo, acc);
-  Accumulate(df, acc, 28, hn::Mul(r_photo, r_photo));
+  PhotometricTerms(df, m, p, fu, fv, qx, qy, qz, safe_qz, j, icp, fi_, acc, photo_inliers);
 }
 
 // A row's lanes of one sum, added in double.
