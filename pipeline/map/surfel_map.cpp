@@ -82,9 +82,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   weight_v_.resize(static_cast<std::size_t>(config.max_height));
   ray_u_.resize(static_cast<std::size_t>(config.max_width));
   ray_v_.resize(static_cast<std::size_t>(config.max_height));
-  index_depth_.resize(pixels);
-  index_.resize(pixels);
-  index_reach_.resize(pixels);
+  index_map_ = IndexMap(pixels);
   explained_.resize(pixels);
   normal_cos_.resize(kNormalCosBuckets);
 }
@@ -105,9 +103,9 @@ SurfelMapMemory SurfelMap::memoryParts() const {
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) + brick_visible_.capacity() +
              (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
   m.pixels = (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
-              weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() + index_depth_.capacity() +
+              weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() +
               normal_cos_.capacity()) * sizeof(float) +
-             index_.capacity() * sizeof(uint32_t) + index_reach_.capacity() + explained_.capacity();
+             index_map_.memoryBytes() + explained_.capacity();
   m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
   return m;
 }
@@ -310,11 +308,7 @@ void SurfelMap::makeRoom(std::size_t wanted, FuseStats& stats) {
 }
 
 void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
-  const std::size_t pixels = frame.pixelCount();
-  std::fill(index_.begin(), index_.begin() + static_cast<std::ptrdiff_t>(pixels), kNone);
-  std::fill(index_depth_.begin(), index_depth_.begin() + static_cast<std::ptrdiff_t>(pixels),
-            std::numeric_limits<float>::infinity());
-  std::fill(index_reach_.begin(), index_reach_.begin() + static_cast<std::ptrdiff_t>(pixels), uint8_t{255});
+  index_map_.reset(frame.width(), frame.height());
   cullBricks(frame);
   const Eigen::Matrix3f R_cw_f = frame.T_world_cam.R_world_cam.transpose().cast<float>();
   if (config_.kernels != KernelSet::kRef) {
@@ -426,13 +420,7 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
         const std::size_t i = static_cast<std::size_t>(y) * w + x;
         // Nearer wins; within the sensor's noise of each other (one surface),
         // the surfel whose centre is nearer the pixel.
-        const auto reach_sq = static_cast<uint8_t>(du * du + dv * dv);
-        const float held = index_depth_[i];
-        if (z < held - same || (z <= held + same && reach_sq < index_reach_[i])) {
-          index_depth_[i] = z;
-          index_[i] = static_cast<uint32_t>(slot);
-          index_reach_[i] = reach_sq;
-        }
+        index_map_.offer(i, z, same, static_cast<uint8_t>(du * du + dv * dv), static_cast<uint32_t>(slot));
       }
     }
   }
@@ -588,9 +576,6 @@ void SurfelMap::applySplats(const SplatView& view, std::size_t b0, std::size_t c
 
 // One surfel's footprint into the z-buffer (the reference's test, pixel by pixel).
 void SurfelMap::splatFootprint(const SplatView& view, const SplatBatch& batch, std::size_t j, uint32_t slot) {
-  float* const index_depth = index_depth_.data();
-  uint32_t* const index = index_.data();
-  uint8_t* const index_reach = index_reach_.data();
   const int w = view.w, h = view.h;
   const int iu = batch.centre_u[j], iv = batch.centre_v[j];
   const int reach = batch.reach_of[j];
@@ -602,23 +587,15 @@ void SurfelMap::splatFootprint(const SplatView& view, const SplatBatch& batch, s
   for (int o = 0; o < count; ++o) {
     const int x = iu + offsets[o].du, y = iv + offsets[o].dv;
     if (!inside && (x < 0 || x >= w || y < 0 || y >= h)) continue;
-    // Written as selects; GCC 12 makes branches of the steep test and of the
-    // depth and index stores, and they predict well: bit selects that force
-    // every store made the index map 1.2 to 2 times slower (measured).
+    // Written as selects (as IndexMap::offer): GCC 12 makes a branch of the
+    // steep test, which predicts well.
     const float rx = view.ray_u[x], ry = view.ray_v[y];
     const float along = nx * rx + (ny * ry + nz);
     const bool steep = along * along > 0.04f * (rx * rx + ry * ry + 1.0f);
     const float on_plane = plane / (steep ? along : 1.0f);
     float z = steep ? on_plane : pz;
     z = z >= view.min_z ? z : pz;
-    const std::size_t i = static_cast<std::size_t>(y) * w + x;
-    const uint8_t reach_sq = offsets[o].reach_sq;
-    const float held = index_depth[i];
-    const uint8_t held_reach = index_reach[i];
-    const bool take = (z < held - same) | ((z <= held + same) & (reach_sq < held_reach));
-    index_depth[i] = take ? z : held;
-    index[i] = take ? slot : index[i];
-    index_reach[i] = take ? reach_sq : held_reach;
+    index_map_.offer(static_cast<std::size_t>(y) * w + x, z, same, offsets[o].reach_sq, slot);
   }
 }
 
@@ -732,20 +709,20 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
     // The surfel a few pixels on: the index map names surfels in no order the
     // cache can guess (a prefetch changes no result).
     if (i + kPrefetchPixels < pixels) {
-      const uint32_t ahead = index_[i + kPrefetchPixels];
+      const uint32_t ahead = index_map_.slot(i + kPrefetchPixels);
       if (ahead != kNone) __builtin_prefetch(&surfels_[ahead]);
     }
     const float weight = weight_[i];
     if (weight == 0.0f) continue;
     const float z = vertex_z_[i];
     const float tolerance = sigmas * depthSigma(z);
-    const uint32_t slot = index_[i];
+    const uint32_t slot = index_map_.slot(i);
     const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
     const bool has_normal = normal.squaredNorm() > 0.0f;
     if (slot != kNone) {
       Surfel& s = surfels_[slot];
       if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
-      const float seen = index_depth_[i];
+      const float seen = index_map_.depth(i);
       if (seen < z - tolerance) {
         // The camera sees through the surfel: free space where it is.
         if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {

@@ -44,6 +44,7 @@
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
+#include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/point_cloud.h"
@@ -190,9 +191,9 @@ class SurfelMap {
   // surfel the frame's pixel saw, rendered at the frame's pose before
   // association (kNoSurfel: none). The slot's surfel is as merged; it may since
   // have been removed (check live()). The tracker's model (tracker.h).
-  const uint32_t* indexMap() const { return index_.data(); }
-  int indexMapWidth() const { return fused_width_; }
-  int indexMapHeight() const { return fused_height_; }
+  const uint32_t* indexMap() const { return index_map_.slots(); }
+  int indexMapWidth() const { return index_map_.width(); }
+  int indexMapHeight() const { return index_map_.height(); }
 
   const SurfelMapConfig& config() const { return config_; }
   const SurfelMapCounters& counters() const { return counters_; }
@@ -279,9 +280,7 @@ class SurfelMap {
   std::vector<float> weight_;
   std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
   std::vector<float> ray_u_, ray_v_;        // splatFast(): (u - cx) / fx by column, (v - cy) / fy by row
-  std::vector<float> index_depth_;        // the index map's z-buffer
-  std::vector<uint32_t> index_;           // surfel slot seen at the pixel, or UINT32_MAX if none
-  std::vector<uint8_t> index_reach_;      // ... and how far (squared pixels) from its centre
+  IndexMap index_map_;                    // step 3's, the tracker's model
   std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
   std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
