@@ -49,35 +49,25 @@ void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::V
   t = V * v;
 }
 
-// Normals of a level's vertex map: central differences over `reach` pixels,
-// none across a depth step, facing the camera; `skip` (may be null): pixels
-// whose normal is already set and kept.
-void computeNormals(int w, int h, int reach, const float* x, const float* y, const float* z, float* nx, float* ny,
-                    float* nz, const uint8_t* skip = nullptr) {
-  const float step = static_cast<float>(reach) * 2.0f * kStepShare;
+}  // namespace
+
+void computeNormalsRef(const NormalMapIn& in, float* nx, float* ny, float* nz) {
+  const int w = in.width, h = in.height, reach = in.reach;
+  const float step = static_cast<float>(reach) * 2.0f * in.step_share;
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      if (skip != nullptr && skip[i]) continue;
-      nx[i] = ny[i] = nz[i] = 0.0f;
-      if (u < reach || v < reach || u >= w - reach || v >= h - reach || !(z[i] > 0.0f)) continue;
-      const std::size_t rs = static_cast<std::size_t>(reach), rw = static_cast<std::size_t>(reach) * w;
-      const std::size_t l = i - rs, r = i + rs, up = i - rw, dn = i + rw;
-      const float zi = z[i];
-      bool ok = true;
-      for (std::size_t j : {l, r, up, dn}) ok = ok && z[j] > 0.0f && std::abs(z[j] - zi) <= step * zi;
-      if (!ok) continue;
-      const float ax = x[r] - x[l], ay = y[r] - y[l], az = z[r] - z[l];
-      const float bx = x[dn] - x[up], by = y[dn] - y[up], bz = z[dn] - z[up];
-      float cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
-      const float n = std::sqrt(cx * cx + cy * cy + cz * cz);
-      if (!(n > 0.0f) || !std::isfinite(n)) continue;
-      cx /= n, cy /= n, cz /= n;
-      if (cx * x[i] + cy * y[i] + cz * zi > 0.0f) cx = -cx, cy = -cy, cz = -cz;
-      nx[i] = cx, ny[i] = cy, nz[i] = cz;
+      if (in.skip != nullptr && in.skip[i]) continue;
+      if (u < reach || v < reach || u >= w - reach || v >= h - reach) {
+        nx[i] = ny[i] = nz[i] = 0.0f;
+        continue;
+      }
+      normalAtRef(in, i, step, nx, ny, nz);
     }
   }
 }
+
+namespace {
 
 // The intensity's gradient per pixel (central differences / 2; zero at the border).
 void computeGradients(int w, int h, const float* in, float* gx, float* gy) {
@@ -417,11 +407,13 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
     }
   }
   valid_pixels_ = valid;
-  computeNormals(w, h, kNormalReach, l0.x.data(), l0.y.data(), l0.z.data(), l0.nx.data(), l0.ny.data(), l0.nz.data());
+  computeNormals(NormalMapIn{w, h, kNormalReach, kStepShare, l0.x.data(), l0.y.data(), l0.z.data(), nullptr},
+                 l0.nx.data(), l0.ny.data(), l0.nz.data(), config_.kernels);
   for (int l = 1; l < kLevels; ++l) {
     downsample(frame_[l - 1], frame_[l], false);
     Level& L = frame_[l];
-    computeNormals(L.width, L.height, 1, L.x.data(), L.y.data(), L.z.data(), L.nx.data(), L.ny.data(), L.nz.data());
+    computeNormals(NormalMapIn{L.width, L.height, 1, kStepShare, L.x.data(), L.y.data(), L.z.data(), nullptr},
+                   L.nx.data(), L.ny.data(), L.nz.data(), config_.kernels);
   }
   return valid >= kMinValidPixels;
 }
@@ -465,8 +457,9 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
   }
   // Normals of the pixels without a surfel: from the model's vertex map (the
   // frame's own measurement there, next to surfels as merged).
-  computeNormals(w, h, kNormalReach, l0.x.data(), l0.y.data(), l0.z.data(), l0.nx.data(), l0.ny.data(), l0.nz.data(),
-                 model_from_surfel_.data());
+  computeNormals(
+      NormalMapIn{w, h, kNormalReach, kStepShare, l0.x.data(), l0.y.data(), l0.z.data(), model_from_surfel_.data()},
+      l0.nx.data(), l0.ny.data(), l0.nz.data(), config_.kernels);
   computeGradients(w, h, l0.intensity.data(), l0.gx.data(), l0.gy.data());
   for (int l = 1; l < kLevels; ++l) {
     downsample(model_[l - 1], model_[l], true);

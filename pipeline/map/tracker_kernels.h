@@ -40,6 +40,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 
@@ -106,6 +107,53 @@ struct TrackPixel {
   float j_photo[6] = {0, 0, 0, 0, 0, 0};
   float r_photo = 0.0f;
 };
+// The normals of a vertex map (a level of the tracker's pyramids): central
+// differences over `reach` pixels each side, none at the border, next to a
+// missing pixel (z <= 0) or across a depth step (a neighbour's depth off by
+// more than step_share * 2 reach of the pixel's), unit length, facing the
+// camera; zero where there is none. `skip` (may be null): pixels whose normal
+// is kept as it is. The scalar reference and Highway's kernel give the same
+// bits: IEEE-exact operations only (no fused multiply-add), in one order.
+struct NormalMapIn {
+  int width = 0, height = 0, reach = 1;
+  float step_share = 0.05f;
+  const float* x = nullptr;
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const uint8_t* skip = nullptr;
+};
+void computeNormalsRef(const NormalMapIn& in, float* nx, float* ny, float* nz);
+// Its pixel i, one not skipped and not on the border (step: step_share * 2 reach).
+inline void normalAtRef(const NormalMapIn& in, std::size_t i, float step, float* nx, float* ny, float* nz) {
+  const float* x = in.x;
+  const float* y = in.y;
+  const float* z = in.z;
+  nx[i] = ny[i] = nz[i] = 0.0f;
+  if (!(z[i] > 0.0f)) return;
+  const std::size_t rs = static_cast<std::size_t>(in.reach), rw = rs * static_cast<std::size_t>(in.width);
+  const std::size_t l = i - rs, r = i + rs, up = i - rw, dn = i + rw;
+  const float zi = z[i];
+  bool ok = true;
+  for (std::size_t j : {l, r, up, dn}) ok = ok && z[j] > 0.0f && std::abs(z[j] - zi) <= step * zi;
+  if (!ok) return;
+  const float ax = x[r] - x[l], ay = y[r] - y[l], az = z[r] - z[l];
+  const float bx = x[dn] - x[up], by = y[dn] - y[up], bz = z[dn] - z[up];
+  float cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+  const float n = std::sqrt(cx * cx + cy * cy + cz * cz);
+  if (!(n > 0.0f) || !std::isfinite(n)) return;
+  cx /= n, cy /= n, cz /= n;
+  if (cx * x[i] + cy * y[i] + cz * zi > 0.0f) cx = -cx, cy = -cy, cz = -cz;
+  nx[i] = cx, ny[i] = cy, nz[i] = cz;
+}
+void computeNormalsSimd(const NormalMapIn& in, float* nx, float* ny, float* nz);
+inline void computeNormals(const NormalMapIn& in, float* nx, float* ny, float* nz, KernelSet kernels) {
+  if (kernels == KernelSet::kSimd) {
+    computeNormalsSimd(in, nx, ny, nz);
+  } else {
+    computeNormalsRef(in, nx, ny, nz);
+  }
+}
+
 TrackPixel trackPixelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
                          std::size_t pixel);
 

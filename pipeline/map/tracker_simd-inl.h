@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 
 #include "hwy/highway.h"
 #include "core/depth_noise.h"
@@ -190,6 +191,92 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   Accumulate(df, acc, 27, hn::Mul(r_icp, r_icp));
   if (!p.use_photometric) return;
   PhotometricTerms(df, m, p, fu, fv, qx, qy, qz, safe_qz, j, icp, fi_, acc, photo_inliers);
+}
+
+// computeNormalsRef's arithmetic (tracker.cpp) on a vector of interior pixels
+// starting at i: the same operations in the same order, selects for its
+// branches, so the same bits.
+template <class DF>
+HWY_INLINE void NormalsVector(DF df, const NormalMapIn& in, std::size_t i, float step, float* nx, float* ny,
+                              float* nz) {
+  using V = hn::Vec<DF>;
+  const V zero = hn::Zero(df);
+  const std::size_t rs = static_cast<std::size_t>(in.reach), rw = rs * static_cast<std::size_t>(in.width);
+  const V zi = hn::LoadU(df, in.z + i);
+  const V limit = hn::Mul(hn::Set(df, step), zi);
+  auto ok = hn::Gt(zi, zero);
+  const V zl = hn::LoadU(df, in.z + i - rs), zr = hn::LoadU(df, in.z + i + rs);
+  const V zu = hn::LoadU(df, in.z + i - rw), zd = hn::LoadU(df, in.z + i + rw);
+  // Each neighbour (a loop over the four would put SVE's sizeless vectors in an array).
+  ok = hn::And(ok, hn::And(hn::Gt(zl, zero), hn::Le(hn::Abs(hn::Sub(zl, zi)), limit)));
+  ok = hn::And(ok, hn::And(hn::Gt(zr, zero), hn::Le(hn::Abs(hn::Sub(zr, zi)), limit)));
+  ok = hn::And(ok, hn::And(hn::Gt(zu, zero), hn::Le(hn::Abs(hn::Sub(zu, zi)), limit)));
+  ok = hn::And(ok, hn::And(hn::Gt(zd, zero), hn::Le(hn::Abs(hn::Sub(zd, zi)), limit)));
+  const V ax = hn::Sub(hn::LoadU(df, in.x + i + rs), hn::LoadU(df, in.x + i - rs));
+  const V ay = hn::Sub(hn::LoadU(df, in.y + i + rs), hn::LoadU(df, in.y + i - rs));
+  const V az = hn::Sub(zr, zl);
+  const V bx = hn::Sub(hn::LoadU(df, in.x + i + rw), hn::LoadU(df, in.x + i - rw));
+  const V by = hn::Sub(hn::LoadU(df, in.y + i + rw), hn::LoadU(df, in.y + i - rw));
+  const V bz = hn::Sub(zd, zu);
+  const V cx = hn::Sub(hn::Mul(ay, bz), hn::Mul(az, by));
+  const V cy = hn::Sub(hn::Mul(az, bx), hn::Mul(ax, bz));
+  const V cz = hn::Sub(hn::Mul(ax, by), hn::Mul(ay, bx));
+  const V n = hn::Sqrt(hn::Add(hn::Add(hn::Mul(cx, cx), hn::Mul(cy, cy)), hn::Mul(cz, cz)));
+  ok = hn::And(ok, hn::And(hn::Gt(n, zero), hn::Lt(n, hn::Set(df, std::numeric_limits<float>::infinity()))));
+  const V safe_n = hn::IfThenElse(ok, n, hn::Set(df, 1.0f));
+  V ux = hn::Div(cx, safe_n), uy = hn::Div(cy, safe_n), uz = hn::Div(cz, safe_n);
+  const V facing = hn::Add(hn::Add(hn::Mul(ux, hn::LoadU(df, in.x + i)), hn::Mul(uy, hn::LoadU(df, in.y + i))),
+                           hn::Mul(uz, zi));
+  const auto flip = hn::Gt(facing, zero);
+  ux = hn::IfThenElse(flip, hn::Neg(ux), ux);
+  uy = hn::IfThenElse(flip, hn::Neg(uy), uy);
+  uz = hn::IfThenElse(flip, hn::Neg(uz), uz);
+  V out_x = hn::IfThenElseZero(ok, ux), out_y = hn::IfThenElseZero(ok, uy), out_z = hn::IfThenElseZero(ok, uz);
+  if (in.skip != nullptr) {
+    // Kept pixels: their normal as it is (a byte each, widened to a lane mask).
+    const hn::Rebind<uint8_t, DF> d8;
+    const hn::RebindToUnsigned<DF> du;
+    const auto keep = hn::RebindMask(df, hn::Ne(hn::PromoteTo(du, hn::LoadU(d8, in.skip + i)), hn::Zero(du)));
+    out_x = hn::IfThenElse(keep, hn::LoadU(df, nx + i), out_x);
+    out_y = hn::IfThenElse(keep, hn::LoadU(df, ny + i), out_y);
+    out_z = hn::IfThenElse(keep, hn::LoadU(df, nz + i), out_z);
+  }
+  hn::StoreU(out_x, df, nx + i);
+  hn::StoreU(out_y, df, ny + i);
+  hn::StoreU(out_z, df, nz + i);
+}
+
+HWY_NOINLINE void ComputeNormalsT(const NormalMapIn& in, float* nx, float* ny, float* nz) {
+  using DF = hn::ScalableTag<float>;
+  const DF df;
+  const std::size_t N = hn::Lanes(df);
+  const int w = in.width, h = in.height, reach = in.reach;
+  const float step = static_cast<float>(reach) * 2.0f * in.step_share;
+  // Border rows and columns, and the row tails a vector does not fill: the reference.
+  auto scalar = [&](int v, int u0, int u1) {
+    for (int u = u0; u < u1; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      const bool border = u < reach || v < reach || u >= w - reach || v >= h - reach;
+      if (in.skip != nullptr && in.skip[i]) continue;
+      if (border) {
+        nx[i] = ny[i] = nz[i] = 0.0f;
+        continue;
+      }
+      normalAtRef(in, i, step, nx, ny, nz);
+    }
+  };
+  for (int v = 0; v < h; ++v) {
+    if (v < reach || v >= h - reach || w <= 2 * reach) {
+      scalar(v, 0, w);
+      continue;
+    }
+    scalar(v, 0, reach);
+    int u = reach;
+    for (; u + static_cast<int>(N) <= w - reach; u += static_cast<int>(N)) {
+      NormalsVector(df, in, static_cast<std::size_t>(v) * w + u, step, nx, ny, nz);
+    }
+    scalar(v, u, w);
+  }
 }
 
 // A row's lanes of one sum, added in double.

@@ -14,6 +14,11 @@
 namespace fovea::pipeline::map {
 
 HWY_EXPORT(TrackLevelT);
+HWY_EXPORT(ComputeNormalsT);
+
+void computeNormalsSimd(const NormalMapIn& in, float* nx, float* ny, float* nz) {
+  HWY_DYNAMIC_DISPATCH(ComputeNormalsT)(in, nx, ny, nz);
+}
 
 void trackLevelSimd(const TrackFrameLevel& frame, const TrackModelLevel& model, const TrackParams& params,
                     TrackSums& sums) {

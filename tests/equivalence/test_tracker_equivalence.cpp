@@ -5,8 +5,10 @@
 // on random scenes and on adversarial ones (no valid pixel, NaN and huge depth,
 // zero normals, a single valid pixel, rows shorter than a vector).
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -181,6 +183,77 @@ TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnAdversarialInput) {
     far.t = {100.0f, 0.0f, 0.0f};
     expectEquivalent(L, far, "outside the view");
   }
+}
+
+// The normals kernel (computeNormalsSimd) against its reference, bit for bit:
+// a noisy wavy surface with depth steps and holes, and adversarial maps (NaN,
+// infinities, zero and huge depths, all steps, widths shorter than a vector
+// and not a multiple of it, reach 1 and 2, every other pixel kept by `skip`).
+struct NormalCase {
+  int w, h, reach;
+  std::vector<float> x, y, z;
+  std::vector<uint8_t> skip;
+};
+
+NormalCase wavyNormals(int w, int h, int reach, std::mt19937& rng, bool with_skip) {
+  NormalCase c{w, h, reach, {}, {}, {}, {}};
+  const std::size_t n = static_cast<std::size_t>(w) * h;
+  c.x.resize(n), c.y.resize(n), c.z.resize(n);
+  std::normal_distribution<float> noise(0.0f, 0.003f);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * w + u;
+      float z = 1.2f + 0.3f * std::sin(0.21f * u) * std::cos(0.17f * v) + noise(rng) + (u > w / 2 ? 0.4f : 0.0f);
+      if (unit(rng) < 0.03f) z = 0.0f;  // holes
+      c.z[i] = z;
+      c.x[i] = (u - 0.5f * w) / (0.8f * w) * z;
+      c.y[i] = (v - 0.5f * h) / (0.8f * w) * z;
+    }
+  }
+  if (with_skip) {
+    c.skip.resize(n);
+    for (std::size_t i = 0; i < n; ++i) c.skip[i] = static_cast<uint8_t>(i % 2);
+  }
+  return c;
+}
+
+void expectSameNormals(const NormalCase& c) {
+  const std::size_t n = c.z.size();
+  const NormalMapIn in{c.w, c.h, c.reach, 0.05f, c.x.data(), c.y.data(), c.z.data(),
+                       c.skip.empty() ? nullptr : c.skip.data()};
+  // Kept pixels must stay as they were: both start from the same values.
+  std::vector<float> rx(n, 7.0f), ry(n, -7.0f), rz(n, 0.5f), sx = rx, sy = ry, sz = rz;
+  computeNormalsRef(in, rx.data(), ry.data(), rz.data());
+  computeNormalsSimd(in, sx.data(), sy.data(), sz.data());
+  for (std::size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(std::memcmp(&rx[i], &sx[i], 4), 0) << "pixel " << i << ": " << rx[i] << " vs " << sx[i];
+    ASSERT_EQ(std::memcmp(&ry[i], &sy[i], 4), 0) << "pixel " << i;
+    ASSERT_EQ(std::memcmp(&rz[i], &sz[i], 4), 0) << "pixel " << i;
+  }
+}
+
+TEST_P(TargetTest, NormalsKernelMatchesTheReferenceBitForBit) {
+  std::mt19937 rng(11);
+  for (const int reach : {1, 2}) {
+    for (const bool skip : {false, true}) {
+      for (const auto& [w, h] : {std::pair{64, 48}, std::pair{37, 29}, std::pair{5, 5}, std::pair{3, 9}}) {
+        SCOPED_TRACE(testing::Message() << w << "x" << h << " reach " << reach << (skip ? " skip" : ""));
+        expectSameNormals(wavyNormals(w, h, reach, rng, skip));
+      }
+    }
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  for (const float bad : {nan, inf, -inf, 0.0f, -1.0f, 1e30f, 1e-30f}) {
+    NormalCase c = wavyNormals(33, 21, 2, rng, false);
+    for (std::size_t i = 0; i < c.z.size(); i += 7) c.z[i] = bad;
+    for (std::size_t i = 3; i < c.x.size(); i += 11) c.x[i] = bad;
+    SCOPED_TRACE(testing::Message() << "bad value " << bad);
+    expectSameNormals(c);
+  }
+  NormalCase steps = wavyNormals(40, 12, 1, rng, false);  // every pixel a depth step
+  for (std::size_t i = 0; i < steps.z.size(); ++i) steps.z[i] = i % 2 ? 1.0f : 2.0f;
+  expectSameNormals(steps);
 }
 
 INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(test::simdTargetsHere()), test::simdTargetName);
