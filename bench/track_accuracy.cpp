@@ -1,7 +1,8 @@
 // fovea-track: the map's camera tracker (pipeline/map/tracker.h, docs/tracking.md)
 // against ground truth: the absolute trajectory error after TUM's rigid
 // alignment (pipeline/map/trajectory_error.h), the tracking time per frame
-// (median, p90; one thread), and the hard cases with their outcome frame by
+// (median, p90; one thread), the model's build after each fused frame (median),
+// and the hard cases with their outcome frame by
 // frame. The ground truth is each camera's own pose (a TUM sequence's
 // groundtruth.txt, interpolated at the depth stamp; the mock camera's path),
 // which the tracker never sees unless a case gives it as the prior.
@@ -56,7 +57,7 @@ struct RunResult {
   std::string error;
   int frames = 0, tracked = 0, lost = 0, relocalised = 0;
   std::optional<TrajectoryError> ate;
-  double track_median_ms = 0, track_p90_ms = 0, fuse_median_ms = 0;
+  double track_median_ms = 0, track_p90_ms = 0, model_median_ms = 0, fuse_median_ms = 0;
   double max_disagreement_m = 0;
   std::string events;  // the hard case's frames: "30 lost(no-valid-depth) 31 relocalised"
 };
@@ -120,11 +121,13 @@ void countOutcome(const RunOptions& o, int i, const TrackStats& stats, RunResult
 
 // The trajectory's error after the alignment, and the times' quantiles.
 void finishResult(const std::vector<Eigen::Vector3d>& estimated, const std::vector<Eigen::Vector3d>& truth,
-                  const std::vector<double>& track_ms, const std::vector<double>& fuse_ms, RunResult& r) {
+                  const std::vector<double>& track_ms, const std::vector<double>& model_ms,
+                  const std::vector<double>& fuse_ms, RunResult& r) {
   fovea::Result<TrajectoryError> ate = absoluteTrajectoryError(estimated, truth);
   if (ate) r.ate = ate.value();
   r.track_median_ms = quantile(track_ms, 0.5);
   r.track_p90_ms = quantile(track_ms, 0.9);
+  r.model_median_ms = quantile(model_ms, 0.5);
   r.fuse_median_ms = quantile(fuse_ms, 0.5);
   r.ok = true;
 }
@@ -160,7 +163,7 @@ RunResult run(const RunOptions& o) {
   }
   RgbdFrame frame(k.width, k.height);
   std::vector<Eigen::Vector3d> estimated, truth;
-  std::vector<double> track_ms, fuse_ms;
+  std::vector<double> track_ms, model_ms, fuse_ms;
   for (int i = 0; r.frames < o.frames; ++i) {
     if (fovea::Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) break;  // a recording's end
     if (i % o.every != 0) continue;
@@ -177,16 +180,19 @@ RunResult run(const RunOptions& o) {
     if (!figures.pose_usable) continue;  // lost: not fused, not in the trajectory
     estimated.push_back(frame.T_world_cam.t_world_cam);
     truth.push_back(gt.t_world_cam);
-    if (fused) fuse_ms.push_back(static_cast<double>(figures.fuse.fuse_ns) * 1e-6);
+    if (fused) {
+      fuse_ms.push_back(static_cast<double>(figures.fuse.fuse_ns) * 1e-6);
+      model_ms.push_back(static_cast<double>(figures.track.model_ns) * 1e-6);
+    }
   }
   camera.stop();
-  finishResult(estimated, truth, track_ms, fuse_ms, r);
+  finishResult(estimated, truth, track_ms, model_ms, fuse_ms, r);
   return r;
 }
 
 void printHeader() {
-  std::printf("%-28s %6s %7s %5s %6s %9s %9s %9s %9s %9s\n", "run", "frames", "tracked", "lost", "reloc", "ATE mm",
-              "max mm", "track ms", "p90 ms", "fuse ms");
+  std::printf("%-28s %6s %7s %5s %6s %9s %9s %9s %9s %9s %9s\n", "run", "frames", "tracked", "lost", "reloc", "ATE mm",
+              "max mm", "track ms", "p90 ms", "model ms", "fuse ms");
 }
 
 void printRow(const RunOptions& o, const RunResult& r) {
@@ -194,9 +200,9 @@ void printRow(const RunOptions& o, const RunResult& r) {
     std::printf("%-28s failed: %s\n", o.name.c_str(), r.error.c_str());
     return;
   }
-  std::printf("%-28s %6d %7d %5d %6d %9.2f %9.2f %9.2f %9.2f %9.2f\n", o.name.c_str(), r.frames, r.tracked, r.lost,
-              r.relocalised, r.ate ? r.ate->rmse_m * 1e3 : NAN, r.ate ? r.ate->max_m * 1e3 : NAN, r.track_median_ms,
-              r.track_p90_ms, r.fuse_median_ms);
+  std::printf("%-28s %6d %7d %5d %6d %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f\n", o.name.c_str(), r.frames, r.tracked,
+              r.lost, r.relocalised, r.ate ? r.ate->rmse_m * 1e3 : NAN, r.ate ? r.ate->max_m * 1e3 : NAN,
+              r.track_median_ms, r.track_p90_ms, r.model_median_ms, r.fuse_median_ms);
   if (!r.events.empty()) std::printf("    %s\n", r.events.c_str());
   if (o.hard == "jump" || o.hard == "drift") {
     std::printf("    largest disagreement with the prior: %.3f m\n", r.max_disagreement_m);

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <utility>
 
+#include "core/clock.h"
+
 namespace fovea::pipeline::map {
 
 namespace {
@@ -58,7 +60,11 @@ bool Mapper::addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFram
   }
   map_->fuse(frame, out.fuse, out.pose_usable);
   budget_.spent(out.fuse.fuse_ns);
-  if (poser_ && out.fused()) poser_->fused(frame, *map_);
+  if (poser_ && out.fused()) {
+    const int64_t t0 = monotonicNs();
+    poser_->fused(frame, *map_);
+    out.track.model_ns = monotonicNs() - t0;
+  }
   return out.fused();
 }
 

@@ -140,6 +140,9 @@ struct TrackStats {
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
   int64_t track_ns = 0;             // all of track()
   int64_t pyramid_ns = 0;           // step 1
+  // Building the model for the next frame from the fused map (modelFused(),
+  // after fusion; Mapper::addFrame times it): tracking's cost besides track().
+  int64_t model_ns = 0;
 };
 
 struct TrackerCounters {
