@@ -387,6 +387,12 @@ bool FrameToModelTracker::Level::setMeasured(std::size_t i, int u, int v, uint16
   return ok;
 }
 
+void FrameToModelTracker::Level::copyPixel(std::size_t from, std::size_t to) {
+  x[to] = x[from], y[to] = y[from], z[to] = z[from];
+  nx[to] = nx[from], ny[to] = ny[from], nz[to] = nz[from];
+  intensity[to] = intensity[from];
+}
+
 float FrameToModelTracker::maxDepth() const {
   return config_.max_depth_m > 0.0 ? static_cast<float>(config_.max_depth_m) : std::numeric_limits<float>::infinity();
 }
@@ -418,27 +424,43 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
   return valid >= kMinValidPixels;
 }
 
-void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map) {
+// The model's finest level, pixel by pixel: the surfel the index map names,
+// moved into the camera at `pose`, or where none is, the frame's own
+// measurement. Two things make it cheap without changing a bit: a surfel's
+// values depend on the surfel and the pose alone, so a pixel naming the surfel
+// its left neighbour named copies them (a footprint spans several pixels of a
+// row); and the surfel kPrefetchPixels ahead is fetched early (the pool is tens
+// of MB: without it most of the time went to waiting for it, perf on the
+// mock orbit).
+void FrameToModelTracker::modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
+                                            const uint32_t* index) {
+  constexpr std::size_t kPrefetchPixels = 24;
   const int w = frame.width(), h = frame.height();
-  if (w > config_.max_width || h > config_.max_height || w < 8 || h < 8) {
-    have_model_ = false;
-    return;
-  }
-  const bool index_ok = map.indexMapWidth() == w && map.indexMapHeight() == h;
-  const uint32_t* index = map.indexMap();
+  const std::size_t pixels = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   Level& l0 = model_[0];
-  l0.setCamera(w, h, frame.intrinsics);
   const Eigen::Matrix3d Rt = pose.R_world_cam.transpose();
   const Eigen::Matrix3f Rt_f = Rt.cast<float>();
   const float scale = static_cast<float>(frame.depth_scale_m);
   const float max_z = maxDepth();
   const uint16_t* depth = frame.depth();
   const uint8_t* rgb = frame.rgb();
+  const std::size_t slots = map.slotCount();
   for (int v = 0; v < h; ++v) {
+    uint32_t left = SurfelMap::kNoSurfel;  // the slot the pixel to the left took its values from
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      const uint32_t slot = index_ok ? index[i] : SurfelMap::kNoSurfel;
-      if (slot != SurfelMap::kNoSurfel && slot < map.slotCount() && map.live(slot)) {
+      if (index != nullptr && i + kPrefetchPixels < pixels) {
+        const uint32_t ahead = index[i + kPrefetchPixels];
+        if (ahead < slots) __builtin_prefetch(&map.surfel(ahead));
+      }
+      const uint32_t slot = index != nullptr ? index[i] : SurfelMap::kNoSurfel;
+      if (slot != SurfelMap::kNoSurfel && slot == left) {
+        l0.copyPixel(i - 1, i);
+        model_from_surfel_[i] = 1;
+        continue;
+      }
+      left = SurfelMap::kNoSurfel;
+      if (slot < slots && map.live(slot)) {
         const Surfel& s = map.surfel(slot);
         const Eigen::Vector3d p = Rt * (map.worldPosition(slot) - pose.t_world_cam);
         if (p.z() > 0.0) {
@@ -448,6 +470,7 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
           const uint8_t c[3] = {s.red, s.green, s.blue};
           l0.intensity[i] = intensityOf(c);
           model_from_surfel_[i] = 1;
+          left = slot;
           continue;
         }
       }
@@ -455,6 +478,24 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
       (void)l0.setMeasured(i, u, v, depth[i], scale, max_z, frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f);
     }
   }
+}
+
+FrameToModelTracker::ModelView FrameToModelTracker::finestModel() const {
+  const Level& l0 = model_[0];
+  return {l0.width,        l0.height,       l0.x.data(),         l0.y.data(), l0.z.data(), l0.nx.data(),
+          l0.ny.data(),    l0.nz.data(),    l0.intensity.data(), model_from_surfel_.data()};
+}
+
+void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map) {
+  const int w = frame.width(), h = frame.height();
+  if (w > config_.max_width || h > config_.max_height || w < 8 || h < 8) {
+    have_model_ = false;
+    return;
+  }
+  const bool index_ok = map.indexMapWidth() == w && map.indexMapHeight() == h;
+  Level& l0 = model_[0];
+  l0.setCamera(w, h, frame.intrinsics);
+  modelFromIndexMap(frame, pose, map, index_ok ? map.indexMap() : nullptr);
   // Normals of the pixels without a surfel: from the model's vertex map (the
   // frame's own measurement there, next to surfels as merged).
   computeNormals(

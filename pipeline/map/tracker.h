@@ -168,6 +168,17 @@ class FrameToModelTracker {
   // Forgets the model and the last pose (the next frame is a first frame).
   void reset();
 
+  // The finest level of the model the next frame is tracked against, as
+  // modelFused() left it (tests): vertices and normals in the camera at its
+  // pose, intensity, and from_surfel 1 where a surfel gave the pixel.
+  struct ModelView {
+    int width = 0, height = 0;
+    const float *x = nullptr, *y = nullptr, *z = nullptr, *nx = nullptr, *ny = nullptr, *nz = nullptr;
+    const float* intensity = nullptr;
+    const uint8_t* from_surfel = nullptr;
+  };
+  ModelView finestModel() const;
+
   bool lost() const { return lost_; }
   const hal::Pose& lastGoodPose() const { return last_good_; }
   const TrackerConfig& config() const { return config_; }
@@ -190,6 +201,7 @@ class FrameToModelTracker {
     // Pixel i = (u, v) from its measurement: the vertex of its raw depth
     // (zeros, and false, without a valid one up to max_z) and its intensity.
     bool setMeasured(std::size_t i, int u, int v, uint16_t raw, float scale, float max_z, float intensity_value);
+    void copyPixel(std::size_t from, std::size_t to);  // vertex, normal and intensity
   };
   float maxDepth() const;  // config_.max_depth_m, infinity when 0 (off)
   // The result of one coarse-to-fine Gauss-Newton run from a start estimate.
@@ -202,6 +214,9 @@ class FrameToModelTracker {
     bool finite = true;
   };
   bool buildFramePyramid(const hal::RgbdFrame& frame);  // false: no valid depth
+  // modelFused()'s finest level from the map's index map (nullptr: none at the frame's size).
+  void modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
+                         const uint32_t* index);
   Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const;

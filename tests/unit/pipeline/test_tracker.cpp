@@ -136,6 +136,66 @@ void startOnTruth(FrameToModelTracker& tracker, SurfelMap& map, hal::RgbdFrame& 
   tracker.modelFused(frame, pose, map);
 }
 
+// The model modelFused() builds is, pixel by pixel, the surfel the index map
+// names moved into the camera (bit for bit as computed here, one surfel at a
+// time), or the frame's own depth where no surfel is in front: the same
+// whether a pixel computed its surfel or took it from its left neighbour.
+TEST(Tracker, TheModelIsTheIndexMapsSurfelsInTheCameraAndTheFrameElsewhere) {
+  std::vector<hal::RgbdFrame> frames =
+      mockFrames("mock:living-room,size=320x240,path=orbit", kW, kH, test::repetitions(6, 4));
+  ASSERT_GE(frames.size(), 3u);
+  auto tracker = FrameToModelTracker::create(trackerConfig(kW, kH)).value();
+  auto map = SurfelMap::create(mapConfig(kW, kH)).value();
+  for (hal::RgbdFrame& frame : frames) {
+    FuseStats fs;
+    ASSERT_EQ(map.fuse(frame, fs), FuseOutcome::kFused);
+  }
+  const hal::RgbdFrame& frame = frames.back();
+  const hal::Pose& pose = frame.T_world_cam;
+  tracker.modelFused(frame, pose, map);
+  const FrameToModelTracker::ModelView m = tracker.finestModel();
+  ASSERT_EQ(m.width, kW);
+  ASSERT_EQ(m.height, kH);
+  ASSERT_EQ(map.indexMapWidth(), kW);
+  const Eigen::Matrix3d Rt = pose.R_world_cam.transpose();
+  const uint32_t* index = map.indexMap();
+  std::size_t from_surfel = 0, same_as_left = 0, measured = 0;
+  for (int v = 0; v < kH; ++v) {
+    for (int u = 0; u < kW; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * kW + u;
+      SCOPED_TRACE(testing::Message() << "pixel " << u << "," << v);
+      const uint32_t slot = index[i];
+      const bool in_front = slot < map.slotCount() && map.live(slot) &&
+                            (Rt * (map.worldPosition(slot) - pose.t_world_cam)).z() > 0.0;
+      ASSERT_EQ(m.from_surfel[i], in_front ? 1 : 0);
+      if (in_front) {
+        ++from_surfel;
+        same_as_left += u > 0 && index[i - 1] == slot ? 1 : 0;
+        const Eigen::Vector3f p = (Rt * (map.worldPosition(slot) - pose.t_world_cam)).cast<float>();
+        const Eigen::Vector3f n = Rt.cast<float>() * surfelNormal(map.surfel(slot));
+        ASSERT_EQ(m.x[i], p.x());
+        ASSERT_EQ(m.y[i], p.y());
+        ASSERT_EQ(m.z[i], p.z());
+        ASSERT_EQ(m.nx[i], n.x());
+        ASSERT_EQ(m.ny[i], n.y());
+        ASSERT_EQ(m.nz[i], n.z());
+        if (u > 0 && index[i - 1] == slot) {
+          ASSERT_EQ(m.intensity[i], m.intensity[i - 1]);
+        }
+      } else {
+        ++measured;
+        const float depth_m = static_cast<float>(frame.depth()[i]) * static_cast<float>(frame.depth_scale_m);
+        ASSERT_EQ(m.z[i], frame.depth()[i] != 0 ? depth_m : 0.0f);
+      }
+    }
+  }
+  // Each path was taken: surfels computed, surfels shared along a row, the frame's own depth.
+  EXPECT_GT(from_surfel, static_cast<std::size_t>(kW * kH / 2));
+  EXPECT_GT(same_as_left, from_surfel / 20);
+  EXPECT_LT(same_as_left, from_surfel);
+  EXPECT_GT(measured, 0u);
+}
+
 class TrackerKernels : public ::testing::TestWithParam<KernelSet> {};
 
 TEST_P(TrackerKernels, SameFrameAgainGivesTheSamePose) {
