@@ -8,7 +8,10 @@
 //   fovea-map-link --experiment gaze|loss|join [--scene living-room] [--path static] [--size 640x480]
 //                  [--fps 30] [--budget-mbps 12.5] [--saccades 12] [--dwell-ms 1500] [--loss 0.1]
 //                  [--loss-seconds 6] [--join-after 8] [--seed 1] [--source map|frame] [--preset F1]
+//                  [--fuse-budget-ms MS]
 //
+// --fuse-budget-ms sets the map's map.fuse_budget_ms (fusion's time budget,
+// pipeline/map/fusion_budget.h; 0, the default: every frame fused).
 // --source frame (gaze only) measures today's frame-by-frame stream instead:
 // the service foveates each frame (--preset) for the newest gaze, and the
 // operator holds the fovea's detail once a frame foveated for the new gaze
@@ -146,6 +149,7 @@ struct LinkOptions {
   uint64_t seed = 1;
   std::string source = "map";
   std::string preset = "F1";
+  double fuse_budget_ms = 0.0;
 };
 
 // Returns the options, or nothing after printing the usage.
@@ -162,15 +166,17 @@ std::optional<LinkOptions> parseOptions(int argc, char** argv) {
   o.seed = static_cast<uint64_t>(std::atoll(option(argc, argv, "--seed", "1").c_str()));
   o.source = option(argc, argv, "--source", "map");
   o.preset = option(argc, argv, "--preset", "F1");
+  o.fuse_budget_ms = std::atof(option(argc, argv, "--fuse-budget-ms", "0").c_str());
   if ((o.experiment != "gaze" && o.experiment != "loss" && o.experiment != "join") || o.fps < 1 ||
       !(o.budget_mbps > 0) || o.saccades < 1 || o.dwell_ms < 100 || !(o.loss >= 0 && o.loss <= 0.5) ||
       !(o.loss_seconds > 0) || !(o.join_after >= 0) || (o.source != "map" && o.source != "frame") ||
-      (o.source == "frame" && o.experiment != "gaze") || !pipeline::parsePreset(o.preset)) {
+      (o.source == "frame" && o.experiment != "gaze") || !pipeline::parsePreset(o.preset) ||
+      !(o.fuse_budget_ms >= 0.0)) {
     std::fprintf(stderr,
                  "usage: fovea-map-link --experiment gaze|loss|join [--scene S] [--path P] [--size WxH] [--fps N]\n"
                  "                      [--budget-mbps MBPS] [--saccades N] [--dwell-ms MS] [--loss SHARE]\n"
                  "                      [--loss-seconds S] [--join-after S] [--seed N] [--source map|frame]\n"
-                 "                      [--preset NAME] (--source frame: gaze only)\n");
+                 "                      [--preset NAME] (--source frame: gaze only) [--fuse-budget-ms MS]\n");
     return std::nullopt;
   }
   o.spec = bench::mockSceneSpec(argc, argv, "static") + ",fps=" + std::to_string(o.fps);
@@ -206,6 +212,7 @@ std::unique_ptr<firmware::Service> createService(const LinkOptions& o) {
   if (o.source == "map") {
     config.map.source = firmware::FoveationSource::kMap;
     config.map.delta = true;
+    config.map.fuse_budget_ms = o.fuse_budget_ms;
   } else {
     config.foveation.acuity.preset = pipeline::parsePreset(o.preset).value();
   }
@@ -470,9 +477,10 @@ int main(int argc, char** argv) {
   const std::unique_ptr<Operator> op = connectOperator(o, robot, view, hello_ns);
   if (!op) return 1;
 
-  std::printf("fovea-map-link: %s, %s, %s, budget %.1f MB/s\n", o.experiment.c_str(), o.spec.c_str(),
+  std::printf("fovea-map-link: %s, %s, %s, budget %.1f MB/s, fusion's time budget %.1f ms\n", o.experiment.c_str(),
+              o.spec.c_str(),
               o.source == "map" ? "the map's bricks (foveation.source = map, map.delta)" : ("frame by frame, " + o.preset).c_str(),
-              o.budget_mbps);
+              o.budget_mbps, o.fuse_budget_ms);
   const Session session{o, *service, *op, relay, hello_ns, before_join};
   if (o.experiment == "gaze") return runGaze(session);
   if (o.experiment == "loss") return runLoss(session);
