@@ -9,15 +9,22 @@
 //
 //   fovea-map-delta [--scene living-room] [--path static] [--frames 90] [--size 640x480]
 //                   [--budget-mbps 12.5] [--fps 30] [--dwell-frames 9] [--eval-every 15]
+//                   [--pose camera|track]
 //
+// The map is the service's: one pipeline::map::Mapper (pipeline/map/mapper.h)
+// that poses (--pose track: its tracker, from the frames alone; camera, the
+// default: the camera's own pose), fuses and plans each frame's bricks within
+// the frame's share of the budget by the service's estimate of their bytes.
 // The gaze: the operator's eye at the camera, fixating the scene's focus point
 // and four points 0.25-0.4 m around it in turn, --dwell-frames frames each
 // (9: 300 ms at 30 fps), with an instant saccade between.
 //
-// MAP-DELTA each frame: the bricks the plan makes due in the fovea, then the
-// frame's points the map does not explain (ACUITY-foveated, as today's
-// chunks), then the other due bricks, while the frame's share of the budget
-// lasts; the rest waits.
+// MAP-DELTA each frame, as the service sends it: the frame's points the map
+// does not explain (ACUITY-foveated; a frame the map did not fuse goes whole),
+// and the bricks Mapper::planBricks puts in the frame's batch (the fovea's
+// first, the live points charged after them, then the other due bricks while
+// the estimate fits the frame's share of the budget; the rest waits), each
+// brick encoded on its own as the service's streamer does.
 //
 // Quality, every --eval-every frames from the second second on and at the
 // last: for each point of the true surface the frame sees (the mock camera's
@@ -28,6 +35,7 @@
 // nearest-point measure, unlike fovea-eval's (each input point against its own
 // representative). An evaluation tool: it allocates freely.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -52,6 +60,7 @@
 #include "pipeline/foveator.h"
 #include "pipeline/map/brick_batch.h"
 #include "pipeline/map/map_delta.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/voxel_sampler.h"
 
@@ -159,18 +168,21 @@ struct Stream {
 };
 
 struct DeltaOptions {
-  std::string spec;  // the mock camera's (mock_scene.h)
+  std::string spec;    // the mock camera's (mock_scene.h)
+  std::string camera;  // --camera: another camera (a TUM sequence) in its place, without a twin
   int frames = 90;
   double budget_mbps = 12.5;
   int fps = 30;
   int dwell = 9;
   int eval_every = 15;
+  bool track = false;  // --pose track
 };
 
 // Returns the options, or nothing after printing why they are refused.
 std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
   DeltaOptions o;
   o.spec = bench::mockSceneSpec(argc, argv, "static");
+  o.camera = option(argc, argv, "--camera", "");
   o.frames = std::atoi(option(argc, argv, "--frames", "90").c_str());
   o.budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
   o.fps = std::atoi(option(argc, argv, "--fps", "30").c_str());
@@ -181,6 +193,12 @@ std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
                  "fovea-map-delta: --frames, --fps, --dwell-frames, --eval-every and --budget-mbps must be positive\n");
     return std::nullopt;
   }
+  const std::string pose = option(argc, argv, "--pose", "camera");
+  if (pose != "camera" && pose != "track") {
+    std::fprintf(stderr, "fovea-map-delta: --pose is camera or track, not '%s'\n", pose.c_str());
+    return std::nullopt;
+  }
+  o.track = pose == "track";
   return o;
 }
 
@@ -191,24 +209,27 @@ struct FrameStep {
   pipeline::Gaze gaze;
   uint32_t frame_id = 0;
   int64_t now_ns = 0;
-  double left = 0.0;    // bytes left of the frame's share of the budget
-  bool live_sent = false;
 };
 
 // The run: the camera and its twin, the map and its stream of changes, the
 // encoder, the operator's side, and the figures gathered frame by frame.
 class DeltaBench {
  public:
-  DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera& truth_camera);
+  // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
+  static constexpr std::size_t kMaxBrickPoints = 1 << 18;
+
+  // truth_camera: the noiseless twin, or nullptr (the frame itself is the reference).
+  DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera* truth_camera);
   // Every frame, the plan's worst case, then the report. Returns the exit status.
   int run();
 
  private:
   int step(int f);
   int sendFrameStreams(const FrameStep& s);
-  int sendMapDelta(FrameStep& s);
-  bool sendBrick(const pipeline::map::BrickDue& due, FrameStep& s);
-  void sendLive(FrameStep& s);
+  int sendMapDelta(const FrameStep& s);
+  bool sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameStep& s);
+  bool foveateLive(const pipeline::Gaze& gaze, bool steady, bool fused);
+  bool sendLive(const FrameStep& s);
   int evaluate(const FrameStep& s);
   int coldPlan(std::vector<double>& cold_ms);
   void printBytes() const;
@@ -218,26 +239,21 @@ class DeltaBench {
     if (steady) stream.bytes_steady += bytes;
   }
 
-  // A brick holds at most this many stable surfels here (the mock room's hold a few thousand).
-  static constexpr std::size_t kMaxBrickPoints = 1 << 18;
-
   const DeltaOptions& o_;
   hal::Camera& camera_;
-  hal::Camera& truth_camera_;
+  hal::Camera* truth_camera_;  // the noiseless twin; nullptr: the frame itself is the reference
   const hal::CameraIntrinsics& k_;
   const std::size_t pixels_;
-  const Eigen::Vector3d focus_;
-  pipeline::map::SurfelMapConfig map_config_;
-  pipeline::map::SurfelMap map_;
-  const pipeline::map::MapDeltaConfig delta_config_;
-  pipeline::map::MapDelta delta_;
+  Eigen::Vector3d focus_;
+  const double budget_per_frame_;
+  const pipeline::map::MapperConfig mapper_config_;
+  pipeline::map::Mapper mapper_;
   pipeline::Foveator f1_foveator_;
   pipeline::Foveator live_foveator_;
   net::ChunkEncoder encoder_;
-  pipeline::map::BrickSampler brick_sampler_;
   pipeline::map::BrickBatch batch_;
   pipeline::PointCloud cloud_, live_;
-  pipeline::FoveatedCloud out_;
+  pipeline::FoveatedCloud out_, live_out_, brick_;
   // The operator's side: the bricks it holds (no loss here), and the last
   // frame's decoded F1 and live points.
   net::BrickCache cache_;
@@ -249,18 +265,26 @@ class DeltaBench {
   std::size_t missing_points_[3] = {};
 
   Stream fref_{"FREF"}, f1_stream_{"F1"}, bricks_{"MAP-DELTA bricks"}, live_stream_{"MAP-DELTA live"};
-  const double budget_per_frame_;
   std::vector<double> plan_ms_, brick_encode_ms_;
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
+  std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent whole); tracked (--pose track)
+  std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
+  int live_regions_ = 0;
+  hal::Pose map_to_world_;  // the map's world in the truth's (--pose track: the first frame's true pose)
   hal::RgbdFrame frame_;
 };
 
-pipeline::map::SurfelMapConfig mapConfigFor(const hal::CameraIntrinsics& k) {
-  pipeline::map::SurfelMapConfig map_config;
-  map_config.max_width = k.width;
-  map_config.max_height = k.height;
-  return map_config;
+// The service's mapper for this camera, streaming bricks of at most
+// kMaxBrickPoints surfels, in batches of a frame's share of the budget.
+pipeline::map::MapperConfig mapperConfigFor(const hal::CameraIntrinsics& k, bool track) {
+  pipeline::map::MapperConfig config;
+  config.map.max_width = k.width;
+  config.map.max_height = k.height;
+  config.tracking = track ? pipeline::map::PoseTracking::kAlone : pipeline::map::PoseTracking::kOff;
+  config.output = pipeline::map::MapOutput::kBricks;
+  config.max_brick_surfels = DeltaBench::kMaxBrickPoints;
+  return config;
 }
 
 pipeline::Foveator foveatorFor(std::size_t pixels, const pipeline::FoveationConfig& config) {
@@ -281,35 +305,51 @@ pipeline::FoveationConfig acuityConfig(const pipeline::map::MapDeltaConfig& delt
   return acuity;
 }
 
+// A frame's batch holds the points its share of the budget can carry by the
+// estimate, and at least one whole brick.
+std::size_t batchPoints(double budget_per_frame) {
+  return std::max(DeltaBench::kMaxBrickPoints,
+                  static_cast<std::size_t>(budget_per_frame / pipeline::map::kWireBytesPerPointEstimate) + 1);
+}
+
+// A camera without a focus point (a recording): the point the first frame's
+// centre pixel sees, or 1.5 m along its axis without a depth there.
+Eigen::Vector3d centreOfView(const hal::RgbdFrame& frame) {
+  const std::size_t centre = static_cast<std::size_t>(frame.height() / 2) * frame.width() + frame.width() / 2;
+  const double depth = frame.depth()[centre] * frame.depth_scale_m;
+  const double along = depth > 0.0 ? depth : 1.5;
+  return frame.T_world_cam.t_world_cam + frame.T_world_cam.R_world_cam.col(2) * along;
+}
+
 net::BrickCache operatorCache() {
   net::BrickCacheConfig cache_config;
   cache_config.max_points = std::size_t{1} << 23;
   return net::BrickCache::create(cache_config).value();
 }
 
-DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera& truth_camera)
+DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Camera* truth_camera)
     : o_(options),
       camera_(camera),
       truth_camera_(truth_camera),
       k_(camera.info().intrinsics),
       pixels_(static_cast<std::size_t>(k_.width) * k_.height),
       focus_(camera.info().focus_point_m.value_or(Eigen::Vector3d(0, 0, 2))),
-      map_config_(mapConfigFor(k_)),
-      map_(pipeline::map::SurfelMap::create(map_config_).value()),
-      delta_(pipeline::map::MapDelta::create(delta_config_, map_config_.max_bricks).value()),
+      budget_per_frame_(o_.budget_mbps * 1e6 / o_.fps),
+      mapper_config_(mapperConfigFor(k_, o_.track)),
+      mapper_(pipeline::map::Mapper::create(mapper_config_).value()),
       f1_foveator_(foveatorFor(pixels_, f1Config())),
-      live_foveator_(foveatorFor(pixels_, acuityConfig(delta_config_))),
+      live_foveator_(foveatorFor(pixels_, acuityConfig(mapper_config_.delta))),
       encoder_(net::ChunkEncoder::create(net::CodecConfig{}, std::max(pixels_, kMaxBrickPoints)).value()),
-      brick_sampler_(pipeline::map::BrickSampler::create(delta_config_.acuity, kMaxBrickPoints).value()),
-      batch_(kMaxBrickPoints, 1),
+      batch_(batchPoints(budget_per_frame_), 1024),
       cloud_(pixels_),
       live_(pixels_),
       out_(pixels_),
+      live_out_(pixels_),
+      brick_(kMaxBrickPoints),
       cache_(operatorCache()),
       decoded_(std::max(pixels_, kMaxBrickPoints)),
       truth_(k_.width, k_.height),
       truth_cloud_(pixels_),
-      budget_per_frame_(o_.budget_mbps * 1e6 / o_.fps),
       frame_(k_.width, k_.height) {}
 
 int DeltaBench::run() {
@@ -326,10 +366,13 @@ int DeltaBench::run() {
 // One frame: the gaze's fixation, the frame-by-frame streams, MAP-DELTA, and
 // (when due) what the operator then holds against the true surface.
 int DeltaBench::step(int f) {
-  if (!camera_.acquire(frame_, std::chrono::seconds(5)) || !truth_camera_.acquire(truth_, std::chrono::seconds(5))) {
+  if (!camera_.acquire(frame_, std::chrono::seconds(5)) ||
+      (truth_camera_ != nullptr && !truth_camera_->acquire(truth_, std::chrono::seconds(5)))) {
     std::fprintf(stderr, "fovea-map-delta: frame %d did not arrive\n", f);
     return 1;
   }
+  if (truth_camera_ == nullptr) truth_ = frame_;  // the measured surface is the reference
+  if (f == 0 && !camera_.info().focus_point_m) focus_ = centreOfView(frame_);
   static const Eigen::Vector3d offsets[5] = {{0, 0, 0}, {0.4, 0.25, 0}, {-0.4, 0.25, 0}, {-0.4, -0.25, 0}, {0.4, -0.25, 0}};
   FrameStep s;
   s.f = f;
@@ -353,7 +396,7 @@ int DeltaBench::step(int f) {
 int DeltaBench::sendFrameStreams(const FrameStep& s) {
   pipeline::BackprojectCounts bp;
   cloud_.clear();
-  if (!pipeline::backprojectRef(frame_, map_config_.depth, cloud_, bp)) return 1;
+  if (!pipeline::backprojectRef(frame_, mapper_config_.map.depth, cloud_, bp)) return 1;
   out_.points.origin_m = cloud_.origin_m;
   std::copy_n(cloud_.x(), cloud_.size(), out_.points.x());
   std::copy_n(cloud_.y(), cloud_.size(), out_.points.y());
@@ -378,89 +421,110 @@ int DeltaBench::sendFrameStreams(const FrameStep& s) {
   return 0;
 }
 
-// MAP-DELTA: fuse, plan, then the fovea's due bricks, the live points and the
-// other due bricks while the frame's share of the budget lasts.
-int DeltaBench::sendMapDelta(FrameStep& s) {
-  pipeline::map::FuseStats fuse;
-  if (map_.fuse(frame_, fuse) != pipeline::map::FuseOutcome::kFused) {
-    std::fprintf(stderr, "fovea-map-delta: frame %d: %s\n", s.f,
-                 std::string(pipeline::map::fuseOutcomeName(fuse.outcome)).c_str());
+// MAP-DELTA as the service sends it: pose and fuse (Mapper::addFrame), the
+// live points foveated for the gaze, the batch of bricks planned for the
+// frame's share of the budget with the live points charged after the fovea's
+// bricks, then every brick of the batch and the live points encoded.
+int DeltaBench::sendMapDelta(const FrameStep& s) {
+  // Tracking alone starts the map's world at the first frame's camera: the
+  // truth's world is that frame's true pose away.
+  if (s.f == 0 && o_.track) map_to_world_ = frame_.T_world_cam;
+  pipeline::map::MapperFrame figures;
+  const bool fused = mapper_.addFrame(frame_, /*outside_pose_valid=*/true, figures);
+  if (o_.track && figures.track.outcome == pipeline::map::TrackOutcome::kTracked) ++tracked_;
+  if (!fused) ++unfused_;
+  pipeline::Gaze gaze = s.gaze;  // in the map's world
+  const Eigen::Matrix3d Rt = map_to_world_.R_world_cam.transpose();
+  gaze.origin_m = Rt * (s.gaze.origin_m - map_to_world_.t_world_cam);
+  gaze.direction = Rt * s.gaze.direction;
+  gaze.view_forward = Rt * s.gaze.view_forward;
+  if (!foveateLive(gaze, s.steady, fused)) return 1;
+  pipeline::map::MapperPlan plan;
+  const double live_bytes = static_cast<double>(live_out_.size()) * pipeline::map::kWireBytesPerPointEstimate;
+  const auto bricks_start = std::chrono::steady_clock::now();  // the plan, the sampling and the encoding
+  if (!mapper_.planBricks(gaze, budget_per_frame_, live_bytes, frame_.T_world_cam.t_world_cam, batch_, plan)) {
+    std::fprintf(stderr, "fovea-map-delta: frame %d: the bricks could not be planned\n", s.f);
     return 1;
   }
-  pipeline::map::MapDeltaStats ds;
-  auto plan = delta_.plan(map_, s.gaze, ds);
-  if (!plan) return 1;
-  plan_ms_.push_back(static_cast<double>(ds.ns) * 1e-6);
-  s.left = budget_per_frame_;
-  s.live_sent = false;
-  const auto encode_start = std::chrono::steady_clock::now();
-  for (const pipeline::map::BrickDue& due : plan.value()) {
-    if (!due.fovea && !s.live_sent) sendLive(s);
-    if (s.left <= 0.0) {
-      ++bricks_waited_;
-      continue;
-    }
-    if (!sendBrick(due, s)) return 1;
+  plan_ms_.push_back(static_cast<double>(plan.delta.ns) * 1e-6);
+  bricks_waited_ += plan.bricks_waiting;
+  for (const pipeline::map::BrickBatchEntry& e : batch_.entries()) {
+    if (!sendBrick(e, s)) return 1;
   }
-  if (!s.live_sent) sendLive(s);
   brick_encode_ms_.push_back(
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - encode_start).count());
-  return 0;
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - bricks_start).count());
+  return sendLive(s) ? 0 : 1;
 }
 
-// One brick at a time through the service's sampler (pipeline/map/brick_batch.h).
-bool DeltaBench::sendBrick(const pipeline::map::BrickDue& due, FrameStep& s) {
-  uint32_t version = delta_.version(due.brick) + 1;
-  if (version == 0) version = 1;
-  batch_.clear(map_.brickOrigin(due.brick));
-  if (!brick_sampler_.append(map_, due.brick, due.level, version, due.fovea, batch_)) return false;
-  const pipeline::map::BrickBatchEntry& e = batch_.entries()[0];
+// One brick of the batch, encoded on its own as the service's streamer does,
+// and decoded into the operator's cache.
+bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameStep& s) {
+  pipeline::PointCloud& p = brick_.points;
+  p.clear();
+  p.origin_m = batch_.points.points.origin_m;
+  if (!p.resize(e.count)) return false;
+  const pipeline::PointCloud& from = batch_.points.points;
+  std::copy_n(from.x() + e.first, e.count, p.x());
+  std::copy_n(from.y() + e.first, e.count, p.y());
+  std::copy_n(from.z() + e.first, e.count, p.z());
+  std::copy_n(from.rgb() + e.first, e.count, p.rgb());
+  std::fill_n(brick_.region.begin(), e.count, e.level);
+  std::copy_n(batch_.points.weight.begin() + e.first, e.count, brick_.weight.begin());
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
-  if (!encoder_.encode(batch_.points, std::span<const double>(batch_.level_step_m.data(), due.level + 1u), s.frame_id,
-                       0, &tag)) {
+  if (!encoder_.encode(brick_, std::span<const double>(batch_.level_step_m.data(), e.level + 1u), s.frame_id, 0, &tag)) {
     return false;
   }
-  const std::size_t bytes = datagramBytes(encoder_);
   decodeAll(encoder_, &cache_, nullptr, decoded_, s.now_ns);
-  count(bricks_, bytes, s.steady);
-  s.left -= static_cast<double>(bytes);
-  brick_points_sent_ += batch_.points.size();
+  count(bricks_, datagramBytes(encoder_), s.steady);
+  brick_points_sent_ += e.count;
   ++bricks_sent_;
-  delta_.markSent(map_, due.brick, due.level);
   return true;
 }
 
-// The frame's points the map does not explain, ACUITY-foveated.
-void DeltaBench::sendLive(FrameStep& s) {
-  s.live_sent = true;
-  live_held_.clear();
+// The frame's points the map does not explain (the whole frame when the map
+// did not fuse it), ACUITY-foveated for the gaze into live_out_.
+bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, bool fused) {
   live_.clear();
-  live_.origin_m = cloud_.origin_m;
-  map_.appendUnexplained(frame_, live_);
-  if (s.steady) live_points_ += live_.size();
-  pipeline::FoveationStats ls;
-  if (live_.size() == 0 || !live_foveator_.foveate(live_, s.gaze, out_, ls)) return;
-  double live_sizes[pipeline::kMaxRegions] = {};
-  for (int r = 0; r < ls.region_count; ++r) live_sizes[r] = ls.regions[r].voxel_size_m;
-  if (!encoder_.encode(out_, std::span<const double>(live_sizes, static_cast<std::size_t>(ls.region_count)), s.frame_id,
-                       0)) {
-    return;
+  if (fused) {
+    live_.origin_m = frame_.T_world_cam.t_world_cam;
+    mapper_.appendUnexplained(frame_, live_);
+  } else {
+    pipeline::BackprojectCounts bp;
+    if (!pipeline::backprojectRef(frame_, mapper_config_.map.depth, live_, bp)) return false;
   }
-  const std::size_t bytes = datagramBytes(encoder_);
-  count(live_stream_, bytes, s.steady);
-  s.left -= static_cast<double>(bytes);
+  if (steady) live_points_ += live_.size();
+  live_out_.clear();
+  pipeline::FoveationStats ls;
+  if (live_.size() > 0 && !live_foveator_.foveate(live_, gaze, live_out_, ls)) return false;
+  live_sizes_.fill(0.0);
+  for (int r = 0; r < ls.region_count; ++r) live_sizes_[static_cast<std::size_t>(r)] = ls.regions[r].voxel_size_m;
+  live_regions_ = live_.size() > 0 ? ls.region_count : 0;
+  return true;
+}
+
+// The foveated live points, encoded and decoded as the operator's frame.
+bool DeltaBench::sendLive(const FrameStep& s) {
+  live_held_.clear();
+  if (live_out_.size() == 0) return true;
+  if (!encoder_.encode(live_out_, std::span<const double>(live_sizes_.data(), static_cast<std::size_t>(live_regions_)),
+                       s.frame_id, 0)) {
+    return false;
+  }
+  count(live_stream_, datagramBytes(encoder_), s.steady);
   decodeAll(encoder_, nullptr, &live_held_, decoded_, s.now_ns);
+  return true;
 }
 
 int DeltaBench::evaluate(const FrameStep& s) {
   pipeline::BackprojectCounts truth_counts;
   truth_cloud_.clear();
-  if (!pipeline::backprojectRef(truth_, map_config_.depth, truth_cloud_, truth_counts)) return 1;
+  if (!pipeline::backprojectRef(truth_, mapper_config_.map.depth, truth_cloud_, truth_counts)) return 1;
   std::vector<Eigen::Vector3d> held = live_held_;
   for (std::size_t slot = 0; slot < cache_.slotCount(); ++slot) {
     if (!cache_.held(slot)) continue;
     cache_.forEachPoint(slot, [&](const Eigen::Vector3d& p, uint32_t) { held.push_back(p); });
   }
+  for (Eigen::Vector3d& p : held) p = map_to_world_.R_world_cam * p + map_to_world_.t_world_cam;  // into the truth's world
   std::vector<Eigen::Vector3d> fref_held(cloud_.size());
   for (std::size_t i = 0; i < cloud_.size(); ++i) fref_held[i] = cloud_.world(i);
   std::size_t missing = 0;
@@ -478,14 +542,15 @@ int DeltaBench::evaluate(const FrameStep& s) {
 // The plan's worst case on the final map: an operator that holds nothing
 // (every brick due, all sorted), median of 21.
 int DeltaBench::coldPlan(std::vector<double>& cold_ms) {
-  pipeline::map::MapDelta cold = pipeline::map::MapDelta::create(delta_config_, map_config_.max_bricks).value();
+  pipeline::map::MapDelta cold =
+      pipeline::map::MapDelta::create(mapper_config_.delta, mapper_config_.map.max_bricks).value();
   pipeline::Gaze gaze;
   gaze.origin_m = frame_.T_world_cam.t_world_cam;
   gaze.direction = (focus_ - gaze.origin_m).normalized();
   for (int i = 0; i < 21; ++i) {
     cold.forgetAll();
     pipeline::map::MapDeltaStats ds;
-    if (!cold.plan(map_, gaze, ds)) return 1;
+    if (!cold.plan(mapper_.map(), gaze, ds)) return 1;
     cold_ms.push_back(static_cast<double>(ds.ns) * 1e-6);
   }
   return 0;
@@ -496,7 +561,7 @@ void DeltaBench::printBytes() const {
   const double seconds = static_cast<double>(o_.frames) / o_.fps;
   const double steady_seconds = static_cast<double>(std::max(0, o_.frames - o_.fps)) / o_.fps;
   std::printf("fovea-map-delta: %s, %d frames at %d fps, gaze: 5 fixations of %d frames, budget %.1f MB/s\n",
-              o_.spec.c_str(), o_.frames, o_.fps, o_.dwell, o_.budget_mbps);
+              (o_.camera.empty() ? o_.spec : o_.camera).c_str(), o_.frames, o_.fps, o_.dwell, o_.budget_mbps);
   std::printf("  %-18s %10s %10s %16s %12s\n", "stream", "MB/s", "vs FREF", "MB/s after 1 s", "vs FREF");
   const Stream delta_total{"MAP-DELTA", bricks_.bytes + live_stream_.bytes,
                            bricks_.bytes_steady + live_stream_.bytes_steady};
@@ -519,7 +584,10 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
   std::printf("  live points after 1 s: %.0f a frame\n",
               frames > fps ? static_cast<double>(live_points_) / (frames - fps) : 0.0);
   std::printf("  bricks sent %zu (%zu points), waited %zu brick-frames; map %zu surfels in %zu bricks\n", bricks_sent_,
-              brick_points_sent_, bricks_waited_, map_.size(), map_.brickCount());
+              brick_points_sent_, bricks_waited_, mapper_.map().size(), mapper_.map().brickCount());
+  std::printf("  frames the map did not fuse (sent whole): %zu", unfused_);
+  if (o_.track) std::printf("; tracked %zu of %d", tracked_, frames);
+  std::printf("\n");
   std::printf("  plan: median %.3f ms, max %.3f ms a frame; brick sampling and encoding: median %.3f ms a frame\n",
               median(plan_ms_), *std::max_element(plan_ms_.begin(), plan_ms_.end()), median(brick_encode_ms_));
   std::printf("  plan with every brick due (an operator that holds nothing): median %.3f ms\n", median(cold_ms));
@@ -529,7 +597,9 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
     return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
   };
   const std::vector<double>* above_mar = above_mar_;
-  std::printf("  what the operator holds, against the true surface (the noiseless twin), %zu frames from the second on:\n",
+  std::printf("  what the operator holds, against %s, %zu frames from the second on:\n",
+              truth_camera_ != nullptr ? "the true surface (the noiseless twin)"
+                                       : "the measured surface (the frame's own points: no noiseless twin)",
               above_mar[0].size());
   std::printf("    share above the MAR (m %.3f), mean [min, max]: FREF %.2f %% [%.2f, %.2f], F1 %.2f %% [%.2f, %.2f], "
               "MAP-DELTA held %.2f %% [%.2f, %.2f]\n",
@@ -549,8 +619,18 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
 int main(int argc, char** argv) {
   const std::optional<DeltaOptions> options = parseOptions(argc, argv);
   if (!options) return 2;
+  if (!options->camera.empty()) {
+    fovea::Result<std::unique_ptr<hal::Camera>> camera = hal::createCamera(options->camera);
+    if (!camera || !camera.value()->open() || !camera.value()->start()) {
+      std::fprintf(stderr, "fovea-map-delta: %s: the camera did not start%s%s\n", options->camera.c_str(),
+                   camera ? "" : ": ", camera ? "" : camera.status().message().c_str());
+      return 1;
+    }
+    DeltaBench delta_bench(*options, *camera.value(), nullptr);
+    return delta_bench.run();
+  }
   bench::MockTwins twins;
   if (int status = bench::openMockTwins("fovea-map-delta", options->spec, twins); status != 0) return status;
-  DeltaBench delta_bench(*options, *twins.noisy, *twins.truth);
+  DeltaBench delta_bench(*options, *twins.noisy, twins.truth.get());
   return delta_bench.run();
 }
