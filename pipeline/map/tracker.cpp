@@ -51,6 +51,12 @@ void expTwist(const Eigen::Matrix<double, 6, 1>& x, Eigen::Matrix3d& R, Eigen::V
 
 }  // namespace
 
+void downsampleRef(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals) {
+  for (int v = 0; v < from.height / 2; ++v) {
+    for (int u = 0; u < from.width / 2; ++u) downsampleBlockRef(from, to, u, v, step_share, normals);
+  }
+}
+
 void computeNormalsRef(const NormalMapIn& in, float* nx, float* ny, float* nz) {
   const int w = in.width, h = in.height, reach = in.reach;
   const float step = static_cast<float>(reach) * 2.0f * in.step_share;
@@ -84,61 +90,6 @@ void computeGradients(int w, int h, const float* in, float* gx, float* gy) {
   }
 }
 
-// Level `to` from level `from` (2x2 blocks; vertices averaged over the pixels
-// within kStepShare of the block's first valid depth; intensity over all four;
-// normals averaged and renormalised when `normals`, else recomputed by the caller).
-template <class L>
-void downsample(const L& from, L& to, bool normals) {
-  to.width = from.width / 2;
-  to.height = from.height / 2;
-  to.fx = from.fx * 0.5f;
-  to.fy = from.fy * 0.5f;
-  to.cx = (from.cx + 0.5f) * 0.5f - 0.5f;
-  to.cy = (from.cy + 0.5f) * 0.5f - 0.5f;
-  const int fw = from.width;
-  for (int v = 0; v < to.height; ++v) {
-    for (int u = 0; u < to.width; ++u) {
-      const std::size_t o = static_cast<std::size_t>(v) * to.width + u;
-      const std::size_t s[4] = {static_cast<std::size_t>(2 * v) * fw + 2 * u,
-                                static_cast<std::size_t>(2 * v) * fw + 2 * u + 1,
-                                static_cast<std::size_t>(2 * v + 1) * fw + 2 * u,
-                                static_cast<std::size_t>(2 * v + 1) * fw + 2 * u + 1};
-      float zref = 0.0f;
-      for (std::size_t j : s) {
-        if (from.z[j] > 0.0f) {
-          zref = from.z[j];
-          break;
-        }
-      }
-      float sx = 0, sy = 0, sz = 0, snx = 0, sny = 0, snz = 0, si = 0;
-      int n = 0;
-      for (std::size_t j : s) {
-        si += from.intensity[j];
-        if (zref > 0.0f && from.z[j] > 0.0f && std::abs(from.z[j] - zref) <= kStepShare * zref) {
-          sx += from.x[j], sy += from.y[j], sz += from.z[j];
-          snx += from.nx[j], sny += from.ny[j], snz += from.nz[j];
-          ++n;
-        }
-      }
-      to.intensity[o] = 0.25f * si;
-      if (n == 0) {
-        to.x[o] = to.y[o] = to.z[o] = 0.0f;
-        to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
-        continue;
-      }
-      const float inv = 1.0f / static_cast<float>(n);
-      to.x[o] = sx * inv, to.y[o] = sy * inv, to.z[o] = sz * inv;
-      if (normals) {
-        const float len = std::sqrt(snx * snx + sny * sny + snz * snz);
-        if (len > 0.5f * static_cast<float>(n)) {  // the normals roughly agree
-          to.nx[o] = snx / len, to.ny[o] = sny / len, to.nz[o] = snz / len;
-        } else {
-          to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
-        }
-      }
-    }
-  }
-}
 
 float intensityOf(const uint8_t* rgb) {
   return (0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]) * (1.0f / 255.0f);
@@ -369,6 +320,24 @@ void FrameToModelTracker::reset() {
   residual_count_ = 0;
 }
 
+// The level below `from`: its camera, and its pixels by the kernel (2x2
+// blocks; vertices averaged over the pixels within kStepShare of the block's
+// first valid depth; intensity over all four; normals averaged and
+// renormalised when `normals`, else recomputed by the caller).
+void FrameToModelTracker::Level::downsampleFrom(const Level& from, bool normals, KernelSet kernels) {
+  width = from.width / 2;
+  height = from.height / 2;
+  fx = from.fx * 0.5f;
+  fy = from.fy * 0.5f;
+  cx = (from.cx + 0.5f) * 0.5f - 0.5f;
+  cy = (from.cy + 0.5f) * 0.5f - 0.5f;
+  const PyramidLevelIn in{from.width,        from.height,    from.x.data(),  from.y.data(),
+                          from.z.data(),     from.nx.data(), from.ny.data(), from.nz.data(),
+                          from.intensity.data()};
+  const PyramidLevelOut out{x.data(), y.data(), z.data(), nx.data(), ny.data(), nz.data(), intensity.data()};
+  downsample(in, out, kStepShare, normals, kernels);
+}
+
 void FrameToModelTracker::Level::setCamera(int w, int h, const hal::CameraIntrinsics& k) {
   width = w;
   height = h;
@@ -416,7 +385,7 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
   computeNormals(NormalMapIn{w, h, kNormalReach, kStepShare, l0.x.data(), l0.y.data(), l0.z.data(), nullptr},
                  l0.nx.data(), l0.ny.data(), l0.nz.data(), config_.kernels);
   for (int l = 1; l < kLevels; ++l) {
-    downsample(frame_[l - 1], frame_[l], false);
+    frame_[l].downsampleFrom(frame_[l - 1], false, config_.kernels);
     Level& L = frame_[l];
     computeNormals(NormalMapIn{L.width, L.height, 1, kStepShare, L.x.data(), L.y.data(), L.z.data(), nullptr},
                    L.nx.data(), L.ny.data(), L.nz.data(), config_.kernels);
@@ -503,7 +472,7 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
       l0.nx.data(), l0.ny.data(), l0.nz.data(), config_.kernels);
   computeGradients(w, h, l0.intensity.data(), l0.gx.data(), l0.gy.data());
   for (int l = 1; l < kLevels; ++l) {
-    downsample(model_[l - 1], model_[l], true);
+    model_[l].downsampleFrom(model_[l - 1], true, config_.kernels);
     Level& L = model_[l];
     computeGradients(L.width, L.height, L.intensity.data(), L.gx.data(), L.gy.data());
   }

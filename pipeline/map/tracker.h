@@ -201,6 +201,7 @@ class FrameToModelTracker {
     // Pixel i = (u, v) from its measurement: the vertex of its raw depth
     // (zeros, and false, without a valid one up to max_z) and its intensity.
     bool setMeasured(std::size_t i, int u, int v, uint16_t raw, float scale, float max_z, float intensity_value);
+    void downsampleFrom(const Level& from, bool normals, KernelSet kernels);
     void copyPixel(std::size_t from, std::size_t to);  // vertex, normal and intensity
   };
   float maxDepth() const;  // config_.max_depth_m, infinity when 0 (off)

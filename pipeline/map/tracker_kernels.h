@@ -2,8 +2,10 @@
 // iteration at one pyramid level; docs/tracking.md): each pixel's residuals and
 // Jacobians against the model, summed into one 6x6 normal system.
 //   trackLevelRef   the scalar reference, the specification (tracker.cpp);
-//   trackLevelSimd  meant for Highway with dynamic dispatch (tracker_simd.cpp);
-//                   NOT YET VECTORISED: today it calls trackLevelRef.
+//   trackLevelSimd  Highway, dynamically dispatched (tracker_simd-inl.h,
+//                   tracker_simd.cpp).
+// Beside it, the pyramids' kernels: the normals of a vertex map and the 2x2
+// downsampling, each a scalar reference and a Highway kernel with the same bits.
 //
 // Per pixel of the frame's level with a vertex p (camera frame of the new frame):
 //   q = R p + t (R, t: the estimate, new camera -> model camera), projected into
@@ -28,12 +30,12 @@
 // product of two floats fits a double), sums a row in double and adds the row's
 // sum to the total in double: 640 x 480 terms lose about 1e-13 relative, where a
 // float running sum loses 1e-3 or more (test_tracker.cpp:
-// TrackerReduction). The planned fast kernel sums each vector lane of a row in
+// TrackerReduction). The Highway kernel sums each vector lane of a row in
 // float (a lane sees at most width / lanes terms: 80 at 640 columns and 8
 // lanes) and adds the row's lanes to the total in double.
 //
-// kTrackSimdTolerance (the bound the Highway kernel is to be tested against;
-// no equivalence test exists while it calls the reference): trackLevelSimd matches trackLevelRef to within this relative
+// kTrackSimdTolerance (test_tracker_equivalence.cpp holds the Highway kernel to
+// it): trackLevelSimd matches trackLevelRef to within this relative
 // bound on each of the 27 sums, relative to the Cauchy-Schwarz scale of the sum
 // (|sum a b| <= sqrt(sum a^2 sum b^2)): for H(i, j), sqrt(H(i, i) H(j, j)); for
 // b(i), sqrt(H(i, i) * residual_sq). The inliers are the same pixels.
@@ -151,6 +153,78 @@ inline void computeNormals(const NormalMapIn& in, float* nx, float* ny, float* n
     computeNormalsSimd(in, nx, ny, nz);
   } else {
     computeNormalsRef(in, nx, ny, nz);
+  }
+}
+
+// One level of the tracker's pyramids, structure of arrays: vertices (camera
+// frame; z <= 0: none), normals (zero: none) and intensity.
+struct PyramidLevelIn {
+  int width = 0, height = 0;
+  const float *x = nullptr, *y = nullptr, *z = nullptr;
+  const float *nx = nullptr, *ny = nullptr, *nz = nullptr;
+  const float* intensity = nullptr;
+};
+struct PyramidLevelOut {
+  float *x = nullptr, *y = nullptr, *z = nullptr;
+  float *nx = nullptr, *ny = nullptr, *nz = nullptr;
+  float* intensity = nullptr;
+};
+// The next level down (width / 2 x height / 2) by 2x2 blocks that never mix
+// across a depth step: a block's vertices averaged over its pixels (in row
+// order) within step_share of its first valid depth, its intensity over all
+// four; with `normals`, its normals averaged and renormalised where they
+// roughly agree (their sum longer than half their count), else zero; without,
+// a block with no vertex gets zero normals and the others keep what `to` holds
+// (the caller computes them). The reference and Highway's kernel give the same
+// bits (IEEE-exact operations only, in one order).
+void downsampleRef(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals);
+// Its block (u, v) of `to`.
+inline void downsampleBlockRef(const PyramidLevelIn& from, const PyramidLevelOut& to, int u, int v, float step_share,
+                               bool normals) {
+  const std::size_t fw = static_cast<std::size_t>(from.width);
+  const std::size_t o = static_cast<std::size_t>(v) * static_cast<std::size_t>(from.width / 2) + u;
+  const std::size_t top = 2 * static_cast<std::size_t>(v) * fw + 2 * static_cast<std::size_t>(u);
+  const std::size_t block[4] = {top, top + 1, top + fw, top + fw + 1};
+  float zref = 0.0f;
+  for (std::size_t j : block) {
+    if (from.z[j] > 0.0f) {
+      zref = from.z[j];
+      break;
+    }
+  }
+  float sx = 0, sy = 0, sz = 0, snx = 0, sny = 0, snz = 0, si = 0;
+  int n = 0;
+  for (std::size_t j : block) {
+    si += from.intensity[j];
+    if (zref > 0.0f && from.z[j] > 0.0f && std::abs(from.z[j] - zref) <= step_share * zref) {
+      sx += from.x[j], sy += from.y[j], sz += from.z[j];
+      snx += from.nx[j], sny += from.ny[j], snz += from.nz[j];
+      ++n;
+    }
+  }
+  to.intensity[o] = 0.25f * si;
+  if (n == 0) {
+    to.x[o] = to.y[o] = to.z[o] = 0.0f;
+    to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
+    return;
+  }
+  const float inv = 1.0f / static_cast<float>(n);
+  to.x[o] = sx * inv, to.y[o] = sy * inv, to.z[o] = sz * inv;
+  if (!normals) return;
+  const float len = std::sqrt(snx * snx + sny * sny + snz * snz);
+  if (len > 0.5f * static_cast<float>(n)) {
+    to.nx[o] = snx / len, to.ny[o] = sny / len, to.nz[o] = snz / len;
+  } else {
+    to.nx[o] = to.ny[o] = to.nz[o] = 0.0f;
+  }
+}
+void downsampleSimd(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals);
+inline void downsample(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals,
+                       KernelSet kernels) {
+  if (kernels == KernelSet::kSimd) {
+    downsampleSimd(from, to, step_share, normals);
+  } else {
+    downsampleRef(from, to, step_share, normals);
   }
 }
 

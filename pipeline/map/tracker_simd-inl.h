@@ -279,6 +279,85 @@ HWY_NOINLINE void ComputeNormalsT(const NormalMapIn& in, float* nx, float* ny, f
   }
 }
 
+// downsampleBlockRef's arithmetic (tracker_kernels.h) on a vector of blocks of
+// row v starting at block u: the four pixels of each block deinterleaved from
+// the two rows, the same operations in the same order, selects for its
+// branches (an excluded pixel adds +0, which leaves a sum that started at +0
+// as it is), so the same bits.
+template <class DF>
+HWY_INLINE void DownsampleVector(DF df, const PyramidLevelIn& from, const PyramidLevelOut& to, std::size_t top,
+                                 std::size_t o, float step_share, bool normals) {
+  using V = hn::Vec<DF>;
+  const V zero = hn::Zero(df);
+  const std::size_t fw = static_cast<std::size_t>(from.width);
+  V z0, z1, z2, z3;
+  hn::LoadInterleaved2(df, from.z + top, z0, z1);
+  hn::LoadInterleaved2(df, from.z + top + fw, z2, z3);
+  V zref = hn::IfThenElseZero(hn::Gt(z3, zero), z3);
+  zref = hn::IfThenElse(hn::Gt(z2, zero), z2, zref);
+  zref = hn::IfThenElse(hn::Gt(z1, zero), z1, zref);
+  zref = hn::IfThenElse(hn::Gt(z0, zero), z0, zref);
+  const V limit = hn::Mul(hn::Set(df, step_share), zref);
+  const auto has_ref = hn::Gt(zref, zero);
+  const auto in0 = hn::And(has_ref, hn::And(hn::Gt(z0, zero), hn::Le(hn::Abs(hn::Sub(z0, zref)), limit)));
+  const auto in1 = hn::And(has_ref, hn::And(hn::Gt(z1, zero), hn::Le(hn::Abs(hn::Sub(z1, zref)), limit)));
+  const auto in2 = hn::And(has_ref, hn::And(hn::Gt(z2, zero), hn::Le(hn::Abs(hn::Sub(z2, zref)), limit)));
+  const auto in3 = hn::And(has_ref, hn::And(hn::Gt(z3, zero), hn::Le(hn::Abs(hn::Sub(z3, zref)), limit)));
+  // One channel's block sum over the pixels in the average, in row order.
+  const auto blockSum = [&](const float* channel) {
+    V a0, a1, a2, a3;
+    hn::LoadInterleaved2(df, channel + top, a0, a1);
+    hn::LoadInterleaved2(df, channel + top + fw, a2, a3);
+    V sum = hn::Add(zero, hn::IfThenElseZero(in0, a0));
+    sum = hn::Add(sum, hn::IfThenElseZero(in1, a1));
+    sum = hn::Add(sum, hn::IfThenElseZero(in2, a2));
+    return hn::Add(sum, hn::IfThenElseZero(in3, a3));
+  };
+  V i0, i1, i2, i3;
+  hn::LoadInterleaved2(df, from.intensity + top, i0, i1);
+  hn::LoadInterleaved2(df, from.intensity + top + fw, i2, i3);
+  const V si = hn::Add(hn::Add(hn::Add(hn::Add(zero, i0), i1), i2), i3);
+  hn::StoreU(hn::Mul(hn::Set(df, 0.25f), si), df, to.intensity + o);
+  const V one = hn::Set(df, 1.0f);
+  const V n = hn::Add(hn::Add(hn::Add(hn::Add(zero, hn::IfThenElseZero(in0, one)), hn::IfThenElseZero(in1, one)),
+                              hn::IfThenElseZero(in2, one)),
+                      hn::IfThenElseZero(in3, one));
+  const auto some = hn::Gt(n, zero);
+  const V inv = hn::Div(one, hn::IfThenElse(some, n, one));
+  hn::StoreU(hn::IfThenElseZero(some, hn::Mul(blockSum(from.x), inv)), df, to.x + o);
+  hn::StoreU(hn::IfThenElseZero(some, hn::Mul(blockSum(from.y), inv)), df, to.y + o);
+  hn::StoreU(hn::IfThenElseZero(some, hn::Mul(blockSum(from.z), inv)), df, to.z + o);
+  if (!normals) {  // kept where the block has a vertex, zero where not
+    hn::StoreU(hn::IfThenElseZero(some, hn::LoadU(df, to.nx + o)), df, to.nx + o);
+    hn::StoreU(hn::IfThenElseZero(some, hn::LoadU(df, to.ny + o)), df, to.ny + o);
+    hn::StoreU(hn::IfThenElseZero(some, hn::LoadU(df, to.nz + o)), df, to.nz + o);
+    return;
+  }
+  const V snx = blockSum(from.nx), sny = blockSum(from.ny), snz = blockSum(from.nz);
+  const V len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(snx, snx), hn::Mul(sny, sny)), hn::Mul(snz, snz)));
+  const auto agree = hn::And(some, hn::Gt(len, hn::Mul(hn::Set(df, 0.5f), n)));
+  const V safe_len = hn::IfThenElse(agree, len, one);
+  hn::StoreU(hn::IfThenElseZero(agree, hn::Div(snx, safe_len)), df, to.nx + o);
+  hn::StoreU(hn::IfThenElseZero(agree, hn::Div(sny, safe_len)), df, to.ny + o);
+  hn::StoreU(hn::IfThenElseZero(agree, hn::Div(snz, safe_len)), df, to.nz + o);
+}
+
+HWY_NOINLINE void DownsampleT(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals) {
+  using DF = hn::ScalableTag<float>;
+  const DF df;
+  const std::size_t N = hn::Lanes(df);
+  const int tw = from.width / 2, th = from.height / 2;
+  const std::size_t fw = static_cast<std::size_t>(from.width);
+  for (int v = 0; v < th; ++v) {
+    int u = 0;
+    for (; u + static_cast<int>(N) <= tw; u += static_cast<int>(N)) {
+      const std::size_t top = 2 * static_cast<std::size_t>(v) * fw + 2 * static_cast<std::size_t>(u);
+      DownsampleVector(df, from, to, top, static_cast<std::size_t>(v) * tw + u, step_share, normals);
+    }
+    for (; u < tw; ++u) downsampleBlockRef(from, to, u, v, step_share, normals);  // the row's tail
+  }
+}
+
 // A row's lanes of one sum, added in double.
 inline double LaneSum(const float* lanes, std::size_t n) {
   double sum = 0.0;

@@ -1,7 +1,8 @@
-// trackLevelSimd (tracker_kernels.h), dynamically dispatched: foreach_target.h
-// re-includes this file once per Highway target, compiling tracker_simd-inl.h
-// for each; HWY_EXPORT builds the table and HWY_DYNAMIC_DISPATCH calls the best
-// supported target (pipeline::forceSimdTarget() restricts it, as for the other kernels).
+// trackLevelSimd, computeNormalsSimd and downsampleSimd (tracker_kernels.h),
+// dynamically dispatched: foreach_target.h re-includes this file once per
+// Highway target, compiling tracker_simd-inl.h for each; HWY_EXPORT builds the
+// table and HWY_DYNAMIC_DISPATCH calls the best supported target
+// (pipeline::forceSimdTarget() restricts it, as for the other kernels).
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/map/tracker_simd.cpp"
 #include "hwy/foreach_target.h"  // IWYU pragma: keep
@@ -15,6 +16,11 @@ namespace fovea::pipeline::map {
 
 HWY_EXPORT(TrackLevelT);
 HWY_EXPORT(ComputeNormalsT);
+HWY_EXPORT(DownsampleT);
+
+void downsampleSimd(const PyramidLevelIn& from, const PyramidLevelOut& to, float step_share, bool normals) {
+  HWY_DYNAMIC_DISPATCH(DownsampleT)(from, to, step_share, normals);
+}
 
 void computeNormalsSimd(const NormalMapIn& in, float* nx, float* ny, float* nz) {
   HWY_DYNAMIC_DISPATCH(ComputeNormalsT)(in, nx, ny, nz);

@@ -256,6 +256,89 @@ TEST_P(TargetTest, NormalsKernelMatchesTheReferenceBitForBit) {
   expectSameNormals(steps);
 }
 
+// The downsampling kernel (downsampleSimd) against its reference, bit for
+// bit: a noisy wavy level with depth steps, holes and normals that sometimes
+// disagree, and adversarial levels (NaN, infinities, zero, negative, huge and
+// tiny values in every channel, normals that cancel), at sizes odd and shorter
+// than a vector, with and without normals (without, the normals `to` held
+// must stay where a block has a vertex).
+struct PyramidCase {
+  int w = 0, h = 0;
+  std::vector<float> x, y, z, nx, ny, nz, i;
+  PyramidLevelIn in() const { return {w, h, x.data(), y.data(), z.data(), nx.data(), ny.data(), nz.data(), i.data()}; }
+};
+
+PyramidCase wavyLevel(int w, int h, std::mt19937& rng) {
+  PyramidCase c;
+  c.w = w, c.h = h;
+  const std::size_t n = static_cast<std::size_t>(w) * h;
+  for (auto* v : {&c.x, &c.y, &c.z, &c.nx, &c.ny, &c.nz, &c.i}) v->assign(n, 0.0f);
+  std::normal_distribution<float> noise(0.0f, 0.003f);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t k = static_cast<std::size_t>(v) * w + u;
+      float z = 1.2f + 0.3f * std::sin(0.21f * u) * std::cos(0.17f * v) + noise(rng) + (u % 7 == 3 ? 0.4f : 0.0f);
+      if (unit(rng) < 0.05f) z = 0.0f;  // holes
+      c.z[k] = z;
+      c.x[k] = (u - 0.5f * w) / (0.8f * w) * z;
+      c.y[k] = (v - 0.5f * h) / (0.8f * w) * z;
+      Eigen::Vector3f nrm(noise(rng) * 100.0f, noise(rng) * 100.0f, -1.0f);
+      if (unit(rng) < 0.1f) nrm = Eigen::Vector3f(unit(rng) - 0.5f, unit(rng) - 0.5f, unit(rng) - 0.5f);  // disagrees
+      nrm.normalize();
+      c.nx[k] = nrm.x(), c.ny[k] = nrm.y(), c.nz[k] = nrm.z();
+      c.i[k] = unit(rng);
+    }
+  }
+  return c;
+}
+
+void expectSameDownsample(const PyramidCase& c, bool normals) {
+  const std::size_t n = static_cast<std::size_t>(c.w / 2) * static_cast<std::size_t>(c.h / 2);
+  // Both start from the same values (kept normals must stay as they were).
+  std::vector<float> ref[7], simd[7];
+  for (int k = 0; k < 7; ++k) ref[k].assign(n + 1, 3.0f + static_cast<float>(k)), simd[k] = ref[k];
+  auto out = [](std::vector<float>* v) {
+    return PyramidLevelOut{v[0].data(), v[1].data(), v[2].data(), v[3].data(), v[4].data(), v[5].data(), v[6].data()};
+  };
+  downsampleRef(c.in(), out(ref), 0.05f, normals);
+  downsampleSimd(c.in(), out(simd), 0.05f, normals);
+  for (int k = 0; k < 7; ++k) {
+    for (std::size_t o = 0; o <= n; ++o) {  // and nothing written past the level
+      ASSERT_EQ(std::memcmp(&ref[k][o], &simd[k][o], 4), 0)
+          << "channel " << k << " block " << o << ": " << ref[k][o] << " vs " << simd[k][o];
+    }
+  }
+}
+
+TEST_P(TargetTest, DownsampleKernelMatchesTheReferenceBitForBit) {
+  std::mt19937 rng(13);
+  for (const bool normals : {false, true}) {
+    for (const auto& [w, h] : {std::pair{64, 48}, std::pair{37, 29}, std::pair{130, 7}, std::pair{5, 5},
+                               std::pair{3, 9}, std::pair{2, 2}, std::pair{1, 1}}) {
+      SCOPED_TRACE(testing::Message() << w << "x" << h << (normals ? " normals" : ""));
+      expectSameDownsample(wavyLevel(w, h, rng), normals);
+    }
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  for (const float bad : {nan, inf, -inf, 0.0f, -0.0f, -1.0f, 1e30f, 1e-30f, 1e38f}) {
+    PyramidCase c = wavyLevel(70, 22, rng);
+    std::vector<float>* channels[7] = {&c.x, &c.y, &c.z, &c.nx, &c.ny, &c.nz, &c.i};
+    for (int k = 0; k < 7; ++k) {
+      for (std::size_t p = static_cast<std::size_t>(k); p < c.z.size(); p += 5 + static_cast<std::size_t>(k)) {
+        (*channels[k])[p] = bad;
+      }
+    }
+    for (const bool normals : {false, true}) {
+      SCOPED_TRACE(testing::Message() << "bad value " << bad << (normals ? " normals" : ""));
+      expectSameDownsample(c, normals);
+    }
+  }
+  PyramidCase cancel = wavyLevel(48, 8, rng);  // each block's normals sum to nothing
+  for (std::size_t p = 0; p < cancel.nz.size(); ++p) cancel.nz[p] = p % 2 ? 1.0f : -1.0f, cancel.nx[p] = cancel.ny[p] = 0.0f;
+  expectSameDownsample(cancel, true);
+}
+
 INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(test::simdTargetsHere()), test::simdTargetName);
 
 }  // namespace
