@@ -356,6 +356,7 @@ class Service {
   std::atomic<uint64_t> frames_tracked_{0}, frames_track_lost_{0}, frames_relocalised_{0};
   std::atomic<double> prior_disagreement_m_{0.0};
   std::atomic<int64_t> track_ns_{0};      // the last frame's tracking time
+  std::atomic<int64_t> model_ns_{0};      // ... the last fused frame's model build (TrackStats::model_ns)
   bool tracking_was_lost_ = false;        // the supervisor's, for the log line
   uint64_t window_heartbeat_toggles_ = 0;  // the supervisor's, at the last status line
   std::atomic<uint64_t> frames_over_capacity_{0};

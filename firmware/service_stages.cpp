@@ -258,6 +258,7 @@ void Service::countFoveationError(const Status& s, const FoveatedFrame& o) {
 void Service::publishTracking() {
   const pipeline::map::TrackStats& t = stage_->mapFigures().track;
   track_ns_.store(t.track_ns, std::memory_order_relaxed);
+  if (t.model_ns > 0) model_ns_.store(t.model_ns, std::memory_order_relaxed);  // frames fused only
   if (t.outcome == pipeline::map::TrackOutcome::kLost) {
     tracking_lost_reason_.store(static_cast<uint8_t>(t.lost_reason), std::memory_order_relaxed);
     frames_track_lost_.fetch_add(1, std::memory_order_relaxed);

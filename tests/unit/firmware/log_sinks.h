@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <mutex>
+#include <regex>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -39,6 +40,15 @@ class RecordingSink final : public LogSink {
     std::lock_guard<std::mutex> lock(mutex_);
     for (const std::string& line : lines_) {
       if (line.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+  // A line with a match of `pattern` (ECMAScript).
+  bool matches(const std::string& pattern) const {
+    const std::regex re(pattern);
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const std::string& line : lines_) {
+      if (std::regex_search(line, re)) return true;
     }
     return false;
   }

@@ -640,6 +640,8 @@ TEST(Service, TrackedPoseLostOnACoveredLensRaisesTheFaultAndRecovers) {
   EXPECT_EQ(stats.tracking.lost_frames, 0u);
   EXPECT_GE(stats.map.frames_fused, 9u);
   ASSERT_TRUE(waitUntil([&] { return sink.contains("| pose tracked, track "); }, 3000ms));
+  // The model's build after a fused frame, beside it (not zero: frames were fused).
+  EXPECT_TRUE(sink.matches(" ms, model (0\\.[1-9]|[1-9][0-9]*\\.[0-9]) ms, lost "));
   EXPECT_FALSE(chip.value(2));
 
   cam.blind(true);
