@@ -160,6 +160,7 @@ Status Service::allocateStreamer(std::size_t points) {
     stream.brick_sender.max_bricks = config_.map.map.max_bricks;
     stream.max_brick_points = config_.map.max_brick_surfels;
     stream.max_frame_brick_points = config_.map.max_frame_brick_points;
+    stream.max_frame_bricks = config_.map.max_frame_bricks;
   }
   const std::size_t before = heapInUse();
   Result<std::unique_ptr<Streamer>> streamer = Streamer::create(stream, points);

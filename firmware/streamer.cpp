@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <ctime>
+#include <type_traits>
 #include <utility>
 
 #include <Eigen/Geometry>
@@ -32,31 +33,21 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
   if (config.map_bricks) {
     if (Status s = config.brick_sender.validate(); !s) return s;
     if (config.max_brick_points == 0 || config.max_brick_points > config.max_frame_brick_points ||
-        config.max_resend_parts == 0) {
+        config.max_resend_parts == 0 || config.max_frame_bricks == 0) {
       return Result<std::unique_ptr<Streamer>>(
-          ErrorCode::kInvalidArgument, "stream bricks: max_brick_points must be in [1, max_frame_brick_points], max_resend_parts > 0");
+          ErrorCode::kInvalidArgument,
+          "stream bricks: max_brick_points must be in [1, max_frame_brick_points], max_resend_parts and max_frame_bricks > 0");
     }
   }
   Result<std::unique_ptr<net::RobotLink>> link = net::RobotLink::create(config.link);
   if (!link) return link.status();
-  // A chunk holds at least one point, so a frame has at most max_points chunks,
-  // and at most 65535 (the codec's chunk index is 16 bits); its bricks at most
-  // their points plus the parts resent.
-  const std::size_t max_chunks = std::min<std::size_t>(max_points, 0xffff) +
-                                 (config.map_bricks ? config.max_frame_brick_points + config.max_resend_parts : 0);
+  // Sized for one datagram here; makeEncoders() sizes it for the MTU.
   Result<net::UplinkScheduler> scheduler =
-      net::UplinkScheduler::create(max_chunks, static_cast<double>(config.link.max_budget_bytes_per_s),
+      net::UplinkScheduler::create(1, static_cast<double>(config.link.max_budget_bytes_per_s),
                                    static_cast<double>(4 * net::kMaxMtu), monotonicNs());
   if (!scheduler) return scheduler.status();
   std::unique_ptr<Streamer> streamer(
       new Streamer(config, std::move(link.value()), std::move(scheduler.value()), max_points));
-  // The chunk encoders for the largest MTU, made once here: a session at that
-  // MTU (the default's) uses them, and only another MTU makes new ones when it
-  // starts.
-  if (Status s = streamer->makeEncoders(config.link.max_mtu_bytes); !s) return s;
-  streamer->chunk_bytes_.resize(max_chunks);
-  streamer->chunk_regions_.resize(max_chunks);
-  streamer->outgoing_.resize(max_chunks);
   if (config.map_bricks) {
     Result<net::BrickSender> sender = net::BrickSender::create(config.brick_sender);
     if (!sender) return sender.status();
@@ -65,6 +56,10 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
     streamer->slot_key_.resize(config.brick_sender.max_bricks);
     streamer->slot_index_ = GridTable(config.brick_sender.max_bricks);
   }
+  // The chunk encoders and the datagram tables for the largest MTU, made once
+  // here: a session at that MTU (the default's) uses them, and only another
+  // MTU makes new ones when it starts.
+  if (Status s = streamer->makeEncoders(config.link.max_mtu_bytes); !s) return s;
   return streamer;
 }
 
@@ -142,8 +137,34 @@ Status Streamer::makeEncoders(uint32_t mtu_bytes) {
     if (!bricks) return bricks.status();
     brick_encoder_.emplace(std::move(bricks.value()));
   }
+  // The frame's datagram tables follow the codec: at the largest MTU a few
+  // thousand entries, where one per point (the bound before) was 25 bytes a
+  // point of the frame and of its bricks.
+  const std::size_t datagrams = frameDatagrams(codec);
+  auto fresh = [datagrams](auto& table) {
+    std::remove_reference_t<decltype(table)>().swap(table);  // the old one goes first
+    table.resize(datagrams);
+  };
+  fresh(chunk_bytes_);
+  fresh(chunk_regions_);
+  fresh(outgoing_);
+  outgoing_count_ = 0;
+  scheduler_.setMaxChunks(datagrams);
   encoder_mtu_ = mtu_bytes;
   return Status::ok();
+}
+
+std::size_t Streamer::frameDatagrams(const net::CodecConfig& codec) const {
+  // The live frame: what its encoder can make, and at most 65535 (the codec's
+  // chunk index is 16 bits).
+  std::size_t datagrams = std::min<std::size_t>(net::maxChunks(codec, max_points_), 0xffff);
+  if (config_.map_bricks) {
+    // Its bricks, each encoded alone: their points' chunks as one encode's, plus
+    // for each brick a region's partial last chunk and the encoder's region slack.
+    datagrams += net::maxChunks(codec, config_.max_frame_brick_points) +
+                 config_.max_frame_bricks * (pipeline::kMaxRegions + 2) + config_.max_resend_parts;
+  }
+  return datagrams;
 }
 
 Status Streamer::beginSession(int64_t now_ns) {

@@ -44,6 +44,7 @@ struct StreamConfig {
   net::BrickSenderConfig brick_sender;
   std::size_t max_brick_points = 1u << 16;        // one brick's points at most (its encoder's size)
   std::size_t max_frame_brick_points = 1u << 18;  // one frame's bricks' points at most
+  std::size_t max_frame_bricks = 1024;            // ... and bricks
   std::size_t max_resend_parts = 512;             // brick parts resent with one frame at most
 };
 
@@ -158,6 +159,9 @@ class Streamer {
   void sendStatus(const net::StatusReport& report);
 
   const net::UplinkCounters& uplinkCounters() const { return scheduler_.counters(); }
+  // Datagrams one frame can stage (the tables sized by makeEncoders for the
+  // encoders' MTU): the live frame's chunks, its bricks' parts, the resends.
+  std::size_t datagramCapacity() const { return outgoing_.size(); }
   // The token bucket's burst in bytes (StreamConfig::burst_ms; 0: a frame period).
   double burstBytes() const { return scheduler_.bucket().burstBytes(); }
 
@@ -166,8 +170,12 @@ class Streamer {
            std::size_t max_points);
   // Sets the encoder and the budget up for a new session.
   Status beginSession(int64_t now_ns);
-  // (Re)makes the chunk encoders for datagrams of mtu_bytes.
+  // (Re)makes the chunk encoders for datagrams of mtu_bytes, and sizes the
+  // frame's tables of datagrams for what they can make.
   Status makeEncoders(uint32_t mtu_bytes);
+  // The most datagrams one frame can stage at codec.max_payload: the live
+  // frame's chunks, its bricks' parts and the resends.
+  std::size_t frameDatagrams(const net::CodecConfig& codec) const;
   // Budget and burst for the current session, under the cap.
   Status applyBudget(int64_t now_ns);
   // Hands the operator's brick acknowledgements and evictions to the sender.
@@ -193,7 +201,7 @@ class Streamer {
   std::size_t max_points_;
   std::optional<net::ChunkEncoder> encoder_;
   uint32_t encoder_mtu_ = 0;  // the MTU encoder_ (and brick_encoder_) were made for; 0: none
-  std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, max chunks
+  std::vector<uint32_t> chunk_bytes_;   // datagram bytes per chunk, frameDatagrams() at the encoders' MTU
   std::vector<uint8_t> chunk_regions_;
   std::vector<Outgoing> outgoing_;       // the frame's datagrams in send order
   std::size_t outgoing_count_ = 0;

@@ -286,6 +286,14 @@ ChunkEncoder::ChunkEncoder(ChunkEncoder&&) noexcept = default;
 ChunkEncoder& ChunkEncoder::operator=(ChunkEncoder&&) noexcept = default;
 ChunkEncoder::~ChunkEncoder() = default;
 
+std::size_t maxChunks(const CodecConfig& config, std::size_t points) {
+  // Every chunk but a region's last holds more than budget - 23 bytes of at
+  // most 23 bytes per point (a 127-bit position code, a 17-bit luma code and two
+  // chroma codes of at most 19 bits), budget being at least max_payload - kMaxHeader.
+  const std::size_t per_chunk = config.max_payload - kMaxHeader - 23;
+  return (23 * points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
+}
+
 Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t max_points) {
   if (Status st = validate(config); !st) return st;
   if (max_points == 0 || max_points > (std::size_t{1} << 26)) {
@@ -300,11 +308,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   static_assert(kMinPayload >= kMaxHeader + 64);
   s->budget = config.max_payload - kMaxHeader;
 
-  // Every chunk but a region's last holds more than budget - 23 bytes of at
-  // most 23 bytes per point (a 127-bit position code, a 17-bit luma code and two
-  // chroma codes of at most 19 bits), budget being at least max_payload - kMaxHeader.
-  const std::size_t per_chunk = config.max_payload - kMaxHeader - 23;
-  s->max_chunks = (23 * max_points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
+  s->max_chunks = maxChunks(config, max_points);
   // Each chunk starts at a kPayloadAlignment boundary (net/wire.h): the patch
   // below and every decoder read it in place.
   s->arena.resize(s->max_chunks * alignUp(config.max_payload, kPayloadAlignment));

@@ -64,6 +64,11 @@ struct BrickTag {
   uint8_t level = 0;            // 0 = raw surfels; n >= 1: ACUITY lattice level n; < kMaxRegions
 };
 
+// The most chunks one encode() of `points` points can make at
+// config.max_payload (every chunk but a region's last is nearly full of the
+// costliest points; the encoder's own capacity).
+std::size_t maxChunks(const CodecConfig& config, std::size_t points);
+
 class ChunkEncoder {
  public:
   // max_points: points per foveated frame. Allocates every buffer here.

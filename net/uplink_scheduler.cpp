@@ -34,6 +34,18 @@ Result<UplinkScheduler> UplinkScheduler::create(std::size_t max_chunks, double b
   return scheduler;
 }
 
+void UplinkScheduler::setMaxChunks(std::size_t max_chunks) {
+  // The frame under way (of the session before) is dropped, as beginFrame drops it.
+  if (next_ < planned_) {
+    counters_.chunks_superseded += planned_ - next_;
+    ++counters_.frames_superseded;
+  }
+  next_ = planned_ = 0;
+  max_chunks_ = std::max<std::size_t>(max_chunks, 1);
+  std::vector<uint32_t>().swap(bytes_);  // the old table goes first
+  bytes_.assign(max_chunks_, 0);
+}
+
 Status UplinkScheduler::setBudget(double budget_bytes_per_s, double burst_bytes, int64_t now_ns) {
   if (Status s = checkBudget(budget_bytes_per_s, burst_bytes); !s) return s;
   bucket_.reset(budget_bytes_per_s, burst_bytes, now_ns);

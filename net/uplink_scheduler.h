@@ -42,6 +42,10 @@ class UplinkScheduler {
   static Result<UplinkScheduler> create(std::size_t max_chunks, double budget_bytes_per_s, double burst_bytes,
                                         int64_t now_ns);
 
+  // Room for max_chunks (>= 1) a frame from now on (a new session whose MTU
+  // changes what the codec can make): allocates, never on the frame path.
+  void setMaxChunks(std::size_t max_chunks);
+
   // Changes the budget (a new session); keeps the counters.
   Status setBudget(double budget_bytes_per_s, double burst_bytes, int64_t now_ns);
 

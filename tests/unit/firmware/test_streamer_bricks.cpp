@@ -7,9 +7,11 @@
 // nothing.
 #include "firmware/streamer.h"
 
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <memory>
+#include <random>
 #include <set>
 #include <thread>
 #include <vector>
@@ -27,6 +29,7 @@ namespace {
 using namespace std::chrono_literals;
 
 constexpr std::size_t kMaxBricks = 64;
+constexpr std::size_t kLivePoints = 1000;  // the streamer's max_points
 
 // Three bricks of a few hundred points each, at level 0, slots 3, 7 and 11.
 pipeline::map::BrickBatch makeBatch(uint32_t version, std::size_t points_per_brick = 300) {
@@ -57,10 +60,11 @@ struct Rig {
   std::unique_ptr<Streamer> streamer;
   BrickFeedback feedback{kMaxBricks};
   std::unique_ptr<net::OperatorLink> op;
-  pipeline::FoveatedCloud live{64};
+  pipeline::FoveatedCloud live{kLivePoints};
   pipeline::FoveationStats stats;
 
-  explicit Rig(int64_t resend_after_ns = 100'000'000) {
+  // mtu_bytes: the operator's (0: its default); max_frame_bricks: the streamer's.
+  explicit Rig(int64_t resend_after_ns = 100'000'000, uint32_t mtu_bytes = 0, std::size_t max_frame_bricks = 16) {
     StreamConfig config;
     config.link.listen = "127.0.0.1:0";
     config.link.insecure = true;
@@ -69,7 +73,8 @@ struct Rig {
     config.brick_sender.resend_after_ns = resend_after_ns;
     config.max_brick_points = 1024;
     config.max_frame_brick_points = 4096;
-    Result<std::unique_ptr<Streamer>> created = Streamer::create(config, 1000);
+    config.max_frame_bricks = max_frame_bricks;
+    Result<std::unique_ptr<Streamer>> created = Streamer::create(config, kLivePoints);
     EXPECT_TRUE(created) << created.status().message();
     streamer = std::move(created.value());
     streamer->attachBrickFeedback(&feedback);
@@ -79,6 +84,7 @@ struct Rig {
     });
     net::OperatorLinkConfig op_config;
     op_config.insecure = true;
+    if (mtu_bytes > 0) op_config.mtu_bytes = mtu_bytes;
     op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
     Result<std::unique_ptr<net::OperatorLink>> link =
         net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
@@ -227,6 +233,106 @@ TEST(StreamerBricks, ABatchArrivesWholeBesideTheLiveFrameAndIsAcknowledged) {
   Result<FrameSendReport> next = rig.send(nullptr, 2);
   ASSERT_TRUE(next);
   EXPECT_EQ(next->brick_resends, 0u);
+}
+
+// The frame's tables of datagrams hold what the codec can make of a frame and
+// its bricks (net::maxChunks: every chunk but a region's last nearly full of
+// the costliest points), not one entry per point: at the service's sizes (a
+// 640x480 frame, a frame's share of 12.5 MB/s in bricks) a few thousand
+// entries at the largest MTU where one per point was 158 000; a session at
+// the smallest MTU gets tables for it.
+TEST(StreamerBricks, TheDatagramTablesFollowTheCodecAtTheSessionsMtu) {
+  StreamConfig config;
+  config.link.listen = "127.0.0.1:0";
+  config.link.insecure = true;
+  config.map_bricks = true;
+  config.brick_sender.max_bricks = kMaxBricks;
+  config.max_brick_points = 1u << 16;
+  config.max_frame_brick_points = 92'593;
+  config.max_frame_bricks = 1024;
+  constexpr std::size_t kPixels = 640 * 480;
+  Result<std::unique_ptr<Streamer>> created = Streamer::create(config, kPixels);
+  ASSERT_TRUE(created) << created.status().message();
+  net::CodecConfig at_max = config.codec, at_min = config.codec;
+  at_max.max_payload = config.link.max_mtu_bytes - net::kDatagramOverhead;
+  at_min.max_payload = net::kMinMtu - net::kDatagramOverhead;
+  auto expected = [&](const net::CodecConfig& codec) {
+    return std::min<std::size_t>(net::maxChunks(codec, kPixels), 0xffff) + net::maxChunks(codec, 92'593) +
+           1024 * (pipeline::kMaxRegions + 2) + config.max_resend_parts;
+  };
+  const std::size_t largest_mtu = (*created)->datagramCapacity();
+  EXPECT_EQ(largest_mtu, expected(at_max));
+  EXPECT_LT(largest_mtu, 20'000u);
+  // A session at the smallest MTU: the tables for it, as its encoders.
+  std::unique_ptr<Streamer> streamer = std::move(created.value());
+  std::atomic<bool> stop{false};
+  std::thread robot([&] {
+    while (!stop.load()) streamer->idleUntil(monotonicNs() + 2'000'000);
+  });
+  net::OperatorLinkConfig op_config;
+  op_config.insecure = true;
+  op_config.mtu_bytes = static_cast<uint32_t>(net::kMinMtu);
+  op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
+  Result<std::unique_ptr<net::OperatorLink>> link =
+      net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
+  stop.store(true);
+  robot.join();
+  ASSERT_TRUE(link) << link.status().message();
+  pipeline::FoveatedCloud live(16);
+  ASSERT_TRUE(live.points.push(0.0f, 0.0f, 1.0f, 0x808080));
+  live.region[0] = 0;
+  live.weight[0] = 1;
+  pipeline::FoveationStats stats;
+  stats.region_count = 1;
+  const int64_t now = monotonicNs();
+  ASSERT_TRUE(streamer->sendFrame(live, stats, 1, now, now + 30'000'000, 33'000'000, nullptr));
+  EXPECT_EQ(streamer->datagramCapacity(), expected(at_min));
+  EXPECT_GT(streamer->datagramCapacity(), largest_mtu);
+}
+
+// The frame's tables of datagrams follow the session's MTU (sized from the
+// codec, not one per point): at the smallest MTU a live frame at the
+// streamer's max_points and a batch of as many bricks and points as a frame may
+// hold, all of them scattered over their space in random colours, are staged
+// and sent whole, nothing of them told to the planner as not sent.
+TEST(StreamerBricks, AtTheSmallestMtuAFullFrameAndAFullBatchAllGoOut) {
+  constexpr std::size_t kBricks = 16, kPointsPerBrick = 256;
+  Rig rig(100'000'000, static_cast<uint32_t>(net::kMinMtu), kBricks);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  auto colour = [&] { return pipeline::packRgb(rng() & 0xff, rng() & 0xff, rng() & 0xff); };
+  rig.live.clear();
+  for (std::size_t i = 0; i < kLivePoints; ++i) {
+    ASSERT_TRUE(rig.live.points.push(4.0f * unit(rng) - 2.0f, 3.0f * unit(rng) - 1.5f, 0.5f + 4.0f * unit(rng), colour()));
+  }
+  std::fill_n(rig.live.region.begin(), kLivePoints, uint8_t{0});
+  std::fill_n(rig.live.weight.begin(), kLivePoints, 1u);
+  pipeline::map::BrickBatch batch(kBricks * kPointsPerBrick, kBricks);
+  batch.clear(Eigen::Vector3d(-1.0, 0.5, 2.0));
+  for (std::size_t b = 0; b < kBricks; ++b) {
+    auto& e = batch.add();
+    e.brick = static_cast<uint16_t>(b);
+    e.key = {static_cast<int32_t>(b), 0, 0};
+    e.version = 1;
+    e.level = 0;
+    e.fovea = b < 2;
+    e.first = static_cast<uint32_t>(batch.points.size());
+    for (std::size_t i = 0; i < kPointsPerBrick; ++i) {
+      ASSERT_TRUE(batch.points.points.push(0.5f * static_cast<float>(b) + 0.5f * unit(rng), 0.5f * unit(rng),
+                                           0.5f * unit(rng), colour()));
+      batch.points.region[batch.points.size() - 1] = 0;
+      batch.points.weight[batch.points.size() - 1] = 1;
+    }
+    e.count = static_cast<uint32_t>(kPointsPerBrick);
+  }
+  Result<FrameSendReport> sent = rig.send(&batch, 1);
+  ASSERT_TRUE(sent) << sent.status().message();
+  EXPECT_TRUE(sent->had_session);
+  EXPECT_EQ(sent->bricks, kBricks);
+  EXPECT_GT(sent->chunks, 20u);  // at this MTU the live frame takes many datagrams (a handful at the default)
+  EXPECT_EQ(sent->chunks_cut, 0u);
+  EXPECT_EQ(sent->brick_parts_sent, sent->brick_parts);
+  EXPECT_TRUE(rig.forgotten().empty());
 }
 
 TEST(StreamerBricks, ABrickWhoseSurfelsAllWentIsSentAsAnEmptyVersion) {

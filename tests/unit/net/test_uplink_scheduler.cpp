@@ -117,6 +117,31 @@ TEST(UplinkScheduler, TheNextFrameDropsTheUnsentTail) {
   EXPECT_EQ(step.chunk, 0u);
 }
 
+// A new session's room (its MTU changes what the codec makes): the frame under
+// way is dropped as the next frame would drop it, counted, and the new room
+// holds exactly max_chunks.
+TEST(UplinkScheduler, NewRoomDropsTheFrameUnderWayAndHoldsItsSize) {
+  auto s = UplinkScheduler::create(64, 1e6, 1000, 0).value();
+  const std::vector<uint32_t> bytes(20, 1000);
+  const std::vector<uint8_t> regions(20, 0);
+  ASSERT_TRUE(s.beginFrame(bytes, regions, 0, 0).isOk());
+  int64_t now = 0;
+  const Sent sent = drain(s, now, 5 * kMs);
+  ASSERT_LT(sent.chunks.size(), 20u);
+  s.setMaxChunks(100);
+  EXPECT_EQ(s.counters().chunks_superseded, 20u - sent.chunks.size());
+  EXPECT_EQ(s.counters().frames_superseded, 1u);
+  EXPECT_TRUE(s.frameDone());
+  EXPECT_EQ(s.next(now).kind, UplinkScheduler::Step::Kind::kDone);
+  EXPECT_TRUE(s.beginFrame(std::vector<uint32_t>(100, 10), std::vector<uint8_t>(100, 0), now, 0).isOk());
+  EXPECT_EQ(s.beginFrame(std::vector<uint32_t>(101, 10), std::vector<uint8_t>(101, 0), now, 0).code(),
+            ErrorCode::kCapacityExceeded);
+  s.setMaxChunks(2);  // smaller
+  EXPECT_EQ(s.beginFrame(std::vector<uint32_t>(3, 10), std::vector<uint8_t>(3, 0), now, 0).code(),
+            ErrorCode::kCapacityExceeded);
+  EXPECT_TRUE(s.beginFrame(std::vector<uint32_t>(2, 10), std::vector<uint8_t>(2, 0), now, 0).isOk());
+}
+
 TEST(UplinkScheduler, OversizedDatagramPassesOnAFullBucket) {
   auto s = UplinkScheduler::create(4, 1e6, 1000, 0).value();
   ASSERT_TRUE(s.beginFrame(std::vector<uint32_t>{4000}, std::vector<uint8_t>{0}, 0, 0).isOk());
