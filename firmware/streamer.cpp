@@ -320,13 +320,16 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
     return report;
   }
   report.had_session = true;
+  // A frame that fails before its bricks are staged: the planner must hear
+  // that they never went (staged ones are the sender's to resend).
+  auto unsent = [&](Status s) {
+    if (bricks) discardBricks(*bricks);
+    return s;
+  };
   int64_t now = monotonicNs();
-  if (Status s = followFrameInterval(interval_ns, now); !s) return s;
+  if (Status s = followFrameInterval(interval_ns, now); !s) return unsent(s);
   if (link_->session()->started_ns != session_started_ns_) {
-    if (Status s = beginSession(now); !s) {
-      if (bricks) discardBricks(*bricks);
-      return s;
-    }
+    if (Status s = beginSession(now); !s) return unsent(s);
   }
   takeBrickAcks();
 
