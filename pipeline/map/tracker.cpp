@@ -90,7 +90,6 @@ void computeGradients(int w, int h, const float* in, float* gx, float* gy) {
   }
 }
 
-
 float intensityOf(const uint8_t* rgb) {
   return (0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]) * (1.0f / 255.0f);
 }
