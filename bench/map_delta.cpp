@@ -459,17 +459,7 @@ int DeltaBench::sendMapDelta(const FrameStep& s) {
 // One brick of the batch, encoded on its own as the service's streamer does,
 // and decoded into the operator's cache.
 bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameStep& s) {
-  pipeline::PointCloud& p = brick_.points;
-  p.clear();
-  p.origin_m = batch_.points.points.origin_m;
-  if (!p.resize(e.count)) return false;
-  const pipeline::PointCloud& from = batch_.points.points;
-  std::copy_n(from.x() + e.first, e.count, p.x());
-  std::copy_n(from.y() + e.first, e.count, p.y());
-  std::copy_n(from.z() + e.first, e.count, p.z());
-  std::copy_n(from.rgb() + e.first, e.count, p.rgb());
-  std::fill_n(brick_.region.begin(), e.count, e.level);
-  std::copy_n(batch_.points.weight.begin() + e.first, e.count, brick_.weight.begin());
+  if (!batch_.copyEntry(e, brick_)) return false;
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
   if (!encoder_.encode(brick_, std::span<const double>(batch_.level_step_m.data(), e.level + 1u), s.frame_id, 0, &tag)) {
     return false;

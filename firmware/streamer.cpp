@@ -242,20 +242,10 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
     if (feedback_) feedback_->forget(e.brick);
     return false;
   };
-  if (e.count > brick_cloud_.points.capacity()) return fail();  // (none: a brick whose surfels all went)
   // Parts staged this frame are sent from the sender's store: they must not be
   // overwritten before the frame's pacing reaches them.
   if (brick_store_staged_ + static_cast<std::size_t>(e.count) * 8 > config_.brick_sender.store_bytes / 2) return fail();
-  pipeline::PointCloud& p = brick_cloud_.points;
-  const pipeline::PointCloud& from = batch.points.points;
-  p.origin_m = from.origin_m;
-  std::copy_n(from.x() + e.first, e.count, p.x());
-  std::copy_n(from.y() + e.first, e.count, p.y());
-  std::copy_n(from.z() + e.first, e.count, p.z());
-  std::copy_n(from.rgb() + e.first, e.count, p.rgb());
-  std::fill_n(brick_cloud_.region.begin(), e.count, e.level);
-  std::copy_n(batch.points.weight.begin() + e.first, e.count, brick_cloud_.weight.begin());
-  if (!p.resize(e.count)) return fail();
+  if (!batch.copyEntry(e, brick_cloud_)) return fail();  // (an empty brick fits: its surfels all went)
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
   if (!brick_encoder_->encode(brick_cloud_, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id,
                               0, &tag)) {

@@ -56,6 +56,25 @@ pipeline::map::BrickBatch makeBatch(uint32_t version, std::size_t points_per_bri
   return batch;
 }
 
+// An operator connected to `streamer` over loopback (mtu_bytes 0: its default);
+// the streamer's link is polled meanwhile, as its send stage would.
+std::unique_ptr<net::OperatorLink> connectOperator(Streamer& streamer, uint32_t mtu_bytes) {
+  std::atomic<bool> stop{false};
+  std::thread robot([&] {
+    while (!stop.load()) streamer.idleUntil(monotonicNs() + 2'000'000);
+  });
+  net::OperatorLinkConfig op_config;
+  op_config.insecure = true;
+  if (mtu_bytes > 0) op_config.mtu_bytes = mtu_bytes;
+  op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
+  Result<std::unique_ptr<net::OperatorLink>> link =
+      net::OperatorLink::connect(streamer.localEndpoint().toString(), op_config);
+  stop.store(true);
+  robot.join();
+  EXPECT_TRUE(link) << link.status().message();
+  return link ? std::move(link.value()) : nullptr;
+}
+
 struct Rig {
   std::unique_ptr<Streamer> streamer;
   BrickFeedback feedback{kMaxBricks};
@@ -78,20 +97,7 @@ struct Rig {
     EXPECT_TRUE(created) << created.status().message();
     streamer = std::move(created.value());
     streamer->attachBrickFeedback(&feedback);
-    std::atomic<bool> stop{false};
-    std::thread robot([&] {
-      while (!stop.load()) streamer->idleUntil(monotonicNs() + 2'000'000);
-    });
-    net::OperatorLinkConfig op_config;
-    op_config.insecure = true;
-    if (mtu_bytes > 0) op_config.mtu_bytes = mtu_bytes;
-    op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
-    Result<std::unique_ptr<net::OperatorLink>> link =
-        net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
-    stop.store(true);
-    robot.join();
-    EXPECT_TRUE(link) << link.status().message();
-    op = std::move(link.value());
+    op = connectOperator(*streamer, mtu_bytes);
     // A live frame of a few points in the fovea.
     for (int i = 0; i < 10; ++i) EXPECT_TRUE(live.points.push(0.1f * static_cast<float>(i), 0.0f, 1.0f, 0x808080));
     std::fill_n(live.region.begin(), 10, uint8_t{0});
@@ -265,19 +271,8 @@ TEST(StreamerBricks, TheDatagramTablesFollowTheCodecAtTheSessionsMtu) {
   EXPECT_LT(largest_mtu, 20'000u);
   // A session at the smallest MTU: the tables for it, as its encoders.
   std::unique_ptr<Streamer> streamer = std::move(created.value());
-  std::atomic<bool> stop{false};
-  std::thread robot([&] {
-    while (!stop.load()) streamer->idleUntil(monotonicNs() + 2'000'000);
-  });
-  net::OperatorLinkConfig op_config;
-  op_config.insecure = true;
-  op_config.mtu_bytes = static_cast<uint32_t>(net::kMinMtu);
-  op_config.connect_timeout_ms = static_cast<int>(test::scaled(std::chrono::milliseconds(3000)).count());
-  Result<std::unique_ptr<net::OperatorLink>> link =
-      net::OperatorLink::connect(streamer->localEndpoint().toString(), op_config);
-  stop.store(true);
-  robot.join();
-  ASSERT_TRUE(link) << link.status().message();
+  std::unique_ptr<net::OperatorLink> op = connectOperator(*streamer, static_cast<uint32_t>(net::kMinMtu));
+  ASSERT_NE(op, nullptr);
   pipeline::FoveatedCloud live(16);
   ASSERT_TRUE(live.points.push(0.0f, 0.0f, 1.0f, 0x808080));
   live.region[0] = 0;
