@@ -317,7 +317,9 @@ TEST(Service, AGazeWithoutAnEyeKeepsTheSessionButNotTheFovea) {
   RecordingSink sink;
   Logger logger(sink);
   ServiceConfig config = streamingConfig();
-  config.stream.link.session_timeout_ns = 500'000'000;
+  // Scaled: under TSan on a loaded machine the operator's thread can be starved
+  // of the 100 Hz it sends at for half a second, which would end the session.
+  config.stream.link.session_timeout_ns = std::chrono::nanoseconds(test::scaled(500ms)).count();
   Service::Environment environment;
   environment.logger = &logger;
   RunningService running;
@@ -346,7 +348,8 @@ TEST(Service, StoppedGazeFloodAndAVanishedOperatorLeaveItRunningWithFlatMemory) 
   RecordingSink sink;
   Logger logger(sink);
   ServiceConfig config = streamingConfig();
-  config.stream.link.session_timeout_ns = 500'000'000;
+  // Scaled as above: the service reads 20 000 junk datagrams before the gaze behind them.
+  config.stream.link.session_timeout_ns = std::chrono::nanoseconds(test::scaled(500ms)).count();
   Service::Environment environment;
   environment.logger = &logger;
   RunningService running;
