@@ -268,6 +268,7 @@ class DeltaBench {
   std::vector<double> plan_ms_, brick_encode_ms_;
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
+  std::array<std::size_t, 3> bricks_sent_by_need_ = {};  // missing, finer, changed (BrickNeed)
   std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent whole); tracked (--pose track)
   std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
   int live_regions_ = 0;
@@ -448,6 +449,7 @@ int DeltaBench::sendMapDelta(const FrameStep& s) {
   }
   plan_ms_.push_back(static_cast<double>(plan.delta.ns) * 1e-6);
   bricks_waited_ += plan.bricks_waiting;
+  for (std::size_t n = 0; n < plan.planned_by_need.size(); ++n) bricks_sent_by_need_[n] += plan.planned_by_need[n];
   for (const pipeline::map::BrickBatchEntry& e : batch_.entries()) {
     if (!sendBrick(e, s)) return 1;
   }
@@ -573,8 +575,10 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
   const int frames = o_.frames, fps = o_.fps;
   std::printf("  live points after 1 s: %.0f a frame\n",
               frames > fps ? static_cast<double>(live_points_) / (frames - fps) : 0.0);
-  std::printf("  bricks sent %zu (%zu points), waited %zu brick-frames; map %zu surfels in %zu bricks\n", bricks_sent_,
-              brick_points_sent_, bricks_waited_, mapper_.map().size(), mapper_.map().brickCount());
+  std::printf("  bricks sent %zu (%zu points; the operator lacked %zu, needed %zu finer, %zu had changed), waited %zu "
+              "brick-frames; map %zu surfels in %zu bricks\n",
+              bricks_sent_, brick_points_sent_, bricks_sent_by_need_[0], bricks_sent_by_need_[1],
+              bricks_sent_by_need_[2], bricks_waited_, mapper_.map().size(), mapper_.map().brickCount());
   std::printf("  frames the map did not fuse (sent whole): %zu", unfused_);
   if (o_.track) std::printf("; tracked %zu of %d", tracked_, frames);
   std::printf("\n");

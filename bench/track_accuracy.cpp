@@ -18,6 +18,7 @@
 // drift (track+socket: the ground truth plus a drift of 1 cm a frame as the
 // prior). An evaluation tool: it allocates freely.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -50,6 +51,7 @@ struct RunOptions {
   int every = 1;  // keep frame i when i % every == 0
   std::string hard = "plain";
   KernelSet kernels = fovea::defaultKernelSet();
+  std::array<int, 3> iterations = TrackerConfig{}.iterations;  // Gauss-Newton's per level, finest first
 };
 
 struct RunResult {
@@ -58,6 +60,7 @@ struct RunResult {
   int frames = 0, tracked = 0, lost = 0, relocalised = 0;
   std::optional<TrajectoryError> ate;
   double track_median_ms = 0, track_p90_ms = 0, model_median_ms = 0, fuse_median_ms = 0;
+  double iterations_median = 0;  // Gauss-Newton iterations a frame, all levels and attempts
   double max_disagreement_m = 0;
   std::string events;  // the hard case's frames: "30 lost(no-valid-depth) 31 relocalised"
 };
@@ -150,6 +153,7 @@ RunResult run(const RunOptions& o) {
   config.map.max_height = k.height;
   config.map.kernels = o.kernels;
   config.tracker.kernels = o.kernels;
+  config.tracker.iterations = o.iterations;
   const bool prior = o.hard == "jump" || o.hard == "drift";
   config.tracking = prior ? PoseTracking::kRefine : PoseTracking::kAlone;
   fovea::Result<Mapper> mapper = Mapper::create(config);
@@ -163,7 +167,7 @@ RunResult run(const RunOptions& o) {
   }
   RgbdFrame frame(k.width, k.height);
   std::vector<Eigen::Vector3d> estimated, truth;
-  std::vector<double> track_ms, model_ms, fuse_ms;
+  std::vector<double> track_ms, model_ms, fuse_ms, iterations;
   for (int i = 0; r.frames < o.frames; ++i) {
     if (fovea::Status s = camera.acquire(frame, std::chrono::seconds(5)); !s) break;  // a recording's end
     if (i % o.every != 0) continue;
@@ -175,6 +179,7 @@ RunResult run(const RunOptions& o) {
     MapperFrame figures;
     const bool fused = mapper->addFrame(frame, /*outside_pose_valid=*/true, figures);
     track_ms.push_back(static_cast<double>(figures.track.track_ns) * 1e-6);
+    iterations.push_back(figures.track.iterations);
     r.max_disagreement_m = std::max(r.max_disagreement_m, figures.track.prior_disagreement_m);
     countOutcome(o, i, figures.track, r);
     if (!figures.pose_usable) continue;  // lost: not fused, not in the trajectory
@@ -187,12 +192,13 @@ RunResult run(const RunOptions& o) {
   }
   camera.stop();
   finishResult(estimated, truth, track_ms, model_ms, fuse_ms, r);
+  r.iterations_median = quantile(iterations, 0.5);
   return r;
 }
 
 void printHeader() {
-  std::printf("%-28s %6s %7s %5s %6s %9s %9s %9s %9s %9s %9s\n", "run", "frames", "tracked", "lost", "reloc", "ATE mm",
-              "max mm", "track ms", "p90 ms", "model ms", "fuse ms");
+  std::printf("%-28s %6s %7s %5s %6s %9s %9s %9s %9s %6s %9s %9s\n", "run", "frames", "tracked", "lost", "reloc", "ATE mm",
+              "max mm", "track ms", "p90 ms", "iters", "model ms", "fuse ms");
 }
 
 void printRow(const RunOptions& o, const RunResult& r) {
@@ -200,9 +206,9 @@ void printRow(const RunOptions& o, const RunResult& r) {
     std::printf("%-28s failed: %s\n", o.name.c_str(), r.error.c_str());
     return;
   }
-  std::printf("%-28s %6d %7d %5d %6d %9.2f %9.2f %9.2f %9.2f %9.2f %9.2f\n", o.name.c_str(), r.frames, r.tracked,
+  std::printf("%-28s %6d %7d %5d %6d %9.2f %9.2f %9.2f %9.2f %6.0f %9.2f %9.2f\n", o.name.c_str(), r.frames, r.tracked,
               r.lost, r.relocalised, r.ate ? r.ate->rmse_m * 1e3 : NAN, r.ate ? r.ate->max_m * 1e3 : NAN,
-              r.track_median_ms, r.track_p90_ms, r.model_median_ms, r.fuse_median_ms);
+              r.track_median_ms, r.track_p90_ms, r.iterations_median, r.model_median_ms, r.fuse_median_ms);
   if (!r.events.empty()) std::printf("    %s\n", r.events.c_str());
   if (o.hard == "jump" || o.hard == "drift") {
     std::printf("    largest disagreement with the prior: %.3f m\n", r.max_disagreement_m);
@@ -221,7 +227,7 @@ int main(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
       std::puts("usage: fovea-track [--camera SPEC] [--frames N] [--every K] [--case plain|skip|invalid|wall|object|jump|drift]\n"
-                "                   [--kernels ref|simd] [--tum PATH]\n"
+                "                   [--kernels ref|simd] [--tum PATH] [--iterations FINE,MID,COARSE]\n"
                 "Without --camera: the suite (TUM teddy, mock orbit and dolly at 640x480, the hard cases).");
       return 0;
     }
@@ -229,6 +235,13 @@ int main(int argc, char** argv) {
   const std::optional<KernelSet> kernels = fovea::parseKernelSet(fovea::bench::option(argc, argv, "--kernels", "simd"));
   if (!kernels) {
     std::fprintf(stderr, "fovea-track: --kernels ref|simd\n");
+    return 2;
+  }
+  std::array<int, 3> iterations = TrackerConfig{}.iterations;
+  const std::string iteration_text = fovea::bench::option(argc, argv, "--iterations", "");
+  if (!iteration_text.empty() &&
+      std::sscanf(iteration_text.c_str(), "%d,%d,%d", &iterations[0], &iterations[1], &iterations[2]) != 3) {
+    std::fprintf(stderr, "fovea-track: --iterations FINE,MID,COARSE (three counts, as TrackerConfig::iterations)\n");
     return 2;
   }
   const std::string camera = fovea::bench::option(argc, argv, "--camera", "");
@@ -241,6 +254,7 @@ int main(int argc, char** argv) {
     o.every = std::max(1, std::atoi(fovea::bench::option(argc, argv, "--every", "1").c_str()));
     o.hard = fovea::bench::option(argc, argv, "--case", "plain");
     o.kernels = *kernels;
+    o.iterations = iterations;
     const RunResult r = run(o);
     printRow(o, r);
     return r.ok ? 0 : 1;
@@ -262,7 +276,8 @@ int main(int argc, char** argv) {
       {"hard: socket drift 1cm/f", orbit, 60, 1, "drift", *kernels},
   };
   int failed = 0;
-  for (const RunOptions& o : suite) {
+  for (RunOptions& o : suite) {
+    o.iterations = iterations;
     const RunResult r = run(o);
     printRow(o, r);
     failed += r.ok ? 0 : 1;

@@ -97,6 +97,7 @@ Status Mapper::planBricks(const Gaze& gaze, double budget_bytes, double live_byt
     const std::size_t points = batch.points.size() - before;
     left -= static_cast<double>(points) * kWireBytesPerPointEstimate;
     ++plan.bricks_planned;
+    ++plan.planned_by_need[static_cast<std::size_t>(brick.need)];
     plan.brick_points += static_cast<uint32_t>(points);
   }
   for (std::size_t i = next; i < due->size(); ++i) {

@@ -17,6 +17,7 @@
 // appendVisible() and planBricks() allocate nothing.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -63,6 +64,8 @@ struct MapperFrame {
 struct MapperPlan {
   MapDeltaStats delta;
   uint32_t bricks_planned = 0;        // into the batch
+  // ... of them by why they were due (BrickNeed: kMissing, kRefine, kChanged)
+  std::array<uint32_t, 3> planned_by_need = {};
   uint32_t brick_points = 0;
   uint32_t bricks_waiting = 0;        // due but not in the batch (the budget): they wait
   uint32_t fovea_bricks_waiting = 0;  // ... of them the fovea's

@@ -322,6 +322,12 @@ TEST(FrameFoveator, PlanBricksSendsWhatTheOperatorLacksWithinTheBudget) {
   uint64_t settled = 0;
   for (std::size_t b = 0; b < stage->map()->brickCount(); ++b) settled += stage->map()->brickSettledCount(static_cast<uint16_t>(b));
   for (const pipeline::map::BrickBatchEntry& e : batch.entries()) EXPECT_EQ(e.version, 1u);
+  // Each counted by why it was due: the operator lacked them all.
+  const auto& by_need = stage->mapFigures().plan.planned_by_need;
+  EXPECT_EQ(by_need[static_cast<std::size_t>(pipeline::map::BrickNeed::kMissing)], bricks);
+  EXPECT_EQ(by_need[static_cast<std::size_t>(pipeline::map::BrickNeed::kRefine)] +
+                by_need[static_cast<std::size_t>(pipeline::map::BrickNeed::kChanged)],
+            0u);
   EXPECT_LE(batch.points.size(), settled);
   EXPECT_GT(batch.points.size(), 0u);
 
