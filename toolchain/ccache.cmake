@@ -8,9 +8,10 @@
 #   (relative paths, as the packages have had), so ccache need not hash the
 #   working directory of a -g compile either.
 # - sloppiness: the tests' precompiled header (GoogleTest, Eigen) is hashed by
-#   its contents, not its time stamps; clang's PCH carries no time stamp. It does
-#   carry the clone's path, though: in the clang (sanitizer) trees the header and
-#   the tests that reuse it miss in another clone (docs/ci.md, the budget).
+#   its contents, not its time stamps; clang's PCH carries no time stamp. In the
+#   clang (sanitizer) trees its header lives outside the clone, beside the cache
+#   (tests/CMakeLists.txt), so that it and the tests that use it hit in another
+#   clone too (docs/ci.md).
 # The compiler (its mtime and size: compiler_check's default), every flag and
 # the sanitizer options stay in the hash as ccache does by default, so the
 # sanitizer and cross trees never share an object with the others.
