@@ -87,6 +87,11 @@ struct Rig {
     StreamConfig config;
     config.link.listen = "127.0.0.1:0";
     config.link.insecure = true;
+    // The operator here sends nothing, so the robot ends the session after its
+    // silence timeout: scaled with the build (under TSan on CI's loaded machine
+    // one of these tests took 4.5 s, and its acknowledgement found the session
+    // ended by the default 3 s).
+    config.link.session_timeout_ns = std::chrono::nanoseconds(test::scaled(std::chrono::seconds(3))).count();
     config.map_bricks = true;
     config.brick_sender.max_bricks = kMaxBricks;
     config.brick_sender.resend_after_ns = resend_after_ns;
