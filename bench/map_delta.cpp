@@ -268,7 +268,7 @@ class DeltaBench {
   std::vector<double> plan_ms_, brick_encode_ms_;
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
-  std::array<std::size_t, 3> bricks_sent_by_need_ = {};  // missing, finer, changed (BrickNeed)
+  std::array<std::size_t, pipeline::map::kBrickNeedCount> bricks_sent_by_need_ = {};  // by BrickNeed
   std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent whole); tracked (--pose track)
   std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
   int live_regions_ = 0;

@@ -55,6 +55,7 @@ struct MapDeltaConfig {
 };
 
 enum class BrickNeed : uint8_t { kMissing, kRefine, kChanged };
+inline constexpr std::size_t kBrickNeedCount = 3;  // the needs above, for tables indexed by them
 
 struct BrickDue {
   uint16_t brick = 0;

@@ -64,8 +64,7 @@ struct MapperFrame {
 struct MapperPlan {
   MapDeltaStats delta;
   uint32_t bricks_planned = 0;        // into the batch
-  // ... of them by why they were due (BrickNeed: kMissing, kRefine, kChanged)
-  std::array<uint32_t, 3> planned_by_need = {};
+  std::array<uint32_t, kBrickNeedCount> planned_by_need = {};  // ... of them by why they were due (BrickNeed)
   uint32_t brick_points = 0;
   uint32_t bricks_waiting = 0;        // due but not in the batch (the budget): they wait
   uint32_t fovea_bricks_waiting = 0;  // ... of them the fovea's
