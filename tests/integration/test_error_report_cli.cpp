@@ -16,6 +16,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 
 namespace fovea {
 namespace {
@@ -42,7 +43,7 @@ std::string readAll(const std::string& path) {
 
 // Cross builds run the tool through the same emulator as the tests.
 const std::string kTool =
-    std::string(FOVEA_EMULATOR).empty() ? FOVEA_ERROR_REPORT_PATH : std::string(FOVEA_EMULATOR) + " " + FOVEA_ERROR_REPORT_PATH;
+    test::program(FOVEA_ERROR_REPORT_PATH);
 
 // A CSV's column index by name.
 using Columns = std::map<std::string, std::size_t>;

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 
 #include "io/ply.h"
@@ -28,15 +29,12 @@ using test::ProcessResult;
 using test::TempDir;
 ProcessResult run(const std::string& command) { return test::runCommand(command); }
 
-std::string fovead() {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
-}
+std::string fovead() { return test::program(FOVEAD_PATH); }
 
 TEST(FoveadCli, ReadmeRunCommandWorks) {
-  if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
+  if (test::emulated()) GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
   // The README's first command, on the build tree under test (setup and build are no-ops here).
-  const ProcessResult r = run(std::string("FOVEA_BUILD_DIR=") + FOVEA_BUILD_DIR + " " + FOVEA_SOURCE_DIR +
+  const ProcessResult r = run("FOVEA_BUILD_DIR=" + test::buildDir() + " " + test::sourceDir() +
                     "/toolchain/run-demo --camera mock:living-room --preset F1 --frames 3");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* expected : {"fovea", "parafovea", "perifovea", "rest", "summary: 3 frames foveated, 0 failed",

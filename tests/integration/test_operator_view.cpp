@@ -23,6 +23,7 @@
 #include "net/robot_link.h"
 
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 #include "tests/support/websocket_tab.h"
 
@@ -31,11 +32,6 @@ namespace {
 
 using namespace std::chrono_literals;
 using test::waitUntil;
-
-std::string program(const char* path) {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(path) : emulator + " " + path;
-}
 
 // The port in "viewer: open http://127.0.0.1:PORT/".
 int viewerPort(test::BackgroundProcess& op) {
@@ -49,17 +45,17 @@ class OperatorView : public ::testing::Test {
  protected:
   void SetUp() override {
     test::initTabs();
-    const test::ProcessResult keygen = test::runCommand(program(FOVEAD_PATH) + " keygen " + dir_.file("key"));
+    const test::ProcessResult keygen = test::runCommand(test::program(FOVEAD_PATH) + " keygen " + dir_.file("key"));
     ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
   }
   std::string operatorCommand(const std::string& address, const std::string& flags) {
-    return program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " + dir_.file("key") + " " + flags;
+    return test::program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " + dir_.file("key") + " " + flags;
   }
   test::TempDir dir_;
 };
 
 TEST_F(OperatorView, ThePageFollowsTheRobotRefusingStreamingAndGoingAway) {
-  test::BackgroundProcess robot(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120,fps=15 --every 0 " +
+  test::BackgroundProcess robot(test::program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120,fps=15 --every 0 " +
                                 "--listen 127.0.0.1:0 --key-file " + dir_.file("key"));
   ASSERT_TRUE(robot.waitFor("streaming: listening on ", 10) && robot.waitFor(" (", 2))
       << robot.output();
@@ -263,7 +259,7 @@ TEST_F(OperatorView, TheOperatorKeepsTheMapsBricksAcknowledgesAndDrawsThem) {
   rc.insecure = true;
   std::unique_ptr<net::RobotLink> robot = net::RobotLink::create(rc).value();
   const std::string address = "127.0.0.1:" + std::to_string(robot->localEndpoint().port());
-  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address +
+  test::BackgroundProcess op(test::program(FOVEA_OPERATOR_PATH) + " --connect " + address +
                              " --insecure --view 127.0.0.1:0 --quiet --map-points 65536 --map-bricks 64 --frame-log " +
                              dir_.file("frames.csv") + " --summary " + dir_.file("summary.json") + " --save-held 11:" +
                              dir_.file("held.ply"));

@@ -22,16 +22,12 @@
 
 #include "io/mcap/reader.h"
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 #include "tests/support/tum_frames.h"
 
 namespace fovea {
 namespace {
-
-std::string program(const char* path) {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(path) : emulator + " " + path;
-}
 
 std::string readFile(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
@@ -97,14 +93,14 @@ TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
   const int frames = test::repetitions(20, 5);
   const std::string rec = dir.file("tum.mcap");
   const test::ProcessResult serve =
-      test::runCommand(program(FOVEAD_PATH) + " serve --camera tum:" + tum_path + ",loop=off,realtime=on --frames " +
+      test::runCommand(test::program(FOVEAD_PATH) + " serve --camera tum:" + tum_path + ",loop=off,realtime=on --frames " +
                        std::to_string(frames) + " --record " + rec + " --record-frames");
   ASSERT_EQ(serve.exit_code, 0) << serve.output;
   // The recorder never blocks the camera: on a loaded machine its writer may fall
   // behind and drop (counted). The frames in the file are then compared.
   const long drops = recorderDrops(serve.output);
   ASSERT_GE(drops, 0) << serve.output;
-  const test::ProcessResult replay = test::runCommand(program(FOVEAD_PATH) + " run --camera mcap:" + rec +
+  const test::ProcessResult replay = test::runCommand(test::program(FOVEAD_PATH) + " run --camera mcap:" + rec +
                                                       ",loop=off --frames " + std::to_string(frames) + " --save-ply " +
                                                       dir.file("mcap.ply"));
   ASSERT_EQ(replay.exit_code, 0) << replay.output;
@@ -117,7 +113,7 @@ TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
   // The TUM camera up to the last frame recorded: the same lines, frame by frame,
   // and the same last frame, byte for byte.
   const long last = replayed.rbegin()->first;
-  const test::ProcessResult tum = test::runCommand(program(FOVEAD_PATH) + " run --camera tum:" + tum_path +
+  const test::ProcessResult tum = test::runCommand(test::program(FOVEAD_PATH) + " run --camera tum:" + tum_path +
                                                    ",loop=off --frames " + std::to_string(last + 1) + " --save-ply " +
                                                    dir.file("tum.ply"));
   ASSERT_EQ(tum.exit_code, 0) << tum.output;
@@ -136,7 +132,7 @@ class StreamRecording : public ::testing::Test {
  protected:
   // The service streaming the mock room to an operator, both recording.
   void SetUp() override {
-    test::BackgroundProcess service(program(FOVEAD_PATH) +
+    test::BackgroundProcess service(test::program(FOVEAD_PATH) +
                                     " serve --camera mock:living-room,size=320x240,fps=15 --listen 127.0.0.1:0 "
                                     "--insecure --record " +
                                     dir_.file("service.mcap"));
@@ -144,7 +140,7 @@ class StreamRecording : public ::testing::Test {
     std::smatch m;
     const std::string out = service.output();
     ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
-    test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
+    test::BackgroundProcess op(test::program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
                                " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --quiet --duration 120 --record " +
                                dir_.file("operator.mcap") + " --frame-log " + dir_.file("live.csv"));
     ASSERT_TRUE(op.waitFor("connected to", 10)) << op.output();
@@ -160,7 +156,7 @@ class StreamRecording : public ::testing::Test {
   }
 
   test::ProcessResult replay(const std::string& file, const std::string& log) {
-    return test::runCommand(program(FOVEA_OPERATOR_PATH) + " --replay " + file + " --speed 0 --quiet --frame-log " + log);
+    return test::runCommand(test::program(FOVEA_OPERATOR_PATH) + " --replay " + file + " --speed 0 --quiet --frame-log " + log);
   }
 
   test::TempDir dir_;
@@ -268,7 +264,7 @@ TEST_F(StreamRecording, ARecordingCutShortReplaysUpToWhereItStops) {
   const test::ProcessResult junk = replay(dir_.file("junk.mcap"), dir_.file("junk.csv"));
   EXPECT_NE(junk.exit_code, 0);
   EXPECT_NE(junk.output.find("wrong magic"), std::string::npos) << junk.output;
-  EXPECT_EQ(test::runCommand(program(FOVEA_OPERATOR_PATH) + " --replay " + cut + " --connect 127.0.0.1:1").exit_code, 2);
+  EXPECT_EQ(test::runCommand(test::program(FOVEA_OPERATOR_PATH) + " --replay " + cut + " --connect 127.0.0.1:1").exit_code, 2);
 }
 
 }  // namespace

@@ -10,15 +10,13 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 
 namespace fovea {
 namespace {
 
-std::string fovead() {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
-}
+std::string fovead() { return test::program(FOVEAD_PATH); }
 
 const std::string kSmallCamera = " --camera mock:living-room,size=160x120,realtime=on,fps=30";
 
@@ -107,10 +105,7 @@ TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
   EXPECT_EQ(exit_code, 0) << serve.output();
 }
 
-std::string foveaOperator() {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(FOVEA_OPERATOR_PATH) : emulator + " " + FOVEA_OPERATOR_PATH;
-}
+std::string foveaOperator() { return test::program(FOVEA_OPERATOR_PATH); }
 
 // The stream end to end through the service's threads: fovea-operator decodes
 // what fovead serve sends for its gaze.

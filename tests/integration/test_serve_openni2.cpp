@@ -9,17 +9,14 @@
 #include <gtest/gtest.h>
 
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 
 namespace fovea {
 namespace {
 
-std::string withEmulator(const std::string& path) {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? path : emulator + " " + path;
-}
-std::string fovead() { return withEmulator(FOVEAD_PATH); }
-std::string foveaOperator() { return withEmulator(FOVEA_OPERATOR_PATH); }
+std::string fovead() { return test::program(FOVEAD_PATH); }
+std::string foveaOperator() { return test::program(FOVEA_OPERATOR_PATH); }
 
 std::string readFile(const std::string& path) {
   const test::ProcessResult cat = test::runCommand("cat " + path);
@@ -27,7 +24,7 @@ std::string readFile(const std::string& path) {
 }
 
 TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
-  if (std::string(FOVEA_EMULATOR).find("qemu") != std::string::npos) {
+  if (test::emulated()) {
     GTEST_SKIP() << "OpenNI2\'s runtime hangs under qemu-user: runs natively only";
   }
   test::TempDir dir;
@@ -76,7 +73,7 @@ TEST(ServeOpenNI2, DummyDeviceIsFoveatedAndStreamedToTheOperator) {
 }
 
 TEST(ServeOpenNI2, FrameLimitOnTheDummy) {
-  if (std::string(FOVEA_EMULATOR).find("qemu") != std::string::npos) {
+  if (test::emulated()) {
     GTEST_SKIP() << "OpenNI2\'s runtime hangs under qemu-user: runs natively only";
   }
   const test::ProcessResult done = test::runCommand(fovead() + " serve --camera openni2:Dummy --frames 20");
@@ -93,7 +90,7 @@ TEST(ServeOpenNI2, OniRecordingIsRefusedNotHung) {
 }
 
 TEST(ServeOpenNI2, NoDeviceSaysWhatToDo) {
-  if (std::string(FOVEA_EMULATOR).find("qemu") != std::string::npos) {
+  if (test::emulated()) {
     GTEST_SKIP() << "OpenNI2\'s runtime hangs under qemu-user: runs natively only";
   }
   const test::ProcessResult none = test::runCommand(fovead() + " serve --camera openni2: --frames 5");

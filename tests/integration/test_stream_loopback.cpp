@@ -19,6 +19,7 @@
 #include "core/sanitizer.h"
 #include "io/ply.h"
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 
 namespace fovea {
@@ -26,13 +27,8 @@ namespace {
 
 // Under an emulator (qemu for a cross build) everything runs about 20 times
 // slower: the streams run longer and fewer frames are expected.
-const bool kEmulated = std::string(FOVEA_EMULATOR) != "";
+const bool kEmulated = test::emulated();
 double streamSeconds(double seconds) { return kEmulated ? 4 * seconds : seconds; }
-
-std::string program(const char* path) {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(path) : emulator + " " + path;
-}
 
 // The mock living room's camera position and scene centre (hal/camera/mock/built_in_scenes.cpp).
 // Quoted for the shell (">" would redirect).
@@ -53,7 +49,7 @@ struct StreamRun {
 StreamRun runStream(const test::TempDir& dir, const std::string& listen, const std::string& operator_flags,
                     double seconds, const std::string& service_flags = "") {
   StreamRun run;
-  test::BackgroundProcess service(program(FOVEAD_PATH) +
+  test::BackgroundProcess service(test::program(FOVEAD_PATH) +
                                   " run --camera mock:living-room,size=320x240,fps=15 --every 0 --listen " + listen +
                                   " --key-file " + dir.file("key") + " --save-ply " + dir.file("robot.ply") + " " +
                                   service_flags);
@@ -68,7 +64,7 @@ StreamRun runStream(const test::TempDir& dir, const std::string& listen, const s
   const std::string out = service.output();
   EXPECT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
   const std::string address = m.size() > 1 ? m[1].str() : "?";
-  test::BackgroundProcess op(program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " +
+  test::BackgroundProcess op(test::program(FOVEA_OPERATOR_PATH) + " --connect " + address + " --key-file " +
                              dir.file("key") + " --gaze " + kGazeScript + " --duration " + std::to_string(seconds + 60) +
                              " --summary " + dir.file("summary.json") + " --save-ply " + dir.file("frames") + " " +
                              operator_flags);
@@ -91,7 +87,7 @@ std::string readFile(const std::string& path) {
 class StreamLoopback : public ::testing::Test {
  protected:
   void SetUp() override {
-    const test::ProcessResult keygen = test::runCommand(program(FOVEAD_PATH) + " keygen " + dir_.file("key"));
+    const test::ProcessResult keygen = test::runCommand(test::program(FOVEAD_PATH) + " keygen " + dir_.file("key"));
     ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
   }
   test::TempDir dir_;
@@ -208,15 +204,15 @@ TEST_F(StreamLoopback, WorksOverIpv6) {
 }
 
 TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
-  const test::ProcessResult keygen = test::runCommand(program(FOVEAD_PATH) + " keygen " + dir_.file("other"));
+  const test::ProcessResult keygen = test::runCommand(test::program(FOVEAD_PATH) + " keygen " + dir_.file("other"));
   ASSERT_EQ(keygen.exit_code, 0) << keygen.output;
-  test::BackgroundProcess service(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --every 0 --listen 127.0.0.1:0 --key-file " +
+  test::BackgroundProcess service(test::program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --every 0 --listen 127.0.0.1:0 --key-file " +
                                   dir_.file("key"));
   ASSERT_TRUE(service.waitFor(" (", 10)) << service.output();
   std::smatch m;
   const std::string out = service.output();
   ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
-  const test::ProcessResult op = test::runCommand(program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
+  const test::ProcessResult op = test::runCommand(test::program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
                                                   " --key-file " + dir_.file("other") + " --gaze " + kGazeScript +
                                                   " --duration 1");
   EXPECT_EQ(op.exit_code, 1) << op.output;
@@ -226,7 +222,7 @@ TEST_F(StreamLoopback, TheWrongKeyIsRefusedAndCounted) {
 }
 
 TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
-  if (std::string(FOVEA_EMULATOR) != "") GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
+  if (kEmulated) GTEST_SKIP() << "run-demo runs host binaries; this build is cross-compiled";
 #ifdef FOVEA_THREAD_SANITIZER
   GTEST_SKIP() << "not under ThreadSanitizer: the demo's full-size mock camera foveates about 1 frame/s there, so "
                   "the status it checks (streaming 1, fault 0) cannot hold; the other StreamLoopback cases run";
@@ -241,8 +237,8 @@ TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
     const std::string ms = std::to_string(static_cast<int>(100 * test::waitLimitSeconds(1)));
     settings = "FOVEA_DEMO_SECONDS=5 FOVEA_DEMO_SET='camera.stall_timeout_ms=" + ms + " stream.gaze_timeout_ms=" + ms + "'";
   }
-  const test::ProcessResult r = test::runCommand(settings + " FOVEA_BUILD_DIR=" + FOVEA_BUILD_DIR + " " +
-                                                 FOVEA_SOURCE_DIR + "/toolchain/run-demo");
+  const test::ProcessResult r = test::runCommand(settings + " FOVEA_BUILD_DIR=" + test::buildDir() + " " +
+                                                 test::sourceDir() + "/toolchain/run-demo");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* expected : {"[robot]    fovead serve: board host-mock", "info: memory: ",
                                "[robot]    streaming: listening on 127.0.0.1:", "[operator] connected to 127.0.0.1:",
@@ -254,11 +250,11 @@ TEST(StreamDemo, ReadmeRunCommandStreamsToALocalOperator) {
 
 TEST_F(StreamLoopback, WithoutAKeyTheServiceRefusesToStartUnlessInsecure) {
   const test::ProcessResult r =
-      test::runCommand(program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --frames 1");
+      test::runCommand(test::program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --frames 1");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--key-file"), std::string::npos) << r.output;
   const test::ProcessResult insecure = test::runCommand(
-      program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --insecure --frames 2 --every 0");
+      test::program(FOVEAD_PATH) + " run --camera mock:living-room,size=160x120 --listen 127.0.0.1:0 --insecure --frames 2 --every 0");
   EXPECT_EQ(insecure.exit_code, 0) << insecure.output;
   EXPECT_NE(insecure.output.find("INSECURE"), std::string::npos) << insecure.output;
 }

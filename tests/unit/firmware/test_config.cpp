@@ -16,6 +16,7 @@
 #include "firmware/options.h"
 #include "hal/camera.h"
 #include "tests/support/process.h"
+#include "tests/support/programs.h"
 
 namespace fovea::firmware {
 namespace {
@@ -425,7 +426,7 @@ TEST(Config, StringsAreUtf8WithoutControlCharacters) {
   expectSame(config, *again);
 }
 
-std::string boardDir() { return std::string(FOVEA_SOURCE_DIR) + "/board"; }
+std::string boardDir() { return test::sourceDir() + "/board"; }
 
 std::vector<std::filesystem::path> boardProfiles() {
   std::vector<std::filesystem::path> profiles;
@@ -690,10 +691,7 @@ TEST(Resolve, BoardDirectoryFromTheEnvironment) {
   EXPECT_EQ(wrong.status().message(), dir.file("wrong.toml") + ":1: board: 'other' in wrong.toml (they must match)");
 }
 
-std::string fovead() {
-  const std::string emulator = FOVEA_EMULATOR;
-  return emulator.empty() ? std::string(FOVEAD_PATH) : emulator + " " + FOVEAD_PATH;
-}
+std::string fovead() { return test::program(FOVEAD_PATH); }
 
 TEST(PrintConfig, PrintsTheEffectiveConfigurationAsLoadableToml) {
   TempDir dir;

@@ -19,6 +19,7 @@
 #include "hal/usb/usb_ids.h"
 #include "hal/usb/usb_monitor.h"
 #include "hal/usb/usb_reset.h"
+#include "tests/support/programs.h"
 
 namespace fovea::hal::usb {
 namespace {
@@ -159,8 +160,9 @@ TEST(UsbUdevRules, HeaderSaysHowToInstall) {
 // The file the build generated (and installs) is the table's rules.
 TEST(UsbUdevRules, TheGeneratedFileIsTheTablesRules) {
 #ifdef FOVEA_UDEV_RULES_FILE
-  std::ifstream in(FOVEA_UDEV_RULES_FILE);
-  ASSERT_TRUE(in) << FOVEA_UDEV_RULES_FILE << " was not generated";
+  const std::string path = test::buildDir() + "/" + FOVEA_UDEV_RULES_FILE;
+  std::ifstream in(path);
+  ASSERT_TRUE(in) << path << " was not generated";
   std::stringstream content;
   content << in.rdbuf();
   EXPECT_EQ(content.str(), udevRules());

@@ -11,6 +11,7 @@
 #include "io/mcap/format.h"
 #include "io/mcap/reader.h"
 #include "io/mcap/writer.h"
+#include "tests/support/programs.h"
 #include "tests/support/test_time.h"
 
 namespace fovea::mcap {
@@ -374,7 +375,7 @@ namespace {
 // unknown opcode, an attachment, metadata and a message outside any chunk; and
 // a chunk compressed with lz4, which fovea does not read.
 TEST(McapReader, FilesOfAnotherWriter) {
-  const std::string dir = std::string(FOVEA_MCAP_CORPUS_DIR) + "/";
+  const std::string dir = test::sourceDir() + "/" + FOVEA_MCAP_CORPUS_DIR + "/";
   auto plain = readFile(dir + "uncompressed_unknown_opcodes.mcap");
   ASSERT_TRUE(plain.isOk()) << plain.status().toString();
   Reader reader(*plain);
