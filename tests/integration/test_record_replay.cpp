@@ -128,45 +128,69 @@ TEST(RecordReplay, ATumRecordingIsACameraBitForBit) {
   EXPECT_TRUE(ply_a == ply_b) << "the last frame's PLY differs";
 }
 
+// One session streamed and recorded by both ends, shared by the cases below (each
+// only reads its files): the streaming is most of this suite's time, and under the
+// sanitizers it ran once a case (CTest's case-by-case runs still stream once each).
+struct RecordedSession {
+  test::TempDir dir;
+  std::map<long, std::string> live;
+  long service_drops = 0;   // what the service's recorder dropped (a loaded machine)
+  long operator_drops = 0;  // what the operator's did
+  bool recorded = false;    // false: an assertion of record() failed (reported above)
+};
+
+// The service streaming the mock room to an operator, both recording.
+void record(RecordedSession& s) {
+  test::BackgroundProcess service(test::program(FOVEAD_PATH) +
+                                  " serve --camera mock:living-room,size=320x240,fps=15 --listen 127.0.0.1:0 "
+                                  "--insecure --record " +
+                                  s.dir.file("service.mcap"));
+  ASSERT_TRUE(service.waitFor("listening on ", 10) && service.waitFor(" (", 2)) << service.output();
+  std::smatch m;
+  const std::string out = service.output();
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
+  test::BackgroundProcess op(test::program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
+                             " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --quiet --duration 120 --record " +
+                             s.dir.file("operator.mcap") + " --frame-log " + s.dir.file("live.csv"));
+  ASSERT_TRUE(op.waitFor("connected to", 10)) << op.output();
+  std::this_thread::sleep_for(std::chrono::duration<double>(test::timeScale() > 1 ? 8.0 : 3.0));
+  ASSERT_EQ(service.stop(SIGTERM, 5), 0) << service.output();
+  s.service_drops = recorderDrops(service.output());
+  ASSERT_GE(s.service_drops, 0) << service.output();
+  ASSERT_EQ(op.stop(0, 5), 0) << op.output();  // ends on the service's Bye
+  EXPECT_NE(op.output().find("recording " + s.dir.file("operator.mcap")), std::string::npos) << op.output();
+  s.operator_drops = dropped(op.output(), "ring full") + dropped(op.output(), "too big") + dropped(op.output(), "disk");
+  s.live = frameFigures(s.dir.file("live.csv"));
+  ASSERT_GE(s.live.size(), 3u) << op.output();
+  s.recorded = true;
+}
+
 class StreamRecording : public ::testing::Test {
  protected:
-  // The service streaming the mock room to an operator, both recording.
-  void SetUp() override {
-    test::BackgroundProcess service(test::program(FOVEAD_PATH) +
-                                    " serve --camera mock:living-room,size=320x240,fps=15 --listen 127.0.0.1:0 "
-                                    "--insecure --record " +
-                                    dir_.file("service.mcap"));
-    ASSERT_TRUE(service.waitFor("listening on ", 10) && service.waitFor(" (", 2)) << service.output();
-    std::smatch m;
-    const std::string out = service.output();
-    ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on (\\S+) \\(")));
-    test::BackgroundProcess op(test::program(FOVEA_OPERATOR_PATH) + " --connect " + m[1].str() +
-                               " --insecure --gaze 'fixed:3,0.35,1.55>3,2.25,1.35' --quiet --duration 120 --record " +
-                               dir_.file("operator.mcap") + " --frame-log " + dir_.file("live.csv"));
-    ASSERT_TRUE(op.waitFor("connected to", 10)) << op.output();
-    std::this_thread::sleep_for(std::chrono::duration<double>(test::timeScale() > 1 ? 8.0 : 3.0));
-    ASSERT_EQ(service.stop(SIGTERM, 5), 0) << service.output();
-    service_drops_ = recorderDrops(service.output());
-    ASSERT_GE(service_drops_, 0) << service.output();
-    ASSERT_EQ(op.stop(0, 5), 0) << op.output();  // ends on the service's Bye
-    EXPECT_NE(op.output().find("recording " + dir_.file("operator.mcap")), std::string::npos) << op.output();
-    operator_drops_ = dropped(op.output(), "ring full") + dropped(op.output(), "too big") + dropped(op.output(), "disk");
-    live_ = frameFigures(dir_.file("live.csv"));
-    ASSERT_GE(live_.size(), 3u) << op.output();
+  static void SetUpTestSuite() {
+    session_ = new RecordedSession;
+    record(*session_);
   }
+  static void TearDownTestSuite() {
+    delete session_;
+    session_ = nullptr;
+  }
+  void SetUp() override { ASSERT_TRUE(session_->recorded) << "no session recorded (the suite's failure above)"; }
 
   test::ProcessResult replay(const std::string& file, const std::string& log) {
     return test::runCommand(test::program(FOVEA_OPERATOR_PATH) + " --replay " + file + " --speed 0 --quiet --frame-log " + log);
   }
 
-  test::TempDir dir_;
-  std::map<long, std::string> live_;
-  long service_drops_ = 0;  // what the service's recorder dropped (a loaded machine)
-  long operator_drops_ = 0;
+  static inline RecordedSession* session_ = nullptr;
+  test::TempDir dir_;  // this case's own files
+  const std::map<long, std::string>& live_ = session_->live;
+  const long& service_drops_ = session_->service_drops;
+  const long& operator_drops_ = session_->operator_drops;
+  std::string recorded(const char* name) const { return session_->dir.file(name); }
 };
 
 TEST_F(StreamRecording, TheOperatorsRecordingReplaysToTheLiveFiguresFrameForFrame) {
-  const test::ProcessResult r = replay(dir_.file("operator.mcap"), dir_.file("replay.csv"));
+  const test::ProcessResult r = replay(recorded("operator.mcap"), dir_.file("replay.csv"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::map<long, std::string> replayed = frameFigures(dir_.file("replay.csv"));
   if (operator_drops_ == 0) {
@@ -182,7 +206,7 @@ TEST_F(StreamRecording, TheOperatorsRecordingReplaysToTheLiveFiguresFrameForFram
 }
 
 TEST_F(StreamRecording, TheServicesRecordingHoldsEveryFrameTheOperatorGotWhole) {
-  const test::ProcessResult r = replay(dir_.file("service.mcap"), dir_.file("replay.csv"));
+  const test::ProcessResult r = replay(recorded("service.mcap"), dir_.file("replay.csv"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::map<long, std::string> replayed = frameFigures(dir_.file("replay.csv"));
   auto whole = [](const std::string& figures) {
@@ -214,7 +238,7 @@ TEST_F(StreamRecording, TheServicesRecordingHoldsEveryFrameTheOperatorGotWhole) 
 // The operator's file also holds Foxglove's messages of what it saw: a cloud per
 // frame decoded, its head and gaze per sample sent, its live lines.
 TEST_F(StreamRecording, TheOperatorsRecordingHasFoxglovesChannels) {
-  Result<std::vector<uint8_t>> file = mcap::readFile(dir_.file("operator.mcap"));
+  Result<std::vector<uint8_t>> file = mcap::readFile(recorded("operator.mcap"));
   ASSERT_TRUE(file) << file.status().message();
   mcap::Reader reader(*file);
   std::map<uint16_t, std::string> topic;
@@ -248,7 +272,7 @@ TEST_F(StreamRecording, TheOperatorsRecordingHasFoxglovesChannels) {
 
 TEST_F(StreamRecording, ARecordingCutShortReplaysUpToWhereItStops) {
   const std::string cut = dir_.file("cut.mcap");
-  std::filesystem::copy_file(dir_.file("operator.mcap"), cut);
+  std::filesystem::copy_file(recorded("operator.mcap"), cut);
   std::filesystem::resize_file(cut, std::filesystem::file_size(cut) * 6 / 10);
   const test::ProcessResult r = replay(cut, dir_.file("cut.csv"));
   EXPECT_NE(r.output.find("stopped at byte"), std::string::npos) << r.output;
