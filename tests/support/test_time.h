@@ -35,6 +35,19 @@ inline double timeScale() {
 // wait: it keeps those trees' CI stages in their time (docs/ci.md).
 inline int repetitions(int native, int slow) { return timeScale() > 1.0 ? slow : native; }
 
+// Under qemu-user (the cross tree's tests, FOVEA_TESTS_IN_QEMU_USER) a case whose
+// point is an accuracy figure over a long sequence of frames skips: it takes a
+// minute or more there, and adds nothing arm64's own. The scalar code is the same
+// IEEE arithmetic on both (-ffp-contract=off), the SIMD kernels are compared with
+// it on NEON, SVE and SVE2 (tests/equivalence), and the short cases run the same
+// code under qemu; the long ones run natively and under ASan+UBSan (docs/ci.md).
+#ifdef FOVEA_TESTS_IN_QEMU_USER
+#define FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU() \
+  GTEST_SKIP() << "a long sequence's accuracy: natively and under ASan+UBSan, not under qemu"
+#else
+#define FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU() (void)0
+#endif
+
 template <class Rep, class Period>
 std::chrono::milliseconds scaled(std::chrono::duration<Rep, Period> timeout) {
   const double ms = std::chrono::duration<double, std::milli>(timeout).count() * timeScale();

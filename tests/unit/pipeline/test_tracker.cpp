@@ -284,6 +284,7 @@ SequenceError trackSequence(std::vector<hal::RgbdFrame>& frames, KernelSet kerne
 }
 
 TEST_P(TrackerKernels, TracksTheOrbitAndTheDolly) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   for (const char* path : {"orbit", "dolly"}) {
     std::vector<hal::RgbdFrame> frames =
         mockFrames(std::string("mock:living-room,size=320x240,path=") + path, kW, kH, test::repetitions(40, 12));
@@ -330,6 +331,7 @@ TEST_P(TrackerKernels, ResetMakesTheNextFrameAFirstFrame) {
 // groundtruth.txt): tracked and fused from the first frame's true pose. The
 // lead's bench/fovea-track measures ATE with alignment; this is the test's bound.
 TEST_P(TrackerKernels, TracksTheTumTeddySlice) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   FOVEA_REQUIRE_TUM_TEDDY(path);
   // 60 frames natively; 15 where a frame costs 10 to 40 times as much (sanitizers, qemu).
   const int n = test::repetitions(60, 15);
