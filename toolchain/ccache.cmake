@@ -12,6 +12,11 @@
 #   clang (sanitizer) trees its header lives outside the clone, beside the cache
 #   (tests/CMakeLists.txt), so that it and the tests that use it hit in another
 #   clone too (docs/ci.md).
+# - inode_cache: ccache checks a manifest's hit by hashing every file the compile
+#   included, the 150-210 MB .gch too, once per test: about 1 s of CPU a hit
+#   (108 s for the arm64 tree's 95 tests). With it, a file is hashed once per
+#   device, inode, size and time stamps and then looked up (ccache 4.10 turns it
+#   on by default; Debian 12 has 4.7): the same 95 hits took 3.3 s.
 # The compiler (its mtime and size: compiler_check's default), every flag and
 # the sanitizer options stay in the hash as ccache does by default, so the
 # sanitizer and cross trees never share an object with the others.
@@ -36,6 +41,7 @@ if(FOVEA_CCACHE AND FOVEA_CCACHE_PROGRAM)
     CCACHE_BASEDIR=${PROJECT_SOURCE_DIR}
     CCACHE_SLOPPINESS=pch_defines,time_macros,include_file_mtime,include_file_ctime
     CCACHE_NOHASHDIR=1
+    CCACHE_INODECACHE=1
     CCACHE_MAXSIZE=12G)
   if(FOVEA_CCACHE_DIR)
     list(APPEND _fovea_ccache_env CCACHE_DIR=${FOVEA_CCACHE_DIR})
