@@ -16,7 +16,7 @@
 //
 // The packages come from toolchain/node/node_modules (bash toolchain/setup-host).
 import { createRequire } from "node:module";
-import { execFileSync, spawn } from "node:child_process";
+import { execFileSync, spawn, spawnSync } from "node:child_process";
 import fs from "node:fs";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
@@ -167,10 +167,19 @@ async function compareManifest(file, manifestFile) {
 async function checkFovead(fovead, workdir, frames) {
   const file = path.join(workdir, "fovead-serve.mcap");
   fs.rmSync(file, { force: true });
-  const out = execFileSync(...command(fovead, ["serve", "--camera", "mock:living-room,realtime=on", "--frames", String(frames),
+  const run = spawnSync(...command(fovead, ["serve", "--camera", "mock:living-room,realtime=on", "--frames", String(frames),
                                     "--listen", "127.0.0.1:0", "--insecure", "--status-interval-ms", "100", "--record", file]), { encoding: "utf8", stdio: ["ignore", "pipe", "pipe"], timeout: 120000 });
+  if (run.status !== 0) throw new Error(`fovead serve --record exited with ${run.status ?? run.signal}: ${run.stderr}`);
+  const out = run.stdout;
   process.stdout.write(out.split("\n").filter((l) => l.includes("record") || l.includes("stopped")).join("\n") + "\n");
   const foveated = Number((/stopped after (\d+) frames foveated/.exec(out) ?? [])[1] ?? -1);
+  // A frame the send stage had not taken when the next one came is dropped by
+  // the ring between the stages (counted; a slow build, ASan beside other tests,
+  // drops a few): it was recorded as foveated (pose, cloud) but never encoded.
+  const stopLine = run.stderr.split("\n").find((l) => l.includes("info: stopped:")) ?? "";
+  process.stdout.write(stopLine + "\n");
+  const handoffDrops = Number((/drops capture \d+ foveation (\d+)/.exec(stopLine) ?? [])[1] ?? -1);
+  check(handoffDrops >= 0, `fovead's stop line counts the frames dropped between foveation and send: '${stopLine}'`);
   const { indexed, stream } = await readBoth(file);
   const r = indexed.reader;
   const topics = new Map([...r.channelsById.values()].map((c) => [c.topic, c]));
@@ -188,8 +197,8 @@ async function checkFovead(fovead, workdir, frames) {
   };
   check(foveated > 0 && count("/fovea/camera_pose") === foveated,
         `/fovea/camera_pose has one message a frame foveated: ${count("/fovea/camera_pose")} of ${foveated}`);
-  check(count("/fovea/frame_summary") === foveated,
-        `/fovea/frame_summary has one summary a frame foveated (no operator: every frame encoded): ${count("/fovea/frame_summary")} of ${foveated}`);
+  check(count("/fovea/frame_summary") === foveated - handoffDrops,
+        `/fovea/frame_summary has one summary a frame foveated and not dropped before the send stage (no operator: every such frame encoded): ${count("/fovea/frame_summary")} of ${foveated} - ${handoffDrops}`);
   check(count("/fovea/chunks") >= foveated, `/fovea/chunks has at least a chunk a frame: ${count("/fovea/chunks")} for ${foveated} frames`);
   check(count("/fovea/status") >= 1, `/fovea/status has the status lines: ${count("/fovea/status")}`);
   const chunks = topics.get("/fovea/chunks");
