@@ -11,6 +11,7 @@
 #include "net/wire.h"
 #include "pipeline/acuity.h"
 #include "pipeline/fixation.h"
+#include "pipeline/map/surfel_links.h"
 
 namespace fovea::firmware::config_detail {
 
@@ -168,7 +169,7 @@ std::vector<Field> foveationFields() {
 std::vector<Field> mapFields() {
   return {
     // [map] (with foveation.source = "map"; pipeline/map/surfel_map.h says what each is)
-    FOVEA_INT("map.max_surfels", map.map.max_surfels, 1, 1 << 30),
+    FOVEA_INT("map.max_surfels", map.map.max_surfels, 1, pipeline::map::SurfelLinks::kMaxSlots),
     FOVEA_INT("map.max_bricks", map.map.max_bricks, 1, 65535),
     FOVEA_FLOAT("map.brick_size_m", map.map.brick_size_m, 0.05, 16.0),
     FOVEA_FLOAT("map.depth_tolerance_sigmas", map.map.depth_tolerance_sigmas, 0.1, 100.0),

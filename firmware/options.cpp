@@ -1,6 +1,7 @@
 #include "firmware/options.h"
 
 #include "firmware/frame_foveator.h"
+#include "pipeline/map/surfel_links.h"
 
 #include <algorithm>
 #include <charconv>
@@ -132,7 +133,7 @@ Result<MapSettings> mapSettingsFromArgs(const Args& args) {
     settings.source = *source;
   }
   if (const std::string* v = args.get("--max-surfels")) {
-    Result<long> n = parseInteger("--max-surfels", *v, 1, 1L << 30);
+    Result<long> n = parseInteger("--max-surfels", *v, 1, pipeline::map::SurfelLinks::kMaxSlots);
     if (!n) return n.status();
     settings.map.max_surfels = static_cast<std::size_t>(n.value());
   }

@@ -132,7 +132,7 @@ Status Service::allocateFoveator(const pipeline::PipelineCapacity& capacity, con
 // The map's parts, a line each (those it has).
 void Service::addMapMemory(const pipeline::map::MapperMemory& m) {
   const std::pair<const char*, std::size_t> parts[] = {
-      {"map: surfel pool (32 B a surfel, 8 B its links)", m.map.pool},
+      {"map: surfel pool (32 B a surfel, 6 B its links)", m.map.pool},
       {"map: bricks (table, culling, lists, counts)", m.map.bricks},
       {"map: fusion's per-pixel scratch", m.map.pixels},
       {"map: eviction histogram", m.map.eviction},

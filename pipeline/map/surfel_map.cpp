@@ -27,7 +27,9 @@ constexpr std::size_t kNormalCosBuckets = 1024;  // the normal tolerance's table
 
 Status SurfelMapConfig::validate() const {
   auto bad = [](const char* what) { return Status(ErrorCode::kInvalidArgument, std::string("map.") + what); };
-  if (max_surfels == 0 || max_surfels > (std::size_t{1} << 31)) return bad("max_surfels: must be in [1, 2^31]");
+  if (max_surfels == 0 || max_surfels > SurfelLinks::kMaxSlots) {
+    return bad("max_surfels: must be in [1, 16777215] (the brick lists link slots in 24 bits)");
+  }
   if (max_bricks == 0 || max_bricks > 65535) return bad("max_bricks: must be in [1, 65535] (a surfel names its brick in 16 bits)");
   if (!(std::isfinite(brick_size_m) && brick_size_m >= 0.05 && brick_size_m <= 16.0)) {
     return bad("brick_size_m: must be in [0.05, 16] m");
@@ -72,8 +74,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_head_.assign(config.max_bricks, kNoSurfel);
   brick_settled_.assign(config.max_bricks, 0);
   brick_changes_.assign(config.max_bricks, 0);
-  link_next_.resize(config.max_surfels);
-  link_prev_.resize(config.max_surfels);
+  links_.resize(config.max_surfels);
   for (std::vector<float>* map : {&vertex_x_, &vertex_y_, &vertex_z_, &normal_x_, &normal_y_, &normal_z_, &radius_,
                                   &weight_}) {
     map->resize(pixels);
@@ -98,7 +99,7 @@ std::size_t SurfelMap::memoryBytes() const {
 
 SurfelMapMemory SurfelMap::memoryParts() const {
   SurfelMapMemory m;
-  m.pool = surfels_.capacity() * sizeof(Surfel) + (link_next_.capacity() + link_prev_.capacity()) * sizeof(uint32_t);
+  m.pool = surfels_.capacity() * sizeof(Surfel) + links_.memoryBytes();
   m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.memoryBytes() +
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) + brick_visible_.capacity() +
              (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
@@ -236,13 +237,13 @@ void SurfelMap::detachSurfel(uint32_t slot) {
     --brick_settled_[s.brick];
     ++brick_changes_[s.brick];
   }
-  const uint32_t next = link_next_[slot], prev = link_prev_[slot];
+  const uint32_t next = links_.next(slot), prev = links_.prev(slot);
   if (prev == kNoSurfel) {
     brick_head_[s.brick] = next;
   } else {
-    link_next_[prev] = next;
+    links_.setNext(prev, next);
   }
-  if (next != kNoSurfel) link_prev_[next] = prev;
+  if (next != kNoSurfel) links_.setPrev(next, prev);
   s.flags = 0;
   --live_;
 }
@@ -254,13 +255,13 @@ void SurfelMap::removeSurfel(uint32_t slot) {
 
 uint32_t SurfelMap::popFree() {
   const uint32_t slot = free_head_;
-  free_head_ = link_next_[slot];
+  free_head_ = links_.next(slot);
   --free_count_;
   return slot;
 }
 
 void SurfelMap::pushFree(uint32_t slot) {
-  link_next_[slot] = free_head_;
+  links_.setNext(slot, free_head_);
   free_head_ = slot;
   ++free_count_;
 }
@@ -619,9 +620,9 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
   s.brick = static_cast<uint16_t>(brick);
   s.first_seen = s.last_seen = frame_;
   const uint32_t head = brick_head_[s.brick];
-  link_next_[slot] = head;
-  link_prev_[slot] = kNoSurfel;
-  if (head != kNoSurfel) link_prev_[head] = slot;
+  links_.setNext(slot, head);
+  links_.setPrev(slot, kNoSurfel);
+  if (head != kNoSurfel) links_.setPrev(head, slot);
   brick_head_[s.brick] = slot;
   if (weight >= config_.stable_confidence) {
     s.flags |= kSurfelStable;
@@ -727,7 +728,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         // The camera sees through the surfel: free space where it is.
         if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
           detachSurfel(slot);
-          link_next_[slot] = carved_head;
+          links_.setNext(slot, carved_head);
           carved_head = slot;
           if (carved_tail == kNone) carved_tail = slot;
           ++carved_away;
@@ -759,7 +760,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
     ++to_add;
   }
   if (carved_head != kNone) {
-    link_next_[carved_tail] = free_head_;
+    links_.setNext(carved_tail, free_head_);
     free_head_ = carved_head;
     free_count_ += carved_away;
   }

@@ -25,8 +25,8 @@
 //  5. evicts the least useful surfels (lowest confidence, longest unseen) when
 //     the pool has no room for the new ones, then adds them, unstable.
 //
-// Memory: the pool of surfels (32 bytes each and 8 for their brick list, the
-// free list threaded through the same links: 40 bytes a surfel of capacity),
+// Memory: the pool of surfels (32 bytes each and 6 for their brick list, the
+// free list threaded through the same links: 38 bytes a surfel of capacity),
 // the brick table and the per-pixel scratch are allocated by create(); fuse()
 // allocates nothing.
 #pragma once
@@ -47,6 +47,7 @@
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
+#include "pipeline/map/surfel_links.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::pipeline::map {
@@ -55,7 +56,7 @@ namespace fovea::pipeline::map {
 using fovea::depthSigma;
 
 struct SurfelMapConfig {
-  std::size_t max_surfels = std::size_t{1} << 20;
+  std::size_t max_surfels = std::size_t{1} << 20;  // at most SurfelLinks::kMaxSlots (16 777 215)
   // Bricks: cubes that hold a surfel's position origin (and will hold the
   // changes the stream sends). 0.5 m: a room needs a few hundred, a float
   // keeps 0.03 micrometres across one, and a brick is a useful unit of change.
@@ -128,7 +129,7 @@ struct FuseStats {
 
 // What create() allocated, by what it grows with.
 struct SurfelMapMemory {
-  std::size_t pool = 0;      // max_surfels: the surfels (32 bytes) and their brick lists' links (8)
+  std::size_t pool = 0;      // max_surfels: the surfels (32 bytes) and their brick lists' links (6)
   std::size_t bricks = 0;    // max_bricks: keys, hash table, per-frame culling, lists' heads, counts
   std::size_t pixels = 0;    // max_width x max_height: the per-pixel scratch of a frame's fusion
   std::size_t eviction = 0;  // fixed: makeRoom()'s histogram
@@ -180,9 +181,9 @@ class SurfelMap {
   // settled ones among them, and a counter of changes to the settled set (a
   // surfel settled, or a settled one went) that only grows (wrapping): a
   // reader keeps the value it last saw and compares.
-  static constexpr uint32_t kNoSurfel = 0xffffffffu;
+  static constexpr uint32_t kNoSurfel = SurfelLinks::kNoSlot;
   uint32_t firstInBrick(uint16_t brick) const { return brick_head_[brick]; }
-  uint32_t nextInBrick(uint32_t slot) const { return link_next_[slot]; }
+  uint32_t nextInBrick(uint32_t slot) const { return links_.next(slot); }
   uint32_t brickSettledCount(uint16_t brick) const { return brick_settled_[brick]; }
   uint32_t brickChanges(uint16_t brick) const { return brick_changes_[brick]; }
 
@@ -255,7 +256,7 @@ class SurfelMap {
 
   SurfelMapConfig config_;
   std::vector<Surfel> surfels_;
-  uint32_t free_head_ = kNoSurfel;    // a stack of free slots below high_water_, through link_next_
+  uint32_t free_head_ = kNoSurfel;    // a stack of free slots below high_water_, through links_.next
   std::size_t free_count_ = 0;
   std::size_t high_water_ = 0;
   std::size_t live_ = 0;
@@ -268,8 +269,8 @@ class SurfelMap {
   std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
   std::vector<uint32_t> brick_settled_;   // ... its settled surfels
   std::vector<uint32_t> brick_changes_;   // ... changes to its settled set (wrapping)
-  // Per slot: the brick list's neighbours; a free slot's link_next_ is the next free one.
-  std::vector<uint32_t> link_next_, link_prev_;
+  // Per slot: the brick list's neighbours; a free slot's next is the next free one.
+  SurfelLinks links_;
 
   // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
   // map_kernels.h), structure of arrays; weight is negated by associate() for a

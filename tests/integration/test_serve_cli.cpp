@@ -157,7 +157,7 @@ TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
   const std::string out = serve.output();
   ASSERT_TRUE(std::regex_search(out, port, std::regex("listening on 127\\.0\\.0\\.1:([0-9]+)"))) << out;
   // The map's parts, each a line; with bricks the eye's depth buffer is not needed.
-  EXPECT_NE(out.find("map: surfel pool (32 B a surfel, 8 B its links)"), std::string::npos) << out;
+  EXPECT_NE(out.find("map: surfel pool (32 B a surfel, 6 B its links)"), std::string::npos) << out;
   EXPECT_NE(out.find("map: bricks the operator holds, plan, sampler"), std::string::npos) << out;
   EXPECT_EQ(out.find("map: eye depth buffer"), std::string::npos) << out;
   const test::ProcessResult op = test::runCommand(foveaOperator() + " --connect 127.0.0.1:" + port[1].str() +

@@ -116,6 +116,9 @@ TEST(Config, OutOfRange) {
   EXPECT_EQ(loadError("[pipeline]\nthreads = 0\n"), "fovea.toml:2: pipeline.threads: must be within 1 .. 64 (got 0)");
   EXPECT_EQ(loadError("[stream]\nmax_mtu_bytes = 9000\n"),
             "fovea.toml:2: stream.max_mtu_bytes: must be within 256 .. 8952 (got 9000)");
+  // The map's brick lists link slots in 24 bits (pipeline/map/surfel_links.h).
+  EXPECT_EQ(loadError("[map]\nmax_surfels = 16777216\n"),
+            "fovea.toml:2: map.max_surfels: must be within 1 .. 16777215 (got 16777216)");
   EXPECT_EQ(loadError("[foveation]\npreset = \"F9\"\n"),
             "fovea.toml:2: foveation.preset: must be one of \"F1\", \"F2\", \"F3\", \"FREF\", \"ACUITY\", \"custom\" (got \"F9\")");
   EXPECT_EQ(loadError("[runtime]\nlog_level = \"loud\"\n"),

@@ -27,6 +27,7 @@
 #include "pipeline/map/fusion_budget.h"
 #include "pipeline/map/lowest_keys.h"
 #include "pipeline/map/map_delta.h"
+#include "pipeline/map/surfel_links.h"
 #include "pipeline/map/surfel_map.h"
 #include "tests/support/test_time.h"
 
@@ -578,20 +579,65 @@ TEST(LowestKeys, TakesExactlyTheKSmallestWithTiesInIndexOrder) {
   }
 }
 
-// Memory to the surfel (issue 41): the pool is 40 bytes a surfel of capacity
-// (the surfel and its two links; the free list and the eviction need none),
-// whatever the other parts are sized for.
-TEST(SurfelMap, ThePoolIsFortyBytesASurfelOfCapacity) {
+// Memory to the surfel (issue 41): the pool is 38 bytes a surfel of capacity
+// (the surfel and its two 24-bit links; the free list and the eviction need
+// none), whatever the other parts are sized for; and what grows with the map's
+// capacity, the pool, the bricks' tables and the operator's brick records
+// (MapDelta), at most 40 bytes a surfel at the default sizes (1 M surfels,
+// 16 384 bricks).
+TEST(SurfelMap, ThePoolIsThirtyEightBytesASurfelOfCapacity) {
   for (const std::size_t surfels : {std::size_t{1000}, std::size_t{1} << 20}) {
     SurfelMapConfig config = smallConfig(40, 30);
     config.max_surfels = surfels;
     const SurfelMap map = SurfelMap::create(config).value();
     const SurfelMapMemory m = map.memoryParts();
-    EXPECT_EQ(m.pool, 40 * surfels);
+    EXPECT_EQ(m.pool, 38 * surfels);
     EXPECT_EQ(m.total(), map.memoryBytes());
     EXPECT_LT(m.bricks, 64 * config.max_bricks);
     EXPECT_LT(m.pixels, 48u * 40 * 30 + 4096 + 16 * 70);
   }
+  SurfelMapConfig defaults = smallConfig(40, 30);
+  defaults.max_surfels = SurfelMapConfig{}.max_surfels;
+  defaults.max_bricks = SurfelMapConfig{}.max_bricks;
+  const SurfelMapMemory m = SurfelMap::create(defaults).value().memoryParts();
+  const std::size_t records = MapDelta::create(MapDeltaConfig{}, defaults.max_bricks).value().memoryBytes();
+  const double per_surfel = static_cast<double>(m.pool + m.bricks + records) / static_cast<double>(defaults.max_surfels);
+  std::printf("at the default sizes: %.2f bytes a surfel of capacity (pool %zu, bricks %zu, operator's records %zu)\n",
+              per_surfel, m.pool, m.bricks, records);
+  EXPECT_LE(per_surfel, 40.0);
+}
+
+// The links in 24 bits: every slot up to the largest and kNoSurfel read back
+// as written, and a slot's two links never touch its neighbours' (against a
+// plain array of 32-bit links written alongside).
+TEST(SurfelLinks, EverySlotAndNoneReadBackAsWrittenBesideItsNeighbours) {
+  constexpr uint32_t kSlots = 4096;
+  SurfelLinks links;
+  links.resize(kSlots);
+  EXPECT_EQ(links.memoryBytes(), 6u * kSlots);
+  std::vector<uint32_t> next(kSlots), prev(kSlots);
+  std::mt19937 rng(7);
+  const uint32_t edge[] = {0, 1, 0xff, 0x100, 0xffff, 0x10000, SurfelLinks::kMaxSlots - 1, SurfelLinks::kNoSlot};
+  for (int round = 0; round < 20000; ++round) {
+    const uint32_t slot = rng() % kSlots;
+    const uint32_t to = rng() % 3 == 0 ? edge[rng() % std::size(edge)] : rng() % SurfelLinks::kMaxSlots;
+    if (rng() % 2 == 0) {
+      links.setNext(slot, to);
+      next[slot] = to;
+    } else {
+      links.setPrev(slot, to);
+      prev[slot] = to;
+    }
+  }
+  for (uint32_t slot = 0; slot < kSlots; ++slot) {
+    ASSERT_EQ(links.next(slot), next[slot]) << slot;
+    ASSERT_EQ(links.prev(slot), prev[slot]) << slot;
+  }
+  SurfelMapConfig config = smallConfig(40, 30);
+  config.max_surfels = SurfelLinks::kMaxSlots;
+  EXPECT_TRUE(config.validate());
+  config.max_surfels = SurfelLinks::kMaxSlots + 1;
+  EXPECT_FALSE(config.validate());
 }
 
 // Fusion's time budget (fusion_budget.h): fusion slower than its budget runs
