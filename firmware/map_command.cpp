@@ -49,7 +49,7 @@ const char* kMapHelp =
     "  --camera SPEC       default mock:living-room,path=orbit ('fovead cameras' lists them)\n"
     "  --frames N          frames to fuse (default 100; with --pose track and a recording: all)\n"
     "  --all-surfels       write unstable surfels too (default: the stable ones, those the map shows)\n"
-    "  --max-surfels N     the pool (default 1048576; 32 bytes a surfel)\n"
+    "  --max-surfels N     the pool (default 1048576, at most 16777215; 38 bytes a surfel)\n"
     "  --brick-size M      the bricks' edge in metres (default 0.5)\n"
     "  --depth-min M, --depth-max M  the depth range fused (default 0.1 .. 10 m)\n";
 

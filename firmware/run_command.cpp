@@ -68,7 +68,7 @@ const char* kRunHelp =
     "  --source frame|map       what is foveated (foveation.source, docs/map.md): each frame's own points\n"
     "                           (default), or the surfel map fused from the posed frames as the eye sees it,\n"
     "                           with the frame's points the map does not explain yet\n"
-    "  --max-surfels N          the map's pool (default 1048576; 32 bytes a surfel)\n"
+    "  --max-surfels N          the map's pool (default 1048576, at most 16777215; 38 bytes a surfel)\n"
     "  --brick-size M           the map's bricks' edge in metres (default 0.5)\n"
     "\n"
     "\n"
