@@ -49,10 +49,14 @@ struct StreamRun {
 StreamRun runStream(const test::TempDir& dir, const std::string& listen, const std::string& operator_flags,
                     double seconds, const std::string& service_flags = "") {
   StreamRun run;
+  // The gaze goes stale after 100 ms (the default) natively; a sanitizer's
+  // operator, sharing two cores with other tests, sends it late by more than
+  // that, and its frames would take the fallback gaze: the bound scales.
+  const auto gaze_timeout = test::scaled(std::chrono::milliseconds(100));
   test::BackgroundProcess service(test::program(FOVEAD_PATH) +
                                   " run --camera mock:living-room,size=320x240,fps=15 --every 0 --listen " + listen +
-                                  " --key-file " + dir.file("key") + " --save-ply " + dir.file("robot.ply") + " " +
-                                  service_flags);
+                                  " --key-file " + dir.file("key") + " --save-ply " + dir.file("robot.ply") +
+                                  " --gaze-timeout-ms " + std::to_string(gaze_timeout.count()) + " " + service_flags);
   EXPECT_TRUE(service.started());
   // The whole "listening on ADDR:PORT (" line.
   if (!service.waitFor("streaming: listening on ", 10) || !service.waitFor(" (", 2)) {

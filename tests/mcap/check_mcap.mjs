@@ -178,6 +178,13 @@ async function checkFovead(fovead, workdir, frames) {
   // drops a few): it was recorded as foveated (pose, cloud) but never encoded.
   const stopLine = run.stderr.split("\n").find((l) => l.includes("info: stopped:")) ?? "";
   process.stdout.write(stopLine + "\n");
+  // The recorder's producer rings are small (4 clouds); a writer thread starved
+  // of CPU (ASan beside other tests) drops what finds its ring full, counted on
+  // its summary line: a cloud channel short by at most that many is its drops.
+  const recordingLine = run.stderr.split("\n").find((l) => /recording .*dropped: ring full/.test(l)) ?? "";
+  process.stdout.write(recordingLine + "\n");
+  const ringFullDrops = Number((/dropped: ring full (\d+)/.exec(recordingLine) ?? [])[1] ?? -1);
+  check(ringFullDrops >= 0, `fovead's recording line counts the messages its full rings dropped: '${recordingLine}'`);
   const handoffDrops = Number((/drops capture \d+ foveation (\d+)/.exec(stopLine) ?? [])[1] ?? -1);
   check(handoffDrops >= 0, `fovead's stop line counts the frames dropped between foveation and send: '${stopLine}'`);
   const { indexed, stream } = await readBoth(file);
@@ -232,7 +239,9 @@ async function checkFovead(fovead, workdir, frames) {
       check(m.frame_id === "world" && m.point_stride === 16 && points > 1000 && Number.isInteger(points),
             `/fovea/cloud decodes: frame ${m.frame_id}, stride ${m.point_stride}, ${points} points`);
       check(m.fields.map((f) => f.name).join(",") === "x,y,z,rgba", `/fovea/cloud's fields are x,y,z,rgba (${m.fields.map((f) => f.name)})`);
-      check(count("/fovea/cloud") === foveated, `/fovea/cloud has one cloud a frame foveated: ${count("/fovea/cloud")} of ${foveated}`);
+      const clouds = count("/fovea/cloud");
+      check(clouds <= foveated && clouds >= foveated - ringFullDrops,
+            `/fovea/cloud has one cloud a frame foveated, less those its full ring dropped: ${clouds} of ${foveated} (ring full ${ringFullDrops})`);
     } else if (topic === "/fovea/camera") {
       check(m.parent_frame_id === "world" && m.child_frame_id === "camera" && m.rotation !== undefined,
             `/fovea/camera decodes: ${m.parent_frame_id} -> ${m.child_frame_id}`);
