@@ -1,7 +1,8 @@
 // The depth sensor's axial noise, one model for the whole house: the mock
 // camera simulates it (hal/camera/mock/render.cpp), the map associates and
-// carves within a few of its sigmas (pipeline/map/surfel_map.cpp, eye_view.cpp)
-// and the tracker weighs ICP's residuals by it (pipeline/map/tracker*).
+// carves within a few of its sigmas (pipeline/map/surfel_map.cpp,
+// surfel_map_render.cpp, eye_view.cpp) and the tracker weighs ICP's residuals
+// by it (pipeline/map/tracker*).
 //
 // sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 metres: Nguyen, Izadi and Lovell
 // 2012, measured on a Kinect (2 mm at 1 m, 26 mm at 4 m); structured-light and

@@ -219,12 +219,12 @@ class SurfelMap {
   }
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
-  // renderIndexMap()'s steps: the bricks' camera-frame origins and visibility,
+  // renderIndexMap()'s steps (surfel_map_render.cpp): the bricks' camera-frame origins and visibility,
   // then the splatting (the reference, or splatFast()).
   void cullBricks(const hal::RgbdFrame& frame);
   void splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
   // renderIndexMap()'s splatting when config_.kernels is not the reference
-  // (the same bits), and its steps (surfel_map.cpp).
+  // (the same bits), and its steps (surfel_map_render.cpp, beside the reference).
   void splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
   struct SplatView;
   struct SplatBatch;
