@@ -129,11 +129,16 @@ Status Streamer::makeEncoders(uint32_t mtu_bytes) {
   encoder_.reset();
   brick_encoder_.reset();
   encoder_mtu_ = 0;
-  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_);
+  const bool bricks_too = brick_sender_ || config_.map_bricks;
+  if (!encoder_points_) {
+    encoder_points_ =
+        net::ChunkEncoder::makePointScratch(std::max(max_points_, bricks_too ? config_.max_brick_points : std::size_t{0}));
+  }
+  Result<net::ChunkEncoder> encoder = net::ChunkEncoder::create(codec, max_points_, encoder_points_);
   if (!encoder) return encoder.status();
   encoder_.emplace(std::move(encoder.value()));
-  if (brick_sender_ || config_.map_bricks) {
-    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points);
+  if (bricks_too) {
+    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points, encoder_points_);
     if (!bricks) return bricks.status();
     brick_encoder_.emplace(std::move(bricks.value()));
   }

@@ -208,6 +208,10 @@ class Streamer {
   // The map's bricks (map_bricks).
   std::optional<net::BrickSender> brick_sender_;
   std::optional<net::ChunkEncoder> brick_encoder_;  // made with encoder_
+  // The two encoders' per-point arrays, one set for both (both encode on the
+  // send stage, one after the other), sized for the larger and made once: a
+  // session at another MTU remakes the encoders, not these.
+  std::shared_ptr<net::ChunkEncoder::PointScratch> encoder_points_;
   pipeline::FoveatedCloud brick_cloud_;             // one brick's points, for its encoder
   std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
   GridTable slot_index_;                            // key -> the map slot it was sent from

@@ -204,17 +204,49 @@ Status validate(const CodecConfig& c) {
 
 // ---- encoder ----
 
+// Per point of the frame, grouped by region; read and written only inside encode().
+struct ChunkEncoder::PointScratch {
+  explicit PointScratch(std::size_t n)
+      : qx(n), qy(n), qz(n), keys(n), keys_tmp(n), order(n), order_tmp(n), colours(n) {}
+  std::vector<int64_t> qx, qy, qz;  // lattice coordinates, in `order`'s slots (grouped by region)
+  std::vector<uint64_t> keys, keys_tmp;
+  std::vector<uint32_t> order, order_tmp;
+  std::vector<uint32_t> colours;  // the points' colours in Morton order (a separate gather: more loads in flight)
+};
+
+std::shared_ptr<ChunkEncoder::PointScratch> ChunkEncoder::makePointScratch(std::size_t max_points) {
+  return std::make_shared<PointScratch>(max_points);
+}
+
 struct ChunkEncoder::State {
+  explicit State(std::shared_ptr<PointScratch> scratch)
+      : points(std::move(scratch)),
+        qx(points->qx),
+        qy(points->qy),
+        qz(points->qz),
+        keys(points->keys),
+        keys_tmp(points->keys_tmp),
+        order(points->order),
+        order_tmp(points->order_tmp),
+        colours(points->colours),
+        summary_fbb(1) {}
+  ~State() = default;
+
   CodecConfig config;
   std::size_t max_points = 0;
   std::size_t budget = 0;  // bytes of data in a chunk of the region in progress (max_payload - its header)
   std::size_t max_chunks = 0;
 
-  // Per point of the frame, grouped by region.
-  std::vector<int64_t> qx, qy, qz;  // lattice coordinates, in `order`'s slots (grouped by region)
-  std::vector<uint64_t> keys, keys_tmp;
-  std::vector<uint32_t> order, order_tmp;
-  std::vector<uint32_t> colours;  // the points' colours in Morton order (a separate gather: more loads in flight)
+  // The per-point arrays (this encoder's own, or shared: ChunkEncoder::create).
+  std::shared_ptr<PointScratch> points;
+  std::vector<int64_t>& qx;
+  std::vector<int64_t>& qy;
+  std::vector<int64_t>& qz;
+  std::vector<uint64_t>& keys;
+  std::vector<uint64_t>& keys_tmp;
+  std::vector<uint32_t>& order;
+  std::vector<uint32_t>& order_tmp;
+  std::vector<uint32_t>& colours;
   std::vector<uint32_t> histogram;  // 1 << kRadixBits per radix pass
 
   // One chunk in the making: 4 order bytes, then the bitstream (+ slack for rollback).
@@ -234,9 +266,6 @@ struct ChunkEncoder::State {
   std::vector<ChunkRef> chunks;
   std::size_t chunk_count = 0;
   std::array<double, pipeline::kMaxRegions> step{};
-
-  State() : summary_fbb(1) {}
-  ~State() = default;
 
   // Writes one chunk (header, then data) at arena[offset]; its size. The chunk
   // count is a placeholder until patchChunkCount().
@@ -294,13 +323,19 @@ std::size_t maxChunks(const CodecConfig& config, std::size_t points) {
   return (23 * points + per_chunk - 1) / per_chunk + pipeline::kMaxRegions + 1;
 }
 
-Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t max_points) {
+Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t max_points,
+                                         std::shared_ptr<PointScratch> scratch) {
   if (Status st = validate(config); !st) return st;
   if (max_points == 0 || max_points > (std::size_t{1} << 26)) {
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
                                 "codec: max_points " + std::to_string(max_points) + " is outside [1, 2^26]");
   }
-  auto s = std::make_unique<State>();
+  if (scratch != nullptr && scratch->qx.size() < max_points) {
+    return Result<ChunkEncoder>(ErrorCode::kInvalidArgument, "codec: a shared point scratch of " +
+                                                                 std::to_string(scratch->qx.size()) +
+                                                                 " points for an encoder of " + std::to_string(max_points));
+  }
+  auto s = std::make_unique<State>(scratch != nullptr ? std::move(scratch) : makePointScratch(max_points));
   s->config = config;
   s->max_points = max_points;
 
@@ -314,14 +349,6 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->arena.resize(s->max_chunks * alignUp(config.max_payload, kPayloadAlignment));
   s->chunks.resize(s->max_chunks);
 
-  s->qx.resize(max_points);
-  s->qy.resize(max_points);
-  s->qz.resize(max_points);
-  s->keys.resize(max_points);
-  s->keys_tmp.resize(max_points);
-  s->order.resize(max_points);
-  s->order_tmp.resize(max_points);
-  s->colours.resize(max_points);
   s->histogram.resize(((63 + kRadixBits - 1) / kRadixBits) * (std::size_t{1} << kRadixBits));  // one per pass
   s->raw.resize(config.max_payload + 64);
   s->packed.resize(ZSTD_compressBound(config.max_payload));

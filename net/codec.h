@@ -71,8 +71,17 @@ std::size_t maxChunks(const CodecConfig& config, std::size_t points);
 
 class ChunkEncoder {
  public:
-  // max_points: points per foveated frame. Allocates every buffer here.
-  static Result<ChunkEncoder> create(const CodecConfig& config, std::size_t max_points);
+  // The per-point arrays encode() quantizes and sorts in (52 bytes a point),
+  // used only while it runs: encoders that never encode at the same time (the
+  // streamer's frame and brick encoders, both on its send thread) can share one.
+  struct PointScratch;
+  static std::shared_ptr<PointScratch> makePointScratch(std::size_t max_points);
+
+  // max_points: points per foveated frame. Allocates every buffer here but the
+  // per-point arrays when `scratch` is given (it must hold max_points; the
+  // encoder keeps it alive; kInvalidArgument when it is smaller).
+  static Result<ChunkEncoder> create(const CodecConfig& config, std::size_t max_points,
+                                     std::shared_ptr<PointScratch> scratch = nullptr);
   ChunkEncoder(ChunkEncoder&&) noexcept;
   ChunkEncoder& operator=(ChunkEncoder&&) noexcept;
   ~ChunkEncoder();

@@ -296,6 +296,50 @@ TEST(CodecFrames, FrameLargerThanAnyBudget) {
   EXPECT_EQ(small.chunkCount(), 0u);
 }
 
+// Two encoders that share their per-point arrays (the streamer's frame and
+// brick encoders) and encode in turn give, chunk for chunk, the bytes each
+// gives with arrays of its own; a shared set smaller than an encoder is refused.
+std::vector<std::vector<uint8_t>> chunksOf(const ChunkEncoder& enc) {
+  std::vector<std::vector<uint8_t>> out;
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) out.emplace_back(enc.chunk(i).begin(), enc.chunk(i).end());
+  return out;
+}
+
+TEST(CodecScratch, EncodersSharingTheirPointArraysGiveTheBytesOfEncodersAlone) {
+  const std::size_t frame_points = 20000, brick_points = 4000;
+  CodecConfig config;
+  config.entropy_coding = true;
+  const double voxel[] = {0.0, 0.002, 0.004};
+  const BrickTag tag{-3, 7, 0, 5, 2};
+  std::shared_ptr<ChunkEncoder::PointScratch> shared = ChunkEncoder::makePointScratch(frame_points);
+  Result<ChunkEncoder> frame_shared = ChunkEncoder::create(config, frame_points, shared);
+  Result<ChunkEncoder> brick_shared = ChunkEncoder::create(config, brick_points, shared);
+  ASSERT_TRUE(frame_shared.isOk() && brick_shared.isOk());
+  shared.reset();  // the encoders keep it
+  ChunkEncoder frame_alone = makeEncoder(config, frame_points), brick_alone = makeEncoder(config, brick_points);
+  for (uint64_t seed = 1; seed <= 3; ++seed) {
+    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    pipeline::FoveatedCloud frame(frame_points), brick(brick_points);
+    frame.points = test::randomCloud(frame_points - 1000 * seed, Eigen::Vector3d(1, 2, 3), 2.0f, seed);
+    for (std::size_t i = 0; i < frame.size(); ++i) frame.region[i] = static_cast<uint8_t>((i * 7 + seed) % 3);
+    brick.points = test::randomCloud(brick_points - 500 * seed, Eigen::Vector3d(-1.25, 3.75, 0.25), 0.25f, 100 + seed);
+    std::fill(brick.region.begin(), brick.region.begin() + static_cast<std::ptrdiff_t>(brick.size()), uint8_t{2});
+    // In turn, as the send stage does: the frame, then a brick, then the frame again.
+    ASSERT_TRUE(frame_shared->encode(frame, voxel, 10, 20).isOk());
+    const auto first = chunksOf(*frame_shared);
+    ASSERT_TRUE(brick_shared->encode(brick, voxel, 10, 20, &tag).isOk());
+    ASSERT_TRUE(brick_alone.encode(brick, voxel, 10, 20, &tag).isOk());
+    EXPECT_EQ(chunksOf(*brick_shared), chunksOf(brick_alone));
+    EXPECT_EQ(chunksOf(*frame_shared), first) << "the frame's chunks stay as they were while a brick is encoded";
+    ASSERT_TRUE(frame_alone.encode(frame, voxel, 10, 20).isOk());
+    EXPECT_EQ(first, chunksOf(frame_alone));
+    ASSERT_GT(first.size(), 3u);
+  }
+  Result<ChunkEncoder> too_big = ChunkEncoder::create(config, frame_points + 1, ChunkEncoder::makePointScratch(frame_points));
+  EXPECT_EQ(too_big.status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(too_big.status().message().find("shared point scratch"), std::string::npos) << too_big.status().message();
+}
+
 TEST(CodecRange, PointsFarFromTheWorldOrigin) {
   for (const Eigen::Vector3d& origin : {Eigen::Vector3d(1e4, -2e4, 5e3), Eigen::Vector3d(-3e6, 4e6, 1e5)}) {
     pipeline::FoveatedCloud cloud(5000);
