@@ -286,9 +286,9 @@ SequenceError trackSequence(std::vector<hal::RgbdFrame>& frames, KernelSet kerne
 // Where a frame costs 10 to 40 times as much (the sanitizers) a long sequence
 // runs once, with the kernels the service runs (only the reference's ran
 // before, in the same time: test_tracker alone under ASan 24 to 30 s before,
-// 23 to 25 after), and test_tracker_equivalence holds the two kernel sets together on every
-// target. The reference's sequences run in a native run-tests (CI's native
-// tree builds no unit tests).
+// 23 to 25 after), and test_tracker_equivalence holds the two kernel sets
+// together on every target. The reference's sequences run in a native
+// run-tests (CI's native tree builds no unit tests).
 #define FOVEA_SKIP_REFERENCE_SEQUENCE_WHEN_SLOW()                 \
   if (test::timeScale() > 1.0 && GetParam() == KernelSet::kRef) \
   GTEST_SKIP() << "the reference's long sequence: natively; the slow trees run the Highway kernels' (simd)"
