@@ -57,7 +57,9 @@ Status applyFoveationAndStreamFlags(const Args& args, ServiceConfig& config) {
     if (!foveation) return foveation.status();
     config.foveation = foveation.value();
   }
-  Result<std::optional<StreamConfig>> stream = streamConfigFromArgs(args);
+  // Over the configuration's stream section: --set stream.gaze_timeout_ms (or
+  // the profile's budget) with --listen used to fall back to the defaults.
+  Result<std::optional<StreamConfig>> stream = streamConfigFromArgs(args, config.stream);
   if (!stream) return stream.status();
   if (stream->has_value()) {
     config.stream = **stream;

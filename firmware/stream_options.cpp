@@ -10,7 +10,7 @@ const std::vector<std::string> kStreamFlags = {"--listen", "--key-file", "--budg
                                                "--fallback-voxel", "--fovea-step", "--chroma", "--entropy"};
 
 // The streaming options, or nullopt without --listen.
-Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args) {
+Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args, const StreamConfig& base) {
   using R = Result<std::optional<StreamConfig>>;
   if (!args.has("--listen")) {
     for (const std::string& flag : kStreamFlags) {
@@ -19,7 +19,7 @@ Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args) {
     if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: only with --listen");
     return std::optional<StreamConfig>();
   }
-  StreamConfig config;
+  StreamConfig config = base;
   config.link.listen = *args.get("--listen");
   if (const std::string* path = args.get("--key-file")) {
     if (args.has("--insecure")) return R(ErrorCode::kInvalidArgument, "--insecure: not together with --key-file");

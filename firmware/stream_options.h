@@ -15,7 +15,9 @@ namespace fovea::firmware {
 // Value flags (--insecure is a switch).
 extern const std::vector<std::string> kStreamFlags;
 
-// The streaming options, or nullopt without --listen; errors name the flag.
-Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args);
+// The streaming options over `base` (serve's: the configuration's stream
+// section, from the board profile, --config and --set), or nullopt without
+// --listen; errors name the flag.
+Result<std::optional<StreamConfig>> streamConfigFromArgs(const Args& args, const StreamConfig& base = {});
 
 }  // namespace fovea::firmware

@@ -105,6 +105,20 @@ TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
   EXPECT_EQ(exit_code, 0) << serve.output();
 }
 
+// --listen and the other stream flags go over the configuration's stream
+// section: what --set (or the profile) says of it stays (the stream was rebuilt
+// from the defaults, so the README demo's wider gaze timeout under the
+// sanitizers never applied).
+TEST(FoveadServe, TheStreamFlagsKeepWhatSetSays) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
+                                " --board host-mock --set stream.budget_mbps=20 --listen 127.0.0.1:0 --insecure");
+  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
+  EXPECT_NE(serve.output().find("budget up to 20.00 MB/s"), std::string::npos) << serve.output();
+  int exit_code = -1;
+  stopSeconds(serve, SIGTERM, exit_code);
+  EXPECT_EQ(exit_code, 0) << serve.output();
+}
+
 std::string foveaOperator() { return test::program(FOVEA_OPERATOR_PATH); }
 
 // The stream end to end through the service's threads: fovea-operator decodes
