@@ -294,8 +294,8 @@ SequenceError trackSequence(std::vector<hal::RgbdFrame>& frames, KernelSet kerne
   GTEST_SKIP() << "the reference's long sequence: natively; the slow trees run the Highway kernels' (simd)"
 
 TEST_P(TrackerKernels, TracksTheOrbitAndTheDolly) {
-  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   FOVEA_SKIP_REFERENCE_SEQUENCE_WHEN_SLOW();
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   for (const char* path : {"orbit", "dolly"}) {
     std::vector<hal::RgbdFrame> frames =
         mockFrames(std::string("mock:living-room,size=320x240,path=") + path, kW, kH, test::repetitions(40, 12));
@@ -342,8 +342,8 @@ TEST_P(TrackerKernels, ResetMakesTheNextFrameAFirstFrame) {
 // groundtruth.txt): tracked and fused from the first frame's true pose. The
 // lead's bench/fovea-track measures ATE with alignment; this is the test's bound.
 TEST_P(TrackerKernels, TracksTheTumTeddySlice) {
-  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   FOVEA_SKIP_REFERENCE_SEQUENCE_WHEN_SLOW();
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   FOVEA_REQUIRE_TUM_TEDDY(path);
   // 60 frames natively; 15 where a frame costs 10 to 40 times as much (sanitizers, qemu).
   const int n = test::repetitions(60, 15);
