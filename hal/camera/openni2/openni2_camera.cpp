@@ -538,20 +538,30 @@ void OpenNI2Camera::stop() {
   // Dummy: OzStream::stop() clears a flag the thread looks at once a frame
   // period, and the thread itself sets that flag when it starts running).
   // Stopping before the thread ran leaves it running for ever; destroying the
-  // stream or unloading the driver before it has left crashes. So: a stream
-  // that delivered nothing yet is given two frame periods to deliver a frame
-  // (its thread is then running) before it is stopped, and after stopping the
-  // threads get two frame periods to leave.
-  const int grace_ms = static_cast<int>(2000.0 / info_.fps) + 10;
+  // stream or unloading the driver before it has left crashes. Both happened on
+  // a loaded machine (CI m29; docs/cameras-openni2.md): a new thread waited
+  // more than two frame periods for a core and started on a destroyed stream,
+  // and a thread woken late from its frame period asked a destroyed stream for
+  // a buffer before looking at the flag. So a stream that delivered nothing
+  // yet is given up to a second to deliver a frame (its thread is then
+  // running) before it is stopped, and after stopping the threads get two
+  // frame periods, at least a quarter of a second, to leave, slept in short
+  // steps: a starved process's steps overrun, so the wait grows with the
+  // starvation that delays the driver's thread too.
+  const int grace_ms = std::max(static_cast<int>(2000.0 / info_.fps) + 10, 250);
+  const int first_frame_ms = std::max(grace_ms, 1000);
   openni::VideoStream* streams[2] = {&impl_->depth, &impl_->colour};
   const bool seen[2] = {depth_seen_, colour_seen_};
   for (int i = 0; i < (colour_enabled_ ? 2 : 1); ++i) {
     int ready = -1;
-    if (!seen[i]) (void)openni::OpenNI::waitForAnyStream(&streams[i], 1, &ready, grace_ms);
+    if (!seen[i]) (void)openni::OpenNI::waitForAnyStream(&streams[i], 1, &ready, first_frame_ms);
   }
   stopStreamLeakingInOpenNI2(impl_->depth);
   if (colour_enabled_) stopStreamLeakingInOpenNI2(impl_->colour);
-  std::this_thread::sleep_for(std::chrono::milliseconds(grace_ms));
+  constexpr int kStepMs = 5;
+  for (int slept_ms = 0; slept_ms < grace_ms; slept_ms += kStepMs) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(kStepMs));
+  }
 }
 
 // Reads the colour frame that is ready into the next colour slot.
