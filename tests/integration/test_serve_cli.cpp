@@ -94,15 +94,21 @@ TEST(FoveadServe, BoardProfileAndSetApply) {
   EXPECT_NE(unknown.output.find("unknown board 'no-such-board'"), std::string::npos) << unknown.output;
 }
 
-TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
-  // --preset names the mode; the floor comes from --set and must survive it.
-  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
-                                " --set foveation.floor_per_m2=0.002 --preset ACUITY --m 0.028");
+// Starts `fovead serve` on the small mock camera with `flags`, expects `line`
+// in what it prints by the time it runs, and stops it cleanly.
+void expectServeStartsSaying(const std::string& flags, const std::string& line) {
+  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera + " " + flags);
   ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
-  EXPECT_NE(serve.output().find("foveation ACUITY floor 2 mm x s^2 (m 0.028"), std::string::npos) << serve.output();
+  EXPECT_NE(serve.output().find(line), std::string::npos) << serve.output();
   int exit_code = -1;
   stopSeconds(serve, SIGTERM, exit_code);
   EXPECT_EQ(exit_code, 0) << serve.output();
+}
+
+TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
+  // --preset names the mode; the floor comes from --set and must survive it.
+  expectServeStartsSaying("--set foveation.floor_per_m2=0.002 --preset ACUITY --m 0.028",
+                          "foveation ACUITY floor 2 mm x s^2 (m 0.028");
 }
 
 // --listen and the other stream flags go over the configuration's stream
@@ -110,13 +116,8 @@ TEST(FoveadServe, FoveationFlagsKeepWhatSetSays) {
 // from the defaults, so the README demo's wider gaze timeout under the
 // sanitizers never applied).
 TEST(FoveadServe, TheStreamFlagsKeepWhatSetSays) {
-  test::BackgroundProcess serve(fovead() + " serve" + kSmallCamera +
-                                " --board host-mock --set stream.budget_mbps=20 --listen 127.0.0.1:0 --insecure");
-  ASSERT_TRUE(serve.waitFor("running", 20.0)) << serve.output();
-  EXPECT_NE(serve.output().find("budget up to 20.00 MB/s"), std::string::npos) << serve.output();
-  int exit_code = -1;
-  stopSeconds(serve, SIGTERM, exit_code);
-  EXPECT_EQ(exit_code, 0) << serve.output();
+  expectServeStartsSaying("--board host-mock --set stream.budget_mbps=20 --listen 127.0.0.1:0 --insecure",
+                          "budget up to 20.00 MB/s");
 }
 
 std::string foveaOperator() { return test::program(FOVEA_OPERATOR_PATH); }
