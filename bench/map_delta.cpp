@@ -228,7 +228,7 @@ class DeltaBench {
   int sendFrameStreams(const FrameStep& s);
   int sendMapDelta(const FrameStep& s);
   bool sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameStep& s);
-  bool foveateLive(const pipeline::Gaze& gaze, bool steady, bool fused);
+  bool foveateLive(const pipeline::Gaze& gaze, bool steady, const pipeline::map::MapperFrame& figures);
   bool sendLive(const FrameStep& s);
   int evaluate(const FrameStep& s);
   int coldPlan(std::vector<double>& cold_ms);
@@ -269,7 +269,7 @@ class DeltaBench {
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
   std::array<std::size_t, pipeline::map::kBrickNeedCount> bricks_sent_by_need_ = {};  // by BrickNeed
-  std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent whole); tracked (--pose track)
+  std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent thinned or whole: Mapper::thinUnfused); tracked (--pose track)
   std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
   int live_regions_ = 0;
   hal::Pose map_to_world_;  // the map's world in the truth's (--pose track: the first frame's true pose)
@@ -439,7 +439,7 @@ int DeltaBench::sendMapDelta(const FrameStep& s) {
   gaze.origin_m = Rt * (s.gaze.origin_m - map_to_world_.t_world_cam);
   gaze.direction = Rt * s.gaze.direction;
   gaze.view_forward = Rt * s.gaze.view_forward;
-  if (!foveateLive(gaze, s.steady, fused)) return 1;
+  if (!foveateLive(gaze, s.steady, figures)) return 1;
   pipeline::map::MapperPlan plan;
   const double live_bytes = static_cast<double>(live_out_.size()) * pipeline::map::kWireBytesPerPointEstimate;
   const auto bricks_start = std::chrono::steady_clock::now();  // the plan, the sampling and the encoding
@@ -475,7 +475,8 @@ bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameS
 
 // The frame's points the map does not explain (the whole frame when the map
 // did not fuse it), ACUITY-foveated for the gaze into live_out_.
-bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, bool fused) {
+bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, const pipeline::map::MapperFrame& figures) {
+  const bool fused = figures.fused();
   live_.clear();
   if (fused) {
     live_.origin_m = frame_.T_world_cam.t_world_cam;
@@ -483,6 +484,7 @@ bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, bool fused
   } else {
     pipeline::BackprojectCounts bp;
     if (!pipeline::backprojectRef(frame_, mapper_config_.map.depth, live_, bp)) return false;
+    (void)mapper_.thinUnfused(figures, live_);
   }
   if (steady) live_points_ += live_.size();
   live_out_.clear();
@@ -579,7 +581,7 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
               "brick-frames; map %zu surfels in %zu bricks\n",
               bricks_sent_, brick_points_sent_, bricks_sent_by_need_[0], bricks_sent_by_need_[1],
               bricks_sent_by_need_[2], bricks_waited_, mapper_.map().size(), mapper_.map().brickCount());
-  std::printf("  frames the map did not fuse (sent whole): %zu", unfused_);
+  std::printf("  frames the map did not fuse (sent without what the last fused view explained, or whole): %zu", unfused_);
   if (o_.track) std::printf("; tracked %zu of %d", tracked_, frames);
   std::printf("\n");
   std::printf("  plan: median %.3f ms, max %.3f ms a frame; brick sampling and encoding: median %.3f ms a frame\n",

@@ -97,11 +97,14 @@ Status FrameFoveator::backproject(hal::RgbdFrame& frame, pipeline::BackprojectCo
   map_figures_ = {};
   if (!mapper_->addFrame(frame, pose_valid, map_figures_)) {
     // Not in the map (refused, lost, or over the time budget): the operator
-    // still sees the frame as it is, beside the map.
+    // still sees the frame as it is, beside the map; a posed frame the budget
+    // skipped without what the last fused frame explained, which the operator
+    // has from the map.
     if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) {
       cloud_.clear();
       return s;
     }
+    map_figures_.explained_by_last_view = static_cast<uint32_t>(mapper_->thinUnfused(map_figures_, cloud_));
     map_figures_.frame_points = static_cast<uint32_t>(cloud_.size());
     return Status::ok();
   }

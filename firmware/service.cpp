@@ -152,7 +152,7 @@ void Service::stop() {
                 " frames without a pose, %" PRIu64 " for another reason",
                 s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
       if (stage_->hasFusionBudget()) {
-        log().log(LogLevel::kInfo, "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent whole)",
+        log().log(LogLevel::kInfo, "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent without what the last fused view explained)",
                   s.map.unfused);
       }
       if (map_bricks_) {

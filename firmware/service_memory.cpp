@@ -138,6 +138,7 @@ void Service::addMapMemory(const pipeline::map::MapperMemory& m) {
       {"map: eviction histogram", m.map.eviction},
       {"map: eye depth buffer", m.eye},
       {"map: bricks the operator holds, plan, sampler", m.delta},
+      {"map: the last fused view (explained depths)", m.view},
       {"map: tracker (frame and model pyramids)", m.tracker},
   };
   for (const auto& [name, bytes] : parts) {

@@ -39,6 +39,12 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
   mapper.output_ = config.output;
   mapper.map_ = std::make_unique<SurfelMap>(std::move(map.value()));
   if (Status s = makeOutput(config, mapper.eye_, mapper.delta_, mapper.sampler_); !s) return s;
+  if (config.output != MapOutput::kNone) {
+    Result<ExplainedView> view =
+        ExplainedView::create(config.map.max_width, config.map.max_height, config.map.depth_tolerance_sigmas);
+    if (!view) return view.status();
+    mapper.view_ = std::make_unique<ExplainedView>(std::move(view.value()));
+  }
   if (config.tracking != PoseTracking::kOff) {
     TrackerConfig tracker = config.tracker;
     tracker.max_width = config.map.max_width;
@@ -60,6 +66,7 @@ bool Mapper::addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFram
   }
   map_->fuse(frame, out.fuse, out.pose_usable);
   budget_.spent(out.fuse.fuse_ns);
+  if (view_ && out.fused()) view_->capture(frame, map_->explainedPixels(), map_->measuredDepth());
   if (poser_ && out.fused()) {
     const int64_t t0 = monotonicNs();
     poser_->fused(frame, *map_);
@@ -125,6 +132,7 @@ MapperMemory Mapper::memory() const {
   m.eye = eye_ ? eye_->memoryBytes() : 0;
   m.delta = delta_ ? delta_->memoryBytes() + sampler_->memoryBytes() : 0;
   m.tracker = poser_ ? poser_->memoryBytes() : 0;
+  m.view = view_ ? view_->memoryBytes() : 0;
   return m;
 }
 

@@ -27,6 +27,7 @@
 #include "hal/frame.h"
 #include "pipeline/partition.h"
 #include "pipeline/map/brick_batch.h"
+#include "pipeline/map/explained_view.h"
 #include "pipeline/map/eye_view.h"
 #include "pipeline/map/fusion_budget.h"
 #include "pipeline/map/map_delta.h"
@@ -75,8 +76,9 @@ struct MapperMemory {
   SurfelMapMemory map;
   std::size_t eye = 0;      // kEyeView: the eye's depth buffer
   std::size_t delta = 0;    // kBricks: what the operator holds, the plan, the brick sampler
+  std::size_t view = 0;     // output other than kNone: the last fused frame's explained depths
   std::size_t tracker = 0;  // with tracking: the pyramids
-  std::size_t total() const { return map.total() + eye + delta + tracker; }
+  std::size_t total() const { return map.total() + eye + delta + view + tracker; }
 };
 
 // Bytes a point is estimated to take on the wire, chunk headers included
@@ -97,6 +99,14 @@ class Mapper {
   // The last fused frame's points no settled surfel explains (SurfelMap::appendUnexplained).
   std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
     return map_->appendUnexplained(frame, out);
+  }
+  // A frame addFrame() did not fuse (`frame` its figures), back-projected
+  // whole into `cloud`: when it was posed and only the time budget left it
+  // out, removes the points the last fused frame explained (ExplainedView),
+  // which the operator has from the map; a refused or lost frame stays whole.
+  // Output kNone keeps no view and removes none. Returns how many it removed.
+  std::size_t thinUnfused(const MapperFrame& frame, PointCloud& cloud) const {
+    return view_ && frame.fusion_skipped && frame.pose_usable ? view_->removeExplained(cloud) : 0;
   }
   // kEyeView: appends the settled surfels an eye at `eye_m` sees (EyeView::appendVisible).
   void appendVisible(const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats);
@@ -132,6 +142,7 @@ class Mapper {
   std::unique_ptr<EyeView> eye_;            // kEyeView
   std::unique_ptr<MapDelta> delta_;         // kBricks
   std::unique_ptr<BrickSampler> sampler_;   // kBricks
+  std::unique_ptr<ExplainedView> view_;     // output other than kNone
   FusionBudget budget_;
 };
 

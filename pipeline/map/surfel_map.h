@@ -193,6 +193,11 @@ class SurfelMap {
   // association (kNoSurfel: none). The slot's surfel is as merged; it may since
   // have been removed (check live()). The tracker's model (tracker.h).
   const uint32_t* indexMap() const { return index_map_.slots(); }
+  // The last fused frame's pixels, as fusion left them: 1 where a settled
+  // surfel explained the pixel (what appendUnexplained() leaves out), and the
+  // measured depth in metres (0: no valid measurement).
+  const uint8_t* explainedPixels() const { return explained_.data(); }
+  const float* measuredDepth() const { return vertex_z_.data(); }
   int indexMapWidth() const { return index_map_.width(); }
   int indexMapHeight() const { return index_map_.height(); }
 

@@ -272,6 +272,9 @@ TEST(FrameFoveator, FramesOverTheFusionBudgetAreCountedAndSentWhole) {
     }
     EXPECT_TRUE(figures.fusion_skipped);
     EXPECT_FALSE(figures.fused());
+    // One fused frame settles nothing, so its view explains nothing and the
+    // whole frame goes (test_explained_view.cpp thins frames against a settled map).
+    EXPECT_EQ(figures.explained_by_last_view, 0u);
     EXPECT_EQ(figures.frame_points, counts.valid) << "the whole frame goes";
     EXPECT_GT(counts.valid, rig.pixels / 2);
     EXPECT_EQ(stage->map()->size(), surfels_after_first);

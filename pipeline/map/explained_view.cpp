@@ -1,0 +1,71 @@
+#include "pipeline/map/explained_view.h"
+
+#include <cmath>
+
+#include "core/depth_noise.h"
+
+namespace fovea::pipeline::map {
+
+Result<ExplainedView> ExplainedView::create(int max_width, int max_height, double depth_tolerance_sigmas) {
+  if (max_width <= 0 || max_height <= 0) {
+    return Result<ExplainedView>(ErrorCode::kInvalidArgument, "explained view: the frame size must be positive");
+  }
+  if (!(depth_tolerance_sigmas > 0.0 && depth_tolerance_sigmas < 100.0)) {
+    return Result<ExplainedView>(ErrorCode::kInvalidArgument, "explained view: the depth tolerance must be in (0, 100) sigmas");
+  }
+  ExplainedView view;
+  view.max_pixels_ = static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height);
+  view.sigmas_ = static_cast<float>(depth_tolerance_sigmas * std::sqrt(2.0));
+  view.depth_.assign(view.max_pixels_, 0.0f);
+  return view;
+}
+
+void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explained, const float* vertex_z) {
+  const std::size_t pixels = frame.pixelCount();
+  if (pixels == 0 || pixels > max_pixels_) {
+    width_ = height_ = 0;
+    return;
+  }
+  width_ = frame.width();
+  height_ = frame.height();
+  const hal::CameraIntrinsics& k = frame.intrinsics;
+  fx_ = static_cast<float>(k.fx), fy_ = static_cast<float>(k.fy);
+  cx_ = static_cast<float>(k.cx), cy_ = static_cast<float>(k.cy);
+  pose_ = frame.T_world_cam;
+  for (std::size_t i = 0; i < pixels; ++i) depth_[i] = explained[i] ? vertex_z[i] : 0.0f;
+}
+
+bool ExplainedView::explains(float x, float y, float z) const {
+  if (!(z > 0.0f)) return false;
+  const float u = fx_ * x / z + cx_, v = fy_ * y / z + cy_;
+  // Inside the view (also false for NaN): the nearest pixel's centre.
+  if (!(u > -0.5f && u < static_cast<float>(width_) - 0.5f && v > -0.5f && v < static_cast<float>(height_) - 0.5f)) {
+    return false;
+  }
+  const auto iu = static_cast<std::size_t>(std::lround(u)), iv = static_cast<std::size_t>(std::lround(v));
+  const float seen = depth_[iv * static_cast<std::size_t>(width_) + iu];
+  return seen > 0.0f && std::fabs(z - seen) <= sigmas_ * depthSigma(seen);
+}
+
+std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
+  if (empty()) return 0;
+  // Into the view's camera: R^T (origin + p - t), the translation in double
+  // (the cloud and the camera may be far from the world origin).
+  const Eigen::Matrix3d Rt = pose_.R_world_cam.transpose();
+  const Eigen::Vector3f t = (Rt * (cloud.origin_m - pose_.t_world_cam)).cast<float>();
+  const Eigen::Matrix3f R = Rt.cast<float>();
+  float *x = cloud.x(), *y = cloud.y(), *z = cloud.z();
+  uint32_t* rgb = cloud.rgb();
+  const std::size_t n = cloud.size();
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f q = R * Eigen::Vector3f(x[i], y[i], z[i]) + t;
+    if (explains(q.x(), q.y(), q.z())) continue;
+    x[kept] = x[i], y[kept] = y[i], z[kept] = z[i], rgb[kept] = rgb[i];
+    ++kept;
+  }
+  (void)cloud.resize(kept);
+  return n - kept;
+}
+
+}  // namespace fovea::pipeline::map

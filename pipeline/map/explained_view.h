@@ -1,0 +1,64 @@
+// What the last fused frame's settled surfels explained, kept so that a later
+// frame the map did not fuse (fusion's time budget left it, or fusion is busy
+// with another frame) can still be thinned to what the map does not explain:
+// its points are reprojected into that fused frame's camera and a point the
+// map explained there, at the same depth within the sensor's noise, is
+// dropped. Without it such a frame went to the operator whole, though the
+// operator holds the map's bricks of most of it.
+//
+// The fused frame's own points judged against its own view are exactly what
+// SurfelMap::appendUnexplained() leaves (test_explained_view.cpp). Judging a
+// later frame is an approximation: a pixel of the fused frame stands for its
+// measured depth, not the surfel's, so the depth tolerance is the map's
+// association tolerance widened by sqrt(2) for the two measurements' noise,
+// and a point outside the fused frame's view is never explained (new to the
+// map as far as the operator can tell).
+//
+// Memory: one float a pixel of the largest frame, allocated by create();
+// capture() and removeExplained() allocate nothing.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/result.h"
+#include "hal/frame.h"
+#include "pipeline/point_cloud.h"
+
+namespace fovea::pipeline::map {
+
+class ExplainedView {
+ public:
+  // depth_tolerance_sigmas: the map's association tolerance (SurfelMapConfig).
+  static Result<ExplainedView> create(int max_width, int max_height, double depth_tolerance_sigmas);
+
+  // Keeps `frame`'s view (its pose and intrinsics) and, per pixel, the
+  // measured depth where `explained` is set (vertex_z: the frame's depth in
+  // metres, 0 where invalid), for the frame the map just fused. A frame larger
+  // than create()'s size empties the view.
+  void capture(const hal::RgbdFrame& frame, const uint8_t* explained, const float* vertex_z);
+
+  // Removes from `cloud` (world positions relative to cloud.origin_m) the
+  // points the captured view explains, keeping the others in their order;
+  // returns how many it removed. An empty view removes none.
+  std::size_t removeExplained(PointCloud& cloud) const;
+
+  bool empty() const { return width_ == 0; }
+  const hal::Pose& pose() const { return pose_; }
+  std::size_t memoryBytes() const { return depth_.capacity() * sizeof(float); }
+
+ private:
+  // Whether the point p (world, relative to the view's camera: R^T (p - t))
+  // lies on an explained pixel at its depth.
+  bool explains(float x, float y, float z) const;
+
+  std::size_t max_pixels_ = 0;
+  float sigmas_ = 0.0f;
+  int width_ = 0, height_ = 0;
+  float fx_ = 0, fy_ = 0, cx_ = 0, cy_ = 0;
+  hal::Pose pose_;
+  std::vector<float> depth_;  // explained pixels' measured depth, 0 elsewhere
+};
+
+}  // namespace fovea::pipeline::map

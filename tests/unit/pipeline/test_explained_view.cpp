@@ -1,0 +1,196 @@
+// The last fused frame's explained view (pipeline/map/explained_view.h): the
+// fused frame judged against its own view leaves exactly what the map's
+// appendUnexplained() leaves; a later frame it was not fused from is thinned
+// as a brute-force reprojection written here (in double) thins it; and the
+// hard cases: no view, a frame larger than the view's size, points behind the
+// view's camera or not finite, and a map 10 km from the world origin.
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/depth_noise.h"
+#include "pipeline/backproject.h"
+#include "pipeline/map/explained_view.h"
+#include "pipeline/map/surfel_map.h"
+#include "tests/support/cameras.h"
+#include "tests/support/test_time.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+constexpr int kW = 320, kH = 240;
+
+// The mock living room on its orbit, fused frame by frame, the view captured
+// after each as the mapper does (mapper.cpp).
+struct Fused {
+  std::unique_ptr<hal::Camera> camera = test::startedCamera("mock:living-room,size=320x240,path=orbit");
+  SurfelMap map = SurfelMap::create(config()).value();
+  ExplainedView view = ExplainedView::create(kW, kH, config().depth_tolerance_sigmas).value();
+  hal::RgbdFrame frame{kW, kH};
+
+  static SurfelMapConfig config() {
+    SurfelMapConfig c;
+    c.max_width = kW;
+    c.max_height = kH;
+    c.max_surfels = 1 << 19;
+    c.max_bricks = 4096;
+    return c;
+  }
+  // The camera's next frame, not fused.
+  void next() {
+    ASSERT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
+  }
+  void fuseNext() {
+    next();
+    FuseStats stats;
+    ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+    view.capture(frame, map.explainedPixels(), map.measuredDepth());
+  }
+  // The frame back-projected whole, in the map's depth range.
+  PointCloud whole() const {
+    PointCloud cloud(static_cast<std::size_t>(kW) * kH);
+    BackprojectCounts counts;
+    EXPECT_TRUE(backprojectRef(frame, config().depth, cloud, counts).isOk());
+    return cloud;
+  }
+};
+
+TEST(ExplainedView, TheFusedFrameJudgedAgainstItsOwnViewLeavesWhatTheMapLeaves) {
+  Fused f;
+  ASSERT_TRUE(f.camera);
+  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
+  PointCloud unexplained(static_cast<std::size_t>(kW) * kH);
+  unexplained.origin_m = f.frame.T_world_cam.t_world_cam;
+  const std::size_t left = f.map.appendUnexplained(f.frame, unexplained);
+  PointCloud cloud = f.whole();
+  const std::size_t valid = cloud.size();
+  const std::size_t removed = f.view.removeExplained(cloud);
+  EXPECT_GT(removed, valid / 2) << "after 14 frames the settled map explains most of the view";
+  ASSERT_EQ(cloud.size(), left);
+  ASSERT_EQ(removed + left, valid);
+  // The same pixels in the same (row) order: the same points, up to float rounding.
+  for (std::size_t i = 0; i < left; ++i) {
+    ASSERT_NEAR(cloud.x()[i], unexplained.x()[i], 1e-5) << i;
+    ASSERT_NEAR(cloud.y()[i], unexplained.y()[i], 1e-5) << i;
+    ASSERT_NEAR(cloud.z()[i], unexplained.z()[i], 1e-5) << i;
+    ASSERT_EQ(cloud.rgb()[i], unexplained.rgb()[i]) << i;
+  }
+}
+
+// The reference: each point into the view's camera in double, the nearest
+// pixel, explained there and within sqrt(2) times the association's tolerance
+// of its measured depth.
+std::vector<bool> explainedByBruteForce(const PointCloud& cloud, const hal::RgbdFrame& view_frame,
+                                        const SurfelMap& map) {
+  const hal::CameraIntrinsics& k = view_frame.intrinsics;
+  const hal::Pose& pose = view_frame.T_world_cam;
+  const double tolerance = std::sqrt(2.0) * map.config().depth_tolerance_sigmas;
+  std::vector<bool> explained(cloud.size(), false);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const Eigen::Vector3d q = pose.R_world_cam.transpose() * (cloud.world(i) - pose.t_world_cam);
+    if (q.z() <= 0.0) continue;
+    const double u = k.fx * q.x() / q.z() + k.cx, v = k.fy * q.y() / q.z() + k.cy;
+    const long iu = std::lround(u), iv = std::lround(v);
+    if (iu < 0 || iv < 0 || iu >= view_frame.width() || iv >= view_frame.height()) continue;
+    const std::size_t p = static_cast<std::size_t>(iv) * view_frame.width() + static_cast<std::size_t>(iu);
+    const double seen = map.measuredDepth()[p];
+    explained[i] = map.explainedPixels()[p] && seen > 0.0 && std::abs(q.z() - seen) <= tolerance * depthSigma(seen);
+  }
+  return explained;
+}
+
+TEST(ExplainedView, ALaterFrameIsThinnedAsABruteForceReprojectionThinsIt) {
+  Fused f;
+  ASSERT_TRUE(f.camera);
+  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
+  const hal::RgbdFrame view_frame = f.frame;
+  for (int later = 1; later <= 3; ++later) {
+    ASSERT_NO_FATAL_FAILURE(f.next());  // the camera moved on: not fused
+    const PointCloud all = f.whole();
+    const std::vector<bool> expected = explainedByBruteForce(all, view_frame, f.map);
+    PointCloud cloud = all;
+    const std::size_t removed = f.view.removeExplained(cloud);
+    // Walk both: the kept points are the reference's unexplained ones, in order;
+    // a point the float and the double arithmetic round to different pixels or
+    // sides of the tolerance may differ (at most 0.2 % of them).
+    std::size_t j = 0, differ = 0, expected_removed = 0;
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      expected_removed += expected[i] ? 1 : 0;
+      const bool kept = j < cloud.size() && cloud.x()[j] == all.x()[i] && cloud.y()[j] == all.y()[i] &&
+                        cloud.z()[j] == all.z()[i];
+      if (kept) ++j;
+      if (kept == expected[i]) ++differ;
+    }
+    EXPECT_EQ(j, cloud.size()) << "every kept point is one of the frame's, in order";
+    EXPECT_LE(differ, all.size() / 500) << "frame +" << later;
+    EXPECT_GT(expected_removed, all.size() / 3) << "frame +" << later << ": the map explains much of a nearby view";
+    EXPECT_LT(expected_removed, all.size()) << "frame +" << later << ": the moved view sees something new";
+    EXPECT_EQ(removed + cloud.size(), all.size());
+  }
+}
+
+TEST(ExplainedView, HardCases) {
+  Fused f;
+  ASSERT_TRUE(f.camera);
+  // No view yet: nothing is explained.
+  ASSERT_NO_FATAL_FAILURE(f.next());
+  PointCloud cloud = f.whole();
+  const std::size_t valid = cloud.size();
+  EXPECT_TRUE(f.view.empty());
+  EXPECT_EQ(f.view.removeExplained(cloud), 0u);
+  EXPECT_EQ(cloud.size(), valid);
+  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
+  PointCloud at_origin = f.whole();
+  const std::size_t whole_at_origin = at_origin.size();
+  const std::size_t removed_at_origin = f.view.removeExplained(at_origin);
+  const std::size_t kept_at_origin = at_origin.size();
+  ASSERT_EQ(kept_at_origin + removed_at_origin, whole_at_origin);
+  ASSERT_GT(kept_at_origin, 0u);
+  ASSERT_GT(removed_at_origin, 0u);
+  // 10 km away: the view and the cloud moved together judge alike.
+  const Eigen::Vector3d far(1e4, -1e4, 1e4);
+  ExplainedView far_view = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();
+  hal::RgbdFrame far_frame = f.frame;
+  far_frame.T_world_cam.t_world_cam += far;
+  far_view.capture(far_frame, f.map.explainedPixels(), f.map.measuredDepth());
+  PointCloud far_cloud = f.whole();
+  far_cloud.origin_m += far;
+  EXPECT_EQ(far_view.removeExplained(far_cloud), removed_at_origin);
+  EXPECT_EQ(far_cloud.size(), kept_at_origin);
+  // Points behind the camera, at it, and not finite are never explained.
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  PointCloud odd(4);
+  odd.origin_m = f.frame.T_world_cam.t_world_cam;
+  const Eigen::Vector3f behind = (f.frame.T_world_cam.R_world_cam * Eigen::Vector3d(0, 0, -2)).cast<float>();
+  ASSERT_TRUE(odd.push(behind.x(), behind.y(), behind.z(), 0));
+  ASSERT_TRUE(odd.push(0, 0, 0, 0));
+  ASSERT_TRUE(odd.push(nan, 0, 1, 0));
+  ASSERT_TRUE(odd.push(inf, inf, inf, 0));
+  EXPECT_EQ(f.view.removeExplained(odd), 0u);
+  EXPECT_EQ(odd.size(), 4u);
+  // A frame larger than the view was made for empties it.
+  hal::RgbdFrame large(2 * kW, kH);
+  ASSERT_TRUE(large.setSize(2 * kW, kH));
+  std::vector<uint8_t> explained(large.pixelCount(), 1);
+  std::vector<float> depth(large.pixelCount(), 1.0f);
+  f.view.capture(large, explained.data(), depth.data());
+  EXPECT_TRUE(f.view.empty());
+  PointCloud again = f.whole();
+  EXPECT_EQ(f.view.removeExplained(again), 0u);
+}
+
+TEST(ExplainedView, RefusesABadSizeOrTolerance) {
+  EXPECT_FALSE(ExplainedView::create(0, kH, 3.0).isOk());
+  EXPECT_FALSE(ExplainedView::create(kW, -1, 3.0).isOk());
+  EXPECT_FALSE(ExplainedView::create(kW, kH, 0.0).isOk());
+  EXPECT_FALSE(ExplainedView::create(kW, kH, std::numeric_limits<double>::quiet_NaN()).isOk());
+  EXPECT_TRUE(ExplainedView::create(kW, kH, 3.0).isOk());
+}
+
+}  // namespace
+}  // namespace fovea::pipeline::map
