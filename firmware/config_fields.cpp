@@ -185,8 +185,11 @@ std::vector<Field> mapFields() {
     FOVEA_INT("map.max_brick_surfels", map.max_brick_surfels, 1, 1 << 24),
     // 0: what the link's largest budget pays for in a frame (frameBrickPoints()).
     FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 0, 1 << 26),
-    // Fusion's average time a frame at most; the rest of the frames go whole (0: fuse all).
+    // Fusion's average time a frame at most; the rest go without what the last
+    // fused frame explained (0: fuse all).
     FOVEA_FLOAT("map.fuse_budget_ms", map.fuse_budget_ms, 0.0, 10000.0),
+    // Fusion on a thread of its own (runtime.map_thread); false: on the foveation stage's.
+    FOVEA_BOOL("map.fusion_thread", map.fusion_thread),
     FOVEA_FLOAT("map.carve_weight", map.map.carve_weight, 0.0, 100.0),
     FOVEA_FLOAT("map.max_pose_jump_m", map.map.max_pose_jump_m, 0.001, 1000.0),
     FOVEA_INT("map.eye_face_cells", map.eye.face_cells, 8, 2048),
@@ -258,6 +261,7 @@ std::vector<Field> runtimeFields() {
     FOVEA_THREAD("runtime.capture_thread", runtime.capture_thread),
     FOVEA_THREAD("runtime.foveation_thread", runtime.foveation_thread),
     FOVEA_THREAD("runtime.send_thread", runtime.send_thread),
+    FOVEA_THREAD("runtime.map_thread", runtime.map_thread),
   };
 }
 

@@ -40,6 +40,7 @@ pipeline::map::MapperConfig mapperConfig(const MapSettings& map, const pipeline:
   config.tracking = map.tracking;
   config.tracker = map.tracker;
   config.fuse_budget_ms = map.fuse_budget_ms;
+  config.fusion_thread = map.fusion_thread;
   config.output = map.delta ? pipeline::map::MapOutput::kBricks : pipeline::map::MapOutput::kEyeView;
   config.eye = map.eye;
   config.delta = map.delta_config;

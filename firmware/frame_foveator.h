@@ -61,8 +61,14 @@ struct MapSettings {
   std::size_t max_frame_brick_points = 0;
   std::size_t max_frame_bricks = 1024;
   // Fusion's average time a frame at most (pipeline/map/fusion_budget.h); the
-  // frames it does not fuse go whole, counted. 0: every frame is fused.
+  // frames it does not fuse go without what the last fused frame explained,
+  // counted. 0: every frame is fused.
   double fuse_budget_ms = 0.0;
+  // Fusion on a thread of its own, which calls fuseSubmitted() (Mapper's
+  // fusion_thread): each frame goes out at once, and fusion takes the newest
+  // frame whenever it is free. Off here (`fovead run`: one thread); the
+  // service's configuration turns it on (map.fusion_thread).
+  bool fusion_thread = false;
   // The map tracks the camera (camera.pose.source = track, track+X; map source
   // only): pipeline/map/pose_tracking.h, docs/tracking.md.
   pipeline::map::PoseTracking tracking = pipeline::map::PoseTracking::kOff;
@@ -166,7 +172,15 @@ class FrameFoveator {
   const pipeline::DepthRange& range() const { return range_; }
   // The map source's mapper, map and figures for the last frame (null / zero otherwise).
   const pipeline::map::Mapper* mapper() const { return mapper_.get(); }
+  // The map itself: with a fusion thread, only on it or after it stopped
+  // (mapStatus() from the others).
   const pipeline::map::SurfelMap* map() const { return mapper_ ? &mapper_->map() : nullptr; }
+  pipeline::map::MapperStatus mapStatus() { return mapper_ ? mapper_->status() : pipeline::map::MapperStatus{}; }
+  bool fusionThread() const { return mapper_ && mapper_->fusionThread(); }
+  // The fusion thread's step (Mapper::fuseSubmitted) and, on the foveation
+  // thread, the figures of the fusion it finished last (Mapper::takeFused).
+  bool fuseSubmitted() { return mapper_ && mapper_->fuseSubmitted(); }
+  bool takeFused(pipeline::map::MapperFrame& out) { return mapper_ && mapper_->takeFused(out); }
   // The last frame's (backproject() the frame's, foveate() the eye's, planBricks() the plan).
   const MapFrameFigures& mapFigures() const { return map_figures_; }
   // Frames the time budget left unfused so far (map source).

@@ -27,7 +27,7 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
   if (rt.status_interval_ms < 10) {
     return R(ErrorCode::kInvalidArgument, "runtime.status_interval_ms: must be at least 10");
   }
-  for (const ThreadPlacement* p : {&rt.capture_thread, &rt.foveation_thread, &rt.send_thread}) {
+  for (const ThreadPlacement* p : {&rt.capture_thread, &rt.foveation_thread, &rt.send_thread, &rt.map_thread}) {
     if (p->realtime_priority < 0 || p->realtime_priority > 99) {
       return R(ErrorCode::kInvalidArgument, "runtime.*_thread.realtime_priority: must be within 0 .. 99");
     }
@@ -116,6 +116,7 @@ Status Service::start() {
   threads_.emplace_back([this] { captureLoop(); });
   threads_.emplace_back([this] { foveationLoop(); });
   threads_.emplace_back([this] { sendLoop(); });
+  if (stage_->fusionThread()) threads_.emplace_back([this] { mapLoop(); });
   if (config_.runtime.systemd_notify) notifier_.notify("READY=1");
   return Status::ok();
 }
@@ -151,6 +152,12 @@ void Service::stop() {
                 "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; refused %" PRIu64
                 " frames without a pose, %" PRIu64 " for another reason",
                 s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
+      if (stage_->fusionThread()) {
+        log().log(LogLevel::kInfo,
+                  "map: fused on its own thread; %" PRIu64 " frames left unfused while it was busy (sent without what "
+                  "the last fused view explained)",
+                  s.map.fusion_busy);
+      }
       if (stage_->hasFusionBudget()) {
         log().log(LogLevel::kInfo, "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent without what the last fused view explained)",
                   s.map.unfused);
@@ -205,6 +212,7 @@ ServiceStats Service::stats() const {
   s.map.refused_other = map_refused_other_.load(std::memory_order_relaxed);
   s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
   s.map.unfused = map_fusion_skipped_.load(std::memory_order_relaxed);
+  s.map.fusion_busy = map_fusion_busy_.load(std::memory_order_relaxed);
   s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);
   s.map.brick_versions = brick_versions_.load(std::memory_order_relaxed);
   s.map.brick_parts = brick_parts_.load(std::memory_order_relaxed);

@@ -14,11 +14,15 @@
 //   fovea-foveate    newest frame -> point cloud -> foveated cloud slot, publish
 //   fovea-send       newest foveated frame -> operator; polls the link; the
 //                    operator's gaze goes back to fovea-foveate through a mailbox
+//   fovea-map        the map source with map.fusion_thread: fuses the newest
+//                    frame fovea-foveate handed over whenever it is free; the
+//                    two share the map through its gate (pipeline/map/map_gate.h)
 //   (caller of run)  supervisor: every few ms the status lines, the watchdog,
 //                    the status line every status_interval_ms, SIGHUP reloads
-// The frame path takes no lock and, after start-up, allocates nothing: the
-// rings move slot indices, the mailboxes are triple buffers, the counters are
-// relaxed atomics. A stage with nothing to do sleeps 0.5 ms (no condition
+// The frame path takes no lock but the map's gate (held by fusion, which lets
+// the foveation stage through at its next safe point) and, after start-up,
+// allocates nothing: the rings move slot indices, the mailboxes are triple
+// buffers, the counters are relaxed atomics. A stage with nothing to do sleeps 0.5 ms (no condition
 // variable: that would put a lock on the frame path).
 //
 // Exceptions to "allocated once", documented: the stream's chunk encoder is
@@ -120,6 +124,7 @@ struct ServiceStats {
     uint64_t refused_other = 0;      // bad pose, pose jump, clock, size
     uint64_t evicted = 0;            // surfels evicted from a full pool
     uint64_t unfused = 0;            // frames the time budget left unfused (map.fuse_budget_ms)
+    uint64_t fusion_busy = 0;        // frames left unfused while the fusion thread was busy (map.fusion_thread)
     // Its bricks (map.delta, docs/map-delta.md): put in frames by the planner,
     // versions and parts sent, parts resent, versions the operator took whole,
     // versions lost on the way (due again), acknowledgements for nothing in flight.
@@ -254,7 +259,8 @@ class Service {
   // A frame the foveation stage dropped: counted and logged (rate-limited).
   void countFoveationError(const Status& s, const FoveatedFrame& o);
   // The foveation stage's map figures to the atomics the status line reads.
-  void publishMapFigures(const pipeline::map::SurfelMap& map);
+  void publishMapFigures();
+  void mapLoop();  // map.fusion_thread
   void publishTracking();  // the tracker's figures of the frame backproject() just posed
   void sendLoop();
   // The send stage's link work between frames (streaming only): a reloaded
@@ -369,7 +375,7 @@ class Service {
   LatencyHistogram capture_latency_, foveate_latency_, send_latency_;
   LatencyHistogram fuse_latency_;  // the map's fusion (a part of foveate_latency_)
   std::atomic<uint64_t> map_surfels_{0}, map_frames_fused_{0}, map_refused_no_pose_{0}, map_refused_other_{0},
-      map_evicted_{0}, map_fusion_skipped_{0};
+      map_evicted_{0}, map_fusion_skipped_{0}, map_fusion_busy_{0};
   std::vector<std::thread> threads_;
 
   // Supervisor state (one thread).

@@ -73,6 +73,7 @@ struct RuntimeSettings {
   ThreadPlacement capture_thread;
   ThreadPlacement foveation_thread;
   ThreadPlacement send_thread;
+  ThreadPlacement map_thread;  // the map's fusion (map.fusion_thread)
   bool memory_lock = false;         // mlockall(MCL_CURRENT | MCL_FUTURE) after start-up
   LogLevel log_level = LogLevel::kInfo;
   int64_t status_interval_ms = 5000;  // the status log line
@@ -97,10 +98,13 @@ struct ServiceConfig {
   std::size_t max_output_points = 0;
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
   // foveation.source and [map]: the fused scene map, streamed as bricks the
-  // operator keeps (map.delta) unless turned off.
+  // operator keeps (map.delta) unless turned off, fused on a thread of its
+  // own (map.fusion_thread, runtime.map_thread) so that no frame and no gaze
+  // waits for fusion.
   MapSettings map = [] {
     MapSettings bricks;
     bricks.delta = true;
+    bricks.fusion_thread = true;
     return bricks;
   }();
   // listen, key, budget, MTU, gaze timeout, fallback, codec. stream.link.listen

@@ -139,6 +139,7 @@ void Service::addMapMemory(const pipeline::map::MapperMemory& m) {
       {"map: eye depth buffer", m.eye},
       {"map: bricks the operator holds, plan, sampler", m.delta},
       {"map: the last fused view (explained depths)", m.view},
+      {"map: the frame handed to the fusion thread", m.handoff},
       {"map: tracker (frame and model pyramids)", m.tracker},
   };
   for (const auto& [name, bytes] : parts) {
@@ -189,7 +190,7 @@ void Service::allocateSupervisorState() {
   usb_monitor_ = std::make_unique<hal::usb::UsbMonitor>(usb_options);
   histogram_scratch_.reset(new uint64_t[LatencyHistogram::kBuckets]);
   for (auto& h : histogram_previous_) h.reset(new uint64_t[LatencyHistogram::kBuckets]());
-  threads_.reserve(3);
+  threads_.reserve(4);
   memory_.add("status, latency histograms", 1, heapGrowthSince(before) + 4 * sizeof(LatencyHistogram));
 }
 

@@ -181,7 +181,7 @@ Status Service::foveateFrame(CapturedFrame& f, FoveatedFrame& o) {
   Status s = stage_->backproject(f.frame, counts, f.pose_fresh);  // with tracking, it poses the frame first
   if (tracking_) publishTracking();
   o.backproject_ns = monotonicNs() - t0;
-  if (const pipeline::map::SurfelMap* map = stage_->map()) publishMapFigures(*map);
+  if (stage_->map() != nullptr) publishMapFigures();
   GazePolicy::Decision decision;
   if (s) {
     decision = decideGaze(f.frame);
@@ -271,16 +271,39 @@ void Service::publishTracking() {
   tracking_lost_.store(false, std::memory_order_relaxed);
 }
 
-void Service::publishMapFigures(const pipeline::map::SurfelMap& map) {
+// The map's figures after a frame: this frame's fusion, or with a fusion
+// thread the last it finished; the counters as the map has them now.
+void Service::publishMapFigures() {
   const MapFrameFigures& figures = stage_->mapFigures();
   if (figures.fused()) fuse_latency_.add(figures.fuse.fuse_ns);
+  pipeline::map::MapperFrame fused;
+  if (stage_->takeFused(fused) && fused.fused()) {
+    fuse_latency_.add(fused.fuse.fuse_ns);
+    if (fused.track.model_ns > 0) model_ns_.store(fused.track.model_ns, std::memory_order_relaxed);
+  }
   map_fusion_skipped_.store(stage_->fusionSkipped(), std::memory_order_relaxed);
-  const pipeline::map::SurfelMapCounters& c = map.counters();
-  map_surfels_.store(map.size(), std::memory_order_relaxed);
+  const pipeline::map::MapperStatus status = stage_->mapStatus();
+  const pipeline::map::SurfelMapCounters& c = status.counters;
+  map_fusion_busy_.store(status.fusion_busy, std::memory_order_relaxed);
+  map_surfels_.store(status.surfels, std::memory_order_relaxed);
   map_frames_fused_.store(c.frames_fused, std::memory_order_relaxed);
   map_refused_no_pose_.store(c.refused_no_pose, std::memory_order_relaxed);
   map_refused_other_.store(c.refused() - c.refused_no_pose, std::memory_order_relaxed);
   map_evicted_.store(c.evicted, std::memory_order_relaxed);
+}
+
+// ---- map (map.fusion_thread) ----
+
+// Fuses each frame the foveation stage hands over, until that stage ended and
+// nothing waits.
+void Service::mapLoop() {
+  placeThread("fovea-map", config_.runtime.map_thread);
+  for (;;) {
+    const bool foveation_done = !foveation_alive_.load(std::memory_order_acquire);
+    if (stage_->fuseSubmitted()) continue;
+    if (foveation_done) break;
+    sleepNs(kIdleSleepNs);
+  }
 }
 
 // ---- send ----

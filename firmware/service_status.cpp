@@ -141,7 +141,8 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
 
 // The map: its size, this window's fusion time, and since start the surfels
 // evicted and the frames refused (no pose; anything else); with a time budget,
-// the frames it left unfused; with bricks, their versions. Empty without a map.
+// the frames it left unfused; with a fusion thread, those it was busy for;
+// with bricks, their versions. Empty without a map.
 void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t size) const {
   if (stage_->map() == nullptr) return;
   int used = std::snprintf(
@@ -149,6 +150,11 @@ void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t s
       " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64 " other",
       map_surfels_.load(std::memory_order_relaxed), fuse_latency, map_evicted_.load(std::memory_order_relaxed),
       map_refused_no_pose_.load(std::memory_order_relaxed), map_refused_other_.load(std::memory_order_relaxed));
+  if (stage_->fusionThread() && used > 0 && static_cast<std::size_t>(used) < size) {
+    const int more = std::snprintf(out + used, size - static_cast<std::size_t>(used), ", unfused %" PRIu64 " (busy)",
+                                   map_fusion_busy_.load(std::memory_order_relaxed));
+    if (more > 0) used += more;
+  }
   if (stage_->hasFusionBudget() && used > 0 && static_cast<std::size_t>(used) < size) {
     const int more = std::snprintf(out + used, size - static_cast<std::size_t>(used), ", unfused %" PRIu64 " (budget)",
                                    map_fusion_skipped_.load(std::memory_order_relaxed));

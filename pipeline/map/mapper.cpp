@@ -54,29 +54,108 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
     mapper.poser_ = std::make_unique<PoseEstimator>(std::move(poser.value()));
   }
   mapper.budget_ = FusionBudget(std::llround(config.fuse_budget_ms * 1e6));
+  mapper.gate_ = std::make_unique<MapGate>();
+  mapper.tracker_lock_ = std::make_unique<std::mutex>();
+  if (config.fusion_thread) {
+    mapper.handoff_ = std::make_unique<HandOff>();
+    mapper.handoff_->frame = hal::RgbdFrame(config.map.max_width, config.map.max_height);
+    mapper.handoff_->bytes = static_cast<std::size_t>(config.map.max_width) * config.map.max_height * (2 + 3);
+    mapper.map_->setGate(mapper.gate_.get());
+  }
   return mapper;
 }
 
 bool Mapper::addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFrame& out) {
   out = {};
-  out.pose_usable = poser_ ? poser_->poseFrame(frame, outside_pose_valid, out.track) : outside_pose_valid;
+  if (poser_) {
+    std::lock_guard<std::mutex> hold(*tracker_lock_);  // the fusion thread builds the tracker's model
+    out.pose_usable = poser_->poseFrame(frame, outside_pose_valid, out.track);
+  } else {
+    out.pose_usable = outside_pose_valid;
+  }
   if (!budget_.admit()) {
     out.fusion_skipped = true;
     return false;
   }
+  if (!handoff_) {
+    MapReadLock hold(*gate_);
+    fuse(frame, out);
+    budget_.spent(out.fuse.fuse_ns);
+    return out.fused();
+  }
+  HandOff& h = *handoff_;
+  if (h.state.load(std::memory_order_acquire) != kIdle) {
+    out.fusion_skipped = true;
+    ++h.busy;
+    return false;
+  }
+  h.frame = frame;  // the same size as created: the vectors keep their memory
+  h.pose_usable = out.pose_usable;
+  h.state.store(kSubmitted, std::memory_order_release);
+  out.handed_off = true;
+  return false;
+}
+
+void Mapper::fuse(hal::RgbdFrame& frame, MapperFrame& out) {
   map_->fuse(frame, out.fuse, out.pose_usable);
-  budget_.spent(out.fuse.fuse_ns);
   if (view_ && out.fused()) view_->capture(frame, map_->explainedPixels(), map_->measuredDepth());
   if (poser_ && out.fused()) {
     const int64_t t0 = monotonicNs();
+    std::lock_guard<std::mutex> hold(*tracker_lock_);
     poser_->fused(frame, *map_);
     out.track.model_ns = monotonicNs() - t0;
   }
-  return out.fused();
+}
+
+bool Mapper::fuseSubmitted() {
+  if (!handoff_) return false;
+  HandOff& h = *handoff_;
+  uint8_t submitted = kSubmitted;
+  if (!h.state.compare_exchange_strong(submitted, kFusing, std::memory_order_acq_rel)) return false;
+  {
+    MapReadLock hold(*gate_);
+    MapperFrame out;
+    out.pose_usable = h.pose_usable;
+    fuse(h.frame, out);
+    h.done = out;
+    ++h.fused;
+    h.untaken_ns += out.fuse.fuse_ns;
+  }
+  h.state.store(kIdle, std::memory_order_release);
+  return true;
+}
+
+bool Mapper::takeFused(MapperFrame& out) {
+  if (!handoff_) return false;
+  MapReadLock hold(*gate_);
+  if (handoff_->taken == handoff_->fused) return false;
+  handoff_->taken = handoff_->fused;
+  out = handoff_->done;
+  budget_.spent(handoff_->untaken_ns);
+  handoff_->untaken_ns = 0;
+  return true;
+}
+
+std::size_t Mapper::thinUnfused(const MapperFrame& frame, PointCloud& cloud) {
+  if (!view_ || !frame.pose_usable || !(frame.fusion_skipped || frame.handed_off)) return 0;
+  MapReadLock hold(*gate_);
+  return view_->removeExplained(cloud);
+}
+
+MapperStatus Mapper::status() {
+  MapperStatus s;
+  MapReadLock hold(*gate_);
+  s.surfels = map_->size();
+  s.counters = map_->counters();
+  s.fusion_busy = handoff_ ? handoff_->busy : 0;
+  s.gate_yields = gate_->yields();
+  return s;
 }
 
 void Mapper::appendVisible(const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats) {
-  if (eye_) eye_->appendVisible(*map_, eye_m, cloud, stats);
+  if (!eye_) return;
+  MapReadLock hold(*gate_);
+  eye_->appendVisible(*map_, eye_m, cloud, stats);
 }
 
 Status Mapper::planBricks(const Gaze& gaze, double budget_bytes, double live_bytes, const Eigen::Vector3d& origin_m,
@@ -84,6 +163,7 @@ Status Mapper::planBricks(const Gaze& gaze, double budget_bytes, double live_byt
   batch.clear(origin_m);
   plan = {};
   if (!delta_) return {ErrorCode::kInvalidArgument, "bricks: the mapper does not stream the map's bricks"};
+  MapReadLock hold(*gate_);  // the plan and the sampling read the map
   Result<std::span<const BrickDue>> due = delta_->plan(*map_, gaze, plan.delta);
   if (!due) return due.status();
   double left = budget_bytes;
@@ -133,6 +213,7 @@ MapperMemory Mapper::memory() const {
   m.delta = delta_ ? delta_->memoryBytes() + sampler_->memoryBytes() : 0;
   m.tracker = poser_ ? poser_->memoryBytes() : 0;
   m.view = view_ ? view_->memoryBytes() : 0;
+  m.handoff = handoff_ ? handoff_->bytes : 0;
   return m;
 }
 

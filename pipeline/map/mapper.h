@@ -13,14 +13,28 @@
 //    needs and lacks (pipeline/map/map_delta.h) and samples them into a batch
 //    (pipeline/map/brick_batch.h).
 //
+// Fusion on a thread of its own (MapperConfig::fusion_thread; issue 41, part
+// 3): addFrame() poses the frame and hands it to fuseSubmitted(), which
+// another thread calls, when that thread is idle (else the frame is left
+// unfused, counted); either way the frame goes out at once, thinned by the
+// last fused view (thinUnfused). The map is shared through a MapGate
+// (map_gate.h): fusion holds it and lets the planner and the view through at
+// its safe points, so a new gaze is planned without waiting for the fusion in
+// flight; the tracker's model, which fusion rebuilds after each frame, has a
+// lock of its own, so that tracking a frame does not hold fusion up. map() is
+// then for the fusion thread alone, or for after it stopped; addFrame()'s
+// thread reads status().
+//
 // Memory: everything is sized by create() from the configuration; addFrame(),
-// appendVisible() and planBricks() allocate nothing.
+// fuseSubmitted(), appendVisible() and planBricks() allocate nothing.
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 
 #include "core/result.h"
@@ -31,6 +45,7 @@
 #include "pipeline/map/eye_view.h"
 #include "pipeline/map/fusion_budget.h"
 #include "pipeline/map/map_delta.h"
+#include "pipeline/map/map_gate.h"
 #include "pipeline/map/pose_tracking.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/point_cloud.h"
@@ -50,6 +65,9 @@ struct MapperConfig {
   EyeViewConfig eye;               // kEyeView
   MapDeltaConfig delta;            // kBricks
   std::size_t max_brick_surfels = 1u << 16;  // kBricks: a brick's settled surfels sampled at most
+  // Fuse on another thread, which calls fuseSubmitted() (the service's map
+  // thread); off: addFrame() fuses on the caller's.
+  bool fusion_thread = false;
 };
 
 // What addFrame() did with a frame.
@@ -57,8 +75,9 @@ struct MapperFrame {
   TrackStats track;             // with tracking
   FuseStats fuse;               // unless fusion_skipped
   bool pose_usable = false;     // the pose source's or the tracker's pose may be fused
-  bool fusion_skipped = false;  // the time budget left the frame unfused
-  bool fused() const { return !fusion_skipped && fuse.outcome == FuseOutcome::kFused; }
+  bool fusion_skipped = false;  // the time budget, or a busy fusion thread, left the frame unfused
+  bool handed_off = false;      // fusion_thread: given to the fusion thread, fused later
+  bool fused() const { return !fusion_skipped && !handed_off && fuse.outcome == FuseOutcome::kFused; }
 };
 
 // What planBricks() put in the batch.
@@ -71,6 +90,14 @@ struct MapperPlan {
   uint32_t fovea_bricks_waiting = 0;  // ... of them the fovea's
 };
 
+// The map's size and counters, as of the reader's look (status()).
+struct MapperStatus {
+  std::size_t surfels = 0;
+  SurfelMapCounters counters;
+  uint64_t fusion_busy = 0;  // fusion_thread: frames left unfused because it was busy
+  uint64_t gate_yields = 0;  // times fusion let a reader through (map_gate.h)
+};
+
 // What create() allocated, by part.
 struct MapperMemory {
   SurfelMapMemory map;
@@ -78,7 +105,8 @@ struct MapperMemory {
   std::size_t delta = 0;    // kBricks: what the operator holds, the plan, the brick sampler
   std::size_t view = 0;     // output other than kNone: the last fused frame's explained depths
   std::size_t tracker = 0;  // with tracking: the pyramids
-  std::size_t total() const { return map.total() + eye + delta + view + tracker; }
+  std::size_t handoff = 0;  // fusion_thread: the frame handed to it
+  std::size_t total() const { return map.total() + eye + delta + view + tracker + handoff; }
 };
 
 // Bytes a point is estimated to take on the wire, chunk headers included
@@ -94,20 +122,29 @@ class Mapper {
   // when it is lost the outside or last good pose, to be shown by) and fuses
   // it when the pose may be fused and the time budget allows. outside_pose_valid:
   // the pose source had a pose for the frame's stamp. Returns out.fused().
+  // fusion_thread: hands the frame to it instead when it is idle (out.handed_off)
+  // and returns false.
   bool addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFrame& out);
+
+  // fusion_thread, on that thread: fuses the frame addFrame() handed off, if
+  // any (false: none waited). Never allocates.
+  bool fuseSubmitted();
+  // fusion_thread: the figures of the newest fusion finished since the last
+  // call (false: none finished). The time budget is charged here, with every
+  // fusion finished since.
+  bool takeFused(MapperFrame& out);
 
   // The last fused frame's points no settled surfel explains (SurfelMap::appendUnexplained).
   std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
     return map_->appendUnexplained(frame, out);
   }
   // A frame addFrame() did not fuse (`frame` its figures), back-projected
-  // whole into `cloud`: when it was posed and only the time budget left it
-  // out, removes the points the last fused frame explained (ExplainedView),
-  // which the operator has from the map; a refused or lost frame stays whole.
-  // Output kNone keeps no view and removes none. Returns how many it removed.
-  std::size_t thinUnfused(const MapperFrame& frame, PointCloud& cloud) const {
-    return view_ && frame.fusion_skipped && frame.pose_usable ? view_->removeExplained(cloud) : 0;
-  }
+  // whole into `cloud`: when it was posed and only the time budget, a busy
+  // fusion thread or the hand-off left it out, removes the points the last
+  // fused frame explained (ExplainedView), which the operator has from the
+  // map; a refused or lost frame stays whole. Output kNone keeps no view and
+  // removes none. Returns how many it removed.
+  std::size_t thinUnfused(const MapperFrame& frame, PointCloud& cloud);
   // kEyeView: appends the settled surfels an eye at `eye_m` sees (EyeView::appendVisible).
   void appendVisible(const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats);
 
@@ -126,15 +163,34 @@ class Mapper {
 
   MapOutput output() const { return output_; }
   const SurfelMap& map() const { return *map_; }
+  MapperStatus status();  // addFrame()'s thread
+  bool fusionThread() const { return handoff_ != nullptr; }
   const PoseEstimator* poseEstimator() const { return poser_.get(); }
   const MapDelta* delta() const { return delta_.get(); }
   const BrickSampler* sampler() const { return sampler_.get(); }
-  uint64_t fusionSkipped() const { return budget_.skipped(); }
+  uint64_t fusionSkipped() const { return budget_.skipped(); }  // by the time budget
   bool hasFusionBudget() const { return budget_.budgetNs() > 0; }
   MapperMemory memory() const;
 
  private:
   Mapper() = default;
+  // Fuses `frame` here (addFrame(), or the fusion thread's fuseSubmitted()).
+  void fuse(hal::RgbdFrame& frame, MapperFrame& out);
+
+  // fusion_thread's hand-off: the frame and the state, which addFrame() moves
+  // from idle to submitted and fuseSubmitted() to fusing and back to idle.
+  enum : uint8_t { kIdle, kSubmitted, kFusing };
+  struct HandOff {
+    hal::RgbdFrame frame;
+    bool pose_usable = false;
+    std::atomic<uint8_t> state{kIdle};
+    MapperFrame done;          // the last fusion's figures (under the gate)
+    uint64_t fused = 0;        // ... how many finished (under the gate)
+    uint64_t taken = 0;        // ... of them seen by takeFused()
+    int64_t untaken_ns = 0;    // ... the time of those not yet seen (under the gate)
+    uint64_t busy = 0;         // frames it was busy for (addFrame's thread)
+    std::size_t bytes = 0;     // the frame's depth and colour
+  };
 
   MapOutput output_ = MapOutput::kNone;
   std::unique_ptr<SurfelMap> map_;
@@ -144,6 +200,11 @@ class Mapper {
   std::unique_ptr<BrickSampler> sampler_;   // kBricks
   std::unique_ptr<ExplainedView> view_;     // output other than kNone
   FusionBudget budget_;
+  std::unique_ptr<MapGate> gate_;    // always (uncontended without a fusion thread)
+  // The tracker: posing a frame (addFrame's thread) against building its model
+  // after a fusion (the fusion thread, which holds the gate then: gate first).
+  std::unique_ptr<std::mutex> tracker_lock_;
+  std::unique_ptr<HandOff> handoff_;  // fusion_thread
 };
 
 }  // namespace fovea::pipeline::map

@@ -414,6 +414,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   const std::size_t pixels = frame.pixelCount();
   constexpr std::size_t kPrefetchPixels = 16;
   for (std::size_t i = 0; i < static_cast<std::size_t>(w) * static_cast<std::size_t>(h); ++i) {
+    if (i % kYieldEvery == 0) yieldGate();
     // The surfel a few pixels on: the index map names surfels in no order the
     // cache can guess (a prefetch changes no result).
     if (i + kPrefetchPixels < pixels) {
@@ -480,6 +481,7 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
   const Eigen::Matrix3f R_wc_f = R_wc.cast<float>();
   const std::size_t pixels = frame.pixelCount();
   for (std::size_t i = 0; i < pixels; ++i) {
+    if (i % kYieldEvery == 0) yieldGate();
     if (!(weight_[i] < 0.0f)) continue;
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
     const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;

@@ -45,6 +45,7 @@
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
 #include "pipeline/map/index_map.h"
+#include "pipeline/map/map_gate.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/map/surfel_links.h"
@@ -211,6 +212,10 @@ class SurfelMap {
   // Empties the map (keeps the memory).
   void clear();
 
+  // With fusion on a thread of its own (Mapper): fuse() runs holding `gate`
+  // and lets readers through at its safe points (map_gate.h). Null: none.
+  void setGate(MapGate* gate) { gate_ = gate; }
+
  private:
   explicit SurfelMap(const SurfelMapConfig& config);
 
@@ -258,6 +263,11 @@ class SurfelMap {
   // none and it must go (the caller removes it: at once, or after the frame's
   // association while the index map may still name it). Counts both.
   bool carveTo(uint32_t slot, float left, FuseStats& stats);
+  // A safe point of fusion: every surfel, brick list and counter whole.
+  void yieldGate() {
+    if (gate_ != nullptr) gate_->yield();
+  }
+  static constexpr std::size_t kYieldEvery = 4096;  // pixels or slots between safe points
 
   SurfelMapConfig config_;
   std::vector<Surfel> surfels_;
@@ -297,6 +307,7 @@ class SurfelMap {
   int64_t last_stamp_ns_ = 0;
   Eigen::Vector3d last_position_ = Eigen::Vector3d::Zero();
   // The last fused frame (appendUnexplained): its pose, size and stamp.
+  MapGate* gate_ = nullptr;
   hal::Pose fused_pose_;
   int fused_width_ = 0, fused_height_ = 0;
   int64_t fused_stamp_ns_ = 0;

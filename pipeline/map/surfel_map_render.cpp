@@ -73,6 +73,7 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
   const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
   const auto carve = static_cast<float>(config_.carve_weight);
   for (std::size_t slot = 0; slot < high_water_; ++slot) {
+    if (slot % kYieldEvery == 0) yieldGate();
     const Surfel& s = surfels_[slot];
     if (!(s.flags & kSurfelLive)) continue;
     if (!(s.flags & kSurfelStable) && frame_ - s.first_seen > config_.unstable_max_frames) {
@@ -197,6 +198,7 @@ void SurfelMap::splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_
     const std::size_t count = std::min(SplatBatch::kSize, high_water_ - b0);
     planSplats(view, b0, count, batch);
     applySplats(view, b0, count, batch, stats);
+    yieldGate();
   }
 }
 

@@ -276,6 +276,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "map.max_brick_surfels=4096",
     "map.max_frame_brick_points=100000",
     "map.fuse_budget_ms=12.5",
+    "map.fusion_thread=false",
     "map.carve_weight=1.5",
     "map.max_pose_jump_m=0.5",
     "map.eye_face_cells=192",
@@ -315,6 +316,8 @@ const std::vector<std::string> kEveryKeyChanged = {
     "runtime.foveation_thread.realtime_priority=40",
     "runtime.send_thread.core=3",
     "runtime.send_thread.realtime_priority=45",
+    "runtime.map_thread.core=1",
+    "runtime.map_thread.realtime_priority=30",
 };
 
 TEST(Config, EveryKeyRoundTrips) {
