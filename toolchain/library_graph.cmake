@@ -4,18 +4,10 @@
 # aliases resolved, fovea's own targets only). toolchain/check-layers reads it:
 # no library links one of a higher layer, none forms a cycle, and the graph in
 # docs/architecture.md is this one.
-function(_fovea_graph_collect dir out)
-  get_property(targets DIRECTORY "${dir}" PROPERTY BUILDSYSTEM_TARGETS)
-  get_property(subdirs DIRECTORY "${dir}" PROPERTY SUBDIRECTORIES)
-  foreach(sub IN LISTS subdirs)
-    _fovea_graph_collect("${sub}" sub_targets)
-    list(APPEND targets ${sub_targets})
-  endforeach()
-  set(${out} ${targets} PARENT_SCOPE)
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/targets.cmake)
 
 function(fovea_write_library_graph)
-  _fovea_graph_collect("${PROJECT_SOURCE_DIR}" all)
+  fovea_targets_under("${PROJECT_SOURCE_DIR}" all)
   set(own "")
   foreach(t IN LISTS all)
     get_target_property(type ${t} TYPE)

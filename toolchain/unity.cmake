@@ -20,15 +20,7 @@
 # target the given directories (and theirs) made with UNITY_BUILD on gets the
 # batches, and UNITY_BUILD is then turned off for it.
 
-function(_fovea_unity_targets dir out)
-  get_property(targets DIRECTORY "${dir}" PROPERTY BUILDSYSTEM_TARGETS)
-  get_property(subdirs DIRECTORY "${dir}" PROPERTY SUBDIRECTORIES)
-  foreach(sub IN LISTS subdirs)
-    _fovea_unity_targets("${sub}" sub_targets)
-    list(APPEND targets ${sub_targets})
-  endforeach()
-  set(${out} "${targets}" PARENT_SCOPE)
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/targets.cmake)
 
 # True when CMake's unity build would put `source` (absolute) of `target` in a batch.
 function(_fovea_unity_batchable target source out)
@@ -97,7 +89,7 @@ endmacro()
 
 function(fovea_relocatable_unity)
   foreach(dir IN LISTS ARGN)
-    _fovea_unity_targets("${dir}" targets)
+    fovea_targets_under("${dir}" targets)
     foreach(target IN LISTS targets)
       get_target_property(type ${target} TYPE)
       get_target_property(unity ${target} UNITY_BUILD)
