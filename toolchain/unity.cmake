@@ -4,9 +4,9 @@
 # (#include "/work/main/core/clock.cpp"). ccache's direct mode hashes a source's
 # bytes, which CCACHE_BASEDIR cannot rewrite, so every batch missed it in a
 # clone in another folder and ran the preprocessor for a hit in preprocessed
-# mode: 40 batches a tree, about 4 minutes of a warm CI run's stage time on the
-# clang trees, where the preprocessor ran niced beside three test stages
-# (docs/ci.md). fovea_relocatable_unity() writes the same batches itself, each
+# mode: 40 batches a tree, whose compiles took 15, 17, 65 and 242 s of ninja's
+# job time in the amd64, arm64, ASan and TSan trees of a warm CI run (m39; the
+# clang trees' preprocessor ran niced beside three test stages; docs/ci.md). fovea_relocatable_unity() writes the same batches itself, each
 # source named relative to its batch file, which lies in the build tree: a build
 # tree inside its clone (build-amd64/, as every script makes them) then writes
 # the same bytes in every clone.
