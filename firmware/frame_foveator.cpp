@@ -97,10 +97,10 @@ Status FrameFoveator::backproject(hal::RgbdFrame& frame, pipeline::BackprojectCo
   }
   map_figures_ = {};
   if (!mapper_->addFrame(frame, pose_valid, map_figures_)) {
-    // Not in the map (refused, lost, or over the time budget): the operator
-    // still sees the frame as it is, beside the map; a posed frame the budget
-    // skipped without what the last fused frame explained, which the operator
-    // has from the map.
+    // Not in the map now (refused, lost, over the time budget, or handed to
+    // the fusion thread): the operator still sees the frame beside the map; a
+    // posed one without what the last fused frame explained, which the
+    // operator has from the map (Mapper::thinUnfused).
     if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) {
       cloud_.clear();
       return s;

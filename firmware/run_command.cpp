@@ -669,8 +669,9 @@ void Run::printSummary() const {
                 static_cast<unsigned long long>(c.refused() - c.refused_no_pose), last.frame_points, last.eye.appended,
                 last.eye.hidden);
     if (stage_.hasFusionBudget()) {
-      std::printf("map: %llu frames left unfused by map.fuse_budget_ms (sent without what the last fused view explained)\n",
-                  static_cast<unsigned long long>(stage_.fusionSkipped()));
+      std::printf(
+          "map: %llu frames left unfused by map.fuse_budget_ms (sent without what the last fused view explained)\n",
+          static_cast<unsigned long long>(stage_.fusionSkipped()));
     }
   }
 }

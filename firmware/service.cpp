@@ -159,7 +159,9 @@ void Service::stop() {
                   s.map.fusion_busy);
       }
       if (stage_->hasFusionBudget()) {
-        log().log(LogLevel::kInfo, "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent without what the last fused view explained)",
+        log().log(LogLevel::kInfo,
+                  "map: %" PRIu64 " frames left unfused by map.fuse_budget_ms (sent without what the last fused "
+                  "view explained)",
                   s.map.unfused);
       }
       if (map_bricks_) {
