@@ -623,6 +623,9 @@ TEST(BoardProfiles, MissingCameraBackendIsReportedButTheProfileValidates) {
   ASSERT_TRUE(rpi5.isOk()) << rpi5.status().message();
   EXPECT_EQ(rpi5->camera.spec.rfind("v4l2:auto,", 0), 0u) << rpi5->camera.spec;
   EXPECT_EQ(rpi5->camera.calibration_file, "/etc/fovea/camera.yaml");
+  // With the map source, fusion under the send thread's SCHED_FIFO on core 3 (docs/map.md).
+  EXPECT_EQ(rpi5->runtime.map_thread.core, 3);
+  EXPECT_EQ(rpi5->runtime.map_thread.realtime_priority, 0);
   // A build with V4L2 (every toolchain/ build: FOVEA_REQUIRE_BACKENDS) misses
   // nothing the profile names; one without it names the backend. Either way
   // the check runs.
