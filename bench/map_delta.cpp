@@ -269,7 +269,8 @@ class DeltaBench {
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
   std::array<std::size_t, pipeline::map::kBrickNeedCount> bricks_sent_by_need_ = {};  // by BrickNeed
-  std::size_t unfused_ = 0, tracked_ = 0;  // frames the map did not fuse (sent thinned or whole: Mapper::thinUnfused); tracked (--pose track)
+  // Frames the map did not fuse (Mapper::thinUnfused); tracked (--pose track).
+  std::size_t unfused_ = 0, tracked_ = 0;
   std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
   int live_regions_ = 0;
   hal::Pose map_to_world_;  // the map's world in the truth's (--pose track: the first frame's true pose)
@@ -473,8 +474,9 @@ bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameS
   return true;
 }
 
-// The frame's points the map does not explain (the whole frame when the map
-// did not fuse it), ACUITY-foveated for the gaze into live_out_.
+// The frame's points the map does not explain (when the map did not fuse it,
+// those its last fused view does not explain, or the whole frame if refused),
+// ACUITY-foveated for the gaze into live_out_.
 bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, const pipeline::map::MapperFrame& figures) {
   const bool fused = figures.fused();
   live_.clear();
@@ -581,7 +583,7 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
               "brick-frames; map %zu surfels in %zu bricks\n",
               bricks_sent_, brick_points_sent_, bricks_sent_by_need_[0], bricks_sent_by_need_[1],
               bricks_sent_by_need_[2], bricks_waited_, mapper_.map().size(), mapper_.map().brickCount());
-  std::printf("  frames the map did not fuse (sent without what the last fused view explained, or whole): %zu", unfused_);
+  std::printf("  frames the map did not fuse (thinned by the last fused view, or whole): %zu", unfused_);
   if (o_.track) std::printf("; tracked %zu of %d", tracked_, frames);
   std::printf("\n");
   std::printf("  plan: median %.3f ms, max %.3f ms a frame; brick sampling and encoding: median %.3f ms a frame\n",

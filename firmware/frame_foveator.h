@@ -87,9 +87,10 @@ std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::siz
 struct MapFrameFigures : pipeline::map::MapperFrame {
   pipeline::map::EyeViewStats eye;
   // The frame's points in the cloud: unexplained (fused), those the last fused
-  // view does not explain (skipped by the time budget), or all (refused, lost).
+  // view does not explain (posed, not fused now: Mapper::thinUnfused), or all
+  // (refused, lost).
   uint32_t frame_points = 0;
-  uint32_t explained_by_last_view = 0;  // skipped: the points the last fused view explained, left out
+  uint32_t explained_by_last_view = 0;  // not fused now: the points the last fused view explained, left out
   pipeline::map::MapperPlan plan;  // planBricks()'s
 };
 

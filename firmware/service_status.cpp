@@ -15,6 +15,14 @@ namespace fovea::firmware {
 
 namespace {
 
+// ", unfused N (why)" after the `used` characters of `out`, when they fit.
+void appendUnfused(char* out, std::size_t size, int& used, uint64_t frames, const char* why) {
+  if (used <= 0 || static_cast<std::size_t>(used) >= size) return;
+  const int more =
+      std::snprintf(out + used, size - static_cast<std::size_t>(used), ", unfused %" PRIu64 " (%s)", frames, why);
+  if (more > 0) used += more;
+}
+
 // USB hot-plug counts since start: "arrived 1 left 0", or "off" when not watched.
 void formatUsbCounts(const hal::usb::UsbMonitorCounters& counts, char* out, std::size_t size) {
   if (counts.available) {
@@ -150,15 +158,9 @@ void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t s
       " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64 " other",
       map_surfels_.load(std::memory_order_relaxed), fuse_latency, map_evicted_.load(std::memory_order_relaxed),
       map_refused_no_pose_.load(std::memory_order_relaxed), map_refused_other_.load(std::memory_order_relaxed));
-  if (stage_->fusionThread() && used > 0 && static_cast<std::size_t>(used) < size) {
-    const int more = std::snprintf(out + used, size - static_cast<std::size_t>(used), ", unfused %" PRIu64 " (busy)",
-                                   map_fusion_busy_.load(std::memory_order_relaxed));
-    if (more > 0) used += more;
-  }
-  if (stage_->hasFusionBudget() && used > 0 && static_cast<std::size_t>(used) < size) {
-    const int more = std::snprintf(out + used, size - static_cast<std::size_t>(used), ", unfused %" PRIu64 " (budget)",
-                                   map_fusion_skipped_.load(std::memory_order_relaxed));
-    if (more > 0) used += more;
+  if (stage_->fusionThread()) appendUnfused(out, size, used, map_fusion_busy_.load(std::memory_order_relaxed), "busy");
+  if (stage_->hasFusionBudget()) {
+    appendUnfused(out, size, used, map_fusion_skipped_.load(std::memory_order_relaxed), "budget");
   }
   if (map_bricks_ && used > 0 && static_cast<std::size_t>(used) < size) {
     std::snprintf(out + used, size - static_cast<std::size_t>(used),

@@ -1,6 +1,6 @@
 // The map shared between the thread that fuses frames into it and the thread
 // that reads it for each frame sent (the plan of the operator's bricks, the
-// last fused view, the tracker): a mutex the fusing thread holds for a whole
+// last fused view, the map's counters): a mutex the fusing thread holds for a whole
 // fusion and lets a waiting reader through at safe points, where every
 // surfel, brick list and counter is whole (SurfelMap yields between splat
 // batches, rows of the association and of new surfels). A reader so waits for
@@ -11,7 +11,7 @@
 // not yet. Whatever it sends then is a consistent map, and a brick changed
 // after it was sampled changes its counter, so it is due again.
 //
-// Readers lock() and unlock() as a mutex (ReadLock); the writer holds the gate
+// Readers lock() and unlock() as a mutex (MapReadLock); the writer holds the gate
 // with lock() too and calls yield() at its safe points. Without a writer
 // thread (fusion on the reader's thread) it is an uncontended mutex.
 #pragma once
@@ -50,7 +50,7 @@ class MapGate {
     holder_returning_.store(false, std::memory_order_release);
   }
 
-  // How often the holder let a waiter through (tests, the status line).
+  // How often the holder let a waiter through (tests).
   uint64_t yields() const { return yields_.load(std::memory_order_relaxed); }
 
  private:

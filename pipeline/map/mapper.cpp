@@ -148,7 +148,6 @@ MapperStatus Mapper::status() {
   s.surfels = map_->size();
   s.counters = map_->counters();
   s.fusion_busy = handoff_ ? handoff_->busy : 0;
-  s.gate_yields = gate_->yields();
   return s;
 }
 

@@ -95,7 +95,6 @@ struct MapperStatus {
   std::size_t surfels = 0;
   SurfelMapCounters counters;
   uint64_t fusion_busy = 0;  // fusion_thread: frames left unfused because it was busy
-  uint64_t gate_yields = 0;  // times fusion let a reader through (map_gate.h)
 };
 
 // What create() allocated, by part.

@@ -306,8 +306,8 @@ class SurfelMap {
   bool have_last_ = false;
   int64_t last_stamp_ns_ = 0;
   Eigen::Vector3d last_position_ = Eigen::Vector3d::Zero();
+  MapGate* gate_ = nullptr;  // setGate(): fusion on a thread of its own
   // The last fused frame (appendUnexplained): its pose, size and stamp.
-  MapGate* gate_ = nullptr;
   hal::Pose fused_pose_;
   int fused_width_ = 0, fused_height_ = 0;
   int64_t fused_stamp_ns_ = 0;
