@@ -51,25 +51,69 @@ struct Fused {
     ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
     view.capture(frame, map.explainedPixels(), map.measuredDepth());
   }
-  // The frame back-projected whole, in the map's depth range.
-  PointCloud whole() const {
-    PointCloud cloud(static_cast<std::size_t>(kW) * kH);
-    BackprojectCounts counts;
-    EXPECT_TRUE(backprojectRef(frame, config().depth, cloud, counts).isOk());
-    return cloud;
-  }
 };
 
-TEST(ExplainedView, TheFusedFrameJudgedAgainstItsOwnViewLeavesWhatTheMapLeaves) {
-  Fused f;
-  ASSERT_TRUE(f.camera);
-  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
+// The frame back-projected whole, in the map's depth range.
+PointCloud whole(const hal::RgbdFrame& frame) {
+  PointCloud cloud(static_cast<std::size_t>(kW) * kH);
+  BackprojectCounts counts;
+  EXPECT_TRUE(backprojectRef(frame, Fused::config().depth, cloud, counts).isOk());
+  return cloud;
+}
+
+// Fusion is the slow part (half a minute under the sanitizers and qemu), so
+// the suite fuses once: 14 frames, the last of them kept as `fused`, then the
+// camera's next three frames, not fused, as `later`. The tests only read it.
+class ExplainedViewTest : public ::testing::Test {
+ protected:
+  static constexpr int kFusedFrames = 14;
+  static constexpr int kLaterFrames = 3;
+
+  static void SetUpTestSuite() {
+    fused_ = new Fused;
+    ASSERT_TRUE(fused_->camera);
+    for (int i = 0; i < kFusedFrames; ++i) ASSERT_NO_FATAL_FAILURE(fused_->fuseNext());
+    fused_frame_ = new hal::RgbdFrame(fused_->frame);
+    later_ = new std::vector<hal::RgbdFrame>;
+    for (int i = 0; i < kLaterFrames; ++i) {
+      ASSERT_NO_FATAL_FAILURE(fused_->next());  // the camera moved on: not fused
+      later_->push_back(fused_->frame);
+    }
+  }
+  static void TearDownTestSuite() {
+    delete later_;
+    delete fused_frame_;
+    delete fused_;
+    later_ = nullptr;
+    fused_frame_ = nullptr;
+    fused_ = nullptr;
+  }
+  void SetUp() override {
+    ASSERT_TRUE(fused_ != nullptr && later_ != nullptr && later_->size() == kLaterFrames) << "the suite's fusion failed";
+  }
+
+  static const SurfelMap& map() { return fused_->map; }
+  static const ExplainedView& view() { return fused_->view; }
+  static const hal::RgbdFrame& fusedFrame() { return *fused_frame_; }
+  static const std::vector<hal::RgbdFrame>& later() { return *later_; }
+
+ private:
+  static Fused* fused_;
+  static hal::RgbdFrame* fused_frame_;
+  static std::vector<hal::RgbdFrame>* later_;
+};
+
+Fused* ExplainedViewTest::fused_ = nullptr;
+hal::RgbdFrame* ExplainedViewTest::fused_frame_ = nullptr;
+std::vector<hal::RgbdFrame>* ExplainedViewTest::later_ = nullptr;
+
+TEST_F(ExplainedViewTest, TheFusedFrameJudgedAgainstItsOwnViewLeavesWhatTheMapLeaves) {
   PointCloud unexplained(static_cast<std::size_t>(kW) * kH);
-  unexplained.origin_m = f.frame.T_world_cam.t_world_cam;
-  const std::size_t left = f.map.appendUnexplained(f.frame, unexplained);
-  PointCloud cloud = f.whole();
+  unexplained.origin_m = fusedFrame().T_world_cam.t_world_cam;
+  const std::size_t left = map().appendUnexplained(fusedFrame(), unexplained);
+  PointCloud cloud = whole(fusedFrame());
   const std::size_t valid = cloud.size();
-  const std::size_t removed = f.view.removeExplained(cloud);
+  const std::size_t removed = view().removeExplained(cloud);
   EXPECT_GT(removed, valid / 2) << "after 14 frames the settled map explains most of the view";
   ASSERT_EQ(cloud.size(), left);
   ASSERT_EQ(removed + left, valid);
@@ -104,17 +148,12 @@ std::vector<bool> explainedByBruteForce(const PointCloud& cloud, const hal::Rgbd
   return explained;
 }
 
-TEST(ExplainedView, ALaterFrameIsThinnedAsABruteForceReprojectionThinsIt) {
-  Fused f;
-  ASSERT_TRUE(f.camera);
-  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
-  const hal::RgbdFrame view_frame = f.frame;
-  for (int later = 1; later <= 3; ++later) {
-    ASSERT_NO_FATAL_FAILURE(f.next());  // the camera moved on: not fused
-    const PointCloud all = f.whole();
-    const std::vector<bool> expected = explainedByBruteForce(all, view_frame, f.map);
+TEST_F(ExplainedViewTest, ALaterFrameIsThinnedAsABruteForceReprojectionThinsIt) {
+  for (int later = 1; later <= kLaterFrames; ++later) {
+    const PointCloud all = whole(this->later()[static_cast<std::size_t>(later - 1)]);
+    const std::vector<bool> expected = explainedByBruteForce(all, fusedFrame(), map());
     PointCloud cloud = all;
-    const std::size_t removed = f.view.removeExplained(cloud);
+    const std::size_t removed = view().removeExplained(cloud);
     // Walk both: the kept points are the reference's unexplained ones, in order;
     // a point the float and the double arithmetic round to different pixels or
     // sides of the tolerance may differ (at most 0.2 % of them).
@@ -134,20 +173,17 @@ TEST(ExplainedView, ALaterFrameIsThinnedAsABruteForceReprojectionThinsIt) {
   }
 }
 
-TEST(ExplainedView, HardCases) {
-  Fused f;
-  ASSERT_TRUE(f.camera);
+TEST_F(ExplainedViewTest, HardCases) {
   // No view yet: nothing is explained.
-  ASSERT_NO_FATAL_FAILURE(f.next());
-  PointCloud cloud = f.whole();
+  ExplainedView none = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();
+  PointCloud cloud = whole(later()[0]);
   const std::size_t valid = cloud.size();
-  EXPECT_TRUE(f.view.empty());
-  EXPECT_EQ(f.view.removeExplained(cloud), 0u);
+  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(none.removeExplained(cloud), 0u);
   EXPECT_EQ(cloud.size(), valid);
-  for (int i = 0; i < 14; ++i) ASSERT_NO_FATAL_FAILURE(f.fuseNext());
-  PointCloud at_origin = f.whole();
+  PointCloud at_origin = whole(fusedFrame());
   const std::size_t whole_at_origin = at_origin.size();
-  const std::size_t removed_at_origin = f.view.removeExplained(at_origin);
+  const std::size_t removed_at_origin = view().removeExplained(at_origin);
   const std::size_t kept_at_origin = at_origin.size();
   ASSERT_EQ(kept_at_origin + removed_at_origin, whole_at_origin);
   ASSERT_GT(kept_at_origin, 0u);
@@ -155,33 +191,34 @@ TEST(ExplainedView, HardCases) {
   // 10 km away: the view and the cloud moved together judge alike.
   const Eigen::Vector3d far(1e4, -1e4, 1e4);
   ExplainedView far_view = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();
-  hal::RgbdFrame far_frame = f.frame;
+  hal::RgbdFrame far_frame = fusedFrame();
   far_frame.T_world_cam.t_world_cam += far;
-  far_view.capture(far_frame, f.map.explainedPixels(), f.map.measuredDepth());
-  PointCloud far_cloud = f.whole();
+  far_view.capture(far_frame, map().explainedPixels(), map().measuredDepth());
+  PointCloud far_cloud = whole(fusedFrame());
   far_cloud.origin_m += far;
   EXPECT_EQ(far_view.removeExplained(far_cloud), removed_at_origin);
   EXPECT_EQ(far_cloud.size(), kept_at_origin);
   // Points behind the camera, at it, and not finite are never explained.
   const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
   PointCloud odd(4);
-  odd.origin_m = f.frame.T_world_cam.t_world_cam;
-  const Eigen::Vector3f behind = (f.frame.T_world_cam.R_world_cam * Eigen::Vector3d(0, 0, -2)).cast<float>();
+  odd.origin_m = fusedFrame().T_world_cam.t_world_cam;
+  const Eigen::Vector3f behind = (fusedFrame().T_world_cam.R_world_cam * Eigen::Vector3d(0, 0, -2)).cast<float>();
   ASSERT_TRUE(odd.push(behind.x(), behind.y(), behind.z(), 0));
   ASSERT_TRUE(odd.push(0, 0, 0, 0));
   ASSERT_TRUE(odd.push(nan, 0, 1, 0));
   ASSERT_TRUE(odd.push(inf, inf, inf, 0));
-  EXPECT_EQ(f.view.removeExplained(odd), 0u);
+  EXPECT_EQ(view().removeExplained(odd), 0u);
   EXPECT_EQ(odd.size(), 4u);
   // A frame larger than the view was made for empties it.
+  ExplainedView emptied = view();
   hal::RgbdFrame large(2 * kW, kH);
   ASSERT_TRUE(large.setSize(2 * kW, kH));
   std::vector<uint8_t> explained(large.pixelCount(), 1);
   std::vector<float> depth(large.pixelCount(), 1.0f);
-  f.view.capture(large, explained.data(), depth.data());
-  EXPECT_TRUE(f.view.empty());
-  PointCloud again = f.whole();
-  EXPECT_EQ(f.view.removeExplained(again), 0u);
+  emptied.capture(large, explained.data(), depth.data());
+  EXPECT_TRUE(emptied.empty());
+  PointCloud again = whole(fusedFrame());
+  EXPECT_EQ(emptied.removeExplained(again), 0u);
 }
 
 TEST(ExplainedView, RefusesABadSizeOrTolerance) {
