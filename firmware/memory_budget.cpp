@@ -29,26 +29,25 @@ std::size_t heapGrowthSince(std::size_t before) {
 }
 
 void MemoryBudget::add(const char* name, std::size_t count, std::size_t bytes) {
-  if (pool_count < kMaxPools) pools[pool_count++] = {name, count, bytes};
+  pools.push_back({name, count, bytes});
 }
 
 std::size_t MemoryBudget::totalBytes() const {
   std::size_t total = 0;
-  for (std::size_t i = 0; i < pool_count; ++i) total += pools[i].bytes;
+  for (const MemoryPool& p : pools) total += p.bytes;
   return total;
 }
 
 std::string MemoryBudget::summary() const {
   char line[96];
   std::snprintf(line, sizeof line, "memory: %.1f MiB in %zu pools", static_cast<double>(totalBytes()) / kMiB,
-                pool_count);
+                pools.size());
   return line;
 }
 
 std::string MemoryBudget::breakdown() const {
   std::string out;
-  for (std::size_t i = 0; i < pool_count; ++i) {
-    const MemoryPool& p = pools[i];
+  for (const MemoryPool& p : pools) {
     char line[160];
     std::snprintf(line, sizeof line, "  %-42s %3zu x %8.3f MiB = %8.3f MiB\n", p.name, p.count,
                   p.count ? static_cast<double>(p.bytes) / static_cast<double>(p.count) / kMiB : 0.0,

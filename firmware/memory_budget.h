@@ -3,9 +3,9 @@
 // growth around its allocation, so that no component needs a size method.
 #pragma once
 
-#include <array>
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace fovea::firmware {
 
@@ -23,10 +23,14 @@ struct MemoryPool {
   std::size_t bytes = 0;  // all of them together
 };
 
+// Every pool added is kept: a fixed table of 12 once dropped the 13th and
+// later pools (the streamer's among them) from the total without a word.
 struct MemoryBudget {
-  static constexpr std::size_t kMaxPools = 12;
-  std::array<MemoryPool, kMaxPools> pools{};
-  std::size_t pool_count = 0;
+  // Room for every pool the service adds, reserved up front so that an add()
+  // inside a pool's measurement never counts the table's own growth.
+  MemoryBudget() { pools.reserve(32); }
+
+  std::vector<MemoryPool> pools;
 
   void add(const char* name, std::size_t count, std::size_t bytes);
   std::size_t totalBytes() const;

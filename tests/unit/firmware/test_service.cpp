@@ -93,13 +93,45 @@ TEST(Service, MemoryBudgetCountsEveryPool) {
   Result<std::unique_ptr<Service>> created = Service::create(config, {});
   ASSERT_TRUE(created.isOk()) << created.status().toString();
   const MemoryBudget& memory = created.value()->memory();
-  EXPECT_GE(memory.pool_count, 5u);
+  EXPECT_GE(memory.pools.size(), 5u);
   // ring_depth + 2 frame slots, each at least the RGB-D frame's pixels.
   EXPECT_EQ(memory.pools[1].count, 5u);
   EXPECT_GE(memory.pools[1].bytes, 5u * 160 * 120 * 5);
   EXPECT_NE(memory.summary().find("memory: "), std::string::npos);
   EXPECT_NE(memory.summary().find(" MiB in "), std::string::npos);
   EXPECT_NE(memory.breakdown().find("frame slots"), std::string::npos);
+}
+
+// The service with the most pools (the map with bricks, tracking, a stream and
+// a timing log) lists every one of them, the last ones too (a table of 12 once
+// dropped the streamer's and the status lines' without a word), and its total
+// is what the heap grew by while the service was made, less the little that
+// is no pool's (the configuration's copies, the logger's strings).
+TEST(Service, MemoryBudgetListsEveryPoolAndTheHeapsGrowth) {
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.map.source = FoveationSource::kMap;
+  config.map.map.max_surfels = 1u << 16;
+  config.camera.pose.source = "track";
+  config.stream.link.listen = "127.0.0.1:0";
+  config.stream.link.insecure = true;
+  const test::TempDir dir;
+  config.runtime.timing_log = dir.file("timing.tsv");
+  ASSERT_TRUE(validate(config).isOk()) << validate(config).toString();
+  const std::size_t before = heapInUse();
+  Result<std::unique_ptr<Service>> created = Service::create(config, {});
+  const std::size_t grown = heapGrowthSince(before);
+  ASSERT_TRUE(created.isOk()) << created.status().toString();
+  const MemoryBudget& memory = created.value()->memory();
+  const std::string breakdown = memory.breakdown();
+  for (const char* name : {"camera backend", "frame slots", "foveated cloud and brick slots", "map: surfel pool",
+                           "map: tracker", "map: bricks the operator holds", "point cloud", "foveator",
+                           "streamer", "status, latency histograms", "timing log buffer"}) {
+    EXPECT_NE(breakdown.find(name), std::string::npos) << "no pool named " << name << " in\n" << breakdown;
+  }
+  EXPECT_GT(memory.pools.size(), 12u);
+  EXPECT_NE(memory.summary().find(" in " + std::to_string(memory.pools.size()) + " pools"), std::string::npos);
+  EXPECT_LE(memory.totalBytes(), grown + grown / 50) << breakdown;
+  EXPECT_GE(memory.totalBytes(), grown - grown / 20) << "heap grew by " << grown << " bytes; the pools:\n" << breakdown;
 }
 
 // pipeline.max_output_points sizes the foveated slots (not the pixels), and a
