@@ -8,8 +8,10 @@
 // which the tracker never sees unless a case gives it as the prior.
 //
 //   fovea-track                      the suite: TUM teddy, mock orbit and dolly, the hard cases
-//   fovea-track --camera SPEC [--frames N] [--case NAME] [--kernels ref|simd] [--every K]
+//   fovea-track --camera SPEC [--frames N] [--case NAME] [--kernels ref|simd] [--every K] [--moving on|off]
 //
+// --moving off: every pixel fused, as before the moving pixels were left out
+// (the suite runs the moving object and the balloon both ways).
 // Cases (--case): plain; skip (every other frame dropped: twice the motion a
 // frame); invalid (frame 30 has no valid depth); wall (frames 30-34 are a flat
 // textureless wall at 1.2 m); object (from frame 20 a box a third of the view
@@ -52,6 +54,7 @@ struct RunOptions {
   std::string hard = "plain";
   KernelSet kernels = fovea::defaultKernelSet();
   std::array<int, 3> iterations = TrackerConfig{}.iterations;  // Gauss-Newton's per level, finest first
+  bool moving = true;  // the moving pixels left out of fusion (pipeline/map/moving_pixels.h)
 };
 
 struct RunResult {
@@ -154,6 +157,7 @@ RunResult run(const RunOptions& o) {
   config.map.kernels = o.kernels;
   config.tracker.kernels = o.kernels;
   config.tracker.iterations = o.iterations;
+  config.tracker.moving.enabled = o.moving;
   const bool prior = o.hard == "jump" || o.hard == "drift";
   config.tracking = prior ? PoseTracking::kRefine : PoseTracking::kAlone;
   fovea::Result<Mapper> mapper = Mapper::create(config);
@@ -227,7 +231,7 @@ int main(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
       std::puts("usage: fovea-track [--camera SPEC] [--frames N] [--every K] [--case plain|skip|invalid|wall|object|jump|drift]\n"
-                "                   [--kernels ref|simd] [--tum PATH] [--iterations FINE,MID,COARSE]\n"
+                "                   [--kernels ref|simd] [--tum PATH] [--iterations FINE,MID,COARSE] [--moving on|off]\n"
                 "Without --camera: the suite (TUM teddy, mock orbit and dolly at 640x480, the hard cases).");
       return 0;
     }
@@ -244,6 +248,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "fovea-track: --iterations FINE,MID,COARSE (three counts, as TrackerConfig::iterations)\n");
     return 2;
   }
+  const std::string moving = fovea::bench::option(argc, argv, "--moving", "on");
+  if (moving != "on" && moving != "off") {
+    std::fprintf(stderr, "fovea-track: --moving on|off\n");
+    return 2;
+  }
   const std::string camera = fovea::bench::option(argc, argv, "--camera", "");
   printHeader();
   if (!camera.empty()) {
@@ -255,6 +264,7 @@ int main(int argc, char** argv) {
     o.hard = fovea::bench::option(argc, argv, "--case", "plain");
     o.kernels = *kernels;
     o.iterations = iterations;
+    o.moving = moving == "on";
     const RunResult r = run(o);
     printRow(o, r);
     return r.ok ? 0 : 1;
@@ -272,12 +282,16 @@ int main(int argc, char** argv) {
       {"hard: invalid depth @30", orbit, 60, 1, "invalid", *kernels},
       {"hard: wall @30-34", orbit, 60, 1, "wall", *kernels},
       {"hard: moving object", orbit, 60, 1, "object", *kernels},
+      {"hard: moving object, all fused", orbit, 60, 1, "object", *kernels, {}, false},
+      {"hard: balloon, orbit", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels},
+      {"hard: balloon, all fused", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels, {}, false},
       {"hard: socket jump @30", orbit, 60, 1, "jump", *kernels},
       {"hard: socket drift 1cm/f", orbit, 60, 1, "drift", *kernels},
   };
   int failed = 0;
   for (RunOptions& o : suite) {
     o.iterations = iterations;
+    o.moving = o.moving && moving == "on";
     const RunResult r = run(o);
     printRow(o, r);
     failed += r.ok ? 0 : 1;

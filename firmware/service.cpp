@@ -208,6 +208,7 @@ ServiceStats Service::stats() const {
   s.tracking.lost_frames = frames_track_lost_.load(std::memory_order_relaxed);
   s.tracking.relocalised = frames_relocalised_.load(std::memory_order_relaxed);
   s.tracking.prior_disagreement_m = prior_disagreement_m_.load(std::memory_order_relaxed);
+  s.tracking.moving_share = moving_share_.load(std::memory_order_relaxed);
   s.map.surfels = map_surfels_.load(std::memory_order_relaxed);
   s.map.frames_fused = map_frames_fused_.load(std::memory_order_relaxed);
   s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);

@@ -115,6 +115,7 @@ struct ServiceStats {
     uint64_t lost_frames = 0;       // frames lost (not fused)
     uint64_t relocalised = 0;       // recoveries
     double prior_disagreement_m = 0.0;  // the last tracked frame's, against its outside pose (track+X)
+    double moving_share = 0.0;          // the last tracked frame's share of pixels found moving (not fused)
   } tracking;
   // The map (foveation.source = map; zero otherwise).
   struct Map {
@@ -361,6 +362,7 @@ class Service {
   std::atomic<uint8_t> tracking_lost_reason_{0};  // pipeline::map::LostReason
   std::atomic<uint64_t> frames_tracked_{0}, frames_track_lost_{0}, frames_relocalised_{0};
   std::atomic<double> prior_disagreement_m_{0.0};
+  std::atomic<double> moving_share_{0.0};  // the last tracked frame's (pipeline/map/moving_pixels.h)
   std::atomic<int64_t> track_ns_{0};      // the last frame's tracking time
   std::atomic<int64_t> model_ns_{0};      // ... the last fused frame's model build (TrackStats::model_ns)
   bool tracking_was_lost_ = false;        // the supervisor's, for the log line

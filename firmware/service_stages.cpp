@@ -268,6 +268,7 @@ void Service::publishTracking() {
   if (t.outcome == pipeline::map::TrackOutcome::kRelocalised) frames_relocalised_.fetch_add(1, std::memory_order_relaxed);
   frames_tracked_.fetch_add(1, std::memory_order_relaxed);
   prior_disagreement_m_.store(t.prior_disagreement_m, std::memory_order_relaxed);
+  moving_share_.store(t.moving_share, std::memory_order_relaxed);
   tracking_lost_.store(false, std::memory_order_relaxed);
 }
 

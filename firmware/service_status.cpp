@@ -137,12 +137,12 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
   if (tracking_ && used >= 0 && static_cast<std::size_t>(used) < size) {
     // "pose LOST" while lost: what an operator greps for.
     std::snprintf(out + used, size - static_cast<std::size_t>(used),
-                  " | pose %s, track %.1f ms, model %.1f ms, lost %" PRIu64 " frames, relocalised %" PRIu64
-                  ", prior off by %.1f cm",
+                  " | pose %s, track %.1f ms, model %.1f ms, moving %.1f %%, lost %" PRIu64
+                  " frames, relocalised %" PRIu64 ", prior off by %.1f cm",
                   tracking_lost_.load(std::memory_order_relaxed) ? "LOST" : "tracked",
                   static_cast<double>(track_ns_.load(std::memory_order_relaxed)) * 1e-6,
                   static_cast<double>(model_ns_.load(std::memory_order_relaxed)) * 1e-6,
-                  frames_track_lost_.load(std::memory_order_relaxed), frames_relocalised_.load(std::memory_order_relaxed),
+                  moving_share_.load(std::memory_order_relaxed) * 100.0, frames_track_lost_.load(std::memory_order_relaxed), frames_relocalised_.load(std::memory_order_relaxed),
                   prior_disagreement_m_.load(std::memory_order_relaxed) * 100.0);
   }
 }

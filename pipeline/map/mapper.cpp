@@ -1,5 +1,6 @@
 #include "pipeline/map/mapper.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -59,7 +60,9 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
   if (config.fusion_thread) {
     mapper.handoff_ = std::make_unique<HandOff>();
     mapper.handoff_->frame = hal::RgbdFrame(config.map.max_width, config.map.max_height);
-    mapper.handoff_->bytes = static_cast<std::size_t>(config.map.max_width) * config.map.max_height * (2 + 3);
+    const std::size_t pixels = static_cast<std::size_t>(config.map.max_width) * config.map.max_height;
+    if (mapper.poser_) mapper.handoff_->moving.assign(pixels, 0);  // the tracker's moving pixels
+    mapper.handoff_->bytes = pixels * (2 + 3) + mapper.handoff_->moving.size();
     mapper.map_->setGate(mapper.gate_.get());
   }
   return mapper;
@@ -77,9 +80,10 @@ bool Mapper::addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFram
     out.fusion_skipped = true;
     return false;
   }
+  const uint8_t* moving = movingPixels(frame);
   if (!handoff_) {
     MapReadLock hold(*gate_);
-    fuse(frame, out);
+    fuse(frame, moving, out);
     budget_.spent(out.fuse.fuse_ns);
     return out.fused();
   }
@@ -90,19 +94,27 @@ bool Mapper::addFrame(hal::RgbdFrame& frame, bool outside_pose_valid, MapperFram
     return false;
   }
   h.frame = frame;  // the same size as created: the vectors keep their memory
+  h.has_moving = moving != nullptr;
+  if (moving != nullptr) std::copy_n(moving, frame.pixelCount(), h.moving.begin());
   h.pose_usable = out.pose_usable;
   h.state.store(kSubmitted, std::memory_order_release);
   out.handed_off = true;
   return false;
 }
 
-void Mapper::fuse(hal::RgbdFrame& frame, MapperFrame& out) {
-  map_->fuse(frame, out.fuse, out.pose_usable);
+const uint8_t* Mapper::movingPixels(const hal::RgbdFrame& frame) const {
+  if (!poser_) return nullptr;
+  const MovingPixels& moving = poser_->tracker().moving();
+  return moving.width() == frame.width() && moving.height() == frame.height() ? moving.mask() : nullptr;
+}
+
+void Mapper::fuse(hal::RgbdFrame& frame, const uint8_t* moving, MapperFrame& out) {
+  map_->fuse(frame, out.fuse, out.pose_usable, moving);
   if (view_ && out.fused()) view_->capture(frame, map_->explainedPixels(), map_->measuredDepth());
   if (poser_ && out.fused()) {
     const int64_t t0 = monotonicNs();
     std::lock_guard<std::mutex> hold(*tracker_lock_);
-    poser_->fused(frame, *map_);
+    poser_->fused(frame, *map_, moving);
     out.track.model_ns = monotonicNs() - t0;
   }
 }
@@ -116,7 +128,7 @@ bool Mapper::fuseSubmitted() {
     MapReadLock hold(*gate_);
     MapperFrame out;
     out.pose_usable = h.pose_usable;
-    fuse(h.frame, out);
+    fuse(h.frame, h.has_moving ? h.moving.data() : nullptr, out);
     h.done = out;
     ++h.fused;
     h.untaken_ns += out.fuse.fuse_ns;

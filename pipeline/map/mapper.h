@@ -36,6 +36,7 @@
 #include <memory>
 #include <mutex>
 #include <span>
+#include <vector>
 
 #include "core/result.h"
 #include "hal/frame.h"
@@ -173,14 +174,20 @@ class Mapper {
 
  private:
   Mapper() = default;
-  // Fuses `frame` here (addFrame(), or the fusion thread's fuseSubmitted()).
-  void fuse(hal::RgbdFrame& frame, MapperFrame& out);
+  // Fuses `frame` here (addFrame(), or the fusion thread's fuseSubmitted()),
+  // without its moving pixels (null: none).
+  void fuse(hal::RgbdFrame& frame, const uint8_t* moving, MapperFrame& out);
+  // The tracker's moving pixels of `frame`, the frame it just posed (null:
+  // no tracking, or none for a frame of that size).
+  const uint8_t* movingPixels(const hal::RgbdFrame& frame) const;
 
   // fusion_thread's hand-off: the frame and the state, which addFrame() moves
   // from idle to submitted and fuseSubmitted() to fusing and back to idle.
   enum : uint8_t { kIdle, kSubmitted, kFusing };
   struct HandOff {
     hal::RgbdFrame frame;
+    std::vector<uint8_t> moving;  // its moving pixels, when has_moving
+    bool has_moving = false;
     bool pose_usable = false;
     std::atomic<uint8_t> state{kIdle};
     MapperFrame done;          // the last fusion's figures (under the gate)
@@ -188,7 +195,7 @@ class Mapper {
     uint64_t taken = 0;        // ... of them seen by takeFused()
     int64_t untaken_ns = 0;    // ... the time of those not yet seen (under the gate)
     uint64_t busy = 0;         // frames it was busy for (addFrame's thread)
-    std::size_t bytes = 0;     // the frame's depth and colour
+    std::size_t bytes = 0;     // the frame's depth and colour, and the moving pixels
   };
 
   MapOutput output_ = MapOutput::kNone;

@@ -53,8 +53,11 @@ class PoseEstimator {
   // the outside pose (kRefine, when valid) or the last good pose, for showing
   // it beside the map, never for fusing it. Never allocates.
   bool poseFrame(hal::RgbdFrame& frame, bool outside_pose_valid, TrackStats& stats);
-  // After `map` fused the frame poseFrame() posed. Never allocates.
-  void fused(const hal::RgbdFrame& frame, const SurfelMap& map) { tracker_.modelFused(frame, frame.T_world_cam, map); }
+  // After `map` fused the frame poseFrame() posed, without its moving pixels
+  // (null: none). Never allocates.
+  void fused(const hal::RgbdFrame& frame, const SurfelMap& map, const uint8_t* moving = nullptr) {
+    tracker_.modelFused(frame, frame.T_world_cam, map, moving);
+  }
 
   PoseTracking mode() const { return mode_; }
   const FrameToModelTracker& tracker() const { return tracker_; }

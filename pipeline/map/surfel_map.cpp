@@ -176,7 +176,7 @@ FuseOutcome SurfelMap::checkFrame(const hal::RgbdFrame& frame) {
   return jumped ? FuseOutcome::kRefusedPoseJump : FuseOutcome::kFused;
 }
 
-FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid) {
+FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid, const uint8_t* moving) {
   const int64_t start_ns = monotonicNs();
   stats = {};
   stats.outcome = pose_valid ? checkFrame(frame) : FuseOutcome::kRefusedNoPose;
@@ -196,6 +196,7 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   std::fill(explained_.begin(), explained_.begin() + static_cast<std::ptrdiff_t>(frame.pixelCount()), uint8_t{0});
   int64_t t0 = monotonicNs();
   computeVertices(frame, stats);
+  if (moving != nullptr) leaveOutMoving(frame.pixelCount(), moving, stats);
   int64_t t1 = monotonicNs();
   stats.vertices_ns = t1 - t0;
   if (stats.pixels_valid > 0) {
@@ -228,6 +229,20 @@ void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
   const VertexParams params =
       prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
   stats.pixels_valid = pipeline::map::computeVertices(params, pixelMaps(), config_.kernels);
+}
+
+// A moving pixel keeps its vertex, so that appendUnexplained() sends it and the
+// index map's pass still sees through surfels in front of it (the space before
+// a mover is free too), but it weighs nothing: the association's merges and
+// carving and addNew() take only pixels of positive weight.
+void SurfelMap::leaveOutMoving(std::size_t pixels, const uint8_t* moving, FuseStats& stats) {
+  uint32_t left_out = 0;
+  for (std::size_t i = 0; i < pixels; ++i) {
+    if (!moving[i] || weight_[i] == 0.0f) continue;
+    weight_[i] = 0.0f;
+    ++left_out;
+  }
+  stats.pixels_moving = left_out;
 }
 
 void SurfelMap::detachSurfel(uint32_t slot) {

@@ -113,6 +113,7 @@ std::string_view fuseOutcomeName(FuseOutcome outcome);
 struct FuseStats {
   FuseOutcome outcome = FuseOutcome::kFused;
   uint32_t pixels_valid = 0;     // depth in range with a normal (those without one only carve)
+  uint32_t pixels_moving = 0;    // of them, left out as moving (fuse()'s `moving`)
   uint32_t merged = 0;           // measurements merged into a surfel
   uint32_t added = 0;            // new surfels
   uint32_t carved = 0;           // surfels seen through (confidence lowered)
@@ -149,9 +150,12 @@ class SurfelMap {
   static Result<SurfelMap> create(const SurfelMapConfig& config);
 
   // Fuses one posed frame (frame.T_world_cam: camera to world). pose_valid
-  // false (the pose source had none for the frame's stamp) refuses it. Never
-  // allocates.
-  FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid = true);
+  // false (the pose source had none for the frame's stamp) refuses it.
+  // moving (null: none): the frame's pixels found moving (MovingPixels), which
+  // neither merge, carve nor add: the map stays static, and they stay
+  // unexplained (appendUnexplained() sends them). Never allocates.
+  FuseOutcome fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool pose_valid = true,
+                   const uint8_t* moving = nullptr);
 
   // The pixels of the last fused frame (pass that frame) that no settled
   // surfel lies at (within the association's depth tolerance): new surface, a
@@ -223,6 +227,7 @@ class SurfelMap {
   int findOrAddBrick(const Eigen::Vector3d& p_world);
   FuseOutcome checkFrame(const hal::RgbdFrame& frame);
   void computeVertices(const hal::RgbdFrame& frame, FuseStats& stats);
+  void leaveOutMoving(std::size_t pixels, const uint8_t* moving, FuseStats& stats);
   PixelMaps pixelMaps();  // step 2's output: pointers into the per-pixel scratch
   Eigen::Vector3d vertexAt(std::size_t pixel) const {
     return {vertex_x_[pixel], vertex_y_[pixel], vertex_z_[pixel]};

@@ -270,6 +270,7 @@ Status TrackerConfig::validate() const {
   }
   if (!(std::isfinite(max_depth_m) && max_depth_m >= 0.0)) return invalidArgument("tracker: max_depth_m must be >= 0");
   if (!positive(max_photometric_residual)) return invalidArgument("tracker: max_photometric_residual must be > 0");
+  if (Status s = moving.validate(); !s) return invalidArgument("tracker: " + s.message());
   return Status::ok();
 }
 
@@ -289,11 +290,14 @@ std::size_t FrameToModelTracker::Level::bytes() const {
   return n;
 }
 
-FrameToModelTracker::FrameToModelTracker(const TrackerConfig& config) : config_(config) {}
+FrameToModelTracker::FrameToModelTracker(const TrackerConfig& config, MovingPixels moving)
+    : config_(config), moving_(std::move(moving)) {}
 
 Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& config) {
   if (Status s = config.validate(); !s.isOk()) return s;
-  FrameToModelTracker t(config);
+  Result<MovingPixels> moving = MovingPixels::create(config.max_width, config.max_height, config.moving);
+  if (!moving) return moving.status();
+  FrameToModelTracker t(config, std::move(moving.value()));
   for (int l = 0; l < kLevels; ++l) {
     const std::size_t pixels =
         static_cast<std::size_t>(config.max_width >> l) * static_cast<std::size_t>(config.max_height >> l);
@@ -305,7 +309,7 @@ Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& con
 }
 
 std::size_t FrameToModelTracker::memoryBytes() const {
-  std::size_t n = model_from_surfel_.capacity();
+  std::size_t n = model_from_surfel_.capacity() + moving_.memoryBytes();
   for (const Level& l : frame_) n += l.bytes();
   for (const Level& l : model_) n += l.bytes();
   return n;
@@ -317,6 +321,7 @@ void FrameToModelTracker::reset() {
   last_good_ = hal::Pose{};
   model_pose_ = hal::Pose{};
   residual_count_ = 0;
+  moving_.clear();
 }
 
 // The level below `from`: its camera, and its pixels by the kernel (2x2
@@ -394,14 +399,15 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
 
 // The model's finest level, pixel by pixel: the surfel the index map names,
 // moved into the camera at `pose`, or where none is, the frame's own
-// measurement. Two things make it cheap without changing a bit: a surfel's
+// measurement (none where the frame's pixel was moving). Two things make it
+// cheap without changing a bit: a surfel's
 // values depend on the surfel and the pose alone, so a pixel naming the surfel
 // its left neighbour named copies them (a footprint spans several pixels of a
 // row); and the surfel kPrefetchPixels ahead is fetched early (the pool is tens
 // of MB: without it most of the time went to waiting for it, perf on the
 // mock orbit).
 void FrameToModelTracker::modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
-                                            const uint32_t* index) {
+                                            const uint32_t* index, const uint8_t* moving) {
   constexpr std::size_t kPrefetchPixels = 24;
   const int w = frame.width(), h = frame.height();
   const std::size_t pixels = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
@@ -443,7 +449,9 @@ void FrameToModelTracker::modelFromIndexMap(const hal::RgbdFrame& frame, const h
         }
       }
       model_from_surfel_[i] = 0;
-      (void)l0.setMeasured(i, u, v, depth[i], scale, max_z, frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f);
+      // A moving pixel's measurement is the mover: no model there.
+      const uint16_t raw = moving != nullptr && moving[i] ? uint16_t{0} : depth[i];
+      (void)l0.setMeasured(i, u, v, raw, scale, max_z, frame.has_rgb ? intensityOf(rgb + 3 * i) : 0.0f);
     }
   }
 }
@@ -454,7 +462,8 @@ FrameToModelTracker::ModelView FrameToModelTracker::finestModel() const {
           l0.ny.data(),    l0.nz.data(),    l0.intensity.data(), model_from_surfel_.data()};
 }
 
-void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map) {
+void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
+                                     const uint8_t* moving) {
   const int w = frame.width(), h = frame.height();
   if (w > config_.max_width || h > config_.max_height || w < 8 || h < 8) {
     have_model_ = false;
@@ -463,7 +472,7 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
   const bool index_ok = map.indexMapWidth() == w && map.indexMapHeight() == h;
   Level& l0 = model_[0];
   l0.setCamera(w, h, frame.intrinsics);
-  modelFromIndexMap(frame, pose, map, index_ok ? map.indexMap() : nullptr);
+  modelFromIndexMap(frame, pose, map, index_ok ? map.indexMap() : nullptr, moving);
   // Normals of the pixels without a surfel: from the model's vertex map (the
   // frame's own measurement there, next to surfels as merged).
   computeNormals(
@@ -657,6 +666,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   };
   const auto lose = [&](LostReason reason) {
     stats.lost_reason = reason;
+    moving_.clear();
     pose = prior != nullptr ? *prior : last_good_;
     if (have_model_) lost_ = true;
     ++counters_.lost;
@@ -675,6 +685,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
     pose = prior != nullptr ? *prior : last_good_;
     last_good_ = pose;
     lost_ = false;
+    moving_.clear();
     return finish(TrackOutcome::kFirstFrame);
   }
   const bool model_size_ok = model_[0].width == frame.width() && model_[0].height == frame.height();
@@ -692,7 +703,17 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   last_good_ = best.pose;
   residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.solve.icp_rms;
   ++residual_count_;
+  markMoving(best.solve, stats);
   return finish(outcome);
+}
+
+void FrameToModelTracker::markMoving(const Solve& s, TrackStats& stats) {
+  const Level& F = frame_[1];
+  const Level& M = model_[0];
+  const MovingPixels::FrameIn half{F.width, F.height, F.x.data(), F.y.data(), F.z.data(), F.intensity.data()};
+  const MovingPixels::ModelIn model{M.width, M.height, M.fx, M.fy, M.cx, M.cy, M.z.data(), model_from_surfel_.data()};
+  stats.moving_pixels = moving_.update(half, model, s.R.cast<float>(), s.t.cast<float>());
+  stats.moving_share = valid_pixels_ > 0 ? static_cast<double>(stats.moving_pixels) / valid_pixels_ : 0.0;
 }
 
 }  // namespace fovea::pipeline::map

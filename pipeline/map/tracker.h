@@ -43,6 +43,7 @@
 #include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
+#include "pipeline/map/moving_pixels.h"
 
 namespace fovea::pipeline::map {
 
@@ -97,6 +98,8 @@ struct TrackerConfig {
   double max_photometric_residual = 0.3;
   // Per-pixel residuals and the reduction: the scalar reference or Highway's.
   KernelSet kernels = defaultKernelSet();
+  // The pixels in front of the map's surface, which are not fused (moving_pixels.h).
+  MovingPixelsConfig moving;
 
   Status validate() const;
 };
@@ -138,6 +141,10 @@ struct TrackStats {
   double prior_disagreement_m = 0.0;
   double prior_disagreement_deg = 0.0;
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
+  // Tracked frames: the pixels found moving (in front of the map's surface, not
+  // settled: moving_pixels.h), and their share of the valid pixels.
+  uint32_t moving_pixels = 0;
+  double moving_share = 0.0;
   int64_t track_ns = 0;             // all of track()
   int64_t pyramid_ns = 0;           // step 1
   // Building the model for the next frame from the fused map (modelFused(),
@@ -162,8 +169,11 @@ class FrameToModelTracker {
   TrackOutcome track(const hal::RgbdFrame& frame, const hal::Pose* prior, hal::Pose& pose, TrackStats& stats);
 
   // After `map` fused `frame` at `pose` (the frame track() just posed): takes the
-  // map's prediction at that pose as the next frame's model. Never allocates.
-  void modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map);
+  // map's prediction at that pose as the next frame's model. moving (null:
+  // none): the frame's moving pixels, which the map did not fuse and the model
+  // does not take from the frame either. Never allocates.
+  void modelFused(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
+                  const uint8_t* moving = nullptr);
 
   // Forgets the model and the last pose (the next frame is a first frame).
   void reset();
@@ -179,6 +189,9 @@ class FrameToModelTracker {
   };
   ModelView finestModel() const;
 
+  // The last tracked frame's moving pixels (none after a first or lost frame),
+  // which the map does not fuse.
+  const MovingPixels& moving() const { return moving_; }
   bool lost() const { return lost_; }
   const hal::Pose& lastGoodPose() const { return last_good_; }
   const TrackerConfig& config() const { return config_; }
@@ -186,7 +199,7 @@ class FrameToModelTracker {
   std::size_t memoryBytes() const;
 
  private:
-  explicit FrameToModelTracker(const TrackerConfig& config);
+  FrameToModelTracker(const TrackerConfig& config, MovingPixels moving);
 
   static constexpr int kLevels = 3;
   // One pyramid level (of the new frame or of the model), structure of arrays.
@@ -217,7 +230,7 @@ class FrameToModelTracker {
   bool buildFramePyramid(const hal::RgbdFrame& frame);  // false: no valid depth
   // modelFused()'s finest level from the map's index map (nullptr: none at the frame's size).
   void modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
-                         const uint32_t* index);
+                         const uint32_t* index, const uint8_t* moving);
   Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const;
@@ -233,6 +246,8 @@ class FrameToModelTracker {
   Attempt relocalise(const hal::Pose* prior, bool photometric, TrackStats& stats);
   void recordAttempt(const Attempt& best, const hal::Pose* prior, TrackStats& stats) const;
   double medianResidual() const;
+  // The tracked frame's moving pixels from the solve that posed it.
+  void markMoving(const Solve& s, TrackStats& stats);
 
   TrackerConfig config_;
   TrackerCounters counters_;
@@ -243,6 +258,7 @@ class FrameToModelTracker {
   std::array<Level, kLevels> frame_;
   std::array<Level, kLevels> model_;
   std::vector<uint8_t> model_from_surfel_;  // finest model level: 1 where a surfel gave the pixel
+  MovingPixels moving_;
   std::array<double, 15> residual_history_{};
   int residual_count_ = 0;
   uint32_t valid_pixels_ = 0;

@@ -1,6 +1,7 @@
 // The tracker's hard cases (pipeline/map/tracker.h, docs/tracking.md): a frame
-// without depth, a textureless wall, fast motion (frames dropped), an object
-// moving through a third of the view, and the view returning after a loss.
+// without depth, a textureless wall, fast motion (frames dropped), a box moving
+// through a third of the view, a block carried with the camera, the balloon,
+// and the view returning after a loss.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "hal/camera.h"
+#include "pipeline/map/moving_pixels.h"
 #include "pipeline/map/surfel_map.h"
 #include "pipeline/map/tracker.h"
 #include "tests/support/test_time.h"
@@ -60,7 +62,8 @@ struct Rig {
     tc.max_height = kH;
     return Rig{SurfelMap::create(mc).value(), FrameToModelTracker::create(tc).value(), hal::Pose{}};
   }
-  // Tracks (prior: the first frame's truth, else none) and fuses where tracked.
+  // Tracks (prior: the first frame's truth, else none) and fuses where
+  // tracked, without the pixels the tracker found moving (as Mapper does).
   TrackOutcome step(hal::RgbdFrame& frame, TrackStats& stats, const hal::Pose* prior = nullptr) {
     hal::Pose pose;
     const TrackOutcome o = tracker.track(frame, prior, pose, stats);
@@ -68,7 +71,9 @@ struct Rig {
       const hal::Pose truth = frame.T_world_cam;
       frame.T_world_cam = pose;
       FuseStats fs;
-      if (map.fuse(frame, fs) == FuseOutcome::kFused) tracker.modelFused(frame, pose, map);
+      const MovingPixels& m = tracker.moving();
+      const uint8_t* moving = m.width() == frame.width() && m.height() == frame.height() ? m.mask() : nullptr;
+      if (map.fuse(frame, fs, true, moving) == FuseOutcome::kFused) tracker.modelFused(frame, pose, map, moving);
       frame.T_world_cam = truth;
       last_pose = pose;
     }
@@ -162,13 +167,64 @@ TEST(TrackerHardCases, FastOrbitWithEveryOtherFrameDropped) {
   EXPECT_LT(rmse, 0.005);
 }
 
+// From frame 10 a textured box a third of the view wide, the full height, at
+// 0.8 m, moves 3 pixels a frame across the orbiting camera's view (fovea-track's
+// `object` case at half its size). The box stands where the map has seen the
+// room: its pixels are moving (moving_pixels.h), are not fused, and the track
+// holds: issue 42's bound, 10 mm. Fusing them (before) put the box in the model
+// and the pose followed it: 186 mm ATE at 640x480 (docs/tracking.md).
+TEST(TrackerHardCases, ABoxAThirdOfTheViewMovingThroughIsLeftOutAndTheTrackHolds) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
+  constexpr int kFrames = 40, kFirst = 10, kBox = kW / 3;
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", kFrames);
+  ASSERT_EQ(frames.size(), static_cast<std::size_t>(kFrames));
+  Rig rig = Rig::make();
+  TrackStats stats;
+  double sq = 0.0, worst = 0.0, least_share = 1.0, most_static_share = 0.0;
+  int n = 0, lost = 0;
+  for (int i = 0; i < kFrames; ++i) {
+    hal::RgbdFrame& f = frames[static_cast<std::size_t>(i)];
+    if (i >= kFirst) {
+      const int x0 = (i - kFirst) * 3;
+      for (int v = 0; v < kH; ++v) {
+        for (int u = x0; u < x0 + kBox; ++u) {
+          const std::size_t p = static_cast<std::size_t>(v) * kW + u;
+          f.depth()[p] = static_cast<uint16_t>(std::lround((0.8 + 0.001 * (u - x0)) / f.depth_scale_m));
+          const bool check = ((u - x0) / 8 + v / 8) % 2 == 0;
+          f.rgb()[3 * p] = check ? 220 : 40, f.rgb()[3 * p + 1] = 60, f.rgb()[3 * p + 2] = check ? 40 : 200;
+        }
+      }
+    }
+    const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
+    if (o == TrackOutcome::kLost) {
+      ++lost;
+      continue;
+    }
+    if (i > kFirst) least_share = std::min(least_share, stats.moving_share);
+    if (i > 0 && i < kFirst) most_static_share = std::max(most_static_share, stats.moving_share);
+    const double e = translationError(rig.last_pose, f.T_world_cam);
+    sq += e * e, ++n, worst = std::max(worst, e);
+  }
+  const double rmse = std::sqrt(sq / std::max(n, 1));
+  std::printf("orbit with a box moving through a third: %d tracked, %d lost, RMSE %.2f mm, max %.2f mm, "
+              "moving share at least %.3f with the box, at most %.3f before it\n",
+              n, lost, rmse * 1e3, worst * 1e3, least_share, most_static_share);
+  EXPECT_EQ(lost, 0);
+  EXPECT_LT(rmse, 0.010);
+  EXPECT_GT(least_share, 0.25) << "the box is a third of the view";
+  EXPECT_LT(most_static_share, 0.01) << "the static room has no mover";
+}
+
 // A block 1 m in front of the camera over the left third of every frame,
 // moving with the camera (an object carried along). MEASURED LIMITATION: the
 // block wins. Its frontal plane at 1 m carries about ten times the weight of the
 // room's pixels at 2 to 4 m (the noise weighting), agrees with "no motion" and
 // the map keeps it (it is seen where it was); the pose follows the block:
-// 215.8 mm RMS over 20 frames when this was written. Asserted as measured
-// (docs/tracking.md): a robust kernel or a motion segmentation is the fix.
+// 215.8 mm RMS over 20 frames when this was written, the same with the moving
+// pixels left out (the block is in the map from the first frame, so it is
+// never in front of what the map knows). Asserted as measured
+// (docs/tracking.md): treating what moves with the camera as one rigid body
+// (RigidFusion) is the missing piece.
 TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
   FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 20);
@@ -205,8 +261,12 @@ TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
 // scene is two planes, which leave the translation along their intersection to
 // the plaster's and tiles' faint texture, while the balloon constrains every
 // axis and moves: the pose follows the balloon, 351 mm RMS over 30 frames when
-// this was written (402 mm without the noise weighting). Nothing flags it: the
-// balloon keeps the system well conditioned. Asserted as measured (docs/tracking.md).
+// this was written (402 mm without the noise weighting), 353 mm with the moving
+// pixels left out: the balloon is in the map from the first frame and drifts
+// slowly, so its new place overlaps its surfels and is seldom in front of the
+// wall by the gap (at 640x480 over 60 frames the moving pixels take fovea-track's
+// figure from 195 to 133 mm). Nothing flags it: the balloon keeps the system
+// well conditioned. Asserted as measured (docs/tracking.md).
 TEST(TrackerHardCases, AMovingBalloonBeforeTwoPlanesHijacksThePose) {
   FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   std::vector<hal::RgbdFrame> frames = mockFrames("mock:balloon,size=320x240,path=orbit", 30);

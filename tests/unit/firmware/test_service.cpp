@@ -670,13 +670,16 @@ TEST(Service, TrackedPoseLostOnACoveredLensRaisesTheFaultAndRecovers) {
   RunningService running;
   startService(running, config, std::move(environment));
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().tracking.tracked >= 10; }, 5000ms));
+  // Fusion, on its own thread, may be a frame or two behind on a loaded machine.
+  EXPECT_TRUE(waitUntil([&] { return running.service->stats().map.frames_fused >= 9; }, 3000ms));
   ServiceStats stats = running.service->stats();
   EXPECT_TRUE(stats.tracking.enabled);
   EXPECT_EQ(stats.tracking.lost_frames, 0u);
-  EXPECT_GE(stats.map.frames_fused, 9u);
   ASSERT_TRUE(waitUntil([&] { return sink.contains("| pose tracked, track "); }, 3000ms));
   // The model's build after a fused frame, beside it (not zero: frames were fused).
-  EXPECT_TRUE(sink.matches(" ms, model (0\\.[1-9]|[1-9][0-9]*\\.[0-9]) ms, lost "));
+  // ... and the share of pixels found moving: next to none in the static room.
+  EXPECT_TRUE(sink.matches(" ms, model (0\\.[1-9]|[1-9][0-9]*\\.[0-9]) ms, moving 0\\.[0-9] %, lost "));
+  EXPECT_LT(stats.tracking.moving_share, 0.01);
   EXPECT_FALSE(chip.value(2));
 
   cam.blind(true);

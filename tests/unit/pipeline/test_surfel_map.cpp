@@ -259,6 +259,57 @@ TEST(SurfelMap, AWallSeenAgainIsMergedNotDuplicated) {
   EXPECT_GT(stable, map.size() / 2);
 }
 
+// Pixels marked moving (fuse()'s `moving`, the tracker's MovingPixels) add,
+// merge and carve nothing: a box seen in front of a known wall while marked
+// adds no surfel where it is, and the frame's unexplained points (what goes
+// to the operator live) still carry it; the same frames unmarked put it in
+// the map.
+TEST(SurfelMap, MovingPixelsAreNotFusedButStayUnexplained) {
+  const int w = 80, h = 60;
+  const Scene wall;
+  const Scene with_box = sceneWithBox();
+  const Box& box = with_box.boxes[0];
+  hal::RgbdFrame frame = makeFrame(w, h);
+  const auto surfelsInBox = [&](const SurfelMap& map) {
+    std::size_t n = 0;
+    for (std::size_t slot = 0; slot < map.slotCount(); ++slot) n += map.live(slot) && box.contains(map.worldPosition(slot), 0.02);
+    return n;
+  };
+  for (const bool marked : {true, false}) {
+    SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
+    int64_t stamp = 1;
+    fuseStill(map, frame, wall, 3, stamp);
+    const std::size_t before = map.size();
+    std::vector<uint8_t> moving(static_cast<std::size_t>(w) * h, 0);
+    std::size_t box_pixels = 0;
+    for (int f = 0; f < 3; ++f) {
+      render(with_box, poseAt({0, 0, 0}), ++stamp, frame);
+      for (std::size_t i = 0; i < moving.size(); ++i) {
+        moving[i] = marked && frame.depth()[i] > 0 && frame.depth()[i] * frame.depth_scale_m < 2.0 ? 1 : 0;
+      }
+      box_pixels = static_cast<std::size_t>(std::count(moving.begin(), moving.end(), uint8_t{1}));
+      FuseStats stats;
+      ASSERT_EQ(map.fuse(frame, stats, true, moving.data()), FuseOutcome::kFused);
+      expectConsistent(map);
+      if (!marked) continue;
+      EXPECT_GT(stats.pixels_moving, box_pixels * 9 / 10) << "frame " << f;
+      PointCloud live(static_cast<std::size_t>(w) * h);
+      const std::size_t unexplained = map.appendUnexplained(frame, live);
+      std::size_t live_on_box = 0;
+      for (std::size_t i = 0; i < unexplained; ++i) {
+        live_on_box += box.contains(live.world(i), 0.01) ? 1 : 0;
+      }
+      EXPECT_GE(live_on_box, box_pixels * 9 / 10) << "frame " << f << ": the box goes out live";
+    }
+    if (marked) {
+      EXPECT_EQ(surfelsInBox(map), 0u) << "the moving box left nothing in the map";
+      EXPECT_LE(map.size(), before) << "and nothing was added for it";
+    } else {
+      EXPECT_GT(surfelsInBox(map), box_pixels / 2) << "unmarked, the box is fused";
+    }
+  }
+}
+
 TEST(SurfelMap, AnObjectThatLeftLeavesNoGhost) {
   const int w = 80, h = 60;
   SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
