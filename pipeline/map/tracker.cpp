@@ -138,6 +138,7 @@ TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, con
   out.j_icp[3] = qy * wnz - qz * wny;
   out.j_icp[4] = qz * wnx - qx * wnz;
   out.j_icp[5] = qx * wny - qy * wnx;
+  out.w_icp = cauchyWeight(out.r_icp, p.icp_robust_scale);
   if (p.use_photometric) {
     // The model's intensity interpolated bilinearly at the projection (nearest
     // would leave the photometric term's minimum up to half a pixel off).
@@ -156,6 +157,7 @@ TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, con
       const float s = p.photometric_sqrt_weight;
       out.photometric = true;
       out.r_photo = s * r;
+      out.w_photo = cauchyWeight(r, p.photometric_robust_scale);
       out.j_photo[0] = s * gx, out.j_photo[1] = s * gy, out.j_photo[2] = s * gz;
       out.j_photo[3] = s * (qy * gz - qz * gy);
       out.j_photo[4] = s * (qz * gx - qx * gz);
@@ -166,12 +168,14 @@ TrackPixel trackPixelRef(const TrackFrameLevel& f, const TrackModelLevel& m, con
 }
 
 namespace {
-void accumulate(const float* J, float r, double* h, double* b) {
+// w J^T J and w J^T r, w J[a] rounded to float as the Highway kernel does,
+// then each product in double (exact).
+void accumulate(const float* J, float r, float w, double* h, double* b) {
   int k = 0;
   for (int a = 0; a < 6; ++a) {
-    const double ja = J[a];
-    for (int c = a; c < 6; ++c) h[k++] += ja * static_cast<double>(J[c]);
-    b[a] += ja * static_cast<double>(r);
+    const double wja = w * J[a];
+    for (int c = a; c < 6; ++c) h[k++] += wja * static_cast<double>(J[c]);
+    b[a] += wja * static_cast<double>(r);
   }
 }
 }  // namespace
@@ -185,11 +189,11 @@ void trackLevelRef(const TrackFrameLevel& frame, const TrackModelLevel& model, c
       const TrackPixel px = trackPixelRef(frame, model, params, static_cast<std::size_t>(v) * frame.width + u);
       if (!px.icp) continue;
       ++sums.inliers;
-      accumulate(px.j_icp, px.r_icp, h, b);
+      accumulate(px.j_icp, px.r_icp, px.w_icp, h, b);
       icp_sq += static_cast<double>(px.r_icp) * px.r_icp;
       if (px.photometric) {
         ++sums.photometric_inliers;
-        accumulate(px.j_photo, px.r_photo, h, b);
+        accumulate(px.j_photo, px.r_photo, px.w_photo, h, b);
         photo_sq += static_cast<double>(px.r_photo) * px.r_photo;
       }
     }
@@ -270,6 +274,10 @@ Status TrackerConfig::validate() const {
   }
   if (!(std::isfinite(max_depth_m) && max_depth_m >= 0.0)) return invalidArgument("tracker: max_depth_m must be >= 0");
   if (!positive(max_photometric_residual)) return invalidArgument("tracker: max_photometric_residual must be > 0");
+  if (!(std::isfinite(icp_robust_scale_m) && icp_robust_scale_m >= 0.0) ||
+      !(std::isfinite(photometric_robust_scale) && photometric_robust_scale >= 0.0)) {
+    return invalidArgument("tracker: icp_robust_scale_m and photometric_robust_scale must be >= 0");
+  }
   if (Status s = moving.validate(); !s) return invalidArgument("tracker: " + s.message());
   return Status::ok();
 }
@@ -509,6 +517,12 @@ FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0,
     p.use_photometric = photometric && config_.photometric_weight > 0.0;
     p.photometric_sqrt_weight = static_cast<float>(std::sqrt(config_.photometric_weight));
     p.max_photometric_residual = static_cast<float>(config_.max_photometric_residual);
+    // Cauchy's weights (IRLS) from the first iteration when tracking from the
+    // last pose; relocalising, least squares until the level converges and the
+    // weights from there: started far off, they would take most of the pixels
+    // that must pull the estimate in (the wall case: 12.5 mm ATE against 0.9).
+    const bool robust_configured = config_.icp_robust_scale_m > 0.0 || config_.photometric_robust_scale > 0.0;
+    bool robust = robust_configured && !lost_;
     // The finest level runs at least one pass so that the statistics are its own.
     const int iterations = l == 0 ? std::max(1, config_.iterations[0]) : config_.iterations[l];
     for (int it = 0; it < iterations; ++it) {
@@ -516,6 +530,8 @@ FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0,
         for (int c = 0; c < 3; ++c) p.R[3 * r + c] = static_cast<float>(s.R(r, c));
         p.t[r] = static_cast<float>(s.t(r));
       }
+      p.icp_robust_scale = robust ? static_cast<float>(config_.icp_robust_scale_m) : 0.0f;
+      p.photometric_robust_scale = robust ? static_cast<float>(config_.photometric_robust_scale) : 0.0f;
       trackLevel(fl, ml, p, sums, config_.kernels);
       ++s.iterations;
       Eigen::Matrix<double, 6, 6> H;
@@ -548,7 +564,10 @@ FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0,
       expTwist(x, dR, dt);
       s.R = dR * s.R;
       s.t = dR * s.t + dt;
-      if (x.head<3>().norm() < config_.converged_step && x.tail<3>().norm() < config_.converged_step) break;
+      if (x.head<3>().norm() < config_.converged_step && x.tail<3>().norm() < config_.converged_step) {
+        if (robust || !robust_configured) break;
+        robust = true;
+      }
     }
   }
   // Re-orthonormalise (float-accumulated rounding over many updates).

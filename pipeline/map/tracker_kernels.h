@@ -22,9 +22,15 @@
 //                 g' = (gx fx / qz, gy fy / qz, -(gx fx qx + gy fy qy) / qz^2) (gx, gy:
 //                 the model's intensity gradient per pixel at (u', v')); both
 //                 scaled by sqrt(photometric_weight).
+// Robust weights (iteratively reweighted least squares with Cauchy's kernel,
+// issue 42): each term's w = 1 / (1 + (r0 / c)^2), r0 its residual before the
+// photometric weight (ICP: r, noise-weighted; photometric: the intensity
+// difference), c its scale (icp_robust_scale, photometric_robust_scale; 0: w = 1,
+// least squares). A pixel of something moving, whose residual is many c, pulls
+// the pose little.
 // Every per-pixel quantity is float. The sums (TrackSums): the 21 entries of the
-// upper triangle of J^T J, the 6 of J^T r, and the squared residuals, over every
-// associated pixel.
+// upper triangle of w J^T J, the 6 of w J^T r, and the squared residuals
+// (unweighted), over every associated pixel.
 //
 // Stable reduction: the reference promotes each product to double (exact: a
 // product of two floats fits a double), sums a row in double and adds the row's
@@ -88,7 +94,17 @@ struct TrackParams {
   bool use_photometric = true;
   float photometric_sqrt_weight = 0.316f;
   float max_photometric_residual = 0.3f;
+  float icp_robust_scale = 0.0f;          // Cauchy's c for ICP's residual (metres at 1 m's noise); 0: none
+  float photometric_robust_scale = 0.0f;  // ... for the intensity difference; 0: none
 };
+
+// Cauchy's weight 1 / (1 + (r / c)^2); 1 when c is 0. The Highway kernel
+// computes it with the same operations in the same order.
+inline float cauchyWeight(float r, float c) {
+  if (c == 0.0f) return 1.0f;
+  const float q = r / c;
+  return 1.0f / (1.0f + q * q);
+}
 
 struct TrackSums {
   std::array<double, 21> h{};  // J^T J upper triangle, row by row: (0,0) (0,1) .. (0,5) (1,1) .. (5,5)
@@ -108,6 +124,8 @@ struct TrackPixel {
   float r_icp = 0.0f;
   float j_photo[6] = {0, 0, 0, 0, 0, 0};
   float r_photo = 0.0f;
+  float w_icp = 1.0f;    // the terms' robust weights (cauchyWeight)
+  float w_photo = 1.0f;
 };
 // The normals of a vertex map (a level of the tracker's pyramids): central
 // differences over `reach` pixels each side, none at the border, next to a

@@ -49,36 +49,49 @@ HWY_INLINE void Accumulate(DF df, float* acc, int k, hn::Vec<DF> term) {
   hn::Store(hn::Add(hn::Load(df, a), term), df, a);
 }
 
-// One term's J^T J and J^T r into the sums (J = j0..j5, sizeless vectors as arguments).
+// One term's w J^T J and w J^T r into the sums (J = j0..j5, sizeless vectors as
+// arguments; w the robust weight, w J rounded to float first as the reference does).
 template <class DF, class V = hn::Vec<DF>>
-HWY_INLINE void AddTerms(DF df, V j0, V j1, V j2, V j3, V j4, V j5, V r, float* acc) {
-  Accumulate(df, acc, 0, hn::Mul(j0, j0));
-  Accumulate(df, acc, 1, hn::Mul(j0, j1));
-  Accumulate(df, acc, 2, hn::Mul(j0, j2));
-  Accumulate(df, acc, 3, hn::Mul(j0, j3));
-  Accumulate(df, acc, 4, hn::Mul(j0, j4));
-  Accumulate(df, acc, 5, hn::Mul(j0, j5));
-  Accumulate(df, acc, 6, hn::Mul(j1, j1));
-  Accumulate(df, acc, 7, hn::Mul(j1, j2));
-  Accumulate(df, acc, 8, hn::Mul(j1, j3));
-  Accumulate(df, acc, 9, hn::Mul(j1, j4));
-  Accumulate(df, acc, 10, hn::Mul(j1, j5));
-  Accumulate(df, acc, 11, hn::Mul(j2, j2));
-  Accumulate(df, acc, 12, hn::Mul(j2, j3));
-  Accumulate(df, acc, 13, hn::Mul(j2, j4));
-  Accumulate(df, acc, 14, hn::Mul(j2, j5));
-  Accumulate(df, acc, 15, hn::Mul(j3, j3));
-  Accumulate(df, acc, 16, hn::Mul(j3, j4));
-  Accumulate(df, acc, 17, hn::Mul(j3, j5));
-  Accumulate(df, acc, 18, hn::Mul(j4, j4));
-  Accumulate(df, acc, 19, hn::Mul(j4, j5));
-  Accumulate(df, acc, 20, hn::Mul(j5, j5));
-  Accumulate(df, acc, 21, hn::Mul(j0, r));
-  Accumulate(df, acc, 22, hn::Mul(j1, r));
-  Accumulate(df, acc, 23, hn::Mul(j2, r));
-  Accumulate(df, acc, 24, hn::Mul(j3, r));
-  Accumulate(df, acc, 25, hn::Mul(j4, r));
-  Accumulate(df, acc, 26, hn::Mul(j5, r));
+HWY_INLINE void AddTerms(DF df, V j0, V j1, V j2, V j3, V j4, V j5, V r, V w, float* acc) {
+  const V w0 = hn::Mul(w, j0), w1 = hn::Mul(w, j1), w2 = hn::Mul(w, j2);
+  const V w3 = hn::Mul(w, j3), w4 = hn::Mul(w, j4), w5 = hn::Mul(w, j5);
+  Accumulate(df, acc, 0, hn::Mul(w0, j0));
+  Accumulate(df, acc, 1, hn::Mul(w0, j1));
+  Accumulate(df, acc, 2, hn::Mul(w0, j2));
+  Accumulate(df, acc, 3, hn::Mul(w0, j3));
+  Accumulate(df, acc, 4, hn::Mul(w0, j4));
+  Accumulate(df, acc, 5, hn::Mul(w0, j5));
+  Accumulate(df, acc, 6, hn::Mul(w1, j1));
+  Accumulate(df, acc, 7, hn::Mul(w1, j2));
+  Accumulate(df, acc, 8, hn::Mul(w1, j3));
+  Accumulate(df, acc, 9, hn::Mul(w1, j4));
+  Accumulate(df, acc, 10, hn::Mul(w1, j5));
+  Accumulate(df, acc, 11, hn::Mul(w2, j2));
+  Accumulate(df, acc, 12, hn::Mul(w2, j3));
+  Accumulate(df, acc, 13, hn::Mul(w2, j4));
+  Accumulate(df, acc, 14, hn::Mul(w2, j5));
+  Accumulate(df, acc, 15, hn::Mul(w3, j3));
+  Accumulate(df, acc, 16, hn::Mul(w3, j4));
+  Accumulate(df, acc, 17, hn::Mul(w3, j5));
+  Accumulate(df, acc, 18, hn::Mul(w4, j4));
+  Accumulate(df, acc, 19, hn::Mul(w4, j5));
+  Accumulate(df, acc, 20, hn::Mul(w5, j5));
+  Accumulate(df, acc, 21, hn::Mul(w0, r));
+  Accumulate(df, acc, 22, hn::Mul(w1, r));
+  Accumulate(df, acc, 23, hn::Mul(w2, r));
+  Accumulate(df, acc, 24, hn::Mul(w3, r));
+  Accumulate(df, acc, 25, hn::Mul(w4, r));
+  Accumulate(df, acc, 26, hn::Mul(w5, r));
+}
+
+// cauchyWeight() (tracker_kernels.h) of the lanes in `mask`, its operations in
+// its order; 1 elsewhere (a lane outside may hold a NaN) and where c is 0.
+template <class DF, class M, class V = hn::Vec<DF>>
+HWY_INLINE V CauchyWeight(DF df, V r, float c, M mask) {
+  const V one = hn::Set(df, 1.0f);
+  if (c == 0.0f) return one;
+  const V q = hn::Div(r, hn::Set(df, c));
+  return hn::IfThenElse(mask, hn::Div(one, hn::Add(one, hn::Mul(q, q))), one);
 }
 
 // TrackVector()'s photometric term for the lanes that associate (icp): the
@@ -118,7 +131,8 @@ HWY_INLINE void PhotometricTerms(DF df, const TrackModelLevel& m, const TrackPar
   AddTerms(df, hn::IfThenElseZero(photo, gx), hn::IfThenElseZero(photo, gy), hn::IfThenElseZero(photo, gzw),
            hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qy, gzw), hn::Mul(qz, gy))),
            hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qz, gx), hn::Mul(qx, gzw))),
-           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx))), r_photo, acc);
+           hn::IfThenElseZero(photo, hn::Sub(hn::Mul(qx, gy), hn::Mul(qy, gx))), r_photo,
+           CauchyWeight(df, r, p.photometric_robust_scale, photo), acc);
   Accumulate(df, acc, 28, hn::Mul(r_photo, r_photo));
 }
 
@@ -187,7 +201,8 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   AddTerms(df, hn::IfThenElseZero(icp, wnx), hn::IfThenElseZero(icp, wny), hn::IfThenElseZero(icp, wnz),
            hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qy, wnz), hn::Mul(qz, wny))),
            hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qz, wnx), hn::Mul(qx, wnz))),
-           hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx))), r_icp, acc);
+           hn::IfThenElseZero(icp, hn::Sub(hn::Mul(qx, wny), hn::Mul(qy, wnx))), r_icp,
+           CauchyWeight(df, r_icp, p.icp_robust_scale, icp), acc);
   Accumulate(df, acc, 27, hn::Mul(r_icp, r_icp));
   if (!p.use_photometric) return;
   PhotometricTerms(df, m, p, fu, fv, qx, qy, qz, safe_qz, j, icp, fi_, acc, photo_inliers);

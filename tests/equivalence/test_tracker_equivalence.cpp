@@ -4,6 +4,8 @@
 // reference's, relative to the sum's Cauchy-Schwarz scale (tracker_kernels.h),
 // on random scenes and on adversarial ones (no valid pixel, NaN and huge depth,
 // zero normals, a single valid pixel, rows shorter than a vector).
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -132,21 +134,27 @@ TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnRandomScenes) {
       const Levels L = makeScene(w, h, rng);
       for (bool photometric : {false, true}) {
         for (bool weighting : {false, true}) {
-          const TrackParams p = makeParams(rng, photometric, weighting);
-          expectEquivalent(L, p, "random scene");
-          ++cases;
+          for (bool robust : {false, true}) {  // Cauchy's weights (a scale of a few residuals' size), or none
+            TrackParams p = makeParams(rng, photometric, weighting);
+            p.icp_robust_scale = robust ? 0.002f : 0.0f;
+            p.photometric_robust_scale = robust ? 0.06f : 0.0f;
+            expectEquivalent(L, p, robust ? "random scene, robust" : "random scene");
+            ++cases;
+          }
         }
       }
     }
   }
-  EXPECT_EQ(cases, 48);
+  EXPECT_EQ(cases, 96);
 }
 
 TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnAdversarialInput) {
   std::mt19937 rng(7);
   const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
   Levels base = makeScene(61, 17, rng);
-  const TrackParams p = makeParams(rng, true, true);
+  TrackParams p = makeParams(rng, true, true);
+  p.icp_robust_scale = 0.002f;  // the tracker's defaults: the weights' lanes outside see NaNs too
+  p.photometric_robust_scale = 0.06f;
   {
     Levels L = base;  // no valid depth at all
     std::fill(L.fz_.begin(), L.fz_.end(), 0.0f);
@@ -183,6 +191,50 @@ TEST_P(TargetTest, TrackerKernelMatchesTheReferenceOnAdversarialInput) {
     far.t = {100.0f, 0.0f, 0.0f};
     expectEquivalent(L, far, "outside the view");
   }
+}
+
+// The reference's robust weights, against a brute-force sum written here in
+// double: each associated pixel's ICP and photometric terms (trackPixelRef)
+// weighted by Cauchy's 1 / (1 + (r0 / c)^2), r0 the residual before the
+// photometric weight. Weights below 1 must occur, or the test shows nothing.
+TEST(TrackerRobust, TheReferenceWeightsEachTermByCauchysKernel) {
+  std::mt19937 rng(42);
+  const Levels L = makeScene(97, 61, rng);
+  TrackParams p = makeParams(rng, true, true);
+  p.icp_robust_scale = 0.002f;
+  p.photometric_robust_scale = 0.06f;
+  TrackSums sums;
+  trackLevelRef(L.frame(), L.model(), p, sums);
+  std::array<double, 21> h{};
+  std::array<double, 6> b{};
+  double least_weight = 1.0;
+  const auto add = [&](const float* J, double r, double w) {
+    int k = 0;
+    for (int a = 0; a < 6; ++a) {
+      for (int c = a; c < 6; ++c) h[static_cast<std::size_t>(k++)] += w * J[a] * J[c];
+      b[static_cast<std::size_t>(a)] += w * J[a] * r;
+    }
+    least_weight = std::min(least_weight, w);
+  };
+  const auto cauchy = [](double r, double c) { return 1.0 / (1.0 + (r / c) * (r / c)); };
+  for (std::size_t i = 0; i < static_cast<std::size_t>(97 * 61); ++i) {
+    const TrackPixel px = trackPixelRef(L.frame(), L.model(), p, i);
+    if (!px.icp) continue;
+    add(px.j_icp, px.r_icp, cauchy(px.r_icp, p.icp_robust_scale));
+    if (px.photometric) add(px.j_photo, px.r_photo, cauchy(px.r_photo / p.photometric_sqrt_weight, p.photometric_robust_scale));
+  }
+  ASSERT_GT(sums.inliers, 100u);
+  EXPECT_LT(least_weight, 0.5) << "the scene's residuals must reach beyond the scales";
+  for (std::size_t k = 0; k < 21; ++k) EXPECT_NEAR(sums.h[k], h[k], 1e-5 * (std::abs(h[k]) + 1e-9)) << "H " << k;
+  for (std::size_t k = 0; k < 6; ++k) EXPECT_NEAR(sums.b[k], b[k], 1e-5 * (std::abs(b[k]) + 1e-9)) << "b " << k;
+  // Without the weights the sums are the plain ones: larger.
+  TrackParams plain = p;
+  plain.icp_robust_scale = plain.photometric_robust_scale = 0.0f;
+  TrackSums unweighted;
+  trackLevelRef(L.frame(), L.model(), plain, unweighted);
+  EXPECT_GT(unweighted.h[0], sums.h[0] * 1.01);
+  EXPECT_EQ(unweighted.inliers, sums.inliers);
+  EXPECT_DOUBLE_EQ(unweighted.icp_sq, sums.icp_sq) << "the residuals' sums stay unweighted";
 }
 
 // The normals kernel (computeNormalsSimd) against its reference, bit for bit:

@@ -222,7 +222,8 @@ TEST(TrackerHardCases, ABoxAThirdOfTheViewMovingThroughIsLeftOutAndTheTrackHolds
 // the map keeps it (it is seen where it was); the pose follows the block:
 // 215.8 mm RMS over 20 frames when this was written, the same with the moving
 // pixels left out (the block is in the map from the first frame, so it is
-// never in front of what the map knows). Asserted as measured
+// never in front of what the map knows), 295 mm with Cauchy's weights (the
+// block agrees with its own surfels best of all). Asserted as measured
 // (docs/tracking.md): treating what moves with the camera as one rigid body
 // (RigidFusion) is the missing piece.
 TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
@@ -257,17 +258,16 @@ TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
 }
 
 // The balloon scene: a striped balloon of 0.3 m drifting (0.6 m amplitude)
-// before a wall over a floor, on its orbit. MEASURED LIMITATION: the static
-// scene is two planes, which leave the translation along their intersection to
-// the plaster's and tiles' faint texture, while the balloon constrains every
-// axis and moves: the pose follows the balloon, 351 mm RMS over 30 frames when
-// this was written (402 mm without the noise weighting), 353 mm with the moving
-// pixels left out: the balloon is in the map from the first frame and drifts
-// slowly, so its new place overlaps its surfels and is seldom in front of the
-// wall by the gap (at 640x480 over 60 frames the moving pixels take fovea-track's
-// figure from 195 to 133 mm). Nothing flags it: the balloon keeps the system
-// well conditioned. Asserted as measured (docs/tracking.md).
-TEST(TrackerHardCases, AMovingBalloonBeforeTwoPlanesHijacksThePose) {
+// before a wall over a floor, on its orbit. The static scene is two planes,
+// which leave the translation along their intersection to the plaster's and
+// tiles' faint texture, while the balloon constrains every axis and moves. With
+// least squares the pose followed the balloon: 351 mm RMS over these 30 frames
+// (402 mm without the noise weighting), 354 mm with the moving pixels left out
+// (the balloon is in the map from the first frame and drifts a few centimetres
+// a frame, within the association's reach). Cauchy's weights (issue 42) take
+// its terms, centimetres off, to a few per cent of the walls': 33 mm here, and
+// 5.8 mm at 640x480 over 60 frames (fovea-track, docs/tracking.md).
+TEST(TrackerHardCases, AMovingBalloonBeforeTwoPlanesNoLongerTakesThePose) {
   FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
   std::vector<hal::RgbdFrame> frames = mockFrames("mock:balloon,size=320x240,path=orbit", 30);
   ASSERT_EQ(frames.size(), 30u);
@@ -286,7 +286,8 @@ TEST(TrackerHardCases, AMovingBalloonBeforeTwoPlanesHijacksThePose) {
   }
   const double rmse = std::sqrt(sq / std::max(n, 1));
   std::printf("balloon scene, orbit: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
-  EXPECT_GT(rmse, 0.05) << "the balloon no longer hijacks the pose: make this a bound (docs/tracking.md)";
+  EXPECT_EQ(lost, 0);
+  EXPECT_LT(rmse, 0.05);
 }
 
 // Tracked, then frames the model cannot explain (no depth, a wall of one

@@ -223,7 +223,10 @@ TEST_P(TrackerKernels, SameFrameAgainGivesTheSamePose) {
 }
 
 TEST_P(TrackerKernels, RecoversAKnownOrbitMotionWithoutAPrior) {
-  // Frames 0 and 2 of the orbit: about 2.4 cm and 1 degree apart.
+  // Frames 0 and 2 of the orbit: about 2.4 cm and 1 degree apart. Least squares
+  // left 2.4 mm; Cauchy's weights (the default since issue 42) 4.4 mm: from this
+  // far, with a model of one frame, the weighted steps stop within the
+  // iterations a level gets, where a sequence's small steps gain (docs/tracking.md).
   std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", kW, kH, 3);
   ASSERT_EQ(frames.size(), 3u);
   auto map = SurfelMap::create(mapConfig(kW, kH)).value();
@@ -239,7 +242,7 @@ TEST_P(TrackerKernels, RecoversAKnownOrbitMotionWithoutAPrior) {
               moved * 1e3, rotationError(frames[0].T_world_cam, frames[2].T_world_cam),
               translationError(pose, frames[2].T_world_cam) * 1e3, rotationError(pose, frames[2].T_world_cam),
               stats.inlier_fraction, stats.icp_rms_m * 1e3);
-  EXPECT_LT(translationError(pose, frames[2].T_world_cam), 0.004);
+  EXPECT_LT(translationError(pose, frames[2].T_world_cam), 0.005);
   EXPECT_LT(rotationError(pose, frames[2].T_world_cam), 0.3);
 }
 
