@@ -17,7 +17,7 @@
 // Cases (--case): plain; skip (every other frame dropped: twice the motion a
 // frame); invalid (frame 30 has no valid depth); wall (frames 30-34 are a flat
 // textureless wall at 1.2 m); object (from frame 20 a box a third of the view
-// wide moves across it at 0.8 m); jump (track+socket: the ground truth as the
+// wide moves across it at 0.8 m); small (the same box a tenth of the view wide); jump (track+socket: the ground truth as the
 // prior, shifted 0.5 m from frame 30 on, as a socket's pose that jumps);
 // drift (track+socket: the ground truth plus a drift of 1 cm a frame as the
 // prior). An evaluation tool: it allocates freely.
@@ -86,9 +86,9 @@ void applyHardCase(const std::string& hard, int index, RgbdFrame& frame) {
   } else if (hard == "wall" && index >= 30 && index <= 34) {
     std::fill(frame.depth(), frame.depth() + frame.pixelCount(), raw(1.2));
     std::fill(frame.rgb(), frame.rgb() + 3 * frame.pixelCount(), uint8_t{200});
-  } else if (hard == "object" && index >= 20) {
-    // A third of the view wide, the full height, moving 6 pixels a frame, textured.
-    const int box = w / 3;
+  } else if ((hard == "object" || hard == "small") && index >= 20) {
+    // A third of the view wide (small: a tenth), the full height, moving 6 pixels a frame, textured.
+    const int box = hard == "object" ? w / 3 : w / 10;
     const int x0 = ((index - 20) * 6) % (w - box);
     for (int v = 0; v < h; ++v) {
       for (int u = x0; u < x0 + box; ++u) {
@@ -234,7 +234,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
-      std::puts("usage: fovea-track [--camera SPEC] [--frames N] [--every K] [--case plain|skip|invalid|wall|object|jump|drift]\n"
+      std::puts("usage: fovea-track [--camera SPEC] [--frames N] [--every K] [--case plain|skip|invalid|wall|object|small|jump|drift]\n"
                 "                   [--kernels ref|simd] [--tum PATH] [--iterations FINE,MID,COARSE] [--moving on|off]\n"
                 "                   [--robust on|off]\n"
                 "Without --camera: the suite (TUM teddy, mock orbit and dolly at 640x480, the hard cases).");
@@ -290,6 +290,8 @@ int main(int argc, char** argv) {
       {"hard: wall @30-34", orbit, 60, 1, "wall", *kernels},
       {"hard: moving object", orbit, 60, 1, "object", *kernels},
       {"hard: moving object, as before", orbit, 60, 1, "object", *kernels, {}, false, false},
+      {"hard: small moving object", orbit, 60, 1, "small", *kernels},
+      {"hard: small object, as before", orbit, 60, 1, "small", *kernels, {}, false, false},
       {"hard: balloon, orbit", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels},
       {"hard: balloon, as before", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels, {}, false, false},
       {"hard: socket jump @30", orbit, 60, 1, "jump", *kernels},
