@@ -142,7 +142,8 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
                   tracking_lost_.load(std::memory_order_relaxed) ? "LOST" : "tracked",
                   static_cast<double>(track_ns_.load(std::memory_order_relaxed)) * 1e-6,
                   static_cast<double>(model_ns_.load(std::memory_order_relaxed)) * 1e-6,
-                  moving_share_.load(std::memory_order_relaxed) * 100.0, frames_track_lost_.load(std::memory_order_relaxed), frames_relocalised_.load(std::memory_order_relaxed),
+                  moving_share_.load(std::memory_order_relaxed) * 100.0,
+                  frames_track_lost_.load(std::memory_order_relaxed), frames_relocalised_.load(std::memory_order_relaxed),
                   prior_disagreement_m_.load(std::memory_order_relaxed) * 100.0);
   }
 }

@@ -60,7 +60,6 @@ std::size_t MovingPixels::memoryBytes() const {
 void MovingPixels::clear() {
   std::fill(mask_.begin(), mask_.end(), uint8_t{0});
   std::fill(age_.begin(), age_.end(), uint8_t{0});
-  moving_ = 0;
 }
 
 uint32_t MovingPixels::update(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R,
@@ -82,8 +81,7 @@ uint32_t MovingPixels::update(const FrameIn& half, const ModelIn& model, const E
   const std::size_t pixels = static_cast<std::size_t>(half.width) * static_cast<std::size_t>(half.height);
   for (std::size_t i = 0; i < pixels; ++i) class_[i] = classify(half, model, R, t, i);
   growMovers(half);
-  moving_ = age(half);
-  return moving_;
+  return age(half);
 }
 
 void MovingPixels::nearestModelDepth(const ModelIn& model) {
@@ -141,7 +139,7 @@ void MovingPixels::growMovers(const FrameIn& half) {
     if (class_[seed] != kInFront) continue;  // not in front, or already in a region
     const std::size_t size = growRegion(half, seed);
     std::size_t in_front = 0;
-    for (std::size_t k = 0; k < size; ++k) in_front += (class_[queue_[k]] & ~kVisited & 0xff) == kInFront ? 1 : 0;
+    for (std::size_t k = 0; k < size; ++k) in_front += (class_[queue_[k]] & ~kVisited) == kInFront ? 1 : 0;
     const bool mover = size >= min_pixels && 2 * in_front >= size;
     if (!mover) continue;
     for (std::size_t k = 0; k < size; ++k) class_[queue_[k]] |= kInMover;

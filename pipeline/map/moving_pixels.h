@@ -98,14 +98,12 @@ class MovingPixels {
   const uint8_t* mask() const { return mask_.data(); }
   int width() const { return 2 * half_width_; }
   int height() const { return 2 * half_height_; }
-  uint32_t movingCount() const { return moving_; }
-  const MovingPixelsConfig& config() const { return config_; }
   std::size_t memoryBytes() const;
 
+ private:
   // classify()'s classes, and the flags growMovers() adds.
   static constexpr uint8_t kExplained = 0, kUnknown = 1, kInFront = 2, kVisited = 0x40, kInMover = 0x80;
 
- private:
   MovingPixels() = default;
   // near_: per half-level pixel, the nearest surfel depth of the model's 4 x 4
   // finest pixels around its block; 0 where none has a surfel.
@@ -123,7 +121,6 @@ class MovingPixels {
   MovingPixelsConfig config_;
   std::size_t max_half_pixels_ = 0;
   int half_width_ = 0, half_height_ = 0;
-  uint32_t moving_ = 0;
   std::vector<uint8_t> mask_;       // the finest level's: 1 moving
   std::vector<uint8_t> class_;      // the half level's: classify()'s, with the flags
   std::vector<uint32_t> queue_;     // growRegion()'s pixels

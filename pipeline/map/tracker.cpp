@@ -408,12 +408,11 @@ bool FrameToModelTracker::buildFramePyramid(const hal::RgbdFrame& frame) {
 // The model's finest level, pixel by pixel: the surfel the index map names,
 // moved into the camera at `pose`, or where none is, the frame's own
 // measurement (none where the frame's pixel was moving). Two things make it
-// cheap without changing a bit: a surfel's
-// values depend on the surfel and the pose alone, so a pixel naming the surfel
-// its left neighbour named copies them (a footprint spans several pixels of a
-// row); and the surfel kPrefetchPixels ahead is fetched early (the pool is tens
-// of MB: without it most of the time went to waiting for it, perf on the
-// mock orbit).
+// cheap without changing a bit: a surfel's values depend on the surfel and the
+// pose alone, so a pixel naming the surfel its left neighbour named copies them
+// (a footprint spans several pixels of a row); and the surfel kPrefetchPixels
+// ahead is fetched early (the pool is tens of MB: without it most of the time
+// went to waiting for it, perf on the mock orbit).
 void FrameToModelTracker::modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
                                             const uint32_t* index, const uint8_t* moving) {
   constexpr std::size_t kPrefetchPixels = 24;
