@@ -1,5 +1,5 @@
-// The mock camera's built-in scenes, the living room and the balloon, and the
-// table of their names: what each scene holds, apart from the ray casting and
+// The mock camera's built-in scenes, the living room, the balloon and the
+// living room's movers, and the table of their names: what each scene holds, apart from the ray casting and
 // shading of scene.cpp that every scene shares.
 #include "hal/camera/mock/scene.h"
 
@@ -63,14 +63,21 @@ Result<Scene> Scene::create(std::string_view name) {
   if (name == "balloon") return balloon();
   // The balloon leaves after 2 s (frame 60 at 30 fps): what the map keeps of it after.
   if (name == "balloon-leaves") return balloon(2.0);
+  if (name == "walker") return walker();
+  // The walker leaves after 3 s (frame 90): the map 30 frames after it left.
+  if (name == "walker-leaves") return walker(3.0);
+  if (name == "carried") return carried();
   return Result<Scene>(ErrorCode::kInvalidArgument,
                        "scene: unknown name '" + std::string(name) + "'; accepted: " + names());
 }
 
-std::string Scene::names() { return "living-room|balloon|balloon-leaves"; }
+std::string Scene::names() {
+  return "living-room|balloon|balloon-leaves|walker|walker-leaves|carried";
+}
 
 bool Scene::isKnown(std::string_view name) {
-  return name == "living-room" || name == "balloon" || name == "balloon-leaves";
+  return name == "living-room" || name == "balloon" || name == "balloon-leaves" ||
+         name == "walker" || name == "walker-leaves" || name == "carried";
 }
 
 // The living room's materials, by what they cover.
@@ -317,6 +324,47 @@ Scene Scene::balloon(double gone_from_s) {
   motion.phase_rad = v3(0.0, std::numbers::pi / 2.0, 0.0);
   motion.gone_from_s = gone_from_s;
   scene.addMovingSphere(rest_m, kRadius, motion, balloon);
+  return scene;
+}
+
+// The living room with a person walking through it (issue 42's large mover):
+// a person-sized box (0.55 m wide, 0.3 m deep, 1.75 m tall, in a checked
+// shirt) walking east and back along y = 1.9 m, between the orbit's start and
+// the focus point, 1.3 m either way of x = 3 m in 8 s (1 m/s at the middle).
+// It starts at the west end and crosses the middle at 2 s, where the orbit's
+// camera sees it at about 1.1 m, over a third of the view.
+Scene Scene::walker(double gone_from_s) {
+  Scene scene = livingRoom();
+  scene.info_.name = std::isinf(gone_from_s) ? "walker" : "walker-leaves";
+  Material shirt;
+  shirt.texture = TextureKind::kChecker;
+  shirt.color_a = rgb(0.20f, 0.32f, 0.62f);
+  shirt.color_b = rgb(0.78f, 0.76f, 0.70f);
+  shirt.scale_m = 0.09;
+  const int person = scene.addMaterial(shirt);
+  Motion walk;
+  walk.amplitude_m = v3(1.3, 0.0, 0.0);
+  walk.frequency_hz = v3(0.125, 0.0, 0.0);
+  walk.phase_rad = v3(-std::numbers::pi / 2.0, 0.0, 0.0);
+  walk.gone_from_s = gone_from_s;
+  scene.addMovingBox(v3(2.725, 1.75, 0.0), v3(3.275, 2.05, 1.75), walk, person);
+  return scene;
+}
+
+// The living room with a block carried with the camera (issue 42's carried
+// mover, a robot's gripper holding a box): a cardboard box 0.6 to 0.9 m in
+// front of the camera over the lower left of the view, about 28 % of it.
+Scene Scene::carried() {
+  Scene scene = livingRoom();
+  scene.info_.name = "carried";
+  Material cardboard;
+  cardboard.texture = TextureKind::kNoise;
+  cardboard.color_a = rgb(0.72f, 0.55f, 0.34f);
+  cardboard.color_b = rgb(0.45f, 0.32f, 0.18f);
+  cardboard.scale_m = 0.03;
+  cardboard.salt = 211u;
+  const int box = scene.addMaterial(cardboard);
+  scene.addCarriedBox(v3(-0.45, -0.15, 0.6), v3(-0.10, 0.45, 0.9), box);
   return scene;
 }
 

@@ -143,8 +143,10 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
     } else if (out.depth_m[i] > 0.0) {
       t_max = out.depth_m[i];  // the static layer already rendered there
     }
-    if (dynamic_layer)
+    if (dynamic_layer) {
       found |= scene_.intersect(origin, dir, time_s, SceneLayer::kDynamic, t_max, hit);
+      found |= scene_.intersectCarried(pose, dir, found ? hit.t : t_max, hit);
+    }
     if (!found) {
       if (static_layer) {
         out.depth_m[i] = 0.0;
@@ -251,11 +253,13 @@ MockCamera::PixelRect MockCamera::projectBox(const Pose& pose, const Vector3d& l
   return r;
 }
 
-// Every pixel whose ray can hit a dynamic shape at time_s.
+// Every pixel whose ray can hit a dynamic shape at time_s or a carried one.
 MockCamera::PixelRect MockCamera::dynamicRect(const Pose& pose, double time_s) const {
   Vector3d lo, hi;
-  if (!scene_.dynamicBounds(time_s, lo, hi)) return {};
-  return projectBox(pose, lo, hi);
+  PixelRect rect;
+  if (scene_.dynamicBounds(time_s, lo, hi)) rect = projectBox(pose, lo, hi);
+  if (scene_.carriedBounds(lo, hi)) rect = unite(rect, projectBox(Pose{}, lo, hi));  // camera frame
+  return rect;
 }
 
 MockCamera::PixelRect MockCamera::unite(const PixelRect& a, const PixelRect& b) const {

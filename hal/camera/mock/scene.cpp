@@ -95,9 +95,8 @@ bool intersectBox(const Shape& s, const Vector3d& o, const Vector3d& d, const Ve
   return true;
 }
 
-bool intersectSphere(const Shape& s, const Vector3d& center_m, const Vector3d& o, const Vector3d& d,
-                     double& t_best, Hit& hit) {
-  const Vector3d oc = o - center_m;
+bool intersectSphere(const Shape& s, const Vector3d& o, const Vector3d& d, double& t_best, Hit& hit) {
+  const Vector3d oc = o - s.center_m;
   const double a = d.squaredNorm();
   const double b = oc.dot(d);
   const double c = oc.squaredNorm() - s.radius_m * s.radius_m;
@@ -115,7 +114,6 @@ bool intersectSphere(const Shape& s, const Vector3d& center_m, const Vector3d& o
   hit.shape = &s;
   hit.material = s.material;
   hit.face_axis = -1;
-  hit.center_m = center_m;
   return true;
 }
 
@@ -375,12 +373,34 @@ void Scene::addMovingSphere(const Vector3d& center_m, double radius_m, const Mot
   dynamic_shapes_.push_back(s);
 }
 
+void Scene::addMovingBox(const Vector3d& min_m, const Vector3d& max_m, const Motion& motion,
+                         int material) {
+  Shape s;
+  s.kind = ShapeKind::kBox;
+  s.material = material;
+  s.min_m = min_m;
+  s.max_m = max_m;
+  s.center_m = 0.5 * (min_m + max_m);
+  s.motion = motion;
+  dynamic_shapes_.push_back(s);
+}
+
+void Scene::addCarriedBox(const Vector3d& min_cam_m, const Vector3d& max_cam_m, int material) {
+  Shape s;
+  s.kind = ShapeKind::kBox;
+  s.material = material;
+  s.min_m = min_cam_m;
+  s.max_m = max_cam_m;
+  s.center_m = 0.5 * (min_cam_m + max_cam_m);
+  carried_shapes_.push_back(s);
+}
+
 bool Scene::intersectShape(const Shape& s, const Vector3d& origin, const Vector3d& dir,
                            const Vector3d& inv_dir, double& t_best, Hit& hit) const {
   switch (s.kind) {
     case ShapeKind::kBox:
     case ShapeKind::kRoom: return intersectBox(s, origin, dir, inv_dir, t_best, hit);
-    case ShapeKind::kSphere: return intersectSphere(s, s.center_m, origin, dir, t_best, hit);
+    case ShapeKind::kSphere: return intersectSphere(s, origin, dir, t_best, hit);
     case ShapeKind::kCylinder: return intersectCylinder(s, origin, dir, t_best, hit);
     case ShapeKind::kPlane: return intersectPlane(s, origin, dir, t_best, hit);
   }
@@ -392,6 +412,7 @@ bool Scene::intersect(const Vector3d& origin, const Vector3d& dir, double time_s
   const Vector3d inv_dir = dir.cwiseInverse();  // +-inf where a component is 0; see slabs()
   double t_best = t_max;
   bool found = false;
+  Vector3d hit_origin = origin;  // the ray's origin in the frame of the best hit's shape
   if (layer != SceneLayer::kDynamic) {
     for (const Group& group : groups_) {
       if (group.bounded && !hitsBounds(origin, inv_dir, group.min_m, group.max_m, t_best)) continue;
@@ -403,12 +424,42 @@ bool Scene::intersect(const Vector3d& origin, const Vector3d& dir, double time_s
   }
   if (layer != SceneLayer::kStatic) {
     for (const Shape& s : dynamic_shapes_) {
-      // Only spheres move (addMovingSphere).
       if (!s.motion.presentAt(time_s)) continue;
-      found |= intersectSphere(s, s.center_m + s.motion.offsetAt(time_s), origin, dir, t_best, hit);
+      // The ray in the shape's rest frame: a moving shape only translates.
+      const Vector3d rest_origin = origin - s.motion.offsetAt(time_s);
+      if (intersectShape(s, rest_origin, dir, inv_dir, t_best, hit)) {
+        found = true;
+        hit_origin = rest_origin;
+      }
     }
   }
+  if (found) hit.local_m = hit_origin + hit.t * dir;
   return found;
+}
+
+bool Scene::intersectCarried(const Pose& camera, const Vector3d& dir, double t_max, Hit& hit) const {
+  const Vector3d dir_cam = camera.R_world_cam.transpose() * dir;
+  const Vector3d inv_dir = dir_cam.cwiseInverse();
+  double t_best = t_max;
+  bool found = false;
+  for (const Shape& s : carried_shapes_) {
+    found |= intersectShape(s, Vector3d::Zero(), dir_cam, inv_dir, t_best, hit);
+  }
+  if (!found) return false;
+  hit.normal = camera.R_world_cam * hit.normal;
+  hit.local_m = hit.t * dir_cam;
+  return true;
+}
+
+bool Scene::carriedBounds(Vector3d& min_cam_m, Vector3d& max_cam_m) const {
+  if (carried_shapes_.empty()) return false;
+  min_cam_m = Vector3d::Constant(kInf);
+  max_cam_m = Vector3d::Constant(-kInf);
+  for (const Shape& s : carried_shapes_) {
+    min_cam_m = min_cam_m.cwiseMin(s.min_m);
+    max_cam_m = max_cam_m.cwiseMax(s.max_m);
+  }
+  return true;
 }
 
 bool Scene::intersectShapes(const Vector3d& origin, const Vector3d& dir, const uint16_t* shapes,
@@ -419,6 +470,7 @@ bool Scene::intersectShapes(const Vector3d& origin, const Vector3d& dir, const u
   for (std::size_t i = 0; i < shape_count; ++i) {
     found |= intersectShape(shapes_[shapes[i]], origin, dir, inv_dir, t_best, hit);
   }
+  if (found) hit.local_m = origin + hit.t * dir;
   return found;
 }
 
@@ -430,15 +482,14 @@ bool Scene::staticShapeBounds(std::size_t shape, Vector3d& min_m, Vector3d& max_
 }
 
 bool Scene::dynamicBounds(double time_s, Vector3d& min_m, Vector3d& max_m) const {
-  if (dynamic_shapes_.empty()) return false;
   min_m = Vector3d::Constant(kInf);
   max_m = Vector3d::Constant(-kInf);
   bool any = false;
   for (const Shape& s : dynamic_shapes_) {
     if (!s.motion.presentAt(time_s)) continue;
-    const Vector3d c = s.center_m + s.motion.offsetAt(time_s);
-    min_m = min_m.cwiseMin(c - Vector3d::Constant(s.radius_m));
-    max_m = max_m.cwiseMax(c + Vector3d::Constant(s.radius_m));
+    const Vector3d offset = s.motion.offsetAt(time_s);
+    min_m = min_m.cwiseMin(s.min_m + offset);
+    max_m = max_m.cwiseMax(s.max_m + offset);
     any = true;
   }
   return any;
@@ -482,37 +533,38 @@ Vector3f Scene::albedo(const Material& m, double u, double v) const {
 Vector3f Scene::shade(const Vector3d& origin, const Vector3d& dir, const Hit& hit) const {
   const Shape& s = *hit.shape;
   const Material& m = materials_[hit.material];
-  const Vector3d p = origin + hit.t * dir;
+  const Vector3d& q = hit.local_m;  // texture coordinates move with the shape
   double u = 0.0;
   double v = 0.0;
   switch (s.kind) {
     case ShapeKind::kBox:
     case ShapeKind::kRoom:
-      u = hit.face_axis == 0 ? p.y() : p.x();
-      v = hit.face_axis == 2 ? p.y() : p.z();
+      u = hit.face_axis == 0 ? q.y() : q.x();
+      v = hit.face_axis == 2 ? q.y() : q.z();
       break;
     case ShapeKind::kSphere: {
-      const Vector3d q = p - hit.center_m;
-      u = std::atan2(q.y(), q.x()) * s.radius_m;
-      v = q.z();
+      const Vector3d r = q - s.center_m;
+      u = std::atan2(r.y(), r.x()) * s.radius_m;
+      v = r.z();
       break;
     }
     case ShapeKind::kCylinder:
       if (hit.face_axis == 2) {
-        u = p.x();
-        v = p.y();
+        u = q.x();
+        v = q.y();
       } else {
-        u = std::atan2(p.y() - s.center_m.y(), p.x() - s.center_m.x()) * s.radius_m;
-        v = p.z();
+        u = std::atan2(q.y() - s.center_m.y(), q.x() - s.center_m.x()) * s.radius_m;
+        v = q.z();
       }
       break;
     case ShapeKind::kPlane:
-      u = p.dot(s.u_axis);
-      v = p.dot(s.v_axis);
+      u = q.dot(s.u_axis);
+      v = q.dot(s.v_axis);
       break;
   }
   const Vector3f base = albedo(m, u, v);
   if (m.emissive) return base;
+  const Vector3d p = origin + hit.t * dir;
   const Vector3d to_light = (info_.light_m - p).normalized();
   const auto lambert = static_cast<float>(std::max(0.0, hit.normal.dot(to_light)));
   return base * (info_.ambient + (1.0f - info_.ambient) * lambert);

@@ -86,7 +86,8 @@ struct Shape {
   double offset_m = 0.0;
   Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();
   Eigen::Vector3d v_axis = Eigen::Vector3d::UnitY();
-  // Spheres only: dynamic shapes move with `motion`.
+  // Dynamic shapes (spheres and boxes) move with `motion`, their bounds and
+  // centre being those at rest.
   Motion motion;
 };
 
@@ -97,7 +98,10 @@ struct Hit {
   const Shape* shape = nullptr;
   int material = 0;
   int face_axis = -1;  // box, room: axis of the face hit; cylinder: 2 on a cap, -1 on the side
-  Eigen::Vector3d center_m = Eigen::Vector3d::Zero();  // sphere: centre at the hit's time
+  // The hit point in the shape's own frame, where its texture is fixed: the
+  // world point for a static shape, less its offset for a moving one, in the
+  // camera's frame for a carried one.
+  Eigen::Vector3d local_m = Eigen::Vector3d::Zero();
 };
 
 // What a camera path and the service need to know about a scene.
@@ -130,17 +134,20 @@ class Scene {
  public:
   Scene() = default;  // empty: every ray misses
 
-  // "living-room" or "balloon"; kInvalidArgument naming the accepted names otherwise.
+  // A name of names(); kInvalidArgument naming the accepted names otherwise.
   static Result<Scene> create(std::string_view name);
-  // "living-room|balloon", for help texts and error messages.
+  // "living-room|balloon|...", for help texts and error messages.
   static std::string names();
   static bool isKnown(std::string_view name);
 
   const SceneInfo& info() const { return info_; }
   // The default camera pose: default_eye_m looking at default_target_m.
   Pose defaultPose() const;
-  bool isDynamic() const { return !dynamic_shapes_.empty(); }
-  std::size_t shapeCount() const { return shapes_.size() + dynamic_shapes_.size(); }
+  // Whether anything moves: a shape with a motion or one carried with the camera.
+  bool isDynamic() const { return !dynamic_shapes_.empty() || !carried_shapes_.empty(); }
+  std::size_t shapeCount() const {
+    return shapes_.size() + dynamic_shapes_.size() + carried_shapes_.size();
+  }
 
   // Nearest hit with t in (kMinT, t_max) among the shapes of `layer` at time_s.
   // Allocation-free and const: safe to call from several threads.
@@ -168,6 +175,15 @@ class Scene {
   // Bounds of every dynamic shape at time_s; false when the scene has none.
   bool dynamicBounds(double time_s, Eigen::Vector3d& min_m, Eigen::Vector3d& max_m) const;
 
+  // Shapes carried with the camera (a block in a robot's gripper): boxes fixed
+  // in the camera's frame, seen the same in every frame whatever the path.
+  // Nearest hit with t in (kMinT, t_max) of the ray from the camera at `camera`
+  // along dir (world frame; t is the same in either frame).
+  bool intersectCarried(const Pose& camera, const Eigen::Vector3d& dir, double t_max,
+                        Hit& hit) const;
+  // Bounds of every carried shape in the camera's frame; false when none.
+  bool carriedBounds(Eigen::Vector3d& min_cam_m, Eigen::Vector3d& max_cam_m) const;
+
   static constexpr double kMinT = 1e-6;
 
  private:
@@ -184,6 +200,10 @@ class Scene {
   // The built-in scenes (built_in_scenes.cpp).
   static Scene livingRoom();
   static Scene balloon(double gone_from_s = std::numeric_limits<double>::infinity());
+  // The living room with a person walking through it, or a block carried with
+  // the camera (issue 42's movers).
+  static Scene walker(double gone_from_s = std::numeric_limits<double>::infinity());
+  static Scene carried();
   // livingRoom()'s pieces, added in this order: a material's noise salt is its
   // index, and the order of the shapes and groups is part of the scene's bits.
   struct LivingRoomMaterials;
@@ -210,6 +230,11 @@ class Scene {
                 int material);
   void addMovingSphere(const Eigen::Vector3d& center_m, double radius_m, const Motion& motion,
                        int material);
+  void addMovingBox(const Eigen::Vector3d& min_m, const Eigen::Vector3d& max_m,
+                    const Motion& motion, int material);
+  // A box in the camera's frame (OpenCV axes: x right, y down, z forward).
+  void addCarriedBox(const Eigen::Vector3d& min_cam_m, const Eigen::Vector3d& max_cam_m,
+                     int material);
   void addShape(const Shape& shape);
 
   Eigen::Vector3f albedo(const Material& material, double u, double v) const;
@@ -219,6 +244,7 @@ class Scene {
   std::vector<Shape> shapes_;  // static, contiguous per group
   std::vector<Group> groups_;
   std::vector<Shape> dynamic_shapes_;
+  std::vector<Shape> carried_shapes_;  // boxes, in the camera's frame
   bool group_open_ = false;
 };
 

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -393,7 +394,9 @@ TEST(MockCamera, NoiseOffFramesEqualABruteForceRayCast) {
         // Straight down from under the ceiling (look-at falls back to +y up).
         "living-room,noise=off,size=160x120,path=keyframes:0,2.8,2.6,2.6,2.8,2.6,0",
         // Inside the bookshelf's bounds, between two shelves.
-        "living-room,noise=off,size=160x120,path=keyframes:0,0.2,1.8,0.75,3,2,0.7"}) {
+        "living-room,noise=off,size=160x120,path=keyframes:0,0.2,1.8,0.75,3,2,0.7",
+        // The movers: a box walking across the orbit, a box carried with the camera.
+        "walker,noise=off,size=160x120,path=orbit,fps=2", "carried,noise=off,size=160x120,path=orbit,fps=2"}) {
     std::unique_ptr<MockCamera> camera = makeStarted(args);
     RgbdFrame frame = makeSlot(*camera);
     for (int i = 0; i < 6; ++i) {
@@ -403,9 +406,11 @@ TEST(MockCamera, NoiseOffFramesEqualABruteForceRayCast) {
       for (int y = 0; y < frame.height(); ++y) {
         for (int x = 0; x < frame.width(); ++x) {
           Hit hit;
-          const bool found =
+          bool found =
               camera->scene().intersect(frame.T_world_cam.t_world_cam, pixelRay(frame, x, y),
                                         time_s, SceneLayer::kAll, 1e300, hit);
+          found |= camera->scene().intersectCarried(frame.T_world_cam, pixelRay(frame, x, y),
+                                                    found ? hit.t : 1e300, hit);
           const uint16_t expected = found && hit.t >= 0.4 && hit.t <= 8.0 ? depthUnits(hit.t) : 0;
           mismatches += frame.depth()[static_cast<std::size_t>(y) * frame.width() + x] != expected;
         }
@@ -638,6 +643,97 @@ TEST(MockScene, FocusPointsAreTheRoomCentreAndTheBalloonsMeanPosition) {
   EXPECT_EQ(hitAt(1.9)->kind, ShapeKind::kSphere);
   ASSERT_NE(hitAt(2.5), nullptr);
   EXPECT_EQ(hitAt(2.5)->kind, ShapeKind::kPlane);  // the wall where the balloon was
+}
+
+// The pixels where the noiseless view of `scene` differs from the living room's
+// by more than a centimetre (the same path and time): where its movers are seen.
+std::vector<bool> moverPixels(const RgbdFrame& scene, const RgbdFrame& room) {
+  std::vector<bool> mover(scene.pixelCount());
+  for (std::size_t i = 0; i < scene.pixelCount(); ++i) {
+    mover[i] = std::abs(static_cast<int>(scene.depth()[i]) - static_cast<int>(room.depth()[i])) > 10;
+  }
+  return mover;
+}
+
+double share(const std::vector<bool>& mask) {
+  return static_cast<double>(std::count(mask.begin(), mask.end(), true)) / static_cast<double>(mask.size());
+}
+
+// Issue 42's large mover: a person-sized box walking 1.3 m either way of the
+// room's middle in 8 s, from its west end; over a third of the orbit's view
+// as it crosses the middle at 2 s; walker-leaves is gone from 3 s on.
+TEST(MockScene, TheWalkerCrossesTheOrbitsViewOverAThirdOfItAndLeaves) {
+  Result<Scene> walker = Scene::create("walker");
+  ASSERT_TRUE(walker.isOk());
+  EXPECT_TRUE(walker.value().isDynamic());
+  Eigen::Vector3d lo, hi;
+  const std::pair<double, double> centre_x_at[] = {{0.0, 1.7}, {2.0, 3.0}, {4.0, 4.3}, {6.0, 3.0}, {8.0, 1.7}};
+  for (const auto& [time_s, x_m] : centre_x_at) {
+    ASSERT_TRUE(walker.value().dynamicBounds(time_s, lo, hi));
+    EXPECT_NEAR(0.5 * (lo.x() + hi.x()), x_m, 1e-9) << time_s;
+    EXPECT_NEAR(hi.z() - lo.z(), 1.75, 1e-12);
+  }
+  std::unique_ptr<MockCamera> camera = makeStarted("walker,noise=off,size=160x120,path=orbit,fps=0.5");
+  std::unique_ptr<MockCamera> room = makeStarted("living-room,noise=off,size=160x120,path=orbit,fps=0.5");
+  RgbdFrame frame = makeSlot(*camera), room_frame = makeSlot(*room);
+  grab(*camera, frame), grab(*room, room_frame);  // t = 0: at the west end, out of view
+  const double at_start = share(moverPixels(frame, room_frame));
+  grab(*camera, frame), grab(*room, room_frame);  // t = 2 s: crossing the middle
+  const double crossing = share(moverPixels(frame, room_frame));
+  EXPECT_GE(crossing, 0.30) << "a third of the view";
+  EXPECT_LT(crossing, 0.60);
+  EXPECT_LT(at_start, crossing);
+
+  Result<Scene> leaves = Scene::create("walker-leaves");
+  ASSERT_TRUE(leaves.isOk());
+  EXPECT_EQ(leaves.value().info().name, "walker-leaves");
+  EXPECT_TRUE(leaves.value().dynamicBounds(2.9, lo, hi));
+  EXPECT_FALSE(leaves.value().dynamicBounds(3.0, lo, hi));
+}
+
+// A moving shape's texture moves with it: the same point of the walker at two
+// times, reached by rays shifted by its motion, is the same point of its own
+// frame (and so the same texel).
+TEST(MockScene, AMovingBoxCarriesItsTexture) {
+  Result<Scene> walker = Scene::create("walker");
+  ASSERT_TRUE(walker.isOk());
+  const Scene& scene = walker.value();
+  Eigen::Vector3d lo0, hi0, lo1, hi1;
+  ASSERT_TRUE(scene.dynamicBounds(1.0, lo0, hi0));
+  ASSERT_TRUE(scene.dynamicBounds(1.5, lo1, hi1));
+  const Eigen::Vector3d shift = lo1 - lo0;
+  ASSERT_GT(shift.norm(), 0.1);
+  const Eigen::Vector3d origin(lo0.x() + 0.2, 1.0, 1.2);  // south of the box, looking north at it
+  const Eigen::Vector3d dir(0.0, 1.0, 0.05);
+  Hit first, second;
+  ASSERT_TRUE(scene.intersect(origin, dir, 1.0, SceneLayer::kDynamic, 1e9, first));
+  ASSERT_TRUE(scene.intersect(origin + shift, dir, 1.5, SceneLayer::kDynamic, 1e9, second));
+  EXPECT_NEAR(first.t, second.t, 1e-9);
+  EXPECT_EQ(first.face_axis, 1);
+  EXPECT_TRUE(first.local_m.isApprox(second.local_m, 1e-12));
+  EXPECT_FALSE(first.local_m.isApprox(origin + first.t * dir, 1e-3)) << "local, not world, coordinates";
+}
+
+// Issue 42's carried mover: the block is seen in the same pixels at the same
+// depth in every frame while the camera orbits, over about 28 % of the view.
+TEST(MockScene, TheCarriedBlockStaysPutInTheViewWhileTheCameraOrbits) {
+  std::unique_ptr<MockCamera> camera = makeStarted("carried,noise=off,size=160x120,path=orbit,fps=1");
+  std::unique_ptr<MockCamera> room = makeStarted("living-room,noise=off,size=160x120,path=orbit,fps=1");
+  RgbdFrame frame = makeSlot(*camera), room_frame = makeSlot(*room), first = makeSlot(*camera);
+  grab(*camera, first), grab(*room, room_frame);
+  const std::vector<bool> first_mask = moverPixels(first, room_frame);
+  EXPECT_GT(share(first_mask), 0.24);
+  EXPECT_LT(share(first_mask), 0.32);
+  for (int i = 1; i < 3; ++i) {
+    grab(*camera, frame), grab(*room, room_frame);
+    EXPECT_FALSE(frame.T_world_cam.t_world_cam.isApprox(first.T_world_cam.t_world_cam, 1e-3)) << "the camera moves";
+    const std::vector<bool> mask = moverPixels(frame, room_frame);
+    std::size_t moved = 0;
+    for (std::size_t p = 0; p < mask.size(); ++p) {
+      moved += mask[p] != first_mask[p] || (mask[p] && frame.depth()[p] != first.depth()[p]);
+    }
+    EXPECT_EQ(moved, 0u) << "frame " << i;
+  }
 }
 
 }  // namespace
