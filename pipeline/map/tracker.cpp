@@ -231,6 +231,7 @@ std::string_view lostReasonName(LostReason reason) {
     case LostReason::kDegenerate: return "degenerate";
     case LostReason::kImplausibleMotion: return "implausible-motion";
     case LostReason::kNoValidDepth: return "no-valid-depth";
+    case LostReason::kMostlyMoving: return "mostly-moving";
   }
   return "unknown";
 }
@@ -256,6 +257,9 @@ Status TrackerConfig::validate() const {
   }
   if (!(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0)) {
     return invalidArgument("tracker: min_inlier_fraction must be within [0, 1]");
+  }
+  if (!(max_moving_share > 0.0 && max_moving_share <= 1.0)) {
+    return invalidArgument("tracker: max_moving_share must be within (0, 1]");
   }
   if (!(std::isfinite(max_residual_jump) && max_residual_jump > 1.0)) {
     return invalidArgument("tracker: max_residual_jump must be > 1");
@@ -496,13 +500,13 @@ void FrameToModelTracker::modelFused(const hal::RgbdFrame& frame, const hal::Pos
 }
 
 FrameToModelTracker::Solve FrameToModelTracker::solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0,
-                                                      bool photometric) {
+                                                      bool photometric, int coarsest) {
   Solve s;
   s.R = R0;
   s.t = t0;
   TrackSums sums;
   const float min_cos = static_cast<float>(std::cos(config_.icp_max_normal_deg * kDegToRad));
-  for (int l = kLevels - 1; l >= 0; --l) {
+  for (int l = coarsest; l >= 0; --l) {
     const Level& F = frame_[l];
     const Level& M = model_[l];
     const TrackFrameLevel fl{F.width, F.height, F.x.data(), F.y.data(), F.z.data(),
@@ -582,9 +586,11 @@ double FrameToModelTracker::medianResidual() const {
   return v[static_cast<std::size_t>(n / 2)];
 }
 
-LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const {
+LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference,
+                                      uint32_t left_out) const {
   if (!s.finite || !pose.R_world_cam.allFinite() || !pose.t_world_cam.allFinite()) return LostReason::kDegenerate;
-  const double fraction = valid_pixels_ > 0 ? static_cast<double>(s.inliers) / valid_pixels_ : 0.0;
+  const uint32_t used = valid_pixels_ - std::min(left_out, valid_pixels_);
+  const double fraction = used > 0 ? static_cast<double>(s.inliers) / used : 0.0;
   if (fraction < config_.min_inlier_fraction || s.inliers < 6) return LostReason::kFewInliers;
   if (s.min_eigenvalue < config_.min_eigenvalue) return LostReason::kDegenerate;
   if (residual_count_ >= 5 && s.icp_rms > config_.residual_jump_floor_m &&
@@ -604,7 +610,7 @@ FrameToModelTracker::Attempt FrameToModelTracker::attemptFrom(const hal::Pose& s
   a.solve = solve(Rk_t * start.R_world_cam, Rk_t * (start.t_world_cam - model_pose_.t_world_cam), photometric);
   a.pose.R_world_cam = model_pose_.R_world_cam * a.solve.R;
   a.pose.t_world_cam = model_pose_.R_world_cam * a.solve.t + model_pose_.t_world_cam;
-  a.reason = check(a.solve, a.pose, last_good_);
+  a.reason = check(a.solve, a.pose, last_good_, 0);
   return a;
 }
 
@@ -651,7 +657,8 @@ FrameToModelTracker::Attempt FrameToModelTracker::relocalise(const hal::Pose* pr
 void FrameToModelTracker::recordAttempt(const Attempt& best, const hal::Pose* prior, TrackStats& stats) const {
   stats.iterations = std::max(stats.iterations, best.solve.iterations);
   stats.inliers = best.solve.inliers;
-  stats.inlier_fraction = valid_pixels_ > 0 ? static_cast<double>(best.solve.inliers) / valid_pixels_ : 0.0;
+  const uint32_t used = valid_pixels_ - std::min(best.left_out, valid_pixels_);
+  stats.inlier_fraction = used > 0 ? static_cast<double>(best.solve.inliers) / used : 0.0;
   stats.icp_rms_m = best.solve.icp_rms;
   stats.photometric_rms = best.solve.photometric_rms;
   stats.min_eigenvalue = best.solve.min_eigenvalue;
@@ -710,8 +717,9 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   if (!model_size_ok) return lose(LostReason::kFewInliers);
 
   const bool photometric = frame.has_rgb;
-  const Attempt best =
+  Attempt best =
       lost_ ? relocalise(prior, photometric, stats) : attemptFrom(prior != nullptr ? *prior : last_good_, photometric);
+  if (config_.moving.enabled && best.solve.finite) alignWithoutMovers(best, photometric, stats);
   recordAttempt(best, prior, stats);
   if (best.reason != LostReason::kNone) return lose(best.reason);
   const TrackOutcome outcome = lost_ ? TrackOutcome::kRelocalised : TrackOutcome::kTracked;
@@ -721,7 +729,6 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   last_good_ = best.pose;
   residual_history_[static_cast<std::size_t>(residual_count_) % residual_history_.size()] = best.solve.icp_rms;
   ++residual_count_;
-  markMoving(best.solve, stats);
   return finish(outcome);
 }
 
@@ -732,6 +739,41 @@ void FrameToModelTracker::markMoving(const Solve& s, TrackStats& stats) {
   const MovingPixels::ModelIn model{M.width, M.height, M.fx, M.fy, M.cx, M.cy, M.z.data(), model_from_surfel_.data()};
   stats.moving_pixels = moving_.update(half, model, s.R.cast<float>(), s.t.cast<float>());
   stats.moving_share = valid_pixels_ > 0 ? static_cast<double>(stats.moving_pixels) / valid_pixels_ : 0.0;
+}
+
+// ReFusion's order: align, find what the static model does not explain, align
+// again without it. The second alignment starts at the first's estimate and
+// runs the finest level only (the coarser levels' pixels are not masked; at the
+// estimate a level's few iterations suffice). Its inliers count against the
+// pixels left in, so a mover covering half the view is not "few inliers"; a view
+// mostly moving is lost with its own reason, not tracked on what little is left.
+void FrameToModelTracker::alignWithoutMovers(Attempt& a, bool photometric, TrackStats& stats) {
+  markMoving(a.solve, stats);
+  if (stats.moving_pixels == 0) return;
+  if (stats.moving_share > config_.max_moving_share) {
+    a.reason = LostReason::kMostlyMoving;
+    return;
+  }
+  Level& f0 = frame_[0];
+  const uint8_t* mask = moving_.mask();
+  const int mask_width = moving_.width();
+  const int rows = std::min(f0.height, moving_.height()), columns = std::min(f0.width, mask_width);
+  uint32_t left_out = 0;  // valid pixels taken out
+  for (int v = 0; v < rows; ++v) {
+    for (int u = 0; u < columns; ++u) {
+      float& z = f0.z[static_cast<std::size_t>(v) * f0.width + u];
+      if (!mask[static_cast<std::size_t>(v) * mask_width + u] || !(z > 0.0f)) continue;
+      z = 0.0f;
+      ++left_out;
+    }
+  }
+  const int first_iterations = a.solve.iterations;
+  a.solve = solve(a.solve.R, a.solve.t, photometric, 0);
+  a.solve.iterations += first_iterations;
+  a.pose.R_world_cam = model_pose_.R_world_cam * a.solve.R;
+  a.pose.t_world_cam = model_pose_.R_world_cam * a.solve.t + model_pose_.t_world_cam;
+  a.left_out = left_out;
+  a.reason = check(a.solve, a.pose, last_good_, a.left_out);
 }
 
 }  // namespace fovea::pipeline::map

@@ -110,7 +110,12 @@ struct TrackerConfig {
   // Per-pixel residuals and the reduction: the scalar reference or Highway's.
   KernelSet kernels = defaultKernelSet();
   // The pixels in front of the map's surface, which are not fused (moving_pixels.h).
+  // Found after a first alignment, they are left out of a second one at the
+  // finest level and out of the inliers' share; ...
   MovingPixelsConfig moving;
+  // ... a frame with more than this share of its valid pixels moving is lost
+  // (kMostlyMoving): what static remains is too little to trust.
+  double max_moving_share = 0.75;
 
   Status validate() const;
 };
@@ -131,6 +136,7 @@ enum class LostReason : uint8_t {
   kDegenerate,
   kImplausibleMotion,
   kNoValidDepth,
+  kMostlyMoving,  // more of the view moving than TrackerConfig::max_moving_share
 };
 std::string_view lostReasonName(LostReason reason);
 
@@ -143,7 +149,7 @@ struct TrackStats {
   int iterations = 0;               // Gauss-Newton iterations run, all levels
   uint32_t valid_pixels = 0;        // finest level, with depth
   uint32_t inliers = 0;             // finest level, associated at the last iteration
-  double inlier_fraction = 0.0;
+  double inlier_fraction = 0.0;     // of the valid pixels not moving
   double icp_rms_m = 0.0;           // point-to-plane RMS over the inliers
   double photometric_rms = 0.0;     // intensity RMS (0..1) over the inliers
   double min_eigenvalue = 0.0;      // of the normalised J^T J at the last iteration
@@ -152,8 +158,9 @@ struct TrackStats {
   double prior_disagreement_m = 0.0;
   double prior_disagreement_deg = 0.0;
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
-  // Tracked frames: the pixels found moving (in front of the map's surface, not
-  // settled: moving_pixels.h), and their share of the valid pixels.
+  // The pixels found moving after the first alignment (in front of the map's
+  // surface, not settled: moving_pixels.h), and their share of the valid pixels;
+  // 0 on a frame lost before that (no model, no depth).
   uint32_t moving_pixels = 0;
   double moving_share = 0.0;
   int64_t track_ns = 0;             // all of track()
@@ -242,15 +249,18 @@ class FrameToModelTracker {
   // modelFused()'s finest level from the map's index map (nullptr: none at the frame's size).
   void modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
                          const uint32_t* index, const uint8_t* moving);
-  Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
+  // Gauss-Newton from R0, t0, the pyramid's levels from `coarsest` down to the finest.
+  Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric, int coarsest = kLevels - 1);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
-  LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference) const;
+  // left_out: the valid pixels the solve did not use (moving), not counted against its inliers.
+  LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference, uint32_t left_out) const;
   // track()'s steps: a solve from a start pose with its world pose and checks,
   // relocalisation's search over starts, the stats of the attempt taken.
   struct Attempt {
     Solve solve;
     hal::Pose pose;
     LostReason reason = LostReason::kNone;
+    uint32_t left_out = 0;  // moving pixels left out of the finest level's solve
   };
   bool frameUsable(const hal::RgbdFrame& frame) const;
   Attempt attemptFrom(const hal::Pose& start, bool photometric);
@@ -259,6 +269,9 @@ class FrameToModelTracker {
   double medianResidual() const;
   // The tracked frame's moving pixels from the solve that posed it.
   void markMoving(const Solve& s, TrackStats& stats);
+  // The moving pixels after the attempt's alignment, then the alignment again
+  // at the finest level without them, checked anew.
+  void alignWithoutMovers(Attempt& a, bool photometric, TrackStats& stats);
 
   TrackerConfig config_;
   TrackerCounters counters_;

@@ -1,7 +1,8 @@
 // The tracker's hard cases (pipeline/map/tracker.h, docs/tracking.md): a frame
 // without depth, a textureless wall, fast motion (frames dropped), a box moving
-// through a third of the view, a block carried with the camera, the balloon,
-// and the view returning after a loss.
+// through a third of the view, a block carried with the camera, a person walking
+// through, a view filled by a mover, the balloon, and the view returning after
+// a loss.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -215,20 +216,19 @@ TEST(TrackerHardCases, ABoxAThirdOfTheViewMovingThroughIsLeftOutAndTheTrackHolds
   EXPECT_LT(most_static_share, 0.01) << "the static room has no mover";
 }
 
-// A block 1 m in front of the camera over the left third of every frame,
-// moving with the camera (an object carried along). MEASURED LIMITATION: the
-// block wins. Its frontal plane at 1 m carries about ten times the weight of the
-// room's pixels at 2 to 4 m (the noise weighting), agrees with "no motion" and
-// the map keeps it (it is seen where it was); the pose follows the block:
-// 215.8 mm RMS over 20 frames when this was written, the same with the moving
-// pixels left out (the block is in the map from the first frame, so it is
-// never in front of what the map knows), 295 mm with Cauchy's weights (the
-// block agrees with its own surfels best of all). Asserted as measured
-// (docs/tracking.md): treating what moves with the camera as one rigid body
-// (RigidFusion) is the missing piece.
-TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
+// The mock camera's `carried` scene: a cardboard box 0.6 to 0.9 m in front of
+// the camera over the lower left of every frame (about 28 % of the view),
+// carried with the orbiting camera (a robot's gripper holding it). MEASURED
+// LIMITATION: the block wins. It is in the map from the first frame, so it is
+// never in front of what the map knows and never found moving; its frontal
+// faces at under a metre carry several times the weight of the room's pixels at
+// 2 to 4 m (the noise weighting), agree with "no motion" exactly, and Cauchy's
+// weights favour them further. The pose follows the block (docs/tracking.md:
+// 154 mm ATE at 640x480). Asserted as measured: treating what moves with the
+// camera as one rigid body (RigidFusion) is the missing piece.
+TEST(TrackerHardCases, ABlockCarriedWithTheCameraHijacksThePose) {
   FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
-  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", 20);
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:carried,size=320x240,path=orbit", 20);
   ASSERT_EQ(frames.size(), 20u);
   Rig rig = Rig::make();
   TrackStats stats;
@@ -236,13 +236,6 @@ TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
   int n = 0, lost = 0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     hal::RgbdFrame& f = frames[i];
-    for (int v = 0; v < kH; ++v) {
-      for (int u = 0; u < kW / 3; ++u) {
-        const std::size_t p = static_cast<std::size_t>(v) * kW + u;
-        f.depth()[p] = static_cast<uint16_t>(1.0 / f.depth_scale_m);
-        f.rgb()[3 * p] = 250, f.rgb()[3 * p + 1] = 20, f.rgb()[3 * p + 2] = 20;
-      }
-    }
     const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
     if (o == TrackOutcome::kLost) {
       ++lost;
@@ -252,9 +245,95 @@ TEST(TrackerHardCases, AnObjectCarriedThroughAThirdOfTheViewHijacksThePose) {
     sq += e * e, ++n;
   }
   const double rmse = std::sqrt(sq / std::max(n, 1));
-  std::printf("orbit with a carried block over a third: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
-  EXPECT_EQ(lost, 0);
+  std::printf("orbit carrying a block: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
   EXPECT_GT(rmse, 0.05) << "the carried block no longer hijacks the pose: make this a bound (docs/tracking.md)";
+}
+
+// The mock camera's `walker` scene: a person-sized box walking across the
+// living room, between the orbiting camera and the room's middle, up to 45 %
+// of the view here (fps=15: the orbit at twice its speed a frame, 40 frames
+// to 2.7 s). Found moving after the first alignment, left out of the second
+// and of the fusion: the track holds to issue 42's bound, 10 mm. Before (every
+// pixel fused, least squares) the pose followed it: 173 mm ATE at 640x480.
+TEST(TrackerHardCases, APersonWalkingThroughTheViewIsLeftOutAndTheTrackHolds) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
+  constexpr int kFrames = 40;
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:walker,size=320x240,path=orbit,fps=15", kFrames);
+  ASSERT_EQ(frames.size(), static_cast<std::size_t>(kFrames));
+  Rig rig = Rig::make();
+  TrackStats stats;
+  double sq = 0.0, worst = 0.0, most_share = 0.0;
+  int n = 0, lost = 0;
+  for (int i = 0; i < kFrames; ++i) {
+    hal::RgbdFrame& f = frames[static_cast<std::size_t>(i)];
+    const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
+    most_share = std::max(most_share, stats.moving_share);
+    if (o == TrackOutcome::kLost) {
+      // Lost only with its reason where the person covers over half the view (then
+      // what is left of the room can be too flat: kDegenerate), never tracked wrong.
+      EXPECT_GT(stats.moving_share, 0.5) << "frame " << i << " lost: " << lostReasonName(stats.lost_reason);
+      ++lost;
+      continue;
+    }
+    const double e = translationError(rig.last_pose, f.T_world_cam);
+    sq += e * e, ++n, worst = std::max(worst, e);
+  }
+  const double rmse = std::sqrt(sq / std::max(n, 1));
+  std::printf("orbit with a person walking through: %d tracked, %d lost, RMSE %.2f mm, max %.2f mm, "
+              "moving share up to %.3f\n", n, lost, rmse * 1e3, worst * 1e3, most_share);
+  EXPECT_LE(lost, 2);
+  EXPECT_LT(rmse, 0.010);
+  EXPECT_GT(most_share, 0.30) << "the person covers over a third of the view";
+}
+
+// A board filling 90 % of the view at 0.7 m passes in front of the orbiting
+// camera for five frames. What static remains (a strip at the top) is too
+// little to trust: each of those frames is lost as mostly moving, not tracked
+// on the strip or on the board, and the track returns when the board has gone.
+TEST(TrackerHardCases, AViewFilledByAMoverIsLostAsMostlyMovingAndTheTrackReturns) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
+  constexpr int kFrames = 32, kFirst = 20, kLast = 24, kTop = kH / 10;
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:living-room,size=320x240,path=orbit", kFrames);
+  ASSERT_EQ(frames.size(), static_cast<std::size_t>(kFrames));
+  Rig rig = Rig::make();
+  TrackStats stats;
+  int mostly_moving = 0, other_outcomes = 0;
+  double after_sq = 0.0;
+  int after_n = 0;
+  for (int i = 0; i < kFrames; ++i) {
+    hal::RgbdFrame& f = frames[static_cast<std::size_t>(i)];
+    const bool board = i >= kFirst && i <= kLast;
+    if (board) {
+      for (int v = kTop; v < kH; ++v) {
+        for (int u = 0; u < kW; ++u) {
+          const std::size_t p = static_cast<std::size_t>(v) * kW + u;
+          f.depth()[p] = static_cast<uint16_t>(std::lround(0.7 / f.depth_scale_m));
+          const bool check = ((u + 4 * i) / 10 + v / 10) % 2 == 0;
+          f.rgb()[3 * p] = check ? 230 : 30, f.rgb()[3 * p + 1] = check ? 200 : 60, f.rgb()[3 * p + 2] = 50;
+        }
+      }
+    }
+    const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
+    if (board) {
+      if (o == TrackOutcome::kLost && stats.lost_reason == LostReason::kMostlyMoving) {
+        ++mostly_moving;
+      } else {
+        ++other_outcomes;
+        ADD_FAILURE() << "frame " << i << ": " << trackOutcomeName(o) << " (" << lostReasonName(stats.lost_reason)
+                      << "), moving share " << stats.moving_share;
+      }
+    } else if (i > kLast + 1) {
+      EXPECT_NE(o, TrackOutcome::kLost) << "frame " << i;
+      const double e = translationError(rig.last_pose, f.T_world_cam);
+      after_sq += e * e, ++after_n;
+    }
+  }
+  const double after_rmse = std::sqrt(after_sq / std::max(after_n, 1));
+  std::printf("a board over 90 %% of the view for %d frames: %d lost as mostly moving; RMSE after it %.2f mm\n",
+              kLast - kFirst + 1, mostly_moving, after_rmse * 1e3);
+  EXPECT_EQ(mostly_moving, kLast - kFirst + 1);
+  EXPECT_EQ(other_outcomes, 0);
+  EXPECT_LT(after_rmse, 0.010);
 }
 
 // The balloon scene: a striped balloon of 0.3 m drifting (0.6 m amplitude)

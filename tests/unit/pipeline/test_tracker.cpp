@@ -90,6 +90,8 @@ TEST(TrackerConfig, RejectsBadValues) {
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.photometric_weight = -1.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.min_inlier_fraction = 1.5; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_residual_jump = 0.5; }));
+  EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_moving_share = 0.0; }));
+  EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_moving_share = std::nan(""); }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.min_eigenvalue = -1.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_motion_m = 0.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_motion_deg = 200.0; }));
@@ -106,6 +108,7 @@ TEST(TrackerNames, AreDistinct) {
   EXPECT_EQ(trackOutcomeName(TrackOutcome::kRelocalised), "relocalised");
   EXPECT_EQ(lostReasonName(LostReason::kDegenerate), "degenerate");
   EXPECT_EQ(lostReasonName(LostReason::kNoValidDepth), "no-valid-depth");
+  EXPECT_EQ(lostReasonName(LostReason::kMostlyMoving), "mostly-moving");
 }
 
 constexpr int kW = 320, kH = 240;
