@@ -3,7 +3,7 @@
 // twin (noise=off, the same path and poses) gives the truth.
 //
 //   fovea-map-accuracy [--scene living-room] [--path orbit] [--frames 60] [--size 640x480] [--every 10]
-//                      [--stable C] [--cap C] [--unstable-frames N] [--kernels ref|simd]
+//                      [--stable C] [--cap C] [--unstable-frames N] [--kernels ref|simd] [--pose truth|track]
 //                      (SurfelMapConfig's stable_confidence, confidence_cap, unstable_max_frames, kernels;
 //                      the kernels' default is defaultKernelSet(): simd unless FOVEA_FORCE_KERNEL=ref)
 //
@@ -17,6 +17,12 @@
 // surfel within 1 cm, and (at the last frame) the stable surfels in view that
 // lie in free space, more than 5 cm in front of the true surface: on the balloon
 // scene, ghosts of where the balloon was. An evaluation tool: it allocates freely.
+//
+// --pose truth (the default) fuses each frame at the camera's true pose, every
+// pixel. --pose track fuses as the service does with camera.pose.source=track:
+// through a Mapper whose tracker takes the first frame's true pose and tracks
+// the rest, leaving out the pixels it finds moving (issue 42); it also prints
+// the tracker's outcomes, its error against the true path, and the moving share.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -33,6 +39,7 @@
 #include "bench/bench_input.h"
 #include "bench/mock_scene.h"
 #include "hal/camera.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/map/surfel_map.h"
 
 namespace {
@@ -174,10 +181,21 @@ int readMapOptions(int argc, char** argv, fovea::pipeline::map::SurfelMapConfig&
   return 0;
 }
 
+// --pose track's figures: the tracker's outcomes, its position error against
+// the true path (no alignment: the first frame's pose is the truth), the
+// moving share a frame.
+struct TrackFigures {
+  int tracked = 0, lost = 0;
+  double error_sq = 0.0, error_max = 0.0;
+  std::vector<double> moving_share;
+};
+
 // Fuses `frames` frames of the noisy camera, comparing the map with the twin's
-// view every `every` frames and at the last. Returns 0, or the exit status 1.
-int fuseFrames(fovea::hal::Camera& a, fovea::hal::Camera& b, SurfelMap& map, int frames, int every, Totals& totals,
-               FuseTimes& times) {
+// view every `every` frames and at the last. With tracking, the first frame
+// gives the tracker its true pose and a lost frame is not fused. Returns 0, or
+// the exit status 1.
+int fuseFrames(fovea::hal::Camera& a, fovea::hal::Camera& b, fovea::pipeline::map::Mapper& mapper, bool tracking,
+               int frames, int every, Totals& totals, FuseTimes& times, TrackFigures& track) {
   const fovea::hal::CameraIntrinsics& k = a.info().intrinsics;
   RgbdFrame noisy(k.width, k.height), truth(k.width, k.height);
   for (int i = 0; i < frames; ++i) {
@@ -185,16 +203,36 @@ int fuseFrames(fovea::hal::Camera& a, fovea::hal::Camera& b, SurfelMap& map, int
       std::fprintf(stderr, "fovea-map-accuracy: frame %d did not arrive\n", i);
       return 1;
     }
-    fovea::pipeline::map::FuseStats stats;
-    if (map.fuse(noisy, stats) != fovea::pipeline::map::FuseOutcome::kFused) {
+    fovea::pipeline::map::MapperFrame figures;
+    const bool fused = mapper.addFrame(noisy, /*outside_pose_valid=*/!tracking || i == 0, figures);
+    if (tracking && i > 0) {
+      const bool lost = figures.track.outcome == fovea::pipeline::map::TrackOutcome::kLost;
+      (lost ? track.lost : track.tracked) += 1;
+      track.moving_share.push_back(figures.track.moving_share);
+      const double e = (noisy.T_world_cam.t_world_cam - truth.T_world_cam.t_world_cam).norm();
+      if (!lost) track.error_sq += e * e, track.error_max = std::max(track.error_max, e);
+    }
+    if (fused) {
+      times.add(figures.fuse);
+    } else if (!tracking) {
       std::fprintf(stderr, "fovea-map-accuracy: frame %d: %s\n", i,
-                   std::string(fovea::pipeline::map::fuseOutcomeName(stats.outcome)).c_str());
+                   std::string(fovea::pipeline::map::fuseOutcomeName(figures.fuse.outcome)).c_str());
       return 1;
     }
-    times.add(stats);
-    if ((i + 1) % every == 0 || i + 1 == frames) evaluate(map, noisy, truth, totals);
+    if ((i + 1) % every == 0 || i + 1 == frames) evaluate(mapper.map(), noisy, truth, totals);
   }
   return 0;
+}
+
+void printTracking(const TrackFigures& t) {
+  std::vector<double> shares = t.moving_share;
+  std::sort(shares.begin(), shares.end());
+  const double median = shares.empty() ? 0.0 : shares[shares.size() / 2];
+  const double most = shares.empty() ? 0.0 : shares.back();
+  std::printf("tracking: %d tracked, %d lost; position error against the true path: RMS %.2f mm, max %.2f mm; "
+              "moving share a frame: median %.1f %%, max %.1f %%\n",
+              t.tracked, t.lost, t.tracked ? 1e3 * std::sqrt(t.error_sq / t.tracked) : 0.0, 1e3 * t.error_max,
+              100.0 * median, 100.0 * most);
 }
 
 // The map's surfels, and its depth error and coverage against the single frame's.
@@ -247,20 +285,35 @@ int main(int argc, char** argv) {
   fovea::bench::MockTwins twins;
   if (int status = fovea::bench::openMockTwins("fovea-map-accuracy", spec, twins); status != 0) return status;
   const fovea::hal::CameraIntrinsics& k = twins.noisy->info().intrinsics;
-  fovea::pipeline::map::SurfelMapConfig config;
-  config.max_width = k.width;
-  config.max_height = k.height;
-  if (int status = readMapOptions(argc, argv, config); status != 0) return status;
-  fovea::Result<SurfelMap> created = SurfelMap::create(config);
+  const std::string pose = option(argc, argv, "--pose", "truth");
+  if (pose != "truth" && pose != "track") {
+    std::fprintf(stderr, "fovea-map-accuracy: --pose must be truth or track\n");
+    return 2;
+  }
+  const bool tracking = pose == "track";
+  fovea::pipeline::map::MapperConfig config;
+  config.map.max_width = k.width;
+  config.map.max_height = k.height;
+  if (int status = readMapOptions(argc, argv, config.map); status != 0) return status;
+  config.tracking = tracking ? fovea::pipeline::map::PoseTracking::kRefine : fovea::pipeline::map::PoseTracking::kOff;
+  config.tracker.max_width = k.width;
+  config.tracker.max_height = k.height;
+  config.tracker.kernels = config.map.kernels;
+  fovea::Result<fovea::pipeline::map::Mapper> created = fovea::pipeline::map::Mapper::create(config);
   if (!created) {
     std::fprintf(stderr, "fovea-map-accuracy: %s\n", created.status().message().c_str());
     return 2;
   }
-  SurfelMap& map = created.value();
+  fovea::pipeline::map::Mapper& mapper = created.value();
   Totals totals;
   FuseTimes times;
-  if (int status = fuseFrames(*twins.noisy, *twins.truth, map, frames, every, totals, times); status != 0) return status;
-  printAccuracy(spec, frames, every, map, totals);
-  printFuseTimes(times, config.kernels);
+  TrackFigures track;
+  if (int status = fuseFrames(*twins.noisy, *twins.truth, mapper, tracking, frames, every, totals, times, track);
+      status != 0) {
+    return status;
+  }
+  printAccuracy(spec, frames, every, mapper.map(), totals);
+  if (tracking) printTracking(track);
+  printFuseTimes(times, config.map.kernels);
   return 0;
 }
