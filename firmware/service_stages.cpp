@@ -160,7 +160,10 @@ void Service::foveationLoop() {
     // It reads the captured frame, so the slot goes back to the capture stage
     // only after it (released first, the capture stage could refill the slot
     // while the recorder copied it).
-    if (recorder_) recorder_->onFrame(o.frame_id, f.captured_ns, f.frame, f.pose_fresh, o.cloud);
+    if (recorder_) {
+      recorder_->onFrame(o.frame_id, f.captured_ns, f.frame, f.pose_fresh, o.cloud,
+                         tracking_ ? &stage_->mapFigures().track : nullptr);
+    }
     (void)in_ring.release(in);
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - o.foveation_start_ns);

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <string_view>
 
 #include "core/clock.h"
 #include "firmware/frame_record.h"
@@ -33,7 +34,10 @@ constexpr const char* kPoseSchema = R"json({
     "translation_m": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3},
     "rotation_xyzw": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
     "pose_fresh": {"type": "boolean", "description": "the pose source had a pose for the frame's stamp"},
-    "points": {"type": "integer", "description": "points in the foveated cloud"}
+    "points": {"type": "integer", "description": "points in the foveated cloud"},
+    "tracking": {"type": "string", "description": "with tracking: the frame's outcome (tracked, relocalised, lost, first-frame)"},
+    "lost_reason": {"type": "string", "description": "with tracking, a lost frame: why (docs/tracking.md)"},
+    "moving_share": {"type": "number", "description": "with tracking: the share of the frame's valid pixels found moving (not fused)"}
   }
 })json";
 
@@ -132,17 +136,26 @@ void SessionRecorder::onReceived(net::MessageType type, std::span<const uint8_t>
 }
 
 void SessionRecorder::onFrame(uint32_t frame_id, int64_t captured_ns, const hal::RgbdFrame& frame, bool pose_fresh,
-                              const pipeline::FoveatedCloud& cloud) {
+                              const pipeline::FoveatedCloud& cloud, const pipeline::map::TrackStats* track) {
   const hal::Pose& pose = frame.T_world_cam;
   const Eigen::Quaterniond q(pose.R_world_cam);
-  char json[512];
+  char tracking[160] = "";
+  if (track != nullptr) {
+    const std::string_view outcome = pipeline::map::trackOutcomeName(track->outcome);
+    const bool lost = track->outcome == pipeline::map::TrackOutcome::kLost;
+    const std::string_view reason = lost ? pipeline::map::lostReasonName(track->lost_reason) : std::string_view();
+    std::snprintf(tracking, sizeof tracking, ",\"tracking\":\"%.*s\"%s%.*s%s,\"moving_share\":%.4f",
+                  static_cast<int>(outcome.size()), outcome.data(), lost ? ",\"lost_reason\":\"" : "",
+                  static_cast<int>(reason.size()), reason.data(), lost ? "\"" : "", track->moving_share);
+  }
+  char json[640];
   const int n = std::snprintf(
       json, sizeof json,
       "{\"frame_id\":%" PRIu32 ",\"stamp_ns\":%" PRId64 ",\"captured_ns\":%" PRId64
       ",\"translation_m\":[%.17g,%.17g,%.17g],\"rotation_xyzw\":[%.17g,%.17g,%.17g,%.17g],\"pose_fresh\":%s"
-      ",\"points\":%zu}",
+      ",\"points\":%zu%s}",
       frame_id, frame.stamp_ns, captured_ns, pose.t_world_cam.x(), pose.t_world_cam.y(), pose.t_world_cam.z(), q.x(),
-      q.y(), q.z(), q.w(), pose_fresh ? "true" : "false", cloud.size());
+      q.y(), q.z(), q.w(), pose_fresh ? "true" : "false", cloud.size(), tracking);
   if (n > 0 && static_cast<std::size_t>(n) < sizeof json) {
     (void)frames_->record(pose_, static_cast<uint64_t>(wallClockNs()), {reinterpret_cast<const uint8_t*>(json), static_cast<std::size_t>(n)});
   }

@@ -13,7 +13,8 @@
 //   /fovea/brick_chunks   fovea.chunk: the map's brick parts as sent (map.delta)
 //   /fovea/gaze           fovea.flatbuffer: each gaze sample (with the HMD pose)
 //                         as it came, decrypted; schema: net/schema/control.fbs
-//   /fovea/camera_pose    json: the camera pose of each frame foveated
+//   /fovea/camera_pose    json: the camera pose of each frame foveated, and with
+//                         tracking its outcome and moving share
 //   /fovea/status         json: the status lines
 //
 // Threads: onSent and onReceived are the send stage's (fovea-send), onFrame the
@@ -33,6 +34,7 @@
 #include "io/mcap/recorder.h"
 #include "net/stream_channels.h"
 #include "net/wire.h"
+#include "pipeline/map/tracker.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::firmware {
@@ -75,8 +77,9 @@ class SessionRecorder {
   // This is where channels built from the frame go (the Foxglove ones:
   // foxglove.PointCloud from `cloud`, foxglove.FrameTransform from the pose):
   // give them their own producer slots sized for the cloud, as frame_slots are.
+  // track: the tracker's figures for the frame (nullptr: no tracking).
   void onFrame(uint32_t frame_id, int64_t captured_ns, const hal::RgbdFrame& frame, bool pose_fresh,
-               const pipeline::FoveatedCloud& cloud);
+               const pipeline::FoveatedCloud& cloud, const pipeline::map::TrackStats* track);
   // fovea-capture: a frame as the camera gave it (with --record-frames; the
   // pose source's pose applied). A frame larger than the slots is dropped and counted.
   void onCapture(const hal::RgbdFrame& frame);
