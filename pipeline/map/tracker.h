@@ -110,8 +110,8 @@ struct TrackerConfig {
   // Per-pixel residuals and the reduction: the scalar reference or Highway's.
   KernelSet kernels = defaultKernelSet();
   // The pixels in front of the map's surface, which are not fused (moving_pixels.h).
-  // Found after a first alignment, they are left out of a second one at the
-  // finest level and out of the inliers' share; ...
+  // Found after the alignment, they are left out of the inliers' share (its
+  // min_gap_m at least icp_max_distance_m: the finest level never used them); ...
   MovingPixelsConfig moving;
   // ... a frame with more than this share of its valid pixels moving is lost
   // (kMostlyMoving): what static remains is too little to trust.
@@ -165,6 +165,7 @@ struct TrackStats {
   double moving_share = 0.0;
   int64_t track_ns = 0;             // all of track()
   int64_t pyramid_ns = 0;           // step 1
+  int64_t moving_ns = 0;            // finding the moving pixels and checking without them
   // Building the model for the next frame from the fused map (modelFused(),
   // after fusion; Mapper::addFrame times it): tracking's cost besides track().
   int64_t model_ns = 0;
@@ -249,8 +250,7 @@ class FrameToModelTracker {
   // modelFused()'s finest level from the map's index map (nullptr: none at the frame's size).
   void modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
                          const uint32_t* index, const uint8_t* moving);
-  // Gauss-Newton from R0, t0, the pyramid's levels from `coarsest` down to the finest.
-  Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric, int coarsest = kLevels - 1);
+  Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   // left_out: the valid pixels the solve did not use (moving), not counted against its inliers.
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference, uint32_t left_out) const;
@@ -260,7 +260,7 @@ class FrameToModelTracker {
     Solve solve;
     hal::Pose pose;
     LostReason reason = LostReason::kNone;
-    uint32_t left_out = 0;  // moving pixels left out of the finest level's solve
+    uint32_t left_out = 0;  // valid pixels found moving: not counted against the inliers
   };
   bool frameUsable(const hal::RgbdFrame& frame) const;
   Attempt attemptFrom(const hal::Pose& start, bool photometric);
@@ -269,9 +269,9 @@ class FrameToModelTracker {
   double medianResidual() const;
   // The tracked frame's moving pixels from the solve that posed it.
   void markMoving(const Solve& s, TrackStats& stats);
-  // The moving pixels after the attempt's alignment, then the alignment again
-  // at the finest level without them, checked anew.
-  void alignWithoutMovers(Attempt& a, bool photometric, TrackStats& stats);
+  // The moving pixels after the attempt's alignment, and the attempt checked
+  // anew without them.
+  void leaveOutMovers(Attempt& a, TrackStats& stats);
 
   TrackerConfig config_;
   TrackerCounters counters_;

@@ -252,8 +252,8 @@ TEST(TrackerHardCases, ABlockCarriedWithTheCameraHijacksThePose) {
 // The mock camera's `walker` scene: a person-sized box walking across the
 // living room, between the orbiting camera and the room's middle, up to 45 %
 // of the view here (fps=15: the orbit at twice its speed a frame, 40 frames
-// to 2.7 s). Found moving after the first alignment, left out of the second
-// and of the fusion: the track holds to issue 42's bound, 10 mm. Before (every
+// to 2.7 s). Found moving after the alignment, left out of its judgement and
+// of the fusion: the track holds to issue 42's bound, 10 mm. Before (every
 // pixel fused, least squares) the pose followed it: 173 mm ATE at 640x480.
 TEST(TrackerHardCases, APersonWalkingThroughTheViewIsLeftOutAndTheTrackHolds) {
   FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();

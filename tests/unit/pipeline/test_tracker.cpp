@@ -92,6 +92,9 @@ TEST(TrackerConfig, RejectsBadValues) {
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_residual_jump = 0.5; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_moving_share = 0.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_moving_share = std::nan(""); }));
+  // A moving pixel must lie beyond the finest level's association (leaveOutMovers()).
+  EXPECT_TRUE(bad([](TrackerConfig& c) { c.moving.min_gap_m = 0.05; }));
+  EXPECT_FALSE(bad([](TrackerConfig& c) { c.moving.min_gap_m = 0.05, c.moving.enabled = false; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.min_eigenvalue = -1.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_motion_m = 0.0; }));
   EXPECT_TRUE(bad([](TrackerConfig& c) { c.max_motion_deg = 200.0; }));
