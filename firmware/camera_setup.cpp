@@ -123,9 +123,11 @@ Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
   settings.spec = args.getOr("--camera", "mock:living-room");
   settings.calibration_file = args.getOr("--calibration", "");
   std::string pose = args.getOr("--pose", "none");
-  // track, track+fixed:..., track+socket:PATH: the tracker, alone or refining the outside pose.
+  // track, track+fixed:..., track+socket:PATH, track+camera: the tracker, alone or
+  // refining the outside pose (track+camera: the camera's own, as `none` gives it).
   const bool track = pose == "track" || pose.rfind("track+", 0) == 0;
-  if (pose == "track") {
+  const bool own = pose == "track+camera";
+  if (pose == "track" || own) {
     pose = "none";
   } else if (track) {
     pose.erase(0, 6);
@@ -148,7 +150,9 @@ Result<CameraSettings> cameraSettingsFromArgs(const Args& args) {
     return Result<CameraSettings>(ErrorCode::kInvalidArgument,
                                   "--pose: '" + args.getOr("--pose", "") + "' is not " + kPoseFlagForms);
   }
-  if (track) settings.pose.source = settings.pose.source == "none" ? "track" : "track+" + settings.pose.source;
+  if (track) {
+    settings.pose.source = own ? "track+camera" : settings.pose.source == "none" ? "track" : "track+" + settings.pose.source;
+  }
   if (const std::string* v = args.get("--pose-max-age-ms")) {
     Result<long> ms = parseInteger("--pose-max-age-ms", *v, 1, 60'000);
     if (!ms) return ms.status();

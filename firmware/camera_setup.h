@@ -32,9 +32,9 @@ Result<std::string> applyCameraCalibration(hal::Camera& camera, const CameraSett
 
 // What camera.pose.source takes, and --pose: for the messages and the help.
 inline constexpr const char* kPoseSourceChoices =
-    "camera.pose.source: must be none, fixed, socket, track, track+fixed or track+socket";
+    "camera.pose.source: must be none, fixed, socket, track, track+fixed, track+socket or track+camera";
 inline constexpr const char* kPoseFlagForms =
-    "none, fixed:X,Y,Z[,QX,QY,QZ,QW], socket:PATH, track, track+fixed:X,Y,Z[,...] or track+socket:PATH";
+    "none, fixed:X,Y,Z[,QX,QY,QZ,QW], socket:PATH, track, track+fixed:X,Y,Z[,...], track+socket:PATH or track+camera";
 
 // The outside pose source camera.pose.source names (track: none; track+X: X).
 // The tracking part is pipeline::map::parsePoseSourceChoice's.

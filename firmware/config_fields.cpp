@@ -87,7 +87,7 @@ std::vector<Field> cameraFields() {
     FOVEA_FLOAT_LIST("camera.extrinsics.rotation_xyzw", camera.extrinsics_rotation_xyzw, -2.0, 2.0),
     FOVEA_FLOAT_LIST("camera.extrinsics.translation_m", camera.extrinsics_translation_m, -10.0, 10.0),
     // [camera.pose]
-    Field{"camera.pose.source", Kind::kChoice, 0, 0, {"none", "fixed", "socket", "track", "track+fixed", "track+socket"},
+    Field{"camera.pose.source", Kind::kChoice, 0, 0, {"none", "fixed", "socket", "track", "track+fixed", "track+socket", "track+camera"},
           [](const ServiceConfig& c) -> Value { return c.camera.pose.source; },
           [](ServiceConfig& c, const Value& v) { c.camera.pose.source = std::get<std::string>(v); }},
     FOVEA_FLOAT_LIST("camera.pose.translation_m", camera.pose.translation_m, -1e7, 1e7),

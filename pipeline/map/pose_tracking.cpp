@@ -16,8 +16,8 @@ std::optional<PoseSourceChoice> parsePoseSourceChoice(std::string_view source) {
   constexpr std::string_view kTrackPlus = "track+";
   if (source.substr(0, kTrackPlus.size()) == kTrackPlus) {
     source.remove_prefix(kTrackPlus.size());
-    if (source != "socket" && source != "fixed") return std::nullopt;
-    choice.outside = source;
+    if (source != "socket" && source != "fixed" && source != "camera") return std::nullopt;
+    choice.outside = source == "camera" ? std::string_view("none") : source;  // camera: its own pose
     choice.tracking = PoseTracking::kRefine;
     return choice;
   }

@@ -30,7 +30,7 @@ class SurfelMap;
 enum class PoseTracking : uint8_t {
   kOff,     // the outside pose as it is (none, fixed, socket)
   kAlone,   // track: the tracker alone; the frame's own pose is ignored
-  kRefine,  // track+socket, track+fixed: the outside pose is the prior tracking refines
+  kRefine,  // track+socket, track+fixed, track+camera: the outside pose is the prior tracking refines
 };
 
 // camera.pose.source split in two: the outside source ("none", "fixed",

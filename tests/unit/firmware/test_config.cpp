@@ -15,6 +15,7 @@
 
 #include "firmware/options.h"
 #include "hal/camera.h"
+#include "pipeline/map/pose_tracking.h"
 #include "tests/support/process.h"
 #include "tests/support/programs.h"
 
@@ -400,7 +401,15 @@ TEST(Config, SetOverrides) {
   ASSERT_TRUE(applyOverride(config, "pose.source=track").isOk());
   EXPECT_EQ(config.camera.pose.source, "track");
   EXPECT_EQ(setError("pose.source=gps"), "--set: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\", "
-                                         "\"track\", \"track+fixed\", \"track+socket\" (got \"gps\")");
+                                         "\"track\", \"track+fixed\", \"track+socket\", \"track+camera\" (got \"gps\")");
+  // The tracker refining the camera's own pose (a mock's path, a recording's ground truth).
+  ASSERT_TRUE(applyOverride(config, "pose.source=track+camera").isOk());
+  EXPECT_EQ(config.camera.pose.source, "track+camera");
+  const std::optional<pipeline::map::PoseSourceChoice> own = pipeline::map::parsePoseSourceChoice("track+camera");
+  ASSERT_TRUE(own.has_value());
+  EXPECT_EQ(own->outside, "none");
+  EXPECT_EQ(own->tracking, pipeline::map::PoseTracking::kRefine);
+  EXPECT_FALSE(pipeline::map::parsePoseSourceChoice("track+none").has_value());
   EXPECT_NE(setError("source=map").find("unknown key 'source'"), std::string::npos);  // no section at all: not guessed
 
   EXPECT_EQ(setError("camera.sepc=mock"), "--set: unknown key 'camera.sepc' (did you mean 'camera.spec'?)");
@@ -769,7 +778,7 @@ TEST(Config, CameraGeometryKeysAreChecked) {
             "fovea.toml:3: camera.pose.socket: must name the socket's path with camera.pose.source = \"socket\"");
   EXPECT_EQ(loadError("[camera.pose]\nsource = \"gps\"\n"),
             "fovea.toml:2: camera.pose.source: must be one of \"none\", \"fixed\", \"socket\", \"track\", \"track+fixed\", "
-            "\"track+socket\" (got \"gps\")");
+            "\"track+socket\", \"track+camera\" (got \"gps\")");
   EXPECT_EQ(loadError("[camera.pose]\nmax_age_ms = 0\n"),
             "fovea.toml:2: camera.pose.max_age_ms: must be within 1 .. 60000 (got 0)");
   EXPECT_EQ(loadError("[camera]\ncalibration_file = \"d435.yaml\"\n[camera.pose]\nsource = \"fixed\"\n"
