@@ -75,7 +75,8 @@ const char* kHelp =
     "  --frames N             frames per position (default 400, the paper's)\n"
     "  --positions N          HMD positions per dataset (default 5, the paper's)\n"
     "  --seed S               the positions' and fixations' seed (default 1)\n"
-    "  --datasets LIST        living-room, balloon, tum (default: all there are)\n"
+    "  --datasets LIST        living-room, balloon, tum (default: all there are), balloon-orbit (the\n"
+    "                         balloon with the camera orbiting, the map tracked: named only)\n"
     "  --conditions LIST      F1, F2, F3, FREF, ACUITY, ACUITY-2MM (ACUITY with a distance floor of\n"
     "                         2 mm x s^2), ACUITY-REFINED (ACUITY, margin 0.3, one refinement pass),\n"
     "                         MAP (ACUITY on the fused surfel map, foveation.source = map, map.delta =\n"
@@ -329,7 +330,7 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
                                       kBudgetMbps, "--frames", std::to_string(captured), "--timing-log",
                                       run.dir + "/timing.csv", "--log-level", "warning", "--status-interval-ms",
                                       "600000"};
-    for (const std::string& setting : conditionSettings(run.condition)) serve.insert(serve.end(), {"--set", setting});
+    for (const std::string& setting : runSettings(run.dataset, run.condition)) serve.insert(serve.end(), {"--set", setting});
     const pid_t robot = spawn(serve, run.dir + "/fovead.log");
     if (robot < 0) return R(ErrorCode::kNotFound, "cannot start " + fovead + " (--fovead PATH)");
     // The operator says hello for 3 s until the service answers: start it once the
@@ -475,7 +476,8 @@ int chooseDatasets(const Options& o, std::vector<Dataset>& datasets) {
     }
     available.push_back({"recording", "", "mcap:" + fs::absolute(o.mcap).string() + ",realtime=on,loop=on"});
   }
-  datasets = available;
+  datasets.clear();
+  std::copy_if(available.begin(), available.end(), std::back_inserter(datasets), [](const Dataset& d) { return d.by_default; });
   if (!o.mcap.empty() && o.datasets.empty()) datasets = {available.back()};
   if (!o.datasets.empty()) {
     Result<std::vector<Dataset>> d = selectDatasets(available, o.datasets);

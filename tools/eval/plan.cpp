@@ -16,6 +16,7 @@ std::vector<Dataset> defaultDatasets(const std::string& tum_path) {
   std::vector<Dataset> d = {{"living-room", "LIV", "mock:living-room,realtime=on"},
                             {"balloon", "BAL", "mock:balloon,realtime=on"}};
   if (!tum_path.empty()) d.push_back({"tum", "", "tum:" + tum_path + ",realtime=on,loop=on"});
+  d.push_back({"balloon-orbit", "", "mock:balloon,realtime=on,path=orbit", {"camera.pose.source=track+camera"}, false});
   return d;
 }
 
@@ -42,6 +43,12 @@ std::vector<std::string> conditionSettings(const Condition& c) {
   // stream of the map's bricks (fovead's default with the map since issue 26),
   // said explicitly so that the run does not depend on the default.
   if (c.source == "map") out.push_back(c.map_delta ? "map.delta=true" : "map.delta=false");
+  return out;
+}
+
+std::vector<std::string> runSettings(const Dataset& d, const Condition& c) {
+  std::vector<std::string> out = conditionSettings(c);
+  if (c.source == "map") out.insert(out.end(), d.map_settings.begin(), d.map_settings.end());
   return out;
 }
 
@@ -88,7 +95,7 @@ Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, con
     auto it = std::find_if(all.begin(), all.end(), [&](const Dataset& d) { return d.name == n; });
     if (it == all.end()) {
       return Result<std::vector<Dataset>>(ErrorCode::kInvalidArgument,
-                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, tum with --tum PATH, recording with --mcap FILE)");
+                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, balloon-orbit, tum with --tum PATH, recording with --mcap FILE)");
     }
     out.push_back(*it);
   }

@@ -15,12 +15,18 @@
 namespace fovea::tools::eval {
 
 struct Dataset {
-  std::string name;         // "living-room" (LIV), "balloon" (BAL), "tum"
+  std::string name;         // "living-room" (LIV), "balloon" (BAL), "tum", "balloon-orbit"
   std::string paper_name;   // "LIV", "BAL", "" (not in the paper)
   std::string camera_spec;  // for fovead serve --camera (paced in real time)
+  // --set settings of the conditions foveating the map on this dataset.
+  std::vector<std::string> map_settings = {};
+  bool by_default = true;  // run without --datasets naming it
 };
 
-// living-room and balloon from the mock camera; tum when tum_path is not empty.
+// living-room and balloon from the mock camera; tum when tum_path is not empty;
+// balloon-orbit (the balloon with the camera orbiting, the map's conditions
+// tracking it with track+camera so that the balloon is found moving: issue 42),
+// only when --datasets names it.
 std::vector<Dataset> defaultDatasets(const std::string& tum_path);
 
 struct Condition {
@@ -55,6 +61,8 @@ std::vector<Condition> allConditions();
 // foveation.floor_per_m2, foveation.level_margin, foveation.refine_passes,
 // foveation.source and, with the map, map.delta (those set).
 std::vector<std::string> conditionSettings(const Condition& c);
+// A run's settings: its condition's, and the dataset's for the map's conditions.
+std::vector<std::string> runSettings(const Dataset& d, const Condition& c);
 // The quality frame (the camera's sequence number) when --quality-frame is not
 // given: 30, or 90 when a condition streams the map as bricks (MAP-DELTA): its
 // operator must hold the map by then, and the map's bricks come only once its

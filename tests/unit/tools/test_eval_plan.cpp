@@ -1,5 +1,6 @@
 // fovea-eval's plan (seeded HMD positions, gaze scripts, selections) and its
 // reading of a run's logs (tools/eval/results.h) on logs written here by hand.
+#include <algorithm>
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -72,8 +73,22 @@ TEST(EvalPlan, SelectionsNameWhatIsUnknown) {
   EXPECT_NE(bad.status().message().find("F9"), std::string::npos);
   EXPECT_FALSE(selectConditions(""));
   const std::vector<Dataset> mock = defaultDatasets("");
-  EXPECT_EQ(mock.size(), 2u);
-  EXPECT_EQ(defaultDatasets("/data/tum").back().camera_spec, "tum:/data/tum,realtime=on,loop=on");
+  ASSERT_EQ(mock.size(), 3u);
+  EXPECT_EQ(std::count_if(mock.begin(), mock.end(), [](const Dataset& d) { return d.by_default; }), 2);
+  EXPECT_EQ(defaultDatasets("/data/tum")[2].camera_spec, "tum:/data/tum,realtime=on,loop=on");
+  // The balloon with a moving camera, named only; its map conditions track the
+  // camera (track+camera) so that the balloon is found moving (issue 42).
+  const Dataset& orbit = mock.back();
+  EXPECT_EQ(orbit.name, "balloon-orbit");
+  EXPECT_FALSE(orbit.by_default);
+  EXPECT_EQ(orbit.camera_spec, "mock:balloon,realtime=on,path=orbit");
+  Result<std::vector<Condition>> f1_delta = selectConditions("F1,MAP-DELTA");
+  ASSERT_TRUE(f1_delta);
+  EXPECT_EQ(runSettings(orbit, (*f1_delta)[0]), std::vector<std::string>{});
+  EXPECT_EQ(runSettings(orbit, (*f1_delta)[1]),
+            (std::vector<std::string>{"foveation.source=map", "map.delta=true", "camera.pose.source=track+camera"}));
+  EXPECT_EQ(runSettings(mock[1], (*f1_delta)[1]), conditionSettings((*f1_delta)[1]));
+  EXPECT_TRUE(selectDatasets(mock, "balloon-orbit"));
   EXPECT_FALSE(selectDatasets(mock, "tum"));  // not there without a path
   EXPECT_TRUE(selectDatasets(mock, "balloon"));
   EXPECT_EQ(runName(mock[1], defaultConditions()[3], makePositions(livingRoom(), 2, 1)[1]), "balloon_FREF_p2");
