@@ -33,7 +33,14 @@
 // frame's live points), and whether it is displaced, seen from the eye, by more
 // than the MAR at the true point's eccentricity (Eq. 1, m = 0.022). A
 // nearest-point measure, unlike fovea-eval's (each input point against its own
-// representative). An evaluation tool: it allocates freely.
+// representative).
+//
+// On a mock scene with movers (the balloon, the walker, the carried block:
+// hal/camera/mock/built_in_scenes.cpp), the same frames judge the mover alone
+// (issue 42): the true points the twin sees on it, the points F1 and MAP-DELTA
+// draw on it (within 2 cm of its surface along the camera's ray) and the
+// share of its true points above the MAR, frame by frame. An evaluation tool:
+// it allocates freely.
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -54,6 +61,7 @@
 #include "bench/bench_input.h"
 #include "bench/mock_scene.h"
 #include "hal/camera.h"
+#include "hal/camera/mock/scene.h"
 #include "net/brick_cache.h"
 #include "net/codec.h"
 #include "pipeline/backproject.h"
@@ -107,7 +115,7 @@ void decodeAll(const net::ChunkEncoder& encoder, net::BrickCache* cache, std::ve
 // point of `held` is displaced, seen from the eye, by more than the MAR at the
 // point's eccentricity (Eq. 1, slope m). A true point with no held point within
 // 10 cm counts as displaced (`missing`).
-double shareAboveMar(const std::vector<Eigen::Vector3d>& held, const pipeline::PointCloud& truth,
+double shareAboveMar(const std::vector<Eigen::Vector3d>& held, const std::vector<Eigen::Vector3d>& truth,
                      const pipeline::Gaze& gaze, double slope, std::size_t& missing) {
   constexpr double kCell = 0.02;
   constexpr int kRings = 5;
@@ -125,7 +133,7 @@ double shareAboveMar(const std::vector<Eigen::Vector3d>& held, const pipeline::P
   std::size_t above = 0, seen = 0;
   missing = 0;
   for (std::size_t t = 0; t < truth.size(); ++t) {
-    const Eigen::Vector3d p = truth.world(t);
+    const Eigen::Vector3d& p = truth[t];
     const Eigen::Vector3i c = cellOf(p);
     double best = std::numeric_limits<double>::infinity();
     int nearest = -1;
@@ -169,6 +177,7 @@ struct Stream {
 
 struct DeltaOptions {
   std::string spec;    // the mock camera's (mock_scene.h)
+  std::string scene;   // its scene's name (--scene), for the mover's own figures
   std::string camera;  // --camera: another camera (a TUM sequence) in its place, without a twin
   int frames = 90;
   double budget_mbps = 12.5;
@@ -182,6 +191,7 @@ struct DeltaOptions {
 std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
   DeltaOptions o;
   o.spec = bench::mockSceneSpec(argc, argv, "static");
+  o.scene = option(argc, argv, "--scene", "living-room");
   o.camera = option(argc, argv, "--camera", "");
   o.frames = std::atoi(option(argc, argv, "--frames", "90").c_str());
   o.budget_mbps = std::atof(option(argc, argv, "--budget-mbps", "12.5").c_str());
@@ -231,9 +241,12 @@ class DeltaBench {
   bool foveateLive(const pipeline::Gaze& gaze, bool steady, const pipeline::map::MapperFrame& figures);
   bool sendLive(const FrameStep& s);
   int evaluate(const FrameStep& s);
+  void evaluateMover(const FrameStep& s, const std::vector<Eigen::Vector3d>& held);
+  bool onMover(const Eigen::Vector3d& p, double time_s) const;
   int coldPlan(std::vector<double>& cold_ms);
   void printBytes() const;
   void printQuality(const std::vector<double>& cold_ms) const;
+  void printMover() const;
   void count(Stream& stream, std::size_t bytes, bool steady) {
     stream.bytes += bytes;
     if (steady) stream.bytes_steady += bytes;
@@ -263,6 +276,15 @@ class DeltaBench {
   pipeline::PointCloud truth_cloud_;
   std::vector<double> above_mar_[3], held_points_, f1_points_;  // FREF, F1, MAP-DELTA held
   std::size_t missing_points_[3] = {};
+  // The movers' scene (the twin's), when it has any; each evaluated frame's
+  // figures for the mover alone.
+  std::optional<hal::mock::Scene> mover_scene_;
+  struct MoverFrame {
+    int frame = 0;
+    std::size_t true_points = 0, f1_points = 0, delta_points = 0;
+    double f1_above = 0.0, delta_above = 0.0;  // % of its true points
+  };
+  std::vector<MoverFrame> mover_frames_;
 
   Stream fref_{"FREF"}, f1_stream_{"F1"}, bricks_{"MAP-DELTA bricks"}, live_stream_{"MAP-DELTA live"};
   std::vector<double> plan_ms_, brick_encode_ms_;
@@ -352,7 +374,12 @@ DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Ca
       decoded_(std::max(pixels_, kMaxBrickPoints)),
       truth_(k_.width, k_.height),
       truth_cloud_(pixels_),
-      frame_(k_.width, k_.height) {}
+      frame_(k_.width, k_.height) {
+  if (truth_camera_ != nullptr) {
+    Result<hal::mock::Scene> scene = hal::mock::Scene::create(o_.scene);
+    if (scene && scene.value().isDynamic()) mover_scene_ = std::move(scene.value());
+  }
+}
 
 int DeltaBench::run() {
   for (int f = 0; f < o_.frames; ++f) {
@@ -523,16 +550,54 @@ int DeltaBench::evaluate(const FrameStep& s) {
   for (Eigen::Vector3d& p : held) p = map_to_world_.R_world_cam * p + map_to_world_.t_world_cam;  // into the truth's world
   std::vector<Eigen::Vector3d> fref_held(cloud_.size());
   for (std::size_t i = 0; i < cloud_.size(); ++i) fref_held[i] = cloud_.world(i);
+  std::vector<Eigen::Vector3d> truth(truth_cloud_.size());
+  for (std::size_t i = 0; i < truth_cloud_.size(); ++i) truth[i] = truth_cloud_.world(i);
   std::size_t missing = 0;
-  above_mar_[0].push_back(100.0 * shareAboveMar(fref_held, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  above_mar_[0].push_back(100.0 * shareAboveMar(fref_held, truth, s.gaze, pipeline::kDefaultSlope, missing));
   missing_points_[0] += missing;
-  above_mar_[1].push_back(100.0 * shareAboveMar(f1_held_, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  above_mar_[1].push_back(100.0 * shareAboveMar(f1_held_, truth, s.gaze, pipeline::kDefaultSlope, missing));
   missing_points_[1] += missing;
-  above_mar_[2].push_back(100.0 * shareAboveMar(held, truth_cloud_, s.gaze, pipeline::kDefaultSlope, missing));
+  above_mar_[2].push_back(100.0 * shareAboveMar(held, truth, s.gaze, pipeline::kDefaultSlope, missing));
   missing_points_[2] += missing;
   held_points_.push_back(static_cast<double>(held.size()));
   f1_points_.push_back(static_cast<double>(f1_held_.size()));
+  if (mover_scene_) evaluateMover(s, held);
   return 0;
+}
+
+// Whether world point p lies on a mover of the twin's scene at time_s: the
+// camera's ray through it meets a moving or carried shape within 2 cm of it.
+bool DeltaBench::onMover(const Eigen::Vector3d& p, double time_s) const {
+  constexpr double kNear = 0.02;
+  const hal::Pose& camera = truth_.T_world_cam;
+  const Eigen::Vector3d to_p = p - camera.t_world_cam;
+  const double z = (camera.R_world_cam.transpose() * to_p).z();
+  if (!(z > 0.0)) return false;
+  const Eigen::Vector3d dir = to_p / z;  // camera z 1: the ray parameter is the depth
+  hal::mock::Hit hit;
+  bool found = mover_scene_->intersect(camera.t_world_cam, dir, time_s, hal::mock::SceneLayer::kDynamic, z + kNear, hit);
+  found |= mover_scene_->intersectCarried(camera, dir, found ? hit.t : z + kNear, hit);
+  return found && std::abs(hit.t - z) <= kNear;
+}
+
+// The mover alone: its true points (the twin's pixels on it), what F1 and
+// MAP-DELTA (the bricks held and the frame's live points) draw on it, and the
+// share of its true points above the MAR for each.
+void DeltaBench::evaluateMover(const FrameStep& s, const std::vector<Eigen::Vector3d>& held) {
+  const double time_s = static_cast<double>(truth_.stamp_ns) * 1e-9;
+  std::vector<Eigen::Vector3d> mover_truth;
+  for (std::size_t i = 0; i < truth_cloud_.size(); ++i) {
+    if (onMover(truth_cloud_.world(i), time_s)) mover_truth.push_back(truth_cloud_.world(i));
+  }
+  MoverFrame m;
+  m.frame = s.f;
+  m.true_points = mover_truth.size();
+  for (const Eigen::Vector3d& p : f1_held_) m.f1_points += onMover(p, time_s) ? 1 : 0;
+  for (const Eigen::Vector3d& p : held) m.delta_points += onMover(p, time_s) ? 1 : 0;
+  std::size_t missing = 0;
+  m.f1_above = 100.0 * shareAboveMar(f1_held_, mover_truth, s.gaze, pipeline::kDefaultSlope, missing);
+  m.delta_above = 100.0 * shareAboveMar(held, mover_truth, s.gaze, pipeline::kDefaultSlope, missing);
+  mover_frames_.push_back(m);
 }
 
 // The plan's worst case on the final map: an operator that holds nothing
@@ -610,6 +675,24 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
   std::printf("    points drawn, mean: F1 %.0f, MAP-DELTA held %.0f; true points with nothing within 10 cm: FREF %zu, F1 %zu, "
               "MAP-DELTA %zu\n",
               mean(f1_points_), mean(held_points_), missing_points_[0], missing_points_[1], missing_points_[2]);
+  if (mover_scene_) printMover();
+}
+
+// The mover's figures frame by frame, and their means.
+void DeltaBench::printMover() const {
+  std::printf("  the mover alone (%s), frame by frame: its true points; points drawn on it and its share above the MAR\n",
+              o_.scene.c_str());
+  double sums[5] = {};
+  for (const MoverFrame& m : mover_frames_) {
+    std::printf("    frame %3d: %6zu true; F1 %6zu points, %5.1f %% above; MAP-DELTA %6zu points, %5.1f %% above\n", m.frame,
+                m.true_points, m.f1_points, m.f1_above, m.delta_points, m.delta_above);
+    const double row[5] = {static_cast<double>(m.true_points), static_cast<double>(m.f1_points), m.f1_above,
+                           static_cast<double>(m.delta_points), m.delta_above};
+    for (int k = 0; k < 5; ++k) sums[k] += row[k];
+  }
+  const double n = std::max<double>(1.0, static_cast<double>(mover_frames_.size()));
+  std::printf("    mean: %.0f true; F1 %.0f points, %.1f %% above; MAP-DELTA %.0f points, %.1f %% above\n", sums[0] / n,
+              sums[1] / n, sums[2] / n, sums[3] / n, sums[4] / n);
 }
 
 }  // namespace
