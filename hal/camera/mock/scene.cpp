@@ -247,6 +247,17 @@ float valueNoise(double u, double v, uint32_t salt) {
 
 Vector3f mix(const Vector3f& a, const Vector3f& b, float w) { return a + (b - a) * w; }
 
+// A box from its corners; its centre for the shapes that move (their texture's frame).
+Shape boxShape(const Vector3d& min_m, const Vector3d& max_m, int material) {
+  Shape s;
+  s.kind = ShapeKind::kBox;
+  s.material = material;
+  s.min_m = min_m;
+  s.max_m = max_m;
+  s.center_m = 0.5 * (min_m + max_m);
+  return s;
+}
+
 }  // namespace
 
 Vector3d Motion::offsetAt(double time_s) const {
@@ -307,12 +318,7 @@ void Scene::addShape(const Shape& shape) {
 }
 
 void Scene::addBox(const Vector3d& min_m, const Vector3d& max_m, int material) {
-  Shape s;
-  s.kind = ShapeKind::kBox;
-  s.material = material;
-  s.min_m = min_m;
-  s.max_m = max_m;
-  addShape(s);
+  addShape(boxShape(min_m, max_m, material));
 }
 
 void Scene::addRoom(const Vector3d& min_m, const Vector3d& max_m, const int (&face_material)[6]) {
@@ -375,24 +381,13 @@ void Scene::addMovingSphere(const Vector3d& center_m, double radius_m, const Mot
 
 void Scene::addMovingBox(const Vector3d& min_m, const Vector3d& max_m, const Motion& motion,
                          int material) {
-  Shape s;
-  s.kind = ShapeKind::kBox;
-  s.material = material;
-  s.min_m = min_m;
-  s.max_m = max_m;
-  s.center_m = 0.5 * (min_m + max_m);
+  Shape s = boxShape(min_m, max_m, material);
   s.motion = motion;
   dynamic_shapes_.push_back(s);
 }
 
 void Scene::addCarriedBox(const Vector3d& min_cam_m, const Vector3d& max_cam_m, int material) {
-  Shape s;
-  s.kind = ShapeKind::kBox;
-  s.material = material;
-  s.min_m = min_cam_m;
-  s.max_m = max_cam_m;
-  s.center_m = 0.5 * (min_cam_m + max_cam_m);
-  carried_shapes_.push_back(s);
+  carried_shapes_.push_back(boxShape(min_cam_m, max_cam_m, material));
 }
 
 bool Scene::intersectShape(const Shape& s, const Vector3d& origin, const Vector3d& dir,
