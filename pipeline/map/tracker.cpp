@@ -750,15 +750,17 @@ void FrameToModelTracker::markMoving(const Solve& s, TrackStats& stats) {
 }
 
 // ReFusion's order: align, find what the static model does not explain, and
-// judge the alignment on the rest. A pixel found moving lies at least
-// min_gap_m in front of the model, which TrackerConfig::validate() keeps at or
-// beyond the finest level's association distance: the finest level, the
-// alignment's last, never used it, so the alignment is already the one without
-// the movers (aligning again without them moved no pose: fovea-track's walker,
-// 5.45 mm ATE with one or ten more finest iterations). What changes is the
-// judgement: the inliers count against the pixels left in, so a mover over half
-// the view is not "few inliers", and a view mostly moving is lost with its own
-// reason, not tracked on what little is left.
+// judge the alignment on the rest. A mover's pixels in front lie at least
+// min_gap_m before the model's surfels, which TrackerConfig::validate() keeps at
+// or beyond the finest level's association distance: the finest level, the
+// alignment's last, never used them, so the alignment already is the one without
+// them (only the unknown pixels a mover's region grows into, where the model
+// holds the frame before's measurement, can have been used). Aligning again
+// without them was measured and not kept: its extra finest iterations cost 2.1 ms
+// and moved the ATE both ways (docs/tracking.md). What changes is the judgement:
+// the inliers count against the pixels left in, so a mover over half the view is
+// not "few inliers", and a view mostly moving is lost with its own reason, not
+// tracked on what little is left.
 void FrameToModelTracker::leaveOutMovers(Attempt& a, TrackStats& stats) {
   markMoving(a.solve, stats);
   if (stats.moving_pixels == 0) return;
