@@ -19,7 +19,7 @@
 // scene, ghosts of where the balloon was. An evaluation tool: it allocates freely.
 //
 // --pose truth (the default) fuses each frame at the camera's true pose, every
-// pixel. --pose track fuses as the service does with camera.pose.source=track:
+// pixel. --pose track fuses as the service does with camera.pose.source=track+camera:
 // through a Mapper whose tracker takes the first frame's true pose and tracks
 // the rest, leaving out the pixels it finds moving (issue 42); it also prints
 // the tracker's outcomes, its error against the true path, and the moving share.

@@ -590,11 +590,15 @@ double FrameToModelTracker::medianResidual() const {
   return v[static_cast<std::size_t>(n / 2)];
 }
 
+double FrameToModelTracker::inlierFraction(uint32_t inliers, uint32_t left_out) const {
+  const uint32_t used = valid_pixels_ - std::min(left_out, valid_pixels_);
+  return used > 0 ? static_cast<double>(inliers) / used : 0.0;
+}
+
 LostReason FrameToModelTracker::check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference,
                                       uint32_t left_out) const {
   if (!s.finite || !pose.R_world_cam.allFinite() || !pose.t_world_cam.allFinite()) return LostReason::kDegenerate;
-  const uint32_t used = valid_pixels_ - std::min(left_out, valid_pixels_);
-  const double fraction = used > 0 ? static_cast<double>(s.inliers) / used : 0.0;
+  const double fraction = inlierFraction(s.inliers, left_out);
   if (fraction < config_.min_inlier_fraction || s.inliers < 6) return LostReason::kFewInliers;
   if (s.min_eigenvalue < config_.min_eigenvalue) return LostReason::kDegenerate;
   if (residual_count_ >= 5 && s.icp_rms > config_.residual_jump_floor_m &&
@@ -661,8 +665,7 @@ FrameToModelTracker::Attempt FrameToModelTracker::relocalise(const hal::Pose* pr
 void FrameToModelTracker::recordAttempt(const Attempt& best, const hal::Pose* prior, TrackStats& stats) const {
   stats.iterations = std::max(stats.iterations, best.solve.iterations);
   stats.inliers = best.solve.inliers;
-  const uint32_t used = valid_pixels_ - std::min(best.left_out, valid_pixels_);
-  stats.inlier_fraction = used > 0 ? static_cast<double>(best.solve.inliers) / used : 0.0;
+  stats.inlier_fraction = inlierFraction(best.solve.inliers, best.left_out);
   stats.icp_rms_m = best.solve.icp_rms;
   stats.photometric_rms = best.solve.photometric_rms;
   stats.min_eigenvalue = best.solve.min_eigenvalue;

@@ -158,7 +158,7 @@ struct TrackStats {
   double prior_disagreement_m = 0.0;
   double prior_disagreement_deg = 0.0;
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
-  // The pixels found moving after the first alignment (in front of the map's
+  // The pixels found moving after the alignment (in front of the map's
   // surface, not settled: moving_pixels.h), and their share of the valid pixels;
   // 0 on a frame lost before that (no model, no depth).
   uint32_t moving_pixels = 0;
@@ -252,6 +252,8 @@ class FrameToModelTracker {
                          const uint32_t* index, const uint8_t* moving);
   Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
   // The checks of step 3 on a solve from the estimate (R, t of the world pose).
+  // The inliers' share of the valid pixels less left_out (moving: not counted against them).
+  double inlierFraction(uint32_t inliers, uint32_t left_out) const;
   // left_out: the valid pixels the solve did not use (moving), not counted against its inliers.
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference, uint32_t left_out) const;
   // track()'s steps: a solve from a start pose with its world pose and checks,
