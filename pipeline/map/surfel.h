@@ -73,7 +73,10 @@ inline uint32_t encodeNormal(const Eigen::Vector3f& n) {
   return (quantiseUnit(u) << 12) | quantiseUnit(v);
 }
 
-inline Eigen::Vector3f decodeNormal(uint32_t code) {  // unit length
+// The normal's direction before normalising (its L1 norm is 1): enough where
+// only the direction counts (a plane's depth along a ray is a ratio), without
+// the square root and divisions of decodeNormal().
+inline Eigen::Vector3f decodeDirection(uint32_t code) {
   using namespace surfel_detail;
   float u = unquantiseUnit((code >> 12) & 0xfffu);
   float v = unquantiseUnit(code & 0xfffu);
@@ -84,8 +87,10 @@ inline Eigen::Vector3f decodeNormal(uint32_t code) {  // unit length
     u = fu;
     v = fv;
   }
-  return Eigen::Vector3f(u, v, z).normalized();
+  return {u, v, z};
 }
+
+inline Eigen::Vector3f decodeNormal(uint32_t code) { return decodeDirection(code).normalized(); }  // unit length
 
 inline constexpr float kMinRadiusM = 1e-4f;
 inline constexpr float kMaxRadiusM = 0.1f;
@@ -108,6 +113,7 @@ inline uint16_t encodeConfidence(float c) {
 inline float decodeConfidence(uint16_t code) { return static_cast<float>(code) / kConfidenceScale; }
 
 inline Eigen::Vector3f surfelNormal(const Surfel& s) { return decodeNormal(s.normal_radius >> 8); }
+inline Eigen::Vector3f surfelDirection(const Surfel& s) { return decodeDirection(s.normal_radius >> 8); }
 inline float surfelRadius(const Surfel& s) { return decodeRadius(static_cast<uint8_t>(s.normal_radius & 0xffu)); }
 inline void setNormalAndRadius(Surfel& s, const Eigen::Vector3f& unit_normal, float radius_m) {
   s.normal_radius = (encodeNormal(unit_normal) << 8) | encodeRadius(radius_m);

@@ -80,9 +80,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   }
   weight_u_.resize(static_cast<std::size_t>(config.max_width));
   weight_v_.resize(static_cast<std::size_t>(config.max_height));
-  ray_u_.resize(static_cast<std::size_t>(config.max_width));
-  ray_v_.resize(static_cast<std::size_t>(config.max_height));
-  index_map_ = IndexMap(pixels);
+  index_map_ = IndexMap(config.max_width, config.max_height);
   explained_.resize(pixels);
   normal_cos_.resize(kNormalCosBuckets);
 }
@@ -103,8 +101,7 @@ SurfelMapMemory SurfelMap::memoryParts() const {
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) + brick_visible_.capacity() +
              (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
   m.pixels = (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
-              weight_v_.capacity() + ray_u_.capacity() + ray_v_.capacity() +
-              normal_cos_.capacity()) * sizeof(float) +
+              weight_v_.capacity() + normal_cos_.capacity()) * sizeof(float) +
              index_map_.memoryBytes() + explained_.capacity();
   m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
   return m;

@@ -235,18 +235,20 @@ class SurfelMap {
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
   // renderIndexMap()'s steps (surfel_map_render.cpp): the bricks' camera-frame origins and visibility,
-  // then the splatting (the reference, or splatFast()).
+  // then each surfel to its centre's cell and the gather (the reference, or splatFast()).
   void cullBricks(const hal::RgbdFrame& frame);
   void splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
-  // renderIndexMap()'s splatting when config_.kernels is not the reference
+  // renderIndexMap()'s first pass when config_.kernels is not the reference
   // (the same bits), and its steps (surfel_map_render.cpp, beside the reference).
   void splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
   struct SplatView;
   struct SplatBatch;
-  SplatView splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f);
+  SplatView splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f) const;
   void planSplats(const SplatView& view, std::size_t b0, std::size_t count, SplatBatch& batch) const;
-  void applySplats(const SplatView& view, std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats);
-  void splatFootprint(const SplatView& view, const SplatBatch& batch, std::size_t j, uint32_t slot);
+  void applySplats(std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats);
+  IndexMap::Centre centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, float pu, float pv,
+                            int iu, int iv) const;
+  void gatherIndexMap(const SplatView& view, KernelSet kernels);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
   std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
   // associate()'s normal test (its tolerance by depth, for this focal length) and merge.
@@ -300,7 +302,6 @@ class SurfelMap {
   std::vector<float> radius_;
   std::vector<float> weight_;
   std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
-  std::vector<float> ray_u_, ray_v_;        // splatFast(): (u - cx) / fx by column, (v - cy) / fy by row
   IndexMap index_map_;                    // step 3's, the tracker's model
   std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth

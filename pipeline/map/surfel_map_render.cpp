@@ -1,8 +1,10 @@
 // SurfelMap's index map, rendered for a frame (renderIndexMap): the bricks the
-// view can see (cullBricks), then every surfel of them splatted over its
-// footprint into the z-buffer, with the removals and carvings the pass makes;
-// the reference (splatReference) or its fast path (splatFast, the same index
-// map bit for bit). Fusion's association and the tracker read the result.
+// view can see (cullBricks), then every surfel of them offered to the cell of
+// its centre's pixel, with the removals and carvings the pass makes, and the
+// footprints filled by the index map's gather (index_map.h); the reference
+// (splatReference) or its fast path (splatFast and the gather's Highway
+// kernel, the same index map bit for bit). Fusion's association and the
+// tracker read the result.
 #include <cmath>
 #include <cstdint>
 
@@ -12,11 +14,24 @@
 
 namespace fovea::pipeline::map {
 
-namespace {
+// What the index map's first pass needs of the frame for every surfel.
+struct SurfelMap::SplatView {
+  int w = 0, h = 0;
+  float fx = 0, fy = 0, cx = 0, cy = 0, f = 0, inv_fx = 0, inv_fy = 0;
+  float min_z = 0, sigmas = 0, carve = 0;
+  float u_lo = 0, u_hi = 0, v_lo = 0, v_hi = 0;  // the centres that may reach the image
+  Eigen::Matrix3f R_cw_f;
+};
 
-constexpr int kMaxSplatPixels = 2;  // a surfel covers at most 2 pixels around its centre in the index map
-
-}  // namespace
+// A batch of slots' fates and centres: splatFast()'s first pass, read by its second.
+struct SurfelMap::SplatBatch {
+  enum : uint8_t { kSkip, kRemoveUnstable, kCarve, kSplat };
+  static constexpr std::size_t kSize = 128;
+  uint8_t action[kSize];
+  int32_t centre_u[kSize], centre_v[kSize];
+  IndexMap::Centre centre[kSize];  // for kSplat
+  float kept[kSize];               // for kCarve: the confidence it keeps
+};
 
 void SurfelMap::renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats) {
   index_map_.reset(frame.width(), frame.height());
@@ -42,8 +57,8 @@ void SurfelMap::cullBricks(const hal::RgbdFrame& frame) {
   const double half = 0.5 * config_.brick_size_m;
   const double radius = std::sqrt(3.0) * half;
   // Side planes through the camera: x = a z (left, right) and y = b z (top, bottom).
-  const double a_left = (-0.5 - kMaxSplatPixels - k.cx) / k.fx, a_right = (w - 0.5 + kMaxSplatPixels - k.cx) / k.fx;
-  const double b_top = (-0.5 - kMaxSplatPixels - k.cy) / k.fy, b_bottom = (h - 0.5 + kMaxSplatPixels - k.cy) / k.fy;
+  const double a_left = (-0.5 - kMaxReach - k.cx) / k.fx, a_right = (w - 0.5 + kMaxReach - k.cx) / k.fx;
+  const double b_top = (-0.5 - kMaxReach - k.cy) / k.fy, b_bottom = (h - 0.5 + kMaxReach - k.cy) / k.fy;
   const double n_left = std::sqrt(1.0 + a_left * a_left), n_right = std::sqrt(1.0 + a_right * a_right);
   const double n_top = std::sqrt(1.0 + b_top * b_top), n_bottom = std::sqrt(1.0 + b_bottom * b_bottom);
   for (std::size_t b = 0; b < brick_count_; ++b) {
@@ -60,18 +75,10 @@ void SurfelMap::cullBricks(const hal::RgbdFrame& frame) {
   }
 }
 
-// renderIndexMap()'s reference: every surfel in slot order, its footprint's
-// pixels in row order.
+// renderIndexMap()'s reference: every surfel in slot order to its centre's
+// cell, then the gather's reference.
 void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats) {
-  const int w = frame.width(), h = frame.height();
-  const hal::CameraIntrinsics& k = frame.intrinsics;
-  const auto fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
-  const auto cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
-  const float inv_fx = 1.0f / fx, inv_fy = 1.0f / fy;
-  const float f = 0.5f * (fx + fy);
-  const auto min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
-  const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
-  const auto carve = static_cast<float>(config_.carve_weight);
+  const SplatView view = splatView(frame, R_cw_f);
   for (std::size_t slot = 0; slot < high_water_; ++slot) {
     if (slot % kYieldEvery == 0) yieldGate();
     const Surfel& s = surfels_[slot];
@@ -83,12 +90,9 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
     }
     if (!brick_visible_[s.brick]) continue;
     const Eigen::Vector3f p = brick_cam_[s.brick] + R_cw_f * Eigen::Vector3f(s.x, s.y, s.z);
-    if (!(p.z() >= min_z)) continue;
-    const float pu = fx * p.x() / p.z() + cx, pv = fy * p.y() / p.z() + cy;
-    if (!(pu > -0.5f - kMaxSplatPixels && pu < static_cast<float>(w) - 0.5f + kMaxSplatPixels &&
-          pv > -0.5f - kMaxSplatPixels && pv < static_cast<float>(h) - 0.5f + kMaxSplatPixels)) {
-      continue;
-    }
+    if (!(p.z() >= view.min_z)) continue;
+    const float pu = view.fx * p.x() / p.z() + view.cx, pv = view.fy * p.y() / p.z() + view.cy;
+    if (!(pu > view.u_lo && pu < view.u_hi && pv > view.v_lo && pv < view.v_hi)) continue;
     const int iu = static_cast<int>(std::lround(pu)), iv = static_cast<int>(std::lround(pv));
     // Free space: the camera measures a surface clearly behind the surfel at
     // its centre's pixel, so it sees through it. Every such surfel is carved,
@@ -96,136 +100,109 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
     // camera and away again leaves layers behind each other, and carving only
     // the front one took a frame or more per layer (on the mock balloon scene,
     // 4 % of the surfels in view were such ghosts).
-    if (iu >= 0 && iv >= 0 && iu < w && iv < h) {
-      const std::size_t centre = static_cast<std::size_t>(iv) * w + iu;
+    if (iu >= 0 && iv >= 0 && iu < view.w && iv < view.h) {
+      const std::size_t centre = static_cast<std::size_t>(iv) * view.w + iu;
       const float measured = vertex_z_[centre];
-      if (measured > 0.0f && p.z() < measured - sigmas * depthSigma(measured)) {
-        const float left = 0.5f * decodeConfidence(s.confidence) - carve * weight_[centre];
+      if (measured > 0.0f && p.z() < measured - view.sigmas * depthSigma(measured)) {
+        const float left = 0.5f * decodeConfidence(s.confidence) - view.carve * weight_[centre];
         if (carveTo(static_cast<uint32_t>(slot), left, stats)) removeSurfel(static_cast<uint32_t>(slot));
         continue;
       }
     }
-    // The footprint in pixels, and the surfel's plane: the depth it has at a
-    // neighbouring pixel is where that pixel's ray meets the plane, so a slanted
-    // surface is not seen in front of itself.
-    const float footprint = f * surfelRadius(s) / p.z();
-    const int reach = std::min(kMaxSplatPixels, static_cast<int>(footprint));
-    const Eigen::Vector3f n = R_cw_f * surfelNormal(s);
-    const float plane = n.dot(p);
-    // Surfels within the sensor's noise at this depth are one surface (the
-    // tolerance at the centre's depth: the splat spans a few millimetres of it).
-    const float same = sigmas * depthSigma(p.z());
-    for (int dv = -reach; dv <= reach; ++dv) {
-      const int y = iv + dv;
-      if (y < 0 || y >= h) continue;
-      const float ry = (static_cast<float>(y) - cy) * inv_fy;
-      const float along_y = n.y() * ry + n.z();
-      for (int du = -reach; du <= reach; ++du) {
-        const int x = iu + du;
-        if (x < 0 || x >= w || du * du + dv * dv > reach * reach) continue;
-        const float rx = (static_cast<float>(x) - cx) * inv_fx;
-        const float along = n.x() * rx + along_y;
-        // Near grazing the plane's depth is ill-conditioned: the centre depth then
-        // (|along| > 0.2 |ray|, squared: no root).
-        float z = along * along > 0.04f * (rx * rx + ry * ry + 1.0f) ? plane / along : p.z();
-        if (!(z >= min_z)) z = p.z();
-        const std::size_t i = static_cast<std::size_t>(y) * w + x;
-        // Nearer wins; within the sensor's noise of each other (one surface),
-        // the surfel whose centre is nearer the pixel.
-        index_map_.offer(i, z, same, static_cast<uint8_t>(du * du + dv * dv), static_cast<uint32_t>(slot));
-      }
-    }
+    index_map_.offerCentre(iu, iv, centreOf(view, s, p, pu, pv, iu, iv), static_cast<uint32_t>(slot));
+  }
+  gatherIndexMap(view, KernelSet::kRef);
+}
+
+// A splatting surfel's centre for the index map (both paths): its footprint's
+// reach from its radius, and its plane (through p, with the camera-frame normal
+// direction n, not normalised: the depth on a plane along a ray is a ratio) as
+// inverse depth at the centre pixel's ray and its change per pixel, so that a
+// slanted surface is not seen in front of itself at the footprint's edge. Near
+// grazing (the ray along the plane within about 11 degrees: (n . ray)^2 <=
+// 0.04 |ray|^2 |n|^2, no root) the plane's depth is ill-conditioned, and a
+// plane nearer than the depth range's start is a surfel seen edge on: both take
+// the centre's own depth at every pixel of the footprint.
+IndexMap::Centre SurfelMap::centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, float pu,
+                                     float pv, int iu, int iv) const {
+  IndexMap::Centre c;
+  const float footprint = view.f * surfelRadius(s) / p.z();
+  c.reach = static_cast<uint8_t>(std::clamp(static_cast<int>(footprint), 0, kMaxReach));
+  const Eigen::Vector3f n = view.R_cw_f * surfelDirection(s);
+  const float inv_plane = 1.0f / n.dot(p);
+  const float rx = (static_cast<float>(iu) - view.cx) * view.inv_fx, ry = (static_cast<float>(iv) - view.cy) * view.inv_fy;
+  const float along = n.x() * rx + (n.y() * ry + n.z());
+  const bool steep = along * along > 0.04f * (rx * rx + ry * ry + 1.0f) * n.squaredNorm();
+  const float on_plane = along * inv_plane;
+  if (steep && on_plane * view.min_z <= 1.0f && on_plane > 0.0f) {
+    c.inv_depth = on_plane;
+    c.depth = 1.0f / on_plane;
+    c.grad_u = n.x() * view.inv_fx * inv_plane;
+    c.grad_v = n.y() * view.inv_fy * inv_plane;
+  } else {
+    c.inv_depth = 1.0f / p.z();
+    c.depth = p.z();
+  }
+  c.same = view.sigmas * depthSigma(c.depth);
+  // Of one surface's centres in a cell the one nearest the pixel's centre: its
+  // distance squared (at most 0.5 px^2) in 250 steps. Measured against the most
+  // confident (docs/map.md, "The index map"): neither wins every row.
+  const float du = pu - static_cast<float>(iu), dv = pv - static_cast<float>(iv);
+  c.rank = static_cast<uint8_t>(std::min((du * du + dv * dv) * 500.0f, 250.0f));
+  return c;
+}
+
+// The gather over the frame, in bands of rows between safe points.
+void SurfelMap::gatherIndexMap(const SplatView& view, KernelSet kernels) {
+  constexpr int kBandRows = 16;
+  for (int y0 = 0; y0 < view.h; y0 += kBandRows) {
+    index_map_.gather(kernels, view.sigmas, y0, std::min(view.h, y0 + kBandRows));
+    yieldGate();
   }
 }
 
-namespace {
-
-// A footprint's pixels (du, dv) with du^2 + dv^2 <= reach^2, in the reference's
-// order (rows, then columns), by reach 0, 1, 2: the first 1, 5 and 13 entries of
-// the lists below.
-struct SplatOffset {
-  int8_t du, dv;
-  uint8_t reach_sq;
-};
-constexpr SplatOffset kSplat0[] = {{0, 0, 0}};
-constexpr SplatOffset kSplat1[] = {{0, -1, 1}, {-1, 0, 1}, {0, 0, 0}, {1, 0, 1}, {0, 1, 1}};
-constexpr SplatOffset kSplat2[] = {{0, -2, 4}, {-1, -1, 2}, {0, -1, 1}, {1, -1, 2}, {-2, 0, 4},
-                                   {-1, 0, 1}, {0, 0, 0},   {1, 0, 1},  {2, 0, 4},  {-1, 1, 2},
-                                   {0, 1, 1},  {1, 1, 2},   {0, 2, 4}};
-static_assert(kMaxSplatPixels == 2, "the footprints above go to 2 pixels");
-
-}  // namespace
-
-// What splatFast() needs of the frame for every surfel and footprint pixel.
-struct SurfelMap::SplatView {
-  int w = 0, h = 0;
-  float fx = 0, fy = 0, cx = 0, cy = 0, f = 0;
-  float min_z = 0, sigmas = 0, carve = 0;
-  float u_lo = 0, u_hi = 0, v_lo = 0, v_hi = 0;  // the centres that may reach the image
-  const float* ray_u = nullptr;  // (u - cx) / fx by column
-  const float* ray_v = nullptr;  // (v - cy) / fy by row
-  Eigen::Matrix3f R_cw_f;
-};
-
-// A batch of slots' fates and projections: splatFast()'s first pass, read by its second.
-struct SurfelMap::SplatBatch {
-  enum : uint8_t { kSkip, kRemoveUnstable, kCarve, kSplat };
-  static constexpr std::size_t kSize = 128;
-  uint8_t action[kSize];
-  int32_t centre_u[kSize], centre_v[kSize];
-  uint8_t reach_of[kSize];
-  // plane_of: the plane's offset for kSplat, the confidence kept for kCarve.
-  float depth_of[kSize], plane_of[kSize], same_of[kSize], nx_of[kSize], ny_of[kSize], nz_of[kSize];
-};
-
-// The fast path of renderIndexMap()'s splatting: the reference's arithmetic and
-// order of side effects (surfels in slot order, the same removals, carvings and
-// z-buffer updates), so the same index map bit for bit
-// (test_map_equivalence's MapsFusedWithEitherKernelSetAreTheSame), without its
-// per-surfel and per-pixel overheads: the rays through the columns and rows from
-// tables made once a frame, lround() inline, the footprint's pixels from a list
-// instead of a (2 reach + 1)^2 loop with a circle test, and no bounds tests for a
-// footprint inside the image. Two passes over a batch of slots: the first
-// decides each surfel's fate and computes its projection from the surfel alone
-// (nothing another surfel's fate changes: a removal or carving touches only
-// that surfel), surfel after independent surfel, so the divisions and square
-// roots of several overlap; the second applies the removals, carvings and
-// splats in slot order, as the reference does.
+// The fast path of renderIndexMap(): the reference's arithmetic and order of
+// side effects (surfels in slot order, the same removals, carvings and centre
+// offers), so the same index map bit for bit (test_map_equivalence's
+// MapsFusedWithEitherKernelSetAreTheSame), then the gather's Highway kernel.
+// Two passes over a batch of slots: the first decides each surfel's fate and
+// computes its centre from the surfel alone (nothing another surfel's fate
+// changes: a removal or carving touches only that surfel), surfel after
+// independent surfel, so the divisions and square roots of several overlap;
+// the second applies the removals, carvings and offers in slot order, as the
+// reference does.
 void SurfelMap::splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats) {
   const SplatView view = splatView(frame, R_cw_f);
   SplatBatch batch;
   for (std::size_t b0 = 0; b0 < high_water_; b0 += SplatBatch::kSize) {
     const std::size_t count = std::min(SplatBatch::kSize, high_water_ - b0);
     planSplats(view, b0, count, batch);
-    applySplats(view, b0, count, batch, stats);
+    applySplats(b0, count, batch, stats);
     yieldGate();
   }
+  gatherIndexMap(view, KernelSet::kSimd);
 }
 
-SurfelMap::SplatView SurfelMap::splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f) {
+SurfelMap::SplatView SurfelMap::splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f) const {
   SplatView v;
   v.w = frame.width();
   v.h = frame.height();
   const hal::CameraIntrinsics& k = frame.intrinsics;
   v.fx = static_cast<float>(k.fx), v.fy = static_cast<float>(k.fy);
   v.cx = static_cast<float>(k.cx), v.cy = static_cast<float>(k.cy);
-  const float inv_fx = 1.0f / v.fx, inv_fy = 1.0f / v.fy;
+  v.inv_fx = 1.0f / v.fx, v.inv_fy = 1.0f / v.fy;
   v.f = 0.5f * (v.fx + v.fy);
   v.min_z = static_cast<float>(std::max(config_.depth.min_m, 1e-3));
   v.sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
   v.carve = static_cast<float>(config_.carve_weight);
-  for (int x = 0; x < v.w; ++x) ray_u_[static_cast<std::size_t>(x)] = (static_cast<float>(x) - v.cx) * inv_fx;
-  for (int y = 0; y < v.h; ++y) ray_v_[static_cast<std::size_t>(y)] = (static_cast<float>(y) - v.cy) * inv_fy;
-  v.ray_u = ray_u_.data();
-  v.ray_v = ray_v_.data();
-  v.u_lo = -0.5f - kMaxSplatPixels, v.u_hi = static_cast<float>(v.w) - 0.5f + kMaxSplatPixels;
-  v.v_lo = -0.5f - kMaxSplatPixels, v.v_hi = static_cast<float>(v.h) - 0.5f + kMaxSplatPixels;
+  v.u_lo = -0.5f - kMaxReach, v.u_hi = static_cast<float>(v.w) - 0.5f + kMaxReach;
+  v.v_lo = -0.5f - kMaxReach, v.v_hi = static_cast<float>(v.h) - 0.5f + kMaxReach;
   v.R_cw_f = R_cw_f;
   return v;
 }
 
 // splatFast()'s first pass: the fate of slots [b0, b0 + count) and, for those
-// that splat, their projections.
+// that splat, their centres.
 void SurfelMap::planSplats(const SplatView& view, std::size_t b0, std::size_t count, SplatBatch& batch) const {
   const float* const measured_z = vertex_z_.data();
   const uint8_t* const visible = brick_visible_.data();
@@ -249,28 +226,19 @@ void SurfelMap::planSplats(const SplatView& view, std::size_t b0, std::size_t co
       const float measured = measured_z[centre];
       if (measured > 0.0f && p.z() < measured - view.sigmas * depthSigma(measured)) {
         batch.action[j] = SplatBatch::kCarve;
-        batch.plane_of[j] = 0.5f * decodeConfidence(s.confidence) - view.carve * weight_[centre];  // what it keeps
+        batch.kept[j] = 0.5f * decodeConfidence(s.confidence) - view.carve * weight_[centre];
         continue;
       }
     }
     batch.action[j] = SplatBatch::kSplat;
     batch.centre_u[j] = iu;
     batch.centre_v[j] = iv;
-    const float footprint = view.f * surfelRadius(s) / p.z();
-    batch.reach_of[j] = static_cast<uint8_t>(std::clamp(static_cast<int>(footprint), 0, kMaxSplatPixels));
-    const Eigen::Vector3f n = view.R_cw_f * surfelNormal(s);
-    batch.nx_of[j] = n.x();
-    batch.ny_of[j] = n.y();
-    batch.nz_of[j] = n.z();
-    batch.plane_of[j] = n.dot(p);
-    batch.depth_of[j] = p.z();
-    batch.same_of[j] = view.sigmas * depthSigma(p.z());
+    batch.centre[j] = centreOf(view, s, p, pu, pv, iu, iv);
   }
 }
 
-// splatFast()'s second pass: the batch's removals, carvings and splats in slot order.
-void SurfelMap::applySplats(const SplatView& view, std::size_t b0, std::size_t count, const SplatBatch& batch,
-                            FuseStats& stats) {
+// splatFast()'s second pass: the batch's removals, carvings and offers in slot order.
+void SurfelMap::applySplats(std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats) {
   for (std::size_t j = 0; j < count; ++j) {
     const auto slot = static_cast<uint32_t>(b0 + j);
     switch (batch.action[j]) {
@@ -280,35 +248,10 @@ void SurfelMap::applySplats(const SplatView& view, std::size_t b0, std::size_t c
         ++stats.removed_unstable;
         continue;
       case SplatBatch::kCarve:
-        if (carveTo(slot, batch.plane_of[j], stats)) removeSurfel(slot);
+        if (carveTo(slot, batch.kept[j], stats)) removeSurfel(slot);
         continue;
-      default: splatFootprint(view, batch, j, slot);
+      default: index_map_.offerCentre(batch.centre_u[j], batch.centre_v[j], batch.centre[j], slot);
     }
-  }
-}
-
-// One surfel's footprint into the z-buffer (the reference's test, pixel by pixel).
-void SurfelMap::splatFootprint(const SplatView& view, const SplatBatch& batch, std::size_t j, uint32_t slot) {
-  const int w = view.w, h = view.h;
-  const int iu = batch.centre_u[j], iv = batch.centre_v[j];
-  const int reach = batch.reach_of[j];
-  const float nx = batch.nx_of[j], ny = batch.ny_of[j], nz = batch.nz_of[j];
-  const float plane = batch.plane_of[j], pz = batch.depth_of[j], same = batch.same_of[j];
-  const SplatOffset* offsets = reach == 0 ? kSplat0 : reach == 1 ? kSplat1 : kSplat2;
-  const int count = reach == 0 ? 1 : reach == 1 ? 5 : 13;
-  const bool inside = iu >= reach && iv >= reach && iu + reach < w && iv + reach < h;
-  for (int o = 0; o < count; ++o) {
-    const int x = iu + offsets[o].du, y = iv + offsets[o].dv;
-    if (!inside && (x < 0 || x >= w || y < 0 || y >= h)) continue;
-    // Written as selects (as IndexMap::offer): GCC 12 makes a branch of the
-    // steep test, which predicts well.
-    const float rx = view.ray_u[x], ry = view.ray_v[y];
-    const float along = nx * rx + (ny * ry + nz);
-    const bool steep = along * along > 0.04f * (rx * rx + ry * ry + 1.0f);
-    const float on_plane = plane / (steep ? along : 1.0f);
-    float z = steep ? on_plane : pz;
-    z = z >= view.min_z ? z : pz;
-    index_map_.offer(static_cast<std::size_t>(y) * w + x, z, same, offsets[o].reach_sq, slot);
   }
 }
 

@@ -2,7 +2,9 @@
 // computeVerticesSimd against the scalar reference computeVerticesRef, bit for bit
 // in all eight maps and the count, on random and adversarial frames and on every
 // Highway target compiled in and supported here (TargetTest/<Case>/<TARGET>);
-// then whole maps fused with either kernel set, which must be the same map.
+// the index map's gather (pipeline/map/index_map.h) the same way, and its
+// reference against a brute force over every centre of the grid; then whole
+// maps fused with either kernel set, which must be the same map.
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -12,6 +14,7 @@
 #include <limits>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -21,7 +24,9 @@
 #include "tests/support/simd_targets.h"
 #include "tests/support/test_time.h"
 #include "hal/camera.h"
+#include "core/depth_noise.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/surfel_map.h"
 
@@ -270,6 +275,169 @@ TEST(MapRounding, RoundingIsLround) {
   check(0.49999997f);
   check(-0.49999997f);
   EXPECT_EQ(differ, 0);
+}
+
+// ---- the index map's gather --------------------------------------------------
+
+// Random centres over a w x h frame and its border: planes seen straight on and
+// slanted, gradients that turn the inverse depth negative within the footprint,
+// depths from a few values (ties within and across the tolerance), every reach,
+// near-infinite depths, and cells left empty.
+IndexMap randomCentres(int w, int h, std::mt19937_64& rng) {
+  IndexMap map(w, h);
+  map.reset(w, h);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const float depths[] = {0.5f, 0.5f, 0.503f, 1.0f, 1.004f, 2.5f, 4.0f};
+  const int kind = static_cast<int>(rng() % 3);  // 0: sparse, 1: about one a pixel, 2: several a pixel
+  const std::size_t offers = static_cast<std::size_t>(w * h) * (kind == 0 ? 1 : kind == 1 ? 4 : 12) / 4;
+  for (std::size_t n = 0; n < offers; ++n) {
+    const int u = static_cast<int>(rng() % static_cast<uint64_t>(w + 2 * kMaxReach)) - kMaxReach;
+    const int v = static_cast<int>(rng() % static_cast<uint64_t>(h + 2 * kMaxReach)) - kMaxReach;
+    IndexMap::Centre c;
+    c.depth = rng() % 8 == 0 ? 3e30f + unit(rng) * 1e30f : depths[rng() % 7] * (1.0f + 0.002f * unit(rng));
+    c.inv_depth = 1.0f / c.depth;
+    c.same = 3.0f * depthSigma(c.depth);
+    c.rank = static_cast<uint8_t>(rng() % 3 * 100);
+    c.reach = static_cast<uint8_t>(rng() % 3);
+    const int slant = static_cast<int>(rng() % 4);  // flat, slanted, steep, past the horizon
+    const float scale = slant == 0 ? 0.0f : slant == 1 ? 0.01f : slant == 2 ? 0.2f : 0.8f;
+    c.grad_u = (unit(rng) - 0.5f) * scale * c.inv_depth;
+    c.grad_v = (unit(rng) - 0.5f) * scale * c.inv_depth;
+    map.offerCentre(u, v, c, static_cast<uint32_t>(n));
+  }
+  return map;
+}
+
+struct Gathered {
+  std::vector<uint32_t> slot;
+  std::vector<float> depth;
+  explicit Gathered(std::size_t pixels) : slot(pixels, 0xa5a5a5a5u), depth(pixels, std::bit_cast<float>(Maps::kUnwritten)) {}
+  IndexOut out() { return {slot.data(), depth.data()}; }
+};
+
+// Pixel by pixel the same slot and the same depth bits; returns the pixels given a surfel.
+std::size_t expectSameGather(const Gathered& a, const Gathered& b, const std::string& what) {
+  std::size_t seen = 0;
+  int reported = 0;
+  for (std::size_t i = 0; i < a.slot.size(); ++i) {
+    seen += a.slot[i] != IndexMap::kNoSurfel;
+    if ((a.slot[i] != b.slot[i] || std::bit_cast<uint32_t>(a.depth[i]) != std::bit_cast<uint32_t>(b.depth[i])) &&
+        reported++ < 5) {
+      ADD_FAILURE() << what << ": pixel " << i << ": slot " << a.slot[i] << " depth " << a.depth[i] << " against slot "
+                    << b.slot[i] << " depth " << b.depth[i];
+    }
+  }
+  return seen;
+}
+
+TEST_P(TargetTest, TheIndexMapsGatherIsTheReference) {
+  std::mt19937_64 rng(41);
+  const int sizes[][2] = {{640, 480}, {1, 1}, {3, 3}, {5, 2}, {15, 6}, {16, 4}, {17, 5}, {31, 3}, {33, 7},
+                          {63, 2}, {64, 3}, {65, 9}, {129, 5}, {3, 37}, {320, 240}};
+  std::size_t seen = 0;
+  const int reps = test::repetitions(3, 1);
+  for (const auto& s : sizes) {
+    for (int rep = 0; rep < reps; ++rep) {
+      const IndexMap map = randomCentres(s[0], s[1], rng);
+      const std::size_t pixels = static_cast<std::size_t>(s[0]) * static_cast<std::size_t>(s[1]);
+      Gathered ref(pixels), simd(pixels);
+      gatherIndexRef(map.grid(), 3.0f, 0, s[1], ref.out());
+      // In two bands, as fusion calls it between safe points.
+      gatherIndexSimd(map.grid(), 3.0f, 0, s[1] / 2, simd.out());
+      gatherIndexSimd(map.grid(), 3.0f, s[1] / 2, s[1], simd.out());
+      seen += expectSameGather(ref, simd, std::to_string(s[0]) + "x" + std::to_string(s[1]));
+    }
+  }
+  EXPECT_GT(seen, 100000u) << "most pixels should see a surfel";
+  // No centre at all: every pixel empty, at infinity.
+  IndexMap empty(40, 30);
+  empty.reset(40, 30);
+  Gathered ref(1200), simd(1200);
+  gatherIndexRef(empty.grid(), 3.0f, 0, 30, ref.out());
+  gatherIndexSimd(empty.grid(), 3.0f, 0, 30, simd.out());
+  EXPECT_EQ(expectSameGather(ref, simd, "empty"), 0u);
+  EXPECT_EQ(ref.depth[0], std::numeric_limits<float>::infinity());
+}
+
+// The reference against the rule as a brute force states it: every centre of
+// the grid whose footprint (du^2 + dv^2 <= reach^2) holds the pixel, nearest
+// first, then by row and column offset; a candidate with a positive inverse
+// depth replaces the held one when nearer by more than the tolerance.
+TEST(IndexMapGather, TheReferenceIsTheBruteForce) {
+  std::mt19937_64 rng(43);
+  for (int rep = 0; rep < 12; ++rep) {
+    const int w = 5 + static_cast<int>(rng() % 20), h = 3 + static_cast<int>(rng() % 12);
+    const IndexMap map = randomCentres(w, h, rng);
+    const CentreGrid g = map.grid();
+    Gathered ref(static_cast<std::size_t>(w * h)), brute(static_cast<std::size_t>(w * h));
+    gatherIndexRef(g, 3.0f, 0, h, ref.out());
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        struct Candidate {
+          int rsq, dv, du;
+          std::size_t k;
+        };
+        std::vector<Candidate> candidates;
+        for (int cy = -kMaxReach; cy < h + kMaxReach; ++cy) {
+          for (int cx = -kMaxReach; cx < w + kMaxReach; ++cx) {
+            const std::size_t k = g.at(cx, cy);
+            if (g.cell[k] == CentreGrid::kEmptyCell) continue;
+            const int du = x - cx, dv = y - cy, reach = static_cast<int>(g.cell[k] >> 24);
+            if (du * du + dv * dv <= reach * reach) candidates.push_back({du * du + dv * dv, dv, du, k});
+          }
+        }
+        std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+          return std::tie(a.rsq, a.dv, a.du) < std::tie(b.rsq, b.dv, b.du);
+        });
+        float held = std::numeric_limits<float>::infinity();
+        uint32_t slot = IndexMap::kNoSurfel;
+        for (const Candidate& c : candidates) {
+          const float iz = (g.inv_depth[c.k] + g.grad_u[c.k] * static_cast<float>(c.du)) +
+                           g.grad_v[c.k] * static_cast<float>(c.dv);
+          if (!(iz > 0.0f)) continue;
+          const float z = 1.0f / iz;
+          if (z < held - 3.0f * depthSigma(z)) {
+            held = z;
+            slot = g.cell[c.k] & 0x00ffffffu;
+          }
+        }
+        const std::size_t i = static_cast<std::size_t>(y * w + x);
+        brute.slot[i] = slot;
+        brute.depth[i] = held;
+      }
+    }
+    expectSameGather(brute, ref, "brute force " + std::to_string(w) + "x" + std::to_string(h));
+  }
+}
+
+// The centre's contest: the nearer surface wins; within the tolerance the
+// lower rank (the map's: the centre nearer the pixel's), and of equal ranks the first offered.
+TEST(IndexMapGather, TheNearerSurfaceAndThenTheLowerRankWinsTheCell) {
+  IndexMap map(4, 4);
+  map.reset(4, 4);
+  auto centre = [](float z, uint8_t rank) {
+    IndexMap::Centre c;
+    c.depth = z;
+    c.inv_depth = 1.0f / z;
+    c.same = 0.01f;
+    c.rank = rank;
+    return c;
+  };
+  auto winner = [&map] {
+    Gathered out(16);
+    gatherIndexRef(map.grid(), 3.0f, 0, 4, out.out());
+    return out.slot[5];  // pixel (1, 1)
+  };
+  map.offerCentre(1, 1, centre(2.0f, 100), 1);
+  EXPECT_EQ(winner(), 1u);
+  map.offerCentre(1, 1, centre(2.005f, 50), 2);  // one surface, the lower rank
+  EXPECT_EQ(winner(), 2u);
+  map.offerCentre(1, 1, centre(2.0f, 50), 3);  // the same rank: the first stays
+  EXPECT_EQ(winner(), 2u);
+  map.offerCentre(1, 1, centre(2.5f, 0), 4);  // behind: never
+  EXPECT_EQ(winner(), 2u);
+  map.offerCentre(1, 1, centre(1.5f, 200), 5);  // in front: always
+  EXPECT_EQ(winner(), 5u);
 }
 
 // ---- whole maps --------------------------------------------------------------
