@@ -54,15 +54,20 @@ void gatherIndexRef(const CentreGrid& grid, float sigmas, int y0, int y1, const 
     for (int x = 0; x < grid.width; ++x) {
       float held = std::numeric_limits<float>::infinity();
       uint32_t cell = CentreGrid::kEmptyCell;
+      int held_rsq = -1;
       for (const GatherOffset& o : kGatherOffsets) {
         const std::size_t k = grid.at(x - o.du, y - o.dv);
         const float iz =
             (grid.inv_depth[k] + grid.grad_u[k] * static_cast<float>(o.du)) + grid.grad_v[k] * static_cast<float>(o.dv);
         if (!(iz > 0.0f) || (grid.cell[k] >> 24) < o.reach) continue;
         const float z = 1.0f / iz;
-        if (z < held - sigmas * depthSigma(z)) {
+        const float same = sigmas * depthSigma(z);
+        const int rsq = o.du * o.du + o.dv * o.dv;
+        const bool older = rsq == held_rsq && (grid.cell[k] & 0x00ffffffu) < (cell & 0x00ffffffu);
+        if (z < held - same || (z <= held + same && older)) {
           held = z;
           cell = grid.cell[k];
+          held_rsq = rsq;
         }
       }
       const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(x);

@@ -34,8 +34,11 @@ HWY_INLINE void GatherVector(DF df, const CentreGrid& g, float sigmas, int x, in
   const hn::RebindToSigned<DF> di;
   auto held = hn::Set(df, std::numeric_limits<float>::infinity());
   auto cell = hn::Set(du, CentreGrid::kEmptyCell);
+  auto held_slot = hn::Set(di, 0x00ffffff);
+  auto held_rsq = hn::Set(di, -1);
   const auto zero = hn::Zero(df);
   const auto one = hn::Set(df, 1.0f);
+  const auto slot_bits = hn::Set(di, 0x00ffffff);
   for (const GatherOffset& o : kGatherOffsets) {
     const std::size_t k = g.at(x - o.du, y - o.dv);
     const auto c = hn::LoadU(du, g.cell + k);
@@ -47,10 +50,19 @@ HWY_INLINE void GatherVector(DF df, const CentreGrid& g, float sigmas, int x, in
     const auto z = hn::Div(one, iz);
     const auto d = hn::Sub(z, hn::Set(df, kDepthNoiseOffsetF));
     const auto sigma = hn::Add(hn::Set(df, kDepthNoiseBaseF), hn::Mul(hn::Mul(hn::Set(df, kDepthNoiseQuadraticF), d), d));
-    const auto nearer = hn::Lt(z, hn::Sub(held, hn::Mul(hn::Set(df, sigmas), sigma)));
-    const auto take = hn::And(hn::And(hn::Gt(iz, zero), reaches), nearer);
+    const auto same = hn::Mul(hn::Set(df, sigmas), sigma);
+    const auto nearer = hn::Lt(z, hn::Sub(held, same));
+    // Slots are below 2^24: signed comparisons order them.
+    const int32_t rsq = o.du * o.du + o.dv * o.dv;
+    const auto slot = hn::And(hn::BitCast(di, c), slot_bits);
+    const auto older = hn::And(hn::Eq(held_rsq, hn::Set(di, rsq)), hn::Lt(slot, held_slot));
+    const auto tie = hn::And(hn::Le(z, hn::Add(held, same)), hn::RebindMask(df, older));
+    const auto take = hn::And(hn::And(hn::Gt(iz, zero), reaches), hn::Or(nearer, tie));
+    const auto take_i = hn::RebindMask(di, take);
     held = hn::IfThenElse(take, z, held);
     cell = hn::IfThenElse(hn::RebindMask(du, take), c, cell);
+    held_slot = hn::IfThenElse(take_i, slot, held_slot);
+    held_rsq = hn::IfThenElse(take_i, hn::Set(di, rsq), held_rsq);
   }
   const auto slot = hn::And(cell, hn::Set(du, 0x00ffffffu));
   const auto none = hn::Eq(slot, hn::Set(du, 0x00ffffffu));

@@ -246,8 +246,7 @@ class SurfelMap {
   SplatView splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f) const;
   void planSplats(const SplatView& view, std::size_t b0, std::size_t count, SplatBatch& batch) const;
   void applySplats(std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats);
-  IndexMap::Centre centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, float pu, float pv,
-                            int iu, int iv) const;
+  IndexMap::Centre centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, int iu, int iv) const;
   void gatherIndexMap(const SplatView& view, KernelSet kernels);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
   std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);

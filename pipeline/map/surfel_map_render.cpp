@@ -109,7 +109,7 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
         continue;
       }
     }
-    index_map_.offerCentre(iu, iv, centreOf(view, s, p, pu, pv, iu, iv), static_cast<uint32_t>(slot));
+    index_map_.offerCentre(iu, iv, centreOf(view, s, p, iu, iv), static_cast<uint32_t>(slot));
   }
   gatherIndexMap(view, KernelSet::kRef);
 }
@@ -123,8 +123,8 @@ void SurfelMap::splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3
 // 0.04 |ray|^2 |n|^2, no root) the plane's depth is ill-conditioned, and a
 // plane nearer than the depth range's start is a surfel seen edge on: both take
 // the centre's own depth at every pixel of the footprint.
-IndexMap::Centre SurfelMap::centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, float pu,
-                                     float pv, int iu, int iv) const {
+IndexMap::Centre SurfelMap::centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, int iu,
+                                     int iv) const {
   IndexMap::Centre c;
   const float footprint = view.f * surfelRadius(s) / p.z();
   c.reach = static_cast<uint8_t>(std::clamp(static_cast<int>(footprint), 0, kMaxReach));
@@ -144,11 +144,11 @@ IndexMap::Centre SurfelMap::centreOf(const SplatView& view, const Surfel& s, con
     c.depth = p.z();
   }
   c.same = view.sigmas * depthSigma(c.depth);
-  // Of one surface's centres in a cell the one nearest the pixel's centre: its
-  // distance squared (at most 0.5 px^2) in 250 steps. Measured against the most
-  // confident (docs/map.md, "The index map"): neither wins every row.
-  const float du = pu - static_cast<float>(iu), dv = pv - static_cast<float>(iv);
-  c.rank = static_cast<uint8_t>(std::min((du * du + dv * dv) * 500.0f, 250.0f));
+  // Of one surface's centres in a cell the most confident: the measurements
+  // keep averaging into the surfel that holds the most (docs/map.md, "The index
+  // map", has the centre nearest the pixel's measured against it). 8.8 fixed
+  // point in steps of an eighth; the cap is 20 (SurfelMapConfig::confidence_cap).
+  c.rank = static_cast<uint8_t>(255 - std::min<int>(s.confidence >> 5, 255));
   return c;
 }
 
@@ -233,7 +233,7 @@ void SurfelMap::planSplats(const SplatView& view, std::size_t b0, std::size_t co
     batch.action[j] = SplatBatch::kSplat;
     batch.centre_u[j] = iu;
     batch.centre_v[j] = iv;
-    batch.centre[j] = centreOf(view, s, p, pu, pv, iu, iv);
+    batch.centre[j] = centreOf(view, s, p, iu, iv);
   }
 }
 

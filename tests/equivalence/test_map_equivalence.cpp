@@ -362,7 +362,8 @@ TEST_P(TargetTest, TheIndexMapsGatherIsTheReference) {
 // The reference against the rule as a brute force states it: every centre of
 // the grid whose footprint (du^2 + dv^2 <= reach^2) holds the pixel, nearest
 // first, then by row and column offset; a candidate with a positive inverse
-// depth replaces the held one when nearer by more than the tolerance.
+// depth replaces the held one when nearer by more than the tolerance, or within
+// it at the held one's distance with a lower slot.
 TEST(IndexMapGather, TheReferenceIsTheBruteForce) {
   std::mt19937_64 rng(43);
   for (int rep = 0; rep < 12; ++rep) {
@@ -391,14 +392,17 @@ TEST(IndexMapGather, TheReferenceIsTheBruteForce) {
         });
         float held = std::numeric_limits<float>::infinity();
         uint32_t slot = IndexMap::kNoSurfel;
+        int held_rsq = -1;
         for (const Candidate& c : candidates) {
           const float iz = (g.inv_depth[c.k] + g.grad_u[c.k] * static_cast<float>(c.du)) +
                            g.grad_v[c.k] * static_cast<float>(c.dv);
           if (!(iz > 0.0f)) continue;
-          const float z = 1.0f / iz;
-          if (z < held - 3.0f * depthSigma(z)) {
+          const float z = 1.0f / iz, same = 3.0f * depthSigma(z);
+          const uint32_t candidate = g.cell[c.k] & 0x00ffffffu;
+          if (z < held - same || (z <= held + same && c.rsq == held_rsq && candidate < slot)) {
             held = z;
-            slot = g.cell[c.k] & 0x00ffffffu;
+            slot = candidate;
+            held_rsq = c.rsq;
           }
         }
         const std::size_t i = static_cast<std::size_t>(y * w + x);
@@ -411,7 +415,7 @@ TEST(IndexMapGather, TheReferenceIsTheBruteForce) {
 }
 
 // The centre's contest: the nearer surface wins; within the tolerance the
-// lower rank (the map's: the centre nearer the pixel's), and of equal ranks the first offered.
+// lower rank (the map's: the more confident surfel), and of equal ranks the first offered.
 TEST(IndexMapGather, TheNearerSurfaceAndThenTheLowerRankWinsTheCell) {
   IndexMap map(4, 4);
   map.reset(4, 4);
