@@ -2,6 +2,7 @@
 #include "pipeline/map/index_map.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "core/depth_noise.h"
 
@@ -9,12 +10,8 @@ namespace fovea::pipeline::map {
 
 namespace {
 
-// Columns right of the border that a vector of the widest Highway target
-// (64 floats) may load past the frame's last pixel: empty cells.
-constexpr std::size_t kVectorSlack = 64;
-
 std::size_t strideFor(int width) {
-  return static_cast<std::size_t>(width) + 2 * CentreGrid::kPad + kVectorSlack;
+  return static_cast<std::size_t>(width + 2 * CentreGrid::kPad + CentreGrid::kVectorSlack);
 }
 
 }  // namespace
@@ -63,7 +60,7 @@ void gatherIndexRef(const CentreGrid& grid, float sigmas, int y0, int y1, const 
         const float z = 1.0f / iz;
         const float same = sigmas * depthSigma(z);
         const int rsq = o.du * o.du + o.dv * o.dv;
-        const bool older = rsq == held_rsq && (grid.cell[k] & 0x00ffffffu) < (cell & 0x00ffffffu);
+        const bool older = rsq == held_rsq && (grid.cell[k] & CentreGrid::kSlotBits) < (cell & CentreGrid::kSlotBits);
         if (z < held - same || (z <= held + same && older)) {
           held = z;
           cell = grid.cell[k];
@@ -71,8 +68,8 @@ void gatherIndexRef(const CentreGrid& grid, float sigmas, int y0, int y1, const 
         }
       }
       const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(x);
-      const uint32_t slot = cell & 0x00ffffffu;
-      out.slot[i] = slot == 0x00ffffffu ? IndexMap::kNoSurfel : slot;
+      const uint32_t slot = cell & CentreGrid::kSlotBits;
+      out.slot[i] = slot == CentreGrid::kSlotBits ? IndexMap::kNoSurfel : slot;
       out.depth[i] = held;
     }
   }

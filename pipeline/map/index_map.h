@@ -32,7 +32,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <limits>
 #include <vector>
 
 #include "core/kernel_set.h"
@@ -56,8 +55,12 @@ inline constexpr GatherOffset kGatherOffsets[] = {
 // is reach << 24 | slot (kEmptyCell: none) and the plane's inverse depth at the
 // cell's pixel, with its change per pixel to the right and down.
 struct CentreGrid {
-  static constexpr uint32_t kEmptyCell = 0x00ffffffu;  // reach 0, no slot: inverse depth 0 there
+  static constexpr uint32_t kSlotBits = 0x00ffffffu;    // a cell's slot; all set: none
+  static constexpr uint32_t kEmptyCell = kSlotBits;      // reach 0, no slot: inverse depth 0 there
   static constexpr int kPad = kMaxReach;
+  // Cells right of the border that a vector of the widest Highway target (64
+  // floats) may load past the frame's last pixel: empty.
+  static constexpr int kVectorSlack = 64;
   const uint32_t* cell = nullptr;
   const float* inv_depth = nullptr;
   const float* grad_u = nullptr;
@@ -90,7 +93,7 @@ class IndexMap {
 
   // A surfel's centre, offered to the cell of its pixel.
   struct Centre {
-    float depth = 0;      // on its plane at the pixel's centre: 1 / inv_depth
+    float depth = 0;      // on its plane at the pixel's centre (the surfel's own depth when flat)
     float same = 0;       // the depth within which two surfels are one surface here
     uint8_t rank = 0;     // of one surface's centres in a cell, the lowest wins
     uint8_t reach = 0;    // its footprint: pixels around the centre, 0 to kMaxReach

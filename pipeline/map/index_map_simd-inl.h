@@ -34,11 +34,11 @@ HWY_INLINE void GatherVector(DF df, const CentreGrid& g, float sigmas, int x, in
   const hn::RebindToSigned<DF> di;
   auto held = hn::Set(df, std::numeric_limits<float>::infinity());
   auto cell = hn::Set(du, CentreGrid::kEmptyCell);
-  auto held_slot = hn::Set(di, 0x00ffffff);
+  const auto slot_bits = hn::Set(di, static_cast<int32_t>(CentreGrid::kSlotBits));
+  auto held_slot = slot_bits;
   auto held_rsq = hn::Set(di, -1);
   const auto zero = hn::Zero(df);
   const auto one = hn::Set(df, 1.0f);
-  const auto slot_bits = hn::Set(di, 0x00ffffff);
   for (const GatherOffset& o : kGatherOffsets) {
     const std::size_t k = g.at(x - o.du, y - o.dv);
     const auto c = hn::LoadU(du, g.cell + k);
@@ -64,8 +64,8 @@ HWY_INLINE void GatherVector(DF df, const CentreGrid& g, float sigmas, int x, in
     held_slot = hn::IfThenElse(take_i, slot, held_slot);
     held_rsq = hn::IfThenElse(take_i, hn::Set(di, rsq), held_rsq);
   }
-  const auto slot = hn::And(cell, hn::Set(du, 0x00ffffffu));
-  const auto none = hn::Eq(slot, hn::Set(du, 0x00ffffffu));
+  const auto slot = hn::And(cell, hn::Set(du, CentreGrid::kSlotBits));
+  const auto none = hn::Eq(slot, hn::Set(du, CentreGrid::kSlotBits));
   hn::StoreU(hn::IfThenElse(none, hn::Set(du, IndexMap::kNoSurfel), slot), du, slot_out);
   hn::StoreU(held, df, depth_out);
 }

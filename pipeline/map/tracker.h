@@ -251,9 +251,9 @@ class FrameToModelTracker {
   void modelFromIndexMap(const hal::RgbdFrame& frame, const hal::Pose& pose, const SurfelMap& map,
                          const uint32_t* index, const uint8_t* moving);
   Solve solve(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool photometric);
-  // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   // The inliers' share of the valid pixels less left_out (moving: not counted against them).
   double inlierFraction(uint32_t inliers, uint32_t left_out) const;
+  // The checks of step 3 on a solve from the estimate (R, t of the world pose).
   // left_out: the valid pixels the solve did not use (moving), not counted against its inliers.
   LostReason check(const Solve& s, const hal::Pose& pose, const hal::Pose& reference, uint32_t left_out) const;
   // track()'s steps: a solve from a start pose with its world pose and checks,

@@ -398,7 +398,7 @@ TEST(IndexMapGather, TheReferenceIsTheBruteForce) {
                            g.grad_v[c.k] * static_cast<float>(c.dv);
           if (!(iz > 0.0f)) continue;
           const float z = 1.0f / iz, same = 3.0f * depthSigma(z);
-          const uint32_t candidate = g.cell[c.k] & 0x00ffffffu;
+          const uint32_t candidate = g.cell[c.k] & CentreGrid::kSlotBits;
           if (z < held - same || (z <= held + same && c.rsq == held_rsq && candidate < slot)) {
             held = z;
             slot = candidate;

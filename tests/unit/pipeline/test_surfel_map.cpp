@@ -648,7 +648,7 @@ TEST(SurfelMap, ThePoolIsThirtyEightBytesASurfelOfCapacity) {
     // 41 bytes a pixel (eight float maps, the explained flag, the index map's
     // slot and depth) and 17 a cell of the index map's centre grid, which adds a
     // border and a vector's slack (index_map.h); the small tables beside them.
-    const std::size_t grid_cells = (40 + 2 * kMaxReach + 64) * (30 + 2 * kMaxReach);
+    const std::size_t grid_cells = (40 + 2 * kMaxReach + CentreGrid::kVectorSlack) * (30 + 2 * kMaxReach);
     EXPECT_LE(m.pixels, 41u * 40 * 30 + 17u * grid_cells + 4096 + 16 * 70);
   }
   SurfelMapConfig defaults = smallConfig(40, 30);
