@@ -98,8 +98,8 @@ SurfelMapMemory SurfelMap::memoryParts() const {
   SurfelMapMemory m;
   m.pool = surfels_.capacity() * sizeof(Surfel) + links_.memoryBytes();
   m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.memoryBytes() +
-             brick_cam_.capacity() * sizeof(Eigen::Vector3f) + brick_visible_.capacity() +
-             (brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
+             brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
+             (brick_visible_.capacity() + brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
   m.pixels = (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
               weight_v_.capacity() + normal_cos_.capacity()) * sizeof(float) +
              index_map_.memoryBytes() + explained_.capacity();

@@ -47,6 +47,7 @@
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/map_gate.h"
 #include "pipeline/map/map_kernels.h"
+#include "pipeline/map/splat_plan.h"
 #include "pipeline/map/surfel.h"
 #include "pipeline/map/surfel_links.h"
 #include "pipeline/point_cloud.h"
@@ -234,20 +235,12 @@ class SurfelMap {
   }
   void makeRoom(std::size_t wanted, FuseStats& stats);
   void renderIndexMap(const hal::RgbdFrame& frame, FuseStats& stats);
-  // renderIndexMap()'s steps (surfel_map_render.cpp): the bricks' camera-frame origins and visibility,
-  // then each surfel to its centre's cell and the gather (the reference, or splatFast()).
+  // renderIndexMap()'s steps (surfel_map_render.cpp): the bricks' camera-frame
+  // origins and culling, then every surfel to its centre's cell and the gather.
   void cullBricks(const hal::RgbdFrame& frame);
-  void splatReference(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
-  // renderIndexMap()'s first pass when config_.kernels is not the reference
-  // (the same bits), and its steps (surfel_map_render.cpp, beside the reference).
-  void splatFast(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f, FuseStats& stats);
-  struct SplatView;
-  struct SplatBatch;
-  SplatView splatView(const hal::RgbdFrame& frame, const Eigen::Matrix3f& R_cw_f) const;
-  void planSplats(const SplatView& view, std::size_t b0, std::size_t count, SplatBatch& batch) const;
-  void applySplats(std::size_t b0, std::size_t count, const SplatBatch& batch, FuseStats& stats);
-  IndexMap::Centre centreOf(const SplatView& view, const Surfel& s, const Eigen::Vector3f& p, int iu, int iv) const;
-  void gatherIndexMap(const SplatView& view, KernelSet kernels);
+  void splatSurfels(const hal::RgbdFrame& frame, FuseStats& stats);
+  SplatFrame splatFrame(const hal::RgbdFrame& frame) const;
+  void applySplats(std::size_t b0, std::size_t count, const SplatPlan& plan, FuseStats& stats);
   // Merges and carves; returns the pixels left to add (marked by a negative weight).
   std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
   // associate()'s normal test (its tolerance by depth, for this focal length) and merge.
@@ -286,7 +279,7 @@ class SurfelMap {
   GridTable brick_table_;                 // key -> brick
   std::size_t brick_count_ = 0;
   std::vector<Eigen::Vector3f> brick_cam_;   // per frame: brick origin in camera coordinates
-  std::vector<uint8_t> brick_visible_;
+  std::vector<uint32_t> brick_visible_;  // 1: in the view (a word: the plan's kernel gathers it)
   std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
   std::vector<uint32_t> brick_settled_;   // ... its settled surfels
   std::vector<uint32_t> brick_changes_;   // ... changes to its settled set (wrapping)

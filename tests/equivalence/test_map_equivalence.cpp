@@ -3,7 +3,8 @@
 // in all eight maps and the count, on random and adversarial frames and on every
 // Highway target compiled in and supported here (TargetTest/<Case>/<TARGET>);
 // the index map's gather (pipeline/map/index_map.h) the same way, and its
-// reference against a brute force over every centre of the grid; then whole
+// reference against a brute force over every centre of the grid; the index
+// map's first pass (pipeline/map/splat_plan.h) the same way; then whole
 // maps fused with either kernel set, which must be the same map.
 #include <algorithm>
 #include <bit>
@@ -28,6 +29,7 @@
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
+#include "pipeline/map/splat_plan.h"
 #include "pipeline/map/surfel_map.h"
 
 namespace fovea::pipeline::map {
@@ -442,6 +444,174 @@ TEST(IndexMapGather, TheNearerSurfaceAndThenTheLowerRankWinsTheCell) {
   EXPECT_EQ(winner(), 2u);
   map.offerCentre(1, 1, centre(1.5f, 200), 5);  // in front: always
   EXPECT_EQ(winner(), 5u);
+}
+
+// ---- the index map's first pass: the splat plans ----------------------------
+
+// A random frame and bricks for the plans: a rotation, bricks in front of,
+// beside and behind the camera (some culled), and per pixel depths that are
+// missing, near and far, with their weights.
+struct PlanScene {
+  static constexpr int kBricks = 64;
+  int w = 0, h = 0;
+  std::vector<float> brick_cam = std::vector<float>(3 * kBricks);
+  std::vector<uint32_t> visible = std::vector<uint32_t>(kBricks);
+  std::vector<float> depth, weight;
+  SplatFrame frame;
+
+  PlanScene(const PlanScene&) = delete;  // the frame points into this scene's arrays
+  PlanScene& operator=(const PlanScene&) = delete;
+  PlanScene(int width, int height, std::mt19937_64& rng) : w(width), h(height) {
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    depth.resize(static_cast<std::size_t>(w) * h);
+    weight.resize(depth.size());
+    for (std::size_t i = 0; i < depth.size(); ++i) {
+      depth[i] = rng() % 4 == 0 ? 0.0f : 0.3f + 4.0f * unit(rng);
+      weight[i] = 2.0f * unit(rng);
+    }
+    for (int b = 0; b < kBricks; ++b) {
+      brick_cam[3 * b] = 2.0f * unit(rng) - 1.0f;
+      brick_cam[3 * b + 1] = 2.0f * unit(rng) - 1.0f;
+      brick_cam[3 * b + 2] = 5.0f * unit(rng) - 0.5f;  // some behind the camera
+      visible[b] = rng() % 5 != 0;
+    }
+    const Eigen::Matrix3f r =
+        Eigen::AngleAxisf(unit(rng) * 6.0f, Eigen::Vector3f(unit(rng), unit(rng), unit(rng) + 0.1f).normalized())
+            .toRotationMatrix();
+    for (int i = 0; i < 9; ++i) frame.r[i] = r(i / 3, i % 3);
+    frame.brick_cam = brick_cam.data();
+    frame.brick_visible = visible.data();
+    frame.measured_z = depth.data();
+    frame.weight = weight.data();
+    frame.w = w, frame.h = h;
+    frame.fx = 0.8f * static_cast<float>(w), frame.fy = 0.75f * static_cast<float>(w);
+    frame.cx = 0.5f * static_cast<float>(w) - 0.5f, frame.cy = 0.5f * static_cast<float>(h) + 0.25f;
+    frame.inv_fx = 1.0f / frame.fx, frame.inv_fy = 1.0f / frame.fy;
+    frame.f = 0.5f * (frame.fx + frame.fy);
+    frame.min_z = 0.1f, frame.sigmas = 3.0f, frame.carve = 0.5f;
+    frame.u_lo = -0.5f - kMaxReach, frame.u_hi = static_cast<float>(w) - 0.5f + kMaxReach;
+    frame.v_lo = -0.5f - kMaxReach, frame.v_hi = static_cast<float>(h) - 0.5f + kMaxReach;
+    frame.frame = 1000, frame.unstable_max = 30;
+  }
+
+  // A surfel of a random brick whose centre projects to pixel (u, v) at depth z
+  // (the position is then rotated into the brick's frame).
+  Surfel surfelAt(float u, float v, float z, uint16_t brick) const {
+    const Eigen::Vector3f p((u - frame.cx) / frame.fx * z, (v - frame.cy) / frame.fy * z, z);
+    const Eigen::Matrix3f r = Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>>(frame.r);
+    const Eigen::Vector3f local = r.transpose() * (p - Eigen::Vector3f::Map(brick_cam.data() + 3 * brick));
+    Surfel s;
+    s.x = local.x(), s.y = local.y(), s.z = local.z();
+    s.brick = brick;
+    return s;
+  }
+};
+
+// Random surfels: live and dead, stable and not and of every age, centres in
+// and around the frame (many at half-integer pixels and at the depth range's
+// start), every normal and radius code, every confidence.
+std::vector<Surfel> randomSurfels(const PlanScene& scene, std::size_t n, std::mt19937_64& rng) {
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<Surfel> surfels(n);
+  for (Surfel& s : surfels) {
+    const auto brick = static_cast<uint16_t>(rng() % PlanScene::kBricks);
+    float u = (unit(rng) * 1.2f - 0.1f) * static_cast<float>(scene.w);
+    float v = (unit(rng) * 1.2f - 0.1f) * static_cast<float>(scene.h);
+    if (rng() % 3 == 0) u = std::round(u) + 0.5f, v = std::round(v) - 0.5f;
+    const float z = rng() % 8 == 0 ? scene.frame.min_z : rng() % 8 == 0 ? -1.0f : 0.2f + 4.5f * unit(rng);
+    s = scene.surfelAt(u, v, z, brick);
+    if (rng() % 10 == 0) s = Surfel{unit(rng), unit(rng), unit(rng)};  // anywhere in its brick
+    s.brick = brick;
+    s.normal_radius = static_cast<uint32_t>(rng());
+    s.confidence = static_cast<uint16_t>(rng());
+    s.flags = static_cast<uint8_t>(rng() % 8);
+    s.first_seen = scene.frame.frame - static_cast<uint32_t>(rng() % 40) + (rng() % 20 == 0 ? 10u : 0u);
+  }
+  return surfels;
+}
+
+// Lane by lane the same action and, for what the action uses, the same bits.
+int expectSamePlans(const SplatPlan& a, const SplatPlan& b, std::size_t count, const std::string& what) {
+  int reported = 0, splats = 0;
+  auto same = [](float x, float y) { return std::bit_cast<uint32_t>(x) == std::bit_cast<uint32_t>(y); };
+  for (std::size_t j = 0; j < count; ++j) {
+    bool ok = a.action[j] == b.action[j];
+    if (ok && a.action[j] == SplatPlan::kCarve) ok = same(a.kept[j], b.kept[j]);
+    if (ok && a.action[j] == SplatPlan::kSplat) {
+      ++splats;
+      ok = a.centre_u[j] == b.centre_u[j] && a.centre_v[j] == b.centre_v[j] && a.reach[j] == b.reach[j] &&
+           a.rank[j] == b.rank[j] && same(a.depth[j], b.depth[j]) && same(a.same[j], b.same[j]) &&
+           same(a.inv_depth[j], b.inv_depth[j]) && same(a.grad_u[j], b.grad_u[j]) && same(a.grad_v[j], b.grad_v[j]);
+    }
+    if (!ok && reported++ < 5) {
+      ADD_FAILURE() << what << ": lane " << j << ": action " << a.action[j] << " against " << b.action[j]
+                    << ", centre (" << a.centre_u[j] << ", " << a.centre_v[j] << ") against (" << b.centre_u[j]
+                    << ", " << b.centre_v[j] << "), depth " << a.depth[j] << " against " << b.depth[j];
+    }
+  }
+  return splats;
+}
+
+TEST_P(TargetTest, TheSplatPlansAreTheReference) {
+  std::mt19937_64 rng(47);
+  int splats = 0;
+  uint64_t actions[4] = {};
+  const int reps = test::repetitions(40, 10);
+  for (int rep = 0; rep < reps; ++rep) {
+    const int w = rep % 4 == 0 ? 640 : 3 + static_cast<int>(rng() % 90), h = rep % 4 == 0 ? 480 : 2 + static_cast<int>(rng() % 70);
+    const PlanScene scene(w, h, rng);
+    const std::vector<Surfel> surfels = randomSurfels(scene, SplatPlan::kSize, rng);
+    for (std::size_t count : {SplatPlan::kSize, std::size_t{1}, std::size_t{1} + rng() % SplatPlan::kSize}) {
+      SplatPlan ref{}, simd{};
+      planSplatsRef(scene.frame, surfels.data(), count, ref);
+      planSplatsSimd(scene.frame, surfels.data(), count, simd);
+      splats += expectSamePlans(ref, simd, count, std::to_string(w) + "x" + std::to_string(h));
+      for (std::size_t j = 0; j < count; ++j) ++actions[ref.action[j]];
+    }
+  }
+  for (int a = 0; a < 4; ++a) EXPECT_GT(actions[a], 20u) << "action " << a << " should be among the random plans";
+  EXPECT_GT(splats, 12 * reps);  // about 28 a repetition
+}
+
+// Adversarial surfels: non-finite and huge positions, a centre on the depth
+// range's start and on the frame's edges, normals along and across the ray
+// (every fold of the octahedral code), the largest radius.
+TEST_P(TargetTest, TheSplatPlansOfAdversarialSurfelsAreTheReference) {
+  std::mt19937_64 rng(53);
+  PlanScene scene(64, 48, rng);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  std::vector<Surfel> surfels;
+  const float edges[] = {-2.5f, -2.49f, -0.5f, 0.0f, 0.49999997f, 0.5f, 31.5f, 63.5f, 64.5f, 65.49f, 65.5f};
+  for (float u : edges) {
+    for (float v : {-2.5f, 0.5f, 47.5f, 49.49f}) surfels.push_back(scene.surfelAt(u, v, rng() % 2 ? 0.1f : 1.3f, 0));
+  }
+  for (float x : {nan, inf, -inf, 1e30f, -1e30f, 0.0f}) {
+    surfels.push_back(Surfel{x, 0.1f, 0.2f});
+    surfels.push_back(Surfel{0.1f, x, 0.2f});
+    surfels.push_back(Surfel{0.1f, 0.2f, x});
+  }
+  std::size_t live = surfels.size();
+  for (uint32_t code : {0u, 0xfffu, 0xfff000u, 0xffffffu, 0x7ff7ffu, 0x800800u, 0x7ff000u, 0x000fffu}) {
+    for (uint32_t radius : {0u, 128u, 255u}) {
+      surfels.push_back(scene.surfelAt(20.0f, 30.0f, 0.5f + 0.01f * static_cast<float>(surfels.size()), 1));
+      surfels.back().normal_radius = code << 8 | radius;
+    }
+  }
+  for (std::size_t i = 0; i < surfels.size(); ++i) {
+    if (i >= live) surfels[i].brick = 1;
+    surfels[i].flags = kSurfelLive | kSurfelStable;
+    surfels[i].confidence = static_cast<uint16_t>(rng());
+  }
+  scene.visible[0] = scene.visible[1] = 1;
+  int splats = 0;
+  for (std::size_t b0 = 0; b0 < surfels.size(); b0 += SplatPlan::kSize) {
+    const std::size_t count = std::min(SplatPlan::kSize, surfels.size() - b0);
+    SplatPlan ref{}, simd{};
+    planSplatsRef(scene.frame, surfels.data() + b0, count, ref);
+    planSplatsSimd(scene.frame, surfels.data() + b0, count, simd);
+    splats += expectSamePlans(ref, simd, count, "adversarial");
+  }
+  EXPECT_GT(splats, 20);
 }
 
 // ---- whole maps --------------------------------------------------------------
