@@ -6,6 +6,9 @@
 // index, and every lane computed in the reference's order of operations (Add,
 // Sub, Mul, Div, never MulAdd). Lanes past `count` repeat the last surfel and
 // store into the plan's room past count (kSize is a multiple of the lanes).
+// PlanVector and PlanCentres are not inlined: as one function the emulated
+// 128-bit target took clang 9.3 s to compile under ASan, as two 3.5 s, at the
+// same speed (docs/kernels.md).
 
 // Per-target include guard (Highway's toggle idiom).
 #if defined(FOVEA_PIPELINE_MAP_SPLAT_PLAN_SIMD_INL_H_) == defined(HWY_TARGET_TOGGLE)
@@ -85,7 +88,7 @@ HWY_INLINE void DecodeDirection(DF df, VU normal_radius, hn::Vec<DF>& nx, hn::Ve
 
 // planCentre (splat_plan.cpp) for every lane, stored at j0.
 template <class DF, class V, class VI, class VU>
-HWY_INLINE void PlanCentres(DF df, const SplatFrame& f, VU normal_radius, VU confidence, V px, V py, V pz, VI iu, VI iv,
+HWY_NOINLINE void PlanCentres(DF df, const SplatFrame& f, VU normal_radius, VU confidence, V px, V py, V pz, VI iu, VI iv,
                             std::size_t j0, SplatPlan& plan) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du;
@@ -119,7 +122,7 @@ HWY_INLINE void PlanCentres(DF df, const SplatFrame& f, VU normal_radius, VU con
 
 // The lanes at j0: their actions, the carved ones' confidence left and the splatted ones' centres.
 template <class DF>
-HWY_INLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, std::size_t j0, std::size_t count,
+HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, std::size_t j0, std::size_t count,
                            SplatPlan& plan) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du;
