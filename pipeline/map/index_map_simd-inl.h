@@ -17,8 +17,8 @@
 #include <cstring>
 #include <limits>
 
-#include "core/depth_noise.h"
 #include "hwy/highway.h"
+#include "pipeline/map/depth_sigma_simd-inl.h"
 #include "pipeline/map/index_map.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -48,9 +48,7 @@ HWY_INLINE void GatherVector(DF df, const CentreGrid& g, float sigmas, int x, in
     const auto reach = hn::BitCast(di, hn::ShiftRight<24>(c));
     const auto reaches = hn::RebindMask(df, hn::Gt(reach, hn::Set(di, static_cast<int32_t>(o.reach) - 1)));
     const auto z = hn::Div(one, iz);
-    const auto d = hn::Sub(z, hn::Set(df, kDepthNoiseOffsetF));
-    const auto sigma = hn::Add(hn::Set(df, kDepthNoiseBaseF), hn::Mul(hn::Mul(hn::Set(df, kDepthNoiseQuadraticF), d), d));
-    const auto same = hn::Mul(hn::Set(df, sigmas), sigma);
+    const auto same = hn::Mul(hn::Set(df, sigmas), DepthSigma(df, z));
     const auto nearer = hn::Lt(z, hn::Sub(held, same));
     // Slots are below 2^24: signed comparisons order them.
     const int32_t rsq = o.du * o.du + o.dv * o.dv;

@@ -20,8 +20,8 @@
 
 #include <cstddef>
 
-#include "core/depth_noise.h"
 #include "hwy/highway.h"
+#include "pipeline/map/depth_sigma_simd-inl.h"
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/splat_plan.h"
 
@@ -48,12 +48,6 @@ HWY_INLINE V Dot3(V a0, V a1, V a2, V b0, V b1, V b2) {
 template <class DF, class V>
 HWY_INLINE V RotateRow(DF df, const float* r, V x, V y, V z) {
   return Dot3(hn::Set(df, r[0]), hn::Set(df, r[1]), hn::Set(df, r[2]), x, y, z);
-}
-
-template <class DF, class V>
-HWY_INLINE V DepthSigma(DF df, V z) {
-  const auto d = hn::Sub(z, hn::Set(df, kDepthNoiseOffsetF));
-  return hn::Add(hn::Set(df, kDepthNoiseBaseF), hn::Mul(hn::Mul(hn::Set(df, kDepthNoiseQuadraticF), d), d));
 }
 
 // roundHalfAwayFromZero (map_kernels.h), per lane.
