@@ -48,7 +48,9 @@ TEST(SimdTargets, ListWhichTargetsRun) {
   for (int64_t t : targets) names += std::string(names.empty() ? "" : " ") + simdTargetName(t);
   std::printf("Highway targets compiled and supported here (each runs every equivalence test): %s\n", names.c_str());
   std::printf("dispatch picks: %s\n", simdTargetName(activeSimdTarget()));
+  std::printf("SVE vector: %d bytes\n", test::sveVectorBytes());
   RecordProperty("targets", names);
+  RecordProperty("sve_vector_bytes", test::sveVectorBytes());
   // forceSimdTarget really switches the dispatch.
   for (int64_t t : targets) {
     forceSimdTarget(t);

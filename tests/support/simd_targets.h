@@ -12,6 +12,10 @@
 
 #include <gtest/gtest.h>
 
+#if defined(__aarch64__) && defined(__linux__)
+#include <sys/prctl.h>
+#endif
+
 #include "pipeline/kernels/foveation_simd.h"
 
 namespace fovea::test {
@@ -31,6 +35,18 @@ inline std::vector<int64_t> simdTargetsHere() {
 
 inline std::string simdTargetName(const ::testing::TestParamInfo<int64_t>& info) {
   return pipeline::simdTargetName(info.param);
+}
+
+// The SVE vector length this process runs with, in bytes (0: no SVE here), as
+// the kernel reports it: the SVE tests' vectors are this long (under qemu-user,
+// QEMU_CPU's sve-default-vector-length; toolchain/run-tests-aarch64 checks it).
+inline int sveVectorBytes() {
+#if defined(__aarch64__) && defined(__linux__) && defined(PR_SVE_GET_VL)
+  const int vl = prctl(PR_SVE_GET_VL, 0, 0, 0, 0);
+  return vl < 0 ? 0 : (vl & PR_SVE_VL_LEN_MASK);
+#else
+  return 0;
+#endif
 }
 
 }  // namespace fovea::test
