@@ -110,6 +110,7 @@ std::vector<Field> pipelineFields() {
             c.pipeline.kernels = *fovea::parseKernelSet(std::get<std::string>(v));
           }},
     FOVEA_INT("pipeline.threads", pipeline.threads, 1, 64),
+    FOVEA_INT("pipeline.max_coarsenings", pipeline.max_coarsenings, 0, 16),
   };
 }
 

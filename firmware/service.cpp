@@ -185,6 +185,7 @@ ServiceStats Service::stats() const {
   s.frames_foveated = frames_foveated_.load(std::memory_order_relaxed);
   s.foveate_errors = foveate_errors_.load(std::memory_order_relaxed);
   s.frames_over_capacity = frames_over_capacity_.load(std::memory_order_relaxed);
+  s.frames_coarsened = frames_coarsened_.load(std::memory_order_relaxed);
   s.frames_sent = frames_sent_.load(std::memory_order_relaxed);
   s.frames_withheld = frames_withheld_.load(std::memory_order_relaxed);
   s.frames_unsent = frames_unsent_.load(std::memory_order_relaxed);

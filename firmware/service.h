@@ -85,6 +85,7 @@ struct ServiceStats {
   uint64_t frames_foveated = 0;
   uint64_t foveate_errors = 0;
   uint64_t frames_over_capacity = 0;  // of them: more voxels or points than pipeline.max_voxels / max_output_points
+  uint64_t frames_coarsened = 0;      // foveated with coarser voxels to fit them (pipeline.max_coarsenings)
   uint64_t frames_sent = 0;      // went out to an operator (a session stood)
   uint64_t frames_withheld = 0;  // taken by the send stage while privacy paused streaming
   uint64_t frames_unsent = 0;    // taken by the send stage with no operator (or not streaming)
@@ -367,7 +368,7 @@ class Service {
   std::atomic<int64_t> model_ns_{0};      // ... the last fused frame's model build (TrackStats::model_ns)
   bool tracking_was_lost_ = false;        // the supervisor's, for the log line
   uint64_t window_heartbeat_toggles_ = 0;  // the supervisor's, at the last status line
-  std::atomic<uint64_t> frames_over_capacity_{0};
+  std::atomic<uint64_t> frames_over_capacity_{0}, frames_coarsened_{0};
   std::atomic<uint64_t> capture_errors_{0}, frames_foveated_{0}, foveate_errors_{0}, frames_sent_{0},
       frames_withheld_{0}, frames_unsent_{0}, reloads_applied_{0}, wire_bytes_{0};
   // Written by the supervisor, read by stats() from any thread.

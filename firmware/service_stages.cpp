@@ -168,6 +168,7 @@ void Service::foveationLoop() {
     o.foveated_ns = monotonicNs();
     foveate_latency_.add(o.foveated_ns - o.foveation_start_ns);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
+    if (o.stats.coarsened > 0) frames_coarsened_.fetch_add(1, std::memory_order_relaxed);
     o.bricks_pending = !o.bricks.entries().empty();
     out_ring.publish(out);
   }

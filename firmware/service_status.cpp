@@ -79,10 +79,15 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   formatPoseFields(pose, sizeof pose);
   char map[256] = "";
   formatMapFields(latency[3], map, sizeof map);
-  // Frames dropped since start for more voxels or points than configured (only once there is one).
-  char over[48] = "";
+  // Frames since start dropped for more voxels or points than configured, and
+  // those foveated coarser to fit them (each only once there is one).
+  char over[80] = "";
+  int over_used = 0;
   if (const uint64_t n_over = frames_over_capacity_.load(std::memory_order_relaxed); n_over > 0) {
-    std::snprintf(over, sizeof over, " over capacity %" PRIu64, n_over);
+    over_used = std::snprintf(over, sizeof over, " over capacity %" PRIu64, n_over);
+  }
+  if (const uint64_t n_coarse = frames_coarsened_.load(std::memory_order_relaxed); n_coarse > 0) {
+    std::snprintf(over + over_used, sizeof over - static_cast<std::size_t>(over_used), " coarsened %" PRIu64, n_coarse);
   }
   const int n = std::snprintf(
       out, size,

@@ -18,6 +18,9 @@ Result<Foveator> Foveator::create(const PipelineCapacity& capacity, const Foveat
   if (capacity.max_voxels == 0) {
     return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_voxels: must be at least 1");
   }
+  if (capacity.max_coarsenings < 0 || capacity.max_coarsenings > 16) {
+    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_coarsenings: must be in [0, 16]");
+  }
   if (Status s = config.fixation.validate(); !s) return s;
   Result<RegionModel> model = RegionModel::create(config.acuity);
   if (!model) return model.status();
@@ -208,6 +211,22 @@ Status Foveator::setConfig(const FoveationConfig& config) {
   return Status::ok();
 }
 
+// Doubling every region's edge leaves the regions and the fovea as they were
+// and merges neighbouring voxels: on a surface about a quarter as many. The
+// fovea alone over the output's capacity stays an error.
+Status Foveator::sampleWithinCapacity(const PointCloud& in, std::array<double, kMaxRegions>& voxel_size_m,
+                                      FoveatedCloud& out, SampleCounts& counts, uint32_t* representative,
+                                      FoveationStats& stats) {
+  Status s = table_.sample(*this, in, voxel_size_m, out, counts, representative);
+  while (s.code() == ErrorCode::kCapacityExceeded && stats.coarsened < capacity_.max_coarsenings) {
+    for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] *= 2.0;
+    ++stats.coarsened;
+    counts = {};
+    s = table_.sample(*this, in, voxel_size_m, out, counts, representative);
+  }
+  return s;
+}
+
 Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,
                          uint32_t* representative) {
   stats = {};
@@ -239,7 +258,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   // ACUITY's refinement needs every point's representative, asked for or not.
   const bool refine = model_.levels() && model_.refinePasses() > 0;
   uint32_t* rep = representative != nullptr || !refine ? representative : representative_.data();
-  Status sampled = table_.sample(*this, in, voxel_size_m, out, sample_counts, rep);
+  Status sampled = sampleWithinCapacity(in, voxel_size_m, out, sample_counts, rep, stats);
   // Move the points the eye would see displaced one level down and sample again,
   // until none moves or the passes are spent.
   for (int pass = 0; refine && sampled && pass < model_.refinePasses(); ++pass) {
@@ -249,7 +268,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
                                                 voxel_beyond_.data(), region_.data(), partition_counts);
     stats.refined += static_cast<uint32_t>(moved);
     ++stats.refine_passes;
-    sampled = table_.sample(*this, in, voxel_size_m, out, sample_counts, rep);
+    sampled = sampleWithinCapacity(in, voxel_size_m, out, sample_counts, rep, stats);
   }
   const int64_t t3 = monotonicNs();
 

@@ -33,6 +33,13 @@ struct PipelineCapacity {
   // the reference runs on the calling thread). Created once by create(), in
   // [1, 64]; the output does not depend on it.
   int threads = 1;
+  // A frame whose sampling needs more voxels than max_voxels, or more points than
+  // the output holds, is sampled again with every region's voxel edge doubled, at
+  // most this many times (0: the error at once), in [0, 16]: that frame's
+  // periphery coarser rather than no frame (FoveationStats::coarsened). A near
+  // fixation shrinks F1's voxels with d0 (Eq. 5-6); a tracked camera orbiting a
+  // world-fixed gaze took more than 0.3 of the pixels (docs/service.md).
+  int max_coarsenings = 3;
 };
 
 struct FoveationConfig {
@@ -55,6 +62,7 @@ struct FoveationStats {
   uint32_t culled = 0;             // ACUITY's view cull (drop): outside the field of view, not sent
   uint32_t refined = 0;            // ACUITY's refinement: level changes over all passes
   int refine_passes = 0;           // ... and the passes that moved a point
+  int coarsened = 0;               // voxel edges doubled to fit the capacity (PipelineCapacity::max_coarsenings)
   Fixation fixation;
   int64_t partition_ns = 0;
   int64_t fixation_ns = 0;
@@ -80,8 +88,9 @@ class Foveator {
   Status setConfig(const FoveationConfig& config);
 
   // Foveates `in` for `gaze` into `out` (whose capacity must be at least
-  // in.size()). kInvalidInput for a bad gaze; kCapacityExceeded / kRangeExceeded
-  // as the sampler reports. representative, if not null, gets for each input
+  // in.size()). kInvalidInput for a bad gaze; kRangeExceeded as the sampler
+  // reports; kCapacityExceeded when the frame does not fit even after
+  // capacity().max_coarsenings doublings of the voxel edges. representative, if not null, gets for each input
   // point the index of its output point (see VoxelSampler::sample). Never
   // allocates on success.
   Status foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,
@@ -120,6 +129,10 @@ class Foveator {
   std::size_t refineTestParallel(const PointCloud& in, const Gaze& gaze, const PointCloud& out,
                                  const uint32_t* representative);
   void sumHistograms(PartitionCounts& counts) const;  // the pool's parts' histograms
+  // table_.sample, again with the voxel edges doubled while over the capacity.
+  Status sampleWithinCapacity(const PointCloud& in, std::array<double, kMaxRegions>& voxel_size_m,
+                              FoveatedCloud& out, SampleCounts& counts, uint32_t* representative,
+                              FoveationStats& stats);
 
   PipelineCapacity capacity_;
   FoveationConfig config_;

@@ -245,6 +245,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "pipeline.max_output_points=95000",
     "pipeline.kernels=ref",
     "pipeline.threads=4",
+    "pipeline.max_coarsenings=5",
     "foveation.preset=custom",
     "foveation.custom_bounds_deg=[2.5, 7, 19.125]",
     "foveation.slope=0.031",

@@ -135,8 +135,9 @@ TEST(Service, MemoryBudgetListsEveryPoolAndTheHeapsGrowth) {
 }
 
 // pipeline.max_output_points sizes the foveated slots (not the pixels), and a
-// frame that needs more voxels than pipeline.max_voxels is dropped and counted,
-// never a crash; the status line says how many.
+// frame that needs more voxels than pipeline.max_voxels, even after
+// pipeline.max_coarsenings doublings of its voxels (none here), is dropped and
+// counted, never a crash; the status line says how many.
 TEST(Service, OutputCapacityIsConfiguredAndAnOverflowIsCountedNotACrash) {
   RecordingSink sink;
   Logger logger(sink);
@@ -144,6 +145,7 @@ TEST(Service, OutputCapacityIsConfiguredAndAnOverflowIsCountedNotACrash) {
   config.runtime.status_interval_ms = 50;
   config.max_output_points = 4000;
   config.pipeline.max_voxels = 10;  // the mock room at 160x120 takes hundreds
+  config.pipeline.max_coarsenings = 0;
   Service::Environment environment;
   environment.logger = &logger;
   RunningService running;
@@ -160,6 +162,31 @@ TEST(Service, OutputCapacityIsConfiguredAndAnOverflowIsCountedNotACrash) {
   const ServiceStats end = running.service->stats();
   EXPECT_EQ(end.frames_foveated, 0u);
   EXPECT_EQ(end.frames_over_capacity, end.foveate_errors);
+}
+
+// With its default pipeline.max_coarsenings, a frame over max_voxels goes out
+// with its periphery's voxels doubled until it fits: counted, not dropped.
+TEST(Service, AFrameOverTheVoxelsIsFoveatedCoarserAndCounted) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig();
+  config.runtime.status_interval_ms = 50;
+  // The mock room at 160x120 takes more than 2000 at the fallback's 5 cm voxels
+  // (no operator here); 400 fit once they are doubled.
+  config.pipeline.max_voxels = 400;
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_coarsened >= 3; }, 5000ms))
+      << running.service->stats().frames_foveated << " foveated, " << running.service->stats().frames_over_capacity
+      << " over capacity";
+  ASSERT_TRUE(waitUntil([&] { return sink.contains(" coarsened "); }, 5000ms)) << "status line without the count";
+  running.stop();
+  const ServiceStats end = running.service->stats();
+  EXPECT_EQ(end.frames_over_capacity, 0u);
+  EXPECT_EQ(end.foveate_errors, 0u);
+  EXPECT_EQ(end.frames_coarsened, end.frames_foveated) << "every frame of the static room needs it";
 }
 
 TEST(Service, RejectsABadConfigurationNamingTheField) {

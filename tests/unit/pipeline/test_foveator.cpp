@@ -1,4 +1,5 @@
 // The whole foveation of a cloud against the brute-force reference.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -143,6 +144,107 @@ TEST(Foveator, RejectsCloudsOverCapacity) {
   EXPECT_EQ(foveator.foveate(in, Gaze{}, out, stats).code(), ErrorCode::kCapacityExceeded);
   EXPECT_FALSE(Foveator::create({0, 10}, configFor(Preset::kF1)).isOk());
 }
+
+// ---- over the capacity: the voxels doubled until the frame fits ----
+
+// The occupied voxels of the brute-force grouping (as RandomCloud above) of the
+// points `regions` names, at the regions' edges times `scale`.
+std::size_t bruteVoxelCount(const PointCloud& in, const uint8_t* regions, const FoveationStats& stats, double scale) {
+  std::map<test::BruteKey, int> voxels;
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    const int r = regions[i];
+    if (r == 0 || r >= stats.region_count) continue;
+    const Eigen::Vector3d w = in.world(i);
+    ++voxels[test::bruteKey(r, w.x(), w.y(), w.z(), stats.regions[r].voxel_size_m * scale)];
+  }
+  return voxels.size();
+}
+
+// A wall of 40 000 points 5 mm apart, 2 m ahead (the surface a depth camera
+// sees), under F1 at a fixation of 2 m: its inner regions' voxels are smaller
+// than the spacing, so the frame takes thousands.
+PointCloud wall() {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<float> jitter(-0.001f, 0.001f);
+  PointCloud cloud(40000);
+  for (int v = 0; v < 160; ++v) {
+    for (int u = 0; u < 250; ++u) {
+      (void)cloud.push(-0.625f + 0.005f * static_cast<float>(u), -0.4f + 0.005f * static_cast<float>(v),
+                       2.0f + jitter(rng), 0x808080u);
+    }
+  }
+  return cloud;
+}
+
+class FoveatorOverCapacity : public ::testing::TestWithParam<KernelSet> {
+ protected:
+  static FoveationConfig config() {
+    FoveationConfig c = configFor(Preset::kF1, 0.022, FixationMode::kFixed);
+    c.fixation.fixed_m = 2.0;
+    return c;
+  }
+  PointCloud in_ = wall();
+  Gaze gaze_;  // from the origin along +z
+};
+
+// A frame with more voxels than max_voxels is sampled again with every edge
+// doubled, the fewest times that fit: with room for the voxels of edges four
+// times as large, twice, and the output is the brute-force grouping at them.
+TEST_P(FoveatorOverCapacity, IsSampledAtDoubledVoxelsTheFewestTimesThatFit) {
+  PipelineCapacity roomy{in_.size(), in_.size(), GetParam()};
+  Foveator reference = Foveator::create(roomy, config()).value();
+  FoveatedCloud full(in_.size());
+  FoveationStats full_stats;
+  ASSERT_TRUE(reference.foveate(in_, gaze_, full, full_stats).isOk());
+  EXPECT_EQ(full_stats.coarsened, 0);
+  const std::size_t fovea = full_stats.regions[0].points_out;
+  const uint8_t* regions = reference.lastRegions();
+  ASSERT_EQ(full.size() - fovea, bruteVoxelCount(in_, regions, full_stats, 1.0));
+  const std::size_t at2 = bruteVoxelCount(in_, regions, full_stats, 2.0);
+  const std::size_t at4 = bruteVoxelCount(in_, regions, full_stats, 4.0);
+  ASSERT_GT(full.size() - fovea, at2);
+  ASSERT_GT(at2, at4);
+
+  PipelineCapacity tight = roomy;
+  tight.max_voxels = at4;
+  Foveator foveator = Foveator::create(tight, config()).value();
+  FoveatedCloud out(in_.size());
+  FoveationStats stats;
+  ASSERT_TRUE(foveator.foveate(in_, gaze_, out, stats).isOk());
+  EXPECT_EQ(stats.coarsened, 2);
+  for (int r = 1; r < stats.region_count; ++r) {
+    EXPECT_EQ(stats.regions[r].voxel_size_m, full_stats.regions[r].voxel_size_m * 4.0) << "region " << r;
+    EXPECT_EQ(stats.regions[r].points_in, full_stats.regions[r].points_in) << "region " << r;
+  }
+  EXPECT_EQ(stats.regions[0].points_out, fovea) << "the fovea stays whole";
+  EXPECT_EQ(out.size() - fovea, at4);
+}
+
+TEST_P(FoveatorOverCapacity, WithoutCoarseningsOrBeyondThemTheFrameIsRefused) {
+  PipelineCapacity none{in_.size(), 100, GetParam()};
+  none.max_coarsenings = 0;
+  Foveator refusing = Foveator::create(none, config()).value();
+  FoveatedCloud out(in_.size());
+  FoveationStats stats;
+  EXPECT_EQ(refusing.foveate(in_, gaze_, out, stats).code(), ErrorCode::kCapacityExceeded);
+  EXPECT_EQ(stats.coarsened, 0);
+
+  PipelineCapacity one_voxel{in_.size(), 1, GetParam()};  // several regions hold points: never fits
+  Foveator trying = Foveator::create(one_voxel, config()).value();
+  EXPECT_EQ(trying.foveate(in_, gaze_, out, stats).code(), ErrorCode::kCapacityExceeded);
+  EXPECT_EQ(stats.coarsened, one_voxel.max_coarsenings);
+
+  PipelineCapacity bad{in_.size(), 100, GetParam()};
+  bad.max_coarsenings = 17;
+  EXPECT_EQ(Foveator::create(bad, config()).status().code(), ErrorCode::kInvalidArgument);
+  bad.max_coarsenings = -1;
+  EXPECT_EQ(Foveator::create(bad, config()).status().code(), ErrorCode::kInvalidArgument);
+}
+
+INSTANTIATE_TEST_SUITE_P(Kernels, FoveatorOverCapacity, ::testing::Values(KernelSet::kRef, KernelSet::kSimd),
+                         [](const ::testing::TestParamInfo<KernelSet>& info) {
+                           return std::string(kernelSetName(info.param));
+                         });
 
 // ---- the kernel table: chosen once, from the kernel set and the thread count ----
 
