@@ -55,7 +55,8 @@ using Plain = std::remove_cvref_t<T>;
   }
 #define FOVEA_THREAD(PATH, MEMBER)                                                     \
   FOVEA_INT(PATH ".core", MEMBER.core, -1, 1023),                                      \
-      FOVEA_INT(PATH ".realtime_priority", MEMBER.realtime_priority, 0, 99)
+      FOVEA_INT(PATH ".realtime_priority", MEMBER.realtime_priority, 0, 99),           \
+      FOVEA_INT(PATH ".nice", MEMBER.nice, -20, 19)
 
 std::string checkSpec(const std::string& spec) {
   if (spec.empty() || spec.front() == ':') return "must name a backend, as backend[:args]";

@@ -31,6 +31,9 @@ Result<std::unique_ptr<Service>> Service::create(const ServiceConfig& config, En
     if (p->realtime_priority < 0 || p->realtime_priority > 99) {
       return R(ErrorCode::kInvalidArgument, "runtime.*_thread.realtime_priority: must be within 0 .. 99");
     }
+    if (p->nice < -20 || p->nice > 19) {
+      return R(ErrorCode::kInvalidArgument, "runtime.*_thread.nice: must be within -20 .. 19");
+    }
   }
   if (Status s = config.camera.depth.validate(); !s) return s;
   const std::size_t heap_before_camera = heapInUse();

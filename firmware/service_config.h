@@ -22,11 +22,14 @@
 namespace fovea::firmware {
 
 // Where a stage's thread runs. core -1: anywhere; realtime_priority 0: the
-// normal scheduler, 1..99: SCHED_FIFO at that priority. When the system refuses
-// (no CAP_SYS_NICE, a core that does not exist) the service logs it and runs on.
+// normal scheduler, 1..99: SCHED_FIFO at that priority; nice (-20 .. 19, the
+// normal scheduler only): added to the process's nice value for the thread
+// (its share of a busy core; 0: as the process). When the system refuses (no CAP_SYS_NICE for a priority or a
+// negative nice, a core that does not exist) the service logs it and runs on.
 struct ThreadPlacement {
   int core = -1;
   int realtime_priority = 0;
+  int nice = 0;
 };
 
 // Where the camera is (hal/pose_source.h, docs/pose.md).
@@ -94,7 +97,8 @@ struct ServiceConfig {
   // whole plus one per voxel), which sizes the foveated slots and the chunk
   // encoder. 0: the camera's pixels. A preset that keeps every point (FREF) and
   // the map source always get the pixels (the map's surfels on top). A frame
-  // that needs more is dropped and counted (the status line's "over capacity").
+  // that needs more is foveated with coarser voxels (pipeline.max_coarsenings,
+  // "coarsened"), or past them dropped and counted ("over capacity").
   std::size_t max_output_points = 0;
   pipeline::FoveationConfig foveation;  // preset, m, far eccentricity, fixation
   // foveation.source and [map]: the fused scene map, streamed as bricks the

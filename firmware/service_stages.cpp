@@ -5,8 +5,11 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -41,6 +44,18 @@ void Service::placeThread(const char* name, const ThreadPlacement& placement) {
     if (const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param); e != 0) {
       log().log(LogLevel::kWarning, "%s: SCHED_FIFO priority %d refused (%s): running on the normal scheduler", name,
                 placement.realtime_priority, std::strerror(e));
+    }
+  } else if (placement.nice != 0) {
+    // Relative to the thread's start (the process's, which `nice` may have
+    // set), so that the stages keep their lead; Linux keeps a nice value per
+    // thread (PRIO_PROCESS with its id).
+    const auto tid = static_cast<id_t>(::gettid());
+    errno = 0;
+    const int base = ::getpriority(PRIO_PROCESS, tid);
+    const int target = std::clamp((errno == 0 ? base : 0) + placement.nice, -20, 19);
+    if (::setpriority(PRIO_PROCESS, tid, target) != 0) {
+      log().log(LogLevel::kWarning, "%s: nice %d refused (%s): running at the process's", name, target,
+                std::strerror(errno));
     }
   }
 }

@@ -320,6 +320,10 @@ const std::vector<std::string> kEveryKeyChanged = {
     "runtime.send_thread.realtime_priority=45",
     "runtime.map_thread.core=1",
     "runtime.map_thread.realtime_priority=30",
+    "runtime.capture_thread.nice=-5",
+    "runtime.foveation_thread.nice=-3",
+    "runtime.send_thread.nice=-4",
+    "runtime.map_thread.nice=7",
 };
 
 TEST(Config, EveryKeyRoundTrips) {

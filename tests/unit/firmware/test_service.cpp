@@ -6,14 +6,18 @@
 #include "hal/usb/usb_devices.h"
 
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <mutex>
 #include <optional>
@@ -730,6 +734,47 @@ TEST(Service, TrackedPoseLostOnACoveredLensRaisesTheFaultAndRecovers) {
   const uint64_t fused_again = running.service->stats().map.frames_fused;
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().map.frames_fused >= fused_again + 5; }, 3000ms));
   running.stop();
+}
+
+// The nice value of the thread named `name` in this process; nullopt if none.
+std::optional<int> threadNice(const std::string& name) {
+  for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+    std::ifstream comm(task.path() / "comm");
+    std::string line;
+    if (!std::getline(comm, line) || line != name) continue;
+    errno = 0;
+    const int nice = ::getpriority(PRIO_PROCESS, static_cast<id_t>(std::stoi(task.path().filename().string())));
+    if (errno == 0) return nice;
+  }
+  return std::nullopt;
+}
+
+// runtime.*_thread.nice is added to the process's for that thread: the map's
+// fusion yields a busy core to the stages (the host profile's 10), the stages
+// keep the process's.
+TEST(Service, AThreadsNiceValueIsAddedToTheProcesss) {
+  errno = 0;
+  const int base = ::getpriority(PRIO_PROCESS, 0);
+  ASSERT_EQ(errno, 0);
+  if (base > 12) GTEST_SKIP() << "the test runs at nice " << base << ": no room for 7 more";
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.map.source = FoveationSource::kMap;
+  config.map.map.max_surfels = 1u << 14;
+  config.runtime.map_thread.nice = 7;
+  ASSERT_TRUE(config.map.fusion_thread);
+  RunningService running;
+  startService(running, config, {});
+  ASSERT_TRUE(waitUntil([&] { return threadNice("fovea-map").has_value(); }, 5000ms)) << "no fovea-map thread";
+  // A thread names itself first and sets its nice value next: wait for both.
+  EXPECT_TRUE(waitUntil([&] { return threadNice("fovea-map") == base + 7; }, 2000ms)) << *threadNice("fovea-map");
+  for (const char* stage : {"fovea-capture", "fovea-foveate", "fovea-send"}) {
+    ASSERT_TRUE(waitUntil([&] { return threadNice(stage).has_value(); }, 2000ms)) << stage;
+    EXPECT_EQ(threadNice(stage), base) << stage;
+  }
+  running.stop();
+
+  config.runtime.map_thread.nice = 20;
+  EXPECT_FALSE(Service::create(config, {}).isOk());
 }
 
 // Tracking needs the map: a configuration that asks for it without says so.
