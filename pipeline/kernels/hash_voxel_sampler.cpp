@@ -85,10 +85,6 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       voxel_table_pos_(max_voxels),
       acc_(new Acc[max_voxels]),
       rank_(max_voxels),
-      sort_keys_(max_voxels),
-      sort_keys_scratch_(max_voxels),
-      sort_slot_(max_voxels),
-      sort_slot_scratch_(max_voxels),
       point_slot_(max_points),
       chunk_key_(kChunk),
       chunk_slot_(kChunk),
@@ -262,7 +258,7 @@ struct HashVoxelSampler::KeyPass {
 // voxel's slot below it where both fit one 64-bit word.
 struct HashVoxelSampler::VoxelOrder {
   int region_shift = 0;  // of the region within the key
-  int key_shift = 0;     // of the key within sort_keys_: the slot's bits when packed, else 0
+  int key_shift = 0;     // of the key within sortKeys(): the slot's bits when packed, else 0
   bool packed = false;
   uint64_t slot_mask = 0;
 };
@@ -323,6 +319,8 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   copyFoveaFast(in, region, out, representative);
   counts.out[0] = static_cast<uint32_t>(fovea);
   writeVoxels(order, fovea, voxels, out, counts);
+  std::fill_n(sortKeys(), voxels, kEmpty);  // the table empty again for the next frame
+  std::fill_n(sortKeysScratch(), voxels, kEmpty);
   if (representative != nullptr) {
     const uint32_t* point_slot = point_slot_.data();
     for (std::size_t i = 0; i < n; ++i) {
@@ -476,6 +474,7 @@ HashVoxelSampler::VoxelOrder HashVoxelSampler::sortVoxels(int region_count, cons
   order.packed = key_bits + slot_bits <= 64;
   order.key_shift = order.packed ? slot_bits : 0;
   order.slot_mask = (uint64_t{1} << slot_bits) - 1;
+  uint64_t* keys = sortKeys();
   for (std::size_t s = 0; s < voxels; ++s) {
     const uint64_t hash_key = voxel_key_[s];
     const auto r = static_cast<uint8_t>(hash_key >> (3 * kVoxelAxisBits));
@@ -485,16 +484,16 @@ HashVoxelSampler::VoxelOrder HashVoxelSampler::sortVoxels(int region_count, cons
       key |= ((wrapped - static_cast<uint64_t>(lo_index[r][a])) & kAxisMask) << shift[a];
     }
     if (order.packed) {
-      sort_keys_[s] = (key << order.key_shift) | s;
+      keys[s] = (key << order.key_shift) | s;
     } else {
-      sort_keys_[s] = key;
-      sort_slot_[s] = static_cast<uint32_t>(s);
+      keys[s] = key;
+      sortSlots()[s] = static_cast<uint32_t>(s);
     }
   }
   if (order.packed) {
-    radixSortBits(sort_keys_.data(), sort_keys_scratch_.data(), voxels, slot_bits, key_bits);
+    radixSortBits(keys, sortKeysScratch(), voxels, slot_bits, key_bits);
   } else {
-    radixSortPairs(sort_keys_.data(), sort_slot_.data(), sort_keys_scratch_.data(), sort_slot_scratch_.data(),
+    radixSortPairs(keys, sortSlots(), sortKeysScratch(), sortSlotsScratch(),
                    voxels);
   }
   return order;
@@ -504,8 +503,10 @@ HashVoxelSampler::VoxelOrder HashVoxelSampler::sortVoxels(int region_count, cons
 // final expressions; rank_ keeps each slot's place for the representatives.
 void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, std::size_t voxels,
                                    FoveatedCloud& out, SampleCounts& counts) {
+  const uint64_t* keys = sortKeys();
+  const uint32_t* slots = sortSlots();
   const auto slotAt = [&](std::size_t q) {
-    return order.packed ? static_cast<uint32_t>(sort_keys_[q] & order.slot_mask) : sort_slot_[q];
+    return order.packed ? static_cast<uint32_t>(keys[q] & order.slot_mask) : slots[q];
   };
   for (std::size_t q = 0; q < voxels; ++q) {
     const std::size_t o = fovea + q;
@@ -517,7 +518,7 @@ void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, s
     }
     rank_[slot] = static_cast<uint32_t>(o);
     const Acc& a = acc_[slot];
-    const auto r = static_cast<uint8_t>(sort_keys_[q] >> (order.key_shift + order.region_shift));
+    const auto r = static_cast<uint8_t>(keys[q] >> (order.key_shift + order.region_shift));
     const auto cnt = static_cast<uint64_t>(a.n);
     const double inv_n = 1.0 / static_cast<double>(cnt);
     out.points.x()[o] = std::clamp(static_cast<float>(a.fx + a.sx * inv_n), a.lo[0], a.hi[0]);

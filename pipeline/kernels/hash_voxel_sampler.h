@@ -156,9 +156,16 @@ class HashVoxelSampler {
   std::size_t lookups_ = 0;  // recent-voxel cache misses this frame
   int shift_ = 64;
   // The table: keys (probed; 8 bytes an entry keeps it dense in cache) and, beside
-  // them, the slots (read on a match only).
+  // them, the slots (read on a match only). It is empty between a frame's
+  // accumulation and the next (clearTable), and holds at least 2 max_voxels
+  // entries: step 3's sort uses them meanwhile (keys and their scratch, slots and
+  // theirs), and sample() empties the keys it wrote again.
   std::vector<uint64_t> table_key_;
   std::vector<uint32_t> table_slot_;
+  uint64_t* sortKeys() { return table_key_.data(); }
+  uint64_t* sortKeysScratch() { return table_key_.data() + max_voxels_; }
+  uint32_t* sortSlots() { return table_slot_.data(); }
+  uint32_t* sortSlotsScratch() { return table_slot_.data() + max_voxels_; }
   // Per voxel slot (max_voxels).
   std::vector<uint64_t> voxel_key_;        // the hash key
   std::vector<uint32_t> voxel_table_pos_;  // where it sits in the table
@@ -166,8 +173,6 @@ class HashVoxelSampler {
   // touched, so the resident size follows the voxels actually used, not max_voxels.
   std::unique_ptr<Acc[]> acc_;
   std::vector<uint32_t> rank_;             // place in the output order
-  std::vector<uint64_t> sort_keys_, sort_keys_scratch_;
-  std::vector<uint32_t> sort_slot_, sort_slot_scratch_;
   // Per point (max_points).
   std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot (only with representatives)
   std::vector<uint64_t> point_key_;   // keys of the whole cloud (threaded key pass only)
