@@ -24,8 +24,9 @@ namespace fovea::firmware {
 // Where a stage's thread runs. core -1: anywhere; realtime_priority 0: the
 // normal scheduler, 1..99: SCHED_FIFO at that priority; nice (-20 .. 19, the
 // normal scheduler only): added to the process's nice value for the thread
-// (its share of a busy core; 0: as the process). When the system refuses (no CAP_SYS_NICE for a priority or a
-// negative nice, a core that does not exist) the service logs it and runs on.
+// (its share of a busy core; 0: as the process). When the system refuses (no
+// CAP_SYS_NICE for a priority or a lower nice value, a core that does not
+// exist) the service logs it and runs on.
 struct ThreadPlacement {
   int core = -1;
   int realtime_priority = 0;

@@ -90,9 +90,9 @@ class Foveator {
   // Foveates `in` for `gaze` into `out` (whose capacity must be at least
   // in.size()). kInvalidInput for a bad gaze; kRangeExceeded as the sampler
   // reports; kCapacityExceeded when the frame does not fit even after
-  // capacity().max_coarsenings doublings of the voxel edges. representative, if not null, gets for each input
-  // point the index of its output point (see VoxelSampler::sample). Never
-  // allocates on success.
+  // capacity().max_coarsenings doublings of the voxel edges. representative,
+  // if not null, gets for each input point the index of its output point (see
+  // VoxelSampler::sample). Never allocates on success.
   Status foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,
                  uint32_t* representative = nullptr);
 
