@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -29,6 +30,26 @@ constexpr uint16_t kChunkCountPlaceholder = 0xffff;
 // Lattice coordinates up to 2^50 steps: w + 0.5 stays exact enough in double
 // that rounding by truncation keeps |w - q| <= 1/2.
 constexpr double kMaxLatticeCoord = 1125899906842624.0;
+
+// The lattice coordinates of p (relative to origin o) at 1 / inv_step steps
+// from the world origin, rounded half away from zero (q unset unless kInRange).
+// Monotonic in each coordinate, so a region's bounds are those of its points'
+// extremes; encode() computes the keys' coordinates again: the same bits.
+enum class Lattice { kInRange, kNotFinite, kBeyond };
+inline double latticeUnits(double o, float p, double inv_step) { return (o + double{p}) * inv_step; }
+inline int64_t roundHalfAway(double w) { return static_cast<int64_t>(w >= 0.0 ? w + 0.5 : w - 0.5); }
+inline Lattice latticeCoords(const Eigen::Vector3d& o, const float p[3], double inv_step, int64_t q[3]) {
+  for (int a = 0; a < 3; ++a) {
+    const double w = latticeUnits(o[a], p[a], inv_step);
+    if (!(std::fabs(w) < kMaxLatticeCoord)) return std::isfinite(w) ? Lattice::kBeyond : Lattice::kNotFinite;
+    q[a] = roundHalfAway(w);
+  }
+  return Lattice::kInRange;
+}
+inline Lattice latticeCoords(const pipeline::PointCloud& c, std::size_t i, double inv_step, int64_t q[3]) {
+  const float p[3] = {c.x()[i], c.y()[i], c.z()[i]};
+  return latticeCoords(c.origin_m, p, inv_step, q);
+}
 
 // The order k in [lo, hi] that codes `values` in the fewest bits, among the four
 // below the bit width of their mean (on the mock frames the best order was always
@@ -206,9 +227,9 @@ Status validate(const CodecConfig& c) {
 
 // Per point of the frame, grouped by region; read and written only inside encode().
 struct ChunkEncoder::PointScratch {
-  explicit PointScratch(std::size_t n)
-      : qx(n), qy(n), qz(n), keys(n), keys_tmp(n), order(n), order_tmp(n), colours(n) {}
-  std::vector<int64_t> qx, qy, qz;  // lattice coordinates, in `order`'s slots (grouped by region)
+  explicit PointScratch(std::size_t n) : keys(n), keys_tmp(n), order(n), order_tmp(n), colours(n) {}
+  // No lattice coordinates: the key pass quantizes each point again (the same
+  // arithmetic, so the same values), which costs less than 24 bytes a point.
   std::vector<uint64_t> keys, keys_tmp;
   std::vector<uint32_t> order, order_tmp;
   std::vector<uint32_t> colours;  // the points' colours in Morton order (a separate gather: more loads in flight)
@@ -221,9 +242,6 @@ std::shared_ptr<ChunkEncoder::PointScratch> ChunkEncoder::makePointScratch(std::
 struct ChunkEncoder::State {
   explicit State(std::shared_ptr<PointScratch> scratch)
       : points(std::move(scratch)),
-        qx(points->qx),
-        qy(points->qy),
-        qz(points->qz),
         keys(points->keys),
         keys_tmp(points->keys_tmp),
         order(points->order),
@@ -239,9 +257,6 @@ struct ChunkEncoder::State {
 
   // The per-point arrays (this encoder's own, or shared: ChunkEncoder::create).
   std::shared_ptr<PointScratch> points;
-  std::vector<int64_t>& qx;
-  std::vector<int64_t>& qy;
-  std::vector<int64_t>& qz;
   std::vector<uint64_t>& keys;
   std::vector<uint64_t>& keys_tmp;
   std::vector<uint32_t>& order;
@@ -294,9 +309,10 @@ struct ChunkEncoder::State {
   Status countRegions(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
                       FrameInProgress& frame);
   Status quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame);
+  Status firstPointOutOfRange(const pipeline::FoveatedCloud& cloud) const;
+  void mortonKeys(const pipeline::FoveatedCloud& cloud, const FrameInProgress& frame);
   Status encodeRegion(const pipeline::FoveatedCloud& cloud, int r, FrameInProgress& frame);
-  std::pair<const uint64_t*, const uint32_t*> sortByMorton(std::size_t begin, std::size_t end,
-                                                           const std::array<int64_t, 3>& qmin, int64_t span);
+  std::pair<const uint64_t*, const uint32_t*> sortByMorton(std::size_t begin, std::size_t end, int64_t span);
   Orders chooseOrders(const RegionCut& cut, std::size_t k);
   std::size_t packChunk(const RegionCut& cut, std::size_t k, const Orders& orders, std::size_t& raw_size);
   Status storeChunk(const RegionCut& cut, std::size_t points, std::size_t raw_size, FrameInProgress& frame);
@@ -330,9 +346,9 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
                                 "codec: max_points " + std::to_string(max_points) + " is outside [1, 2^26]");
   }
-  if (scratch != nullptr && scratch->qx.size() < max_points) {
+  if (scratch != nullptr && scratch->keys.size() < max_points) {
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument, "codec: a shared point scratch of " +
-                                                                 std::to_string(scratch->qx.size()) +
+                                                                 std::to_string(scratch->keys.size()) +
                                                                  " points for an encoder of " + std::to_string(max_points));
   }
   auto s = std::make_unique<State>(scratch != nullptr ? std::move(scratch) : makePointScratch(max_points));
@@ -394,6 +410,7 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
   frame.brick = brick;
   if (Status st = s.countRegions(cloud, region_voxel_size_m, frame); !st) return st;
   if (Status st = s.quantize(cloud, frame); !st) return st;
+  s.mortonKeys(cloud, frame);
   for (int r = 0; r < pipeline::kMaxRegions; ++r) {
     if (Status st = s.encodeRegion(cloud, r, frame); !st) return st;
   }
@@ -432,44 +449,92 @@ Status ChunkEncoder::State::countRegions(const pipeline::FoveatedCloud& cloud,
   return Status::ok();
 }
 
-// Lattice coordinates (qx, qy, qz) and their bounds per region; `order` gets the
-// points grouped by region.
+// The lattice coordinates' bounds per region, from the points' extremes;
+// `order` gets the points grouped by region.
 Status ChunkEncoder::State::quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame) {
   std::array<uint32_t, pipeline::kMaxRegions> fill{};
-  auto& qmin = frame.qmin;
-  auto& qmax = frame.qmax;
-  for (int r = 0; r < pipeline::kMaxRegions; ++r) {
-    qmin[static_cast<std::size_t>(r)].fill(INT64_MAX);
-    qmax[static_cast<std::size_t>(r)].fill(INT64_MIN);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  std::array<std::array<float, 3>, pipeline::kMaxRegions> lo, hi;
+  for (auto& l : lo) l.fill(kInf);
+  for (auto& h : hi) h.fill(-kInf);
+  bool finite = true;
+  const float* px[3] = {cloud.points.x(), cloud.points.y(), cloud.points.z()};
+  // Run by run of one region (the samplers write the regions in turn), so that
+  // the bounds stay in registers.
+  for (std::size_t i = 0; i < cloud.size();) {
+    const uint8_t r = cloud.region[i];
+    std::size_t end = i + 1;
+    while (end < cloud.size() && cloud.region[end] == r) ++end;
+    for (std::size_t a = 0; a < 3; ++a) {
+      float l = lo[r][a], h = hi[r][a];
+      bool ok = true;
+      for (std::size_t k = i; k < end; ++k) {
+        const float v = px[a][k];
+        ok &= std::isfinite(v);
+        l = v < l ? v : l;
+        h = v > h ? v : h;
+      }
+      lo[r][a] = l, hi[r][a] = h;
+      finite &= ok;
+    }
+    for (std::size_t k = i; k < end; ++k) order[frame.start[r] + fill[r]++] = static_cast<uint32_t>(k);
+    i = end;
   }
-  const Eigen::Vector3d& o = cloud.points.origin_m;
+  for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) {
+    if (fill[r] == 0) continue;
+    const double inv = 1.0 / step[r];
+    if (!finite || latticeCoords(cloud.points.origin_m, lo[r].data(), inv, frame.qmin[r].data()) != Lattice::kInRange ||
+        latticeCoords(cloud.points.origin_m, hi[r].data(), inv, frame.qmax[r].data()) != Lattice::kInRange) {
+      return firstPointOutOfRange(cloud);
+    }
+  }
+  return Status::ok();
+}
+
+// The error for the first point with no lattice coordinates (quantize() found one).
+Status ChunkEncoder::State::firstPointOutOfRange(const pipeline::FoveatedCloud& cloud) const {
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const uint8_t r = cloud.region[i];
+    int64_t q[3];
+    const Lattice l = latticeCoords(cloud.points, i, 1.0 / step[r], q);
+    if (l == Lattice::kNotFinite) return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
+    if (l == Lattice::kBeyond) {
+      return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^50 steps of " +
+                                             std::to_string(step[r]) + " m from the world origin"};
+    }
+  }
+  return {ErrorCode::kInvalidInput, "codec: a region's bounds are out of range (bug: no point is)"};
+}
+
+// Every point's Morton key relative to its region's lattice origin, in the
+// slots quantize() gave `order` (every point in range: quantize() checked).
+// The bits of a region wider than kMaxLatticeSpan are wrong, and unused: its
+// encodeRegion() fails first.
+void ChunkEncoder::State::mortonKeys(const pipeline::FoveatedCloud& cloud, const FrameInProgress& frame) {
+  std::array<uint32_t, pipeline::kMaxRegions> fill{};
   const float* px = cloud.points.x();
   const float* py = cloud.points.y();
   const float* pz = cloud.points.z();
   std::array<double, pipeline::kMaxRegions> inv_step;
   for (std::size_t r = 0; r < inv_step.size(); ++r) inv_step[r] = 1.0 / step[r];
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
+  for (std::size_t i = 0; i < cloud.size();) {  // run by run of one region, as quantize()
     const uint8_t r = cloud.region[i];
+    std::size_t end = i + 1;
+    while (end < cloud.size() && cloud.region[end] == r) ++end;
+    const std::array<int64_t, 3>& qmin = frame.qmin[r];
+    uint64_t* out = keys.data() + frame.start[r] + fill[r];
+    const Eigen::Vector3d& o = cloud.points.origin_m;
     const double inv = inv_step[r];
-    const double w[3] = {(o.x() + double{px[i]}) * inv, (o.y() + double{py[i]}) * inv, (o.z() + double{pz[i]}) * inv};
-    int64_t q[3];
-    for (int a = 0; a < 3; ++a) {
-      if (!(std::fabs(w[a]) < kMaxLatticeCoord)) {  // also NaN
-        if (!std::isfinite(w[a])) {
-          return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
-        }
-        return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^50 steps of " +
-                                               std::to_string(step[r]) + " m from the world origin"};
-      }
-      q[a] = static_cast<int64_t>(w[a] >= 0.0 ? w[a] + 0.5 : w[a] - 0.5);  // round half away from zero
-      qmin[r][static_cast<std::size_t>(a)] = std::min(qmin[r][static_cast<std::size_t>(a)], q[a]);
-      qmax[r][static_cast<std::size_t>(a)] = std::max(qmax[r][static_cast<std::size_t>(a)], q[a]);
+    for (std::size_t k = i; k < end; ++k) {  // latticeCoords() without its checks
+      const int64_t qx = roundHalfAway(latticeUnits(o.x(), px[k], inv));
+      const int64_t qy = roundHalfAway(latticeUnits(o.y(), py[k], inv));
+      const int64_t qz = roundHalfAway(latticeUnits(o.z(), pz[k], inv));
+      out[k - i] = morton(static_cast<uint64_t>(qx - qmin[0]), static_cast<uint64_t>(qy - qmin[1]),
+                          static_cast<uint64_t>(qz - qmin[2]));
     }
-    const uint32_t slot = frame.start[r] + fill[r]++;
-    qx[slot] = q[0], qy[slot] = q[1], qz[slot] = q[2];
-    order[slot] = static_cast<uint32_t>(i);
+    fill[r] += static_cast<uint32_t>(end - i);
+    i = end;
   }
-  return Status::ok();
 }
 
 // Region r's points in Morton order, cut greedily into chunks.
@@ -486,7 +551,7 @@ Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, i
                                            " steps of " + std::to_string(step[ru]) + " m, more than " +
                                            std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
   }
-  const std::pair<const uint64_t*, const uint32_t*> sorted = sortByMorton(begin, end, qmin, span);
+  const std::pair<const uint64_t*, const uint32_t*> sorted = sortByMorton(begin, end, span);
   const uint32_t* rgb = cloud.points.rgb();
   for (std::size_t k = 0; k < end - begin; ++k) colours[begin + k] = rgb[sorted.second[k]];
   const RegionCut cut{r,
@@ -511,13 +576,12 @@ Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, i
   return Status::ok();
 }
 
-// Morton keys of order[begin, end) relative to the region's lattice origin,
-// radix-sorted (stable); the keys and input indices in sorted order (in
-// keys/order or in keys_tmp/order_tmp, as the passes end).
+// The Morton keys of order[begin, end) (mortonKeys()), radix-sorted (stable);
+// the keys and input indices in sorted order (in keys/order or in
+// keys_tmp/order_tmp, as the passes end).
 std::pair<const uint64_t*, const uint32_t*> ChunkEncoder::State::sortByMorton(std::size_t begin, std::size_t end,
-                                                                             const std::array<int64_t, 3>& qmin,
                                                                              int64_t span) {
-  // Keys and every pass's histogram in one sweep; then one scatter per pass.
+  // Every pass's histogram in one sweep; then one scatter per pass.
   const int key_bits = 3 * std::bit_width(static_cast<uint64_t>(span));
   const int passes = (key_bits + kRadixBits - 1) / kRadixBits;
   constexpr std::size_t kBins = std::size_t{1} << kRadixBits;
@@ -530,8 +594,7 @@ std::pair<const uint64_t*, const uint32_t*> ChunkEncoder::State::sortByMorton(st
   const int place_bits = std::bit_width(m - 1);
   const bool packed = key_bits + place_bits <= 64;
   for (std::size_t k = begin; k < end; ++k) {
-    const uint64_t key = morton(static_cast<uint64_t>(qx[k] - qmin[0]), static_cast<uint64_t>(qy[k] - qmin[1]),
-                                static_cast<uint64_t>(qz[k] - qmin[2]));
+    const uint64_t key = keys[k];
     keys[k] = packed ? (key << place_bits) | (k - begin) : key;
     for (int p = 0; p < passes; ++p) ++histogram[static_cast<std::size_t>(p) * kBins + ((key >> (p * kRadixBits)) & kMask)];
   }

@@ -71,7 +71,7 @@ std::size_t maxChunks(const CodecConfig& config, std::size_t points);
 
 class ChunkEncoder {
  public:
-  // The per-point arrays encode() quantizes and sorts in (52 bytes a point),
+  // The per-point arrays encode() sorts in (28 bytes a point),
   // used only while it runs: encoders that never encode at the same time (the
   // streamer's frame and brick encoders, both on its send thread) can share one.
   struct PointScratch;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <random>
 #include <span>
@@ -367,6 +368,33 @@ TEST(CodecRange, RegionWiderThanTheLatticeIsAnErrorNotAWrap) {
   EXPECT_EQ(enc.chunkCount(), 0u);
   // 2000 m fits (2e6 steps), and round-trips.
   cloud.points.x()[1] = 2000.f;
+  ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+  expectRoundTrip(cloud, decodeAll(enc, 10), enc, true);
+}
+
+// The bounds come from each region's extremes; a point out of range is named
+// as the first in the cloud, whichever region it is in.
+TEST(CodecRange, TheFirstPointOutOfRangeIsNamed) {
+  pipeline::FoveatedCloud cloud(10);
+  for (int i = 0; i < 10; ++i) {
+    ASSERT_TRUE(cloud.points.push(0.1f * static_cast<float>(i), 0.f, 1.f, 0));
+    cloud.region[static_cast<std::size_t>(i)] = static_cast<uint8_t>(i % 2);
+  }
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 10);
+  const double voxel[] = {0.0, 0.02};
+  cloud.points.z()[6] = std::nanf("");
+  cloud.points.y()[4] = std::numeric_limits<float>::infinity();
+  Status st = enc.encode(cloud, voxel, 1, 0);
+  EXPECT_EQ(st.code(), ErrorCode::kInvalidInput);
+  EXPECT_NE(st.message().find("point 4 is not finite"), std::string::npos) << st.message();
+  cloud.points.y()[4] = 1e15f;  // 1e18 steps of 1 mm
+  st = enc.encode(cloud, voxel, 1, 0);
+  EXPECT_EQ(st.code(), ErrorCode::kRangeExceeded);
+  EXPECT_NE(st.message().find("point 4 is beyond"), std::string::npos) << st.message();
+  cloud.points.y()[4] = 0.f;
+  st = enc.encode(cloud, voxel, 1, 0);
+  EXPECT_NE(st.message().find("point 6 is not finite"), std::string::npos) << st.message();
+  cloud.points.z()[6] = 1.f;
   ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
   expectRoundTrip(cloud, decodeAll(enc, 10), enc, true);
 }
