@@ -34,10 +34,7 @@ Foveator::Foveator(const PipelineCapacity& capacity, const FoveationConfig& conf
       bounds_(ConeBounds::fromModel(model)),
       levels_(LevelBounds::fromModel(model)),
       region_(capacity.max_points),
-      t_scratch_(capacity.max_points),
-      representative_(capacity.max_points),
-      refine_state_(capacity.max_points),
-      voxel_beyond_(capacity.max_points),
+      point_scratch_(new std::byte[capacity.max_points * sizeof(double)]),
       sampler_(capacity.kernels == KernelSet::kRef ? VoxelSampler(capacity.max_points, capacity.max_voxels)
                                                    : VoxelSampler()),
       hash_sampler_(capacity.kernels == KernelSet::kSimd ? HashVoxelSampler(capacity.max_points, capacity.max_voxels)
@@ -70,7 +67,7 @@ Foveator::KernelTable Foveator::chooseKernels(KernelSet set, bool pooled) {
           return f.sampler_.sample(in, f.region_.data(), f.model_.regionCount(), voxel_size_m, out, counts, rep);
         },
         [](Foveator& f, const PointCloud& in, const Gaze& gaze, const PointCloud& out, const uint32_t* rep) {
-          return refineTestRef(in, gaze, f.levels_, out, rep, f.region_.data(), f.refine_state_.data());
+          return refineTestRef(in, gaze, f.levels_, out, rep, f.region_.data(), f.refineState());
         },
         {"partitionRef", "assignLevelsRef", "computeFixation", "VoxelSampler", "refineTestRef"}};
   }
@@ -106,7 +103,7 @@ Foveator::KernelTable Foveator::chooseKernels(KernelSet set, bool pooled) {
       computeFixationSimd,
       hash_sample,
       [](Foveator& f, const PointCloud& in, const Gaze& gaze, const PointCloud& out, const uint32_t* rep) {
-        return refineTestSimd(in, gaze, f.levels_, out, rep, f.region_.data(), f.refine_state_.data());
+        return refineTestSimd(in, gaze, f.levels_, out, rep, f.region_.data(), f.refineState());
       },
       {"partitionSimd", "assignLevelsSimd", "computeFixationSimd", "HashVoxelSampler", "refineTestSimd"}};
 }
@@ -169,7 +166,7 @@ std::size_t Foveator::refineTestParallel(const PointCloud& in, const Gaze& gaze,
                                          const uint32_t* representative) {
   const kernels::LevelParams params = kernels::prepareLevels(in, gaze, levels_);
   const kernels::RefineInputs inputs = kernels::prepareRefine(in, out, representative);
-  RefineJob job{&in, &params, &inputs, region_.data(), refine_state_.data(), part_histograms_.data()};
+  RefineJob job{&in, &params, &inputs, region_.data(), refineState(), part_histograms_.data()};
   pool_->run(refinePart, &job);
   std::size_t beyond = 0;
   for (int part = 0; part < pool_->parts(); ++part) beyond += part_histograms_[256 * static_cast<std::size_t>(part)];
@@ -249,7 +246,7 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   if (model_.levels()) {
     stats.fixation.source = FixationSource::kNone;
   } else {
-    stats.fixation = table_.fixation(in, region_.data(), unit_gaze.value(), config_.fixation, t_scratch_.data());
+    stats.fixation = table_.fixation(in, region_.data(), unit_gaze.value(), config_.fixation, fixationScratch());
   }
   std::array<double, kMaxRegions> voxel_size_m{};
   for (int r = 1; r < model_.regionCount(); ++r) voxel_size_m[r] = model_.voxelSizeM(r, stats.fixation.d0_m);
@@ -257,15 +254,15 @@ Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& 
   SampleCounts sample_counts;
   // ACUITY's refinement needs every point's representative, asked for or not.
   const bool refine = model_.levels() && model_.refinePasses() > 0;
-  uint32_t* rep = representative != nullptr || !refine ? representative : representative_.data();
+  uint32_t* rep = representative != nullptr || !refine ? representative : representativeScratch();
   Status sampled = sampleWithinCapacity(in, voxel_size_m, out, sample_counts, rep, stats);
   // Move the points the eye would see displaced one level down and sample again,
   // until none moves or the passes are spent.
   for (int pass = 0; refine && sampled && pass < model_.refinePasses(); ++pass) {
     const std::size_t beyond = table_.refine_test(*this, in, unit_gaze.value(), out.points, rep);
     if (beyond == 0) break;
-    const std::size_t moved = moveRefinedVoxels(refine_state_.data(), rep, in.size(), out.size(),
-                                                voxel_beyond_.data(), region_.data(), partition_counts);
+    const std::size_t moved = moveRefinedVoxels(refineState(), rep, in.size(), out.size(), voxelBeyond(),
+                                                region_.data(), partition_counts);
     stats.refined += static_cast<uint32_t>(moved);
     ++stats.refine_passes;
     sampled = sampleWithinCapacity(in, voxel_size_m, out, sample_counts, rep, stats);

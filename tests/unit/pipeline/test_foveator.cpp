@@ -1,4 +1,5 @@
 // The whole foveation of a cloud against the brute-force reference.
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -343,6 +344,41 @@ TEST(FoveatorKernels, MovedFoveatorKeepsItsTable) {
         ASSERT_EQ(a.weight[o], b.weight[o]) << o;
       }
       EXPECT_EQ(sa.refined, sb.refined);
+    }
+  }
+}
+
+// The cones' fixation and ACUITY's refinement share one per-point scratch: a
+// foveator switched between them frame by frame gives each frame what a fresh
+// foveator of that configuration gives (nothing read from the other's use).
+TEST(FoveatorKernels, FixationAndRefinementShareTheirScratchWithoutLeaks) {
+  PointCloud in = test::randomCloud(5000, Eigen::Vector3d(0.2, -0.1, 0.5), 3.0f, 11);
+  FoveationConfig acuity = configFor(Preset::kAcuity);
+  acuity.acuity.level_margin = 0.15;
+  acuity.acuity.refine_passes = kMaxRefinePasses;
+  const FoveationConfig cones = configFor(Preset::kF1);
+  for (KernelSet set : {KernelSet::kRef, KernelSet::kSimd}) {
+    SCOPED_TRACE(std::string(kernelSetName(set)));
+    Foveator switched = Foveator::create({5000, 5000, set, 1}, cones).value();
+    for (const FoveationConfig* config : std::array<const FoveationConfig*, 4>{&cones, &acuity, &cones, &acuity}) {
+      ASSERT_TRUE(switched.setConfig(*config).isOk());
+      Foveator fresh = Foveator::create({5000, 5000, set, 1}, *config).value();
+      FoveatedCloud a(5000), b(5000);
+      FoveationStats sa, sb;
+      ASSERT_TRUE(switched.foveate(in, Gaze{}, a, sa).isOk());
+      ASSERT_TRUE(fresh.foveate(in, Gaze{}, b, sb).isOk());
+      ASSERT_EQ(a.size(), b.size());
+      for (std::size_t o = 0; o < a.size(); ++o) {
+        ASSERT_EQ(a.points.x()[o], b.points.x()[o]) << o;
+        ASSERT_EQ(a.points.z()[o], b.points.z()[o]) << o;
+        ASSERT_EQ(a.region[o], b.region[o]) << o;
+        ASSERT_EQ(a.weight[o], b.weight[o]) << o;
+      }
+      EXPECT_EQ(sa.fixation.d0_m, sb.fixation.d0_m);
+      EXPECT_EQ(sa.refined, sb.refined);
+      if (config == &acuity) {
+        EXPECT_GT(sa.refined, 0u);  // the refinement's arrays were used
+      }
     }
   }
 }
