@@ -165,7 +165,7 @@ void copyFoveated(const pipeline::FoveatedCloud& from, pipeline::FoveatedCloud& 
   std::copy_n(from.points.z(), n, to.points.z());
   std::copy_n(from.points.rgb(), n, to.points.rgb());
   std::copy_n(from.region.begin(), n, to.region.begin());
-  std::copy_n(from.weight.begin(), n, to.weight.begin());
+  if (to.hasWeights() && from.hasWeights()) std::copy_n(from.weight.begin(), n, to.weight.begin());
 }
 
 // SIGINT/SIGTERM end the run loop cleanly (the link says Bye on the way out).

@@ -92,10 +92,13 @@ void Service::allocateFrameSlots(const hal::CameraIntrinsics& k, std::size_t dep
 void Service::allocateFoveatedSlots(std::size_t points, std::size_t depth) {
   const std::size_t before = heapInUse();
   {
+    // Without weights: the send stage and the recorder never read them.
+    constexpr auto kNoWeights = pipeline::FoveatedCloud::Weights::kNone;
     FoveatedFrame prototype;
-    prototype.cloud = pipeline::FoveatedCloud(points);
+    prototype.cloud = pipeline::FoveatedCloud(points, kNoWeights);
     if (map_bricks_) {
-      prototype.bricks = pipeline::map::BrickBatch(config_.map.max_frame_brick_points, config_.map.max_frame_bricks);
+      prototype.bricks =
+          pipeline::map::BrickBatch(config_.map.max_frame_brick_points, config_.map.max_frame_bricks, kNoWeights);
     }
     foveated_ = std::make_unique<fovea::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
   }

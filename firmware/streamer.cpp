@@ -52,7 +52,7 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
     Result<net::BrickSender> sender = net::BrickSender::create(config.brick_sender);
     if (!sender) return sender.status();
     streamer->brick_sender_.emplace(std::move(sender.value()));
-    streamer->brick_cloud_ = pipeline::FoveatedCloud(config.max_brick_points);
+    streamer->brick_cloud_ = pipeline::FoveatedCloud(config.max_brick_points, pipeline::FoveatedCloud::Weights::kNone);
     streamer->slot_key_.resize(config.brick_sender.max_bricks);
     streamer->slot_index_ = GridTable(config.brick_sender.max_bricks);
   }

@@ -238,7 +238,8 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
 
   const uint32_t n = c.points;
   pipeline::PointCloud& pts = out.points;
-  if (pts.capacity() - pts.size() < n || out.region.size() < pts.size() + n || out.weight.size() < pts.size() + n) {
+  if (pts.capacity() - pts.size() < n || out.region.size() < pts.size() + n ||
+      (out.hasWeights() && out.weight.size() < pts.size() + n)) {
     return Result<DecodedChunk>(ErrorCode::kCapacityExceeded, "chunk: output cloud is full");
   }
   const std::size_t first = pts.size();
@@ -248,7 +249,7 @@ Result<DecodedChunk> decodeChunk(std::span<const uint8_t> payload, pipeline::Fov
   if (first == 0) pts.origin_m = base;
   for (uint32_t k = 0; k < n; ++k) {
     out.region[first + k] = c.info.region;
-    out.weight[first + k] = 1;
+    if (out.hasWeights()) out.weight[first + k] = 1;
   }
   (void)pts.resize(first + n);
   c.info.points = n;

@@ -115,7 +115,7 @@ class Foveator {
                          double* t_scratch) = nullptr;
     Status (*sample)(Foveator&, const PointCloud& in, const std::array<double, kMaxRegions>& voxel_size_m,
                      FoveatedCloud& out, SampleCounts& counts, uint32_t* representative) = nullptr;
-    // Returns the points beyond their MAR (refine_state_ gets every point's state).
+    // Returns the points beyond their MAR (refineState() gets every point's state).
     std::size_t (*refine_test)(Foveator&, const PointCloud& in, const Gaze& gaze, const PointCloud& out,
                                const uint32_t* representative) = nullptr;
     StageKernels names;

@@ -78,13 +78,18 @@ class PointCloud {
 namespace fovea::pipeline {
 
 // The output of foveation: points plus, per point, its region and how many input
-// points it stands for (1 in the fovea, the voxel's population elsewhere).
+// points it stands for (1 in the fovea, the voxel's population elsewhere). A
+// cloud made without weights has none (the service's slots: nothing on the robot
+// reads them, 4 bytes a point); every sampler and copy skips them then.
 struct FoveatedCloud {
+  enum class Weights { kKept, kNone };
   FoveatedCloud() = default;
-  explicit FoveatedCloud(std::size_t capacity) : points(capacity), region(capacity), weight(capacity) {}
+  explicit FoveatedCloud(std::size_t capacity, Weights weights = Weights::kKept)
+      : points(capacity), region(capacity), weight(weights == Weights::kKept ? capacity : 0) {}
 
   std::size_t size() const { return points.size(); }
   void clear() { points.clear(); }
+  bool hasWeights() const { return !weight.empty(); }
 
   PointCloud points;
   std::vector<uint8_t> region;

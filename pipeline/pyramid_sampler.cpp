@@ -396,7 +396,7 @@ struct PyramidSampler::Walk {
     pc.z()[n] = (r[6] * cxm + r[7] * cym) + r[8] * czm;
     pc.rgb()[n] = rgb;
     out->region[n] = level;
-    out->weight[n] = weight;
+    if (out->hasWeights()) out->weight[n] = weight;
     ++n;
     ++stats->out_by_level[level];
   }
@@ -450,7 +450,7 @@ Status PyramidSampler::sample(const hal::RgbdFrame& frame, const DepthRange& ran
                                               std::to_string(frame.height()) + " is larger than the sampler's " +
                                               std::to_string(max_width_) + "x" + std::to_string(max_height_)};
   }
-  if (out.region.size() < out.points.capacity() || out.weight.size() < out.points.capacity()) {
+  if (out.region.size() < out.points.capacity() || (out.hasWeights() && out.weight.size() < out.points.capacity())) {
     return {ErrorCode::kInvalidArgument, "pyramid: the output's region and weight arrays are shorter than its points"};
   }
   if (!gaze.origin_m.allFinite() || !gaze.direction.allFinite() || !std::isfinite(gaze.fovea_growth_deg)) {

@@ -66,7 +66,7 @@ inline std::size_t copyFovea(const PointCloud& in, const uint8_t* region, Foveat
     out.points.z()[o] = in.z()[i];
     out.points.rgb()[o] = in.rgb()[i];
     out.region[o] = 0;
-    out.weight[o] = 1;
+    if (out.hasWeights()) out.weight[o] = 1;
     ++o;
   }
   return o;
@@ -107,7 +107,7 @@ inline void reduceVoxel(const PointCloud& in, const uint32_t* members, std::size
   out.points.rgb()[o] = packRgb(static_cast<uint8_t>((sr + n / 2) / n), static_cast<uint8_t>((sg + n / 2) / n),
                                 static_cast<uint8_t>((sb + n / 2) / n));
   out.region[o] = region;
-  out.weight[o] = static_cast<uint32_t>(n);
+  if (out.hasWeights()) out.weight[o] = static_cast<uint32_t>(n);
 }
 
 class VoxelSampler {

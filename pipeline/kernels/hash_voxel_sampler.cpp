@@ -41,7 +41,7 @@ void copyFoveaFast(const PointCloud& in, const uint8_t* region, FoveatedCloud& o
   float* oz = out.points.z();
   uint32_t* orgb = out.points.rgb();
   uint8_t* oregion = out.region.data();
-  uint32_t* oweight = out.weight.data();
+  uint32_t* oweight = out.hasWeights() ? out.weight.data() : nullptr;
   std::size_t o = 0;
   std::size_t i = 0;
   constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
@@ -62,7 +62,7 @@ void copyFoveaFast(const PointCloud& in, const uint8_t* region, FoveatedCloud& o
       oz[o] = z[i];
       orgb[o] = rgb[i];
       oregion[o] = 0;
-      oweight[o] = 1;
+      if (oweight != nullptr) oweight[o] = 1;
       ++o;
     }
   }
@@ -508,6 +508,7 @@ void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, s
   const auto slotAt = [&](std::size_t q) {
     return order.packed ? static_cast<uint32_t>(keys[q] & order.slot_mask) : slots[q];
   };
+  uint32_t* weights = out.hasWeights() ? out.weight.data() : nullptr;
   for (std::size_t q = 0; q < voxels; ++q) {
     const std::size_t o = fovea + q;
     const uint32_t slot = slotAt(q);
@@ -528,7 +529,7 @@ void HashVoxelSampler::writeVoxels(const VoxelOrder& order, std::size_t fovea, s
         packRgb(roundedMeanColour(a.sr, cnt, inv_n), roundedMeanColour(a.sg, cnt, inv_n),
                 roundedMeanColour(a.sb, cnt, inv_n));
     out.region[o] = r;
-    out.weight[o] = a.n;
+    if (weights != nullptr) weights[o] = a.n;
     ++counts.out[r];
   }
 }

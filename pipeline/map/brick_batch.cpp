@@ -15,7 +15,13 @@ bool BrickBatch::copyEntry(const BrickBatchEntry& e, FoveatedCloud& out) const {
   std::copy_n(from.z() + e.first, e.count, p.z());
   std::copy_n(from.rgb() + e.first, e.count, p.rgb());
   std::fill_n(out.region.begin(), e.count, e.level);
-  std::copy_n(points.weight.begin() + e.first, e.count, out.weight.begin());
+  if (out.hasWeights()) {  // 0: the batch kept no counts
+    if (points.hasWeights()) {
+      std::copy_n(points.weight.begin() + e.first, e.count, out.weight.begin());
+    } else {
+      std::fill_n(out.weight.begin(), e.count, 0u);
+    }
+  }
   return true;
 }
 
@@ -73,7 +79,7 @@ bool BrickSampler::append(const SurfelMap& map, uint16_t brick, uint8_t level, u
   for (std::size_t i = 0; i < sampled_.size(); ++i) {
     (void)out.push(in.x()[i] + shift.x(), in.y()[i] + shift.y(), in.z()[i] + shift.z(), in.rgb()[i]);
     batch.points.region[first + i] = level;
-    batch.points.weight[first + i] = sampled_.weight[i];
+    if (batch.points.hasWeights()) batch.points.weight[first + i] = sampled_.weight[i];
   }
   BrickBatchEntry& e = batch.add();
   e.brick = brick;

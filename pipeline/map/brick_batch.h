@@ -38,7 +38,9 @@ struct BrickBatchEntry {
 class BrickBatch {
  public:
   BrickBatch() = default;
-  BrickBatch(std::size_t max_points, std::size_t max_bricks) : points(max_points), entries_(max_bricks) {}
+  BrickBatch(std::size_t max_points, std::size_t max_bricks,
+             FoveatedCloud::Weights weights = FoveatedCloud::Weights::kKept)
+      : points(max_points, weights), entries_(max_bricks) {}
 
   // Empties the batch; its points are then written relative to origin_m.
   void clear(const Eigen::Vector3d& origin_m) {

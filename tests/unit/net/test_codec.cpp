@@ -224,6 +224,27 @@ TEST_P(CodecMtu, EveryChunkFitsItsDatagramAndDecodesAlone) {
 
 INSTANTIATE_TEST_SUITE_P(Mtus, CodecMtu, ::testing::Values(kMinMtu, kDefaultMtu, kMaxMtu));
 
+// The decoder fills a cloud made without weights (the operator's own choice)
+// with the same points.
+TEST(CodecFrames, ACloudWithoutWeightsDecodesTheSamePoints) {
+  pipeline::FoveatedCloud cloud(3000);
+  cloud.points = test::randomCloud(3000, Eigen::Vector3d(1.0, 2.0, 0.5), 2.0f, 5);
+  for (std::size_t i = 0; i < 3000; ++i) cloud.region[i] = static_cast<uint8_t>(i % 3);
+  ChunkEncoder enc = makeEncoder(CodecConfig{}, 3000);
+  const double voxel[] = {0.0, 0.01, 0.05};
+  ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+  const pipeline::FoveatedCloud with = decodeAll(enc, 3000);
+  pipeline::FoveatedCloud without(3000, pipeline::FoveatedCloud::Weights::kNone);
+  for (std::size_t i = 0; i < enc.chunkCount(); ++i) ASSERT_TRUE(decodeChunk(enc.chunk(i), without).isOk());
+  ASSERT_EQ(without.size(), with.size());
+  for (std::size_t o = 0; o < with.size(); ++o) {
+    ASSERT_EQ(without.points.x()[o], with.points.x()[o]) << o;
+    ASSERT_EQ(without.points.rgb()[o], with.points.rgb()[o]) << o;
+    ASSERT_EQ(without.region[o], with.region[o]) << o;
+  }
+  EXPECT_FALSE(without.hasWeights());
+}
+
 TEST(CodecLoss, DroppedChunksCostOnlyTheirOwnPoints) {
   const test::MockFoveatedFrame& f = livingRoom();
   ChunkEncoder enc = makeEncoder(CodecConfig{}, f.cloud.size());

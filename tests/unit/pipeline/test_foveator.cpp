@@ -383,5 +383,33 @@ TEST(FoveatorKernels, FixationAndRefinementShareTheirScratchWithoutLeaks) {
   }
 }
 
+// A cloud made without weights (the service's slots) gets the same points and
+// regions from every sampler, and no weights.
+TEST(FoveatorKernels, ACloudWithoutWeightsGetsTheSamePoints) {
+  PointCloud in = test::randomCloud(5000, Eigen::Vector3d(0.1, 0.0, 0.4), 3.0f, 12);
+  FoveationConfig acuity = configFor(Preset::kAcuity);
+  acuity.acuity.refine_passes = kMaxRefinePasses;
+  for (const FoveationConfig& config : {configFor(Preset::kF1), configFor(Preset::kF3), acuity}) {
+    for (KernelSet set : {KernelSet::kRef, KernelSet::kSimd}) {
+      SCOPED_TRACE(std::string(kernelSetName(set)) + " " + std::string(presetName(config.acuity.preset)));
+      Foveator foveator = Foveator::create({5000, 5000, set, 1}, config).value();
+      FoveatedCloud with(5000), without(5000, FoveatedCloud::Weights::kNone);
+      FoveationStats sa, sb;
+      ASSERT_TRUE(foveator.foveate(in, Gaze{}, with, sa).isOk());
+      ASSERT_TRUE(foveator.foveate(in, Gaze{}, without, sb).isOk());
+      EXPECT_TRUE(with.hasWeights());
+      EXPECT_FALSE(without.hasWeights());
+      ASSERT_EQ(with.size(), without.size());
+      ASSERT_GT(with.size(), 0u);
+      for (std::size_t o = 0; o < with.size(); ++o) {
+        ASSERT_EQ(with.points.x()[o], without.points.x()[o]) << o;
+        ASSERT_EQ(with.points.y()[o], without.points.y()[o]) << o;
+        ASSERT_EQ(with.points.rgb()[o], without.points.rgb()[o]) << o;
+        ASSERT_EQ(with.region[o], without.region[o]) << o;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fovea::pipeline

@@ -267,6 +267,27 @@ TEST(PyramidSampler, FramesOfChangingSizesShareOneSampler) {
   }
 }
 
+// A cloud made without weights (the service's slots) gets the same points.
+TEST(PyramidSampler, ACloudWithoutWeightsGetsTheSamePoints) {
+  std::mt19937 rng(31);
+  const hal::RgbdFrame f = randomFrame(rng, 97, 71);
+  PyramidSampler sampler = PyramidSampler::create(97, 71, 5).value();
+  const Gaze gaze = gazeAtPixel(f, 40, 30);
+  const Sampled with = sample(sampler, f, gaze, PyramidRule{});
+  FoveatedCloud without(f.pixelCount(), FoveatedCloud::Weights::kNone);
+  PyramidStats stats;
+  ASSERT_TRUE(sampler.sample(f, DepthRange{}, gaze, PyramidRule{}, without, stats).isOk());
+  ASSERT_FALSE(without.hasWeights());
+  ASSERT_EQ(without.size(), with.out.size());
+  ASSERT_GT(without.size(), 0u);
+  for (std::size_t o = 0; o < without.size(); ++o) {
+    ASSERT_EQ(without.points.x()[o], with.out.points.x()[o]) << o;
+    ASSERT_EQ(without.points.z()[o], with.out.points.z()[o]) << o;
+    ASSERT_EQ(without.points.rgb()[o], with.out.points.rgb()[o]) << o;
+    ASSERT_EQ(without.region[o], with.out.region[o]) << o;
+  }
+}
+
 TEST(PyramidSampler, TheFoveaKeepsEveryPixelAndThePeripheryMerges) {
   hal::RgbdFrame f = makeFrame(320, 240, 300.0);
   for (std::size_t p = 0; p < f.pixelCount(); ++p) f.depth()[p] = 3000;  // a wall 3 m away
