@@ -152,9 +152,11 @@ void Service::stop() {
               s.foveation_ring.dropped, s.reloads_applied);
     if (stage_->map() != nullptr) {
       log().log(LogLevel::kInfo,
-                "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; refused %" PRIu64
+                "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; %" PRIu64
+                " new surfels dropped (%" PRIu64 " for want of a brick); refused %" PRIu64
                 " frames without a pose, %" PRIu64 " for another reason",
-                s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.refused_no_pose, s.map.refused_other);
+                s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.dropped, s.map.dropped_no_brick,
+                s.map.refused_no_pose, s.map.refused_other);
       if (stage_->fusionThread()) {
         log().log(LogLevel::kInfo,
                   "map: fused on its own thread; %" PRIu64 " frames left unfused while it was busy (sent without what "
@@ -218,6 +220,8 @@ ServiceStats Service::stats() const {
   s.map.refused_no_pose = map_refused_no_pose_.load(std::memory_order_relaxed);
   s.map.refused_other = map_refused_other_.load(std::memory_order_relaxed);
   s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
+  s.map.dropped = map_dropped_.load(std::memory_order_relaxed);
+  s.map.dropped_no_brick = map_dropped_no_brick_.load(std::memory_order_relaxed);
   s.map.unfused = map_fusion_skipped_.load(std::memory_order_relaxed);
   s.map.fusion_busy = map_fusion_busy_.load(std::memory_order_relaxed);
   s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);

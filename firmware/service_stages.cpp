@@ -310,6 +310,14 @@ void Service::publishMapFigures() {
   map_refused_no_pose_.store(c.refused_no_pose, std::memory_order_relaxed);
   map_refused_other_.store(c.refused() - c.refused_no_pose, std::memory_order_relaxed);
   map_evicted_.store(c.evicted, std::memory_order_relaxed);
+  map_dropped_.store(c.dropped_full, std::memory_order_relaxed);
+  // The brick table fills once and stays full (bricks are not freed): say so
+  // once, since the map then no longer grows into new places.
+  if (c.dropped_no_brick > 0 && map_dropped_no_brick_.exchange(c.dropped_no_brick, std::memory_order_relaxed) == 0) {
+    log().log(LogLevel::kWarning,
+              "map: the brick table is full (map.max_bricks = %zu): surfaces outside its bricks are not mapped",
+              config_.map.map.max_bricks);
+  }
 }
 
 // ---- map (map.fusion_thread) ----

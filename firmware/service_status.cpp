@@ -154,15 +154,17 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
 }
 
 // The map: its size, this window's fusion time, and since start the surfels
-// evicted and the frames refused (no pose; anything else); with a time budget,
+// evicted, the new surfels dropped (pool or brick table full) and the frames refused (no pose; anything else); with a time budget,
 // the frames it left unfused; with a fusion thread, those it was busy for;
 // with bricks, their versions. Empty without a map.
 void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t size) const {
   if (stage_->map() == nullptr) return;
   int used = std::snprintf(
       out, size,
-      " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", refused %" PRIu64 " no pose %" PRIu64 " other",
+      " | map %" PRIu64 " surfels, fuse %s ms, evicted %" PRIu64 ", dropped %" PRIu64 ", refused %" PRIu64
+      " no pose %" PRIu64 " other",
       map_surfels_.load(std::memory_order_relaxed), fuse_latency, map_evicted_.load(std::memory_order_relaxed),
+      map_dropped_.load(std::memory_order_relaxed),
       map_refused_no_pose_.load(std::memory_order_relaxed), map_refused_other_.load(std::memory_order_relaxed));
   if (stage_->fusionThread()) appendUnfused(out, size, used, map_fusion_busy_.load(std::memory_order_relaxed), "busy");
   if (stage_->hasFusionBudget()) {

@@ -213,6 +213,7 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   counters_.removed_carved += stats.removed_carved;
   counters_.removed_unstable += stats.removed_unstable;
   counters_.dropped_full += stats.dropped_full;
+  counters_.dropped_no_brick += stats.dropped_no_brick;
   stats.fuse_ns = monotonicNs() - start_ns;
   return stats.outcome;
 }
@@ -319,11 +320,11 @@ void SurfelMap::makeRoom(std::size_t wanted, FuseStats& stats) {
   stats.evicted += static_cast<uint32_t>(target);
 }
 
-bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
-                          const uint8_t* rgb) {
-  if (free_count_ == 0 && high_water_ == surfels_.size()) return false;
+SurfelMap::Added SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius,
+                                      float weight, const uint8_t* rgb) {
+  if (free_count_ == 0 && high_water_ == surfels_.size()) return Added::kNoSurfel;
   const int brick = findOrAddBrick(p_world);
-  if (brick < 0) return false;
+  if (brick < 0) return Added::kNoBrick;
   const uint32_t slot = free_count_ > 0 ? popFree() : static_cast<uint32_t>(high_water_++);
   Surfel& s = surfels_[slot];
   const Eigen::Vector3d rel = p_world - brickOrigin(static_cast<uint16_t>(brick));
@@ -348,7 +349,7 @@ bool SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f&
     if (config_.settle_frames == 0) markSettled(s);
   }
   ++live_;
-  return true;
+  return Added::kYes;
 }
 
 // The pixel's normal is noisy: its two differences span 2 kNormalReach pixels,
@@ -498,10 +499,12 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
     const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
     const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
-    if (addSurfel(p_world, R_wc_f * normal, radius_[i], -weight_[i], rgb)) {
+    const Added added = addSurfel(p_world, R_wc_f * normal, radius_[i], -weight_[i], rgb);
+    if (added == Added::kYes) {
       ++stats.added;
     } else {
       ++stats.dropped_full;
+      if (added == Added::kNoBrick) ++stats.dropped_no_brick;
     }
   }
 }

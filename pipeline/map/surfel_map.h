@@ -122,6 +122,7 @@ struct FuseStats {
   uint32_t removed_unstable = 0; // unstable for longer than unstable_max_frames
   uint32_t evicted = 0;          // removed to make room in a full pool
   uint32_t dropped_full = 0;     // measurements not added: no surfel or brick left
+  uint32_t dropped_no_brick = 0; // ... of them for want of a brick (the table full, or beyond its keys)
   int64_t fuse_ns = 0;
   // fuse_ns by step (monotonic clock; the rest of fuse_ns is the frame's checks):
   int64_t vertices_ns = 0;   // 2. vertices, normals, radii, weights
@@ -143,7 +144,7 @@ struct SurfelMapCounters {
   uint64_t frames_fused = 0;
   uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0, refused_no_pose = 0;
   uint64_t refused() const { return refused_size + refused_bad_pose + refused_pose_jump + refused_clock + refused_no_pose; }
-  uint64_t added = 0, evicted = 0, removed_carved = 0, removed_unstable = 0, dropped_full = 0;
+  uint64_t added = 0, evicted = 0, removed_carved = 0, removed_unstable = 0, dropped_full = 0, dropped_no_brick = 0;
 };
 
 class SurfelMap {
@@ -249,8 +250,9 @@ class SurfelMap {
   void mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
                  const Eigen::Vector3f& n_surfel, float weight, const uint8_t* rgb);
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
-  bool addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
-                 const uint8_t* rgb);
+  enum class Added { kYes, kNoSurfel, kNoBrick };
+  Added addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
+                  const uint8_t* rgb);
   void removeSurfel(uint32_t slot);
   void pushFree(uint32_t slot);
   uint32_t popFree();  // free_count_ > 0

@@ -43,6 +43,13 @@ class RecordingSink final : public LogSink {
     }
     return false;
   }
+  // The lines that contain `text`.
+  std::size_t countOf(const std::string& text) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::size_t n = 0;
+    for (const std::string& line : lines_) n += line.find(text) != std::string::npos ? 1 : 0;
+    return n;
+  }
   // A line with a match of `pattern` (ECMAScript).
   bool matches(const std::string& pattern) const {
     const std::regex re(pattern);

@@ -193,6 +193,34 @@ TEST(Service, AFrameOverTheVoxelsIsFoveatedCoarserAndCounted) {
   EXPECT_EQ(end.frames_coarsened, end.frames_foveated) << "every frame of the static room needs it";
 }
 
+// A full brick table drops the new surfels outside its bricks: counted in the
+// status line and the stop line, and said once as a warning (the map no longer
+// grows into new places), never a crash.
+TEST(Service, AFullBrickTableIsCountedAndSaidOnce) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.map.source = FoveationSource::kMap;
+  config.map.map.max_surfels = 1u << 14;
+  config.map.map.max_bricks = 2;
+  config.map.map.brick_size_m = 0.1;  // the room's view spans hundreds
+  ASSERT_TRUE(validate(config).isOk()) << validate(config).toString();
+  config.runtime.status_interval_ms = 50;  // below what validate() allows, as the other tests here
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().map.frames_fused >= 3; }, 5000ms));
+  ASSERT_TRUE(waitUntil([&] { return sink.matches("evicted [0-9]+, dropped [1-9][0-9]*, refused"); }, 5000ms))
+      << "status line without the dropped surfels";
+  running.stop();
+  const ServiceStats end = running.service->stats();
+  EXPECT_GT(end.map.dropped_no_brick, 0u);
+  EXPECT_EQ(end.map.dropped_no_brick, end.map.dropped) << "the pool had room";
+  EXPECT_EQ(sink.countOf("map: the brick table is full (map.max_bricks = 2)"), 1u);
+  EXPECT_TRUE(sink.matches("new surfels dropped \\([1-9][0-9]* for want of a brick\\)"));
+}
+
 TEST(Service, RejectsABadConfigurationNamingTheField) {
   ServiceConfig config = test::smallServiceConfig();
   config.runtime.ring_depth = 0;

@@ -737,8 +737,10 @@ TEST(SurfelMap, AFullBrickTableDropsAndCountsWhatItCannotPlace) {
   ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
   EXPECT_EQ(map.brickCount(), 2u);
   EXPECT_GT(stats.dropped_full, 0u);
+  EXPECT_EQ(stats.dropped_no_brick, stats.dropped_full);  // the pool had room
   EXPECT_EQ(stats.added + stats.dropped_full, stats.pixels_valid);
   EXPECT_EQ(map.counters().dropped_full, stats.dropped_full);
+  EXPECT_EQ(map.counters().dropped_no_brick, stats.dropped_no_brick);
   expectConsistent(map);
 }
 
