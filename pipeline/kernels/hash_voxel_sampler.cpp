@@ -85,7 +85,7 @@ HashVoxelSampler::HashVoxelSampler(std::size_t max_points, std::size_t max_voxel
       voxel_table_pos_(max_voxels),
       acc_(new Acc[max_voxels]),
       rank_(max_voxels),
-      point_slot_(max_points),
+      max_points_(max_points),
       chunk_key_(kChunk),
       chunk_slot_(kChunk),
       part_state_(1),
@@ -99,7 +99,7 @@ void HashVoxelSampler::setWorkerPool(WorkerPool* pool) {
   const std::size_t parts = pool ? static_cast<std::size_t>(pool->parts()) : 1;
   part_state_.assign(parts, kernels::VoxelKeyState{});
   part_bad_.assign(parts, BadPoint{});
-  point_key_.assign(parts > 1 ? point_slot_.size() : 0, kEmpty);
+  point_key_.assign(parts > 1 ? max_points_ : 0, kEmpty);
 }
 
 void HashVoxelSampler::clearTable(std::size_t voxels) {
@@ -226,7 +226,7 @@ bool HashVoxelSampler::accumulateChunk(const PointCloud& in, std::size_t begin, 
     slot_of[i - begin] = slot;
   }
   // Pass 2: reduceVoxel()'s loop body, point by point in input order, into the slots.
-  uint32_t* point_slot = point_slot_.data();
+  uint32_t* point_slot = point_slot_;
   for (std::size_t i = begin; i < end; ++i) {
     const uint32_t slot = slot_of[i - begin];
     if constexpr (kRepresentative) point_slot[i] = slot;
@@ -271,9 +271,9 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   out.points.origin_m = in.origin_m;
   out.points.has_color = in.has_color;
   const std::size_t n = in.size();
-  if (n > point_slot_.size()) {
+  if (n > max_points_) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: cloud has " + std::to_string(n) + " points, capacity is " +
-                                              std::to_string(point_slot_.size()) + ": raise pipeline.max_points"};
+                                              std::to_string(max_points_) + ": raise pipeline.max_points"};
   }
   if (region_count < 1 || region_count > kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};
@@ -290,6 +290,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   //      reference), so a voxel overflow only stops the accumulation.
   const int parts = (pool_ != nullptr && pool_->parts() > 1 && n >= 4 * kChunk) ? pool_->parts() : 1;
   const bool with_representatives = representative != nullptr;
+  point_slot_ = representative;
   const KeyPass pass = parts > 1 ? keysThreaded(in, region, parts, with_representatives)
                                  : keysInChunks(in, region, region_count, with_representatives);
   const std::size_t voxels = voxels_;
@@ -316,19 +317,29 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   // 3. The occupied voxels in the reference's key order, after the fovea (untouched
   //    and in input order).
   const VoxelOrder order = sortVoxels(region_count, counts, lo_index, voxels);
-  copyFoveaFast(in, region, out, representative);
+  copyFoveaFast(in, region, out, nullptr);
   counts.out[0] = static_cast<uint32_t>(fovea);
   writeVoxels(order, fovea, voxels, out, counts);
   std::fill_n(sortKeys(), voxels, kEmpty);  // the table empty again for the next frame
   std::fill_n(sortKeysScratch(), voxels, kEmpty);
-  if (representative != nullptr) {
-    const uint32_t* point_slot = point_slot_.data();
-    for (std::size_t i = 0; i < n; ++i) {
-      if (point_slot[i] != kNoSlot) representative[i] = rank_[point_slot[i]];
-    }
-  }
+  if (representative != nullptr) slotsToRepresentatives(region, n, representative);
   (void)out.points.resize(fovea + voxels);
   return Status::ok();
+}
+
+// Each point's voxel slot (kNoSlot: none), as accumulate() left it in
+// `representative`, into its output index: the fovea's points their place in
+// input order at the front (copyFovea's), the others their voxel's.
+void HashVoxelSampler::slotsToRepresentatives(const uint8_t* region, std::size_t n, uint32_t* representative) const {
+  uint32_t fovea = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const uint32_t slot = representative[i];
+    if (region[i] == 0) {
+      representative[i] = fovea++;
+    } else {
+      representative[i] = slot != kNoSlot ? rank_[slot] : kNoRepresentative;
+    }
+  }
 }
 
 // Sizes the table for this frame and resets the cache, the counters and the key states.
@@ -415,7 +426,7 @@ HashVoxelSampler::KeyPass HashVoxelSampler::keysInChunks(const PointCloud& in, c
       break;
     }
     if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
-      if (with_representatives) std::fill(point_slot_.begin() + c0, point_slot_.begin() + c1, kNoSlot);
+      if (with_representatives) std::fill(point_slot_ + c0, point_slot_ + c1, kNoSlot);
       continue;
     }
     if (pass.fits) {

@@ -71,7 +71,8 @@ class HashVoxelSampler {
   HashVoxelSampler() = default;
   HashVoxelSampler(std::size_t max_points, std::size_t max_voxels);
 
-  // Same contract as VoxelSampler::sample.
+  // Same contract as VoxelSampler::sample, but for one thing: after an error,
+  // representative's contents are unspecified (the sampler works in it).
   Status sample(const PointCloud& in, const uint8_t* region, int region_count,
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out, SampleCounts& counts,
                 uint32_t* representative = nullptr);
@@ -80,7 +81,7 @@ class HashVoxelSampler {
   // the same. The pool must outlive the sampler's use of it; null: one thread.
   void setWorkerPool(WorkerPool* pool);
 
-  std::size_t maxPoints() const { return point_slot_.size(); }
+  std::size_t maxPoints() const { return max_points_; }
   std::size_t maxVoxels() const { return max_voxels_; }
   std::size_t tableSize() const { return table_key_.size(); }
   // Points of the last sample() whose voxel was not in the recent-voxel cache: each
@@ -130,6 +131,7 @@ class HashVoxelSampler {
   VoxelOrder sortVoxels(int region_count, const SampleCounts& counts, const RegionLo& lo_index, std::size_t voxels);
   void writeVoxels(const VoxelOrder& order, std::size_t fovea, std::size_t voxels, FoveatedCloud& out,
                    SampleCounts& counts);
+  void slotsToRepresentatives(const uint8_t* region, std::size_t n, uint32_t* representative) const;
   // Keys of points [begin, end) into keys[0, end - begin), with the scalar code for
   // the points the SIMD kernel leaves. False at the first bad point (in `bad`).
   bool computeKeys(const PointCloud& in, const uint8_t* region, std::size_t begin, std::size_t end,
@@ -174,7 +176,11 @@ class HashVoxelSampler {
   std::unique_ptr<Acc[]> acc_;
   std::vector<uint32_t> rank_;             // place in the output order
   // Per point (max_points).
-  std::vector<uint32_t> point_slot_;  // voxel slot, or kNoSlot (only with representatives)
+  std::size_t max_points_ = 0;
+  // With representatives, each point's voxel slot (kNoSlot: none) goes into the
+  // caller's representative array, which sample() then turns into output
+  // indices in place: no array of the sampler's own.
+  uint32_t* point_slot_ = nullptr;
   std::vector<uint64_t> point_key_;   // keys of the whole cloud (threaded key pass only)
   std::vector<uint64_t> chunk_key_;   // kChunk keys (single-threaded)
   std::vector<uint32_t> chunk_slot_;  // kChunk voxel slots (accumulateChunk's first pass)
