@@ -24,13 +24,10 @@ constexpr std::size_t kPrefetchAhead = 32;
 
 const char* axisName(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
 
-// copyFovea() with its pointers in locals, skipping 8 points at a time where none is
-// in the fovea (the usual case outside it). Same output, same representatives.
-void copyFoveaFast(const PointCloud& in, const uint8_t* region, FoveatedCloud& out, uint32_t* representative) {
-  if (representative != nullptr) {
-    copyFovea(in, region, out, representative);
-    return;
-  }
+// copyFovea() without representatives (slotsToRepresentatives() gives the
+// fovea's), its pointers in locals, skipping 8 points at a time where none is in
+// the fovea (the usual case outside it). Same output.
+void copyFoveaFast(const PointCloud& in, const uint8_t* region, FoveatedCloud& out) {
   const std::size_t n = in.size();
   const float* x = in.x();
   const float* y = in.y();
@@ -317,7 +314,7 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   // 3. The occupied voxels in the reference's key order, after the fovea (untouched
   //    and in input order).
   const VoxelOrder order = sortVoxels(region_count, counts, lo_index, voxels);
-  copyFoveaFast(in, region, out, nullptr);
+  copyFoveaFast(in, region, out);
   counts.out[0] = static_cast<uint32_t>(fovea);
   writeVoxels(order, fovea, voxels, out, counts);
   std::fill_n(sortKeys(), voxels, kEmpty);  // the table empty again for the next frame
