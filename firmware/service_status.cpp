@@ -154,9 +154,10 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
 }
 
 // The map: its size, this window's fusion time, and since start the surfels
-// evicted, the new surfels dropped (pool or brick table full) and the frames refused (no pose; anything else); with a time budget,
-// the frames it left unfused; with a fusion thread, those it was busy for;
-// with bricks, their versions. Empty without a map.
+// evicted, the new surfels dropped (pool or brick table full) and the frames
+// refused (no pose; anything else); with a time budget, the frames it left
+// unfused; with a fusion thread, those it was busy for; with bricks, their
+// versions. Empty without a map.
 void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t size) const {
   if (stage_->map() == nullptr) return;
   int used = std::snprintf(

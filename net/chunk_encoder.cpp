@@ -497,7 +497,9 @@ Status ChunkEncoder::State::firstPointOutOfRange(const pipeline::FoveatedCloud& 
     const uint8_t r = cloud.region[i];
     int64_t q[3];
     const Lattice l = latticeCoords(cloud.points, i, 1.0 / step[r], q);
-    if (l == Lattice::kNotFinite) return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
+    if (l == Lattice::kNotFinite) {
+      return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
+    }
     if (l == Lattice::kBeyond) {
       return {ErrorCode::kRangeExceeded, "codec: point " + std::to_string(i) + " is beyond 2^50 steps of " +
                                              std::to_string(step[r]) + " m from the world origin"};
