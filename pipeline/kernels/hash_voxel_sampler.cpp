@@ -173,17 +173,18 @@ uint32_t HashVoxelSampler::findSlotInTable(uint64_t key, uint64_t hash, std::siz
 }
 
 template <bool kRepresentative>
-bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys) {
+bool HashVoxelSampler::accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys,
+                                  uint32_t* point_slot) {
   for (std::size_t c0 = begin; c0 < end; c0 += kChunk) {
     const std::size_t c1 = std::min(end, c0 + kChunk);
-    if (!accumulateChunk<kRepresentative>(in, c0, c1, keys + (c0 - begin))) return false;
+    if (!accumulateChunk<kRepresentative>(in, c0, c1, keys + (c0 - begin), point_slot)) return false;
   }
   return true;
 }
 
 template <bool kRepresentative>
 bool HashVoxelSampler::accumulateChunk(const PointCloud& in, std::size_t begin, std::size_t end,
-                                       const uint64_t* keys) {
+                                       const uint64_t* keys, uint32_t* point_slot) {
   const float* px_in = in.x();
   const float* py_in = in.y();
   const float* pz_in = in.z();
@@ -223,7 +224,6 @@ bool HashVoxelSampler::accumulateChunk(const PointCloud& in, std::size_t begin, 
     slot_of[i - begin] = slot;
   }
   // Pass 2: reduceVoxel()'s loop body, point by point in input order, into the slots.
-  uint32_t* point_slot = point_slot_;
   for (std::size_t i = begin; i < end; ++i) {
     const uint32_t slot = slot_of[i - begin];
     if constexpr (kRepresentative) point_slot[i] = slot;
@@ -286,10 +286,8 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   //      order wins over everything, then spans, then the voxel count (as the
   //      reference), so a voxel overflow only stops the accumulation.
   const int parts = (pool_ != nullptr && pool_->parts() > 1 && n >= 4 * kChunk) ? pool_->parts() : 1;
-  const bool with_representatives = representative != nullptr;
-  point_slot_ = representative;
-  const KeyPass pass = parts > 1 ? keysThreaded(in, region, parts, with_representatives)
-                                 : keysInChunks(in, region, region_count, with_representatives);
+  const KeyPass pass = parts > 1 ? keysThreaded(in, region, parts, representative)
+                                 : keysInChunks(in, region, region_count, representative);
   const std::size_t voxels = voxels_;
   clearTable(voxels);  // the table is empty again for the next frame
   last_voxels_ = voxels;
@@ -366,7 +364,7 @@ void HashVoxelSampler::startFrame(const PointCloud& in, int region_count, const 
 // Step 1 on the pool's threads over contiguous ranges (keys kept for every point),
 // then step 2 over the whole cloud.
 HashVoxelSampler::KeyPass HashVoxelSampler::keysThreaded(const PointCloud& in, const uint8_t* region, int parts,
-                                                         bool with_representatives) {
+                                                         uint32_t* point_slot) {
   KeyPass pass;
   KeyJob job{this, &in, region, point_key_.data(), &part_state_, &part_bad_};
   pool_->run(
@@ -384,8 +382,8 @@ HashVoxelSampler::KeyPass HashVoxelSampler::keysThreaded(const PointCloud& in, c
   }
   if (pass.bad != nullptr) return pass;
   mergePartStates(parts);
-  pass.fits = with_representatives ? accumulate<true>(in, 0, in.size(), point_key_.data())
-                                   : accumulate<false>(in, 0, in.size(), point_key_.data());
+  pass.fits = point_slot != nullptr ? accumulate<true>(in, 0, in.size(), point_key_.data(), point_slot)
+                                    : accumulate<false>(in, 0, in.size(), point_key_.data(), nullptr);
   return pass;
 }
 
@@ -406,7 +404,7 @@ void HashVoxelSampler::mergePartStates(int parts) {
 
 // Steps 1-2 a chunk of kChunk points at a time, on this thread.
 HashVoxelSampler::KeyPass HashVoxelSampler::keysInChunks(const PointCloud& in, const uint8_t* region,
-                                                         int region_count, bool with_representatives) {
+                                                         int region_count, uint32_t* point_slot) {
   KeyPass pass;
   const std::size_t n = in.size();
   const uint32_t* histogram = part_state_[0].histogram;
@@ -423,12 +421,12 @@ HashVoxelSampler::KeyPass HashVoxelSampler::keysInChunks(const PointCloud& in, c
       break;
     }
     if (sampledSoFar() == sampled_before) {  // only fovea or skipped points (all of FREF)
-      if (with_representatives) std::fill(point_slot_ + c0, point_slot_ + c1, kNoSlot);
+      if (point_slot != nullptr) std::fill(point_slot + c0, point_slot + c1, kNoSlot);
       continue;
     }
     if (pass.fits) {
-      pass.fits = with_representatives ? accumulate<true>(in, c0, c1, chunk_key_.data())
-                                       : accumulate<false>(in, c0, c1, chunk_key_.data());
+      pass.fits = point_slot != nullptr ? accumulate<true>(in, c0, c1, chunk_key_.data(), point_slot)
+                                        : accumulate<false>(in, c0, c1, chunk_key_.data(), nullptr);
     }
   }
   return pass;

@@ -123,9 +123,12 @@ class HashVoxelSampler {
 
   // sample()'s steps, in order.
   void startFrame(const PointCloud& in, int region_count, const std::array<double, 256>& inv_voxel);
-  KeyPass keysThreaded(const PointCloud& in, const uint8_t* region, int parts, bool with_representatives);
+  // point_slot (null: no representatives asked for) gets each point's voxel
+  // slot: the caller's representative array, which sample() then turns into
+  // output indices in place (slotsToRepresentatives).
+  KeyPass keysThreaded(const PointCloud& in, const uint8_t* region, int parts, uint32_t* point_slot);
   void mergePartStates(int parts);
-  KeyPass keysInChunks(const PointCloud& in, const uint8_t* region, int region_count, bool with_representatives);
+  KeyPass keysInChunks(const PointCloud& in, const uint8_t* region, int region_count, uint32_t* point_slot);
   Status countAndCheckSpans(int region_count, const std::array<double, kMaxRegions>& voxel_size_m,
                             SampleCounts& counts, RegionLo& lo_index) const;
   VoxelOrder sortVoxels(int region_count, const SampleCounts& counts, const RegionLo& lo_index, std::size_t voxels);
@@ -136,13 +139,16 @@ class HashVoxelSampler {
   // the points the SIMD kernel leaves. False at the first bad point (in `bad`).
   bool computeKeys(const PointCloud& in, const uint8_t* region, std::size_t begin, std::size_t end,
                    kernels::VoxelKeyState& state, uint64_t* keys, BadPoint& bad) const;
-  // Accumulates points [begin, end) (keys[i - begin]) into their voxels. Returns
-  // false when a voxel beyond max_voxels appears (nothing more is accumulated).
+  // Accumulates points [begin, end) (keys[i - begin]) into their voxels, and
+  // with kRepresentative each point's slot into point_slot[i]. Returns false
+  // when a voxel beyond max_voxels appears (nothing more is accumulated).
   template <bool kRepresentative>
-  bool accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
+  bool accumulate(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys,
+                  uint32_t* point_slot);
   // accumulate() on at most kChunk points (the slot scratch).
   template <bool kRepresentative>
-  bool accumulateChunk(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys);
+  bool accumulateChunk(const PointCloud& in, std::size_t begin, std::size_t end, const uint64_t* keys,
+                       uint32_t* point_slot);
   // The slot of `key` past the recent-voxel cache (updating its line), inserting a
   // fresh voxel; kNoSlot past max_voxels.
   [[gnu::noinline]] uint32_t findSlotInTable(uint64_t key, uint64_t hash, std::size_t line, bool& fresh);
@@ -175,12 +181,9 @@ class HashVoxelSampler {
   // touched, so the resident size follows the voxels actually used, not max_voxels.
   std::unique_ptr<Acc[]> acc_;
   std::vector<uint32_t> rank_;             // place in the output order
-  // Per point (max_points).
+  // Per point (max_points; each point's voxel slot goes into the caller's
+  // representative array, when asked for: no array of the sampler's own).
   std::size_t max_points_ = 0;
-  // With representatives, each point's voxel slot (kNoSlot: none) goes into the
-  // caller's representative array, which sample() then turns into output
-  // indices in place: no array of the sampler's own.
-  uint32_t* point_slot_ = nullptr;
   std::vector<uint64_t> point_key_;   // keys of the whole cloud (threaded key pass only)
   std::vector<uint64_t> chunk_key_;   // kChunk keys (single-threaded)
   std::vector<uint32_t> chunk_slot_;  // kChunk voxel slots (accumulateChunk's first pass)
