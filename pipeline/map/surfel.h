@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 
@@ -95,8 +96,30 @@ inline Eigen::Vector3f decodeNormal(uint32_t code) { return decodeDirection(code
 inline constexpr float kMinRadiusM = 1e-4f;
 inline constexpr float kMaxRadiusM = 0.1f;
 // A radius in metres as a byte on a log scale over [kMinRadiusM, kMaxRadiusM]
-// (clamped to it; NaN gives the smallest).
-uint8_t encodeRadius(float radius_m);
+// (clamped to it; NaN gives the smallest): the reference, with a logarithm.
+uint8_t encodeRadiusRef(float radius_m);
+
+// encodeRadiusRef() without the logarithm (it was 6 % of fusion's time, perf on
+// map/fuse-simd): the radius's float bits pick one of 64 buckets an octave, whose
+// lowest float's code is tabled; the next code's lowest radius is at most one
+// step on (codes are 2.7 % apart, buckets 1.1 %). Both tables come from
+// encodeRadiusRef() itself at start-up, so the codes are the same for every
+// float (tests/unit/pipeline/test_surfel_map.cpp compares them).
+struct RadiusCodeTables {
+  static constexpr int kBucketShift = 17;  // 23 mantissa bits less 6: 64 buckets an octave
+  uint32_t lowest_bits = 0;                // kMinRadiusM's float bits: bucket 0 starts there
+  std::array<uint8_t, 1024> bucket_code{};   // the code of each bucket's lowest float
+  std::array<float, 257> lowest_radius{};  // per code, the smallest radius that has it; [256]: infinity
+};
+RadiusCodeTables makeRadiusCodeTables();
+extern const RadiusCodeTables kRadiusCodes;
+inline uint8_t encodeRadius(float radius_m) {
+  if (!(radius_m > kMinRadiusM)) return 0;
+  if (radius_m >= kMaxRadiusM) return 255;
+  const uint32_t bits = std::bit_cast<uint32_t>(radius_m);
+  const uint32_t code = kRadiusCodes.bucket_code[(bits - kRadiusCodes.lowest_bits) >> RadiusCodeTables::kBucketShift];
+  return static_cast<uint8_t>(code + (radius_m >= kRadiusCodes.lowest_radius[code + 1] ? 1u : 0u));
+}
 // decodeRadius's 256 values, made by surfel.cpp's static initialisation. Not an
 // inline variable: that would run makeRadiusTable() in every program that includes
 // this header, and a test binary without the pipeline library then fails to link.

@@ -212,6 +212,30 @@ TEST(Surfel, Is32BytesAndItsEncodingsKeepWhatTheyPromise) {
   EXPECT_EQ(decodeNormal(encodeNormal(Eigen::Vector3f::Zero())), Eigen::Vector3f::UnitZ());
 }
 
+// The tabled radius code against the logarithm's: every float near each code's
+// edge, a stride through every float of the range, and the values outside it.
+TEST(SurfelCodes, TheTabledRadiusCodeIsTheReferencesForEveryFloat) {
+  const uint32_t lo = std::bit_cast<uint32_t>(kMinRadiusM), hi = std::bit_cast<uint32_t>(kMaxRadiusM);
+  std::size_t checked = 0;
+  for (uint32_t code = 1; code < 256; ++code) {
+    const uint32_t edge = std::bit_cast<uint32_t>(kRadiusCodes.lowest_radius[code]);
+    ASSERT_EQ(encodeRadiusRef(std::bit_cast<float>(edge)), code);
+    ASSERT_LT(encodeRadiusRef(std::bit_cast<float>(edge - 1)), code);
+    for (uint32_t bits = edge - 8; bits <= edge + 8; ++bits, ++checked) {
+      ASSERT_EQ(encodeRadius(std::bit_cast<float>(bits)), encodeRadiusRef(std::bit_cast<float>(bits))) << bits;
+    }
+  }
+  for (uint32_t bits = lo - 64; bits <= hi + 64; bits += 97, ++checked) {  // about 870 000 floats
+    ASSERT_EQ(encodeRadius(std::bit_cast<float>(bits)), encodeRadiusRef(std::bit_cast<float>(bits))) << bits;
+  }
+  for (const float r : {0.0f, -0.0f, -1.0f, kMinRadiusM, kMaxRadiusM, 1.0f, 1e30f, std::numeric_limits<float>::denorm_min(),
+                        std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                        std::numeric_limits<float>::quiet_NaN()}) {
+    EXPECT_EQ(encodeRadius(r), encodeRadiusRef(r)) << r;
+  }
+  EXPECT_GT(checked, 800000u);
+}
+
 TEST(SurfelMapConfig, BadValuesAreRefusedNamingTheKey) {
   auto message = [](auto change) {
     SurfelMapConfig c;
