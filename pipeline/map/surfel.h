@@ -64,7 +64,8 @@ inline uint32_t encodeNormal(const Eigen::Vector3f& n) {
   using namespace surfel_detail;
   const float l1 = std::abs(n.x()) + std::abs(n.y()) + std::abs(n.z());
   if (!(l1 > 0.0f) || !std::isfinite(l1)) return (quantiseUnit(0.0f) << 12) | quantiseUnit(0.0f);  // +z
-  float u = n.x() / l1, v = n.y() / l1;
+  const float inv_l1 = 1.0f / l1;  // one division, not two
+  float u = n.x() * inv_l1, v = n.y() * inv_l1;
   if (n.z() < 0.0f) {  // the lower half folds over the diagonals
     const float fu = (1.0f - std::abs(v)) * signNotZero(u);
     const float fv = (1.0f - std::abs(u)) * signNotZero(v);

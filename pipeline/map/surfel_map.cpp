@@ -384,20 +384,25 @@ float SurfelMap::normalCosTolerance(float z) const {
 
 // Pixel i's measurement (its world normal n_world) into surfel s, which it
 // sees at its depth and orientation: confidence-weighted averages, the
-// confidence capped so that a changed surface still moves.
+// confidence capped so that a changed surface still moves. The surfel's normal
+// comes as its decoded direction and that direction's length, not as a unit
+// vector: the weighted sum of unit normals scaled by the length and the
+// confidences' sum points the same way, and the encoding keeps only the way
+// (it divides by the L1 norm), so the merge needs no division for it.
 void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
-                          const Eigen::Vector3f& n_surfel, float weight, const uint8_t* rgb) {
+                          const Eigen::Vector3f& surfel_direction, float direction_norm, float weight,
+                          const uint8_t* rgb) {
   // Relative to the surfel's brick: its origin is in camera coordinates
   // already (cullBricks, from double), a few metres from the vertex.
   const Eigen::Vector3f rel = R_wc_f * (Eigen::Vector3f(vertex_x_[i], vertex_y_[i], vertex_z_[i]) - brick_cam_[s.brick]);
   const float c = decodeConfidence(s.confidence);
   const float sum = c + weight;
-  const float a = c / sum, b = weight / sum;
+  const float inv_sum = 1.0f / sum;
+  const float a = c * inv_sum, b = weight * inv_sum;
   s.x = a * s.x + b * rel.x();
   s.y = a * s.y + b * rel.y();
   s.z = a * s.z + b * rel.z();
-  // Not normalised: the octahedral encoding divides by the L1 norm itself.
-  const Eigen::Vector3f n = a * n_surfel + b * n_world;
+  const Eigen::Vector3f n = c * surfel_direction + (weight * direction_norm) * n_world;
   setNormalAndRadius(s, n.squaredNorm() > 0.0f ? n : n_world, a * surfelRadius(s) + b * radius_[i]);
   s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
   s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
@@ -467,10 +472,14 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
       if (at_depth && (s.flags & kSurfelSettled)) explained_[i] = 1;
       if (!has_normal) continue;
       if (at_depth) {
+        // The angle test on the surfel's direction as decoded: (d / |d|) . n < cos
+        // is d . n < cos |d|, a square root and no division.
         const Eigen::Vector3f n_world = R_wc_f * normal;
-        const Eigen::Vector3f n_surfel = surfelNormal(s);
-        if (n_surfel.dot(n_world) < normalCosTolerance(z)) continue;  // another orientation: not this surfel's
-        mergeInto(s, i, R_wc_f, n_world, n_surfel, weight, frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
+        const Eigen::Vector3f direction = surfelDirection(s);
+        const float direction_norm = direction.norm();
+        if (direction.dot(n_world) < normalCosTolerance(z) * direction_norm) continue;  // another orientation
+        mergeInto(s, i, R_wc_f, n_world, direction, direction_norm, weight,
+                  frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
         ++stats.merged;
         continue;
       }

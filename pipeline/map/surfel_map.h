@@ -248,7 +248,7 @@ class SurfelMap {
   void updateNormalTolerance(float f_px);
   float normalCosTolerance(float z) const;
   void mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
-                 const Eigen::Vector3f& n_surfel, float weight, const uint8_t* rgb);
+                 const Eigen::Vector3f& surfel_direction, float direction_norm, float weight, const uint8_t* rgb);
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   enum class Added { kYes, kNoSurfel, kNoBrick };
   Added addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
