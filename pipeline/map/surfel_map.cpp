@@ -364,6 +364,9 @@ SurfelMap::Added SurfelMap::addSurfel(const Eigen::Vector3d& p_world, const Eige
 void SurfelMap::updateNormalTolerance(float f_px) {
   if (f_px == normal_cos_f_px_) return;
   normal_cos_f_px_ = f_px;
+  normal_cos_z_min_ = static_cast<float>(config_.depth.min_m);
+  normal_cos_per_m_ =
+      static_cast<float>(normal_cos_.size()) / static_cast<float>(config_.depth.max_m - config_.depth.min_m);
   const auto tolerance_rad = static_cast<float>(config_.normal_tolerance_deg * std::numbers::pi / 180.0);
   const auto z0 = static_cast<float>(config_.depth.min_m), z1 = static_cast<float>(config_.depth.max_m);
   const std::size_t n = normal_cos_.size();
@@ -375,10 +378,7 @@ void SurfelMap::updateNormalTolerance(float f_px) {
 }
 
 float SurfelMap::normalCosTolerance(float z) const {
-  const auto z_min = static_cast<float>(config_.depth.min_m);
-  const float z_to_bucket =
-      static_cast<float>(normal_cos_.size()) / static_cast<float>(config_.depth.max_m - config_.depth.min_m);
-  const auto b = static_cast<std::size_t>(std::max(0.0f, (z - z_min) * z_to_bucket));
+  const auto b = static_cast<std::size_t>(std::max(0.0f, (z - normal_cos_z_min_) * normal_cos_per_m_));
   return normal_cos_[std::min(b, normal_cos_.size() - 1)];
 }
 

@@ -301,6 +301,8 @@ class SurfelMap {
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
   std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
   float normal_cos_f_px_ = 0.0f;          // ... for this focal length (0: not made yet)
+  float normal_cos_z_min_ = 0.0f;         // ... its first bucket's depth
+  float normal_cos_per_m_ = 0.0f;         // ... and buckets a metre (not a division a pixel)
 
   uint32_t frame_ = 0;                    // frames fused so far
   bool have_last_ = false;
