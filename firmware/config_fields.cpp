@@ -187,6 +187,8 @@ std::vector<Field> mapFields() {
     FOVEA_INT("map.max_brick_surfels", map.max_brick_surfels, 1, 1 << 24),
     // 0: what the link's largest budget pays for in a frame (frameBrickPoints()).
     FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 0, 1 << 26),
+    // With bricks, a frame's live points at most; 0: an eighth of the pixels (liveFramePoints()).
+    FOVEA_INT("map.max_live_points", map.max_live_points, 0, 1 << 26),
     // Fusion's average time a frame at most; the rest go without what the last
     // fused frame explained (0: fuse all).
     FOVEA_FLOAT("map.fuse_budget_ms", map.fuse_budget_ms, 0.0, 10000.0),

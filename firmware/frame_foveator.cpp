@@ -27,6 +27,10 @@ std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::siz
   return std::max(max_brick_surfels, static_cast<std::size_t>(std::min(points, 1e9)));
 }
 
+std::size_t liveFramePoints(std::size_t max_live_points, std::size_t pixels) {
+  return max_live_points > 0 ? max_live_points : std::max<std::size_t>(pixels / 8, 1);
+}
+
 namespace {
 
 // The map source's mapper, from the [map] settings and the camera.

@@ -60,6 +60,15 @@ struct MapSettings {
   // the service applies; 2^18 before, three times that at 30 fps).
   std::size_t max_frame_brick_points = 0;
   std::size_t max_frame_bricks = 1024;
+  // With bricks, a foveated frame's live points at most (the fovea whole and a
+  // point per voxel; the sampler's voxels too), within pipeline.max_voxels and
+  // pipeline.max_output_points: the operator keeps the map, so a frame carries
+  // what the map does not explain yet, a few thousand points once it has
+  // settled (the mock orbit: 4 443 a frame median, 6 730 at p90), and all of
+  // the frame only while the map is new or a frame is not fused. 0: what
+  // liveFramePoints() makes of the pixels (the service applies it). A frame
+  // that needs more is foveated coarser, as any (pipeline.max_coarsenings).
+  std::size_t max_live_points = 0;
   // Fusion's average time a frame at most (pipeline/map/fusion_budget.h); the
   // frames it does not fuse go without what the last fused frame explained,
   // counted. 0: every frame is fused.
@@ -81,6 +90,13 @@ using pipeline::map::kWireBytesPerPointEstimate;
 // budget pays for in one frame period at kWireBytesPerPointEstimate (92 593
 // at 12.5 MB/s and 30 fps), and at least one brick whole.
 std::size_t frameBrickPoints(double max_budget_bytes_per_s, double fps, std::size_t max_brick_surfels);
+
+// MapSettings::max_live_points when 0: an eighth of the pixels (38 400 at
+// 640x480), which holds F1's foveation of a whole frame of the mock living room
+// (37 300 points, the map's first frames), where the frame source's capacity
+// (pipeline.max_output_points, 0.35 of the pixels) is sized for F2 and F3 on a
+// whole TUM frame.
+std::size_t liveFramePoints(std::size_t max_live_points, std::size_t pixels);
 
 // What the map did with the last frame (map source only): the mapper's
 // frame (track, fuse, fusion_skipped, fused()), the eye's view, and the plan.

@@ -59,11 +59,19 @@ Status Service::allocate() {
   Result<pipeline::PipelineCapacity> capacity = frameCapacity(config_.pipeline, k);
   if (!capacity) return capacity.status();
   allocateFrameSlots(k, depth);
-  const std::size_t points = foveatedCloudPoints(config_, pixels);
+  std::size_t points = foveatedCloudPoints(config_, pixels);
   map_bricks_ = config_.map.source == FoveationSource::kMap && config_.map.delta;
   if (map_bricks_ && config_.map.max_frame_brick_points == 0) {
     config_.map.max_frame_brick_points = frameBrickPoints(static_cast<double>(config_.stream.link.max_budget_bytes_per_s),
                                                           camera_->info().fps, config_.map.max_brick_surfels);
+  }
+  // With bricks a frame carries its live points only (MapSettings::max_live_points);
+  // a preset that keeps every point (FREF) still needs the pixels.
+  if (map_bricks_ && config_.foveation.acuity.preset != pipeline::Preset::kFRef) {
+    const std::size_t live = liveFramePoints(config_.map.max_live_points, pixels);
+    points = std::min(points, live);
+    capacity.value().max_voxels = std::min(capacity.value().max_voxels, live);
+    live_points_capped_ = true;
   }
   allocateFoveatedSlots(points, depth);
   if (Status s = allocateFoveator(capacity.value(), k); !s) return s;

@@ -267,8 +267,9 @@ void Service::countFoveationError(const Status& s, const FoveatedFrame& o) {
     // is dropped and counted (the status line's "over capacity").
     frames_over_capacity_.fetch_add(1, std::memory_order_relaxed);
     (void)log().logLimited(foveate_site, LogLevel::kWarning,
-                           "foveation: %s (frame dropped; pipeline.max_voxels %zu, pipeline.max_output_points %zu)",
-                           s.toString().c_str(), stage_->foveator().capacity().max_voxels, o.cloud.points.capacity());
+                           "foveation: %s (frame dropped; pipeline.max_voxels %zu, pipeline.max_output_points %zu%s)",
+                           s.toString().c_str(), stage_->foveator().capacity().max_voxels, o.cloud.points.capacity(),
+                           live_points_capped_ ? ", both at most map.max_live_points with the map's bricks" : "");
   } else {
     (void)log().logLimited(foveate_site, LogLevel::kWarning, "foveation: %s", s.toString().c_str());
   }

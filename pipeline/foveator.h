@@ -37,9 +37,12 @@ struct PipelineCapacity {
   // the output holds, is sampled again with every region's voxel edge doubled, at
   // most this many times (0: the error at once), in [0, 16]: that frame's
   // periphery coarser rather than no frame (FoveationStats::coarsened). A near
-  // fixation shrinks F1's voxels with d0 (Eq. 5-6); a tracked camera orbiting a
-  // world-fixed gaze took more than 0.3 of the pixels (docs/service.md).
-  int max_coarsenings = 3;
+  // fixation shrinks F1's voxels with d0 (Eq. 5-6), below the points' spacing,
+  // where a doubling merges few: a tracked camera orbiting a world-fixed gaze
+  // took more than 0.3 of the pixels, and with the map's live points capped
+  // (map.max_live_points) 3 frames in 60 s still did not fit after 3 doublings
+  // and none after 6 (docs/service.md).
+  int max_coarsenings = 6;
 };
 
 struct FoveationConfig {

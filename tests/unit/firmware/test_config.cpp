@@ -277,6 +277,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "map.change_fraction=0.05",
     "map.max_brick_surfels=4096",
     "map.max_frame_brick_points=100000",
+    "map.max_live_points=20000",
     "map.fuse_budget_ms=12.5",
     "map.fusion_thread=false",
     "map.carve_weight=1.5",

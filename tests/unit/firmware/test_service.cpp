@@ -193,6 +193,37 @@ TEST(Service, AFrameOverTheVoxelsIsFoveatedCoarserAndCounted) {
   EXPECT_EQ(end.frames_coarsened, end.frames_foveated) << "every frame of the static room needs it";
 }
 
+// With the map's bricks a frame carries the points the map does not explain
+// yet, so map.max_live_points caps both the foveated slots' points and the
+// sampler's voxels (below pipeline.max_output_points and max_voxels); a frame
+// over it (the map's first frames explain nothing) is dropped and counted, and
+// the warning says which key sized it. 0 is an eighth of the pixels.
+TEST(Service, TheMapsLivePointsCapTheFramesCapacityAndTheWarningNamesIt) {
+  EXPECT_EQ(liveFramePoints(0, 640u * 480u), 38400u);
+  EXPECT_EQ(liveFramePoints(1234, 640u * 480u), 1234u);
+  EXPECT_EQ(liveFramePoints(0, 3), 1u);
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.map.source = FoveationSource::kMap;
+  config.map.map.max_surfels = 1u << 14;
+  config.max_output_points = 4000;
+  config.pipeline.max_voxels = 3000;
+  config.map.max_live_points = 300;  // the room at 160x120 takes thousands of voxels while the map is new
+  config.pipeline.max_coarsenings = 0;
+  ASSERT_TRUE(validate(config).isOk()) << validate(config).toString();
+  config.runtime.status_interval_ms = 50;
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_over_capacity >= 1; }, 5000ms));
+  ASSERT_TRUE(waitUntil([&] { return sink.contains(" over capacity "); }, 5000ms)) << "status line without the count";
+  EXPECT_TRUE(sink.contains("pipeline.max_voxels 300, pipeline.max_output_points 300, both at most "
+                            "map.max_live_points with the map's bricks"));
+  running.stop();
+}
+
 // A full brick table drops the new surfels outside its bricks: counted in the
 // status line and the stop line, and said once as a warning (the map no longer
 // grows into new places), never a crash.
