@@ -123,10 +123,6 @@ HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, 
   // Lanes past count repeat the last surfel.
   const auto lane = hn::Min(hn::Iota(di, static_cast<int32_t>(j0)), hn::Set(di, static_cast<int32_t>(count - 1)));
   const auto word = hn::Mul(lane, hn::Set(di, static_cast<int32_t>(sizeof(Surfel) / sizeof(uint32_t))));
-  const auto x = GatherField(df, surfels, offsetof(Surfel, x), word);
-  const auto y = GatherField(df, surfels, offsetof(Surfel, y), word);
-  const auto z = GatherField(df, surfels, offsetof(Surfel, z), word);
-  const auto normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
   const auto flags = hn::ShiftRight<24>(GatherField(du, surfels, offsetof(Surfel, red), word));
   const auto confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
   const auto confidence = hn::And(confidence_brick, hn::Set(du, 0xffffu));
@@ -137,6 +133,17 @@ HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, 
   const auto remove = hn::AndNot(stable, hn::And(live, old));
   const auto brick = hn::BitCast(di, hn::IfThenElseZero(live, hn::ShiftRight<16>(confidence_brick)));
   const auto visible = hn::Ne(hn::GatherIndex(du, f.brick_visible, brick), hn::Zero(du));
+  // A vector of surfels none of which is removed or in a visible brick (a map
+  // larger than the view: surfels of one frame share slots and bricks) is
+  // skipped whole, as the lanes below would all decide.
+  if (hn::AllFalse(du, hn::Or(remove, hn::And(live, visible)))) {
+    hn::StoreU(hn::Set(du, SplatPlan::kSkip), du, plan.action + j0);
+    return;
+  }
+  const auto x = GatherField(df, surfels, offsetof(Surfel, x), word);
+  const auto y = GatherField(df, surfels, offsetof(Surfel, y), word);
+  const auto z = GatherField(df, surfels, offsetof(Surfel, z), word);
+  const auto normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
   const auto b3 = hn::Mul(brick, hn::Set(di, 3));
   const auto px = hn::Add(hn::GatherIndex(df, f.brick_cam, b3), RotateRow(df, f.r, x, y, z));
   const auto py = hn::Add(hn::GatherIndex(df, f.brick_cam + 1, b3), RotateRow(df, f.r + 3, x, y, z));

@@ -614,6 +614,50 @@ TEST_P(TargetTest, TheSplatPlansOfAdversarialSurfelsAreTheReference) {
   EXPECT_GT(splats, 20);
 }
 
+// Runs of surfels the kernel may skip a vector at a time (none removed, none
+// live in a visible brick: a map larger than the view), each run broken at one
+// random place by a surfel that must not be skipped: live in a visible brick,
+// or unstable and old in an invisible one (removed wherever it is), so that a
+// vector with one such lane among skippable ones is planned lane by lane.
+TEST_P(TargetTest, TheSplatPlansOfRunsOutOfViewAreTheReference) {
+  std::mt19937_64 rng(59);
+  PlanScene scene(96, 72, rng);
+  scene.visible.assign(scene.visible.size(), 0);
+  scene.visible[3] = 1;
+  std::vector<Surfel> surfels = randomSurfels(scene, 8 * SplatPlan::kSize, rng);
+  for (std::size_t i = 0; i < surfels.size(); ++i) {
+    Surfel& s = surfels[i];
+    s.brick = static_cast<uint16_t>(rng() % 3);  // invisible
+    s.flags = i % 7 == 0 ? 0 : kSurfelLive | kSurfelStable;  // some dead
+  }
+  std::size_t broken_visible = 0, broken_removed = 0;
+  for (std::size_t run = 0; run + 64 <= surfels.size(); run += 64) {
+    const std::size_t at = run + rng() % 64;
+    if (rng() % 3 == 0) continue;  // a run left whole
+    if (rng() % 2 == 0) {
+      surfels[at] = scene.surfelAt(40.0f, 30.0f, 1.5f, 3);
+      surfels[at].flags = kSurfelLive | kSurfelStable;
+      ++broken_visible;
+    } else {
+      surfels[at].flags = kSurfelLive;  // unstable
+      surfels[at].first_seen = scene.frame.frame - scene.frame.unstable_max - 1;
+      ++broken_removed;
+    }
+  }
+  uint64_t actions[4] = {};
+  for (std::size_t b0 = 0; b0 < surfels.size(); b0 += SplatPlan::kSize) {
+    SplatPlan ref{}, simd{};
+    planSplatsRef(scene.frame, surfels.data() + b0, SplatPlan::kSize, ref);
+    planSplatsSimd(scene.frame, surfels.data() + b0, SplatPlan::kSize, simd);
+    expectSamePlans(ref, simd, SplatPlan::kSize, "runs out of view");
+    for (std::size_t j = 0; j < SplatPlan::kSize; ++j) ++actions[ref.action[j]];
+  }
+  EXPECT_GT(broken_visible + broken_removed, 4u);
+  EXPECT_EQ(actions[SplatPlan::kRemoveUnstable], broken_removed);
+  EXPECT_EQ(actions[SplatPlan::kSplat], broken_visible);
+  EXPECT_EQ(actions[SplatPlan::kSkip], surfels.size() - broken_visible - broken_removed);
+}
+
 // ---- whole maps --------------------------------------------------------------
 
 ::testing::AssertionResult sameMap(const SurfelMap& a, const SurfelMap& b) {
