@@ -161,7 +161,8 @@ TEST(Service, OutputCapacityIsConfiguredAndAnOverflowIsCountedNotACrash) {
   EXPECT_GE(memory.pools[2].bytes, memory.pools[2].count * 4000u * 16u);
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_over_capacity >= 3; }, 5000ms));
   ASSERT_TRUE(waitUntil([&] { return sink.contains(" over capacity "); }, 5000ms)) << "status line without the count";
-  EXPECT_TRUE(sink.contains("pipeline.max_voxels 10"));
+  EXPECT_TRUE(waitUntil([&] { return sink.contains("pipeline.max_voxels 10"); }, 5000ms))
+      << "no warning (the foveation thread warns after it counts)";
   running.stop();
   const ServiceStats end = running.service->stats();
   EXPECT_EQ(end.frames_foveated, 0u);
@@ -219,8 +220,11 @@ TEST(Service, TheMapsLivePointsCapTheFramesCapacityAndTheWarningNamesIt) {
   startService(running, config, std::move(environment));
   ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_over_capacity >= 1; }, 5000ms));
   ASSERT_TRUE(waitUntil([&] { return sink.contains(" over capacity "); }, 5000ms)) << "status line without the count";
-  EXPECT_TRUE(sink.contains("pipeline.max_voxels 300, pipeline.max_output_points 300, both at most "
-                            "map.max_live_points with the map's bricks"));
+  // The foveation thread warns after it counts: the status line may say so first.
+  EXPECT_TRUE(waitUntil([&] {
+    return sink.contains("pipeline.max_voxels 300, pipeline.max_output_points 300, both at most "
+                         "map.max_live_points with the map's bricks");
+  }, 5000ms));
   running.stop();
 }
 
