@@ -39,7 +39,8 @@ namespace {
 // least `code` (1..255): a bisection over the floats' bits, which order
 // positive floats as they order their values (the reference is monotonic).
 uint32_t lowestBitsOfCode(uint32_t code) {
-  uint32_t lo = std::bit_cast<uint32_t>(kMinRadiusM), hi = std::bit_cast<uint32_t>(kMaxRadiusM);  // code(lo) < code <= code(hi)
+  // code(lo) < code <= code(hi)
+  uint32_t lo = std::bit_cast<uint32_t>(kMinRadiusM), hi = std::bit_cast<uint32_t>(kMaxRadiusM);
   while (hi - lo > 1) {
     const uint32_t mid = lo + (hi - lo) / 2;
     (encodeRadiusRef(std::bit_cast<float>(mid)) >= code ? hi : lo) = mid;
@@ -57,8 +58,8 @@ RadiusCodeTables makeRadiusCodeTables() {
   t.lowest_radius[256] = std::numeric_limits<float>::infinity();
   for (std::size_t b = 0; b < t.bucket_code.size(); ++b) {
     const uint64_t bits = t.lowest_bits + (static_cast<uint64_t>(b) << RadiusCodeTables::kBucketShift);
-    t.bucket_code[b] = bits >= std::bit_cast<uint32_t>(kMaxRadiusM) ? uint8_t{255}
-                                                                     : encodeRadiusRef(std::bit_cast<float>(static_cast<uint32_t>(bits)));
+    const bool past = bits >= std::bit_cast<uint32_t>(kMaxRadiusM);
+    t.bucket_code[b] = past ? uint8_t{255} : encodeRadiusRef(std::bit_cast<float>(static_cast<uint32_t>(bits)));
   }
   return t;
 }

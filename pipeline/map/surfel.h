@@ -103,7 +103,7 @@ uint8_t encodeRadiusRef(float radius_m);
 // encodeRadiusRef() without the logarithm (it was 6 % of fusion's time, perf on
 // map/fuse-simd): the radius's float bits pick one of 64 buckets an octave, whose
 // lowest float's code is tabled; the next code's lowest radius is at most one
-// step on (codes are 2.7 % apart, buckets 1.1 %). Both tables come from
+// step on (codes are 2.7 % apart, buckets at most 1.6 %). Both tables come from
 // encodeRadiusRef() itself at start-up, so the codes are the same for every
 // float (tests/unit/pipeline/test_surfel_map.cpp compares them).
 struct RadiusCodeTables {
