@@ -282,7 +282,7 @@ Status MockCamera::open() {
   work_.resize(pixels);
   if (scene_.isDynamic()) background_.resize(pixels);
   final_drop_prob_.assign(pixels, 1.0f);
-  near_row_min_m_.assign(pixels, 0.0f);
+  near_row_min_m_.assign(3 * static_cast<std::size_t>(w), 0.0f);
   const std::size_t shapes = scene_.staticShapeCount();
   if (shapes > 65535) return invalid("scene has more than 65535 static shapes");
   shape_rects_.resize(shapes);

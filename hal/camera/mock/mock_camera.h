@@ -172,7 +172,7 @@ class MockCamera final : public Camera {
   CleanImage background_;
   CleanImage work_;
   std::vector<float> final_drop_prob_;  // work_.drop_prob plus the discontinuity bands
-  std::vector<float> near_row_min_m_;   // scratch of updateDropouts()
+  std::vector<float> near_row_min_m_;   // scratch of updateDropouts(): three rows
   // Screen-space culling: each static shape's projected bounds, the shapes in
   // order of their first column, those covering the current row and pixel.
   std::vector<PixelRect> shape_rects_;

@@ -278,7 +278,8 @@ MockCamera::PixelRect MockCamera::grow(const PixelRect& r, int pixels) const {
 // more than the jump threshold is always lost; the pixel two to the left of
 // such an occluder (the projector's shadow side) is lost half of the time.
 // The 3 x 3 minimum is separable: a horizontal pass into near_row_min_m_, then
-// a vertical one.
+// a vertical one. The horizontal pass keeps three rows (row r at r % 3), each
+// filled just before the first output row that needs it.
 void MockCamera::updateDropouts(const PixelRect& rect) {
   if (rect.empty()) return;
   const int w = options_.width;
@@ -288,17 +289,26 @@ void MockCamera::updateDropouts(const PixelRect& rect) {
   };
   const double* depth = work_.depth_m.data();
   const auto surface = [](double z) { return z > 0.0 ? z : kInf; };  // 0: nothing there
-  for (int y = std::max(0, rect.y0 - 1); y < std::min(h, rect.y1 + 1); ++y) {
+  const auto row_min = [this, w](int y) {
+    return near_row_min_m_.data() + static_cast<std::size_t>(y % 3) * static_cast<std::size_t>(w);
+  };
+  const auto fill_row = [&](int y) {
+    float* out = row_min(y);
     for (int x = rect.x0; x < rect.x1; ++x) {
       double nearest = surface(depth[at(x, y)]);
       if (x > 0) nearest = std::min(nearest, surface(depth[at(x - 1, y)]));
       if (x + 1 < w) nearest = std::min(nearest, surface(depth[at(x + 1, y)]));
-      near_row_min_m_[at(x, y)] = static_cast<float>(nearest);
+      out[x] = static_cast<float>(nearest);
     }
-  }
+  };
+  int filled = std::max(0, rect.y0 - 1) - 1;  // the last row filled
   for (int y = rect.y0; y < rect.y1; ++y) {
     const int y_above = std::max(0, y - 1);
     const int y_below = std::min(h - 1, y + 1);
+    while (filled < y_below) fill_row(++filled);
+    const float* above = row_min(y_above);
+    const float* here = row_min(y);
+    const float* below = row_min(y_below);
     for (int x = rect.x0; x < rect.x1; ++x) {
       const std::size_t i = at(x, y);
       float p = work_.drop_prob[i];
@@ -307,8 +317,7 @@ void MockCamera::updateDropouts(const PixelRect& rect) {
         // z - zq > kEdgeJumpM + kEdgeJumpPerM * zq, solved for zq. The pixel
         // itself is never nearer than that.
         const double occluder_below_m = (z - kEdgeJumpM) / (1.0 + kEdgeJumpPerM);
-        const float nearest = std::min(
-            {near_row_min_m_[at(x, y_above)], near_row_min_m_[i], near_row_min_m_[at(x, y_below)]});
+        const float nearest = std::min({above[x], here[x], below[x]});
         if (nearest < occluder_below_m) {
           p = 1.0f;
         } else if (x + kEdgeReachPx < w) {
