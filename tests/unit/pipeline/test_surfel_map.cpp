@@ -667,6 +667,8 @@ TEST(SurfelMap, ThePoolIsThirtyEightBytesASurfelOfCapacity) {
     const SurfelMap map = SurfelMap::create(config).value();
     const SurfelMapMemory m = map.memoryParts();
     EXPECT_EQ(m.pool, 38 * surfels);
+    // No surfel straddles two cache lines (surfel.h: the pool is aligned to a surfel).
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(&map.surfel(0)) % sizeof(Surfel), 0u);
     EXPECT_EQ(m.total(), map.memoryBytes());
     EXPECT_LT(m.bricks, 64 * config.max_bricks);
     // 41 bytes a pixel (eight float maps, the explained flag, the index map's
