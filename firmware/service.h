@@ -324,7 +324,7 @@ class Service {
   // The map's bricks: what the send stage learns the operator lacks, for the
   // planner in the foveation stage; the session's budget the planner fills.
   bool map_bricks_ = false;
-  bool live_points_capped_ = false;  // the capacity is map.max_live_points's (allocate())
+  bool live_points_capped_ = false;  // allocate() sized the frame by map.max_live_points (the warning says so)
   std::unique_ptr<BrickFeedback> brick_feedback_;
   std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
   std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},

@@ -15,9 +15,17 @@ namespace fovea::firmware {
 
 namespace {
 
+// With the map's bricks a frame carries only the points the map does not
+// explain yet: map.max_live_points caps its output and its voxels. A preset
+// that keeps every point (FREF) still needs the pixels.
+bool capsLivePoints(const ServiceConfig& config) {
+  return FrameFoveator::streamsLiveOnly(config.map) && config.foveation.acuity.preset != pipeline::Preset::kFRef;
+}
+
 // The pipeline's capacity for the camera's frames: a frame has no more points
 // than pixels; an error when pipeline.max_points is below them.
-Result<pipeline::PipelineCapacity> frameCapacity(pipeline::PipelineCapacity capacity, const hal::CameraIntrinsics& k) {
+Result<pipeline::PipelineCapacity> frameCapacity(const ServiceConfig& config, const hal::CameraIntrinsics& k) {
+  pipeline::PipelineCapacity capacity = config.pipeline;
   const std::size_t pixels = static_cast<std::size_t>(k.width) * static_cast<std::size_t>(k.height);
   if (capacity.max_points < pixels) {
     return Result<pipeline::PipelineCapacity>(
@@ -28,6 +36,9 @@ Result<pipeline::PipelineCapacity> frameCapacity(pipeline::PipelineCapacity capa
   }
   capacity.max_points = pixels;  // a frame has no more points than pixels
   capacity.max_voxels = std::min(capacity.max_voxels, pixels);
+  if (capsLivePoints(config)) {
+    capacity.max_voxels = std::min(capacity.max_voxels, liveFramePoints(config.map.max_live_points, pixels));
+  }
   return capacity;
 }
 
@@ -36,7 +47,8 @@ Result<pipeline::PipelineCapacity> frameCapacity(pipeline::PipelineCapacity capa
 // (FREF) needs the pixels; the map source without bricks foveates the map's
 // surfels too, so its clouds hold them (the map's memory on top of the
 // frame's); with bricks its clouds are the frame's live points, capped as the
-// frame source's, and the map goes in the brick slots. The pyramid
+// frame source's and by map.max_live_points, and the map goes in the brick
+// slots. The pyramid
 // source keeps the pixels too: at ACUITY's default margin it sends more points
 // than the voxel methods, and with the cap (0.35 of the pixels) the mock room's
 // scan lost 18 frames in 10 s as over capacity (toolchain/run-latency).
@@ -47,6 +59,7 @@ std::size_t foveatedCloudPoints(const ServiceConfig& config, std::size_t pixels)
       config.max_output_points > 0) {
     points = std::min(points, config.max_output_points);
   }
+  if (capsLivePoints(config)) points = std::min(points, liveFramePoints(config.map.max_live_points, pixels));
   return points;
 }
 
@@ -56,22 +69,15 @@ Status Service::allocate() {
   const hal::CameraIntrinsics& k = camera_->info().intrinsics;
   const auto depth = static_cast<std::size_t>(config_.runtime.ring_depth);
   const std::size_t pixels = static_cast<std::size_t>(k.width) * static_cast<std::size_t>(k.height);
-  Result<pipeline::PipelineCapacity> capacity = frameCapacity(config_.pipeline, k);
+  Result<pipeline::PipelineCapacity> capacity = frameCapacity(config_, k);
   if (!capacity) return capacity.status();
   allocateFrameSlots(k, depth);
-  std::size_t points = foveatedCloudPoints(config_, pixels);
+  const std::size_t points = foveatedCloudPoints(config_, pixels);
+  live_points_capped_ = capsLivePoints(config_);
   map_bricks_ = config_.map.source == FoveationSource::kMap && config_.map.delta;
   if (map_bricks_ && config_.map.max_frame_brick_points == 0) {
     config_.map.max_frame_brick_points = frameBrickPoints(static_cast<double>(config_.stream.link.max_budget_bytes_per_s),
                                                           camera_->info().fps, config_.map.max_brick_surfels);
-  }
-  // With bricks a frame carries its live points only (MapSettings::max_live_points);
-  // a preset that keeps every point (FREF) still needs the pixels.
-  if (map_bricks_ && config_.foveation.acuity.preset != pipeline::Preset::kFRef) {
-    const std::size_t live = liveFramePoints(config_.map.max_live_points, pixels);
-    points = std::min(points, live);
-    capacity.value().max_voxels = std::min(capacity.value().max_voxels, live);
-    live_points_capped_ = true;
   }
   allocateFoveatedSlots(points, depth);
   if (Status s = allocateFoveator(capacity.value(), k); !s) return s;
