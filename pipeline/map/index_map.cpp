@@ -16,33 +16,32 @@ std::size_t strideFor(int width) {
 
 }  // namespace
 
-IndexMap::IndexMap(int max_width, int max_height) {
-  const std::size_t cells = strideFor(max_width) * static_cast<std::size_t>(max_height + 2 * CentreGrid::kPad);
+IndexMap::IndexMap(int max_width, int max_height, std::size_t scratch_floats) {
+  cells_ = strideFor(max_width) * static_cast<std::size_t>(max_height + 2 * CentreGrid::kPad);
   const std::size_t pixels = static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height);
-  cell_.resize(cells);
-  inv_depth_.resize(cells);
-  grad_u_.resize(cells);
-  grad_v_.resize(cells);
-  rank_.resize(cells);
+  cell_.resize(cells_);
+  planes_.resize(std::max(3 * cells_, scratch_floats));
+  rank_.resize(cells_);
   slot_.resize(pixels);
   depth_.resize(pixels);
 }
 
 // An empty cell is kEmptyCell with inverse depth 0: the gather's iz > 0 and its
-// reach test refuse it at every offset, whatever its gradients hold (finite,
-// written by earlier frames, or 0), and offerCentre() sees it at infinity.
+// reach test refuse it at every offset, whatever its gradients hold (earlier
+// frames' or the scratch's floats, even a NaN: iz > 0 is false for it), and
+// offerCentre() sees it at infinity.
 void IndexMap::reset(int width, int height) {
   width_ = width;
   height_ = height;
   stride_ = strideFor(width);
   const auto n = static_cast<std::ptrdiff_t>(stride_ * static_cast<std::size_t>(height + 2 * CentreGrid::kPad));
   std::fill(cell_.begin(), cell_.begin() + n, CentreGrid::kEmptyCell);
-  std::fill(inv_depth_.begin(), inv_depth_.begin() + n, 0.0f);
+  std::fill(planes_.begin(), planes_.begin() + n, 0.0f);  // the inverse depths
 }
 
 std::size_t IndexMap::memoryBytes() const {
   return (cell_.capacity() + slot_.capacity()) * sizeof(uint32_t) +
-         (inv_depth_.capacity() + grad_u_.capacity() + grad_v_.capacity() + depth_.capacity()) * sizeof(float) +
+         (planes_.capacity() + depth_.capacity()) * sizeof(float) +
          rank_.capacity();
 }
 

@@ -27,7 +27,10 @@
 //
 // Memory: the centre grid, 17 bytes a cell over the largest frame and a border
 // (kMaxReach each side, a vector's lanes more on the right), and the result,
-// 8 bytes a pixel; allocated by the constructor. Nothing else allocates.
+// 8 bytes a pixel; allocated by the constructor. Nothing else allocates. The
+// grid's planes (12 of its bytes a cell) are read last by the gather, so their
+// floats are the caller's scratch until the next reset() (scratch(): fusion
+// keeps a frame's normals there, SurfelMap::fuse()).
 #pragma once
 
 #include <cstddef>
@@ -102,7 +105,8 @@ class IndexMap {
   };
 
   IndexMap() = default;
-  IndexMap(int max_width, int max_height);
+  // scratch_floats: the planes' storage is at least that long (scratch()).
+  IndexMap(int max_width, int max_height, std::size_t scratch_floats = 0);
 
   // Empties the centres for a new frame of that size (at most the largest).
   void reset(int width, int height);
@@ -110,13 +114,14 @@ class IndexMap {
   // to kMaxReach outside the frame.
   void offerCentre(int u, int v, const Centre& c, uint32_t slot) {
     const std::size_t k = grid().at(u, v);
-    const float held = 1.0f / inv_depth_[k];  // infinity for an empty cell
+    float* const inv_depth = planes_.data();
+    const float held = 1.0f / inv_depth[k];  // infinity for an empty cell
     const bool take = (c.depth < held - c.same) | ((c.depth <= held + c.same) & (c.rank < rank_[k]));
     if (!take) return;
     cell_[k] = static_cast<uint32_t>(c.reach) << 24 | slot;
-    inv_depth_[k] = c.inv_depth;
-    grad_u_[k] = c.grad_u;
-    grad_v_[k] = c.grad_v;
+    inv_depth[k] = c.inv_depth;
+    inv_depth[cells_ + k] = c.grad_u;
+    inv_depth[2 * cells_ + k] = c.grad_v;
     rank_[k] = c.rank;
   }
   // Pass 2, rows [y0, y1) (callers yield between bands).
@@ -137,15 +142,21 @@ class IndexMap {
   float depth(std::size_t i) const { return depth_[i]; }
   const uint32_t* slots() const { return slot_.data(); }
   CentreGrid grid() const {
-    return {cell_.data(), inv_depth_.data(), grad_u_.data(), grad_v_.data(), width_, height_, stride_};
+    const float* inv_depth = planes_.data();
+    return {cell_.data(), inv_depth, inv_depth + cells_, inv_depth + 2 * cells_, width_, height_, stride_};
   }
+  // The planes' floats, free from a gather to the next reset() (whose pass 1
+  // writes them again): at least the constructor's scratch_floats.
+  float* scratch() { return planes_.data(); }
+  const float* scratch() const { return planes_.data(); }
   std::size_t memoryBytes() const;
 
  private:
   int width_ = 0, height_ = 0;
   std::size_t stride_ = 0;
   std::vector<uint32_t> cell_;
-  std::vector<float> inv_depth_, grad_u_, grad_v_;
+  std::size_t cells_ = 0;
+  std::vector<float> planes_;  // by cell: inverse depth, then grad_u, then grad_v; the scratch's rest
   std::vector<uint8_t> rank_;
   std::vector<uint32_t> slot_;
   std::vector<float> depth_;

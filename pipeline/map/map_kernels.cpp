@@ -36,6 +36,20 @@ VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& r
   return p;
 }
 
+uint32_t computeDepthsRef(const VertexParams& p, float* z, float* weight) {
+  uint32_t measured = 0;
+  for (int v = 0; v < p.height; ++v) {
+    for (int u = 0; u < p.width; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * p.width + u;
+      const int32_t d = p.depth[i];
+      z[i] = d < p.raw_min || d > p.raw_max ? 0.0f : static_cast<float>(d) * p.scale;
+      weight[i] = z[i] == 0.0f ? 0.0f : p.weight_u[u] * p.weight_v[v];
+      if (z[i] != 0.0f) ++measured;
+    }
+  }
+  return measured;
+}
+
 uint32_t computeVerticesRef(const VertexParams& p, const PixelMaps& out) {
   const int w = p.width, h = p.height;
   for (int v = 0; v < h; ++v) {

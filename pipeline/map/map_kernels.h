@@ -2,7 +2,8 @@
 // camera-frame vertex, normal, radius and weight, written as structure-of-arrays
 // maps. Two kernels, one output, BIT FOR BIT (docs/kernels.md, docs/map.md):
 //   computeVerticesRef  the scalar reference, the specification (map_kernels.cpp);
-//   computeVerticesSimd Highway, dynamic dispatch (vertices_simd.cpp).
+//   computeVerticesSimd Highway, dynamic dispatch (vertices_simd.cpp);
+// and computeDepthsRef/Simd, the z and weight maps alone.
 //
 // The arithmetic is defined so that SIMD can reproduce it (only Add, Sub, Mul, Div,
 // Sqrt, comparisons and selects, in the order written below, never a fused
@@ -80,6 +81,16 @@ struct VertexParams {
 // written to weight_u (width entries) and weight_v (height entries).
 VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, float* weight_u,
                              float* weight_v);
+
+// The z and weight maps of computeVerticesRef() alone, the same bits: what the
+// index map's render reads before the other maps are made (SurfelMap::fuse()).
+// The scalar reference and its Highway kernel; both return the number of
+// pixels with a vertex.
+uint32_t computeDepthsRef(const VertexParams& params, float* z, float* weight);
+uint32_t computeDepthsSimd(const VertexParams& params, float* z, float* weight);
+inline uint32_t computeDepths(const VertexParams& params, float* z, float* weight, KernelSet kernels) {
+  return kernels == KernelSet::kSimd ? computeDepthsSimd(params, z, weight) : computeDepthsRef(params, z, weight);
+}
 
 uint32_t computeVerticesRef(const VertexParams& params, const PixelMaps& out);
 uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out);

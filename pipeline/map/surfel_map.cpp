@@ -74,13 +74,12 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_settled_.assign(config.max_bricks, 0);
   brick_changes_.assign(config.max_bricks, 0);
   links_.resize(config.max_surfels);
-  for (std::vector<float>* map : {&vertex_x_, &vertex_y_, &vertex_z_, &normal_x_, &normal_y_, &normal_z_, &radius_,
-                                  &weight_}) {
-    map->resize(pixels);
-  }
+  pixel_capacity_ = pixels;
+  vertex_z_.resize(pixels);
+  weight_.resize(pixels);
   weight_u_.resize(static_cast<std::size_t>(config.max_width));
   weight_v_.resize(static_cast<std::size_t>(config.max_height));
-  index_map_ = IndexMap(config.max_width, config.max_height);
+  index_map_ = IndexMap(config.max_width, config.max_height, kLateMaps * pixels);
   explained_.resize(pixels);
   normal_cos_.resize(kNormalCosBuckets);
 }
@@ -100,8 +99,8 @@ SurfelMapMemory SurfelMap::memoryParts() const {
   m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.memoryBytes() +
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
              (brick_visible_.capacity() + brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
-  m.pixels = (vertex_x_.capacity() * 6 + radius_.capacity() + weight_.capacity() + weight_u_.capacity() +
-              weight_v_.capacity() + normal_cos_.capacity()) * sizeof(float) +
+  m.pixels = (vertex_z_.capacity() + weight_.capacity() + weight_u_.capacity() + weight_v_.capacity() +
+              normal_cos_.capacity()) * sizeof(float) +
              index_map_.memoryBytes() + explained_.capacity();
   m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
   return m;
@@ -191,15 +190,23 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   fused_height_ = frame.height();
   fused_stamp_ns_ = frame.stamp_ns;
   std::fill(explained_.begin(), explained_.begin() + static_cast<std::ptrdiff_t>(frame.pixelCount()), uint8_t{0});
+  // The depths first, for the render; the rest of step 2's maps after it, in
+  // the index map's scratch (the late maps). A moving pixel weighs nothing in
+  // either.
   int64_t t0 = monotonicNs();
-  computeVertices(frame, stats);
+  const uint32_t measured = computeDepths(frame);
   if (moving != nullptr) leaveOutMoving(frame.pixelCount(), moving, stats);
   int64_t t1 = monotonicNs();
   stats.vertices_ns = t1 - t0;
-  if (stats.pixels_valid > 0) {
+  if (measured > 0) {
     renderIndexMap(frame, stats);
     t0 = monotonicNs();
     stats.index_map_ns = t0 - t1;
+    computeVertices(frame, stats);
+    if (moving != nullptr) leaveOutMoving(frame.pixelCount(), moving, stats);
+    t1 = monotonicNs();
+    stats.vertices_ns += t1 - t0;
+    t0 = t1;
     const std::size_t to_add = associate(frame, stats);
     t1 = monotonicNs();
     stats.associate_ns = t1 - t0;
@@ -219,10 +226,18 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
 }
 
 PixelMaps SurfelMap::pixelMaps() {
-  return {vertex_x_.data(), vertex_y_.data(), vertex_z_.data(), normal_x_.data(),
-          normal_y_.data(), normal_z_.data(), radius_.data(),   weight_.data()};
+  return {lateMap(kVertexX), lateMap(kVertexY), vertex_z_.data(), lateMap(kNormalX),
+          lateMap(kNormalY), lateMap(kNormalZ), lateMap(kRadius), weight_.data()};
 }
 
+uint32_t SurfelMap::computeDepths(const hal::RgbdFrame& frame) {
+  const VertexParams params =
+      prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
+  return pipeline::map::computeDepths(params, vertex_z_.data(), weight_.data(), config_.kernels);
+}
+
+// After computeDepths() and the render: the same depths and weights again
+// (the same bits), with the late maps.
 void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
   const VertexParams params =
       prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
@@ -394,7 +409,7 @@ void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_
                           const uint8_t* rgb) {
   // Relative to the surfel's brick: its origin is in camera coordinates
   // already (cullBricks, from double), a few metres from the vertex.
-  const Eigen::Vector3f rel = R_wc_f * (Eigen::Vector3f(vertex_x_[i], vertex_y_[i], vertex_z_[i]) - brick_cam_[s.brick]);
+  const Eigen::Vector3f rel = R_wc_f * (vertexAt(i).cast<float>() - brick_cam_[s.brick]);
   const float c = decodeConfidence(s.confidence);
   const float sum = c + weight;
   const float inv_sum = 1.0f / sum;
@@ -403,7 +418,7 @@ void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_
   s.y = a * s.y + b * rel.y();
   s.z = a * s.z + b * rel.z();
   const Eigen::Vector3f n = c * surfel_direction + (weight * direction_norm) * n_world;
-  setNormalAndRadius(s, n.squaredNorm() > 0.0f ? n : n_world, a * surfelRadius(s) + b * radius_[i]);
+  setNormalAndRadius(s, n.squaredNorm() > 0.0f ? n : n_world, a * surfelRadius(s) + b * lateMap(kRadius)[i]);
   s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
   s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
   s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
@@ -444,7 +459,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
     const float z = vertex_z_[i];
     const float tolerance = sigmas * depthSigma(z);
     const uint32_t slot = index_map_.slot(i);
-    const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
+    const Eigen::Vector3f normal = normalAt(i);
     const bool has_normal = normal.squaredNorm() > 0.0f;
     if (slot != kNone) {
       Surfel& s = surfels_[slot];
@@ -507,8 +522,7 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
     if (!(weight_[i] < 0.0f)) continue;
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
     const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
-    const Eigen::Vector3f normal(normal_x_[i], normal_y_[i], normal_z_[i]);
-    const Added added = addSurfel(p_world, R_wc_f * normal, radius_[i], -weight_[i], rgb);
+    const Added added = addSurfel(p_world, R_wc_f * normalAt(i), lateMap(kRadius)[i], -weight_[i], rgb);
     if (added == Added::kYes) {
       ++stats.added;
     } else {
@@ -531,7 +545,7 @@ std::size_t SurfelMap::appendUnexplained(const hal::RgbdFrame& frame, PointCloud
   std::size_t appended = 0;
   for (std::size_t i = 0; i < pixels; ++i) {
     if (explained_[i] || vertex_z_[i] == 0.0f) continue;
-    const Eigen::Vector3f p = R_f * Eigen::Vector3f(vertex_x_[i], vertex_y_[i], vertex_z_[i]) + t;
+    const Eigen::Vector3f p = R_f * vertexAt(i).cast<float>() + t;
     const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
     if (!out.push(p.x(), p.y(), p.z(), packRgb(rgb[0], rgb[1], rgb[2]))) break;
     ++appended;

@@ -1,4 +1,4 @@
-// Per-target body of computeVerticesSimd (map_kernels.h); compiled once per
+// Per-target body of computeVerticesSimd and computeDepthsSimd (map_kernels.h); compiled once per
 // Highway target by vertices_simd.cpp (through hwy/foreach_target.h). Every
 // function that calls a Highway op sits between HWY_BEFORE_NAMESPACE and
 // HWY_AFTER_NAMESPACE (GCC 12 on aarch64 refuses to inline the ops otherwise).
@@ -116,6 +116,52 @@ HWY_INLINE std::size_t NormalVector(DF df, const VertexParams& p, const float* x
   hn::StoreU(hn::IfThenElseZero(keep, nz), df, onz);
   hn::StoreU(hn::IfThenElseZero(keep, radius), df, orad);
   return hn::CountTrue(df, keep);
+}
+
+// One vector of depths and weights from column u (computeDepthsRef's lanes).
+template <class DF>
+HWY_INLINE std::size_t DepthVector(DF df, const VertexParams& p, const uint16_t* src, const float* wu,
+                                   hn::Vec<DF> wv, float* oz, float* ow) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du32;
+  const hn::Rebind<uint16_t, DF> du16;
+  const auto raw = hn::BitCast(di, hn::PromoteTo(du32, hn::LoadU(du16, src)));
+  const auto valid = hn::RebindMask(
+      df, hn::And(hn::Gt(raw, hn::Set(di, p.raw_min - 1)), hn::Lt(raw, hn::Set(di, p.raw_max + 1))));
+  const auto z = hn::IfThenElseZero(valid, hn::Mul(hn::ConvertTo(df, raw), hn::Set(df, p.scale)));
+  const auto seen = hn::Ne(z, hn::Zero(df));
+  hn::StoreU(z, df, oz);
+  hn::StoreU(hn::IfThenElseZero(seen, hn::Mul(hn::LoadU(df, wu), wv)), df, ow);
+  return hn::CountTrue(df, seen);
+}
+
+inline uint32_t ComputeDepthsT(const VertexParams& p, float* z, float* weight) {
+  const hn::ScalableTag<float> df;
+  const std::size_t lanes = hn::Lanes(df);
+  const auto w = static_cast<std::size_t>(p.width);
+  HWY_ALIGN uint16_t tail_depth[kMaxFloatLanes];
+  HWY_ALIGN float tail_wu[kMaxFloatLanes];
+  HWY_ALIGN float tail[2][kMaxFloatLanes];
+  std::size_t measured = 0;
+  for (std::size_t v = 0; v < static_cast<std::size_t>(p.height); ++v) {
+    const auto wv = hn::Set(df, p.weight_v[v]);
+    const std::size_t i0 = v * w;
+    std::size_t u = 0;
+    for (; u + lanes <= w; u += lanes) {
+      measured += DepthVector(df, p, p.depth + i0 + u, p.weight_u + u, wv, z + i0 + u, weight + i0 + u);
+    }
+    if (u < w) {
+      std::memset(tail_depth, 0, sizeof tail_depth);
+      std::memcpy(tail_depth, p.depth + i0 + u, (w - u) * sizeof(uint16_t));
+      std::fill(tail_wu, tail_wu + kMaxFloatLanes, 0.0f);
+      std::memcpy(tail_wu, p.weight_u + u, (w - u) * sizeof(float));
+      // raw 0 is never valid (raw_min >= 1): the padding's lanes count nothing.
+      measured += DepthVector(df, p, tail_depth, tail_wu, wv, tail[0], tail[1]);
+      std::memcpy(z + i0 + u, tail[0], (w - u) * sizeof(float));
+      std::memcpy(weight + i0 + u, tail[1], (w - u) * sizeof(float));
+    }
+  }
+  return static_cast<uint32_t>(measured);
 }
 
 inline uint32_t ComputeVerticesT(const VertexParams& p, const PixelMaps& out) {

@@ -1,4 +1,4 @@
-// computeVerticesSimd (map_kernels.h), dynamically dispatched: foreach_target.h
+// computeVerticesSimd and computeDepthsSimd (map_kernels.h), dynamically dispatched: foreach_target.h
 // re-includes this file once per Highway target, compiling vertices_simd-inl.h
 // for each; HWY_EXPORT builds the table and HWY_DYNAMIC_DISPATCH calls the best
 // supported target (pipeline::forceSimdTarget() restricts it, as for the other kernels).
@@ -14,9 +14,14 @@
 namespace fovea::pipeline::map {
 
 HWY_EXPORT(ComputeVerticesT);
+HWY_EXPORT(ComputeDepthsT);
 
 uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out) {
   return HWY_DYNAMIC_DISPATCH(ComputeVerticesT)(params, out);
+}
+
+uint32_t computeDepthsSimd(const VertexParams& params, float* z, float* weight) {
+  return HWY_DYNAMIC_DISPATCH(ComputeDepthsT)(params, z, weight);
 }
 
 }  // namespace fovea::pipeline::map

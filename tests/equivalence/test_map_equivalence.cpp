@@ -67,6 +67,17 @@ Result2 expectSameVertices(const hal::RgbdFrame& frame, const DepthRange& range,
   n.ref = computeVerticesRef(params, ref.view());
   n.simd = computeVerticesSimd(params, simd.view());
   EXPECT_EQ(n.ref, n.simd) << what;
+  // The depths made alone before the render, by either kernel, are the
+  // reference's z and weight, and the count is the pixels with a vertex.
+  const auto with_vertex = static_cast<uint32_t>(
+      std::count_if(ref.m[2].begin(), ref.m[2].end(), [](float d) { return d != 0.0f; }));
+  for (const KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
+    std::vector<float> z(pixels, std::bit_cast<float>(Maps::kUnwritten)), weight = z;
+    EXPECT_EQ(computeDepths(params, z.data(), weight.data(), kernels), with_vertex) << what;
+    const char* name = kernels == KernelSet::kRef ? "computeDepthsRef" : "computeDepthsSimd";
+    EXPECT_EQ(0, std::memcmp(z.data(), ref.m[2].data(), pixels * sizeof(float))) << what << ": " << name << "'s z";
+    EXPECT_EQ(0, std::memcmp(weight.data(), ref.m[7].data(), pixels * sizeof(float))) << what << ": " << name << "'s weight";
+  }
   int reported = 0;
   for (int k = 0; k < 8; ++k) {
     for (std::size_t i = 0; i < pixels; ++i) {
