@@ -303,17 +303,16 @@ void bmMapVertices(benchmark::State& state) {
   Fixture& f = Fixture::get();
   const hal::RgbdFrame& frame = f.input.frame;
   const std::size_t pixels = frame.pixelCount();
-  std::vector<float> maps[8];
+  std::vector<float> maps[6];
   for (auto& m : maps) m.resize(pixels);
-  const pipeline::map::PixelMaps out{maps[0].data(), maps[1].data(), maps[2].data(), maps[3].data(),
-                                     maps[4].data(), maps[5].data(), maps[6].data(), maps[7].data()};
-  std::vector<float> weight_u(static_cast<std::size_t>(frame.width())), weight_v(static_cast<std::size_t>(frame.height()));
+  const pipeline::map::PixelMaps out{maps[0].data(), maps[1].data(), maps[2].data(),
+                                     maps[3].data(), maps[4].data(), maps[5].data()};
+  pipeline::map::VertexTables tables(frame.width(), frame.height());
   const pipeline::RawDepthRange raw = pipeline::rawDepthRange(pipeline::map::SurfelMapConfig{}.depth, frame.depth_scale_m);
   uint32_t valid = 0;
   for (auto _ : state) {
     // As fuse() does it: the parameters (and the weight's exp() per column and row) every frame.
-    const pipeline::map::VertexParams params =
-        pipeline::map::prepareVertices(frame, raw, weight_u.data(), weight_v.data());
+    const pipeline::map::VertexParams params = pipeline::map::prepareVertices(frame, raw, tables);
     valid = pipeline::map::computeVertices(params, out, kKernels);
     benchmark::DoNotOptimize(valid);
     benchmark::ClobberMemory();

@@ -7,8 +7,17 @@
 
 namespace fovea::pipeline::map {
 
-VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, float* weight_u,
-                             float* weight_v) {
+VertexTables::VertexTables(int max_width, int max_height)
+    : weight_u(static_cast<std::size_t>(max_width)),
+      weight_v(static_cast<std::size_t>(max_height)),
+      ray_u(static_cast<std::size_t>(max_width) + kNormalReach + kRaySlack, 0.0f),
+      ray_v(static_cast<std::size_t>(max_height)) {}
+
+std::size_t VertexTables::memoryBytes() const {
+  return (weight_u.capacity() + weight_v.capacity() + ray_u.capacity() + ray_v.capacity()) * sizeof(float);
+}
+
+VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, VertexTables& tables) {
   const hal::CameraIntrinsics& k = frame.intrinsics;
   VertexParams p;
   p.depth = frame.depth();
@@ -29,10 +38,19 @@ VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& r
   const float half_diagonal = std::sqrt(p.cx * p.cx + p.cy * p.cy);
   const float two_sigma_sq = 2.0f * 0.6f * 0.6f;
   auto factor = [&](float d) { return std::exp(-(d * d) / (half_diagonal * half_diagonal) / two_sigma_sq); };
-  for (int u = 0; u < p.width; ++u) weight_u[u] = factor(static_cast<float>(u) - p.cx);
-  for (int v = 0; v < p.height; ++v) weight_v[v] = factor(static_cast<float>(v) - p.cy);
-  p.weight_u = weight_u;
-  p.weight_v = weight_v;
+  float* const ray_u = tables.ray_u.data() + kNormalReach;
+  for (int u = 0; u < p.width; ++u) {
+    tables.weight_u[u] = factor(static_cast<float>(u) - p.cx);
+    ray_u[u] = (static_cast<float>(u) - p.cx) / p.fx;
+  }
+  for (int v = 0; v < p.height; ++v) {
+    tables.weight_v[v] = factor(static_cast<float>(v) - p.cy);
+    tables.ray_v[v] = (static_cast<float>(v) - p.cy) / p.fy;
+  }
+  p.weight_u = tables.weight_u.data();
+  p.weight_v = tables.weight_v.data();
+  p.ray_u = ray_u;
+  p.ray_v = tables.ray_v.data();
   return p;
 }
 
@@ -50,22 +68,8 @@ uint32_t computeDepthsRef(const VertexParams& p, float* z, float* weight) {
   return measured;
 }
 
-uint32_t computeVerticesRef(const VertexParams& p, const PixelMaps& out) {
+uint32_t computeNormalsRef(const VertexParams& p, const PixelMaps& out) {
   const int w = p.width, h = p.height;
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const std::size_t i = static_cast<std::size_t>(v) * w + u;
-      const int32_t d = p.depth[i];
-      if (d < p.raw_min || d > p.raw_max) {
-        out.x[i] = out.y[i] = out.z[i] = 0.0f;
-        continue;
-      }
-      const float z = static_cast<float>(d) * p.scale;
-      out.x[i] = (static_cast<float>(u) - p.cx) / p.fx * z;
-      out.y[i] = (static_cast<float>(v) - p.cy) / p.fy * z;
-      out.z[i] = z;
-    }
-  }
   // Normals from central differences over kNormalReach pixels each side; none near
   // the border, next to a missing measurement or across a depth step (more than 5 %
   // of the depth a pixel: a surface seen at up to about 87 degrees keeps its normal,
@@ -78,11 +82,7 @@ uint32_t computeVerticesRef(const VertexParams& p, const PixelMaps& out) {
       out.nx[i] = out.ny[i] = out.nz[i] = 0.0f;  // none: the pixel can still carve, not merge or add
       out.radius[i] = 0.0f;
       const float z = out.z[i];
-      if (z == 0.0f) {
-        out.weight[i] = 0.0f;
-        continue;
-      }
-      out.weight[i] = p.weight_u[u] * p.weight_v[v];
+      if (z == 0.0f) continue;
       if (u < kNormalReach || v < kNormalReach || u >= w - kNormalReach || v >= h - kNormalReach) continue;
       const std::size_t l = i - kNormalReach, r = i + kNormalReach, up = i - row, down = i + row;
       const float step = (0.05f * kNormalReach) * z;
@@ -91,13 +91,18 @@ uint32_t computeVerticesRef(const VertexParams& p, const PixelMaps& out) {
           std::abs(out.z[down] - z) > step) {
         continue;
       }
-      const float ax = out.x[r] - out.x[l], ay = out.y[r] - out.y[l], az = out.z[r] - out.z[l];
-      const float bx = out.x[down] - out.x[up], by = out.y[down] - out.y[up], bz = out.z[down] - out.z[up];
+      // The neighbours' vertices from their depths and rays.
+      const float ray_l = p.ray_u[u - kNormalReach], ray_r = p.ray_u[u + kNormalReach], ray_c = p.ray_u[u];
+      const float ray_up = p.ray_v[v - kNormalReach], ray_down = p.ray_v[v + kNormalReach], ray_v = p.ray_v[v];
+      const float ax = ray_r * out.z[r] - ray_l * out.z[l], ay = ray_v * out.z[r] - ray_v * out.z[l];
+      const float az = out.z[r] - out.z[l];
+      const float bx = ray_c * out.z[down] - ray_c * out.z[up], by = ray_down * out.z[down] - ray_up * out.z[up];
+      const float bz = out.z[down] - out.z[up];
       float nx = ay * bz - az * by, ny = az * bx - ax * bz, nz = ax * by - ay * bx;
       const float norm = std::sqrt((nx * nx + ny * ny) + nz * nz);
       if (!(norm > 0.0f)) continue;
       nx = nx / norm, ny = ny / norm, nz = nz / norm;
-      const float x = out.x[i], y = out.y[i];
+      const float x = ray_c * z, y = ray_v * z;
       const float length = std::sqrt((x * x + y * y) + z * z);
       const float rx = x / length, ry = y / length, rz = z / length;
       float facing = -((nx * rx + ny * ry) + nz * rz);

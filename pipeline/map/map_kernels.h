@@ -1,16 +1,20 @@
 // The surfel map's per-pixel work (SurfelMap::fuse() step 2): each depth pixel's
-// camera-frame vertex, normal, radius and weight, written as structure-of-arrays
-// maps. Two kernels, one output, BIT FOR BIT (docs/kernels.md, docs/map.md):
-//   computeVerticesRef  the scalar reference, the specification (map_kernels.cpp);
-//   computeVerticesSimd Highway, dynamic dispatch (vertices_simd.cpp);
-// and computeDepthsRef/Simd, the z and weight maps alone.
+// camera-frame depth, normal, radius and weight, written as structure-of-arrays
+// maps, in two parts: computeDepths (z and weight, which the index map's render
+// reads) and computeNormals (normals and radii, made after the render, in its
+// scratch). Each has two kernels, one output, BIT FOR BIT (docs/kernels.md,
+// docs/map.md): *Ref, the scalar reference, the specification (map_kernels.cpp),
+// and *Simd, Highway, dynamic dispatch (vertices_simd.cpp); computeVertices* is
+// both parts in turn.
 //
 // The arithmetic is defined so that SIMD can reproduce it (only Add, Sub, Mul, Div,
 // Sqrt, comparisons and selects, in the order written below, never a fused
 // multiply-add), and the one transcendental, the weight's exp(), is taken per
 // column and per row by prepareVertices(), not per pixel:
-//   vertex:  z = float(raw) * scale; x = (float(u) - cx) / fx * z; y = (float(v) - cy) / fy * z;
-//            zero (z = 0: no measurement) when raw is outside [raw_min, raw_max].
+//   vertex:  z = float(raw) * scale, zero (no measurement) when raw is outside
+//            [raw_min, raw_max]; x = ray_u[u] * z and y = ray_v[v] * z, with
+//            ray_u[u] = (float(u) - cx) / fx and ray_v[v] = (float(v) - cy) / fy (no
+//            map of their own: made from z where needed, the same bits every time).
 //   weight:  weight_u[u] * weight_v[v] for a pixel with a vertex, else 0, where
 //            weight_u[u] = exp(-(du * du) / (half_diagonal * half_diagonal) / (2 * 0.6^2)),
 //            du = float(u) - cx (weight_v likewise with dv = float(v) - cy) and
@@ -27,11 +31,13 @@
 //   radius:  for a pixel with a normal, clamp(sqrt(2) * z / f / max(facing, 0.2),
 //            kMinRadiusM, kMaxRadiusM) with f = 0.5 * (fx + fy) (left to right; max and
 //            clamp as std::max and std::clamp); 0 without a normal.
-// Both return the number of pixels with a normal.
+// computeDepths* return the pixels with a vertex, computeNormals* and
+// computeVertices* the pixels with a normal.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "core/kernel_set.h"
 #include "hal/frame.h"
@@ -54,14 +60,24 @@ inline int roundHalfAwayFromZero(float x) {
 
 // Per-pixel maps, each of at least width x height floats.
 struct PixelMaps {
-  float* x = nullptr;  // camera-frame vertex [m]; z = 0: no valid measurement
-  float* y = nullptr;
-  float* z = nullptr;
+  float* z = nullptr;   // camera-frame depth [m]; 0: no valid measurement
   float* nx = nullptr;  // unit normal towards the camera; zero: none (the pixel can carve, not merge or add)
   float* ny = nullptr;
   float* nz = nullptr;
   float* radius = nullptr;  // [m]; 0 without a normal
   float* weight = nullptr;  // Keller's weight in (0, 1]; 0 without a vertex
+};
+
+// A frame's per-column and per-row factors, for frames up to the largest size
+// (allocated here, once): the weight's two factors and the rays' slopes. ray_u
+// has kNormalReach columns before the frame's first and kRaySlack after its
+// last, which the SIMD kernel loads and masks.
+struct VertexTables {
+  static constexpr std::size_t kRaySlack = 64 + 2;  // the widest vector's lanes and kNormalReach
+  VertexTables() = default;
+  VertexTables(int max_width, int max_height);
+  std::vector<float> weight_u, weight_v, ray_u, ray_v;
+  std::size_t memoryBytes() const;
 };
 
 struct VertexParams {
@@ -74,26 +90,37 @@ struct VertexParams {
   float f = 0.0f;                     // 0.5 * (fx + fy)
   const float* weight_u = nullptr;    // width entries
   const float* weight_v = nullptr;    // height entries
+  const float* ray_u = nullptr;       // width entries, readable from [-kNormalReach] to [width + kRaySlack)
+  const float* ray_v = nullptr;       // height entries
 };
 
 // The parameters of a frame that SurfelMap::checkFrame() accepted (at least 3x3,
-// finite positive fx, fy and depth scale, finite cx, cy), with the weight's factors
-// written to weight_u (width entries) and weight_v (height entries).
-VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, float* weight_u,
-                             float* weight_v);
+// finite positive fx, fy and depth scale, finite cx, cy, at most the tables'
+// size), with the tables written for it.
+VertexParams prepareVertices(const hal::RgbdFrame& frame, const RawDepthRange& raw, VertexTables& tables);
 
-// The z and weight maps of computeVerticesRef() alone, the same bits: what the
-// index map's render reads before the other maps are made (SurfelMap::fuse()).
-// The scalar reference and its Highway kernel; both return the number of
-// pixels with a vertex.
 uint32_t computeDepthsRef(const VertexParams& params, float* z, float* weight);
 uint32_t computeDepthsSimd(const VertexParams& params, float* z, float* weight);
 inline uint32_t computeDepths(const VertexParams& params, float* z, float* weight, KernelSet kernels) {
   return kernels == KernelSet::kSimd ? computeDepthsSimd(params, z, weight) : computeDepthsRef(params, z, weight);
 }
 
-uint32_t computeVerticesRef(const VertexParams& params, const PixelMaps& out);
-uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out);
+// From out.z (computeDepths'): out.nx, ny, nz and radius; out.weight is not touched.
+uint32_t computeNormalsRef(const VertexParams& params, const PixelMaps& out);
+uint32_t computeNormalsSimd(const VertexParams& params, const PixelMaps& out);
+inline uint32_t computeNormals(const VertexParams& params, const PixelMaps& out, KernelSet kernels) {
+  return kernels == KernelSet::kSimd ? computeNormalsSimd(params, out) : computeNormalsRef(params, out);
+}
+
+// Both parts in turn (the benches and the equivalence tests).
+inline uint32_t computeVerticesRef(const VertexParams& params, const PixelMaps& out) {
+  (void)computeDepthsRef(params, out.z, out.weight);
+  return computeNormalsRef(params, out);
+}
+inline uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out) {
+  (void)computeDepthsSimd(params, out.z, out.weight);
+  return computeNormalsSimd(params, out);
+}
 inline uint32_t computeVertices(const VertexParams& params, const PixelMaps& out, KernelSet kernels) {
   return kernels == KernelSet::kSimd ? computeVerticesSimd(params, out) : computeVerticesRef(params, out);
 }

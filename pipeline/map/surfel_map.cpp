@@ -77,8 +77,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   pixel_capacity_ = pixels;
   vertex_z_.resize(pixels);
   weight_.resize(pixels);
-  weight_u_.resize(static_cast<std::size_t>(config.max_width));
-  weight_v_.resize(static_cast<std::size_t>(config.max_height));
+  tables_ = VertexTables(config.max_width, config.max_height);
   index_map_ = IndexMap(config.max_width, config.max_height, kLateMaps * pixels);
   explained_.resize(pixels);
   normal_cos_.resize(kNormalCosBuckets);
@@ -99,8 +98,7 @@ SurfelMapMemory SurfelMap::memoryParts() const {
   m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.memoryBytes() +
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
              (brick_visible_.capacity() + brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
-  m.pixels = (vertex_z_.capacity() + weight_.capacity() + weight_u_.capacity() + weight_v_.capacity() +
-              normal_cos_.capacity()) * sizeof(float) +
+  m.pixels = (vertex_z_.capacity() + weight_.capacity() + normal_cos_.capacity()) * sizeof(float) + tables_.memoryBytes() +
              index_map_.memoryBytes() + explained_.capacity();
   m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
   return m;
@@ -190,9 +188,8 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
   fused_height_ = frame.height();
   fused_stamp_ns_ = frame.stamp_ns;
   std::fill(explained_.begin(), explained_.begin() + static_cast<std::ptrdiff_t>(frame.pixelCount()), uint8_t{0});
-  // The depths first, for the render; the rest of step 2's maps after it, in
-  // the index map's scratch (the late maps). A moving pixel weighs nothing in
-  // either.
+  // The depths and weights first, for the render (a moving pixel weighs
+  // nothing); the normals and radii after it, in the index map's scratch.
   int64_t t0 = monotonicNs();
   const uint32_t measured = computeDepths(frame);
   if (moving != nullptr) leaveOutMoving(frame.pixelCount(), moving, stats);
@@ -202,8 +199,7 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
     renderIndexMap(frame, stats);
     t0 = monotonicNs();
     stats.index_map_ns = t0 - t1;
-    computeVertices(frame, stats);
-    if (moving != nullptr) leaveOutMoving(frame.pixelCount(), moving, stats);
+    computeNormals(stats);
     t1 = monotonicNs();
     stats.vertices_ns += t1 - t0;
     t0 = t1;
@@ -226,22 +222,17 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
 }
 
 PixelMaps SurfelMap::pixelMaps() {
-  return {lateMap(kVertexX), lateMap(kVertexY), vertex_z_.data(), lateMap(kNormalX),
-          lateMap(kNormalY), lateMap(kNormalZ), lateMap(kRadius), weight_.data()};
+  return {vertex_z_.data(), lateMap(kNormalX), lateMap(kNormalY), lateMap(kNormalZ), lateMap(kRadius), weight_.data()};
 }
 
 uint32_t SurfelMap::computeDepths(const hal::RgbdFrame& frame) {
-  const VertexParams params =
-      prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
-  return pipeline::map::computeDepths(params, vertex_z_.data(), weight_.data(), config_.kernels);
+  vertex_params_ = prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), tables_);
+  return pipeline::map::computeDepths(vertex_params_, vertex_z_.data(), weight_.data(), config_.kernels);
 }
 
-// After computeDepths() and the render: the same depths and weights again
-// (the same bits), with the late maps.
-void SurfelMap::computeVertices(const hal::RgbdFrame& frame, FuseStats& stats) {
-  const VertexParams params =
-      prepareVertices(frame, rawDepthRange(config_.depth, frame.depth_scale_m), weight_u_.data(), weight_v_.data());
-  stats.pixels_valid = pipeline::map::computeVertices(params, pixelMaps(), config_.kernels);
+// After the render, whose planes they take: from computeDepths()'s depths.
+void SurfelMap::computeNormals(FuseStats& stats) {
+  stats.pixels_valid = pipeline::map::computeNormals(vertex_params_, pixelMaps(), config_.kernels);
 }
 
 // A moving pixel keeps its vertex, so that appendUnexplained() sends it and the
@@ -404,12 +395,13 @@ float SurfelMap::normalCosTolerance(float z) const {
 // vector: the weighted sum of unit normals scaled by the length and the
 // confidences' sum points the same way, and the encoding keeps only the way
 // (it divides by the L1 norm), so the merge needs no division for it.
-void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
+void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& vertex, const Eigen::Matrix3f& R_wc_f,
+                          const Eigen::Vector3f& n_world,
                           const Eigen::Vector3f& surfel_direction, float direction_norm, float weight,
                           const uint8_t* rgb) {
   // Relative to the surfel's brick: its origin is in camera coordinates
   // already (cullBricks, from double), a few metres from the vertex.
-  const Eigen::Vector3f rel = R_wc_f * (vertexAt(i).cast<float>() - brick_cam_[s.brick]);
+  const Eigen::Vector3f rel = R_wc_f * (vertex - brick_cam_[s.brick]);
   const float c = decodeConfidence(s.confidence);
   const float sum = c + weight;
   const float inv_sum = 1.0f / sum;
@@ -446,63 +438,66 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   std::size_t to_add = 0;
   const std::size_t pixels = frame.pixelCount();
   constexpr std::size_t kPrefetchPixels = 16;
-  for (std::size_t i = 0; i < static_cast<std::size_t>(w) * static_cast<std::size_t>(h); ++i) {
-    if (i % kYieldEvery == 0) yieldGate();
-    // The surfel a few pixels on: the index map names surfels in no order the
-    // cache can guess (a prefetch changes no result).
-    if (i + kPrefetchPixels < pixels) {
-      const uint32_t ahead = index_map_.slot(i + kPrefetchPixels);
-      if (ahead != kNone) __builtin_prefetch(&surfels_[ahead]);
-    }
-    const float weight = weight_[i];
-    if (weight == 0.0f) continue;
-    const float z = vertex_z_[i];
-    const float tolerance = sigmas * depthSigma(z);
-    const uint32_t slot = index_map_.slot(i);
-    const Eigen::Vector3f normal = normalAt(i);
-    const bool has_normal = normal.squaredNorm() > 0.0f;
-    if (slot != kNone) {
-      Surfel& s = surfels_[slot];
-      if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
-      const float seen = index_map_.depth(i);
-      if (seen < z - tolerance) {
-        // The camera sees through the surfel: free space where it is.
-        if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
-          detachSurfel(slot);
-          links_.setNext(slot, carved_head);
-          carved_head = slot;
-          if (carved_tail == kNone) carved_tail = slot;
-          ++carved_away;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+      if (i % kYieldEvery == 0) yieldGate();
+      // The surfel a few pixels on: the index map names surfels in no order the
+      // cache can guess (a prefetch changes no result).
+      if (i + kPrefetchPixels < pixels) {
+        const uint32_t ahead = index_map_.slot(i + kPrefetchPixels);
+        if (ahead != kNone) __builtin_prefetch(&surfels_[ahead]);
+      }
+      const float weight = weight_[i];
+      if (weight == 0.0f) continue;
+      const float z = vertex_z_[i];
+      const float tolerance = sigmas * depthSigma(z);
+      const uint32_t slot = index_map_.slot(i);
+      const Eigen::Vector3f normal = normalAt(i);
+      const bool has_normal = normal.squaredNorm() > 0.0f;
+      if (slot != kNone) {
+        Surfel& s = surfels_[slot];
+        if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
+        const float seen = index_map_.depth(i);
+        if (seen < z - tolerance) {
+          // The camera sees through the surfel: free space where it is.
+          if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
+            detachSurfel(slot);
+            links_.setNext(slot, carved_head);
+            carved_head = slot;
+            if (carved_tail == kNone) carved_tail = slot;
+            ++carved_away;
+          }
+          continue;
         }
-        continue;
+        // A settled surfel at the measured depth explains the pixel, whether or
+        // not the measurement merges: an edge pixel has no normal, and a far
+        // pixel's normal is too noisy for the tolerance (on the mock living
+        // room these were 35 000 of the 40 000 pixels a static view left
+        // unexplained, and went to the operator every frame). A stable surfel
+        // seen at its depth settles once old enough.
+        const bool at_depth = seen <= z + tolerance;
+        if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
+        if (at_depth && (s.flags & kSurfelSettled)) explained_[i] = 1;
+        if (!has_normal) continue;
+        if (at_depth) {
+          // The angle test on the surfel's direction as decoded: (d / |d|) . n < cos
+          // is d . n < cos |d|, a square root and no division.
+          const Eigen::Vector3f n_world = R_wc_f * normal;
+          const Eigen::Vector3f direction = surfelDirection(s);
+          const float direction_norm = direction.norm();
+          if (direction.dot(n_world) < normalCosTolerance(z) * direction_norm) continue;  // another orientation
+          mergeInto(s, i, vertexAt(i, u, v), R_wc_f, n_world, direction, direction_norm, weight,
+                    frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
+          ++stats.merged;
+          continue;
+        }
+        // The measurement lies in front of the surfel: a surface the map does not have.
       }
-      // A settled surfel at the measured depth explains the pixel, whether or
-      // not the measurement merges: an edge pixel has no normal, and a far
-      // pixel's normal is too noisy for the tolerance (on the mock living
-      // room these were 35 000 of the 40 000 pixels a static view left
-      // unexplained, and went to the operator every frame). A stable surfel
-      // seen at its depth settles once old enough.
-      const bool at_depth = seen <= z + tolerance;
-      if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
-      if (at_depth && (s.flags & kSurfelSettled)) explained_[i] = 1;
       if (!has_normal) continue;
-      if (at_depth) {
-        // The angle test on the surfel's direction as decoded: (d / |d|) . n < cos
-        // is d . n < cos |d|, a square root and no division.
-        const Eigen::Vector3f n_world = R_wc_f * normal;
-        const Eigen::Vector3f direction = surfelDirection(s);
-        const float direction_norm = direction.norm();
-        if (direction.dot(n_world) < normalCosTolerance(z) * direction_norm) continue;  // another orientation
-        mergeInto(s, i, R_wc_f, n_world, direction, direction_norm, weight,
-                  frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
-        ++stats.merged;
-        continue;
-      }
-      // The measurement lies in front of the surfel: a surface the map does not have.
+      weight_[i] = -weight;
+      ++to_add;
     }
-    if (!has_normal) continue;
-    weight_[i] = -weight;
-    ++to_add;
   }
   if (carved_head != kNone) {
     links_.setNext(carved_tail, free_head_);
@@ -516,18 +511,21 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
   const Eigen::Matrix3d& R_wc = frame.T_world_cam.R_world_cam;
   const Eigen::Vector3d& t = frame.T_world_cam.t_world_cam;
   const Eigen::Matrix3f R_wc_f = R_wc.cast<float>();
-  const std::size_t pixels = frame.pixelCount();
-  for (std::size_t i = 0; i < pixels; ++i) {
-    if (i % kYieldEvery == 0) yieldGate();
-    if (!(weight_[i] < 0.0f)) continue;
-    const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
-    const Eigen::Vector3d p_world = R_wc * vertexAt(i) + t;
-    const Added added = addSurfel(p_world, R_wc_f * normalAt(i), lateMap(kRadius)[i], -weight_[i], rgb);
-    if (added == Added::kYes) {
-      ++stats.added;
-    } else {
-      ++stats.dropped_full;
-      if (added == Added::kNoBrick) ++stats.dropped_no_brick;
+  const int w = frame.width(), h = frame.height();
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+      if (i % kYieldEvery == 0) yieldGate();
+      if (!(weight_[i] < 0.0f)) continue;
+      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+      const Eigen::Vector3d p_world = R_wc * vertexAt(i, u, v).cast<double>() + t;
+      const Added added = addSurfel(p_world, R_wc_f * normalAt(i), lateMap(kRadius)[i], -weight_[i], rgb);
+      if (added == Added::kYes) {
+        ++stats.added;
+      } else {
+        ++stats.dropped_full;
+        if (added == Added::kNoBrick) ++stats.dropped_no_brick;
+      }
     }
   }
 }
@@ -541,14 +539,17 @@ std::size_t SurfelMap::appendUnexplained(const hal::RgbdFrame& frame, PointCloud
   // Relative to the cloud's origin in double, then float (the map may be far from the world origin).
   const Eigen::Vector3f t = (fused_pose_.t_world_cam - out.origin_m).cast<float>();
   const Eigen::Matrix3f R_f = R.cast<float>();
-  const std::size_t pixels = frame.pixelCount();
+  const int w = frame.width(), h = frame.height();
   std::size_t appended = 0;
-  for (std::size_t i = 0; i < pixels; ++i) {
-    if (explained_[i] || vertex_z_[i] == 0.0f) continue;
-    const Eigen::Vector3f p = R_f * vertexAt(i).cast<float>() + t;
-    const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
-    if (!out.push(p.x(), p.y(), p.z(), packRgb(rgb[0], rgb[1], rgb[2]))) break;
-    ++appended;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+      if (explained_[i] || vertex_z_[i] == 0.0f) continue;
+      const Eigen::Vector3f p = R_f * vertexAt(i, u, v) + t;
+      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+      if (!out.push(p.x(), p.y(), p.z(), packRgb(rgb[0], rgb[1], rgb[2]))) return appended;
+      ++appended;
+    }
   }
   return appended;
 }

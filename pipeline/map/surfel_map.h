@@ -228,12 +228,15 @@ class SurfelMap {
   // The brick holding world position p (inserted if new); -1 when the table is full.
   int findOrAddBrick(const Eigen::Vector3d& p_world);
   FuseOutcome checkFrame(const hal::RgbdFrame& frame);
-  uint32_t computeDepths(const hal::RgbdFrame& frame);  // step 2's depth and weight maps
-  void computeVertices(const hal::RgbdFrame& frame, FuseStats& stats);  // all of step 2's maps
+  uint32_t computeDepths(const hal::RgbdFrame& frame);  // step 2's depths and weights, and vertex_params_
+  void computeNormals(FuseStats& stats);                 // ... and its normals and radii
   void leaveOutMoving(std::size_t pixels, const uint8_t* moving, FuseStats& stats);
   PixelMaps pixelMaps();  // step 2's output: pointers into the per-pixel scratch
-  Eigen::Vector3d vertexAt(std::size_t pixel) const {
-    return {lateMap(kVertexX)[pixel], lateMap(kVertexY)[pixel], vertex_z_[pixel]};
+  // Pixel (u, v) = i of the frame prepareVertices() last saw: its vertex from
+  // the depth and the rays, the same bits as computeNormals() makes it.
+  Eigen::Vector3f vertexAt(std::size_t i, int u, int v) const {
+    const float z = vertex_z_[i];
+    return {tables_.ray_u[kNormalReach + u] * z, tables_.ray_v[v] * z, z};
   }
   Eigen::Vector3f normalAt(std::size_t pixel) const {
     return {lateMap(kNormalX)[pixel], lateMap(kNormalY)[pixel], lateMap(kNormalZ)[pixel]};
@@ -251,8 +254,9 @@ class SurfelMap {
   // associate()'s normal test (its tolerance by depth, for this focal length) and merge.
   void updateNormalTolerance(float f_px);
   float normalCosTolerance(float z) const;
-  void mergeInto(Surfel& s, std::size_t i, const Eigen::Matrix3f& R_wc_f, const Eigen::Vector3f& n_world,
-                 const Eigen::Vector3f& surfel_direction, float direction_norm, float weight, const uint8_t* rgb);
+  void mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& vertex, const Eigen::Matrix3f& R_wc_f,
+                 const Eigen::Vector3f& n_world, const Eigen::Vector3f& surfel_direction, float direction_norm,
+                 float weight, const uint8_t* rgb);
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   enum class Added { kYes, kNoSurfel, kNoBrick };
   Added addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
@@ -295,16 +299,18 @@ class SurfelMap {
   // Per pixel, sized for max_width x max_height: step 2's maps (PixelMaps,
   // map_kernels.h), structure of arrays; weight is negated by associate() for a
   // pixel to add. The depth and the weight, which the index map's render reads,
-  // have maps of their own; the rest (kLateMaps) are made after the render, in
-  // the index map's scratch (its planes, free once gathered): 3.9 MiB less at
-  // 640x480 than a map each.
-  enum LateMap : std::size_t { kVertexX, kVertexY, kNormalX, kNormalY, kNormalZ, kRadius, kLateMaps };
+  // have maps of their own; the normals and radii (kLateMaps) are made after
+  // the render, in the index map's scratch (its planes, free once gathered); a
+  // vertex's x and y come from its depth and ray (vertexAt()). 14 bytes a
+  // pixel where a map each took 32.
+  enum LateMap : std::size_t { kNormalX, kNormalY, kNormalZ, kRadius, kLateMaps };
   float* lateMap(LateMap m) { return index_map_.scratch() + m * pixel_capacity_; }
   const float* lateMap(LateMap m) const { return index_map_.scratch() + m * pixel_capacity_; }
   std::size_t pixel_capacity_ = 0;        // max_width x max_height
   std::vector<float> vertex_z_;           // camera frame; 0: no valid measurement
   std::vector<float> weight_;
-  std::vector<float> weight_u_, weight_v_;  // the weight's factors by column and by row
+  VertexTables tables_;                   // the weight's factors and the rays, by column and by row
+  VertexParams vertex_params_;            // the frame being fused's (computeDepths())
   IndexMap index_map_;                    // step 3's, the tracker's model; its scratch: the late maps
   std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth

@@ -1,4 +1,4 @@
-// computeVerticesSimd and computeDepthsSimd (map_kernels.h), dynamically dispatched: foreach_target.h
+// computeDepthsSimd and computeNormalsSimd (map_kernels.h), dynamically dispatched: foreach_target.h
 // re-includes this file once per Highway target, compiling vertices_simd-inl.h
 // for each; HWY_EXPORT builds the table and HWY_DYNAMIC_DISPATCH calls the best
 // supported target (pipeline::forceSimdTarget() restricts it, as for the other kernels).
@@ -13,11 +13,11 @@
 
 namespace fovea::pipeline::map {
 
-HWY_EXPORT(ComputeVerticesT);
 HWY_EXPORT(ComputeDepthsT);
+HWY_EXPORT(ComputeNormalsT);
 
-uint32_t computeVerticesSimd(const VertexParams& params, const PixelMaps& out) {
-  return HWY_DYNAMIC_DISPATCH(ComputeVerticesT)(params, out);
+uint32_t computeNormalsSimd(const VertexParams& params, const PixelMaps& out) {
+  return HWY_DYNAMIC_DISPATCH(ComputeNormalsT)(params, out);
 }
 
 uint32_t computeDepthsSimd(const VertexParams& params, float* z, float* weight) {

@@ -38,19 +38,18 @@ namespace {
 using test::TargetTest;
 using test::simdTargetsHere;
 
-// The eight maps of one kernel's run, pre-filled with a marker that no kernel
+// The six maps of one kernel's run, pre-filled with a marker that no kernel
 // writes, so a pixel left unwritten shows.
 struct Maps {
   static constexpr uint32_t kUnwritten = 0x7fa5a5a5u;  // a NaN with a payload
-  std::vector<float> m[8];
+  std::vector<float> m[6];
   explicit Maps(std::size_t pixels) {
     for (auto& v : m) v.assign(pixels, std::bit_cast<float>(kUnwritten));
   }
-  PixelMaps view() {
-    return {m[0].data(), m[1].data(), m[2].data(), m[3].data(), m[4].data(), m[5].data(), m[6].data(), m[7].data()};
-  }
+  PixelMaps view() { return {m[0].data(), m[1].data(), m[2].data(), m[3].data(), m[4].data(), m[5].data()}; }
 };
-constexpr const char* kMapNames[8] = {"x", "y", "z", "nx", "ny", "nz", "radius", "weight"};
+constexpr int kMaps = 6;
+constexpr const char* kMapNames[kMaps] = {"z", "nx", "ny", "nz", "radius", "weight"};
 
 struct Result2 {
   uint32_t ref = 0, simd = 0;
@@ -60,26 +59,27 @@ struct Result2 {
 // count; returns the counts.
 Result2 expectSameVertices(const hal::RgbdFrame& frame, const DepthRange& range, const std::string& what) {
   const std::size_t pixels = frame.pixelCount();
-  std::vector<float> wu(static_cast<std::size_t>(frame.width())), wv(static_cast<std::size_t>(frame.height()));
-  const VertexParams params = prepareVertices(frame, rawDepthRange(range, frame.depth_scale_m), wu.data(), wv.data());
+  VertexTables tables(frame.width(), frame.height());
+  const VertexParams params = prepareVertices(frame, rawDepthRange(range, frame.depth_scale_m), tables);
   Maps ref(pixels), simd(pixels);
   Result2 n;
   n.ref = computeVerticesRef(params, ref.view());
   n.simd = computeVerticesSimd(params, simd.view());
   EXPECT_EQ(n.ref, n.simd) << what;
-  // The depths made alone before the render, by either kernel, are the
-  // reference's z and weight, and the count is the pixels with a vertex.
+  // The depths' count is the pixels with a vertex, by either kernel; the
+  // normals leave the weights as they were (a moving pixel's 0 stays 0).
   const auto with_vertex = static_cast<uint32_t>(
-      std::count_if(ref.m[2].begin(), ref.m[2].end(), [](float d) { return d != 0.0f; }));
+      std::count_if(ref.m[0].begin(), ref.m[0].end(), [](float d) { return d != 0.0f; }));
   for (const KernelSet kernels : {KernelSet::kRef, KernelSet::kSimd}) {
-    std::vector<float> z(pixels, std::bit_cast<float>(Maps::kUnwritten)), weight = z;
-    EXPECT_EQ(computeDepths(params, z.data(), weight.data(), kernels), with_vertex) << what;
-    const char* name = kernels == KernelSet::kRef ? "computeDepthsRef" : "computeDepthsSimd";
-    EXPECT_EQ(0, std::memcmp(z.data(), ref.m[2].data(), pixels * sizeof(float))) << what << ": " << name << "'s z";
-    EXPECT_EQ(0, std::memcmp(weight.data(), ref.m[7].data(), pixels * sizeof(float))) << what << ": " << name << "'s weight";
+    Maps again(pixels);
+    EXPECT_EQ(computeDepths(params, again.m[0].data(), again.m[5].data(), kernels), with_vertex) << what;
+    std::fill(again.m[5].begin(), again.m[5].end(), 0.5f);
+    (void)computeNormals(params, again.view(), kernels);
+    EXPECT_TRUE(std::all_of(again.m[5].begin(), again.m[5].end(), [](float x) { return x == 0.5f; }))
+        << what << ": computeNormals wrote a weight";
   }
   int reported = 0;
-  for (int k = 0; k < 8; ++k) {
+  for (int k = 0; k < kMaps; ++k) {
     for (std::size_t i = 0; i < pixels; ++i) {
       const uint32_t a = std::bit_cast<uint32_t>(ref.m[k][i]), b = std::bit_cast<uint32_t>(simd.m[k][i]);
       EXPECT_NE(a, Maps::kUnwritten) << what << ": the reference left " << kMapNames[k] << " of pixel " << i;
@@ -206,12 +206,12 @@ TEST_P(TargetTest, StepsAtTheThreshold) {
           const int nu = u + (which == 0 ? -kNormalReach : which == 1 ? kNormalReach : 0);
           const int nv = 3 + (which == 2 ? -kNormalReach : which == 3 ? kNormalReach : 0);
           frame.depth()[nv * w + nu] = static_cast<uint16_t>(dn);
-          std::vector<float> wu(w), wv(h);
+          VertexTables tables(w, h);
           const DepthRange all{0.0, 1e9};
-          const VertexParams p = prepareVertices(frame, rawDepthRange(all, frame.depth_scale_m), wu.data(), wv.data());
+          const VertexParams p = prepareVertices(frame, rawDepthRange(all, frame.depth_scale_m), tables);
           Maps ref(frame.pixelCount());
           (void)computeVerticesRef(p, ref.view());
-          const bool has_normal = ref.m[6][3 * w + u] > 0.0f;  // a radius
+          const bool has_normal = ref.m[4][3 * w + u] > 0.0f;  // a radius
           (has_normal ? kept : lost) += 1;
           if (delta == 0) {
             EXPECT_TRUE(has_normal) << "a step at the threshold keeps the normal";
