@@ -281,7 +281,6 @@ Status MockCamera::open() {
   for (int y = 0; y < h; ++y) ray_y_[static_cast<std::size_t>(y)] = (y - k.cy) / k.fy;
   work_.resize(pixels);
   if (scene_.isDynamic()) background_.resize(pixels);
-  final_drop_prob_.assign(pixels, 1.0f);
   near_row_min_m_.assign(3 * static_cast<std::size_t>(w), 0.0f);
   const std::size_t shapes = scene_.staticShapeCount();
   if (shapes > 65535) return invalid("scene has more than 65535 static shapes");

@@ -118,7 +118,7 @@ class MockCamera final : public Camera {
   struct CleanImage {
     std::vector<double> depth_m;   // z along the optical axis; 0: the ray hit nothing
     std::vector<float> sigma_m;    // axial noise
-    std::vector<float> drop_prob;  // incidence, material and random dropout
+    std::vector<float> drop_prob;  // incidence, material and random dropout; in work_, with the discontinuity bands (updateDropouts)
     std::vector<uint8_t> rgb;      // shaded colour, 3 bytes per pixel
     void resize(std::size_t pixels);
   };
@@ -171,7 +171,6 @@ class MockCamera final : public Camera {
   std::vector<double> ray_y_;  // (v - cy) / fy per row
   CleanImage background_;
   CleanImage work_;
-  std::vector<float> final_drop_prob_;  // work_.drop_prob plus the discontinuity bands
   std::vector<float> near_row_min_m_;   // scratch of updateDropouts(): three rows
   // Screen-space culling: each static shape's projected bounds, the shapes in
   // order of their first column, those covering the current row and pixel.

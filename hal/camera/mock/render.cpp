@@ -54,19 +54,19 @@ void MockCamera::renderClean(const Pose& pose, double time_s) {
     renderRect(pose, time_s, SceneLayer::kAll, fullRect(), work_);
     updateDropouts(fullRect());
   } else {
-    PixelRect dirty;
+    // Whatever updateDropouts() rewrites starts again from the background: it
+    // turns the clean dropout probabilities into the final ones in place.
+    const PixelRect rect = dynamicRect(pose, time_s);
+    PixelRect redo = fullRect();
     if (!same_pose) {
       renderRect(pose, time_s, SceneLayer::kStatic, fullRect(), background_);
-      dirty = fullRect();
-      copyRect(background_, dirty, work_);
     } else {
-      dirty = dynamic_rect_;
-      copyRect(background_, dirty, work_);
+      redo = grow(unite(dynamic_rect_, rect), kEdgeReachPx);
     }
-    const PixelRect rect = dynamicRect(pose, time_s);
+    copyRect(background_, redo, work_);
     renderRect(pose, time_s, SceneLayer::kDynamic, rect, work_);
     dynamic_rect_ = rect;
-    updateDropouts(grow(unite(dirty, rect), kEdgeReachPx));
+    updateDropouts(redo);
   }
   rendered_pose_ = pose;
   have_render_ = true;
@@ -279,7 +279,8 @@ MockCamera::PixelRect MockCamera::grow(const PixelRect& r, int pixels) const {
 // such an occluder (the projector's shadow side) is lost half of the time.
 // The 3 x 3 minimum is separable: a horizontal pass into near_row_min_m_, then
 // a vertical one. The horizontal pass keeps three rows (row r at r % 3), each
-// filled just before the first output row that needs it.
+// filled just before the first output row that needs it. In place: work_'s
+// probabilities in rect must be the clean ones (rendered or copied since).
 void MockCamera::updateDropouts(const PixelRect& rect) {
   if (rect.empty()) return;
   const int w = options_.width;
@@ -325,7 +326,7 @@ void MockCamera::updateDropouts(const PixelRect& rect) {
           if (zq > 0.0 && zq < occluder_below_m) p = 1.0f - (1.0f - p) * (1.0f - kShadowDropout);
         }
       }
-      final_drop_prob_[i] = p;
+      work_.drop_prob[i] = p;
     }
   }
 }
@@ -364,7 +365,7 @@ void MockCamera::writeFrame(RgbdFrame& slot, uint64_t sequence) const {
       uint16_t units = 0;
       if (inRange(z)) {
         const float u_drop = static_cast<float>(drop_bits[k]) * 0x1.0p-16f;
-        if (u_drop >= final_drop_prob_[i]) units = toDepthUnits(z + work_.sigma_m[i] * gaussian[k]);
+        if (u_drop >= work_.drop_prob[i]) units = toDepthUnits(z + work_.sigma_m[i] * gaussian[k]);
       }
       depth[i] = units;
       const uint64_t rgb_bits = b >> (16 + 24 * k);
