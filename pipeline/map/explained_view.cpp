@@ -16,11 +16,11 @@ Result<ExplainedView> ExplainedView::create(int max_width, int max_height, doubl
   ExplainedView view;
   view.max_pixels_ = static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height);
   view.sigmas_ = static_cast<float>(depth_tolerance_sigmas * std::sqrt(2.0));
-  view.depth_.assign(view.max_pixels_, 0.0f);
+  view.raw_.assign(view.max_pixels_, 0);
   return view;
 }
 
-void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explained, const float* vertex_z) {
+void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explained) {
   const std::size_t pixels = frame.pixelCount();
   if (pixels == 0 || pixels > max_pixels_) {
     width_ = height_ = 0;
@@ -32,7 +32,9 @@ void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explaine
   fx_ = static_cast<float>(k.fx), fy_ = static_cast<float>(k.fy);
   cx_ = static_cast<float>(k.cx), cy_ = static_cast<float>(k.cy);
   pose_ = frame.T_world_cam;
-  for (std::size_t i = 0; i < pixels; ++i) depth_[i] = explained[i] ? vertex_z[i] : 0.0f;
+  scale_ = static_cast<float>(frame.depth_scale_m);
+  const uint16_t* raw = frame.depth();
+  for (std::size_t i = 0; i < pixels; ++i) raw_[i] = explained[i] ? raw[i] : uint16_t{0};
 }
 
 bool ExplainedView::explains(float x, float y, float z) const {
@@ -43,7 +45,7 @@ bool ExplainedView::explains(float x, float y, float z) const {
     return false;
   }
   const auto iu = static_cast<std::size_t>(std::lround(u)), iv = static_cast<std::size_t>(std::lround(v));
-  const float seen = depth_[iv * static_cast<std::size_t>(width_) + iu];
+  const float seen = static_cast<float>(raw_[iv * static_cast<std::size_t>(width_) + iu]) * scale_;
   return seen > 0.0f && std::fabs(z - seen) <= sigmas_ * depthSigma(seen);
 }
 

@@ -14,8 +14,8 @@
 // and a point outside the fused frame's view is never explained (new to the
 // map as far as the operator can tell).
 //
-// Memory: one float a pixel of the largest frame, allocated by create();
-// capture() and removeExplained() allocate nothing.
+// Memory: the raw depth, two bytes a pixel of the largest frame, allocated by
+// create(); capture() and removeExplained() allocate nothing.
 #pragma once
 
 #include <cstddef>
@@ -34,10 +34,12 @@ class ExplainedView {
   static Result<ExplainedView> create(int max_width, int max_height, double depth_tolerance_sigmas);
 
   // Keeps `frame`'s view (its pose and intrinsics) and, per pixel, the
-  // measured depth where `explained` is set (vertex_z: the frame's depth in
-  // metres, 0 where invalid), for the frame the map just fused. A frame larger
-  // than create()'s size empties the view.
-  void capture(const hal::RgbdFrame& frame, const uint8_t* explained, const float* vertex_z);
+  // measured depth where `explained` is set (which the map sets only on a
+  // valid depth), for the frame the map just fused: its raw value, which
+  // makes the depth in metres as the map's vertices do (float(raw) * scale,
+  // map_kernels.h), the same bits. A frame larger than create()'s size
+  // empties the view.
+  void capture(const hal::RgbdFrame& frame, const uint8_t* explained);
 
   // Removes from `cloud` (world positions relative to cloud.origin_m) the
   // points the captured view explains, keeping the others in their order;
@@ -46,7 +48,7 @@ class ExplainedView {
 
   bool empty() const { return width_ == 0; }
   const hal::Pose& pose() const { return pose_; }
-  std::size_t memoryBytes() const { return depth_.capacity() * sizeof(float); }
+  std::size_t memoryBytes() const { return raw_.capacity() * sizeof(uint16_t); }
 
  private:
   // Whether the point p (world, relative to the view's camera: R^T (p - t))
@@ -58,7 +60,8 @@ class ExplainedView {
   int width_ = 0, height_ = 0;
   float fx_ = 0, fy_ = 0, cx_ = 0, cy_ = 0;
   hal::Pose pose_;
-  std::vector<float> depth_;  // explained pixels' measured depth, 0 elsewhere
+  float scale_ = 0;             // the captured frame's metres per raw unit, as a float
+  std::vector<uint16_t> raw_;  // explained pixels' raw depth, 0 elsewhere
 };
 
 }  // namespace fovea::pipeline::map

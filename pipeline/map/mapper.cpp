@@ -110,7 +110,7 @@ const uint8_t* Mapper::movingPixels(const hal::RgbdFrame& frame) const {
 
 void Mapper::fuse(hal::RgbdFrame& frame, const uint8_t* moving, MapperFrame& out) {
   map_->fuse(frame, out.fuse, out.pose_usable, moving);
-  if (view_ && out.fused()) view_->capture(frame, map_->explainedPixels(), map_->measuredDepth());
+  if (view_ && out.fused()) view_->capture(frame, map_->explainedPixels());
   if (poser_ && out.fused()) {
     const int64_t t0 = monotonicNs();
     std::lock_guard<std::mutex> hold(*tracker_lock_);

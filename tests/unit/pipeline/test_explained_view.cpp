@@ -49,7 +49,7 @@ struct Fused {
     next();
     FuseStats stats;
     ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
-    view.capture(frame, map.explainedPixels(), map.measuredDepth());
+    view.capture(frame, map.explainedPixels());
   }
 };
 
@@ -193,7 +193,7 @@ TEST_F(ExplainedViewTest, HardCases) {
   ExplainedView far_view = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();
   hal::RgbdFrame far_frame = fusedFrame();
   far_frame.T_world_cam.t_world_cam += far;
-  far_view.capture(far_frame, map().explainedPixels(), map().measuredDepth());
+  far_view.capture(far_frame, map().explainedPixels());
   PointCloud far_cloud = whole(fusedFrame());
   far_cloud.origin_m += far;
   EXPECT_EQ(far_view.removeExplained(far_cloud), removed_at_origin);
@@ -214,8 +214,8 @@ TEST_F(ExplainedViewTest, HardCases) {
   hal::RgbdFrame large(2 * kW, kH);
   ASSERT_TRUE(large.setSize(2 * kW, kH));
   std::vector<uint8_t> explained(large.pixelCount(), 1);
-  std::vector<float> depth(large.pixelCount(), 1.0f);
-  emptied.capture(large, explained.data(), depth.data());
+  std::fill(large.depth(), large.depth() + large.pixelCount(), uint16_t{1000});
+  emptied.capture(large, explained.data());
   EXPECT_TRUE(emptied.empty());
   PointCloud again = whole(fusedFrame());
   EXPECT_EQ(emptied.removeExplained(again), 0u);
