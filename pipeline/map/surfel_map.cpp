@@ -430,11 +430,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
   updateNormalTolerance(static_cast<float>(0.5 * (frame.intrinsics.fx + frame.intrinsics.fy)));
   const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
   const auto carve = static_cast<float>(config_.carve_weight);
-  // Surfels carved away stay out of the free list until every pixel is
-  // associated (the index map may still name them at other pixels): a chain
-  // through the links, in the order the surfels went.
-  std::size_t carved_away = 0;
-  uint32_t carved_head = kNone, carved_tail = kNone;
+  CarvedChain carved;
   std::size_t to_add = 0;
   const std::size_t pixels = frame.pixelCount();
   constexpr std::size_t kPrefetchPixels = 16;
@@ -461,13 +457,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         const float seen = index_map_.depth(i);
         if (seen < z - tolerance) {
           // The camera sees through the surfel: free space where it is.
-          if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) {
-            detachSurfel(slot);
-            links_.setNext(slot, carved_head);
-            carved_head = slot;
-            if (carved_tail == kNone) carved_tail = slot;
-            ++carved_away;
-          }
+          if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) carveAway(slot, carved);
           continue;
         }
         // A settled surfel at the measured depth explains the pixel, whether or
@@ -499,12 +489,23 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
       ++to_add;
     }
   }
-  if (carved_head != kNone) {
-    links_.setNext(carved_tail, free_head_);
-    free_head_ = carved_head;
-    free_count_ += carved_away;
+  if (carved.head != kNone) {
+    links_.setNext(carved.tail, free_head_);
+    free_head_ = carved.head;
+    free_count_ += carved.count;
   }
   return to_add;
+}
+
+// Surfels carved away stay out of the free list until every pixel is
+// associated (the index map may still name them at other pixels): a chain
+// through the links (newest first), which associate() then frees whole.
+void SurfelMap::carveAway(uint32_t slot, CarvedChain& chain) {
+  detachSurfel(slot);
+  links_.setNext(slot, chain.head);
+  chain.head = slot;
+  if (chain.tail == kNone) chain.tail = slot;
+  ++chain.count;
 }
 
 void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {

@@ -257,6 +257,11 @@ class SurfelMap {
   void mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& vertex, const Eigen::Matrix3f& R_wc_f,
                  const Eigen::Vector3f& n_world, const Eigen::Vector3f& surfel_direction, float direction_norm,
                  float weight, const uint8_t* rgb);
+  struct CarvedChain {
+    uint32_t head = kNoSurfel, tail = kNoSurfel;
+    std::size_t count = 0;
+  };
+  void carveAway(uint32_t slot, CarvedChain& chain);  // associate()'s: off the brick, onto the chain
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   enum class Added { kYes, kNoSurfel, kNoBrick };
   Added addSurfel(const Eigen::Vector3d& p_world, const Eigen::Vector3f& n_world, float radius, float weight,
