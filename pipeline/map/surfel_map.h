@@ -306,8 +306,9 @@ class SurfelMap {
   // pixel to add. The depth and the weight, which the index map's render reads,
   // have maps of their own; the normals and radii (kLateMaps) are made after
   // the render, in the index map's scratch (its planes, free once gathered); a
-  // vertex's x and y come from its depth and ray (vertexAt()). 14 bytes a
-  // pixel where a map each took 32.
+  // vertex's x and y come from its depth and ray (vertexAt()). 8 bytes a
+  // pixel of their own, and the planes grown from 13.4 to 16 a pixel at
+  // 640x480, where a map each took 32.
   enum LateMap : std::size_t { kNormalX, kNormalY, kNormalZ, kRadius, kLateMaps };
   float* lateMap(LateMap m) { return index_map_.scratch() + m * pixel_capacity_; }
   const float* lateMap(LateMap m) const { return index_map_.scratch() + m * pixel_capacity_; }
@@ -315,7 +316,7 @@ class SurfelMap {
   std::vector<float> vertex_z_;           // camera frame; 0: no valid measurement
   std::vector<float> weight_;
   VertexTables tables_;                   // the weight's factors and the rays, by column and by row
-  VertexParams vertex_params_;            // the frame being fused's (computeDepths())
+  VertexParams vertex_params_;            // the frame being fused's (computeDepths(); until fuse() returns)
   IndexMap index_map_;                    // step 3's, the tracker's model; its scratch: the late maps
   std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
