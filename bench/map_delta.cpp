@@ -266,7 +266,7 @@ class DeltaBench {
   net::ChunkEncoder encoder_;
   pipeline::map::BrickBatch batch_;
   pipeline::PointCloud cloud_, live_;
-  pipeline::FoveatedCloud out_, live_out_, brick_;
+  pipeline::FoveatedCloud out_, live_out_;
   // The operator's side: the bricks it holds (no loss here), and the last
   // frame's decoded F1 and live points.
   net::BrickCache cache_;
@@ -369,7 +369,6 @@ DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Ca
       live_(pixels_),
       out_(pixels_),
       live_out_(pixels_),
-      brick_(kMaxBrickPoints),
       cache_(operatorCache()),
       decoded_(std::max(pixels_, kMaxBrickPoints)),
       truth_(k_.width, k_.height),
@@ -489,9 +488,10 @@ int DeltaBench::sendMapDelta(const FrameStep& s) {
 // One brick of the batch, encoded on its own as the service's streamer does,
 // and decoded into the operator's cache.
 bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameStep& s) {
-  if (!batch_.copyEntry(e, brick_)) return false;
+  const std::optional<net::EncodeInput> points = net::EncodeInput::slice(batch_.points, e.first, e.count);
+  if (!points) return false;
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
-  if (!encoder_.encode(brick_, std::span<const double>(batch_.level_step_m.data(), e.level + 1u), s.frame_id, 0, &tag)) {
+  if (!encoder_.encode(*points, std::span<const double>(batch_.level_step_m.data(), e.level + 1u), s.frame_id, 0, &tag)) {
     return false;
   }
   decodeAll(encoder_, &cache_, nullptr, decoded_, s.now_ns);

@@ -52,7 +52,6 @@ Result<std::unique_ptr<Streamer>> Streamer::create(const StreamConfig& config, s
     Result<net::BrickSender> sender = net::BrickSender::create(config.brick_sender);
     if (!sender) return sender.status();
     streamer->brick_sender_.emplace(std::move(sender.value()));
-    streamer->brick_cloud_ = pipeline::FoveatedCloud(config.max_brick_points, pipeline::FoveatedCloud::Weights::kNone);
     streamer->slot_key_.resize(config.brick_sender.max_bricks);
     streamer->slot_index_ = GridTable(config.brick_sender.max_bricks);
   }
@@ -250,10 +249,13 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
   // Parts staged this frame are sent from the sender's store: they must not be
   // overwritten before the frame's pacing reaches them.
   if (brick_store_staged_ + static_cast<std::size_t>(e.count) * 8 > config_.brick_sender.store_bytes / 2) return fail();
-  if (!batch.copyEntry(e, brick_cloud_)) return fail();  // (an empty brick fits: its surfels all went)
+  // The brick's slice of the batch, encoded where it lies (an empty brick
+  // encodes too: its surfels all went).
+  const std::optional<net::EncodeInput> points = net::EncodeInput::slice(batch.points, e.first, e.count);
+  if (!points) return fail();
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
-  if (!brick_encoder_->encode(brick_cloud_, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id,
-                              0, &tag)) {
+  if (!brick_encoder_->encode(*points, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id, 0,
+                              &tag)) {
     return fail();
   }
   const std::size_t parts = brick_encoder_->chunkCount();

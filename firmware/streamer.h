@@ -212,7 +212,6 @@ class Streamer {
   // send stage, one after the other), sized for the larger and made once: a
   // session at another MTU remakes the encoders, not these.
   std::shared_ptr<net::ChunkEncoder::PointScratch> encoder_points_;
-  pipeline::FoveatedCloud brick_cloud_;             // one brick's points, for its encoder
   std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
   GridTable slot_index_;                            // key -> the map slot it was sent from
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)

@@ -46,8 +46,8 @@ inline Lattice latticeCoords(const Eigen::Vector3d& o, const float p[3], double 
   }
   return Lattice::kInRange;
 }
-inline Lattice latticeCoords(const pipeline::PointCloud& c, std::size_t i, double inv_step, int64_t q[3]) {
-  const float p[3] = {c.x()[i], c.y()[i], c.z()[i]};
+inline Lattice latticeCoords(const EncodeInput& c, std::size_t i, double inv_step, int64_t q[3]) {
+  const float p[3] = {c.x[i], c.y[i], c.z[i]};
   return latticeCoords(c.origin_m, p, inv_step, q);
 }
 
@@ -306,12 +306,12 @@ struct ChunkEncoder::State {
   }
 
   // encode()'s steps, in order.
-  Status countRegions(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
+  Status countRegions(const EncodeInput& cloud, std::span<const double> region_voxel_size_m,
                       FrameInProgress& frame);
-  Status quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame);
-  Status firstPointOutOfRange(const pipeline::FoveatedCloud& cloud) const;
-  void mortonKeys(const pipeline::FoveatedCloud& cloud, const FrameInProgress& frame);
-  Status encodeRegion(const pipeline::FoveatedCloud& cloud, int r, FrameInProgress& frame);
+  Status quantize(const EncodeInput& cloud, FrameInProgress& frame);
+  Status firstPointOutOfRange(const EncodeInput& cloud) const;
+  void mortonKeys(const EncodeInput& cloud, const FrameInProgress& frame);
+  Status encodeRegion(const EncodeInput& cloud, int r, FrameInProgress& frame);
   std::pair<const uint64_t*, const uint32_t*> sortByMorton(std::size_t begin, std::size_t end, int64_t span);
   Orders chooseOrders(const RegionCut& cut, std::size_t k);
   std::size_t packChunk(const RegionCut& cut, std::size_t k, const Orders& orders, std::size_t& raw_size);
@@ -391,15 +391,15 @@ uint8_t ChunkEncoder::chunkRegion(std::size_t i) const { return s_->chunks[i].re
 uint32_t ChunkEncoder::chunkPoints(std::size_t i) const { return s_->chunks[i].points; }
 double ChunkEncoder::regionStep(int region) const { return s_->step[static_cast<std::size_t>(region)]; }
 
-Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
-                            uint32_t frame_id, uint64_t capture_time_ns, const BrickTag* brick) {
+Status ChunkEncoder::encode(const EncodeInput& cloud, std::span<const double> region_voxel_size_m, uint32_t frame_id,
+                            uint64_t capture_time_ns, const BrickTag* brick) {
   State& s = *s_;
   s.chunk_count = 0;
   if (brick != nullptr && brick->level >= pipeline::kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "codec: brick level " + std::to_string(brick->level) + " is not below " +
                                              std::to_string(pipeline::kMaxRegions)};
   }
-  const std::size_t n = cloud.size();
+  const std::size_t n = cloud.size;
   if (n > s.max_points) {
     return {ErrorCode::kCapacityExceeded, "codec: frame has " + std::to_string(n) + " points, max_points is " +
                                               std::to_string(s.max_points)};
@@ -427,10 +427,10 @@ Status ChunkEncoder::encode(const pipeline::FoveatedCloud& cloud, std::span<cons
 }
 
 // Points per region (frame.start, as offsets), and the step of each region.
-Status ChunkEncoder::State::countRegions(const pipeline::FoveatedCloud& cloud,
+Status ChunkEncoder::State::countRegions(const EncodeInput& cloud,
                                          std::span<const double> region_voxel_size_m, FrameInProgress& frame) {
   std::array<uint32_t, pipeline::kMaxRegions + 1>& start = frame.start;
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
+  for (std::size_t i = 0; i < cloud.size; ++i) {
     const uint8_t r = cloud.region[i];
     if (r >= pipeline::kMaxRegions || r >= region_voxel_size_m.size()) {
       return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " has region " + std::to_string(r) +
@@ -451,20 +451,20 @@ Status ChunkEncoder::State::countRegions(const pipeline::FoveatedCloud& cloud,
 
 // The lattice coordinates' bounds per region, from the points' extremes;
 // `order` gets the points grouped by region.
-Status ChunkEncoder::State::quantize(const pipeline::FoveatedCloud& cloud, FrameInProgress& frame) {
+Status ChunkEncoder::State::quantize(const EncodeInput& cloud, FrameInProgress& frame) {
   std::array<uint32_t, pipeline::kMaxRegions> fill{};
   constexpr float kInf = std::numeric_limits<float>::infinity();
   std::array<std::array<float, 3>, pipeline::kMaxRegions> lo, hi;
   for (auto& l : lo) l.fill(kInf);
   for (auto& h : hi) h.fill(-kInf);
   bool finite = true;
-  const float* px[3] = {cloud.points.x(), cloud.points.y(), cloud.points.z()};
+  const float* px[3] = {cloud.x, cloud.y, cloud.z};
   // Run by run of one region (the samplers write the regions in turn), so that
   // the bounds stay in registers.
-  for (std::size_t i = 0; i < cloud.size();) {
+  for (std::size_t i = 0; i < cloud.size;) {
     const uint8_t r = cloud.region[i];
     std::size_t end = i + 1;
-    while (end < cloud.size() && cloud.region[end] == r) ++end;
+    while (end < cloud.size && cloud.region[end] == r) ++end;
     for (std::size_t a = 0; a < 3; ++a) {
       float l = lo[r][a], h = hi[r][a];
       bool ok = true;
@@ -483,8 +483,8 @@ Status ChunkEncoder::State::quantize(const pipeline::FoveatedCloud& cloud, Frame
   for (std::size_t r = 0; r < pipeline::kMaxRegions; ++r) {
     if (fill[r] == 0) continue;
     const double inv = 1.0 / step[r];
-    if (!finite || latticeCoords(cloud.points.origin_m, lo[r].data(), inv, frame.qmin[r].data()) != Lattice::kInRange ||
-        latticeCoords(cloud.points.origin_m, hi[r].data(), inv, frame.qmax[r].data()) != Lattice::kInRange) {
+    if (!finite || latticeCoords(cloud.origin_m, lo[r].data(), inv, frame.qmin[r].data()) != Lattice::kInRange ||
+        latticeCoords(cloud.origin_m, hi[r].data(), inv, frame.qmax[r].data()) != Lattice::kInRange) {
       return firstPointOutOfRange(cloud);
     }
   }
@@ -492,11 +492,11 @@ Status ChunkEncoder::State::quantize(const pipeline::FoveatedCloud& cloud, Frame
 }
 
 // The error for the first point with no lattice coordinates (quantize() found one).
-Status ChunkEncoder::State::firstPointOutOfRange(const pipeline::FoveatedCloud& cloud) const {
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
+Status ChunkEncoder::State::firstPointOutOfRange(const EncodeInput& cloud) const {
+  for (std::size_t i = 0; i < cloud.size; ++i) {
     const uint8_t r = cloud.region[i];
     int64_t q[3];
-    const Lattice l = latticeCoords(cloud.points, i, 1.0 / step[r], q);
+    const Lattice l = latticeCoords(cloud, i, 1.0 / step[r], q);
     if (l == Lattice::kNotFinite) {
       return {ErrorCode::kInvalidInput, "codec: point " + std::to_string(i) + " is not finite"};
     }
@@ -512,20 +512,20 @@ Status ChunkEncoder::State::firstPointOutOfRange(const pipeline::FoveatedCloud& 
 // slots quantize() gave `order` (every point in range: quantize() checked).
 // The bits of a region wider than kMaxLatticeSpan are wrong, and unused: its
 // encodeRegion() fails first.
-void ChunkEncoder::State::mortonKeys(const pipeline::FoveatedCloud& cloud, const FrameInProgress& frame) {
+void ChunkEncoder::State::mortonKeys(const EncodeInput& cloud, const FrameInProgress& frame) {
   std::array<uint32_t, pipeline::kMaxRegions> fill{};
-  const float* px = cloud.points.x();
-  const float* py = cloud.points.y();
-  const float* pz = cloud.points.z();
+  const float* px = cloud.x;
+  const float* py = cloud.y;
+  const float* pz = cloud.z;
   std::array<double, pipeline::kMaxRegions> inv_step;
   for (std::size_t r = 0; r < inv_step.size(); ++r) inv_step[r] = 1.0 / step[r];
-  for (std::size_t i = 0; i < cloud.size();) {  // run by run of one region, as quantize()
+  for (std::size_t i = 0; i < cloud.size;) {  // run by run of one region, as quantize()
     const uint8_t r = cloud.region[i];
     std::size_t end = i + 1;
-    while (end < cloud.size() && cloud.region[end] == r) ++end;
+    while (end < cloud.size && cloud.region[end] == r) ++end;
     const std::array<int64_t, 3>& qmin = frame.qmin[r];
     uint64_t* out = keys.data() + frame.start[r] + fill[r];
-    const Eigen::Vector3d& o = cloud.points.origin_m;
+    const Eigen::Vector3d& o = cloud.origin_m;
     const double inv = inv_step[r];
     for (std::size_t k = i; k < end; ++k) {  // latticeCoords() without its checks
       const int64_t qx = roundHalfAway(latticeUnits(o.x(), px[k], inv));
@@ -540,7 +540,7 @@ void ChunkEncoder::State::mortonKeys(const pipeline::FoveatedCloud& cloud, const
 }
 
 // Region r's points in Morton order, cut greedily into chunks.
-Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, int r, FrameInProgress& frame) {
+Status ChunkEncoder::State::encodeRegion(const EncodeInput& cloud, int r, FrameInProgress& frame) {
   const std::size_t ru = static_cast<std::size_t>(r);
   const std::size_t begin = frame.start[ru], end = frame.start[ru + 1];
   if (begin == end) return Status::ok();
@@ -554,7 +554,7 @@ Status ChunkEncoder::State::encodeRegion(const pipeline::FoveatedCloud& cloud, i
                                            std::to_string(kMaxLatticeSpan) + ": raise the step or narrow the depth range"};
   }
   const std::pair<const uint64_t*, const uint32_t*> sorted = sortByMorton(begin, end, span);
-  const uint32_t* rgb = cloud.points.rgb();
+  const uint32_t* rgb = cloud.rgb;
   for (std::size_t k = 0; k < end - begin; ++k) colours[begin + k] = rgb[sorted.second[k]];
   const RegionCut cut{r,
                       sorted.first,

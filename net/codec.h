@@ -12,6 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -64,6 +65,27 @@ struct BrickTag {
   uint8_t level = 0;            // 0 = raw surfels; n >= 1: ACUITY lattice level n; < kMaxRegions
 };
 
+// The points encode() reads, as arrays: positions relative to origin_m,
+// colours (packRgb) and regions. A foveated cloud is one (of()); a brick of a
+// map's batch is a slice of the batch's arrays, encoded without a copy.
+struct EncodeInput {
+  Eigen::Vector3d origin_m = Eigen::Vector3d::Zero();
+  const float* x = nullptr;
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const uint32_t* rgb = nullptr;
+  const uint8_t* region = nullptr;
+  std::size_t size = 0;
+  static EncodeInput of(const pipeline::FoveatedCloud& cloud) { return slice(cloud, 0, cloud.size()).value(); }
+  // Points [first, first + count) of `cloud`; nullopt when they are not all in it.
+  static std::optional<EncodeInput> slice(const pipeline::FoveatedCloud& cloud, std::size_t first, std::size_t count) {
+    if (first > cloud.size() || count > cloud.size() - first) return std::nullopt;
+    const pipeline::PointCloud& p = cloud.points;
+    return EncodeInput{p.origin_m,      p.x() + first, p.y() + first, p.z() + first, p.rgb() + first,
+                       cloud.region.data() + first, count};
+  }
+};
+
 // The most chunks one encode() of `points` points can make at
 // config.max_payload (every chunk but a region's last is nearly full of the
 // costliest points; the encoder's own capacity).
@@ -97,8 +119,12 @@ class ChunkEncoder {
   // indices and count are the parts of that version; frame_id is the robot's
   // frame when the version was made) and is sized for it, so still fits
   // max_payload; kInvalidArgument if brick->level >= pipeline::kMaxRegions.
+  Status encode(const EncodeInput& points, std::span<const double> region_voxel_size_m, uint32_t frame_id,
+                uint64_t capture_time_ns, const BrickTag* brick = nullptr);
   Status encode(const pipeline::FoveatedCloud& cloud, std::span<const double> region_voxel_size_m,
-                uint32_t frame_id, uint64_t capture_time_ns, const BrickTag* brick = nullptr);
+                uint32_t frame_id, uint64_t capture_time_ns, const BrickTag* brick = nullptr) {
+    return encode(EncodeInput::of(cloud), region_voxel_size_m, frame_id, capture_time_ns, brick);
+  }
 
   // The chunks of the last encode(), fovea first then outward.
   std::size_t chunkCount() const;

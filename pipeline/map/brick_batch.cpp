@@ -4,27 +4,6 @@
 
 namespace fovea::pipeline::map {
 
-bool BrickBatch::copyEntry(const BrickBatchEntry& e, FoveatedCloud& out) const {
-  PointCloud& p = out.points;
-  p.clear();
-  p.origin_m = points.points.origin_m;
-  if (!p.resize(e.count)) return false;  // over its capacity: left empty
-  const PointCloud& from = points.points;
-  std::copy_n(from.x() + e.first, e.count, p.x());
-  std::copy_n(from.y() + e.first, e.count, p.y());
-  std::copy_n(from.z() + e.first, e.count, p.z());
-  std::copy_n(from.rgb() + e.first, e.count, p.rgb());
-  std::fill_n(out.region.begin(), e.count, e.level);
-  if (out.hasWeights()) {  // 0: the batch kept no counts
-    if (points.hasWeights()) {
-      std::copy_n(points.weight.begin() + e.first, e.count, out.weight.begin());
-    } else {
-      std::fill_n(out.weight.begin(), e.count, 0u);
-    }
-  }
-  return true;
-}
-
 Result<BrickSampler> BrickSampler::create(const AcuityConfig& levels, std::size_t max_brick_surfels) {
   if (max_brick_surfels == 0 || max_brick_surfels > (std::size_t{1} << 24)) {
     return Result<BrickSampler>(ErrorCode::kInvalidArgument, "brick sampler: max_brick_surfels must be in [1, 2^24]");

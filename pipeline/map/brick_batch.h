@@ -52,10 +52,9 @@ class BrickBatch {
   std::size_t maxBricks() const { return entries_.size(); }
   bool full() const { return count_ == entries_.size(); }
   BrickBatchEntry& add() { return entries_[count_++]; }  // caller checks full()
-  // Entry e's points alone into `out` (the batch's origin, every point's region
-  // the entry's level): what one brick's encode takes. false (out emptied)
-  // when they do not fit it.
-  bool copyEntry(const BrickBatchEntry& e, FoveatedCloud& out) const;
+  // Entry e's points are points[e.first, e.first + e.count), their region the
+  // entry's level: one brick's encode takes them where they lie
+  // (net::EncodeInput::slice).
 
   FoveatedCloud points;  // every entry's points, region = the entry's level
   // Level n's lattice step (ACUITY's v_n), for the encoder: [0] is 0.
