@@ -211,10 +211,16 @@ void radixSortBits(uint64_t* values, uint64_t* scratch, std::size_t n, int lo_bi
 Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int region_count,
                             const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                             SampleCounts& counts, uint32_t* representative) {
-  counts = {};
   out.clear();
   out.points.origin_m = in.origin_m;
   out.points.has_color = in.has_color;
+  return sampleAt(in, region, region_count, voxel_size_m, out, 0, counts, representative);
+}
+
+Status VoxelSampler::sampleAt(const PointCloud& in, const uint8_t* region, int region_count,
+                              const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
+                              std::size_t first, SampleCounts& counts, uint32_t* representative) {
+  counts = {};
   const std::size_t n = in.size();
   if (n > keys_.size()) {
     return {ErrorCode::kCapacityExceeded,
@@ -244,13 +250,13 @@ Status VoxelSampler::sample(const PointCloud& in, const uint8_t* region, int reg
                                               std::to_string(max_voxels_) + ": raise pipeline.max_voxels"};
   }
   const std::size_t fovea = counts.in[0];
-  if (fovea + voxels > out.points.capacity()) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
+  if (first > out.size() || first + fovea + voxels > out.points.capacity()) {
+    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(first + fovea + voxels) +
                                               " points, capacity is " + std::to_string(out.points.capacity())};
   }
 
   // The fovea, untouched and in input order.
-  std::size_t o = copyFovea(in, region, out, representative);
+  std::size_t o = copyFovea(in, region, out, representative, first);
   counts.out[0] = static_cast<uint32_t>(fovea);
 
   // One centroid per run of equal keys.

@@ -49,12 +49,12 @@ inline double voxelIndex(double origin_m, float coord, double inv_voxel_m) {
   return std::floor((origin_m + static_cast<double>(coord)) * inv_voxel_m);
 }
 
-// Copies the fovea (region 0) untouched, in input order, to the front of `out`,
-// sets representative[] for every input point (kNoRepresentative for the others,
-// which the voxel reduction fills in later) and returns the number copied.
+// Copies the fovea (region 0) untouched, in input order, to `out` from index
+// `o` on (the front, for a sampler's own output), sets representative[] for
+// every input point (kNoRepresentative for the others, which the voxel
+// reduction fills in later) and returns the index after the last copied.
 inline std::size_t copyFovea(const PointCloud& in, const uint8_t* region, FoveatedCloud& out,
-                             uint32_t* representative) {
-  std::size_t o = 0;
+                             uint32_t* representative, std::size_t o = 0) {
   for (std::size_t i = 0; i < in.size(); ++i) {
     if (region[i] != 0) {
       if (representative) representative[i] = kNoRepresentative;
@@ -125,6 +125,13 @@ class VoxelSampler {
   Status sample(const PointCloud& in, const uint8_t* region, int region_count,
                 const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out,
                 SampleCounts& counts, uint32_t* representative = nullptr);
+  // sample()'s points appended to `out` after its `first` points, which stay,
+  // as do its origin and colour flag: the points written are relative to
+  // in.origin_m all the same (the caller moves them if the origins differ).
+  // Nothing is written when an error is returned.
+  Status sampleAt(const PointCloud& in, const uint8_t* region, int region_count,
+                  const std::array<double, kMaxRegions>& voxel_size_m, FoveatedCloud& out, std::size_t first,
+                  SampleCounts& counts, uint32_t* representative = nullptr);
 
   std::size_t maxPoints() const { return keys_.size(); }
   std::size_t maxVoxels() const { return max_voxels_; }

@@ -22,13 +22,12 @@ BrickSampler::BrickSampler(const std::array<double, kMaxRegions>& steps, std::si
     : level_step_m_(steps),
       surfels_(max_brick_surfels),
       region_(max_brick_surfels),
-      sampler_(max_brick_surfels, max_brick_surfels),
-      sampled_(max_brick_surfels) {}
+      sampler_(max_brick_surfels, max_brick_surfels) {}
 
 std::size_t BrickSampler::memoryBytes() const {
   // Per point: the surfel copy (16), its region (1), the sampler's keys and
-  // indices with their scratch (24) and the sampled copy (21).
-  return surfels_.capacity() * (16 + 1 + 24 + 21);
+  // indices with their scratch (24).
+  return surfels_.capacity() * (16 + 1 + 24);
 }
 
 bool BrickSampler::append(const SurfelMap& map, uint16_t brick, uint8_t level, uint32_t version, bool fovea,
@@ -46,20 +45,21 @@ bool BrickSampler::append(const SurfelMap& map, uint16_t brick, uint8_t level, u
     }
   }
   std::fill_n(region_.begin(), surfels_.size(), level);
-  SampleCounts counts;
-  if (!sampler_.sample(surfels_, region_.data(), level + 1, level_step_m_, sampled_, counts)) return false;
+  // Sampled straight into the batch (its regions are the level, its weights
+  // the sampler's), relative to the brick's origin, then moved to the batch's:
+  // the batch's points share one origin, and the brick's offset from it, in
+  // float, is exact to well under a millimetre within kilometres.
   PointCloud& out = batch.points.points;
   const std::size_t first = out.size();
-  if (first + sampled_.size() > out.capacity()) return false;
-  // The batch's points share one origin: the brick's offset from it, in float,
-  // is exact to well under a millimetre within kilometres.
+  SampleCounts counts;
+  if (!sampler_.sampleAt(surfels_, region_.data(), level + 1, level_step_m_, batch.points, first, counts)) return false;
   const Eigen::Vector3f shift = (surfels_.origin_m - out.origin_m).cast<float>();
-  const PointCloud& in = sampled_.points;
-  for (std::size_t i = 0; i < sampled_.size(); ++i) {
-    (void)out.push(in.x()[i] + shift.x(), in.y()[i] + shift.y(), in.z()[i] + shift.z(), in.rgb()[i]);
-    batch.points.region[first + i] = level;
-    if (batch.points.hasWeights()) batch.points.weight[first + i] = sampled_.weight[i];
+  for (std::size_t i = first; i < out.size(); ++i) {
+    out.x()[i] = out.x()[i] + shift.x();
+    out.y()[i] = out.y()[i] + shift.y();
+    out.z()[i] = out.z()[i] + shift.z();
   }
+  const std::size_t sampled = out.size() - first;
   BrickBatchEntry& e = batch.add();
   e.brick = brick;
   e.key = map.brickKey(brick);
@@ -67,11 +67,11 @@ bool BrickSampler::append(const SurfelMap& map, uint16_t brick, uint8_t level, u
   e.level = level;
   e.fovea = fovea;
   e.first = static_cast<uint32_t>(first);
-  e.count = static_cast<uint32_t>(sampled_.size());
+  e.count = static_cast<uint32_t>(sampled);
   batch.level_step_m = level_step_m_;
   ++counters_.bricks;
   counters_.surfels_in += surfels_.size();
-  counters_.points_out += sampled_.size();
+  counters_.points_out += sampled;
   counters_.truncated += truncated ? 1 : 0;
   return true;
 }

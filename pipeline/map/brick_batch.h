@@ -96,7 +96,6 @@ class BrickSampler {
   PointCloud surfels_;
   std::vector<uint8_t> region_;
   VoxelSampler sampler_;
-  FoveatedCloud sampled_;
   BrickSamplerCounters counters_;
 };
 

@@ -1,6 +1,7 @@
 // Foveated voxel sampling (Eq. 7) against a brute-force std::map reference,
 // and its properties: lattice anchoring, order, conservation, containment.
 #include <algorithm>
+#include <bit>
 #include <map>
 #include <random>
 
@@ -266,6 +267,48 @@ TEST(VoxelSampler, TooManyVoxelsForTheCapacityIsAnError) {
   const Sampled s = sample(in, region, 2, {0, 0.001}, /*max_voxels=*/100);
   EXPECT_EQ(s.status.code(), ErrorCode::kCapacityExceeded);
   EXPECT_NE(s.status.message().find("max_voxels"), std::string::npos);
+}
+
+// sampleAt() writes sample()'s points after the ones out holds, which stay
+// (and a request that does not fit writes nothing).
+TEST(VoxelSampler, SampleAtAppendsWhatSampleWritesAndKeepsWhatWasThere) {
+  PointCloud in = test::randomCloud(3000, Eigen::Vector3d(-4, 2, 7), 1.0f, 25);
+  const std::vector<uint8_t> region = randomRegions(in.size(), 3, 26);
+  const std::array<double, kMaxRegions> voxel_m{0, 0.05, 0.2};
+  const Sampled alone = sample(in, region, 3, voxel_m);
+  ASSERT_TRUE(alone.status.isOk());
+  constexpr std::size_t kHeld = 37;
+  FoveatedCloud out(kHeld + alone.out.size());
+  for (std::size_t i = 0; i < kHeld; ++i) {
+    ASSERT_TRUE(out.points.push(float(i), -float(i), 0.5f, 0x123456u));
+  }
+  std::fill_n(out.region.begin(), kHeld, uint8_t{4});
+  std::fill_n(out.weight.begin(), kHeld, 9u);
+  VoxelSampler sampler(in.size(), in.size());
+  SampleCounts counts;
+  ASSERT_TRUE(sampler.sampleAt(in, region.data(), 3, voxel_m, out, kHeld, counts).isOk());
+  ASSERT_EQ(out.size(), kHeld + alone.out.size());
+  for (std::size_t i = 0; i < kHeld; ++i) {
+    ASSERT_EQ(out.points.x()[i], float(i));
+    ASSERT_EQ(out.points.rgb()[i], 0x123456u);
+    ASSERT_EQ(out.region[i], 4);
+    ASSERT_EQ(out.weight[i], 9u);
+  }
+  for (std::size_t o = 0; o < alone.out.size(); ++o) {
+    const std::size_t a = kHeld + o;
+    ASSERT_EQ(std::bit_cast<uint32_t>(out.points.x()[a]), std::bit_cast<uint32_t>(alone.out.points.x()[o])) << o;
+    ASSERT_EQ(std::bit_cast<uint32_t>(out.points.y()[a]), std::bit_cast<uint32_t>(alone.out.points.y()[o])) << o;
+    ASSERT_EQ(std::bit_cast<uint32_t>(out.points.z()[a]), std::bit_cast<uint32_t>(alone.out.points.z()[o])) << o;
+    ASSERT_EQ(out.points.rgb()[a], alone.out.points.rgb()[o]) << o;
+    ASSERT_EQ(out.region[a], alone.out.region[o]) << o;
+    ASSERT_EQ(out.weight[a], alone.out.weight[o]) << o;
+  }
+  EXPECT_EQ(counts.out, alone.counts.out);
+  // One point short: an error, and the cloud as it was.
+  FoveatedCloud tight(kHeld + alone.out.size() - 1);
+  for (std::size_t i = 0; i < kHeld; ++i) ASSERT_TRUE(tight.points.push(1.0f, 2.0f, 3.0f, 0u));
+  EXPECT_EQ(sampler.sampleAt(in, region.data(), 3, voxel_m, tight, kHeld, counts).code(), ErrorCode::kCapacityExceeded);
+  EXPECT_EQ(tight.size(), kHeld);
 }
 
 TEST(VoxelSampler, RejectsNonPositiveVoxelSizes) {
