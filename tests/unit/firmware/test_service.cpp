@@ -515,7 +515,17 @@ TEST(Service, StoppedGazeFloodAndAVanishedOperatorLeaveItRunningWithFlatMemory) 
   std::printf("resident set NOT checked under ThreadSanitizer (%ld KiB before, %ld KiB after): its shadow memory "
               "and tables grow with what the process touches (core/sanitizer.h)\n", rss_before, rss_after);
 #else
-  EXPECT_LT(rss_after - rss_before, 2048) << rss_before << " KiB before, " << rss_after << " KiB after";
+  // Under qemu-user the resident set is qemu's, and its cache of translated
+  // code grows by the paths the flood and the timeout run for the first time
+  // (2 072 to 2 080 KiB there, against 8 KiB natively): twice the allowance
+  // there. A leak of 100 bytes a datagram (2 MB over the flood) still shows
+  // natively and under ASan.
+#ifdef FOVEA_TESTS_IN_QEMU_USER
+  constexpr long kFlatKiB = 4096;
+#else
+  constexpr long kFlatKiB = 2048;
+#endif
+  EXPECT_LT(rss_after - rss_before, kFlatKiB) << rss_before << " KiB before, " << rss_after << " KiB after";
 #endif
   // A new operator is served after the silent one timed out.
   TestOperator next;
