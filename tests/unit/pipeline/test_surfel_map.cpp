@@ -671,11 +671,14 @@ TEST(SurfelMap, ThePoolIsThirtyEightBytesASurfelOfCapacity) {
     EXPECT_EQ(reinterpret_cast<std::uintptr_t>(&map.surfel(0)) % sizeof(Surfel), 0u);
     EXPECT_EQ(m.total(), map.memoryBytes());
     EXPECT_LT(m.bricks, 64 * config.max_bricks);
-    // 41 bytes a pixel (eight float maps, the explained flag, the index map's
-    // slot and depth) and 17 a cell of the index map's centre grid, which adds a
-    // border and a vector's slack (index_map.h); the small tables beside them.
+    // 17 bytes a pixel (depth and weight, the explained flag, the index map's
+    // slot and depth), 5 a cell of the index map's centre grid (which adds a
+    // border and a vector's slack, index_map.h), and its planes, 12 bytes a
+    // cell or the normals and radii, 16 a pixel, whichever is more (they
+    // share them); the small tables beside them.
+    const std::size_t pixels = 40 * 30;
     const std::size_t grid_cells = (40 + 2 * kMaxReach + CentreGrid::kVectorSlack) * (30 + 2 * kMaxReach);
-    EXPECT_LE(m.pixels, 41u * 40 * 30 + 17u * grid_cells + 4096 + 16 * 70);
+    EXPECT_LE(m.pixels, 17u * pixels + 5u * grid_cells + std::max(12u * grid_cells, 16u * pixels) + 4096 + 16 * 70);
   }
   SurfelMapConfig defaults = smallConfig(40, 30);
   defaults.max_surfels = SurfelMapConfig{}.max_surfels;
