@@ -9,8 +9,10 @@
 namespace fovea::pipeline {
 
 Result<Foveator> Foveator::create(const PipelineCapacity& capacity, const FoveationConfig& config) {
-  if (capacity.max_points == 0 || capacity.max_points > UINT32_MAX) {
-    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_points: must be in [1, 2^32)");
+  if (capacity.max_points == 0 || capacity.max_points > HashVoxelSampler::kMaxPoints) {
+    return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.max_points: must be in [1, " +
+                                                              std::to_string(HashVoxelSampler::kMaxPoints) +
+                                                              "] (the voxels' 32-bit colour sums)");
   }
   if (capacity.threads < 1 || capacity.threads > 64) {
     return Result<Foveator>(ErrorCode::kInvalidArgument, "pipeline.threads: must be in [1, 64]");

@@ -268,9 +268,10 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   out.points.origin_m = in.origin_m;
   out.points.has_color = in.has_color;
   const std::size_t n = in.size();
-  if (n > max_points_) {
+  if (n > max_points_ || n > kMaxPoints) {
     return {ErrorCode::kCapacityExceeded, "voxel sampler: cloud has " + std::to_string(n) + " points, capacity is " +
-                                              std::to_string(max_points_) + ": raise pipeline.max_points"};
+                                              std::to_string(std::min(max_points_, kMaxPoints)) +
+                                              ": raise pipeline.max_points"};
   }
   if (region_count < 1 || region_count > kMaxRegions) {
     return {ErrorCode::kInvalidArgument, "voxel sampler: region count out of range"};

@@ -90,6 +90,10 @@ class HashVoxelSampler {
   std::size_t lastTableLookups() const { return lookups_; }
 
   static constexpr std::size_t kChunk = 2048;  // points per key batch
+  // A voxel's colour sums are 32-bit (8 bytes a voxel less than 64-bit sums):
+  // exact while a sample takes at most this many points (255 each). sample()
+  // refuses more; Foveator::create() refuses a capacity above it.
+  static constexpr std::size_t kMaxPoints = UINT32_MAX / 255;
   // The recent-voxel cache has 2^kRecentBits lines, indexed by the top bits of
   // hashVoxelKey(); the line of kNoVoxelKey (fovea and skipped points) always holds it.
   static constexpr int kRecentBits = 10;
@@ -101,7 +105,7 @@ class HashVoxelSampler {
     float fx, fy, fz;   // the first point
     float lo[3], hi[3];
     uint32_t n;
-    uint64_t sr, sg, sb;
+    uint32_t sr, sg, sb;  // at most 255 kMaxPoints each
   };
   // The first point with a bad voxel index (as the reference reports it).
   struct BadPoint {

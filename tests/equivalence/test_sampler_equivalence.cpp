@@ -130,6 +130,18 @@ TEST_P(SamplerTarget, AMillionPointsInOneVoxel) {
   expectSameSampling(cloud, std::vector<uint8_t>(kN, 1), 2, {0, 1.0}, 16, "million");
 }
 
+// The largest colour sums a test can afford: the fast sampler's 32-bit sums (a
+// million white points, 255 million each) against the reference's 64-bit ones.
+TEST_P(SamplerTarget, AMillionWhitePointsInOneVoxel) {
+  constexpr std::size_t kN = 1000000;
+  PointCloud cloud(kN);
+  for (std::size_t i = 0; i < kN; ++i) {
+    const float d = 0.0001f * static_cast<float>(i % 97);
+    (void)cloud.push(d, d, d, packRgb(255, 255, i % 2 == 0 ? 255 : 254));
+  }
+  expectSameSampling(cloud, std::vector<uint8_t>(kN, 1), 2, {0, 1.0}, 16, "white");
+}
+
 TEST_P(SamplerTarget, ManyTinyVoxelsAndFarOffsets) {
   std::mt19937_64 rng(43);
   // Nearly every point its own voxel: 1 mm voxels in a 0.5 m cube, 10 km from the origin.

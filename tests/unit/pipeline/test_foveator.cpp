@@ -240,6 +240,13 @@ TEST_P(FoveatorOverCapacity, WithoutCoarseningsOrBeyondThemTheFrameIsRefused) {
   EXPECT_EQ(Foveator::create(bad, config()).status().code(), ErrorCode::kInvalidArgument);
   bad.max_coarsenings = -1;
   EXPECT_EQ(Foveator::create(bad, config()).status().code(), ErrorCode::kInvalidArgument);
+
+  // The hash sampler's 32-bit colour sums bound the points a frame: refused
+  // before anything is allocated for them.
+  PipelineCapacity too_many{HashVoxelSampler::kMaxPoints + 1, 100, GetParam()};
+  const Status refused = Foveator::create(too_many, config()).status();
+  EXPECT_EQ(refused.code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("colour sums"), std::string::npos) << refused.message();
 }
 
 INSTANTIATE_TEST_SUITE_P(Kernels, FoveatorOverCapacity, ::testing::Values(KernelSet::kRef, KernelSet::kSimd),
