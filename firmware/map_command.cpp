@@ -77,10 +77,11 @@ void printSummary(const pipeline::map::SurfelMap& map, const Samples& fuse_ms, s
               map.brickCount(), map.capacity(), sizeof(pipeline::map::Surfel),
               static_cast<double>(map.memoryBytes()) / (1024.0 * 1024.0));
   std::printf("surfels: %llu added, %llu carved away, %llu unstable too long, %llu evicted, %llu not placed (pool or "
-              "bricks full; %llu for want of a brick)\n",
+              "bricks full; %llu for want of a brick); %llu empty bricks reused\n",
               static_cast<unsigned long long>(c.added), static_cast<unsigned long long>(c.removed_carved),
               static_cast<unsigned long long>(c.removed_unstable), static_cast<unsigned long long>(c.evicted),
-              static_cast<unsigned long long>(c.dropped_full), static_cast<unsigned long long>(c.dropped_no_brick));
+              static_cast<unsigned long long>(c.dropped_full), static_cast<unsigned long long>(c.dropped_no_brick),
+              static_cast<unsigned long long>(c.bricks_reused));
   std::printf("fusion time [ms]: median %.2f, p90 %.2f, max %.2f (per-pixel kernels %s, one thread)\n",
               fuse_ms.median(), fuse_ms.quantile(0.9), fuse_ms.max(),
               std::string(kernelSetName(map.config().kernels)).c_str());

@@ -153,10 +153,10 @@ void Service::stop() {
     if (stage_->map() != nullptr) {
       log().log(LogLevel::kInfo,
                 "map: %" PRIu64 " surfels from %" PRIu64 " fused frames; %" PRIu64 " evicted; %" PRIu64
-                " new surfels dropped (%" PRIu64 " for want of a brick); refused %" PRIu64
+                " new surfels dropped (%" PRIu64 " for want of a brick); %" PRIu64 " empty bricks reused; refused %" PRIu64
                 " frames without a pose, %" PRIu64 " for another reason",
                 s.map.surfels, s.map.frames_fused, s.map.evicted, s.map.dropped, s.map.dropped_no_brick,
-                s.map.refused_no_pose, s.map.refused_other);
+                s.map.bricks_reused, s.map.refused_no_pose, s.map.refused_other);
       if (stage_->fusionThread()) {
         log().log(LogLevel::kInfo,
                   "map: fused on its own thread; %" PRIu64 " frames left unfused while it was busy (sent without what "
@@ -222,6 +222,7 @@ ServiceStats Service::stats() const {
   s.map.evicted = map_evicted_.load(std::memory_order_relaxed);
   s.map.dropped = map_dropped_.load(std::memory_order_relaxed);
   s.map.dropped_no_brick = map_dropped_no_brick_.load(std::memory_order_relaxed);
+  s.map.bricks_reused = map_bricks_reused_.load(std::memory_order_relaxed);
   s.map.unfused = map_fusion_skipped_.load(std::memory_order_relaxed);
   s.map.fusion_busy = map_fusion_busy_.load(std::memory_order_relaxed);
   s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);

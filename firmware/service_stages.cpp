@@ -312,11 +312,14 @@ void Service::publishMapFigures() {
   map_refused_other_.store(c.refused() - c.refused_no_pose, std::memory_order_relaxed);
   map_evicted_.store(c.evicted, std::memory_order_relaxed);
   map_dropped_.store(c.dropped_full, std::memory_order_relaxed);
-  // The brick table fills once and stays full (bricks are not freed): say so
-  // once, since the map then no longer grows into new places.
+  map_bricks_reused_.store(c.bricks_reused, std::memory_order_relaxed);
+  // A full table gives its empty bricks to new places; with none empty (or
+  // all the operator's still) new places go unmapped: said once, the counts
+  // on the stop line.
   if (c.dropped_no_brick > 0 && map_dropped_no_brick_.exchange(c.dropped_no_brick, std::memory_order_relaxed) == 0) {
     log().log(LogLevel::kWarning,
-              "map: the brick table is full (map.max_bricks = %zu): surfaces outside its bricks are not mapped",
+              "map: the brick table is full (map.max_bricks = %zu) and none of its bricks is free: surfaces outside "
+              "them are not mapped until one empties",
               config_.map.map.max_bricks);
   }
 }

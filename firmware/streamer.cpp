@@ -199,11 +199,13 @@ int Streamer::brickSlot(const net::BrickKey& key) const {
 
 void Streamer::rememberBrickSlot(uint16_t slot, const net::BrickKey& key) {
   if (brickSlot(key) == slot) return;
-  // The map never gives a slot another key (its bricks are never freed), so
-  // the index holds at most max_bricks entries.
+  auto key_of = [this](uint32_t s) -> const net::BrickKey& { return slot_key_[s]; };
+  // The map gives an emptied brick's slot to a new place (SurfelMap::pinBrick):
+  // the slot's old key goes first, so that the index holds at most max_bricks
+  // entries and an acknowledgement for the old place names no slot.
+  if (const net::BrickKey& old = slot_key_[slot]; brickSlot(old) == slot) slot_index_.erase(old, key_of);
   slot_key_[slot] = key;
-  const std::size_t cell = slot_index_.probe(key, [this](uint32_t s) -> const net::BrickKey& { return slot_key_[s]; });
-  slot_index_.place(cell, slot);
+  slot_index_.place(slot_index_.probe(key, key_of), slot);
 }
 
 void Streamer::takeBrickAcks() {

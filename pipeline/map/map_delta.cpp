@@ -48,6 +48,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
   held_changes_.assign(max_bricks, 0);
   held_settled_.assign(max_bricks, 0);
   version_.assign(max_bricks, 0);
+  sent_plan_.assign(max_bricks, 0);
   due_since_.assign(max_bricks, 0);
   order_.resize(max_bricks);
   due_.resize(max_bricks);
@@ -56,7 +57,8 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
 
 std::size_t MapDelta::memoryBytes() const {
   return held_level_.capacity() +
-         (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + due_since_.capacity()) *
+         (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + sent_plan_.capacity() +
+          due_since_.capacity()) *
              sizeof(uint32_t) +
          order_.capacity() * sizeof(uint64_t) + (due_.capacity() + plan_.capacity()) * sizeof(BrickDue);
 }
@@ -96,6 +98,10 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
   for (std::size_t b = 0; b < bricks; ++b) {
     const auto brick = static_cast<uint16_t>(b);
     const uint32_t settled = map.brickSettledCount(brick);
+    if (settled == 0 && held_level_[b] != kNotHeld && held_settled_[b] == 0 &&
+        plan_number_ - sent_plan_[b] >= kEmptyHoldPlans) {
+      held_level_[b] = kNotHeld;  // sent empty long enough ago: delivered, or reported lost by now
+    }
     const uint8_t held = held_level_[b];
     stats.bricks += settled > 0 ? 1 : 0;
     if (held == kNotHeld && settled == 0) {
@@ -144,6 +150,7 @@ uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level)
   held_level_[brick] = level;
   held_changes_[brick] = map.brickChanges(brick);
   held_settled_[brick] = map.brickSettledCount(brick);
+  sent_plan_[brick] = plan_number_;
   due_since_[brick] = 0;
   if (++version_[brick] == 0) version_[brick] = 1;
   return version_[brick];

@@ -202,7 +202,19 @@ Status Mapper::planBricks(const Gaze& gaze, double budget_bytes, double live_byt
     ++plan.bricks_waiting;
     plan.fovea_bricks_waiting += (*due)[i].fovea ? 1 : 0;
   }
+  pinHeldBricks();
   return Status::ok();
+}
+
+// What the operator may still draw keeps its brick: fusion gives only an
+// unpinned empty brick to a new place. Here under the gate, so fusion sees the
+// pins whole; forget() between plans only unpins, which waits for the next plan.
+void Mapper::pinHeldBricks() {
+  const std::size_t bricks = map_->brickCount();
+  for (std::size_t b = 0; b < bricks; ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    map_->pinBrick(brick, delta_->holds(brick));
+  }
 }
 
 void Mapper::forgetBrick(uint16_t brick) {

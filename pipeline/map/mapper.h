@@ -180,6 +180,7 @@ class Mapper {
   // The tracker's moving pixels of `frame`, the frame it just posed (null:
   // no tracking, or none for a frame of that size).
   const uint8_t* movingPixels(const hal::RgbdFrame& frame) const;
+  void pinHeldBricks();  // planBricks()'s, under the gate: the map keeps what the operator may draw
 
   // fusion_thread's hand-off: the frame and the state, which addFrame() moves
   // from idle to submitted and fuseSubmitted() to fusing and back to idle.

@@ -73,6 +73,7 @@ SurfelMap::SurfelMap(const SurfelMapConfig& config) : config_(config) {
   brick_head_.assign(config.max_bricks, kNoSurfel);
   brick_settled_.assign(config.max_bricks, 0);
   brick_changes_.assign(config.max_bricks, 0);
+  brick_pinned_.assign(config.max_bricks, 0);
   links_.resize(config.max_surfels);
   pixel_capacity_ = pixels;
   vertex_z_.resize(pixels);
@@ -97,7 +98,8 @@ SurfelMapMemory SurfelMap::memoryParts() const {
   m.pool = surfels_.capacity() * sizeof(Surfel) + links_.memoryBytes();
   m.bricks = brick_keys_.capacity() * sizeof(BrickKey) + brick_table_.memoryBytes() +
              brick_cam_.capacity() * sizeof(Eigen::Vector3f) +
-             (brick_visible_.capacity() + brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t);
+             (brick_visible_.capacity() + brick_head_.capacity() + brick_settled_.capacity() + brick_changes_.capacity()) * sizeof(uint32_t) +
+             brick_pinned_.capacity();
   m.pixels = (vertex_z_.capacity() + weight_.capacity() + normal_cos_.capacity()) * sizeof(float) + tables_.memoryBytes() +
              index_map_.memoryBytes() + explained_.capacity();
   m.eviction = key_histogram_.capacity() * sizeof(uint32_t);
@@ -110,6 +112,9 @@ void SurfelMap::clear() {
   std::fill(brick_head_.begin(), brick_head_.end(), kNoSurfel);
   std::fill(brick_settled_.begin(), brick_settled_.end(), 0);
   std::fill(brick_changes_.begin(), brick_changes_.end(), 0);
+  std::fill(brick_pinned_.begin(), brick_pinned_.end(), uint8_t{0});
+  reuse_cursor_ = 0;
+  reuse_failed_frame_ = 0;
   free_head_ = kNone;
   free_count_ = high_water_ = live_ = brick_count_ = 0;
   frame_ = 0;
@@ -134,13 +139,39 @@ int SurfelMap::findOrAddBrick(const Eigen::Vector3d& p_world) {
   if (!(std::abs(cell.x()) < kLimit && std::abs(cell.y()) < kLimit && std::abs(cell.z()) < kLimit)) return -1;
   const BrickKey key{static_cast<int32_t>(cell.x()), static_cast<int32_t>(cell.y()), static_cast<int32_t>(cell.z())};
   auto key_of = [this](uint32_t brick) -> const BrickKey& { return brick_keys_[brick]; };
-  const std::size_t at = brick_table_.probe(key, key_of);
+  std::size_t at = brick_table_.probe(key, key_of);
   if (const int32_t brick = brick_table_.slotAt(at); brick >= 0) return brick;
-  if (brick_count_ == config_.max_bricks) return -1;
-  brick_keys_[brick_count_] = key;
-  brick_visible_[brick_count_] = 0;
-  brick_table_.place(at, static_cast<uint32_t>(brick_count_));
-  return static_cast<int>(brick_count_++);
+  int brick = -1;
+  if (brick_count_ < config_.max_bricks) {
+    brick = static_cast<int>(brick_count_++);
+  } else {
+    brick = reuseEmptyBrick();
+    if (brick < 0) return -1;
+    at = brick_table_.probe(key, key_of);  // taking the old key out moved the table's entries
+  }
+  brick_keys_[brick] = key;
+  brick_visible_[brick] = 0;  // not culled for this frame: nothing of it was rendered
+  brick_table_.place(at, static_cast<uint32_t>(brick));
+  return brick;
+}
+
+// Empty means no live surfel in its list (so none settled); a surfel freed
+// this frame keeps its old brick number but is no longer live, and nothing
+// reads a dead surfel's brick. The brick's per-frame culling is left as it was:
+// fusion reads it only for live surfels, and the next frame's culling redoes it.
+int SurfelMap::reuseEmptyBrick() {
+  if (reuse_failed_frame_ == frame_) return -1;
+  auto key_of = [this](uint32_t brick) -> const BrickKey& { return brick_keys_[brick]; };
+  for (std::size_t n = 0; n < brick_count_; ++n) {
+    const std::size_t b = reuse_cursor_;
+    reuse_cursor_ = (reuse_cursor_ + 1) % brick_count_;
+    if (brick_head_[b] != kNoSurfel || brick_pinned_[b] != 0) continue;
+    brick_table_.erase(brick_keys_[b], key_of);
+    ++counters_.bricks_reused;
+    return static_cast<int>(b);
+  }
+  reuse_failed_frame_ = frame_;
+  return -1;
 }
 
 FuseOutcome SurfelMap::checkFrame(const hal::RgbdFrame& frame) {

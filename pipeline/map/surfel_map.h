@@ -145,6 +145,7 @@ struct SurfelMapCounters {
   uint64_t refused_size = 0, refused_bad_pose = 0, refused_pose_jump = 0, refused_clock = 0, refused_no_pose = 0;
   uint64_t refused() const { return refused_size + refused_bad_pose + refused_pose_jump + refused_clock + refused_no_pose; }
   uint64_t added = 0, evicted = 0, removed_carved = 0, removed_unstable = 0, dropped_full = 0, dropped_no_brick = 0;
+  uint64_t bricks_reused = 0;  // empty bricks given a new place when the table was full
 };
 
 class SurfelMap {
@@ -194,6 +195,15 @@ class SurfelMap {
   uint32_t brickSettledCount(uint16_t brick) const { return brick_settled_[brick]; }
   uint32_t brickChanges(uint16_t brick) const { return brick_changes_[brick]; }
 
+  // A brick whose surfels all went (evicted, carved) is given to a new place
+  // when the table is full and one is needed, unless it is pinned: the caller
+  // that streams bricks pins those the operator may still draw, so that a
+  // place is never told to the operator under a brick's slot while its old
+  // content is (MapDelta::holds). Bricks start unpinned; pin from the thread
+  // that fuses, or under the map's gate. Its brickChanges() keeps counting.
+  void pinBrick(uint16_t brick, bool pinned) { brick_pinned_[brick] = pinned ? 1 : 0; }
+  bool brickPinned(uint16_t brick) const { return brick_pinned_[brick] != 0; }
+
   // The index map of the last fused frame (indexMapWidth() x indexMapHeight(),
   // row-major; both 0 before the first fused frame): per pixel the slot of the
   // surfel the frame's pixel saw, rendered at the frame's pose before
@@ -225,8 +235,10 @@ class SurfelMap {
  private:
   explicit SurfelMap(const SurfelMapConfig& config);
 
-  // The brick holding world position p (inserted if new); -1 when the table is full.
+  // The brick holding world position p (inserted if new, in an empty unpinned
+  // brick when the table is full); -1 when no brick is left for it.
   int findOrAddBrick(const Eigen::Vector3d& p_world);
+  int reuseEmptyBrick();  // findOrAddBrick()'s: an empty unpinned brick, out of the table; -1: none
   FuseOutcome checkFrame(const hal::RgbdFrame& frame);
   uint32_t computeDepths(const hal::RgbdFrame& frame);  // step 2's depths and weights, and vertex_params_
   void computeNormals(FuseStats& stats);                 // ... and its normals and radii
@@ -298,6 +310,9 @@ class SurfelMap {
   std::vector<uint32_t> brick_head_;      // per brick: first surfel of its list (kNoSurfel: none)
   std::vector<uint32_t> brick_settled_;   // ... its settled surfels
   std::vector<uint32_t> brick_changes_;   // ... changes to its settled set (wrapping)
+  std::vector<uint8_t> brick_pinned_;     // ... 1: not to be reused while empty (pinBrick)
+  std::size_t reuse_cursor_ = 0;          // where reuseEmptyBrick() looks next (round robin)
+  uint32_t reuse_failed_frame_ = 0;       // the frame (frame_, from 1) whose look found none: one fruitless look a frame at most
   // Per slot: the brick list's neighbours; a free slot's next is the next free one.
   SurfelLinks links_;
 

@@ -199,7 +199,7 @@ TEST(FoveadServe, StreamsTheMapToFoveaOperator) {
   const std::string serve_out = serve.output();
   ASSERT_TRUE(std::regex_search(serve_out, map,
                                 std::regex("map: ([0-9]+) surfels from ([0-9]+) fused frames; [0-9]+ evicted; 0 new "
-                                           "surfels dropped \\(0 for want of a brick\\); refused 0 frames without "
+                                           "surfels dropped \\(0 for want of a brick\\); 0 empty bricks reused; refused 0 frames without "
                                            "a pose, 0 for another reason")))
       << serve_out;
   EXPECT_GT(std::stoul(map[1].str()), 5000u) << serve_out;

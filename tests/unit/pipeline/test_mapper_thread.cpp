@@ -136,6 +136,15 @@ TEST(MapperThread, FusingOnAnotherThreadMakesTheMapOneThreadMakesFromTheSameFram
   }
   stop.store(true, std::memory_order_release);
   fusion.join();
+  // The plan pins what the operator may draw (under the gate, beside fusion):
+  // the map reuses none of those bricks.
+  std::size_t pinned = 0;
+  for (std::size_t b = 0; b < mapper.map().brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    EXPECT_EQ(mapper.map().brickPinned(brick), mapper.delta()->holds(brick)) << "brick " << b;
+    pinned += mapper.map().brickPinned(brick) ? 1 : 0;
+  }
+  EXPECT_GT(pinned, 0u);
   ASSERT_FALSE(handed.empty());
   EXPECT_EQ(handed.size() + busy, static_cast<std::size_t>(frames));
   EXPECT_EQ(mapper.status().fusion_busy, busy);

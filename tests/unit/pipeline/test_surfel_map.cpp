@@ -773,6 +773,67 @@ TEST(SurfelMap, AFullBrickTableDropsAndCountsWhatItCannotPlace) {
   expectConsistent(map);
 }
 
+// The table filled by a box before the wall; the box leaves, its bricks empty
+// (carved) and the wall behind it needs bricks of its own: an empty unpinned
+// brick goes to the new place, a pinned one (the operator may still draw it)
+// does not. Returns the surfels mapped on the wall behind the box.
+struct ReuseRun {
+  uint64_t reused = 0, dropped_no_brick = 0;
+  std::size_t wall_behind = 0;
+};
+ReuseRun fillTheTableThenTakeTheBoxAway(bool pin_every_brick) {
+  const int w = 80, h = 60;
+  SurfelMapConfig config = smallConfig(w, h);
+  config.brick_size_m = 0.1;
+  // First as many bricks as the scene with the box takes, then exactly those.
+  SurfelMap sizing = SurfelMap::create(config).value();
+  hal::RgbdFrame frame = makeFrame(w, h);
+  int64_t stamp = 0;
+  fuseStill(sizing, frame, sceneWithBox(), 15, stamp);
+  config.max_bricks = sizing.brickCount();
+  SurfelMap map = SurfelMap::create(config).value();
+  stamp = 0;
+  fuseStill(map, frame, sceneWithBox(), 15, stamp);
+  EXPECT_EQ(map.brickCount(), config.max_bricks);
+  EXPECT_EQ(map.counters().dropped_no_brick, 0u);
+  for (std::size_t b = 0; b < map.brickCount(); ++b) map.pinBrick(static_cast<uint16_t>(b), pin_every_brick);
+  fuseStill(map, frame, Scene{}, 30, stamp);
+  expectConsistent(map);
+  // A brick's key names one brick, and its surfels lie in or at its cube.
+  std::set<std::tuple<int32_t, int32_t, int32_t>> keys;
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    if (map.firstInBrick(brick) == SurfelMap::kNoSurfel) continue;
+    const SurfelMap::BrickKey& k = map.brickKey(brick);
+    EXPECT_TRUE(keys.insert({k.x, k.y, k.z}).second) << "two bricks hold key " << k.x << "," << k.y << "," << k.z;
+  }
+  for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+    if (!map.live(slot)) continue;
+    const Eigen::Vector3d in_brick = map.worldPosition(slot) - map.brickOrigin(map.surfel(slot).brick);
+    EXPECT_TRUE((in_brick.array() > -0.02).all() && (in_brick.array() < 0.12).all())
+        << "slot " << slot << " lies " << in_brick.transpose() << " from its brick's origin";
+  }
+  ReuseRun run;
+  run.reused = map.counters().bricks_reused;
+  run.dropped_no_brick = map.counters().dropped_no_brick;
+  for (std::size_t slot = 0; slot < map.slotCount(); ++slot) {
+    const Eigen::Vector3d p = map.worldPosition(slot);
+    run.wall_behind += map.live(slot) && std::abs(p.x()) < 0.6 && std::abs(p.y()) < 0.6 && std::abs(p.z() - 3.0) < 0.01;
+  }
+  return run;
+}
+
+TEST(SurfelMap, AnEmptiedBrickGoesToANewPlaceWhenTheTableIsFullUnlessPinned) {
+  const ReuseRun pinned = fillTheTableThenTakeTheBoxAway(true);
+  const ReuseRun unpinned = fillTheTableThenTakeTheBoxAway(false);
+  EXPECT_EQ(pinned.reused, 0u);
+  EXPECT_GT(pinned.dropped_no_brick, 0u) << "the wall behind the box needs bricks the table does not have";
+  EXPECT_GT(unpinned.reused, 10u) << "the box's bricks, emptied, were not given to the wall behind it";
+  EXPECT_LT(unpinned.dropped_no_brick, pinned.dropped_no_brick);
+  EXPECT_GT(unpinned.wall_behind, pinned.wall_behind + 50)
+      << "reused " << unpinned.reused << ": " << unpinned.wall_behind << " against " << pinned.wall_behind;
+}
+
 TEST(SurfelMap, ClearEmptiesTheMapAndItFusesAgain) {
   const int w = 40, h = 30;
   SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
@@ -1113,21 +1174,69 @@ TEST(MapDelta, SendsWhatTheOperatorLacksThenNothingUntilTheGazeOrTheMapChanges) 
   EXPECT_EQ(stats.missing, stats.bricks);
 }
 
-TEST(MapDelta, ABrickWhoseSettledSetChangedIsDueAgainAndWaitingBricksGoOldestFirst) {
-  const int w = 80, h = 60;
-  SurfelMap map = SurfelMap::create(smallConfig(w, h)).value();
-  hal::RgbdFrame frame = makeFrame(w, h);
+// The box before the wall fused `frames` frames, and everything due for the
+// gaze at the box sent: the operator holds the whole map.
+struct SentBoxMap {
+  SurfelMap map = SurfelMap::create(smallConfig(80, 60)).value();
+  hal::RgbdFrame frame = makeFrame(80, 60);
   int64_t stamp = 0;
-  fuseStill(map, frame, sceneWithBox(), 10, stamp);
   MapDelta delta = makeDelta();
+  Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
+
+  explicit SentBoxMap(int frames) {
+    fuseStill(map, frame, sceneWithBox(), frames, stamp);
+    MapDeltaStats stats;
+    Result<std::span<const BrickDue>> plan = delta.plan(map, gaze, stats);
+    EXPECT_TRUE(plan);
+    if (plan) {
+      for (const BrickDue& due : plan.value()) delta.markSent(map, due.brick, due.level);
+    }
+  }
+};
+
+// A brick sent empty is the operator's (it may still draw what the empty
+// version replaces) for kEmptyHoldPlans plans, then no longer; one sent with
+// surfels stays held.
+TEST(MapDelta, ABrickSentEmptyIsHeldForAWhileThenNoLonger) {
+  SentBoxMap sent(15);
+  auto& [map, frame, stamp, delta, gaze] = sent;
   MapDeltaStats stats;
-  const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
+  fuseStill(map, frame, Scene{}, 30, stamp);  // the box goes: its bricks empty
+  std::vector<uint16_t> emptied;
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    if (delta.holds(brick) && map.brickSettledCount(brick) == 0) emptied.push_back(brick);
+  }
+  ASSERT_FALSE(emptied.empty()) << "no held brick emptied";
+  // They are due (changed), and sent empty.
   auto plan = delta.plan(map, gaze, stats);
   ASSERT_TRUE(plan);
   for (const BrickDue& due : plan.value()) delta.markSent(map, due.brick, due.level);
+  for (uint16_t brick : emptied) EXPECT_TRUE(delta.holds(brick)) << "brick " << brick;
+  for (uint32_t i = 1; i < MapDelta::kEmptyHoldPlans; ++i) ASSERT_TRUE(delta.plan(map, gaze, stats));
+  for (uint16_t brick : emptied) EXPECT_TRUE(delta.holds(brick)) << "brick " << brick << " released early";
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  for (uint16_t brick : emptied) {
+    EXPECT_FALSE(delta.holds(brick)) << "brick " << brick;
+    for (const BrickDue& due : plan.value()) EXPECT_NE(due.brick, brick) << "an empty brick the operator lacks is due";
+  }
+  std::size_t held_with_surfels = 0;
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    if (map.brickSettledCount(brick) > 0) held_with_surfels += delta.holds(brick) ? 1 : 0;
+  }
+  EXPECT_GT(held_with_surfels, 0u);
+  EXPECT_EQ(held_with_surfels, stats.bricks) << "every brick with surfels is still held";
+}
+
+TEST(MapDelta, ABrickWhoseSettledSetChangedIsDueAgainAndWaitingBricksGoOldestFirst) {
+  SentBoxMap sent(10);
+  auto& [map, frame, stamp, delta, gaze] = sent;
+  MapDeltaStats stats;
   // The box goes: its bricks lose their settled surfels and the wall appears behind it.
   fuseStill(map, frame, Scene{}, 10, stamp);
-  plan = delta.plan(map, gaze, stats);
+  auto plan = delta.plan(map, gaze, stats);
   ASSERT_TRUE(plan);
   EXPECT_GT(stats.changed, 0u);
   std::size_t changed_where_the_box_was = 0;
