@@ -49,6 +49,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
   held_settled_.assign(max_bricks, 0);
   version_.assign(max_bricks, 0);
   sent_plan_.assign(max_bricks, 0);
+  may_draw_.assign(max_bricks, 0);
   due_since_.assign(max_bricks, 0);
   order_.resize(max_bricks);
   due_.resize(max_bricks);
@@ -56,7 +57,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
 }
 
 std::size_t MapDelta::memoryBytes() const {
-  return held_level_.capacity() +
+  return held_level_.capacity() + may_draw_.capacity() +
          (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + sent_plan_.capacity() +
           due_since_.capacity()) *
              sizeof(uint32_t) +
@@ -100,18 +101,25 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
     const uint32_t settled = map.brickSettledCount(brick);
     if (settled == 0 && held_level_[b] != kNotHeld && held_settled_[b] == 0 &&
         plan_number_ - sent_plan_[b] >= kEmptyHoldPlans) {
-      held_level_[b] = kNotHeld;  // sent empty long enough ago: delivered, or reported lost by now
+      held_level_[b] = kNotHeld;  // sent empty long enough ago, and not reported lost: delivered
+      may_draw_[b] = 0;
     }
     const uint8_t held = held_level_[b];
     stats.bricks += settled > 0 ? 1 : 0;
-    if (held == kNotHeld && settled == 0) {
+    if (held == kNotHeld && settled == 0 && may_draw_[b] == 0) {
       due_since_[b] = 0;
       continue;
     }
     const Need need = this->need(map.brickOrigin(brick), size, gaze);
     BrickDue due{brick, need.level, BrickNeed::kMissing, need.ecc_deg <= config_.fovea_ecc_deg};
     bool is_due = false;
-    if (held == kNotHeld) {
+    if (held == kNotHeld && settled == 0) {
+      // Emptied, and the version that says so was lost (or never went): the
+      // operator may still draw what it had.
+      due.need = BrickNeed::kChanged;
+      is_due = true;
+      ++stats.changed;
+    } else if (held == kNotHeld) {
       is_due = true;
       ++stats.missing;
     } else if (need.level < held) {
@@ -150,6 +158,7 @@ uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level)
   held_level_[brick] = level;
   held_changes_[brick] = map.brickChanges(brick);
   held_settled_[brick] = map.brickSettledCount(brick);
+  if (held_settled_[brick] > 0) may_draw_[brick] = 1;
   sent_plan_[brick] = plan_number_;
   due_since_[brick] = 0;
   if (++version_[brick] == 0) version_[brick] = 1;
@@ -158,6 +167,7 @@ uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level)
 
 void MapDelta::forgetAll() {
   std::fill(held_level_.begin(), held_level_.end(), kNotHeld);
+  std::fill(may_draw_.begin(), may_draw_.end(), uint8_t{0});
   std::fill(due_since_.begin(), due_since_.end(), 0);
 }
 

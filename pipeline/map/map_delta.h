@@ -23,7 +23,9 @@
 // A brick sent empty (its settled surfels all went) is held for
 // kEmptyHoldPlans plans, long enough for its one empty chunk to be delivered
 // or reported lost, and then no longer: holds() turns false, and the map may
-// give the brick's slot to a new place (SurfelMap::pinBrick).
+// give the brick's slot to a new place (SurfelMap::pinBrick). An emptied brick
+// whose empty version was lost (forget()) while the operator may still draw an
+// earlier one is due again (kChanged) until one is delivered.
 //
 // Memory: the per-brick state and the plan, allocated by create(); plan()
 // allocates nothing.
@@ -108,7 +110,7 @@ class MapDelta {
   static constexpr uint32_t kEmptyHoldPlans = 64;  // about 2 s at 30 plans a second
   uint8_t heldLevel(uint16_t brick) const { return held_level_[brick]; }
   // Whether the operator may draw something of `brick` as this side sent it.
-  bool holds(uint16_t brick) const { return held_level_[brick] != kNotHeld; }
+  bool holds(uint16_t brick) const { return held_level_[brick] != kNotHeld || may_draw_[brick] != 0; }
   uint32_t version(uint16_t brick) const { return version_[brick]; }
   const MapDeltaConfig& config() const { return config_; }
   std::size_t memoryBytes() const;
@@ -124,6 +126,7 @@ class MapDelta {
   std::vector<uint32_t> held_settled_;      // ... and the settled surfels then
   std::vector<uint32_t> version_;
   std::vector<uint32_t> sent_plan_;        // plan number when last sent
+  std::vector<uint8_t> may_draw_;          // 1: a version with surfels went, and no empty one is known delivered since
   std::vector<uint32_t> due_since_;        // plan number the brick became due (0: not due)
   std::vector<uint64_t> order_;            // plan scratch: sort keys
   std::vector<BrickDue> due_;              // by brick, then in plan order
