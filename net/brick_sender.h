@@ -53,7 +53,7 @@ class BrickSender {
   // the brick whose version had to go to make room. false: parts out of range.
   bool begin(uint16_t brick, uint32_t version, uint16_t parts, int64_t now_ns, int* lost);
   // Stores part `part` of the version begun last (its datagram payload). false
-  // when the part is out of range or larger than a tenth of the store.
+  // when the part is out of range, empty, or larger than a tenth of the store.
   // `stored` (may be null) gets the copy in the store, which stays valid until
   // store_bytes more are written: the caller may send from it.
   bool addPart(uint16_t part, std::span<const uint8_t> payload, std::span<const uint8_t>* stored = nullptr);
@@ -86,12 +86,14 @@ class BrickSender {
     uint16_t acked = 0;
     int64_t sent_ns = 0;     // last (re)send
     uint64_t begun = 0;      // order of begin(), for crowding out the oldest
+    uint64_t written = 0;    // the store's written_ at begin(): its parts' positions are this plus their offsets' distance
   };
   explicit BrickSender(const BrickSenderConfig& config);
   void release(std::size_t r);
   bool intact(std::size_t r, uint16_t part) const;
   uint8_t* bits(std::size_t r) { return ack_bits_.data() + r * part_bytes_; }
-  uint64_t* offsets(std::size_t r) { return part_offset_.data() + r * config_.max_parts; }
+  uint32_t* offsets(std::size_t r) { return part_offset_.data() + r * config_.max_parts; }
+  uint64_t partPosition(std::size_t r, uint16_t part) const;  // absolute, from the record's written
   uint16_t* lengths(std::size_t r) { return part_length_.data() + r * config_.max_parts; }
 
   BrickSenderConfig config_;
@@ -101,7 +103,10 @@ class BrickSender {
   std::vector<Record> records_;
   std::vector<int32_t> record_of_;       // per brick: its record, -1 none
   std::vector<uint8_t> ack_bits_;        // per record: max_parts bits
-  std::vector<uint64_t> part_offset_;    // per record and part: absolute ring position (UINT64_MAX: not stored)
+  // Per record and part: the absolute ring position's low 32 bits (4 bytes a
+  // part, not 8: the record's parts are all written soon after its begin(),
+  // well within 2^32 bytes), and the length (0: not stored; no part is empty).
+  std::vector<uint32_t> part_offset_;
   std::vector<uint16_t> part_length_;
   std::size_t in_flight_ = 0;
   std::size_t current_ = SIZE_MAX;       // the record begin() started
@@ -135,7 +140,7 @@ std::size_t BrickSender::collectResends(int64_t now_ns, std::size_t max_parts, R
     }
     for (uint16_t p = 0; p < rec.parts && given < max_parts; ++p) {
       if (bits(r)[p / 8] & (1u << (p % 8))) continue;
-      const std::size_t at = static_cast<std::size_t>(offsets(r)[p] % ring_.size());
+      const std::size_t at = static_cast<std::size_t>(partPosition(r, p) % ring_.size());
       resend(rec.brick, p, std::span<const uint8_t>(ring_.data() + at, lengths(r)[p]));
       ++given;
       ++counters_.resends;

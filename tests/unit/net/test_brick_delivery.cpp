@@ -239,6 +239,52 @@ TEST(BrickDelivery, PartsOverwrittenBeforeTheirAcknowledgementLoseTheVersion) {
   EXPECT_EQ(sender.inFlight(), 0u);
 }
 
+// A part's place in the store is kept as the low 32 bits of its absolute
+// position: a version whose parts straddle 4 GiB of the store's writes (hours
+// of bricks at a robot's rates) is still whole and resent as the same bytes,
+// and one overwritten there is still lost. 65 535 parts of 64 KiB get there.
+TEST(BrickDelivery, PartsPastFourGibibytesOfWritesAreFoundAsBefore) {
+  BrickSenderConfig config;
+  config.store_bytes = std::size_t{1} << 20;  // 16 parts of 65 535 bytes a turn, then a skip of 16
+  config.max_bricks = 4;
+  config.resend_after_ns = 10 * kMs;
+  BrickSender sender = BrickSender::create(config).value();
+  std::vector<uint8_t> part(65535, 0);
+  for (uint32_t v = 1; v <= 65535; ++v) {  // brick 0: each version acknowledged at once
+    ASSERT_TRUE(sender.begin(0, v, 1, 0, nullptr));
+    ASSERT_TRUE(sender.addPart(0, part));
+    ASSERT_EQ(sender.acknowledge(0, v, 0), BrickSender::Ack::kDone);
+  }
+  // 2^32 - 65 551 bytes written: brick 1's three parts lie either side of 2^32.
+  ASSERT_TRUE(sender.begin(1, 1, 3, 0, nullptr));
+  for (uint16_t p = 0; p < 3; ++p) {
+    std::fill(part.begin(), part.end(), static_cast<uint8_t>(p + 1));
+    ASSERT_TRUE(sender.addPart(p, part));
+  }
+  std::vector<uint16_t> resent;
+  std::vector<int> lost;
+  sender.collectResends(
+      20 * kMs, 100,
+      [&](uint16_t brick, uint16_t p, std::span<const uint8_t> bytes) {
+        EXPECT_EQ(brick, 1);
+        EXPECT_EQ(bytes.size(), 65535u);
+        EXPECT_TRUE(std::all_of(bytes.begin(), bytes.end(), [&](uint8_t b) { return b == p + 1; })) << "part " << p;
+        resent.push_back(p);
+      },
+      [&](uint16_t brick) { lost.push_back(brick); });
+  EXPECT_EQ(resent, (std::vector<uint16_t>{0, 1, 2}));
+  EXPECT_TRUE(lost.empty());
+  // Overwritten past 2^32: lost, as at the start.
+  for (uint32_t v = 65536; v < 65536 + 17; ++v) {
+    ASSERT_TRUE(sender.begin(0, v, 1, 0, nullptr));
+    ASSERT_TRUE(sender.addPart(0, part));
+    ASSERT_EQ(sender.acknowledge(0, v, 0), BrickSender::Ack::kDone);
+  }
+  sender.collectResends(40 * kMs, 100, [&](uint16_t, uint16_t, std::span<const uint8_t>) {},
+                        [&](uint16_t brick) { lost.push_back(brick); });
+  EXPECT_EQ(lost, std::vector<int>{1});
+}
+
 TEST(BrickDelivery, AFullTableCrowdsOutTheOldestVersionAndSaysWhich) {
   BrickSenderConfig config;
   config.max_in_flight = 2;
@@ -257,6 +303,7 @@ TEST(BrickDelivery, AFullTableCrowdsOutTheOldestVersionAndSaysWhich) {
   EXPECT_FALSE(sender.begin(1, 1, 0, 0, &lost));
   EXPECT_FALSE(sender.begin(1, 1, 300, 0, &lost));
   EXPECT_FALSE(sender.addPart(1, std::vector<uint8_t>(10)));
+  EXPECT_FALSE(sender.addPart(0, std::vector<uint8_t>{})) << "an empty part";
   BrickSenderConfig bad;
   bad.store_bytes = 100;
   EXPECT_FALSE(BrickSender::create(bad));
