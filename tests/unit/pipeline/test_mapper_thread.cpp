@@ -106,7 +106,7 @@ TEST(MapperThread, FusingOnAnotherThreadMakesTheMapOneThreadMakesFromTheSameFram
   hal::RgbdFrame frame(kW, kH);
   PointCloud cloud(static_cast<std::size_t>(kW) * kH);
   BrickBatch batch(1 << 16, 256);
-  uint64_t busy = 0, thinned = 0, took = 0;
+  uint64_t busy = 0, thinned = 0, took = 0, planned = 0;
   const int frames = test::repetitions(40, 16);
   for (int i = 0; i < frames; ++i) {
     ASSERT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
@@ -127,6 +127,7 @@ TEST(MapperThread, FusingOnAnotherThreadMakesTheMapOneThreadMakesFromTheSameFram
     gaze.direction = frame.T_world_cam.R_world_cam.col(2);
     MapperPlan plan;
     ASSERT_TRUE(mapper.planBricks(gaze, 1e5, 0.0, gaze.origin_m, batch, plan).isOk());
+    planned += plan.bricks_planned;
     MapperFrame fused;
     if (mapper.takeFused(fused)) {
       ++took;
@@ -144,7 +145,9 @@ TEST(MapperThread, FusingOnAnotherThreadMakesTheMapOneThreadMakesFromTheSameFram
     EXPECT_EQ(mapper.map().brickPinned(brick), mapper.delta()->holds(brick)) << "brick " << b;
     pinned += mapper.map().brickPinned(brick) ? 1 : 0;
   }
-  EXPECT_GT(pinned, 0u);
+  // Nothing was forgotten: a brick planned is held, and pinned (under qemu's
+  // fewer frames the bricks may not have settled in time to be planned).
+  EXPECT_EQ(pinned > 0, planned > 0) << planned << " bricks planned";
   ASSERT_FALSE(handed.empty());
   EXPECT_EQ(handed.size() + busy, static_cast<std::size_t>(frames));
   EXPECT_EQ(mapper.status().fusion_busy, busy);
