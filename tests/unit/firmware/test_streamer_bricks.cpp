@@ -31,6 +31,14 @@ using namespace std::chrono_literals;
 constexpr std::size_t kMaxBricks = 64;
 constexpr std::size_t kLivePoints = 1000;  // the streamer's max_points
 
+// A point of a brick at level 0, as the brick sampler writes it.
+bool pushBrickPoint(pipeline::map::BrickBatch& batch, float x, float y, float z, uint32_t rgb) {
+  if (!batch.points.points.push(x, y, z, rgb)) return false;
+  batch.points.region[batch.points.size() - 1] = 0;
+  batch.points.weight[batch.points.size() - 1] = 1;
+  return true;
+}
+
 // Three bricks of a few hundred points each, at level 0, slots 3, 7 and 11.
 pipeline::map::BrickBatch makeBatch(uint32_t version, std::size_t points_per_brick = 300) {
   pipeline::map::BrickBatch batch(4096, 16);
@@ -47,9 +55,7 @@ pipeline::map::BrickBatch makeBatch(uint32_t version, std::size_t points_per_bri
     for (std::size_t i = 0; i < points_per_brick; ++i) {
       const float x = 0.5f * static_cast<float>(b) + 0.01f * static_cast<float>(i % 40);
       const float y = 0.01f * static_cast<float>(i / 40);
-      EXPECT_TRUE(batch.points.points.push(x, y, 0.25f, pipeline::packRgb(10, 20, static_cast<uint8_t>(b))));
-      batch.points.region[batch.points.size() - 1] = 0;
-      batch.points.weight[batch.points.size() - 1] = 1;
+      EXPECT_TRUE(pushBrickPoint(batch, x, y, 0.25f, pipeline::packRgb(10, 20, static_cast<uint8_t>(b))));
     }
     e.count = static_cast<uint32_t>(points_per_brick);
   }
@@ -117,6 +123,17 @@ struct Rig {
     const int64_t now = monotonicNs();
     const auto deadline = static_cast<int64_t>(test::waitLimitSeconds(0.030) * 1e9);
     return streamer->sendFrame(live, stats, frame_id, now, now + deadline, 33'000'000, batch);
+  }
+
+  // Polls until the operator's acknowledgements have completed `versions`
+  // brick versions (scaled wait); false if they never do.
+  bool versionsDone(uint64_t versions) {
+    return test::waitUntil(
+        [&] {
+          streamer->poll();
+          return streamer->brickCounters()->versions_done == versions;
+        },
+        3000ms);
   }
 
   // What the planner would hear now.
@@ -230,12 +247,7 @@ TEST(StreamerBricks, ABatchArrivesWholeBesideTheLiveFrameAndIsAcknowledged) {
   });
   EXPECT_EQ(near, 300u);
   // The acknowledgements reach the robot with its next poll: every version done.
-  ASSERT_TRUE(test::waitUntil(
-      [&] {
-        rig.streamer->poll();
-        return rig.streamer->brickCounters()->versions_done == 3;
-      },
-      3000ms));
+  ASSERT_TRUE(rig.versionsDone(3));
   EXPECT_EQ(rig.streamer->brickCounters()->acks_unknown, 0u);
   bool all = false;
   EXPECT_TRUE(rig.forgotten(&all).empty());
@@ -318,10 +330,8 @@ TEST(StreamerBricks, AtTheSmallestMtuAFullFrameAndAFullBatchAreStaged) {
     e.fovea = b < 2;
     e.first = static_cast<uint32_t>(batch.points.size());
     for (std::size_t i = 0; i < kPointsPerBrick; ++i) {
-      ASSERT_TRUE(batch.points.points.push(0.5f * static_cast<float>(b) + 0.5f * unit(rng), 0.5f * unit(rng),
-                                           0.5f * unit(rng), colour()));
-      batch.points.region[batch.points.size() - 1] = 0;
-      batch.points.weight[batch.points.size() - 1] = 1;
+      ASSERT_TRUE(pushBrickPoint(batch, 0.5f * static_cast<float>(b) + 0.5f * unit(rng), 0.5f * unit(rng),
+                                 0.5f * unit(rng), colour()));
     }
     e.count = static_cast<uint32_t>(kPointsPerBrick);
   }
@@ -382,21 +392,14 @@ TEST(StreamerBricks, ASlotGivenToANewPlaceAnswersForItsNewKeyOnly) {
     e.version = v;
     e.first = 0;
     for (int i = 0; i < 5; ++i) {
-      ASSERT_TRUE(batch.points.points.push(0.01f * static_cast<float>(i), 0.0f, 0.25f, 0x102030));
-      batch.points.region[batch.points.size() - 1] = 0;
-      batch.points.weight[batch.points.size() - 1] = 1;
+      ASSERT_TRUE(pushBrickPoint(batch, 0.01f * static_cast<float>(i), 0.0f, 0.25f, 0x102030));
     }
     e.count = 5;
     ASSERT_TRUE(rig.send(&batch, v));
   }
   op.receive(*rig.op, 300, true);
   ASSERT_GE(op.cache.find(net::BrickKey{static_cast<int32_t>(places), 100, 100}), 0);
-  ASSERT_TRUE(test::waitUntil(
-      [&] {
-        rig.streamer->poll();
-        return rig.streamer->brickCounters()->versions_done == 1;
-      },
-      3000ms));
+  ASSERT_TRUE(rig.versionsDone(1));
   // Each older place's acknowledgement named a key the slot no longer has: not
   // taken for slot 3's version in flight.
   EXPECT_EQ(rig.streamer->brickCounters()->acks_unknown, 0u);
@@ -432,12 +435,7 @@ TEST(StreamerBricks, UnacknowledgedPartsGoAgainUntilAcknowledged) {
     }
     ASSERT_TRUE(rig.op->sendBrickAck(ack));
   }
-  ASSERT_TRUE(test::waitUntil(
-      [&] {
-        rig.streamer->poll();
-        return rig.streamer->brickCounters()->versions_done == 3;
-      },
-      3000ms));
+  ASSERT_TRUE(rig.versionsDone(3));
 }
 
 TEST(StreamerBricks, EvictionsAndFramesThatCannotGoAreToldToThePlanner) {
