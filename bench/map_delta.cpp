@@ -291,7 +291,7 @@ class DeltaBench {
   std::size_t live_points_ = 0;  // after the first second
   std::size_t bricks_sent_ = 0, bricks_waited_ = 0, brick_points_sent_ = 0;
   std::array<std::size_t, pipeline::map::kBrickNeedCount> bricks_sent_by_need_ = {};  // by BrickNeed
-  // Frames the map did not fuse (Mapper::thinUnfused); tracked (--pose track).
+  // Frames the map did not fuse (Mapper::collectLive); tracked (--pose track).
   std::size_t unfused_ = 0, tracked_ = 0;
   std::array<double, pipeline::kMaxRegions> live_sizes_{};  // the live points' voxel sizes by region
   int live_regions_ = 0;
@@ -505,16 +505,9 @@ bool DeltaBench::sendBrick(const pipeline::map::BrickBatchEntry& e, const FrameS
 // those its last fused view does not explain, or the whole frame if refused),
 // ACUITY-foveated for the gaze into live_out_.
 bool DeltaBench::foveateLive(const pipeline::Gaze& gaze, bool steady, const pipeline::map::MapperFrame& figures) {
-  const bool fused = figures.fused();
-  live_.clear();
-  if (fused) {
-    live_.origin_m = frame_.T_world_cam.t_world_cam;
-    mapper_.appendUnexplained(frame_, live_);
-  } else {
-    pipeline::BackprojectCounts bp;
-    if (!pipeline::backprojectRef(frame_, mapper_config_.map.depth, live_, bp)) return false;
-    (void)mapper_.thinUnfused(figures, live_);
-  }
+  live_.origin_m = frame_.T_world_cam.t_world_cam;
+  pipeline::map::LiveFigures lf;  // the cloud holds the whole frame: never thinned
+  if (!mapper_.collectLive(frame_, figures, mapper_config_.map.depth, {}, live_, lf)) return false;
   if (steady) live_points_ += live_.size();
   live_out_.clear();
   pipeline::FoveationStats ls;

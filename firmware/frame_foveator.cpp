@@ -67,6 +67,10 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
   }
   pipeline::PipelineCapacity sized = capacity;
   sized.max_points = cloudCapacity(capacity.max_points, map);
+  if (streamsLiveOnly(map) && config.acuity.preset != pipeline::Preset::kFRef) {
+    const std::size_t live = liveFramePoints(map.max_live_points, capacity.max_points);
+    sized.max_points = std::min(sized.max_points, kLiveCandidatesPerOutput * live);
+  }
   if (appendsMapToCloud(map)) {
     sized.max_voxels = std::min(sized.max_points, capacity.max_voxels + map.map.max_surfels);
   }
@@ -100,26 +104,45 @@ Status FrameFoveator::backproject(hal::RgbdFrame& frame, pipeline::BackprojectCo
     return Status::ok();
   }
   map_figures_ = {};
-  if (!mapper_->addFrame(frame, pose_valid, map_figures_)) {
-    // Not in the map now (refused, lost, over the time budget, or handed to
-    // the fusion thread): the operator still sees the frame beside the map; a
-    // posed one without what the last fused frame explained, which the
-    // operator has from the map (Mapper::thinUnfused).
-    if (Status s = backprojector_.run(frame, range_, cloud_, counts); !s) {
-      cloud_.clear();
-      return s;
-    }
-    map_figures_.explained_by_last_view = static_cast<uint32_t>(mapper_->thinUnfused(map_figures_, cloud_));
-    map_figures_.frame_points = static_cast<uint32_t>(cloud_.size());
-    return Status::ok();
-  }
-  cloud_.clear();
+  // Fused now or not (refused, lost, over the time budget, or handed to the
+  // fusion thread), the operator gets the frame's points the map does not
+  // explain beside the map; a posed frame not fused now without what the last
+  // fused frame explained, which the operator has from the map.
+  (void)mapper_->addFrame(frame, pose_valid, map_figures_);
   cloud_.origin_m = frame.T_world_cam.t_world_cam;
+  pipeline::map::LiveFigures live;
+  Status s = mapper_->collectLive(frame, map_figures_, range_, liveSelection(frame), cloud_, live);
   counts = {};
   counts.pixels = frame.pixelCount();
-  counts.valid = map_figures_.fuse.pixels_valid;
-  map_figures_.frame_points = static_cast<uint32_t>(mapper_->appendUnexplained(frame, cloud_));
-  return Status::ok();
+  counts.valid = live.valid;
+  map_figures_.explained_by_last_view = live.explained_by_last_view;
+  map_figures_.live = live.points;
+  if (!s) cloud_.clear();
+  map_figures_.frame_points = static_cast<uint32_t>(cloud_.size());
+  return s;
+}
+
+// The eye's cone for thinning a frame whose live points do not fit
+// (pipeline/map/live_points.h): the gaze of the last frame foveated (this
+// frame's is decided after it is taken in) or, before any, the camera's axis;
+// as wide as the fovea (the cone presets' first bound, the paper's 5 degrees
+// for ACUITY, whose levels have none), the gaze policy's growth for the gaze's
+// age, and kLiveGazeMarginDeg for the eye's movement in a frame period.
+pipeline::map::LiveSelection FrameFoveator::liveSelection(const hal::RgbdFrame& frame) const {
+  const pipeline::RegionModel& model = foveator_.model();
+  double whole_deg = model.levels() || model.boundCount() == 0 ? kAcuityFoveaDeg : model.boundDeg(0);
+  pipeline::Gaze gaze = last_gaze_;
+  if (!has_gaze_) {
+    gaze.origin_m = frame.T_world_cam.t_world_cam;
+    gaze.direction = frame.T_world_cam.R_world_cam.col(2);
+    gaze.fovea_growth_deg = 0.0;
+  }
+  whole_deg = std::min(whole_deg + gaze.fovea_growth_deg + kLiveGazeMarginDeg, 180.0);
+  pipeline::map::LiveSelection selection;
+  selection.eye_m = (gaze.origin_m - frame.T_world_cam.t_world_cam).cast<float>();
+  selection.gaze = gaze.direction.normalized().cast<float>();
+  selection.whole_cos = static_cast<float>(std::cos(whole_deg * (M_PI / 180.0)));
+  return selection;
 }
 
 Status FrameFoveator::foveate(const pipeline::Gaze& gaze, pipeline::FoveatedCloud& out,
@@ -127,6 +150,10 @@ Status FrameFoveator::foveate(const pipeline::Gaze& gaze, pipeline::FoveatedClou
   if (source_ == FoveationSource::kPyramid) return foveatePyramid(gaze, out, stats);
   if (source_ == FoveationSource::kMap) {
     if (!gaze.origin_m.allFinite()) return {ErrorCode::kInvalidInput, "gaze origin is not finite"};
+    if (Result<pipeline::Gaze> unit = pipeline::normalizeGaze(gaze)) {
+      last_gaze_ = unit.value();
+      has_gaze_ = true;
+    }
     if (!cloud_.resize(map_figures_.frame_points)) return {ErrorCode::kCapacityExceeded, "map: frame points beyond the cloud"};
     // With bricks the operator holds the map: only the live points go as a frame.
     if (!streamsBricks()) mapper_->appendVisible(gaze.origin_m, cloud_, map_figures_.eye);

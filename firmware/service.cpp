@@ -171,6 +171,10 @@ void Service::stop() {
       }
       if (map_bricks_) {
         log().log(LogLevel::kInfo,
+                  "map: %" PRIu64 " frames' live points thinned to fit their cloud (a grid of pixels outside the "
+                  "eye's cone: the map's first frames, turns into unmapped space)",
+                  s.map.live_thinned);
+        log().log(LogLevel::kInfo,
                   "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64
                   " parts resent; %" PRIu64 " versions acknowledged whole, %" PRIu64 " lost (sent again); %" PRIu64
                   " acknowledgements for nothing in flight",
@@ -225,6 +229,7 @@ ServiceStats Service::stats() const {
   s.map.bricks_reused = map_bricks_reused_.load(std::memory_order_relaxed);
   s.map.unfused = map_fusion_skipped_.load(std::memory_order_relaxed);
   s.map.fusion_busy = map_fusion_busy_.load(std::memory_order_relaxed);
+  s.map.live_thinned = map_live_thinned_.load(std::memory_order_relaxed);
   s.map.bricks_planned = bricks_planned_.load(std::memory_order_relaxed);
   s.map.brick_versions = brick_versions_.load(std::memory_order_relaxed);
   s.map.brick_parts = brick_parts_.load(std::memory_order_relaxed);

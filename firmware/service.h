@@ -130,6 +130,7 @@ struct ServiceStats {
     uint64_t bricks_reused = 0;      // empty bricks given to new places (the table full)
     uint64_t unfused = 0;            // frames the time budget left unfused (map.fuse_budget_ms)
     uint64_t fusion_busy = 0;        // frames left unfused while the fusion thread was busy (map.fusion_thread)
+    uint64_t live_thinned = 0;       // frames whose live points did not fit their cloud: thinned outside the eye's cone
     // Its bricks (map.delta, docs/map-delta.md): put in frames by the planner,
     // versions and parts sent, parts resent, versions the operator took whole,
     // versions lost on the way (due again), acknowledgements for nothing in flight.
@@ -382,7 +383,8 @@ class Service {
   LatencyHistogram capture_latency_, foveate_latency_, send_latency_;
   LatencyHistogram fuse_latency_;  // the map's fusion (a part of foveate_latency_)
   std::atomic<uint64_t> map_surfels_{0}, map_frames_fused_{0}, map_refused_no_pose_{0}, map_refused_other_{0},
-      map_evicted_{0}, map_dropped_{0}, map_dropped_no_brick_{0}, map_bricks_reused_{0}, map_fusion_skipped_{0}, map_fusion_busy_{0};
+      map_evicted_{0}, map_dropped_{0}, map_dropped_no_brick_{0}, map_bricks_reused_{0}, map_fusion_skipped_{0}, map_fusion_busy_{0},
+      map_live_thinned_{0};
   std::vector<std::thread> threads_;
 
   // Supervisor state (one thread).

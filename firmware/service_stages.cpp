@@ -297,6 +297,7 @@ void Service::publishTracking() {
 void Service::publishMapFigures() {
   const MapFrameFigures& figures = stage_->mapFigures();
   if (figures.fused()) fuse_latency_.add(figures.fuse.fuse_ns);
+  if (figures.live.stride > 1) map_live_thinned_.fetch_add(1, std::memory_order_relaxed);
   pipeline::map::MapperFrame fused;
   if (stage_->takeFused(fused) && fused.fused()) {
     fuse_latency_.add(fused.fuse.fuse_ns);

@@ -31,6 +31,15 @@ RawDepthRange rawDepthRange(const DepthRange& range, double depth_scale_m) {
   return raw;
 }
 
+PixelBackprojection::PixelBackprojection(const hal::RgbdFrame& frame, const DepthRange& range)
+    : scale(static_cast<float>(frame.depth_scale_m)),
+      cx(static_cast<float>(frame.intrinsics.cx)),
+      cy(static_cast<float>(frame.intrinsics.cy)),
+      inv_fx(static_cast<float>(1.0 / frame.intrinsics.fx)),
+      inv_fy(static_cast<float>(1.0 / frame.intrinsics.fy)),
+      r(frame.T_world_cam.R_world_cam.cast<float>()),
+      raw(rawDepthRange(range, frame.depth_scale_m)) {}
+
 Status validateFrame(const hal::RgbdFrame& frame) {
   const hal::CameraIntrinsics& k = frame.intrinsics;
   if (k.width != frame.width() || k.height != frame.height()) {
@@ -65,18 +74,7 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
   if (Status s = validateFrame(frame); !s) return s;
   if (Status s = range.validate(); !s) return s;
 
-  const double scale = frame.depth_scale_m;
-  const RawDepthRange raw_range = rawDepthRange(range, scale);
-  const int64_t raw_min = raw_range.min;
-  const int64_t raw_max = raw_range.max;
-
-  const hal::CameraIntrinsics& k = frame.intrinsics;
-  const auto scale_f = static_cast<float>(scale);
-  const auto cx = static_cast<float>(k.cx);
-  const auto cy = static_cast<float>(k.cy);
-  const auto inv_fx = static_cast<float>(1.0 / k.fx);
-  const auto inv_fy = static_cast<float>(1.0 / k.fy);
-  const Eigen::Matrix3f r = frame.T_world_cam.R_world_cam.cast<float>();
+  const PixelBackprojection rule(frame, range);
   out.origin_m = frame.T_world_cam.t_world_cam;
   out.has_color = frame.has_rgb;
 
@@ -92,7 +90,6 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
   float* oz = out.z();
   uint32_t* orgb = out.rgb();
   for (int v = 0; v < h; ++v) {
-    const float yn = (static_cast<float>(v) - cy) * inv_fy;
     for (int u = 0; u < w; ++u) {
       const std::size_t p = static_cast<std::size_t>(v) * w + u;
       const uint32_t raw = depth[p];
@@ -100,7 +97,7 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
         ++counts.no_depth;
         continue;
       }
-      if (raw < raw_min || raw > raw_max) {
+      if (!rule.valid(raw)) {
         ++counts.out_of_range;
         continue;
       }
@@ -109,12 +106,8 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
         return {ErrorCode::kCapacityExceeded, "backproject: frame has more valid pixels than the cloud capacity " +
                                                   std::to_string(capacity) + ": raise pipeline.max_points"};
       }
-      const float z = static_cast<float>(raw) * scale_f;
-      const float x = ((static_cast<float>(u) - cx) * inv_fx) * z;
-      const float y = yn * z;
-      ox[n] = (r(0, 0) * x + r(0, 1) * y) + r(0, 2) * z;
-      oy[n] = (r(1, 0) * x + r(1, 1) * y) + r(1, 2) * z;
-      oz[n] = (r(2, 0) * x + r(2, 1) * y) + r(2, 2) * z;
+      const Eigen::Vector3f q = rule.point(u, v, raw);
+      ox[n] = q.x(), oy[n] = q.y(), oz[n] = q.z();
       orgb[n] = frame.has_rgb ? packRgb(rgb[3 * p], rgb[3 * p + 1], rgb[3 * p + 2]) : 0u;
       ++n;
     }

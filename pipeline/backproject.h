@@ -12,6 +12,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include <Eigen/Core>
+
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/point_cloud.h"
@@ -43,6 +45,40 @@ struct BackprojectCounts {
 // intrinsics or depth scale, a non-finite or non-rigid pose, a size that does not
 // match the intrinsics. The message says which.
 Status validateFrame(const hal::RgbdFrame& frame);
+
+// One pixel's back-projection as the arithmetic above makes it, for the
+// kernels that take a frame's points one at a time (backprojectRef, the map's
+// live points: pipeline/map/live_points.h). For a frame validateFrame() passed.
+struct PixelBackprojection {
+  float scale = 0, cx = 0, cy = 0, inv_fx = 0, inv_fy = 0;
+  Eigen::Matrix3f r = Eigen::Matrix3f::Identity();
+  RawDepthRange raw;
+
+  PixelBackprojection(const hal::RgbdFrame& frame, const DepthRange& range);
+  bool valid(uint32_t raw_depth) const { return raw_depth >= raw.min && raw_depth <= raw.max; }
+  // Relative to the camera's position, in the world's axes.
+  Eigen::Vector3f point(int u, int v, uint32_t raw_depth) const {
+    const float z = static_cast<float>(raw_depth) * scale;
+    const float x = ((static_cast<float>(u) - cx) * inv_fx) * z;
+    const float y = ((static_cast<float>(v) - cy) * inv_fy) * z;
+    return {(r(0, 0) * x + r(0, 1) * y) + r(0, 2) * z, (r(1, 0) * x + r(1, 1) * y) + r(1, 2) * z,
+            (r(2, 0) * x + r(2, 1) * y) + r(2, 2) * z};
+  }
+  // fn(u, v, pixel index, point) for each valid pixel in row-major order,
+  // while it returns true.
+  template <typename Fn>
+  void forEachPoint(const hal::RgbdFrame& frame, Fn&& fn) const {
+    const uint16_t* depth = frame.depth();
+    const int w = frame.width(), h = frame.height();
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+        if (!valid(depth[i])) continue;
+        if (!fn(u, v, i, point(u, v, depth[i]))) return;
+      }
+    }
+  }
+};
 
 // Scalar reference. kCapacityExceeded when out is too small for the frame's
 // valid pixels (nothing is half-written: out is left empty).

@@ -51,11 +51,8 @@ bool ExplainedView::explains(float x, float y, float z) const {
 
 std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
   if (empty()) return 0;
-  // Into the view's camera: R^T (origin + p - t), the translation in double
-  // (the cloud and the camera may be far from the world origin).
-  const Eigen::Matrix3d Rt = pose_.R_world_cam.transpose();
-  const Eigen::Vector3f t = (Rt * (cloud.origin_m - pose_.t_world_cam)).cast<float>();
-  const Eigen::Matrix3f R = Rt.cast<float>();
+  const Eigen::Matrix3f R = intoView();
+  const Eigen::Vector3f t = intoViewOffset(cloud.origin_m);
   float *x = cloud.x(), *y = cloud.y(), *z = cloud.z();
   uint32_t* rgb = cloud.rgb();
   const std::size_t n = cloud.size();
@@ -68,6 +65,25 @@ std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
   }
   (void)cloud.resize(kept);
   return n - kept;
+}
+
+void ExplainedView::visitUnexplained(const hal::RgbdFrame& frame, const PixelBackprojection& rule,
+                                     LivePointSink& sink, VisitCounts& counts) const {
+  counts = {};
+  const Eigen::Matrix3f R = intoView();
+  const Eigen::Vector3f t = intoViewOffset(frame.T_world_cam.t_world_cam);
+  const uint8_t* rgb = frame.rgb();
+  rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
+    ++counts.valid;
+    if (!empty()) {
+      const Eigen::Vector3f q = R * p + t;
+      if (explains(q.x(), q.y(), q.z())) {
+        ++counts.explained;
+        return true;
+      }
+    }
+    return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
+  });
 }
 
 }  // namespace fovea::pipeline::map

@@ -24,6 +24,8 @@
 
 #include "core/result.h"
 #include "hal/frame.h"
+#include "pipeline/backproject.h"
+#include "pipeline/map/live_points.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::pipeline::map {
@@ -43,8 +45,20 @@ class ExplainedView {
 
   // Removes from `cloud` (world positions relative to cloud.origin_m) the
   // points the captured view explains, keeping the others in their order;
-  // returns how many it removed. An empty view removes none.
+  // returns how many it removed. An empty view removes none. The judgement
+  // on a cloud already made, as the tests and fovea-map-delta check it.
   std::size_t removeExplained(PointCloud& cloud) const;
+
+  // The same judgement on `frame`'s valid pixels as `rule` back-projects them
+  // (relative to the frame's camera position): offers `sink` those the view
+  // does not explain, in pixel order, until it says stop, and counts the valid
+  // pixels and the explained ones it passed. The service's way (Mapper::collectLive):
+  // no cloud of the whole frame.
+  struct VisitCounts {
+    uint32_t valid = 0, explained = 0;
+  };
+  void visitUnexplained(const hal::RgbdFrame& frame, const PixelBackprojection& rule, LivePointSink& sink,
+                        VisitCounts& counts) const;
 
   bool empty() const { return width_ == 0; }
   const hal::Pose& pose() const { return pose_; }
@@ -54,6 +68,13 @@ class ExplainedView {
   // Whether the point p (world, relative to the view's camera: R^T (p - t))
   // lies on an explained pixel at its depth.
   bool explains(float x, float y, float z) const;
+  // Into the view's camera from world positions relative to origin_m:
+  // R^T (origin + p - t), the translation in double (the cloud and the camera
+  // may be far from the world origin).
+  Eigen::Matrix3f intoView() const { return pose_.R_world_cam.transpose().cast<float>(); }
+  Eigen::Vector3f intoViewOffset(const Eigen::Vector3d& origin_m) const {
+    return (pose_.R_world_cam.transpose() * (origin_m - pose_.t_world_cam)).cast<float>();
+  }
 
   std::size_t max_pixels_ = 0;
   float sigmas_ = 0.0f;

@@ -148,10 +148,40 @@ bool Mapper::takeFused(MapperFrame& out) {
   return true;
 }
 
-std::size_t Mapper::thinUnfused(const MapperFrame& frame, PointCloud& cloud) {
-  if (!view_ || !frame.pose_usable || !(frame.fusion_skipped || frame.handed_off)) return 0;
-  MapReadLock hold(*gate_);
-  return view_->removeExplained(cloud);
+Status Mapper::collectLive(const hal::RgbdFrame& frame, const MapperFrame& figures, const DepthRange& range,
+                           const LiveSelection& selection, PointCloud& cloud, LiveFigures& out) {
+  out = {};
+  cloud.has_color = frame.has_rgb;
+  if (figures.fused()) {
+    out.valid = figures.fuse.pixels_valid;
+    return collectLivePoints([&](LivePointSink& sink) { (void)map_->visitUnexplained(frame, cloud.origin_m, sink); },
+                             selection, cloud, out.points);
+  }
+  if (Status s = validateFrame(frame); !s) return s;
+  if (Status s = range.validate(); !s) return s;
+  const PixelBackprojection rule(frame, range);
+  if (view_ && figures.pose_usable && (figures.fusion_skipped || figures.handed_off)) {
+    MapReadLock hold(*gate_);  // the fusion thread captures the view
+    ExplainedView::VisitCounts counts;
+    Status s = collectLivePoints([&](LivePointSink& sink) { view_->visitUnexplained(frame, rule, sink, counts); },
+                                 selection, cloud, out.points);
+    out.valid = counts.valid;
+    out.explained_by_last_view = counts.explained;
+    return s;
+  }
+  const uint8_t* rgb = frame.rgb();
+  uint32_t valid = 0;
+  Status s = collectLivePoints(
+      [&](LivePointSink& sink) {
+        valid = 0;
+        rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
+          ++valid;
+          return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
+        });
+      },
+      selection, cloud, out.points);
+  out.valid = valid;
+  return s;
 }
 
 MapperStatus Mapper::status() {

@@ -17,7 +17,7 @@
 // 3): addFrame() poses the frame and hands it to fuseSubmitted(), which
 // another thread calls, when that thread is idle (else the frame is left
 // unfused, counted); either way the frame goes out at once, thinned by the
-// last fused view (thinUnfused). The map is shared through a MapGate
+// last fused view (collectLive). The map is shared through a MapGate
 // (map_gate.h): fusion holds it and lets the planner and the view through at
 // its safe points, so a new gaze is planned without waiting for the fusion in
 // flight; the tracker's model, which fusion rebuilds after each frame, has a
@@ -81,6 +81,13 @@ struct MapperFrame {
   bool fused() const { return !fusion_skipped && !handed_off && fuse.outcome == FuseOutcome::kFused; }
 };
 
+// What collectLive() did with a frame.
+struct LiveFigures {
+  LivePointStats points;
+  uint32_t valid = 0;                   // the frame's valid pixels
+  uint32_t explained_by_last_view = 0;  // not fused now: the valid pixels the last fused view explained, left out
+};
+
 // What planBricks() put in the batch.
 struct MapperPlan {
   MapDeltaStats delta;
@@ -138,13 +145,15 @@ class Mapper {
   std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
     return map_->appendUnexplained(frame, out);
   }
-  // A frame addFrame() did not fuse (`frame` its figures), back-projected
-  // whole into `cloud`: when it was posed and only the time budget, a busy
-  // fusion thread or the hand-off left it out, removes the points the last
-  // fused frame explained (ExplainedView), which the operator has from the
-  // map; a refused or lost frame stays whole. Output kNone keeps no view and
-  // removes none. Returns how many it removed.
-  std::size_t thinUnfused(const MapperFrame& frame, PointCloud& cloud);
+  // The frame's live points (live_points.h), the frame addFrame() just took
+  // (`frame` its figures), into `cloud` (cleared; its origin must be the
+  // frame's camera position): fused now, the pixels no settled surfel
+  // explains; posed and left unfused by the time budget, a busy fusion thread
+  // or the hand-off, the valid pixels the last fused view does not explain
+  // (ExplainedView), which the operator has from the map; refused or lost,
+  // every valid pixel. Output kNone keeps no view: every valid pixel.
+  Status collectLive(const hal::RgbdFrame& frame, const MapperFrame& figures, const DepthRange& range,
+                     const LiveSelection& selection, PointCloud& cloud, LiveFigures& out);
   // kEyeView: appends the settled surfels an eye at `eye_m` sees (EyeView::appendVisible).
   void appendVisible(const Eigen::Vector3d& eye_m, PointCloud& cloud, EyeViewStats& stats);
 

@@ -563,27 +563,34 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
 }
 
 std::size_t SurfelMap::appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
+  const std::size_t before = out.size();
+  const LiveSelection every;
+  LivePointPush push(every, out);
+  (void)visitUnexplained(frame, out.origin_m, push);
+  return out.size() - before;
+}
+
+bool SurfelMap::visitUnexplained(const hal::RgbdFrame& frame, const Eigen::Vector3d& origin_m,
+                                 LivePointSink& sink) const {
   if (fused_width_ == 0 || frame.width() != fused_width_ || frame.height() != fused_height_ ||
       frame.stamp_ns != fused_stamp_ns_) {
-    return 0;
+    return false;
   }
   const Eigen::Matrix3d& R = fused_pose_.R_world_cam;
   // Relative to the cloud's origin in double, then float (the map may be far from the world origin).
-  const Eigen::Vector3f t = (fused_pose_.t_world_cam - out.origin_m).cast<float>();
+  const Eigen::Vector3f t = (fused_pose_.t_world_cam - origin_m).cast<float>();
   const Eigen::Matrix3f R_f = R.cast<float>();
   const int w = frame.width(), h = frame.height();
-  std::size_t appended = 0;
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
       if (explained_[i] || vertex_z_[i] == 0.0f) continue;
       const Eigen::Vector3f p = R_f * vertexAt(i, u, v) + t;
       const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
-      if (!out.push(p.x(), p.y(), p.z(), packRgb(rgb[0], rgb[1], rgb[2]))) return appended;
-      ++appended;
+      if (!sink.take(u, v, p, packRgb(rgb[0], rgb[1], rgb[2]))) return true;
     }
   }
-  return appended;
+  return true;
 }
 
 }  // namespace fovea::pipeline::map

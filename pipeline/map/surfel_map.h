@@ -45,6 +45,7 @@
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
 #include "pipeline/map/index_map.h"
+#include "pipeline/map/live_points.h"
 #include "pipeline/map/map_gate.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/splat_plan.h"
@@ -168,6 +169,10 @@ class SurfelMap {
   // fused one: other size or stamp). The map's foveation sends them beside the
   // map, so nothing dynamic is lost while the map learns it.
   std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const;
+  // The same points offered to `sink` in pixel order (relative to origin_m)
+  // until it says stop; false, offering none, when `frame` is not the last
+  // fused one.
+  bool visitUnexplained(const hal::RgbdFrame& frame, const Eigen::Vector3d& origin_m, LivePointSink& sink) const;
 
   // Live surfels. Slots [0, slotCount()) hold them and free slots (live() false).
   std::size_t size() const { return live_; }

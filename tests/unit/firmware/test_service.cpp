@@ -228,6 +228,29 @@ TEST(Service, TheMapsLivePointsCapTheFramesCapacityAndTheWarningNamesIt) {
   running.stop();
 }
 
+// With the map's bricks the cloud before foveation holds twice the live
+// points (kLiveCandidatesPerOutput), not the pixels: the map's first frames,
+// which it explains nothing of, are thinned outside the eye's cone to fit,
+// counted and said in the stop line, and foveated, not dropped.
+TEST(Service, TheMapsFirstFramesAreThinnedIntoTheirCloudNotDropped) {
+  RecordingSink sink;
+  Logger logger(sink);
+  ServiceConfig config = test::smallServiceConfig(30.0);
+  config.map.source = FoveationSource::kMap;
+  config.map.map.max_surfels = 1u << 14;
+  ASSERT_TRUE(validate(config).isOk()) << validate(config).toString();
+  Service::Environment environment;
+  environment.logger = &logger;
+  RunningService running;
+  startService(running, config, std::move(environment));
+  ASSERT_TRUE(waitUntil([&] { return running.service->stats().frames_foveated >= 5; }, 5000ms));
+  running.stop();
+  const ServiceStats end = running.service->stats();
+  EXPECT_GT(end.map.live_thinned, 0u) << "160x120 has 19 200 pixels, the cloud 4 800 points";
+  EXPECT_EQ(end.frames_over_capacity, 0u);
+  EXPECT_TRUE(sink.matches("map: [1-9][0-9]* frames' live points thinned to fit their cloud"));
+}
+
 // A full brick table drops the new surfels outside its bricks: counted in the
 // status line and the stop line, and said once as a warning (the map no longer
 // grows into new places), never a crash.

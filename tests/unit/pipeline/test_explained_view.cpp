@@ -173,6 +173,43 @@ TEST_F(ExplainedViewTest, ALaterFrameIsThinnedAsABruteForceReprojectionThinsIt) 
   }
 }
 
+// Records what visitUnexplained() offers, as a cloud.
+struct CloudSink final : LivePointSink {
+  PointCloud cloud{static_cast<std::size_t>(kW) * kH};
+  bool take(int, int, const Eigen::Vector3f& p, uint32_t rgb) override { return cloud.push(p.x(), p.y(), p.z(), rgb); }
+};
+
+TEST_F(ExplainedViewTest, VisitingAFramesPixelsOffersWhatRemovingFromItsWholeCloudKeeps) {
+  const ExplainedView none = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();
+  for (const ExplainedView* judge : {&view(), &none}) {
+    for (const hal::RgbdFrame& frame : later()) {
+      PointCloud kept = whole(frame);
+      const std::size_t valid = kept.size();
+      const std::size_t removed = judge->removeExplained(kept);
+      CloudSink offered;
+      ExplainedView::VisitCounts counts;
+      judge->visitUnexplained(frame, PixelBackprojection(frame, Fused::config().depth), offered, counts);
+      EXPECT_EQ(counts.valid, valid);
+      EXPECT_EQ(counts.explained, removed);
+      ASSERT_EQ(offered.cloud.size(), kept.size());
+      for (std::size_t i = 0; i < kept.size(); ++i) {  // the same bits, in the same order
+        ASSERT_EQ(offered.cloud.x()[i], kept.x()[i]) << i;
+        ASSERT_EQ(offered.cloud.y()[i], kept.y()[i]) << i;
+        ASSERT_EQ(offered.cloud.z()[i], kept.z()[i]) << i;
+        ASSERT_EQ(offered.cloud.rgb()[i], kept.rgb()[i]) << i;
+      }
+    }
+  }
+  // A sink that says stop is offered no more.
+  struct StopAtThree final : LivePointSink {
+    int taken = 0;
+    bool take(int, int, const Eigen::Vector3f&, uint32_t) override { return ++taken < 3; }
+  } stop;
+  ExplainedView::VisitCounts counts;
+  none.visitUnexplained(later()[0], PixelBackprojection(later()[0], Fused::config().depth), stop, counts);
+  EXPECT_EQ(stop.taken, 3);
+}
+
 TEST_F(ExplainedViewTest, HardCases) {
   // No view yet: nothing is explained.
   ExplainedView none = ExplainedView::create(kW, kH, Fused::config().depth_tolerance_sigmas).value();

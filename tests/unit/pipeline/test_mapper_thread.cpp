@@ -119,9 +119,12 @@ TEST(MapperThread, FusingOnAnotherThreadMakesTheMapOneThreadMakesFromTheSameFram
     busy += out.fusion_skipped ? 1 : 0;
     // What the service does meanwhile: the frame thinned by the last fused
     // view, bricks planned for a gaze, the finished fusion's figures.
-    BackprojectCounts counts;
-    ASSERT_TRUE(backprojectRef(frame, mapperConfig(true).map.depth, cloud, counts).isOk());
-    thinned += mapper.thinUnfused(out, cloud);
+    cloud.origin_m = frame.T_world_cam.t_world_cam;
+    LiveFigures live;
+    ASSERT_TRUE(mapper.collectLive(frame, out, mapperConfig(true).map.depth, {}, cloud, live).isOk());
+    EXPECT_EQ(live.points.stride, 1) << "a cloud of the whole frame is never thinned";
+    EXPECT_EQ(cloud.size() + live.explained_by_last_view, live.valid);
+    thinned += live.explained_by_last_view;
     Gaze gaze;
     gaze.origin_m = frame.T_world_cam.t_world_cam;
     gaze.direction = frame.T_world_cam.R_world_cam.col(2);

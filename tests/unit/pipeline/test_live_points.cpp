@@ -1,0 +1,214 @@
+// A frame's live points within a fixed capacity (pipeline/map/live_points.h):
+// against a selection written here by brute force, on random candidates and
+// on the mock living room's first frame as the map offers it, and the hard
+// cases: a capacity met exactly, none, no cone, a cone holding everything,
+// a point at the eye.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/map/live_points.h"
+#include "pipeline/map/surfel_map.h"
+#include "tests/support/cameras.h"
+#include "tests/support/test_time.h"
+
+namespace fovea::pipeline::map {
+namespace {
+
+struct Candidate {
+  int u = 0, v = 0;
+  Eigen::Vector3f p;
+  uint32_t rgb = 0;
+};
+
+// Offers a list, as a source does a frame.
+struct ListSource {
+  const std::vector<Candidate>* list;
+  int calls = 0;
+  void operator()(LivePointSink& sink) {
+    ++calls;
+    for (const Candidate& c : *list) {
+      if (!sink.take(c.u, c.v, c.p, c.rgb)) return;
+    }
+  }
+};
+
+// Records what a source offers.
+struct Recorder final : LivePointSink {
+  std::vector<Candidate> seen;
+  bool take(int u, int v, const Eigen::Vector3f& p, uint32_t rgb) override {
+    seen.push_back({u, v, p, rgb});
+    return true;
+  }
+};
+
+// The reference: every candidate when they fit; else the finest stride from
+// 2 to 4 whose grid points plus the points within the cone fit, trying each
+// stride on every candidate. The cone's test is the float arithmetic the
+// header states (a double one would differ on points at its edge).
+std::vector<Candidate> selectByBruteForce(const std::vector<Candidate>& all, const LiveSelection& s,
+                                          std::size_t capacity, int& stride) {
+  stride = 1;
+  if (all.size() <= capacity) return all;
+  auto whole = [&](const Candidate& c) {
+    const Eigen::Vector3f d = c.p - s.eye_m;
+    return d.dot(s.gaze) >= s.whole_cos * d.norm();
+  };
+  for (stride = 2; stride <= LiveSelection::kMaxStride; ++stride) {
+    std::vector<Candidate> kept;
+    for (const Candidate& c : all) {
+      if ((c.u % stride == 0 && c.v % stride == 0) || whole(c)) kept.push_back(c);
+    }
+    if (kept.size() <= capacity) return kept;
+  }
+  stride = 0;
+  return {};
+}
+
+void expectSame(const PointCloud& cloud, const std::vector<Candidate>& expected) {
+  ASSERT_EQ(cloud.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    ASSERT_EQ(cloud.x()[i], expected[i].p.x()) << i;
+    ASSERT_EQ(cloud.y()[i], expected[i].p.y()) << i;
+    ASSERT_EQ(cloud.z()[i], expected[i].p.z()) << i;
+    ASSERT_EQ(cloud.rgb()[i], expected[i].rgb) << i;
+  }
+}
+
+// Runs collectLivePoints and the reference on one list and capacity.
+void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelection& selection, std::size_t capacity) {
+  PointCloud cloud(capacity);
+  LivePointStats stats;
+  ListSource source{&all};
+  const Status s = collectLivePoints(source, selection, cloud, stats);
+  int stride = 0;
+  const std::vector<Candidate> expected = selectByBruteForce(all, selection, capacity, stride);
+  if (stride == 0) {
+    EXPECT_EQ(s.code(), ErrorCode::kCapacityExceeded);
+    EXPECT_EQ(cloud.size(), 0u) << "a refused frame leaves no points";
+    return;
+  }
+  ASSERT_TRUE(s.isOk()) << s.message();
+  EXPECT_EQ(stats.stride, stride);
+  EXPECT_EQ(stats.candidates, all.size());
+  EXPECT_EQ(source.calls, stride == 1 ? 1 : 3) << "once when everything fits, else three times";
+  expectSame(cloud, expected);
+}
+
+std::vector<Candidate> randomCandidates(std::mt19937& rng, int w, int h, double valid_share) {
+  std::uniform_real_distribution<float> pos(-3.0f, 3.0f);
+  std::bernoulli_distribution valid(valid_share);
+  std::vector<Candidate> all;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      if (valid(rng)) all.push_back({u, v, Eigen::Vector3f(pos(rng), pos(rng), pos(rng)), static_cast<uint32_t>(rng())});
+    }
+  }
+  return all;
+}
+
+LiveSelection randomSelection(std::mt19937& rng) {
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  std::uniform_real_distribution<float> deg(0.0f, 60.0f);
+  LiveSelection s;
+  s.eye_m = Eigen::Vector3f(unit(rng), unit(rng), unit(rng));
+  s.gaze = Eigen::Vector3f(unit(rng), unit(rng), unit(rng) + 2.0f).normalized();
+  s.whole_cos = std::cos(deg(rng) * static_cast<float>(M_PI / 180.0));
+  return s;
+}
+
+TEST(LivePoints, RandomCandidatesAreSelectedAsTheBruteForceSelectsThem) {
+  std::mt19937 rng(41);
+  for (int trial = 0; trial < 60; ++trial) {
+    const std::vector<Candidate> all = randomCandidates(rng, 48, 36, trial % 3 == 0 ? 1.0 : 0.6);
+    const LiveSelection selection = randomSelection(rng);
+    std::uniform_int_distribution<std::size_t> capacity(0, all.size() + 10);
+    SCOPED_TRACE(trial);
+    checkAgainstReference(all, selection, capacity(rng));
+  }
+}
+
+TEST(LivePoints, HardCases) {
+  std::mt19937 rng(7);
+  const std::vector<Candidate> all = randomCandidates(rng, 40, 30, 1.0);
+  LiveSelection selection = randomSelection(rng);
+  checkAgainstReference(all, selection, all.size());      // exactly full: every point, one pass
+  checkAgainstReference(all, selection, all.size() - 1);  // one short: thinned
+  checkAgainstReference(all, selection, 0);               // no room at all
+  selection.whole_cos = 2.0f;                             // no cone: the grids alone
+  checkAgainstReference(all, selection, all.size() / 4);
+  checkAgainstReference(all, selection, 80);  // the 4-grid of 40 x 30 exactly
+  checkAgainstReference(all, selection, 79);  // not even that
+  selection.whole_cos = -1.0f;  // a cone of every direction: nothing thins
+  checkAgainstReference(all, selection, all.size() / 2);
+  // A point at the eye is within any cone (its direction is none).
+  std::vector<Candidate> at_eye = all;
+  LiveSelection narrow = selection;
+  narrow.whole_cos = 1.0f;
+  for (Candidate& c : at_eye) c.p = narrow.eye_m;
+  checkAgainstReference(at_eye, narrow, 10);
+}
+
+// The map's first frame of the mock living room: nothing is explained yet, so
+// every valid pixel is a candidate; a cloud of a sixth of the pixels takes the
+// cone whole and a grid of the rest, as the reference selects from what the
+// map offers.
+TEST(LivePoints, TheMapsFirstFrameIsThinnedOutsideTheConeAsTheReferenceThinsIt) {
+  constexpr int kW = 160, kH = 120;
+  std::unique_ptr<hal::Camera> camera = test::startedCamera("mock:living-room,size=160x120,path=orbit");
+  ASSERT_TRUE(camera);
+  SurfelMapConfig config;
+  config.max_width = kW;
+  config.max_height = kH;
+  config.max_surfels = 1 << 16;
+  config.max_bricks = 1024;
+  SurfelMap map = SurfelMap::create(config).value();
+  hal::RgbdFrame frame(kW, kH);
+  ASSERT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
+  FuseStats stats;
+  ASSERT_EQ(map.fuse(frame, stats), FuseOutcome::kFused);
+  const Eigen::Vector3d origin = frame.T_world_cam.t_world_cam;
+  Recorder offered;
+  ASSERT_TRUE(map.visitUnexplained(frame, origin, offered));
+  ASSERT_GT(offered.seen.size(), static_cast<std::size_t>(kW) * kH / 2) << "a new map explains little";
+  LiveSelection selection;
+  selection.eye_m = Eigen::Vector3f::Zero();
+  selection.gaze = frame.T_world_cam.R_world_cam.col(2).cast<float>();
+  selection.whole_cos = std::cos(static_cast<float>(10.0 * M_PI / 180.0));
+  const std::size_t capacity = static_cast<std::size_t>(kW) * kH / 6;
+  PointCloud cloud(capacity);
+  cloud.origin_m = origin;
+  LivePointStats live;
+  ASSERT_TRUE(collectLivePoints([&](LivePointSink& sink) { (void)map.visitUnexplained(frame, origin, sink); },
+                                selection, cloud, live)
+                  .isOk());
+  int stride = 0;
+  const std::vector<Candidate> expected = selectByBruteForce(offered.seen, selection, capacity, stride);
+  ASSERT_GT(stride, 1);
+  EXPECT_EQ(live.stride, stride);
+  expectSame(cloud, expected);
+  // Every point in the cone is there.
+  std::size_t in_cone = 0;
+  for (const Candidate& c : offered.seen) in_cone += selection.whole(c.p) ? 1 : 0;
+  std::size_t kept_in_cone = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    kept_in_cone += selection.whole(Eigen::Vector3f(cloud.x()[i], cloud.y()[i], cloud.z()[i])) ? 1 : 0;
+  }
+  EXPECT_GT(in_cone, 0u);
+  EXPECT_EQ(kept_in_cone, in_cone);
+  // The fused frame alone is offered: another stamp gets nothing.
+  hal::RgbdFrame other = frame;
+  other.stamp_ns += 1;
+  Recorder none;
+  EXPECT_FALSE(map.visitUnexplained(other, origin, none));
+  EXPECT_TRUE(none.seen.empty());
+}
+
+}  // namespace
+}  // namespace fovea::pipeline::map
