@@ -155,7 +155,7 @@ void Service::addMapMemory(const pipeline::map::MapperMemory& m) {
       {"map: eviction histogram", m.map.eviction},
       {"map: eye depth buffer", m.eye},
       {"map: bricks the operator holds, plan, sampler", m.delta},
-      {"map: the last fused view (explained depths)", m.view},
+      {"map: the last fused view (explained depths), the live points' cone bits", m.view},
       {"map: the frame handed to the fusion thread", m.handoff},
       {"map: tracker (frame and model pyramids)", m.tracker},
   };

@@ -74,6 +74,7 @@ void ExplainedView::visitUnexplained(const hal::RgbdFrame& frame, const PixelBac
   const Eigen::Vector3f t = intoViewOffset(frame.T_world_cam.t_world_cam);
   const uint8_t* rgb = frame.rgb();
   rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
+    if (sink.skips(u, v)) return true;
     ++counts.valid;
     if (!empty()) {
       const Eigen::Vector3f q = R * p + t;

@@ -52,7 +52,7 @@ class ExplainedView {
   // The same judgement on `frame`'s valid pixels as `rule` back-projects them
   // (relative to the frame's camera position): offers `sink` those the view
   // does not explain, in pixel order, until it says stop, and counts the valid
-  // pixels and the explained ones it passed. The service's way (Mapper::collectLive):
+  // pixels and the explained ones it passed (of those the sink does not skip). The service's way (Mapper::collectLive):
   // no cloud of the whole frame.
   struct VisitCounts {
     uint32_t valid = 0, explained = 0;

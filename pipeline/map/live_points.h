@@ -17,14 +17,19 @@
 //
 // The candidates come from a source that calls a LivePointSink for each point
 // in pixel order (SurfelMap, ExplainedView, or every valid pixel:
-// pipeline/backproject.h); collectLivePoints() runs it once when everything
-// fits, else three times (take until full, count per stride, take thinned).
-// Nothing allocates.
+// pipeline/backproject.h). LiveCollector runs it once when everything fits;
+// else it counts what each stride would keep (marking the pixels within the
+// cone), then takes the thinned points, the source skipping every other pixel
+// before its work (LivePointSink::skips). A frame after a thinned one is
+// counted as it is taken, since it likely needs thinning too. Memory: a bit a
+// pixel of the largest frame, allocated by the constructor.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -51,17 +56,38 @@ struct LiveSelection {
   }
 };
 
+// Which pixels a pass wants at all: those on the stride's grid or marked
+// within the cone (a bit a pixel, row-major at `width`). Sources ask before
+// their work, so the thinned pass costs what it keeps.
+struct LivePixelFilter {
+  int stride = 1;
+  int width = 0;
+  const uint64_t* cone_bits = nullptr;
+  bool keeps(int u, int v) const {
+    if (LiveSelection::onGrid(u, v, stride)) return true;
+    const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(width) + static_cast<std::size_t>(u);
+    return (cone_bits[i >> 6] >> (i & 63u)) & 1u;
+  }
+};
+
 // Takes a candidate point (relative to the cloud's origin) at pixel (u, v);
-// false stops the source.
+// false stops the source. A source skips the pixels skips() names before it
+// works on them (a filter is an optimisation: take() still selects).
 class LivePointSink {
  public:
   virtual bool take(int u, int v, const Eigen::Vector3f& p, uint32_t rgb) = 0;
+  bool skips(int u, int v) const { return filter_ != nullptr && !filter_->keeps(u, v); }
+  void setFilter(const LivePixelFilter* filter) { filter_ = filter; }
 
  protected:
   ~LivePointSink() = default;
+
+ private:
+  const LivePixelFilter* filter_ = nullptr;
 };
 
-// Pushes the points the selection keeps; stops at the first that does not fit.
+// Pushes the points the selection keeps; stops at the first that does not
+// fit, unless told to go on counting (the tally beside it needs them all).
 class LivePointPush final : public LivePointSink {
  public:
   LivePointPush(const LiveSelection& selection, PointCloud& out) : selection_(selection), out_(out) {}
@@ -79,10 +105,12 @@ class LivePointPush final : public LivePointSink {
   bool overflowed_ = false;
 };
 
-// Counts what each stride would keep.
+// Counts what each stride would keep and marks the candidates within the cone
+// (cone_bits, cleared by the caller).
 class LivePointTally final : public LivePointSink {
  public:
-  explicit LivePointTally(const LiveSelection& selection) : selection_(selection) {}
+  LivePointTally(const LiveSelection& selection, int width, uint64_t* cone_bits)
+      : selection_(selection), width_(width), cone_bits_(cone_bits) {}
   bool take(int u, int v, const Eigen::Vector3f& p, uint32_t) override;
   // The points stride s keeps (1 <= s <= kMaxStride).
   std::size_t kept(int stride) const { return kept_[static_cast<std::size_t>(stride)]; }
@@ -91,39 +119,85 @@ class LivePointTally final : public LivePointSink {
 
  private:
   const LiveSelection& selection_;
+  int width_;
+  uint64_t* cone_bits_;
   std::array<std::size_t, LiveSelection::kMaxStride + 1> kept_{};  // [s]: on stride s's grid or in the cone
 };
 
-struct LivePointStats {
-  uint32_t candidates = 0;  // the source's points (counted only when thinned; else the points kept)
-  uint8_t stride = 1;       // the grid outside the gaze's cone: 1 when not thinned
+// Both at once: takes the points while they fit and counts all of them.
+class LivePointPushAndTally final : public LivePointSink {
+ public:
+  LivePointPushAndTally(LivePointPush& push, LivePointTally& tally) : push_(push), tally_(tally) {}
+  bool take(int u, int v, const Eigen::Vector3f& p, uint32_t rgb) override {
+    (void)tally_.take(u, v, p, rgb);
+    if (!push_.overflowed()) (void)push_.take(u, v, p, rgb);
+    return true;
+  }
+
+ private:
+  LivePointPush& push_;
+  LivePointTally& tally_;
 };
 
-// Fills `out` (cleared first; its origin kept) from `visit_all(sink)`, which
-// must offer the same points in the same order on every call.
+struct LivePointStats {
+  uint32_t candidates = 0;  // the source's points (when not thinned: those taken)
+  uint8_t stride = 1;       // the grid outside the gaze's cone: 1 when not thinned
+  uint8_t passes = 0;       // the source's runs
+};
+
+class LiveCollector {
+ public:
+  LiveCollector() = default;
+  LiveCollector(int max_width, int max_height);
+
+  // Fills `out` (cleared first; its origin kept) with the points of a frame
+  // of width x height pixels from `visit_all(sink)`, which offers the same
+  // points in the same order on every call (skipping those sink.skips()
+  // names). kCapacityExceeded (`out` empty) when even the grid of kMaxStride
+  // does not fit; kInvalidInput for a frame larger than the constructor's.
+  template <typename VisitAll>
+  Status collect(VisitAll&& visit_all, LiveSelection selection, int width, int height, PointCloud& out,
+                 LivePointStats& stats);
+
+  std::size_t memoryBytes() const { return cone_bits_.capacity() * sizeof(uint64_t); }
+
+ private:
+  static Status overCapacity(std::size_t kept, std::size_t capacity);
+  bool fits(int width, int height) const;
+  std::vector<uint64_t> cone_bits_;
+  bool last_thinned_ = false;
+};
+
 template <typename VisitAll>
-Status collectLivePoints(VisitAll&& visit_all, LiveSelection selection, PointCloud& out, LivePointStats& stats) {
+Status LiveCollector::collect(VisitAll&& visit_all, LiveSelection selection, int width, int height, PointCloud& out,
+                              LivePointStats& stats) {
   stats = {};
   out.clear();
+  if (!fits(width, height)) return {ErrorCode::kInvalidInput, "live points: the frame is larger than the collector's"};
   selection.stride = 1;
   LivePointPush all(selection, out);
-  visit_all(static_cast<LivePointSink&>(all));
-  stats.candidates = static_cast<uint32_t>(out.size());
+  LivePointTally tally(selection, width, cone_bits_.data());
+  std::fill(cone_bits_.begin(), cone_bits_.end(), 0);
+  if (last_thinned_) {
+    LivePointPushAndTally both(all, tally);
+    visit_all(static_cast<LivePointSink&>(both));
+  } else {
+    visit_all(static_cast<LivePointSink&>(all));
+    if (all.overflowed()) visit_all(static_cast<LivePointSink&>(tally));
+  }
+  stats.passes = static_cast<uint8_t>(last_thinned_ || !all.overflowed() ? 1 : 2);
+  last_thinned_ = all.overflowed();
+  stats.candidates = static_cast<uint32_t>(all.overflowed() ? tally.kept(1) : out.size());
   if (!all.overflowed()) return Status::ok();
   out.clear();
-  LivePointTally tally(selection);
-  visit_all(static_cast<LivePointSink&>(tally));
-  stats.candidates = static_cast<uint32_t>(tally.kept(1));
   selection.stride = tally.finestStrideWithin(out.capacity());
-  if (selection.stride == 0) {
-    return {ErrorCode::kCapacityExceeded,
-            "live points: " + std::to_string(tally.kept(LiveSelection::kMaxStride)) +
-                " even on every " + std::to_string(LiveSelection::kMaxStride) +
-                "th pixel outside the gaze's cone, capacity " + std::to_string(out.capacity())};
-  }
+  if (selection.stride == 0) return overCapacity(tally.kept(LiveSelection::kMaxStride), out.capacity());
   stats.stride = static_cast<uint8_t>(selection.stride);
-  LivePointPush thinned(selection, out);
-  visit_all(static_cast<LivePointSink&>(thinned));
+  const LivePixelFilter filter{selection.stride, width, cone_bits_.data()};
+  LivePointPush kept(selection, out);
+  kept.setFilter(&filter);
+  visit_all(static_cast<LivePointSink&>(kept));
+  ++stats.passes;
   return Status::ok();
 }
 

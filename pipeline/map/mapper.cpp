@@ -40,6 +40,7 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
   mapper.output_ = config.output;
   mapper.map_ = std::make_unique<SurfelMap>(std::move(map.value()));
   if (Status s = makeOutput(config, mapper.eye_, mapper.delta_, mapper.sampler_); !s) return s;
+  mapper.live_ = std::make_unique<LiveCollector>(config.map.max_width, config.map.max_height);
   if (config.output != MapOutput::kNone) {
     Result<ExplainedView> view =
         ExplainedView::create(config.map.max_width, config.map.max_height, config.map.depth_tolerance_sigmas);
@@ -152,36 +153,38 @@ Status Mapper::collectLive(const hal::RgbdFrame& frame, const MapperFrame& figur
                            const LiveSelection& selection, PointCloud& cloud, LiveFigures& out) {
   out = {};
   cloud.has_color = frame.has_rgb;
+  const int w = frame.width(), h = frame.height();
   if (figures.fused()) {
     out.valid = figures.fuse.pixels_valid;
-    return collectLivePoints([&](LivePointSink& sink) { (void)map_->visitUnexplained(frame, cloud.origin_m, sink); },
-                             selection, cloud, out.points);
+    return live_->collect([&](LivePointSink& sink) { (void)map_->visitUnexplained(frame, cloud.origin_m, sink); },
+                          selection, w, h, cloud, out.points);
   }
   if (Status s = validateFrame(frame); !s) return s;
   if (Status s = range.validate(); !s) return s;
   const PixelBackprojection rule(frame, range);
+  bool first = true;  // the first pass judges every pixel: its counts are the frame's
   if (view_ && figures.pose_usable && (figures.fusion_skipped || figures.handed_off)) {
     MapReadLock hold(*gate_);  // the fusion thread captures the view
-    ExplainedView::VisitCounts counts;
-    Status s = collectLivePoints([&](LivePointSink& sink) { view_->visitUnexplained(frame, rule, sink, counts); },
-                                 selection, cloud, out.points);
-    out.valid = counts.valid;
-    out.explained_by_last_view = counts.explained;
-    return s;
+    return live_->collect(
+        [&](LivePointSink& sink) {
+          ExplainedView::VisitCounts counts;
+          view_->visitUnexplained(frame, rule, sink, counts);
+          if (first) out.valid = counts.valid, out.explained_by_last_view = counts.explained;
+          first = false;
+        },
+        selection, w, h, cloud, out.points);
   }
   const uint8_t* rgb = frame.rgb();
-  uint32_t valid = 0;
-  Status s = collectLivePoints(
+  return live_->collect(
       [&](LivePointSink& sink) {
-        valid = 0;
         rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
-          ++valid;
+          out.valid += first ? 1 : 0;
+          if (sink.skips(u, v)) return true;
           return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
         });
+        first = false;
       },
-      selection, cloud, out.points);
-  out.valid = valid;
-  return s;
+      selection, w, h, cloud, out.points);
 }
 
 MapperStatus Mapper::status() {
@@ -265,7 +268,7 @@ MapperMemory Mapper::memory() const {
   m.eye = eye_ ? eye_->memoryBytes() : 0;
   m.delta = delta_ ? delta_->memoryBytes() + sampler_->memoryBytes() : 0;
   m.tracker = poser_ ? poser_->memoryBytes() : 0;
-  m.view = view_ ? view_->memoryBytes() : 0;
+  m.view = (view_ ? view_->memoryBytes() : 0) + live_->memoryBytes();
   m.handoff = handoff_ ? handoff_->bytes : 0;
   return m;
 }

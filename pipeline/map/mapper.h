@@ -110,7 +110,7 @@ struct MapperMemory {
   SurfelMapMemory map;
   std::size_t eye = 0;      // kEyeView: the eye's depth buffer
   std::size_t delta = 0;    // kBricks: what the operator holds, the plan, the brick sampler
-  std::size_t view = 0;     // output other than kNone: the last fused frame's explained depths
+  std::size_t view = 0;     // the last fused frame's explained depths (output other than kNone), the live points' cone bits
   std::size_t tracker = 0;  // with tracking: the pyramids
   std::size_t handoff = 0;  // fusion_thread: the frame handed to it
   std::size_t total() const { return map.total() + eye + delta + view + tracker + handoff; }
@@ -215,6 +215,7 @@ class Mapper {
   std::unique_ptr<MapDelta> delta_;         // kBricks
   std::unique_ptr<BrickSampler> sampler_;   // kBricks
   std::unique_ptr<ExplainedView> view_;     // output other than kNone
+  std::unique_ptr<LiveCollector> live_;     // collectLive()'s (a bit a pixel)
   FusionBudget budget_;
   std::unique_ptr<MapGate> gate_;    // always (uncontended without a fusion thread)
   // The tracker: posing a frame (addFrame's thread) against building its model

@@ -584,7 +584,7 @@ bool SurfelMap::visitUnexplained(const hal::RgbdFrame& frame, const Eigen::Vecto
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-      if (explained_[i] || vertex_z_[i] == 0.0f) continue;
+      if (explained_[i] || vertex_z_[i] == 0.0f || sink.skips(u, v)) continue;
       const Eigen::Vector3f p = R_f * vertexAt(i, u, v) + t;
       const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
       if (!sink.take(u, v, p, packRgb(rgb[0], rgb[1], rgb[2]))) return true;

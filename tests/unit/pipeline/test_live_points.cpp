@@ -27,13 +27,15 @@ struct Candidate {
   uint32_t rgb = 0;
 };
 
-// Offers a list, as a source does a frame.
+// Offers a list, as a source does a frame, skipping what the sink's filter
+// skips.
 struct ListSource {
   const std::vector<Candidate>* list;
   int calls = 0;
   void operator()(LivePointSink& sink) {
     ++calls;
     for (const Candidate& c : *list) {
+      if (sink.skips(c.u, c.v)) continue;
       if (!sink.take(c.u, c.v, c.p, c.rgb)) return;
     }
   }
@@ -81,12 +83,21 @@ void expectSame(const PointCloud& cloud, const std::vector<Candidate>& expected)
   }
 }
 
-// Runs collectLivePoints and the reference on one list and capacity.
-void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelection& selection, std::size_t capacity) {
+// Runs a collector and the reference on one list and capacity: `fresh` a new
+// collector, else one whose last frame was thinned.
+void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelection& selection, std::size_t capacity,
+                           int w, int h, bool fresh = true) {
+  LiveCollector collector(w, h);
   PointCloud cloud(capacity);
   LivePointStats stats;
+  if (!fresh) {  // a frame of one point more than fits: thinned
+    std::vector<Candidate> over(capacity + 1, Candidate{0, 0, Eigen::Vector3f(0, 0, 1), 0});
+    ListSource before{&over};
+    (void)collector.collect(before, selection, w, h, cloud, stats);
+    ASSERT_GE(stats.passes, 2) << "the frame before did not fit";
+  }
   ListSource source{&all};
-  const Status s = collectLivePoints(source, selection, cloud, stats);
+  const Status s = collector.collect(source, selection, w, h, cloud, stats);
   int stride = 0;
   const std::vector<Candidate> expected = selectByBruteForce(all, selection, capacity, stride);
   if (stride == 0) {
@@ -97,7 +108,11 @@ void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelectio
   ASSERT_TRUE(s.isOk()) << s.message();
   EXPECT_EQ(stats.stride, stride);
   EXPECT_EQ(stats.candidates, all.size());
-  EXPECT_EQ(source.calls, stride == 1 ? 1 : 3) << "once when everything fits, else three times";
+  // Fresh: once when everything fits, else take until full, count, take
+  // thinned; after a thinned frame: take and count at once, then thinned.
+  const int passes = stride == 1 ? 1 : fresh ? 3 : 2;
+  EXPECT_EQ(source.calls, passes);
+  EXPECT_EQ(stats.passes, passes);
   expectSame(cloud, expected);
 }
 
@@ -130,29 +145,43 @@ TEST(LivePoints, RandomCandidatesAreSelectedAsTheBruteForceSelectsThem) {
     const LiveSelection selection = randomSelection(rng);
     std::uniform_int_distribution<std::size_t> capacity(0, all.size() + 10);
     SCOPED_TRACE(trial);
-    checkAgainstReference(all, selection, capacity(rng));
+    checkAgainstReference(all, selection, capacity(rng), 48, 36, trial % 2 == 0);
   }
 }
 
 TEST(LivePoints, HardCases) {
+  constexpr int kW = 40, kH = 30;
   std::mt19937 rng(7);
-  const std::vector<Candidate> all = randomCandidates(rng, 40, 30, 1.0);
+  const std::vector<Candidate> all = randomCandidates(rng, kW, kH, 1.0);
   LiveSelection selection = randomSelection(rng);
-  checkAgainstReference(all, selection, all.size());      // exactly full: every point, one pass
-  checkAgainstReference(all, selection, all.size() - 1);  // one short: thinned
-  checkAgainstReference(all, selection, 0);               // no room at all
-  selection.whole_cos = 2.0f;                             // no cone: the grids alone
-  checkAgainstReference(all, selection, all.size() / 4);
-  checkAgainstReference(all, selection, 80);  // the 4-grid of 40 x 30 exactly
-  checkAgainstReference(all, selection, 79);  // not even that
-  selection.whole_cos = -1.0f;  // a cone of every direction: nothing thins
-  checkAgainstReference(all, selection, all.size() / 2);
-  // A point at the eye is within any cone (its direction is none).
-  std::vector<Candidate> at_eye = all;
-  LiveSelection narrow = selection;
-  narrow.whole_cos = 1.0f;
-  for (Candidate& c : at_eye) c.p = narrow.eye_m;
-  checkAgainstReference(at_eye, narrow, 10);
+  for (bool fresh : {true, false}) {
+    SCOPED_TRACE(fresh ? "fresh" : "after a thinned frame");
+    checkAgainstReference(all, selection, all.size(), kW, kH, fresh);      // exactly full: every point
+    checkAgainstReference(all, selection, all.size() - 1, kW, kH, fresh);  // one short: thinned
+    checkAgainstReference(all, selection, 0, kW, kH, fresh);               // no room at all
+    LiveSelection no_cone = selection;
+    no_cone.whole_cos = 2.0f;  // the grids alone
+    checkAgainstReference(all, no_cone, all.size() / 4, kW, kH, fresh);
+    checkAgainstReference(all, no_cone, 80, kW, kH, fresh);  // the 4-grid of 40 x 30 exactly
+    checkAgainstReference(all, no_cone, 79, kW, kH, fresh);  // not even that
+    LiveSelection everything = selection;
+    everything.whole_cos = -1.0f;  // a cone of every direction: nothing thins
+    checkAgainstReference(all, everything, all.size() / 2, kW, kH, fresh);
+    // A point at the eye is within any cone (its direction is none).
+    std::vector<Candidate> at_eye = all;
+    LiveSelection narrow = selection;
+    narrow.whole_cos = 1.0f;
+    for (Candidate& c : at_eye) c.p = narrow.eye_m;
+    checkAgainstReference(at_eye, narrow, 10, kW, kH, fresh);
+  }
+  // A frame larger than the collector's is refused, never written past.
+  LiveCollector small(kW, kH);
+  PointCloud cloud(16);
+  LivePointStats stats;
+  ListSource source{&all};
+  EXPECT_EQ(small.collect(source, selection, kW + 1, kH, cloud, stats).code(), ErrorCode::kInvalidInput);
+  EXPECT_EQ(small.collect(source, selection, kW, kH + 1, cloud, stats).code(), ErrorCode::kInvalidInput);
+  EXPECT_EQ(source.calls, 0);
 }
 
 // The map's first frame of the mock living room: nothing is explained yet, so
@@ -185,8 +214,10 @@ TEST(LivePoints, TheMapsFirstFrameIsThinnedOutsideTheConeAsTheReferenceThinsIt) 
   PointCloud cloud(capacity);
   cloud.origin_m = origin;
   LivePointStats live;
-  ASSERT_TRUE(collectLivePoints([&](LivePointSink& sink) { (void)map.visitUnexplained(frame, origin, sink); },
-                                selection, cloud, live)
+  LiveCollector collector(kW, kH);
+  ASSERT_TRUE(collector
+                  .collect([&](LivePointSink& sink) { (void)map.visitUnexplained(frame, origin, sink); }, selection,
+                           kW, kH, cloud, live)
                   .isOk());
   int stride = 0;
   const std::vector<Candidate> expected = selectByBruteForce(offered.seen, selection, capacity, stride);
