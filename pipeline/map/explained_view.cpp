@@ -37,18 +37,6 @@ void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explaine
   for (std::size_t i = 0; i < pixels; ++i) raw_[i] = explained[i] ? raw[i] : uint16_t{0};
 }
 
-bool ExplainedView::explains(float x, float y, float z) const {
-  if (!(z > 0.0f)) return false;
-  const float u = fx_ * x / z + cx_, v = fy_ * y / z + cy_;
-  // Inside the view (also false for NaN): the nearest pixel's centre.
-  if (!(u > -0.5f && u < static_cast<float>(width_) - 0.5f && v > -0.5f && v < static_cast<float>(height_) - 0.5f)) {
-    return false;
-  }
-  const auto iu = static_cast<std::size_t>(std::lround(u)), iv = static_cast<std::size_t>(std::lround(v));
-  const float seen = static_cast<float>(raw_[iv * static_cast<std::size_t>(width_) + iu]) * scale_;
-  return seen > 0.0f && std::fabs(z - seen) <= sigmas_ * depthSigma(seen);
-}
-
 std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
   if (empty()) return 0;
   const Eigen::Matrix3f R = intoView();

@@ -258,6 +258,22 @@ TEST_F(ExplainedViewTest, HardCases) {
   EXPECT_EQ(emptied.removeExplained(again), 0u);
 }
 
+// The nearest pixel without libm's lround: the same index for every float
+// above -0.5, the halves and the floats beside them included.
+TEST(ExplainedView, TheNearestPixelIsLroundsAboveMinusAHalf) {
+  std::vector<float> values = {-0.49999997f, -0.25f, -0.0f, 0.0f, 0.49999997f, 0.5f, 0.50000006f, 1.5f,
+                               2.5f, 638.5f, 639.49997f, 16777215.0f};
+  for (int k = 0; k < 2000; ++k) {
+    const float half = static_cast<float>(k) + 0.5f;
+    values.push_back(half);
+    values.push_back(std::nextafter(half, 0.0f));
+    values.push_back(std::nextafter(half, 1e9f));
+  }
+  for (float c : values) {
+    ASSERT_EQ(ExplainedView::nearestPixel(c), static_cast<std::size_t>(std::lround(c))) << c;
+  }
+}
+
 TEST(ExplainedView, RefusesABadSizeOrTolerance) {
   EXPECT_FALSE(ExplainedView::create(0, kH, 3.0).isOk());
   EXPECT_FALSE(ExplainedView::create(kW, -1, 3.0).isOk());
