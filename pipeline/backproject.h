@@ -54,6 +54,7 @@ struct PixelBackprojection {
   Eigen::Matrix3f r = Eigen::Matrix3f::Identity();
   RawDepthRange raw;
 
+  PixelBackprojection() = default;
   PixelBackprojection(const hal::RgbdFrame& frame, const DepthRange& range);
   bool valid(uint32_t raw_depth) const { return raw_depth >= raw.min && raw_depth <= raw.max; }
   // Relative to the camera's position, in the world's axes.

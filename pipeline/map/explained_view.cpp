@@ -2,11 +2,10 @@
 
 #include <cmath>
 
-#include "core/depth_noise.h"
-
 namespace fovea::pipeline::map {
 
-Result<ExplainedView> ExplainedView::create(int max_width, int max_height, double depth_tolerance_sigmas) {
+Result<ExplainedView> ExplainedView::create(int max_width, int max_height, double depth_tolerance_sigmas,
+                                            KernelSet kernels) {
   if (max_width <= 0 || max_height <= 0) {
     return Result<ExplainedView>(ErrorCode::kInvalidArgument, "explained view: the frame size must be positive");
   }
@@ -16,7 +15,9 @@ Result<ExplainedView> ExplainedView::create(int max_width, int max_height, doubl
   ExplainedView view;
   view.max_pixels_ = static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height);
   view.sigmas_ = static_cast<float>(depth_tolerance_sigmas * std::sqrt(2.0));
-  view.raw_.assign(view.max_pixels_, 0);
+  view.raw_.assign(view.max_pixels_ + 1, 0);
+  view.kernels_ = kernels;
+  view.codes_.assign(static_cast<std::size_t>(max_width), 0);
   return view;
 }
 
@@ -39,15 +40,15 @@ void ExplainedView::capture(const hal::RgbdFrame& frame, const uint8_t* explaine
 
 std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
   if (empty()) return 0;
-  const Eigen::Matrix3f R = intoView();
-  const Eigen::Vector3f t = intoViewOffset(cloud.origin_m);
+  const IntoView into = intoView(cloud.origin_m);
+  const ViewLookup view = lookup();
   float *x = cloud.x(), *y = cloud.y(), *z = cloud.z();
   uint32_t* rgb = cloud.rgb();
   const std::size_t n = cloud.size();
   std::size_t kept = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3f q = R * Eigen::Vector3f(x[i], y[i], z[i]) + t;
-    if (explains(q.x(), q.y(), q.z())) continue;
+    const Eigen::Vector3f q = into.apply(Eigen::Vector3f(x[i], y[i], z[i]));
+    if (view.explains(q.x(), q.y(), q.z())) continue;
     x[kept] = x[i], y[kept] = y[i], z[kept] = z[i], rgb[kept] = rgb[i];
     ++kept;
   }
@@ -58,21 +59,34 @@ std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
 void ExplainedView::visitUnexplained(const hal::RgbdFrame& frame, const PixelBackprojection& rule,
                                      LivePointSink& sink, VisitCounts& counts) const {
   counts = {};
-  const Eigen::Matrix3f R = intoView();
-  const Eigen::Vector3f t = intoViewOffset(frame.T_world_cam.t_world_cam);
   const uint8_t* rgb = frame.rgb();
-  rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
-    if (sink.skips(u, v)) return true;
-    ++counts.valid;
-    if (!empty()) {
-      const Eigen::Vector3f q = R * p + t;
-      if (explains(q.x(), q.y(), q.z())) {
+  const auto offer = [&](int u, int v, std::size_t i) {
+    return sink.take(u, v, rule.point(u, v, frame.depth()[i]),
+                     frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
+  };
+  if (static_cast<std::size_t>(frame.width()) > codes_.size()) {  // wider than any view: judged by none
+    rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f&) {
+      if (sink.skips(u, v)) return true;
+      ++counts.valid;
+      return offer(u, v, i);
+    });
+    return;
+  }
+  ViewJudgeParams params{lookup(), intoView(frame.T_world_cam.t_world_cam), rule, frame.depth(), frame.width()};
+  uint8_t* codes = codes_.data();
+  for (int v = 0; v < frame.height(); ++v) {
+    (kernels_ == KernelSet::kSimd ? judgeRowSimd : judgeRowRef)(params, v, codes);
+    const std::size_t row = static_cast<std::size_t>(v) * static_cast<std::size_t>(frame.width());
+    for (int u = 0; u < frame.width(); ++u) {
+      if (codes[u] == kJudgedInvalid || sink.skips(u, v)) continue;
+      ++counts.valid;
+      if (codes[u] == kJudgedExplained) {
         ++counts.explained;
-        return true;
+        continue;
       }
+      if (!offer(u, v, row + static_cast<std::size_t>(u))) return;
     }
-    return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
-  });
+  }
 }
 
 }  // namespace fovea::pipeline::map

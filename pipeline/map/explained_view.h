@@ -14,28 +14,30 @@
 // and a point outside the fused frame's view is never explained (new to the
 // map as far as the operator can tell).
 //
-// Memory: the raw depth, two bytes a pixel of the largest frame, allocated by
-// create(); capture() and removeExplained() allocate nothing.
+// Memory: the raw depth, two bytes a pixel of the largest frame, and a byte a
+// column, allocated by create(); nothing else allocates.
 #pragma once
 
-#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
-#include "core/depth_noise.h"
+#include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
 #include "pipeline/map/live_points.h"
+#include "pipeline/map/view_judge.h"
 #include "pipeline/point_cloud.h"
 
 namespace fovea::pipeline::map {
 
 class ExplainedView {
  public:
-  // depth_tolerance_sigmas: the map's association tolerance (SurfelMapConfig).
-  static Result<ExplainedView> create(int max_width, int max_height, double depth_tolerance_sigmas);
+  // depth_tolerance_sigmas: the map's association tolerance (SurfelMapConfig);
+  // kernels: visitUnexplained()'s judgement of a row (view_judge.h).
+  static Result<ExplainedView> create(int max_width, int max_height, double depth_tolerance_sigmas,
+                                      KernelSet kernels = defaultKernelSet());
 
   // Keeps `frame`'s view (its pose and intrinsics) and, per pixel, the
   // measured depth where `explained` is set (which the map sets only on a
@@ -62,35 +64,18 @@ class ExplainedView {
   void visitUnexplained(const hal::RgbdFrame& frame, const PixelBackprojection& rule, LivePointSink& sink,
                         VisitCounts& counts) const;
 
-  // std::lround(c) for c > -0.5, without libm's call: c + 0.5 is exact in
-  // double, and truncating it is flooring it there.
-  static std::size_t nearestPixel(float c) { return static_cast<std::size_t>(static_cast<double>(c) + 0.5); }
-
   bool empty() const { return width_ == 0; }
   const hal::Pose& pose() const { return pose_; }
-  std::size_t memoryBytes() const { return raw_.capacity() * sizeof(uint16_t); }
+  std::size_t memoryBytes() const { return raw_.capacity() * sizeof(uint16_t) + codes_.capacity(); }
 
  private:
-  // Whether the point p (world, relative to the view's camera: R^T (p - t))
-  // lies on an explained pixel at its depth. Inline: it runs on every pixel
-  // of a frame not fused now (most of the foveation thread's time there).
-  bool explains(float x, float y, float z) const {
-    if (!(z > 0.0f)) return false;
-    const float u = fx_ * x / z + cx_, v = fy_ * y / z + cy_;
-    // Inside the view (also false for NaN): the nearest pixel's centre.
-    if (!(u > -0.5f && u < static_cast<float>(width_) - 0.5f && v > -0.5f && v < static_cast<float>(height_) - 0.5f)) {
-      return false;
-    }
-    const std::size_t iu = nearestPixel(u), iv = nearestPixel(v);
-    const float seen = static_cast<float>(raw_[iv * static_cast<std::size_t>(width_) + iu]) * scale_;
-    return seen > 0.0f && std::fabs(z - seen) <= sigmas_ * depthSigma(seen);
-  }
+  ViewLookup lookup() const { return {raw_.data(), width_, height_, fx_, fy_, cx_, cy_, scale_, sigmas_}; }
   // Into the view's camera from world positions relative to origin_m:
   // R^T (origin + p - t), the translation in double (the cloud and the camera
   // may be far from the world origin).
-  Eigen::Matrix3f intoView() const { return pose_.R_world_cam.transpose().cast<float>(); }
-  Eigen::Vector3f intoViewOffset(const Eigen::Vector3d& origin_m) const {
-    return (pose_.R_world_cam.transpose() * (origin_m - pose_.t_world_cam)).cast<float>();
+  IntoView intoView(const Eigen::Vector3d& origin_m) const {
+    return {pose_.R_world_cam.transpose().cast<float>(),
+            (pose_.R_world_cam.transpose() * (origin_m - pose_.t_world_cam)).cast<float>()};
   }
 
   std::size_t max_pixels_ = 0;
@@ -99,7 +84,9 @@ class ExplainedView {
   float fx_ = 0, fy_ = 0, cx_ = 0, cy_ = 0;
   hal::Pose pose_;
   float scale_ = 0;             // the captured frame's metres per raw unit, as a float
-  std::vector<uint16_t> raw_;  // explained pixels' raw depth, 0 elsewhere
+  std::vector<uint16_t> raw_;  // explained pixels' raw depth, 0 elsewhere; one more (ViewLookup)
+  KernelSet kernels_ = KernelSet::kRef;
+  mutable std::vector<uint8_t> codes_;  // a row's (visitUnexplained; one thread at a time)
 };
 
 }  // namespace fovea::pipeline::map

@@ -43,7 +43,8 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
   mapper.live_ = std::make_unique<LiveCollector>(config.map.max_width, config.map.max_height);
   if (config.output != MapOutput::kNone) {
     Result<ExplainedView> view =
-        ExplainedView::create(config.map.max_width, config.map.max_height, config.map.depth_tolerance_sigmas);
+        ExplainedView::create(config.map.max_width, config.map.max_height, config.map.depth_tolerance_sigmas,
+                              config.map.kernels);
     if (!view) return view.status();
     mapper.view_ = std::make_unique<ExplainedView>(std::move(view.value()));
   }

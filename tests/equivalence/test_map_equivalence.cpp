@@ -4,8 +4,9 @@
 // Highway target compiled in and supported here (TargetTest/<Case>/<TARGET>);
 // the index map's gather (pipeline/map/index_map.h) the same way, and its
 // reference against a brute force over every centre of the grid; the index
-// map's first pass (pipeline/map/splat_plan.h) the same way; then whole
-// maps fused with either kernel set, which must be the same map.
+// map's first pass (pipeline/map/splat_plan.h) the same way, and the explained
+// view's judgement of a row (pipeline/map/view_judge.h); then whole maps fused
+// with either kernel set, which must be the same map.
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -31,6 +32,7 @@
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/splat_plan.h"
 #include "pipeline/map/surfel_map.h"
+#include "pipeline/map/view_judge.h"
 
 namespace fovea::pipeline::map {
 namespace {
@@ -731,6 +733,89 @@ TEST_P(TargetTest, MapsFusedWithEitherKernelSetAreTheSame) {
   }
 }
 
+// A random view, frame and pose for the explained view's judgement
+// (pipeline/map/view_judge.h): depths with holes, out of range and at the
+// extremes; the view's raw depths near the frame's (so that both codes occur);
+// a pose that turns and moves a little.
+struct JudgeCase {
+  std::vector<uint16_t> depth, view_raw;
+  hal::RgbdFrame frame;
+  ViewJudgeParams params;
+  JudgeCase(int w, int h, int vw, int vh, std::mt19937_64& rng) : frame(w, h) {
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    frame.intrinsics = {w, h, 0.8 * w, 0.8 * w, 0.5 * w - 0.5, 0.5 * h - 0.5};
+    frame.depth_scale_m = 0.001;
+    depth.resize(static_cast<std::size_t>(w) * h);
+    for (uint16_t& d : depth) {
+      const uint64_t r = rng();
+      d = r % 11 == 0 ? 0 : r % 13 == 0 ? 65535 : r % 17 == 0 ? 50 : static_cast<uint16_t>(800 + (r >> 20) % 2500);
+    }
+    view_raw.assign(static_cast<std::size_t>(vw) * vh + 1, 0);
+    for (std::size_t i = 0; i + 1 < view_raw.size(); ++i) {
+      const uint64_t r = rng();
+      view_raw[i] = r % 7 == 0 ? 0 : static_cast<uint16_t>(800 + (r >> 20) % 2500);
+    }
+    DepthRange range;
+    range.min_m = 0.3;
+    range.max_m = 6.0;
+    params.rule = PixelBackprojection(frame, range);
+    params.rule.r = Eigen::AngleAxisf(0.3f * unit(rng), Eigen::Vector3f(unit(rng), unit(rng), 1.0f).normalized())
+                        .toRotationMatrix();
+    params.into.R = Eigen::AngleAxisf(0.2f * unit(rng), Eigen::Vector3f(1.0f, unit(rng), unit(rng)).normalized())
+                        .toRotationMatrix();
+    params.into.t = Eigen::Vector3f(0.1f * unit(rng), 0.1f * unit(rng), 0.05f * unit(rng));
+    params.view = {view_raw.data(), vw, vh, 0.8f * vw, 0.8f * vw, 0.5f * vw - 0.5f, 0.5f * vh - 0.5f, 0.001f, 4.24f};
+    params.depth = depth.data();
+    params.width = w;
+  }
+};
+
+// Both kernels on every row: the same code for every pixel. Returns the
+// explained ones.
+std::size_t expectSameJudgement(const JudgeCase& c, int h, const std::string& what) {
+  std::vector<uint8_t> ref(static_cast<std::size_t>(c.params.width)), simd(ref.size());
+  std::size_t explained = 0;
+  for (int v = 0; v < h; ++v) {
+    std::fill(simd.begin(), simd.end(), uint8_t{0xee});
+    judgeRowRef(c.params, v, ref.data());
+    judgeRowSimd(c.params, v, simd.data());
+    for (std::size_t u = 0; u < ref.size(); ++u) {
+      EXPECT_EQ(ref[u], simd[u]) << what << " pixel (" << u << ", " << v << ")";
+      if (ref[u] != simd[u]) return explained;
+      explained += ref[u] == kJudgedExplained ? 1 : 0;
+    }
+  }
+  return explained;
+}
+
+TEST_P(TargetTest, TheViewsJudgementIsTheReference) {
+  std::mt19937_64 rng(47);
+  const int sizes[][4] = {{640, 480, 640, 480}, {1, 1, 1, 1}, {3, 5, 3, 5}, {17, 9, 17, 9}, {33, 7, 20, 9},
+                          {64, 4, 64, 4},       {65, 6, 129, 5}, {100, 30, 40, 20}};
+  std::size_t explained = 0;
+  for (const auto& s : sizes) {
+    JudgeCase c(s[0], s[1], s[2], s[3], rng);
+    explained += expectSameJudgement(c, s[1], std::to_string(s[0]) + "x" + std::to_string(s[1]));
+  }
+  EXPECT_GT(explained, 1000u) << "the cases should explain some pixels";
+  // Points landing on half pixels: the view is the frame's, moved half a pixel
+  // across and down, neither turned nor moved (lround takes the halves up).
+  JudgeCase halves(160, 120, 160, 120, rng);
+  halves.params.rule.r.setIdentity();
+  halves.params.into = {};
+  halves.params.view.cx = static_cast<float>(halves.frame.intrinsics.cx) + 0.5f;
+  halves.params.view.cy = static_cast<float>(halves.frame.intrinsics.cy) + 0.5f;
+  halves.params.view.fx = static_cast<float>(halves.frame.intrinsics.fx);
+  halves.params.view.fy = static_cast<float>(halves.frame.intrinsics.fy);
+  expectSameJudgement(halves, 120, "halves");
+  // Behind the view's camera and an empty view: nothing is explained.
+  JudgeCase behind(70, 10, 70, 10, rng);
+  behind.params.into.R = -Eigen::Matrix3f::Identity();
+  EXPECT_EQ(expectSameJudgement(behind, 10, "behind"), 0u);
+  JudgeCase empty(70, 10, 70, 10, rng);
+  empty.params.view.width = empty.params.view.height = 0;
+  EXPECT_EQ(expectSameJudgement(empty, 10, "empty view"), 0u);
+}
 
 INSTANTIATE_TEST_SUITE_P(Targets, TargetTest, ::testing::ValuesIn(simdTargetsHere()), test::simdTargetName);
 

@@ -260,7 +260,7 @@ TEST_F(ExplainedViewTest, HardCases) {
 
 // The nearest pixel without libm's lround: the same index for every float
 // above -0.5, the halves and the floats beside them included.
-TEST(ExplainedView, TheNearestPixelIsLroundsAboveMinusAHalf) {
+TEST(ViewJudge, TheNearestPixelIsLroundsAboveMinusAHalf) {
   std::vector<float> values = {-0.49999997f, -0.25f, -0.0f, 0.0f, 0.49999997f, 0.5f, 0.50000006f, 1.5f,
                                2.5f, 638.5f, 639.49997f, 16777215.0f};
   for (int k = 0; k < 2000; ++k) {
@@ -270,7 +270,7 @@ TEST(ExplainedView, TheNearestPixelIsLroundsAboveMinusAHalf) {
     values.push_back(std::nextafter(half, 1e9f));
   }
   for (float c : values) {
-    ASSERT_EQ(ExplainedView::nearestPixel(c), static_cast<std::size_t>(std::lround(c))) << c;
+    ASSERT_EQ(nearestPixel(c), static_cast<std::size_t>(std::lround(c))) << c;
   }
 }
 
