@@ -77,6 +77,7 @@ class LivePointSink {
  public:
   virtual bool take(int u, int v, const Eigen::Vector3f& p, uint32_t rgb) = 0;
   bool skips(int u, int v) const { return filter_ != nullptr && !filter_->keeps(u, v); }
+  bool filtered() const { return filter_ != nullptr; }
   void setFilter(const LivePixelFilter* filter) { filter_ = filter; }
 
  protected:
@@ -86,8 +87,7 @@ class LivePointSink {
   const LivePixelFilter* filter_ = nullptr;
 };
 
-// Pushes the points the selection keeps; stops at the first that does not
-// fit, unless told to go on counting (the tally beside it needs them all).
+// Pushes the points the selection keeps; stops at the first that does not fit.
 class LivePointPush final : public LivePointSink {
  public:
   LivePointPush(const LiveSelection& selection, PointCloud& out) : selection_(selection), out_(out) {}
@@ -153,8 +153,10 @@ class LiveCollector {
   // Fills `out` (cleared first; its origin kept) with the points of a frame
   // of width x height pixels from `visit_all(sink)`, which offers the same
   // points in the same order on every call (skipping those sink.skips()
-  // names). kCapacityExceeded (`out` empty) when even the grid of kMaxStride
-  // does not fit; kInvalidInput for a frame larger than the constructor's.
+  // names). The last call whose sink is not filtered() has seen every point
+  // (a source counting the frame's pixels keeps that call's counts).
+  // kCapacityExceeded (`out` empty) when even the grid of kMaxStride does not
+  // fit; kInvalidInput for a frame larger than the constructor's.
   template <typename VisitAll>
   Status collect(VisitAll&& visit_all, LiveSelection selection, int width, int height, PointCloud& out,
                  LivePointStats& stats);

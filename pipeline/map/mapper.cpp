@@ -163,27 +163,27 @@ Status Mapper::collectLive(const hal::RgbdFrame& frame, const MapperFrame& figur
   if (Status s = validateFrame(frame); !s) return s;
   if (Status s = range.validate(); !s) return s;
   const PixelBackprojection rule(frame, range);
-  bool first = true;  // the first pass judges every pixel: its counts are the frame's
+  // The frame's counts are those of the last unfiltered pass, which saw every pixel.
   if (view_ && figures.pose_usable && (figures.fusion_skipped || figures.handed_off)) {
     MapReadLock hold(*gate_);  // the fusion thread captures the view
     return live_->collect(
         [&](LivePointSink& sink) {
           ExplainedView::VisitCounts counts;
           view_->visitUnexplained(frame, rule, sink, counts);
-          if (first) out.valid = counts.valid, out.explained_by_last_view = counts.explained;
-          first = false;
+          if (!sink.filtered()) out.valid = counts.valid, out.explained_by_last_view = counts.explained;
         },
         selection, w, h, cloud, out.points);
   }
   const uint8_t* rgb = frame.rgb();
   return live_->collect(
       [&](LivePointSink& sink) {
+        uint32_t valid = 0;
         rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
-          out.valid += first ? 1 : 0;
+          ++valid;
           if (sink.skips(u, v)) return true;
           return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
         });
-        first = false;
+        if (!sink.filtered()) out.valid = valid;
       },
       selection, w, h, cloud, out.points);
 }

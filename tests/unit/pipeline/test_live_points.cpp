@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/map/live_points.h"
+#include "pipeline/map/mapper.h"
 #include "pipeline/map/surfel_map.h"
 #include "tests/support/cameras.h"
 #include "tests/support/test_time.h"
@@ -239,6 +240,78 @@ TEST(LivePoints, TheMapsFirstFrameIsThinnedOutsideTheConeAsTheReferenceThinsIt) 
   Recorder none;
   EXPECT_FALSE(map.visitUnexplained(other, origin, none));
   EXPECT_TRUE(none.seen.empty());
+}
+
+// The mapper's three sources through one small cloud: a frame fused now, one
+// left unfused (judged by the last fused view) and one refused (every valid
+// pixel). Each is thinned, and the two that judge the pixels themselves count
+// the frame's valid pixels whole, though their first pass stopped when the
+// cloud was full.
+TEST(LivePoints, TheMappersSourcesThinIntoASmallCloudAndCountTheWholeFrame) {
+  constexpr int kW = 160, kH = 120;
+  std::unique_ptr<hal::Camera> camera = test::startedCamera("mock:living-room,size=160x120,path=orbit");
+  ASSERT_TRUE(camera);
+  MapperConfig config;
+  config.map.max_width = kW;
+  config.map.max_height = kH;
+  config.map.max_surfels = 1 << 16;
+  config.map.max_bricks = 1024;
+  config.output = MapOutput::kBricks;
+  Mapper mapper = Mapper::create(config).value();
+  hal::RgbdFrame frame(kW, kH);
+  const auto validPixels = [&] {
+    const PixelBackprojection rule(frame, config.map.depth);
+    uint32_t n = 0;
+    rule.forEachPoint(frame, [&](int, int, std::size_t, const Eigen::Vector3f&) { return ++n > 0; });
+    return n;
+  };
+  LiveSelection selection;
+  selection.gaze = Eigen::Vector3f::UnitZ();
+  selection.whole_cos = std::cos(static_cast<float>(8.0 * M_PI / 180.0));
+  PointCloud cloud(static_cast<std::size_t>(kW) * kH / 8);
+  for (int i = 0; i < 14; ++i) {  // the map settles, so that its view explains
+    ASSERT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
+    MapperFrame fused;
+    ASSERT_TRUE(mapper.addFrame(frame, true, fused));
+    if (i == 0) {
+      cloud.origin_m = frame.T_world_cam.t_world_cam;
+      LiveFigures live;
+      ASSERT_TRUE(mapper.collectLive(frame, fused, config.map.depth, selection, cloud, live).isOk());
+      EXPECT_GT(live.points.stride, 1) << "the first frame is all unexplained";
+      EXPECT_GT(live.points.candidates, cloud.capacity());
+      EXPECT_GT(cloud.size(), 0u);
+      EXPECT_EQ(live.valid, fused.fuse.pixels_valid) << "fused now: the map's count";
+    }
+  }
+  ASSERT_TRUE(camera->acquire(frame, test::scaled(std::chrono::seconds(1))).isOk());
+  cloud.origin_m = frame.T_world_cam.t_world_cam;
+  MapperFrame unfused;
+  unfused.pose_usable = true;
+  unfused.fusion_skipped = true;
+  PointCloud roomy(static_cast<std::size_t>(kW) * kH);
+  roomy.origin_m = cloud.origin_m;
+  LiveFigures all;  // fits: not thinned, so the next frame's first pass stops when full
+  ASSERT_TRUE(mapper.collectLive(frame, unfused, config.map.depth, selection, roomy, all).isOk());
+  EXPECT_EQ(all.points.stride, 1);
+  EXPECT_EQ(all.valid, validPixels());
+  EXPECT_EQ(all.explained_by_last_view + roomy.size(), all.valid);
+  LiveFigures live;
+  PointCloud tiny(200);
+  tiny.origin_m = cloud.origin_m;
+  ASSERT_TRUE(mapper.collectLive(frame, unfused, config.map.depth, selection, tiny, live).isOk());
+  EXPECT_GT(live.points.stride, 1);
+  EXPECT_EQ(live.points.passes, 3) << "take until full, count, take thinned";
+  EXPECT_EQ(live.valid, validPixels());
+  EXPECT_GT(live.explained_by_last_view, live.valid / 3) << "the settled map explains much of a nearby view";
+  EXPECT_EQ(live.explained_by_last_view + live.points.candidates, live.valid);
+  MapperFrame refused;  // no pose: every valid pixel
+  refused.fuse.outcome = FuseOutcome::kRefusedNoPose;
+  LiveFigures whole;
+  ASSERT_TRUE(mapper.collectLive(frame, refused, config.map.depth, selection, cloud, whole).isOk());
+  EXPECT_EQ(whole.valid, validPixels());
+  EXPECT_EQ(whole.explained_by_last_view, 0u);
+  EXPECT_EQ(whole.points.candidates, whole.valid);
+  EXPECT_GT(whole.points.stride, 1);
 }
 
 }  // namespace
