@@ -54,9 +54,10 @@ class ExplainedView {
   std::size_t removeExplained(PointCloud& cloud) const;
 
   // The same judgement on `frame`'s valid pixels as `rule` back-projects them
-  // (relative to the frame's camera position): offers `sink` those the view
-  // does not explain, in pixel order, until it says stop, and counts the valid
-  // pixels and the explained ones it passed (of those the sink does not skip). The service's way (Mapper::collectLive):
+  // (relative to the frame's camera position), a row at a time (view_judge.h):
+  // offers `sink` those the view does not explain, in pixel order, until it
+  // says stop, and counts the valid pixels and the explained ones it passed
+  // (of those the sink does not skip). The service's way (Mapper::collectLive):
   // no cloud of the whole frame.
   struct VisitCounts {
     uint32_t valid = 0, explained = 0;
