@@ -300,9 +300,14 @@ void FrameToModelTracker::Level::allocate(std::size_t pixels, bool gradients) {
   }
 }
 
+void FrameToModelTracker::Level::allocateRays(int max_width, int max_height) {
+  ray_u.assign(static_cast<std::size_t>(max_width), 0.0f);
+  ray_v.assign(static_cast<std::size_t>(max_height), 0.0f);
+}
+
 std::size_t FrameToModelTracker::Level::bytes() const {
   std::size_t n = 0;
-  for (const auto* v : {&x, &y, &z, &nx, &ny, &nz, &intensity, &gx, &gy}) n += v->capacity() * sizeof(float);
+  for (const auto* v : {&x, &y, &z, &nx, &ny, &nz, &intensity, &gx, &gy, &ray_u, &ray_v}) n += v->capacity() * sizeof(float);
   return n;
 }
 
@@ -320,6 +325,8 @@ Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& con
     t.frame_[l].allocate(pixels, false);
     t.model_[l].allocate(pixels, true);
   }
+  t.frame_[0].allocateRays(config.max_width, config.max_height);
+  t.model_[0].allocateRays(config.max_width, config.max_height);
   t.model_from_surfel_.assign(static_cast<std::size_t>(config.max_width) * config.max_height, 0);
   return t;
 }
@@ -363,6 +370,8 @@ void FrameToModelTracker::Level::setCamera(int w, int h, const hal::CameraIntrin
   height = h;
   fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
   cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  for (int u = 0; u < w; ++u) ray_u[static_cast<std::size_t>(u)] = (static_cast<float>(u) - cx) / fx;
+  for (int v = 0; v < h; ++v) ray_v[static_cast<std::size_t>(v)] = (static_cast<float>(v) - cy) / fy;
 }
 
 bool FrameToModelTracker::Level::setMeasured(std::size_t i, int u, int v, uint16_t raw, float scale, float max_z,
@@ -370,8 +379,8 @@ bool FrameToModelTracker::Level::setMeasured(std::size_t i, int u, int v, uint16
   const float depth_m = static_cast<float>(raw) * scale;
   const bool ok = raw != 0 && std::isfinite(depth_m) && depth_m > 0.0f && depth_m <= max_z;
   z[i] = ok ? depth_m : 0.0f;
-  x[i] = ok ? (static_cast<float>(u) - cx) / fx * depth_m : 0.0f;
-  y[i] = ok ? (static_cast<float>(v) - cy) / fy * depth_m : 0.0f;
+  x[i] = ok ? ray_u[static_cast<std::size_t>(u)] * depth_m : 0.0f;  // (u - cx) / fx * depth_m, the same bits
+  y[i] = ok ? ray_v[static_cast<std::size_t>(v)] * depth_m : 0.0f;
   intensity[i] = intensity_value;
   return ok;
 }

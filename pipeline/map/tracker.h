@@ -226,9 +226,13 @@ class FrameToModelTracker {
     int width = 0, height = 0;
     float fx = 0.0f, fy = 0.0f, cx = 0.0f, cy = 0.0f;
     std::vector<float> x, y, z, nx, ny, nz, intensity, gx, gy;
+    // The finest level's (u - cx) / fx per column and (v - cy) / fy per row,
+    // made by setCamera(): setMeasured()'s divisions, once a frame.
+    std::vector<float> ray_u, ray_v;
     void allocate(std::size_t pixels, bool gradients);
+    void allocateRays(int max_width, int max_height);
     std::size_t bytes() const;
-    // The finest level's size and camera from a frame's.
+    // The finest level's size and camera from a frame's (at most allocateRays()'s size).
     void setCamera(int w, int h, const hal::CameraIntrinsics& k);
     // Pixel i = (u, v) from its measurement: the vertex of its raw depth
     // (zeros, and false, without a valid one up to max_z) and its intensity.
