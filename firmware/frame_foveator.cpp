@@ -67,7 +67,7 @@ Result<FrameFoveator> FrameFoveator::create(const pipeline::PipelineCapacity& ca
   }
   pipeline::PipelineCapacity sized = capacity;
   sized.max_points = cloudCapacity(capacity.max_points, map);
-  if (streamsLiveOnly(map) && config.acuity.preset != pipeline::Preset::kFRef) {
+  if (capsLivePoints(map, config.acuity.preset)) {
     const std::size_t live = liveFramePoints(map.max_live_points, capacity.max_points);
     sized.max_points = std::min(sized.max_points, kLiveCandidatesPerOutput * live);
   }

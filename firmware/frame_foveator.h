@@ -143,6 +143,10 @@ class FrameFoveator {
   static bool appendsMapToCloud(const MapSettings& map) { return map.source == FoveationSource::kMap && !map.delta; }
   // The map source with bricks: the cloud carries the frame's live points only.
   static bool streamsLiveOnly(const MapSettings& map) { return map.source == FoveationSource::kMap && map.delta; }
+  // ... and map.max_live_points caps them, unless the preset keeps every point (FREF).
+  static bool capsLivePoints(const MapSettings& map, pipeline::Preset preset) {
+    return streamsLiveOnly(map) && preset != pipeline::Preset::kFRef;
+  }
 
   const pipeline::map::PoseEstimator* poseEstimator() const { return mapper_ ? mapper_->poseEstimator() : nullptr; }
 

@@ -16,10 +16,10 @@ namespace fovea::firmware {
 namespace {
 
 // With the map's bricks a frame carries only the points the map does not
-// explain yet: map.max_live_points caps its output and its voxels. A preset
-// that keeps every point (FREF) still needs the pixels.
+// explain yet: map.max_live_points caps its output and its voxels
+// (FrameFoveator::capsLivePoints).
 bool capsLivePoints(const ServiceConfig& config) {
-  return FrameFoveator::streamsLiveOnly(config.map) && config.foveation.acuity.preset != pipeline::Preset::kFRef;
+  return FrameFoveator::capsLivePoints(config.map, config.foveation.acuity.preset);
 }
 
 // The pipeline's capacity for the camera's frames: a frame has no more points

@@ -82,7 +82,6 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
   const int h = frame.height();
   counts.pixels = static_cast<std::size_t>(w) * h;
   const uint16_t* depth = frame.depth();
-  const uint8_t* rgb = frame.rgb();
   std::size_t n = 0;
   const std::size_t capacity = out.capacity();
   float* ox = out.x();
@@ -108,7 +107,7 @@ Status backprojectRef(const hal::RgbdFrame& frame, const DepthRange& range, Poin
       }
       const Eigen::Vector3f q = rule.point(u, v, raw);
       ox[n] = q.x(), oy[n] = q.y(), oz[n] = q.z();
-      orgb[n] = frame.has_rgb ? packRgb(rgb[3 * p], rgb[3 * p + 1], rgb[3 * p + 2]) : 0u;
+      orgb[n] = pixelRgb(frame, p);
       ++n;
     }
   }

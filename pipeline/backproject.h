@@ -46,6 +46,13 @@ struct BackprojectCounts {
 // match the intrinsics. The message says which.
 Status validateFrame(const hal::RgbdFrame& frame);
 
+// Pixel i's colour as a cloud keeps it (0 for a frame without colour).
+inline uint32_t pixelRgb(const hal::RgbdFrame& frame, std::size_t i) {
+  if (!frame.has_rgb) return 0u;
+  const uint8_t* c = frame.rgb() + 3 * i;
+  return packRgb(c[0], c[1], c[2]);
+}
+
 // One pixel's back-projection as the arithmetic above makes it, for the
 // kernels that take a frame's points one at a time (backprojectRef, the map's
 // live points: pipeline/map/live_points.h). For a frame validateFrame() passed.

@@ -59,10 +59,8 @@ std::size_t ExplainedView::removeExplained(PointCloud& cloud) const {
 void ExplainedView::visitUnexplained(const hal::RgbdFrame& frame, const PixelBackprojection& rule,
                                      LivePointSink& sink, VisitCounts& counts) const {
   counts = {};
-  const uint8_t* rgb = frame.rgb();
   const auto offer = [&](int u, int v, std::size_t i) {
-    return sink.take(u, v, rule.point(u, v, frame.depth()[i]),
-                     frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
+    return sink.take(u, v, rule.point(u, v, frame.depth()[i]), pixelRgb(frame, i));
   };
   if (static_cast<std::size_t>(frame.width()) > codes_.size()) {  // wider than any view: judged by none
     rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f&) {

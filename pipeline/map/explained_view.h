@@ -50,7 +50,7 @@ class ExplainedView {
   // Removes from `cloud` (world positions relative to cloud.origin_m) the
   // points the captured view explains, keeping the others in their order;
   // returns how many it removed. An empty view removes none. The judgement
-  // on a cloud already made, as the tests and fovea-map-delta check it.
+  // on a cloud already made: the tests' reference for visitUnexplained().
   std::size_t removeExplained(PointCloud& cloud) const;
 
   // The same judgement on `frame`'s valid pixels as `rule` back-projects them

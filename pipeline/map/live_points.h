@@ -147,7 +147,6 @@ struct LivePointStats {
 
 class LiveCollector {
  public:
-  LiveCollector() = default;
   LiveCollector(int max_width, int max_height);
 
   // Fills `out` (cleared first; its origin kept) with the points of a frame

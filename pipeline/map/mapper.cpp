@@ -174,14 +174,13 @@ Status Mapper::collectLive(const hal::RgbdFrame& frame, const MapperFrame& figur
         },
         selection, w, h, cloud, out.points);
   }
-  const uint8_t* rgb = frame.rgb();
   return live_->collect(
       [&](LivePointSink& sink) {
         uint32_t valid = 0;
         rule.forEachPoint(frame, [&](int u, int v, std::size_t i, const Eigen::Vector3f& p) {
           ++valid;
           if (sink.skips(u, v)) return true;
-          return sink.take(u, v, p, frame.has_rgb ? packRgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]) : 0u);
+          return sink.take(u, v, p, pixelRgb(frame, i));
         });
         if (!sink.filtered()) out.valid = valid;
       },

@@ -141,10 +141,6 @@ class Mapper {
   // fusion finished since.
   bool takeFused(MapperFrame& out);
 
-  // The last fused frame's points no settled surfel explains (SurfelMap::appendUnexplained).
-  std::size_t appendUnexplained(const hal::RgbdFrame& frame, PointCloud& out) const {
-    return map_->appendUnexplained(frame, out);
-  }
   // The frame's live points (live_points.h), the frame addFrame() just took
   // (`frame` its figures), into `cloud` (cleared; its origin must be the
   // frame's camera position): fused now, the pixels no settled surfel
