@@ -17,6 +17,12 @@ std::vector<Dataset> defaultDatasets(const std::string& tum_path) {
                             {"balloon", "BAL", "mock:balloon,realtime=on"}};
   if (!tum_path.empty()) d.push_back({"tum", "", "tum:" + tum_path + ",realtime=on,loop=on"});
   d.push_back({"balloon-orbit", "", "mock:balloon,realtime=on,path=orbit", {"camera.pose.source=track+camera"}, false});
+  if (!tum_path.empty()) {
+    // TUM with the map tracking the camera (issue 41's TUM target), played
+    // forwards and backwards: a restart would jump the camera back to the first
+    // pose, where the tracker loses it.
+    d.push_back({"tum-track", "", "tum:" + tum_path + ",realtime=on,loop=bounce", {"camera.pose.source=track+camera"}, false});
+  }
   return d;
 }
 
@@ -95,7 +101,7 @@ Result<std::vector<Dataset>> selectDatasets(const std::vector<Dataset>& all, con
     auto it = std::find_if(all.begin(), all.end(), [&](const Dataset& d) { return d.name == n; });
     if (it == all.end()) {
       return Result<std::vector<Dataset>>(ErrorCode::kInvalidArgument,
-                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, balloon-orbit, tum with --tum PATH, recording with --mcap FILE)");
+                                          "--datasets: unknown or unavailable '" + n + "' (living-room, balloon, balloon-orbit, tum and tum-track with --tum PATH, recording with --mcap FILE)");
     }
     out.push_back(*it);
   }

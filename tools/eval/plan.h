@@ -15,7 +15,7 @@
 namespace fovea::tools::eval {
 
 struct Dataset {
-  std::string name;         // "living-room" (LIV), "balloon" (BAL), "tum", "balloon-orbit"
+  std::string name;         // "living-room" (LIV), "balloon" (BAL), "tum", "balloon-orbit", "tum-track"
   std::string paper_name;   // "LIV", "BAL", "" (not in the paper)
   std::string camera_spec;  // for fovead serve --camera (paced in real time)
   // --set settings of the conditions foveating the map on this dataset.
@@ -25,8 +25,9 @@ struct Dataset {
 
 // living-room and balloon from the mock camera; tum when tum_path is not empty;
 // balloon-orbit (the balloon with the camera orbiting, the map's conditions
-// tracking it with track+camera so that the balloon is found moving: issue 42),
-// only when --datasets names it.
+// tracking it with track+camera so that the balloon is found moving: issue 42)
+// and tum-track (TUM played forwards and backwards, the map's conditions
+// tracking it: issue 41's TUM target), only when --datasets names them.
 std::vector<Dataset> defaultDatasets(const std::string& tum_path);
 
 struct Condition {

@@ -272,14 +272,19 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
   TumCameraOptions options;
   const SpecTokens tokens = tokenizeSpec(args);
   const std::string_view path = tokens.head.value_or("");
-  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]");
+  if (path.empty()) return invalid("expected tum:PATH[,loop=on|off|bounce,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]");
   options.path = std::string(path);
   for (const auto& [key, value, has_value] : tokens.items) {
     if (!has_value) {
       return invalid("option '" + std::string(key) + "' is not key=value (keys: loop, realtime, frames, groundtruth, intrinsics)");
     }
     if (key == "loop") {
-      if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) return s;
+      options.bounce = value == "bounce";
+      if (options.bounce) {
+        options.loop = true;
+      } else if (Status s = parseSpecOnOff("tum", key, value, options.loop); !s) {
+        return s;
+      }
     } else if (key == "realtime") {
       if (Status s = parseSpecOnOff("tum", key, value, options.realtime); !s) return s;
     } else if (key == "frames") {
@@ -319,11 +324,11 @@ Result<TumCameraOptions> parseTumCameraOptions(std::string_view args) {
 }
 
 std::string tumCameraHelp() {
-  return "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]  a TUM "
+  return "tum:PATH[,loop=on|off|bounce,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]  a TUM "
          "RGB-D sequence folder (associations.txt or rgb.txt and depth.txt, rgb/, depth/, groundtruth.txt); the "
          "intrinsics of the sensor its name says (freiburg1/2/3; fr3 otherwise), ground-truth poses (auto: when "
          "groundtruth.txt is there, identity poses otherwise); loop=on (default) restarts at the "
-         "end, realtime=on paces frames to their timestamps, frames=N keeps the first N (all are decoded into "
+         "end, loop=bounce plays it backwards from there (the camera's path stays continuous), realtime=on paces frames to their timestamps, frames=N keeps the first N (all are decoded into "
          "memory at open, 1.5 MB each)";
 }
 
@@ -375,10 +380,12 @@ Status TumCamera::open() {
   const int64_t span_ns = frames_.back().depth_stamp_ns - frames_.front().depth_stamp_ns;
   const int64_t period_ns = frames_.size() > 1 ? span_ns / static_cast<int64_t>(frames_.size() - 1) : 33'333'333;
   loop_period_ns_ = span_ns + period_ns;
+  period_ns_ = std::max<int64_t>(period_ns, 1);
   info_.fps = 1e9 / static_cast<double>(period_ns);
   opened_ = true;
   next_ = 0;
-  loops_ = 0;
+  next_stamp_ns_ = frames_.front().depth_stamp_ns;
+  backwards_ = false;
   finished_ = false;
   return Status::ok();
 }
@@ -417,7 +424,7 @@ Status TumCamera::start() {
   if (!opened_) return Status(ErrorCode::kUnavailable, "tum camera: call open() before start()");
   started_ = true;
   start_time_ = std::chrono::steady_clock::now();
-  start_stamp_ns_ = frames_[next_].depth_stamp_ns + static_cast<int64_t>(loops_) * loop_period_ns_;
+  start_stamp_ns_ = next_stamp_ns_;
   return Status::ok();
 }
 
@@ -436,7 +443,7 @@ Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
     return Status(ErrorCode::kCapacityExceeded, "slot too small");
   }
   const Frame& frame = frames_[next_];
-  const int64_t stamp_ns = frame.depth_stamp_ns + static_cast<int64_t>(loops_) * loop_period_ns_;
+  const int64_t stamp_ns = next_stamp_ns_;
   if (options_.realtime) {
     using Clock = std::chrono::steady_clock;
     const Clock::time_point due = start_time_ + std::chrono::nanoseconds(stamp_ns - start_stamp_ns_);
@@ -450,13 +457,34 @@ Status TumCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   slot.has_rgb = true;
   slot.stamp_ns = stamp_ns;
   slot.sequence = sequence_++;
-  if (++next_ == frames_.size()) {
-    next_ = 0;
-    ++loops_;
-    if (!options_.loop) finished_ = true;
-  }
+  advance();
   counters_.frameDelivered();
   return Status::ok();
+}
+
+void TumCamera::advance() {
+  const std::size_t last = frames_.size() - 1;
+  if (!options_.bounce) {
+    if (next_ < last) {
+      ++next_;
+      next_stamp_ns_ += frames_[next_].depth_stamp_ns - frames_[next_ - 1].depth_stamp_ns;
+      return;
+    }
+    // The next loop's first frame, one mean period after this one's last.
+    next_ = 0;
+    next_stamp_ns_ += loop_period_ns_ - (frames_[last].depth_stamp_ns - frames_[0].depth_stamp_ns);
+    if (!options_.loop) finished_ = true;
+    return;
+  }
+  if (last == 0) {
+    next_stamp_ns_ += period_ns_;
+    return;
+  }
+  if (backwards_ ? next_ == 0 : next_ == last) backwards_ = !backwards_;
+  const std::size_t from = next_;
+  next_ = backwards_ ? next_ - 1 : next_ + 1;
+  const int64_t gap = frames_[std::max(from, next_)].depth_stamp_ns - frames_[std::min(from, next_)].depth_stamp_ns;
+  next_stamp_ns_ += gap > 0 ? gap : period_ns_;
 }
 
 }  // namespace fovea::hal::tum

@@ -1,5 +1,5 @@
 // A recorded TUM RGB-D sequence as a camera (https://cvg.cit.tum.de/data/datasets/rgbd-dataset).
-// Spec "tum:PATH[,loop=on|off,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]",
+// Spec "tum:PATH[,loop=on|off|bounce,realtime=on|off,frames=N,groundtruth=auto|on|off,intrinsics=fr1|fr2|fr3|ros]",
 // PATH the sequence folder holding associations.txt (`t_rgb rgb/x.png t_depth
 // depth/y.png` per line; without it, rgb.txt and depth.txt are paired here as
 // TUM's associate.py pairs them), rgb/*.png (8-bit RGB), depth/*.png (16-bit,
@@ -22,6 +22,11 @@
 // - Time: stamp_ns is the depth timestamp in ns on the recording's clock, plus
 //   one recording length (and one mean frame period) per completed loop so it
 //   keeps increasing; realtime=on paces acquire() to those stamps.
+// - loop=bounce plays the recording forwards, then backwards, and so on (its
+//   ends not repeated), each frame stamped the recorded gap to the one before
+//   it later: the camera's path stays continuous, where loop=on jumps from the
+//   last pose to the first (a tracker without an outside pose is lost there;
+//   fovea-eval's tum-track dataset).
 // - After the last frame with loop=off, acquire() returns kUnavailable
 //   ("end of recording") and finished() is true.
 #pragma once
@@ -66,6 +71,7 @@ struct TumCameraOptions {
   bool loop = true;
   bool realtime = false;
   std::size_t max_frames = 0;  // 0: all
+  bool bounce = false;  // loop=bounce (loop is then true too)
   // groundtruth.txt: required (on), not read (off), or read when it is there
   // (auto, the default: a sequence whose ground truth is withheld, tracked by
   // fovead map --pose track, still plays; its frames' poses are the identity).
@@ -85,7 +91,7 @@ struct TumAssociation {
 std::vector<TumAssociation> associateTumStamps(const std::vector<int64_t>& rgb_ns, const std::vector<int64_t>& depth_ns,
                                                int64_t max_difference_ns = 20'000'000);
 
-// Parses "PATH[,loop=on|off,realtime=on|off,frames=N]" (the spec after "tum:").
+// Parses "PATH[,loop=on|off|bounce,realtime=on|off,frames=N,...]" (the spec after "tum:").
 Result<TumCameraOptions> parseTumCameraOptions(std::string_view args);
 std::string tumCameraHelp();
 
@@ -137,8 +143,13 @@ class TumCamera final : public Camera {
   bool opened_ = false;
   bool started_ = false;
   bool finished_ = false;
+  // acquire()'s step to the frame after next_: its index, direction and stamp.
+  void advance();
+
   std::size_t next_ = 0;  // index of the next frame
-  uint64_t loops_ = 0;
+  int64_t next_stamp_ns_ = 0;  // ... and its stamp
+  bool backwards_ = false;     // loop=bounce: playing towards the first frame
+  int64_t period_ns_ = 0;      // the recording's mean frame period
   uint64_t sequence_ = 0;
   std::chrono::steady_clock::time_point start_time_;
   int64_t start_stamp_ns_ = 0;

@@ -104,6 +104,9 @@ TEST(TumSpec, ParsesOptionsAndRejectsUnknownOnes) {
   EXPECT_EQ(o->max_frames, 10u);
   EXPECT_EQ(parseTumCameraOptions("").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_EQ(parseTumCameraOptions("/x,loop=maybe").status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_TRUE(parseTumCameraOptions("/x,loop=bounce")->bounce);
+  EXPECT_TRUE(parseTumCameraOptions("/x,loop=bounce")->loop);
+  EXPECT_FALSE(parseTumCameraOptions("/x,loop=on")->bounce);
   EXPECT_EQ(parseTumCameraOptions("/x,colour=on").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_EQ(parseTumCameraOptions("/x,frames=0").status().code(), ErrorCode::kInvalidArgument);
   EXPECT_EQ(parseTumCameraOptions("/x,groundtruth=off")->groundtruth, TumCameraOptions::GroundTruth::kOff);
@@ -382,6 +385,46 @@ TEST(TumCamera, WrongSizeOrFormatIsAParseErrorSayingWhat) {
   ASSERT_TRUE(again.start().isOk());
   RgbdFrame tiny(320, 240);
   EXPECT_EQ(again.acquire(tiny, milliseconds(100)).code(), ErrorCode::kCapacityExceeded);
+}
+
+// Three frames 30 and 40 ms apart whose ground-truth x is 5 m a second: the
+// pose says which frame was delivered.
+std::vector<std::pair<double, int64_t>> playedFrames(const fs::path& dir, bool bounce, int count) {
+  writeText(dir / "associations.txt",
+            "1.000 rgb/a.png 1.000 depth/a.png\n1.030 rgb/a.png 1.030 depth/a.png\n1.070 rgb/a.png 1.070 depth/a.png\n");
+  writeText(dir / "groundtruth.txt", "0.9 0 0 0 0 0 0 1\n1.1 1 0 0 0 0 0 1\n");
+  EXPECT_TRUE(writePng(dir / "rgb" / "a.png", 640, 480, 8, PNG_COLOR_TYPE_RGB));
+  EXPECT_TRUE(writePng(dir / "depth" / "a.png", 640, 480, 16, PNG_COLOR_TYPE_GRAY));
+  TumCameraOptions options{dir.string()};
+  options.bounce = bounce;
+  TumCamera camera(options);
+  EXPECT_TRUE(camera.open().isOk());
+  EXPECT_TRUE(camera.start().isOk());
+  RgbdFrame frame(640, 480);
+  std::vector<std::pair<double, int64_t>> played;
+  for (int i = 0; i < count && camera.acquire(frame, milliseconds(100)).isOk(); ++i) {
+    played.emplace_back(frame.T_world_cam.t_world_cam.x(), frame.stamp_ns);
+  }
+  return played;
+}
+
+TEST(TumCamera, BounceTurnsAtEachEndAndRestartJumpsBackEachStampedAfterTheLast) {
+  TempDir dir;
+  const std::vector<std::pair<double, int64_t>> bounce = playedFrames(dir.path(), true, 7);
+  // Frames 0 1 2 1 0 1 2, each the recorded gap (30 or 40 ms) after the one before.
+  const double x[] = {0.5, 0.65, 0.85, 0.65, 0.5, 0.65, 0.85};
+  const int64_t stamp_ms[] = {1000, 1030, 1070, 1110, 1140, 1170, 1210};
+  ASSERT_EQ(bounce.size(), 7u);
+  for (std::size_t i = 0; i < 7; ++i) {
+    EXPECT_NEAR(bounce[i].first, x[i], 1e-9) << i;
+    EXPECT_EQ(bounce[i].second, stamp_ms[i] * 1'000'000) << i;
+  }
+  // loop=on: 0 1 2 0 1, the first again one mean period (35 ms) after the last.
+  const std::vector<std::pair<double, int64_t>> restart = playedFrames(dir.path(), false, 5);
+  ASSERT_EQ(restart.size(), 5u);
+  EXPECT_NEAR(restart[3].first, 0.5, 1e-9);
+  EXPECT_EQ(restart[3].second, 1'105'000'000);
+  EXPECT_EQ(restart[4].second, 1'135'000'000);
 }
 
 // The README of the data set: first depth frame 72 % valid, 0.74 - 9.87 m,

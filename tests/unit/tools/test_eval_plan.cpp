@@ -76,6 +76,13 @@ TEST(EvalPlan, SelectionsNameWhatIsUnknown) {
   ASSERT_EQ(mock.size(), 3u);
   EXPECT_EQ(std::count_if(mock.begin(), mock.end(), [](const Dataset& d) { return d.by_default; }), 2);
   EXPECT_EQ(defaultDatasets("/data/tum")[2].camera_spec, "tum:/data/tum,realtime=on,loop=on");
+  // TUM tracked, named only: played back and forth, so that the camera's path
+  // has no jump for the tracker to lose.
+  const Dataset tum_track = defaultDatasets("/data/tum").back();
+  EXPECT_EQ(tum_track.name, "tum-track");
+  EXPECT_FALSE(tum_track.by_default);
+  EXPECT_EQ(tum_track.camera_spec, "tum:/data/tum,realtime=on,loop=bounce");
+  EXPECT_EQ(tum_track.map_settings, std::vector<std::string>{"camera.pose.source=track+camera"});
   // The balloon with a moving camera, named only; its map conditions track the
   // camera (track+camera) so that the balloon is found moving (issue 42).
   const Dataset& orbit = mock.back();
