@@ -30,6 +30,9 @@ Status MapDeltaConfig::validate() const {
   if (!(change_fraction >= 0.0 && change_fraction <= 1.0)) {
     return {ErrorCode::kInvalidArgument, "map_delta.change_fraction: must be in [0, 1]"};
   }
+  if (!(churn_fraction >= 0.0 && churn_fraction <= 1.0)) {
+    return {ErrorCode::kInvalidArgument, "map_delta.churn_fraction: must be in [0, 1]"};
+  }
   return Status::ok();
 }
 
@@ -127,9 +130,7 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
       is_due = true;
       ++stats.refine;
     } else {
-      const uint32_t changes = map.brickChanges(brick) - held_changes_[b];
-      const double allowed = config_.change_fraction * std::ldexp(static_cast<double>(held_settled_[b]), held);
-      if (changes > 0 && static_cast<double>(changes) > allowed) {
+      if (changedEnough(map.brickChanges(brick) - held_changes_[b], settled, held_settled_[b], held)) {
         due.need = BrickNeed::kChanged;
         is_due = true;
         ++stats.changed;
@@ -152,6 +153,13 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
   for (std::size_t i = 0; i < n_due; ++i) plan_[i] = due_[order_[i] & 0xffffu];
   stats.ns = monotonicNs() - start;
   return std::span<const BrickDue>(plan_.data(), n_due);
+}
+
+bool MapDelta::changedEnough(uint32_t changes, uint32_t settled, uint32_t held_settled, uint8_t level) const {
+  if (changes == 0) return false;
+  const double scale = std::ldexp(static_cast<double>(held_settled), level);
+  const double net = std::abs(static_cast<double>(settled) - static_cast<double>(held_settled));
+  return net > config_.change_fraction * scale || static_cast<double>(changes) > config_.churn_fraction * scale;
 }
 
 uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level) {

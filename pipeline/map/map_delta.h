@@ -11,9 +11,12 @@
 // then due when:
 //  - the operator lacks it (kMissing), or needs it finer than it holds it
 //    (kRefine; coarsening is never sent: the operator draws what it has);
-//  - its settled set changed (SurfelMap::brickChanges: surfels settled or
-//    went) by more than change_fraction * 2^h of the settled surfels it held when
-//    sent at level h (kChanged): a coarse level hides more.
+//  - its settled set changed since it was sent at level h (kChanged; a coarse
+//    level hides more, so both bounds are of the settled surfels held then,
+//    times 2^h): it gained or lost more than change_fraction of them, or, with
+//    their number about the same, surfels settled or went (SurfelMap::
+//    brickChanges) more than churn_fraction times (surface replaced where it
+//    was: a real sensor's noise does it all the time, docs/map-delta.md).
 // The plan lists the due bricks in budget order: the fovea's first (the brick
 // comes within fovea_ecc_deg of the gaze), then changes, then the periphery's;
 // in each, the longest waiting first, then the nearest to the gaze. The caller
@@ -54,9 +57,11 @@ struct MapDeltaConfig {
   }();
   // A brick that comes within this of the gaze is the fovea's: sent first.
   double fovea_ecc_deg = 5.0;
-  // Changes to a brick's settled set (fraction of its settled surfels when sent,
-  // times 2^level) that make it due again.
+  // Changes to a brick's settled set that make it due again, as a fraction of
+  // its settled surfels when sent, times 2^level: surfels gained or lost (the
+  // net change), and surfels settled or gone counted each (the churn).
   double change_fraction = 0.01;
+  double churn_fraction = 0.2;
 
   Status validate() const;
 };
@@ -91,6 +96,9 @@ class MapDelta {
     float ecc_deg = 0.0f;
   };
   Need need(const Eigen::Vector3d& origin_m, double size_m, const Gaze& gaze) const;
+  // Whether a brick held at `level` with `held_settled` settled surfels, which
+  // now has `settled` after `changes` settlings and removals, is due again.
+  bool changedEnough(uint32_t changes, uint32_t settled, uint32_t held_settled, uint8_t level) const;
 
   // The bricks due for an eye at `gaze`, in budget order (valid until the next
   // call). kInvalidInput for a bad gaze. Never allocates.

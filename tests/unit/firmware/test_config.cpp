@@ -275,6 +275,7 @@ const std::vector<std::string> kEveryKeyChanged = {
     "map.settle_frames=4",
     "map.delta=false",
     "map.change_fraction=0.05",
+    "map.churn_fraction=0.3",
     "map.max_brick_surfels=4096",
     "map.max_frame_brick_points=100000",
     "map.max_live_points=20000",

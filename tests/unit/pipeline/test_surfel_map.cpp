@@ -1288,6 +1288,47 @@ TEST(MapDelta, ABrickWhoseSettledSetChangedIsDueAgainAndWaitingBricksGoOldestFir
   EXPECT_EQ(older_after_newer, 0u);
 }
 
+// A brick held with 1000 settled surfels at level 0 (the defaults: 1 % gained
+// or lost, or settlings and removals 20 % of them).
+TEST(MapDelta, AChangeIsDueWhenTheSurfaceGrewOrShrankOrWasReplacedEnough) {
+  const MapDelta delta = makeDelta();
+  // Replaced where it was (the number the same): due only past the churn.
+  EXPECT_FALSE(delta.changedEnough(150, 1000, 1000, 0));  // 75 replaced
+  EXPECT_FALSE(delta.changedEnough(200, 1000, 1000, 0));
+  EXPECT_TRUE(delta.changedEnough(201, 1000, 1000, 0));
+  // Grown or shrunk: due past 1 %, however it came about.
+  EXPECT_FALSE(delta.changedEnough(10, 1010, 1000, 0));
+  EXPECT_TRUE(delta.changedEnough(11, 1011, 1000, 0));
+  EXPECT_TRUE(delta.changedEnough(11, 989, 1000, 0));
+  EXPECT_TRUE(delta.changedEnough(31, 1011, 1000, 0));  // 10 replaced and 11 gained
+  // A coarse level hides more: twice as much a level.
+  EXPECT_FALSE(delta.changedEnough(80, 1080, 1000, 3));
+  EXPECT_TRUE(delta.changedEnough(81, 1081, 1000, 3));
+  EXPECT_FALSE(delta.changedEnough(1600, 1000, 1000, 3));
+  EXPECT_TRUE(delta.changedEnough(1601, 1000, 1000, 3));
+  // Sent empty: its first surfel makes it due; nothing changed, nothing is due.
+  EXPECT_TRUE(delta.changedEnough(1, 1, 0, 0));
+  EXPECT_FALSE(delta.changedEnough(0, 1000, 1000, 0));
+  // Property, against the single count it replaced (due past 1 % of settlings
+  // and removals): never due where that was not, and due wherever the net
+  // change alone passes 1 %.
+  std::mt19937 rng(41);
+  std::uniform_int_distribution<uint32_t> count(0, 3000), level(0, 7);
+  for (int trial = 0; trial < 100000; ++trial) {
+    const uint32_t held = count(rng), settled = count(rng), lvl = level(rng);
+    const uint32_t net = settled > held ? settled - held : held - settled;
+    const uint32_t changes = net + 2 * (count(rng) % 500);  // each replacement settles one and removes one
+    const double scale = std::ldexp(static_cast<double>(held), static_cast<int>(lvl));
+    const bool due = delta.changedEnough(changes, settled, held, static_cast<uint8_t>(lvl));
+    if (changes > 0 && static_cast<double>(changes) <= 0.01 * scale) {
+      EXPECT_FALSE(due) << changes << " " << settled << " " << held << " " << lvl;
+    }
+    if (static_cast<double>(net) > 0.01 * scale) {
+      EXPECT_TRUE(due) << changes << " " << settled << " " << held << " " << lvl;
+    }
+  }
+}
+
 TEST(MapDelta, BadGazeAndBadConfigurationsAreRefused) {
   MapDelta delta = makeDelta();
   MapDeltaStats stats;
@@ -1299,6 +1340,9 @@ TEST(MapDelta, BadGazeAndBadConfigurationsAreRefused) {
   EXPECT_FALSE(MapDelta::create(config, 100));
   config = {};
   config.change_fraction = -1.0;
+  EXPECT_FALSE(MapDelta::create(config, 100));
+  config = {};
+  config.churn_fraction = std::nan("");
   EXPECT_FALSE(MapDelta::create(config, 100));
   EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 0));
   EXPECT_FALSE(MapDelta::create(MapDeltaConfig{}, 70000));
