@@ -133,6 +133,8 @@ class TumCamera final : public Camera {
   // open()'s list-and-decode step; poses is nullptr without ground truth.
   Status readFrames(const std::filesystem::path& folder, bool have_associations,
                     const std::vector<StampedPose>* poses);
+  // acquire()'s step to the frame after next_: its index, direction and stamp.
+  void advance();
 
   TumCameraOptions options_;
   CameraInfo info_;
@@ -143,9 +145,6 @@ class TumCamera final : public Camera {
   bool opened_ = false;
   bool started_ = false;
   bool finished_ = false;
-  // acquire()'s step to the frame after next_: its index, direction and stamp.
-  void advance();
-
   std::size_t next_ = 0;  // index of the next frame
   int64_t next_stamp_ns_ = 0;  // ... and its stamp
   bool backwards_ = false;     // loop=bounce: playing towards the first frame
