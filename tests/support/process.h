@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <random>
+#include <regex>
 #include <string>
 
 #include "tests/support/test_time.h"
@@ -71,12 +72,11 @@ class BackgroundProcess {
   // output (false), giving up after waitLimitSeconds(expected_s): the time the
   // text takes natively, scaled for this build and a loaded machine (test_time.h).
   bool waitFor(const std::string& text, double expected_s) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitLimitSeconds(expected_s));
-    while (output_.find(text) == std::string::npos) {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
-      if (left.count() <= 0 || !readSome(static_cast<int>(left.count()))) return false;
-    }
-    return true;
+    return waitUntil([&] { return output_.find(text) != std::string::npos; }, expected_s);
+  }
+  // The same for a pattern (a count in a status line that must leave zero).
+  bool waitForMatch(const std::regex& pattern, double expected_s) {
+    return waitUntil([&] { return std::regex_search(output_, pattern); }, expected_s);
   }
 
   // Sends a signal without waiting (SIGHUP to a service).
@@ -101,6 +101,15 @@ class BackgroundProcess {
   }
 
  private:
+  template <class Seen>
+  bool waitUntil(Seen seen, double expected_s) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitLimitSeconds(expected_s));
+    while (!seen()) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
+      if (left.count() <= 0 || !readSome(static_cast<int>(left.count()))) return false;
+    }
+    return true;
+  }
   // Waits up to timeout_ms for output and appends it; false at end of output or timeout.
   bool readSome(int timeout_ms) {
     if (fd_ < 0) return false;
