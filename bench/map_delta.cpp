@@ -9,7 +9,7 @@
 //
 //   fovea-map-delta [--scene living-room] [--path static] [--frames 90] [--size 640x480]
 //                   [--budget-mbps 12.5] [--fps 30] [--dwell-frames 9] [--eval-every 15]
-//                   [--pose camera|track]
+//                   [--pose camera|track] [--change-fraction 0.01] [--churn-fraction 0.2]
 //
 // The map is the service's: one pipeline::map::Mapper (pipeline/map/mapper.h)
 // that poses (--pose track: its tracker, from the frames alone; camera, the
@@ -185,6 +185,9 @@ struct DeltaOptions {
   int dwell = 9;
   int eval_every = 15;
   bool track = false;  // --pose track
+  // --change-fraction, --churn-fraction: the resend rule's bounds (map.change_fraction,
+  // map.churn_fraction), for sweeps.
+  pipeline::map::MapDeltaConfig delta;
 };
 
 // Returns the options, or nothing after printing why they are refused.
@@ -209,6 +212,12 @@ std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
     return std::nullopt;
   }
   o.track = pose == "track";
+  o.delta.change_fraction = std::atof(option(argc, argv, "--change-fraction", std::to_string(o.delta.change_fraction).c_str()).c_str());
+  o.delta.churn_fraction = std::atof(option(argc, argv, "--churn-fraction", std::to_string(o.delta.churn_fraction).c_str()).c_str());
+  if (Status s = o.delta.validate(); !s) {
+    std::fprintf(stderr, "fovea-map-delta: %s\n", s.message().c_str());
+    return std::nullopt;
+  }
   return o;
 }
 
@@ -301,11 +310,12 @@ class DeltaBench {
 
 // The service's mapper for this camera, streaming bricks of at most
 // kMaxBrickPoints surfels, in batches of a frame's share of the budget.
-pipeline::map::MapperConfig mapperConfigFor(const hal::CameraIntrinsics& k, bool track) {
+pipeline::map::MapperConfig mapperConfigFor(const hal::CameraIntrinsics& k, const DeltaOptions& o) {
   pipeline::map::MapperConfig config;
+  config.delta = o.delta;
   config.map.max_width = k.width;
   config.map.max_height = k.height;
-  config.tracking = track ? pipeline::map::PoseTracking::kAlone : pipeline::map::PoseTracking::kOff;
+  config.tracking = o.track ? pipeline::map::PoseTracking::kAlone : pipeline::map::PoseTracking::kOff;
   config.output = pipeline::map::MapOutput::kBricks;
   config.max_brick_surfels = DeltaBench::kMaxBrickPoints;
   return config;
@@ -359,7 +369,7 @@ DeltaBench::DeltaBench(const DeltaOptions& options, hal::Camera& camera, hal::Ca
       pixels_(static_cast<std::size_t>(k_.width) * k_.height),
       focus_(camera.info().focus_point_m.value_or(Eigen::Vector3d(0, 0, 2))),
       budget_per_frame_(o_.budget_mbps * 1e6 / o_.fps),
-      mapper_config_(mapperConfigFor(k_, o_.track)),
+      mapper_config_(mapperConfigFor(k_, o_)),
       mapper_(pipeline::map::Mapper::create(mapper_config_).value()),
       f1_foveator_(foveatorFor(pixels_, f1Config())),
       live_foveator_(foveatorFor(pixels_, acuityConfig(mapper_config_.delta))),
