@@ -54,5 +54,10 @@ images=$(ls "$out"/images/*.png 2>/dev/null | wc -l)
 [ "$images" -eq $((datasets * (conditions - 1))) ] ||
   fail "$images side-by-side images, expected $((datasets * (conditions - 1)))"
 grep -q "Table II" "$out/report.md" || fail "report.md has no table"
+# Every image the report links to was written, and no link is empty.
+! grep -q '\]()' "$out/report.md" || fail "report.md has an empty link"
+grep -o '](images/[^)]*)' "$out/report.md" | sed 's/^](//; s/)$//' | while read -r f; do
+  [ -s "$out/$f" ] || fail "report.md links to $f, which is not there"
+done
 grep -q "not a user study" "$out/report.md" || fail "report.md does not say the quality figures are proxies"
 echo "run_reduced: $runs runs, $images images, report in $out"

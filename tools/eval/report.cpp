@@ -466,14 +466,11 @@ void writeSideBySideMarkdown(std::ostream& md, const ReportInput& in) {
     if (q.image.empty() || q.condition == "FREF") continue;
     md << "- " << q.dataset << ", " << q.condition << ": [" << q.image << "](" << q.image << ")\n";
   }
-  md << "\n![" << (in.quality.empty() ? "" : in.quality.front().dataset) << " F1](";
-  for (const QualityRow& q : in.quality) {
-    if (!q.image.empty() && q.condition == "F1") {
-      md << q.image;
-      break;
-    }
-  }
-  md << ")\n\n";
+  md << "\n";
+  // The first F1 image shown, when F1 was run (no empty image link otherwise).
+  const auto f1 = std::find_if(in.quality.begin(), in.quality.end(),
+                               [](const QualityRow& q) { return !q.image.empty() && q.condition == "F1"; });
+  if (f1 != in.quality.end()) md << "![" << f1->dataset << " F1](" << f1->image << ")\n\n";
 }
 
 // How a real study like the paper's would be run.
