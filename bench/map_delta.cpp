@@ -33,7 +33,9 @@
 // frame's live points), and whether it is displaced, seen from the eye, by more
 // than the MAR at the true point's eccentricity (Eq. 1, m = 0.022). A
 // nearest-point measure, unlike fovea-eval's (each input point against its own
-// representative).
+// representative). And the other way: the points drawn that the camera sees
+// through, more than 10 cm in front of the surface the reference frame
+// measures (a ghost the true points' nearest-point measure cannot see).
 //
 // On a mock scene with movers (the balloon, the walker, the carried block:
 // hal/camera/mock/built_in_scenes.cpp), the same frames judge the mover alone
@@ -169,6 +171,27 @@ double shareAboveMar(const std::vector<Eigen::Vector3d>& held, const std::vector
   return seen > 0 ? static_cast<double>(above) / static_cast<double>(seen) : 0.0;
 }
 
+// Held points the reference frame's camera sees through: inside its image, in
+// front of the surface its depth measures there by more than 10 cm (a ghost: a
+// surface the operator still draws where the camera now sees free space). The
+// reverse of shareAboveMar's "missing", which only looks from the true points.
+std::size_t pointsInFreeSpace(const std::vector<Eigen::Vector3d>& held, const hal::RgbdFrame& reference,
+                              const hal::CameraIntrinsics& k) {
+  constexpr double kMargin = 0.10;
+  const hal::Pose& pose = reference.T_world_cam;
+  std::size_t ghosts = 0;
+  for (const Eigen::Vector3d& p : held) {
+    const Eigen::Vector3d c = pose.R_world_cam.transpose() * (p - pose.t_world_cam);
+    if (!(c.z() > 0.0)) continue;
+    const double u = k.fx * c.x() / c.z() + k.cx, v = k.fy * c.y() / c.z() + k.cy;
+    if (!(u >= 0.0 && v >= 0.0 && u < k.width && v < k.height)) continue;
+    const uint16_t d = reference.depth()[static_cast<std::size_t>(v) * static_cast<std::size_t>(k.width) +
+                                         static_cast<std::size_t>(u)];
+    if (d != 0 && c.z() < static_cast<double>(d) * reference.depth_scale_m - kMargin) ++ghosts;
+  }
+  return ghosts;
+}
+
 struct Stream {
   const char* name;
   std::size_t bytes = 0;         // all frames
@@ -285,6 +308,7 @@ class DeltaBench {
   pipeline::PointCloud truth_cloud_;
   std::vector<double> above_mar_[3], held_points_, f1_points_;  // FREF, F1, MAP-DELTA held
   std::size_t missing_points_[3] = {};
+  std::size_t free_space_points_[3] = {};  // held points in front of the true surface (pointsInFreeSpace)
   // The movers' scene (the twin's), when it has any; each evaluated frame's
   // figures for the mover alone.
   std::optional<hal::mock::Scene> mover_scene_;
@@ -562,6 +586,9 @@ int DeltaBench::evaluate(const FrameStep& s) {
   missing_points_[1] += missing;
   above_mar_[2].push_back(100.0 * shareAboveMar(held, truth, s.gaze, pipeline::kDefaultSlope, missing));
   missing_points_[2] += missing;
+  free_space_points_[0] += pointsInFreeSpace(fref_held, truth_, k_);
+  free_space_points_[1] += pointsInFreeSpace(f1_held_, truth_, k_);
+  free_space_points_[2] += pointsInFreeSpace(held, truth_, k_);
   held_points_.push_back(static_cast<double>(held.size()));
   f1_points_.push_back(static_cast<double>(f1_held_.size()));
   if (mover_scene_) evaluateMover(s, held);
@@ -678,6 +705,9 @@ void DeltaBench::printQuality(const std::vector<double>& cold_ms) const {
   std::printf("    points drawn, mean: F1 %.0f, MAP-DELTA held %.0f; true points with nothing within 10 cm: FREF %zu, F1 %zu, "
               "MAP-DELTA %zu\n",
               mean(f1_points_), mean(held_points_), missing_points_[0], missing_points_[1], missing_points_[2]);
+  std::printf("    points drawn in front of the true surface by more than 10 cm (free space, the camera's view): FREF %zu, "
+              "F1 %zu, MAP-DELTA %zu\n",
+              free_space_points_[0], free_space_points_[1], free_space_points_[2]);
   if (mover_scene_) printMover();
 }
 
