@@ -2,7 +2,9 @@
 
 #include <cstring>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <memory>
 
 #include "hal/camera.h"
@@ -53,6 +55,21 @@ Result<FrameInput> tumFrame(const std::string& path, int index) {
   (void)index;
   return Status(ErrorCode::kNotFound, "TUM input: this build has no TUM backend (libpng was not found)");
 #endif
+}
+
+double trueDepthAt(const hal::RgbdFrame& truth, double u, double v) {
+  const int u0 = static_cast<int>(std::floor(u)), v0 = static_cast<int>(std::floor(v));
+  if (u0 < 0 || v0 < 0 || u0 + 1 >= truth.width() || v0 + 1 >= truth.height()) return std::nan("");
+  double z[4];
+  for (int j = 0; j < 4; ++j) {
+    const uint16_t raw = truth.depth()[static_cast<std::size_t>(v0 + j / 2) * truth.width() + u0 + j % 2];
+    if (raw == 0) return std::nan("");
+    z[j] = raw * truth.depth_scale_m;
+  }
+  const auto [lo, hi] = std::minmax({z[0], z[1], z[2], z[3]});
+  if (hi - lo > 0.05 * lo) return std::nan("");
+  const double fu = u - u0, fv = v - v0;
+  return (z[0] * (1 - fu) + z[1] * fu) * (1 - fv) + (z[2] * (1 - fu) + z[3] * fu) * fv;
 }
 
 std::string option(int argc, char** argv, const char* name, const char* fallback) {

@@ -45,6 +45,7 @@
 namespace {
 
 using fovea::bench::option;
+using fovea::bench::trueDepthAt;
 using fovea::hal::RgbdFrame;
 using fovea::pipeline::map::SurfelMap;
 
@@ -62,23 +63,6 @@ float median(std::vector<float>& v) {
   if (v.empty()) return 0.0f;
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
   return v[v.size() / 2];
-}
-
-// The noiseless depth at (u, v), bilinear between the four pixels around it;
-// NaN where one is missing or they straddle a depth step (an edge).
-double trueDepthAt(const RgbdFrame& truth, double u, double v) {
-  const int u0 = static_cast<int>(std::floor(u)), v0 = static_cast<int>(std::floor(v));
-  if (u0 < 0 || v0 < 0 || u0 + 1 >= truth.width() || v0 + 1 >= truth.height()) return std::nan("");
-  double z[4];
-  for (int j = 0; j < 4; ++j) {
-    const uint16_t raw = truth.depth()[static_cast<std::size_t>(v0 + j / 2) * truth.width() + u0 + j % 2];
-    if (raw == 0) return std::nan("");
-    z[j] = raw * truth.depth_scale_m;
-  }
-  const auto [lo, hi] = std::minmax({z[0], z[1], z[2], z[3]});
-  if (hi - lo > 0.05 * lo) return std::nan("");
-  const double fu = u - u0, fv = v - v0;
-  return (z[0] * (1 - fu) + z[1] * fu) * (1 - fv) + (z[2] * (1 - fu) + z[3] * fu) * fv;
 }
 
 std::int64_t cellKey(const Eigen::Vector3d& p, double cell) {

@@ -173,8 +173,9 @@ double shareAboveMar(const std::vector<Eigen::Vector3d>& held, const std::vector
 
 // Held points the reference frame's camera sees through: inside its image, in
 // front of the surface its depth measures there by more than 10 cm (a ghost: a
-// surface the operator still draws where the camera now sees free space). The
-// reverse of shareAboveMar's "missing", which only looks from the true points.
+// surface the operator still draws where the camera now sees free space), away
+// from depth edges (trueDepthAt). The reverse of shareAboveMar's "missing",
+// which only looks from the true points.
 std::size_t pointsInFreeSpace(const std::vector<Eigen::Vector3d>& held, const hal::RgbdFrame& reference,
                               const hal::CameraIntrinsics& k) {
   constexpr double kMargin = 0.10;
@@ -183,11 +184,8 @@ std::size_t pointsInFreeSpace(const std::vector<Eigen::Vector3d>& held, const ha
   for (const Eigen::Vector3d& p : held) {
     const Eigen::Vector3d c = pose.R_world_cam.transpose() * (p - pose.t_world_cam);
     if (!(c.z() > 0.0)) continue;
-    const double u = k.fx * c.x() / c.z() + k.cx, v = k.fy * c.y() / c.z() + k.cy;
-    if (!(u >= 0.0 && v >= 0.0 && u < k.width && v < k.height)) continue;
-    const uint16_t d = reference.depth()[static_cast<std::size_t>(v) * static_cast<std::size_t>(k.width) +
-                                         static_cast<std::size_t>(u)];
-    if (d != 0 && c.z() < static_cast<double>(d) * reference.depth_scale_m - kMargin) ++ghosts;
+    const double z = bench::trueDepthAt(reference, k.fx * c.x() / c.z() + k.cx, k.fy * c.y() / c.z() + k.cy);
+    if (c.z() < z - kMargin) ++ghosts;  // false for NaN: outside the image, no depth, or an edge
   }
   return ghosts;
 }
