@@ -5,6 +5,7 @@
 #include "core/clock.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/voxel_sampler.h"
 
 namespace fovea::pipeline {
 
@@ -223,7 +224,14 @@ Status Foveator::sampleWithinCapacity(const PointCloud& in, std::array<double, k
     counts = {};
     s = table_.sample(*this, in, voxel_size_m, out, counts, representative);
   }
-  return s;
+  if (s.code() != ErrorCode::kCapacityExceeded) return s;
+  const bool voxels = s.message() == kVoxelsFull;
+  return {ErrorCode::kCapacityExceeded,
+          "voxel sampler: " +
+              (voxels ? "more than " + std::to_string(capacity_.max_voxels) + " occupied voxels"
+                      : "more points than the output's " + std::to_string(out.points.capacity())) +
+              " after " + std::to_string(stats.coarsened) + " coarsenings" +
+              (voxels ? ": raise pipeline.max_voxels" : "")};
 }
 
 Status Foveator::foveate(const PointCloud& in, const Gaze& gaze, FoveatedCloud& out, FoveationStats& stats,

@@ -245,14 +245,11 @@ Status VoxelSampler::sampleAt(const PointCloud& in, const uint8_t* region, int r
 
   std::size_t voxels = 0;
   for (std::size_t s = 0; s < m; ++s) voxels += (s == 0 || keys_[s] != keys_[s - 1]);
-  if (voxels > max_voxels_) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: " + std::to_string(voxels) + " occupied voxels, capacity is " +
-                                              std::to_string(max_voxels_) + ": raise pipeline.max_voxels"};
-  }
+  // The capacity errors the foveator coarsens on: no allocation (kVoxelsFull).
+  if (voxels > max_voxels_) return {ErrorCode::kCapacityExceeded, kVoxelsFull};
   const std::size_t fovea = counts.in[0];
   if (first > out.size() || first + fovea + voxels > out.points.capacity()) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(first + fovea + voxels) +
-                                              " points, capacity is " + std::to_string(out.points.capacity())};
+    return {ErrorCode::kCapacityExceeded, kOutputFull};
   }
 
   // The fovea, untouched and in input order.

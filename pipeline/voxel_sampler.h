@@ -33,6 +33,12 @@ namespace fovea::pipeline {
 inline constexpr int kVoxelAxisBits = 20;
 inline constexpr uint32_t kNoRepresentative = UINT32_MAX;
 inline constexpr int64_t kMaxVoxelSpan = int64_t{1} << kVoxelAxisBits;
+// The voxel samplers' two capacity errors (kCapacityExceeded), on which the
+// foveator coarsens and tries again, a frame at a time: short enough for
+// std::string's own buffer (15 bytes in libstdc++), so that a retry allocates
+// nothing; Foveator::sampleWithinCapacity words the error when it gives up.
+inline constexpr const char* kVoxelsFull = "max_voxels full";
+inline constexpr const char* kOutputFull = "output full";
 
 struct SampleCounts {
   std::array<uint32_t, kMaxRegions> in{};   // input points per region

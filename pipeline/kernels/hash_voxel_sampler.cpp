@@ -8,6 +8,7 @@
 
 #include "pipeline/kernels/foveation_simd.h"
 #include "pipeline/partition.h"
+#include "pipeline/voxel_sampler.h"
 
 namespace fovea::pipeline {
 
@@ -300,15 +301,10 @@ Status HashVoxelSampler::sample(const PointCloud& in, const uint8_t* region, int
   }
   RegionLo lo_index{};
   if (Status s = countAndCheckSpans(region_count, voxel_size_m, counts, lo_index); !s) return s;
-  if (!pass.fits) {
-    return {ErrorCode::kCapacityExceeded,
-            "voxel sampler: more than " + std::to_string(max_voxels_) + " occupied voxels: raise pipeline.max_voxels"};
-  }
+  // The capacity errors the foveator coarsens on: no allocation (kVoxelsFull).
+  if (!pass.fits) return {ErrorCode::kCapacityExceeded, kVoxelsFull};
   const std::size_t fovea = counts.in[0];
-  if (fovea + voxels > out.points.capacity()) {
-    return {ErrorCode::kCapacityExceeded, "voxel sampler: output needs " + std::to_string(fovea + voxels) +
-                                              " points, capacity is " + std::to_string(out.points.capacity())};
-  }
+  if (fovea + voxels > out.points.capacity()) return {ErrorCode::kCapacityExceeded, kOutputFull};
 
   // 3. The occupied voxels in the reference's key order, after the fovea (untouched
   //    and in input order).
