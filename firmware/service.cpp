@@ -172,7 +172,8 @@ void Service::stop() {
       if (map_bricks_) {
         log().log(LogLevel::kInfo,
                   "map: %" PRIu64 " frames' live points thinned to fit their cloud (a grid of pixels outside the "
-                  "eye's cone: the map's first frames, turns into unmapped space)",
+                  "eye's cone, or inside it too when the operator holds little: the map's first frames, turns "
+                  "into unmapped space, a new session)",
                   s.map.live_thinned);
         log().log(LogLevel::kInfo,
                   "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64

@@ -14,6 +14,7 @@ bool LivePointTally::take(int u, int v, const Eigen::Vector3f& p, uint32_t) {
   for (int s = 1; s <= LiveSelection::kMaxStride; ++s) {
     kept_[static_cast<std::size_t>(s)] += whole || LiveSelection::onGrid(u, v, s) ? 1 : 0;
   }
+  on_coarsest_grid_ += LiveSelection::onGrid(u, v, LiveSelection::kMaxStride) ? 1 : 0;
   return true;
 }
 
@@ -35,7 +36,7 @@ bool LiveCollector::fits(int width, int height) const {
 Status LiveCollector::overCapacity(std::size_t kept, std::size_t capacity) {
   return {ErrorCode::kCapacityExceeded, "live points: " + std::to_string(kept) + " even on every " +
                                             std::to_string(LiveSelection::kMaxStride) +
-                                            "th pixel outside the gaze's cone, capacity " + std::to_string(capacity)};
+                                            "th pixel, the gaze's cone too, capacity " + std::to_string(capacity)};
 }
 
 }  // namespace fovea::pipeline::map

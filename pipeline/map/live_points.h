@@ -13,7 +13,13 @@
 //  - of the others, only the pixels on a grid of `stride` (u and v multiples of
 //    it), the finest stride from 2 to kMaxStride whose points fit. The foveator
 //    then samples them into voxels larger than a few pixels anyway.
-// A frame whose points do not fit even so is refused (kCapacityExceeded).
+// A frame whose points do not fit even so keeps the grid of kMaxStride
+// alone, the cone's pixels too (LivePointStats::cone_thinned): the operator
+// then holds little of what the camera sees (a new session, or one that lost
+// its bricks, since only held surface explains a pixel), and a frame dropped
+// for it would send no bricks either, so that the next frames would not fit
+// again. Only when even that grid's points do not fit is the frame refused
+// (kCapacityExceeded).
 //
 // The candidates come from a source that calls a LivePointSink for each point
 // in pixel order (SurfelMap, ExplainedView, or every valid pixel:
@@ -116,12 +122,15 @@ class LivePointTally final : public LivePointSink {
   std::size_t kept(int stride) const { return kept_[static_cast<std::size_t>(stride)]; }
   // The finest stride whose points fit `capacity`; 0 when none does.
   int finestStrideWithin(std::size_t capacity) const;
+  // The points on kMaxStride's grid, the cone's or not.
+  std::size_t onCoarsestGrid() const { return on_coarsest_grid_; }
 
  private:
   const LiveSelection& selection_;
   int width_;
   uint64_t* cone_bits_;
   std::array<std::size_t, LiveSelection::kMaxStride + 1> kept_{};  // [s]: on stride s's grid or in the cone
+  std::size_t on_coarsest_grid_ = 0;
 };
 
 // Both at once: takes the points while they fit and counts all of them.
@@ -142,6 +151,7 @@ class LivePointPushAndTally final : public LivePointSink {
 struct LivePointStats {
   uint32_t candidates = 0;  // the source's points (when not thinned: those taken)
   uint8_t stride = 1;       // the grid outside the gaze's cone: 1 when not thinned
+  bool cone_thinned = false;  // ... and inside it too (the grid of kMaxStride alone)
   uint8_t passes = 0;       // the source's runs
 };
 
@@ -154,8 +164,8 @@ class LiveCollector {
   // points in the same order on every call (skipping those sink.skips()
   // names). The last call whose sink is not filtered() has seen every point
   // (a source counting the frame's pixels keeps that call's counts).
-  // kCapacityExceeded (`out` empty) when even the grid of kMaxStride does not
-  // fit; kInvalidInput for a frame larger than the constructor's.
+  // kCapacityExceeded (`out` empty) when even the grid of kMaxStride alone
+  // does not fit; kInvalidInput for a frame larger than the constructor's.
   template <typename VisitAll>
   Status collect(VisitAll&& visit_all, LiveSelection selection, int width, int height, PointCloud& out,
                  LivePointStats& stats);
@@ -192,7 +202,13 @@ Status LiveCollector::collect(VisitAll&& visit_all, LiveSelection selection, int
   if (!all.overflowed()) return Status::ok();
   out.clear();
   selection.stride = tally.finestStrideWithin(out.capacity());
-  if (selection.stride == 0) return overCapacity(tally.kept(LiveSelection::kMaxStride), out.capacity());
+  if (selection.stride == 0) {
+    if (tally.onCoarsestGrid() > out.capacity()) return overCapacity(tally.onCoarsestGrid(), out.capacity());
+    selection.stride = LiveSelection::kMaxStride;
+    selection.whole_cos = 2.0f;  // no point is within the cone
+    std::fill(cone_bits_.begin(), cone_bits_.end(), 0);
+    stats.cone_thinned = true;
+  }
   stats.stride = static_cast<uint8_t>(selection.stride);
   const LivePixelFilter filter{selection.stride, width, cone_bits_.data()};
   LivePointPush kept(selection, out);

@@ -53,11 +53,14 @@ struct Recorder final : LivePointSink {
 
 // The reference: every candidate when they fit; else the finest stride from
 // 2 to 4 whose grid points plus the points within the cone fit, trying each
-// stride on every candidate. The cone's test is the float arithmetic the
-// header states (a double one would differ on points at its edge).
+// stride on every candidate; else the points on the grid of 4 alone, the
+// cone's too (cone_thinned), when they fit; else none (stride 0). The cone's
+// test is the float arithmetic the header states (a double one would differ
+// on points at its edge).
 std::vector<Candidate> selectByBruteForce(const std::vector<Candidate>& all, const LiveSelection& s,
-                                          std::size_t capacity, int& stride) {
+                                          std::size_t capacity, int& stride, bool& cone_thinned) {
   stride = 1;
+  cone_thinned = false;
   if (all.size() <= capacity) return all;
   auto whole = [&](const Candidate& c) {
     const Eigen::Vector3f d = c.p - s.eye_m;
@@ -70,8 +73,13 @@ std::vector<Candidate> selectByBruteForce(const std::vector<Candidate>& all, con
     }
     if (kept.size() <= capacity) return kept;
   }
-  stride = 0;
-  return {};
+  std::vector<Candidate> grid;
+  for (const Candidate& c : all) {
+    if (c.u % LiveSelection::kMaxStride == 0 && c.v % LiveSelection::kMaxStride == 0) grid.push_back(c);
+  }
+  stride = grid.size() <= capacity ? LiveSelection::kMaxStride : 0;
+  cone_thinned = stride != 0;
+  return stride != 0 ? grid : std::vector<Candidate>{};
 }
 
 void expectSame(const PointCloud& cloud, const std::vector<Candidate>& expected) {
@@ -100,7 +108,8 @@ void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelectio
   ListSource source{&all};
   const Status s = collector.collect(source, selection, w, h, cloud, stats);
   int stride = 0;
-  const std::vector<Candidate> expected = selectByBruteForce(all, selection, capacity, stride);
+  bool cone_thinned = false;
+  const std::vector<Candidate> expected = selectByBruteForce(all, selection, capacity, stride, cone_thinned);
   if (stride == 0) {
     EXPECT_EQ(s.code(), ErrorCode::kCapacityExceeded);
     EXPECT_EQ(cloud.size(), 0u) << "a refused frame leaves no points";
@@ -108,6 +117,7 @@ void checkAgainstReference(const std::vector<Candidate>& all, const LiveSelectio
   }
   ASSERT_TRUE(s.isOk()) << s.message();
   EXPECT_EQ(stats.stride, stride);
+  EXPECT_EQ(stats.cone_thinned, cone_thinned);
   EXPECT_EQ(stats.candidates, all.size());
   // Fresh: once when everything fits, else take until full, count, take
   // thinned; after a thinned frame: take and count at once, then thinned.
@@ -165,6 +175,12 @@ TEST(LivePoints, HardCases) {
     checkAgainstReference(all, no_cone, all.size() / 4, kW, kH, fresh);
     checkAgainstReference(all, no_cone, 80, kW, kH, fresh);  // the 4-grid of 40 x 30 exactly
     checkAgainstReference(all, no_cone, 79, kW, kH, fresh);  // not even that
+    // A cone too wide for any grid: the 4-grid alone, the cone's pixels too,
+    // rather than no frame (it fits exactly), and no frame when not even that.
+    LiveSelection wide = selection;
+    wide.whole_cos = -1.0f;
+    checkAgainstReference(all, wide, 80, kW, kH, fresh);
+    checkAgainstReference(all, wide, 79, kW, kH, fresh);
     LiveSelection everything = selection;
     everything.whole_cos = -1.0f;  // a cone of every direction: nothing thins
     checkAgainstReference(all, everything, all.size() / 2, kW, kH, fresh);
@@ -221,8 +237,10 @@ TEST(LivePoints, TheMapsFirstFrameIsThinnedOutsideTheConeAsTheReferenceThinsIt) 
                            kW, kH, cloud, live)
                   .isOk());
   int stride = 0;
-  const std::vector<Candidate> expected = selectByBruteForce(offered.seen, selection, capacity, stride);
+  bool cone_thinned = false;
+  const std::vector<Candidate> expected = selectByBruteForce(offered.seen, selection, capacity, stride, cone_thinned);
   ASSERT_GT(stride, 1);
+  ASSERT_FALSE(cone_thinned);
   EXPECT_EQ(live.stride, stride);
   expectSame(cloud, expected);
   // Every point in the cone is there.
