@@ -9,7 +9,8 @@
 //
 //   fovea-map-delta [--scene living-room] [--path static] [--frames 90] [--size 640x480]
 //                   [--budget-mbps 12.5] [--fps 30] [--dwell-frames 9] [--eval-every 15]
-//                   [--pose camera|track] [--change-fraction 0.01] [--churn-fraction 0.2]
+//                   [--pose camera|track] [--change-fraction 0.01] [--growth-fraction 0.2]
+//                   [--churn-fraction 0.2] [--explain-held on|off]
 //
 // The map is the service's: one pipeline::map::Mapper (pipeline/map/mapper.h)
 // that poses (--pose track: its tracker, from the frames alone; camera, the
@@ -206,8 +207,9 @@ struct DeltaOptions {
   int dwell = 9;
   int eval_every = 15;
   bool track = false;  // --pose track
-  // --change-fraction, --churn-fraction: the resend rule's bounds (map.change_fraction,
-  // map.churn_fraction), for sweeps.
+  // --change-fraction, --growth-fraction, --churn-fraction: the resend rule's
+  // bounds (map.change_fraction, map.growth_fraction, map.churn_fraction), and
+  // --explain-held (map.explain_held_only), for sweeps.
   pipeline::map::MapDeltaConfig delta;
 };
 
@@ -235,6 +237,8 @@ std::optional<DeltaOptions> parseOptions(int argc, char** argv) {
   o.track = pose == "track";
   o.delta.change_fraction = std::atof(option(argc, argv, "--change-fraction", std::to_string(o.delta.change_fraction).c_str()).c_str());
   o.delta.churn_fraction = std::atof(option(argc, argv, "--churn-fraction", std::to_string(o.delta.churn_fraction).c_str()).c_str());
+  o.delta.growth_fraction = std::atof(option(argc, argv, "--growth-fraction", std::to_string(o.delta.growth_fraction).c_str()).c_str());
+  o.delta.explain_held_only = option(argc, argv, "--explain-held", "on") == "on";
   if (Status s = o.delta.validate(); !s) {
     std::fprintf(stderr, "fovea-map-delta: %s\n", s.message().c_str());
     return std::nullopt;

@@ -184,7 +184,10 @@ std::vector<Field> mapFields() {
     // the map's surfels the eye sees go with every frame.
     FOVEA_BOOL("map.delta", map.delta),
     FOVEA_FLOAT("map.change_fraction", map.delta_config.change_fraction, 0.0, 1.0),
+    FOVEA_FLOAT("map.growth_fraction", map.delta_config.growth_fraction, 0.0, 1.0),
     FOVEA_FLOAT("map.churn_fraction", map.delta_config.churn_fraction, 0.0, 1.0),
+    // A pixel is left out of the live points only by surfels the operator holds.
+    FOVEA_BOOL("map.explain_held_only", map.delta_config.explain_held_only),
     FOVEA_INT("map.max_brick_surfels", map.max_brick_surfels, 1, 1 << 24),
     // 0: what the link's largest budget pays for in a frame (frameBrickPoints()).
     FOVEA_INT("map.max_frame_brick_points", map.max_frame_brick_points, 0, 1 << 26),

@@ -30,6 +30,9 @@ Status MapDeltaConfig::validate() const {
   if (!(change_fraction >= 0.0 && change_fraction <= 1.0)) {
     return {ErrorCode::kInvalidArgument, "map_delta.change_fraction: must be in [0, 1]"};
   }
+  if (!(growth_fraction >= 0.0 && growth_fraction <= 1.0)) {
+    return {ErrorCode::kInvalidArgument, "map_delta.growth_fraction: must be in [0, 1]"};
+  }
   if (!(churn_fraction >= 0.0 && churn_fraction <= 1.0)) {
     return {ErrorCode::kInvalidArgument, "map_delta.churn_fraction: must be in [0, 1]"};
   }
@@ -50,6 +53,8 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
   held_level_.assign(max_bricks, kNotHeld);
   held_changes_.assign(max_bricks, 0);
   held_settled_.assign(max_bricks, 0);
+  held_frame_ = std::make_unique<std::atomic<uint32_t>[]>(max_bricks);
+  for (std::size_t b = 0; b < max_bricks; ++b) held_frame_[b].store(0, std::memory_order_relaxed);
   version_.assign(max_bricks, 0);
   sent_plan_.assign(max_bricks, 0);
   may_draw_.assign(max_bricks, 0);
@@ -62,7 +67,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
 std::size_t MapDelta::memoryBytes() const {
   return held_level_.capacity() + may_draw_.capacity() +
          (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + sent_plan_.capacity() +
-          due_since_.capacity()) *
+          due_since_.capacity() + held_level_.size()) *
              sizeof(uint32_t) +
          order_.capacity() * sizeof(uint64_t) + (due_.capacity() + plan_.capacity()) * sizeof(BrickDue);
 }
@@ -105,6 +110,7 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
     if (settled == 0 && held_level_[b] != kNotHeld && held_settled_[b] == 0 &&
         plan_number_ - sent_plan_[b] >= kEmptyHoldPlans) {
       held_level_[b] = kNotHeld;  // sent empty long enough ago, and not reported lost: delivered
+      held_frame_[b].store(0, std::memory_order_relaxed);
       may_draw_[b] = 0;
     }
     const uint8_t held = held_level_[b];
@@ -158,14 +164,18 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
 bool MapDelta::changedEnough(uint32_t changes, uint32_t settled, uint32_t held_settled, uint8_t level) const {
   if (changes == 0) return false;
   const double scale = std::ldexp(static_cast<double>(held_settled), level);
-  const double net = std::abs(static_cast<double>(settled) - static_cast<double>(held_settled));
-  return net > config_.change_fraction * scale || static_cast<double>(changes) > config_.churn_fraction * scale;
+  const double gained = static_cast<double>(settled) - static_cast<double>(held_settled);
+  // Growth is not scaled by the level: the surfels the operator lacks go as
+  // live points each frame, however coarse the brick it holds.
+  if (gained > config_.growth_fraction * static_cast<double>(held_settled)) return true;
+  return -gained > config_.change_fraction * scale || static_cast<double>(changes) > config_.churn_fraction * scale;
 }
 
 uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level) {
   held_level_[brick] = level;
   held_changes_[brick] = map.brickChanges(brick);
   held_settled_[brick] = map.brickSettledCount(brick);
+  held_frame_[brick].store(map.settledThroughFrame(), std::memory_order_relaxed);
   if (held_settled_[brick] > 0) may_draw_[brick] = 1;
   sent_plan_[brick] = plan_number_;
   due_since_[brick] = 0;
@@ -175,6 +185,7 @@ uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level)
 
 void MapDelta::forgetAll() {
   std::fill(held_level_.begin(), held_level_.end(), kNotHeld);
+  for (std::size_t b = 0; b < held_level_.size(); ++b) held_frame_[b].store(0, std::memory_order_relaxed);
   std::fill(may_draw_.begin(), may_draw_.end(), uint8_t{0});
   std::fill(due_since_.begin(), due_since_.end(), 0);
 }

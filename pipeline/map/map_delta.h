@@ -11,12 +11,15 @@
 // then due when:
 //  - the operator lacks it (kMissing), or needs it finer than it holds it
 //    (kRefine; coarsening is never sent: the operator draws what it has);
-//  - its settled set changed since it was sent at level h (kChanged; a coarse
-//    level hides more, so both bounds are of the settled surfels held then,
-//    times 2^h): it gained or lost more than change_fraction of them, or, with
-//    their number about the same, surfels settled or went (SurfelMap::
-//    brickChanges) more than churn_fraction times (surface replaced where it
-//    was: a real sensor's noise does it all the time, docs/map-delta.md).
+//  - its settled set changed since it was sent at level h (kChanged): it
+//    gained more than growth_fraction of the settled surfels held then, or
+//    (a coarse level hides more, so these bounds are times 2^h) lost more
+//    than change_fraction of them, or, with their number about the same,
+//    surfels settled or went (SurfelMap::brickChanges) more than
+//    churn_fraction times (surface replaced where it was: a real sensor's
+//    noise does it all the time, docs/map-delta.md). A gain is not scaled by
+//    the level: with explain_held_only the surfels the operator lacks go as
+//    live points every frame, however coarse the brick it holds.
 // The plan lists the due bricks in budget order: the fovea's first (the brick
 // comes within fovea_ecc_deg of the gaze), then changes, then the periphery's;
 // in each, the longest waiting first, then the nearest to the gaze. The caller
@@ -34,8 +37,10 @@
 // allocates nothing.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -58,10 +63,18 @@ struct MapDeltaConfig {
   // A brick that comes within this of the gaze is the fovea's: sent first.
   double fovea_ecc_deg = 5.0;
   // Changes to a brick's settled set that make it due again, as a fraction of
-  // its settled surfels when sent, times 2^level: surfels gained or lost (the
-  // net change), and surfels settled or gone counted each (the churn).
+  // its settled surfels when sent: surfels lost, times 2^level (what the
+  // operator would still draw in space now free), surfels gained (surface it
+  // lacks; with explain_held_only it gets their pixels as live points
+  // meanwhile, so the bound may be loose), and surfels settled or gone counted
+  // each, times 2^level (the churn: surface replaced where it was).
   double change_fraction = 0.01;
+  double growth_fraction = 0.2;
   double churn_fraction = 0.2;
+  // A pixel is explained (no live point) only by a settled surfel the operator
+  // holds: one its brick's version in hand had settled (heldFrames()). Off:
+  // by any settled surfel, whether or not its brick went yet.
+  bool explain_held_only = true;
 
   Status validate() const;
 };
@@ -110,7 +123,10 @@ class MapDelta {
   uint32_t markSent(const SurfelMap& map, uint16_t brick, uint8_t level);
   // The operator does not hold `brick` (it evicted it, or its version was lost
   // on the way: net/brick_sender.h): it is due again.
-  void forget(uint16_t brick) { held_level_[brick] = kNotHeld; }
+  void forget(uint16_t brick) {
+    held_level_[brick] = kNotHeld;
+    held_frame_[brick].store(0, std::memory_order_relaxed);
+  }
   // The operator holds nothing (a new session, or an operator that restarted).
   void forgetAll();
 
@@ -120,6 +136,11 @@ class MapDelta {
   // Whether the operator may draw something of `brick` as this side sent it.
   bool holds(uint16_t brick) const { return held_level_[brick] != kNotHeld || may_draw_[brick] != 0; }
   uint32_t version(uint16_t brick) const { return version_[brick]; }
+  // Per brick, the map's last finished frame (SurfelMap::settledThroughFrame)
+  // when the version the operator holds was sampled, 0 when it holds none: the
+  // surfels settled by then are the operator's (SurfelMap::setHeldFrames). Written
+  // by the planner's thread, read by fusion's, hence atomic.
+  const std::atomic<uint32_t>* heldFrames() const { return held_frame_.get(); }
   const MapDeltaConfig& config() const { return config_; }
   std::size_t memoryBytes() const;
 
@@ -132,6 +153,7 @@ class MapDelta {
   std::vector<uint8_t> held_level_;        // kNotHeld: the operator lacks it
   std::vector<uint32_t> held_changes_;     // the map's change counter when sent
   std::vector<uint32_t> held_settled_;      // ... and the settled surfels then
+  std::unique_ptr<std::atomic<uint32_t>[]> held_frame_;  // ... and the map's frame number then (0: not held)
   std::vector<uint32_t> version_;
   std::vector<uint32_t> sent_plan_;        // plan number when last sent
   std::vector<uint8_t> may_draw_;          // 1: a version with surfels went, and no empty one is known delivered since

@@ -40,6 +40,7 @@ Result<Mapper> Mapper::create(const MapperConfig& config) {
   mapper.output_ = config.output;
   mapper.map_ = std::make_unique<SurfelMap>(std::move(map.value()));
   if (Status s = makeOutput(config, mapper.eye_, mapper.delta_, mapper.sampler_); !s) return s;
+  if (mapper.delta_ && config.delta.explain_held_only) mapper.map_->setHeldFrames(mapper.delta_->heldFrames());
   mapper.live_ = std::make_unique<LiveCollector>(config.map.max_width, config.map.max_height);
   if (config.output != MapOutput::kNone) {
     Result<ExplainedView> view =

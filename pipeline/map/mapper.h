@@ -144,7 +144,8 @@ class Mapper {
   // The frame's live points (live_points.h), the frame addFrame() just took
   // (`frame` its figures), into `cloud` (cleared; its origin must be the
   // frame's camera position): fused now, the pixels no settled surfel
-  // explains; posed and left unfused by the time budget, a busy fusion thread
+  // explains (with bricks and MapDeltaConfig::explain_held_only, no surfel
+  // the operator holds); posed and left unfused by the time budget, a busy fusion thread
   // or the hand-off, the valid pixels the last fused view does not explain
   // (ExplainedView), which the operator has from the map; refused or lost,
   // every valid pixel. Output kNone keeps no view: every valid pixel.

@@ -41,7 +41,8 @@ inline constexpr uint8_t kSurfelLive = 1;
 inline constexpr uint8_t kSurfelStable = 2;
 // Stable and in the map for SurfelMapConfig::settle_frames: the map's content
 // for the operator (what the eye view and the stream of changes send, what
-// explains a pixel).
+// explains a pixel: with bricks, once its brick went with it,
+// SurfelMap::setHeldFrames).
 inline constexpr uint8_t kSurfelSettled = 4;
 
 // A unit normal as 24 bits: octahedral projection, 12 bits each for u and v.

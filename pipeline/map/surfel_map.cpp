@@ -117,7 +117,7 @@ void SurfelMap::clear() {
   reuse_failed_frame_ = 0;
   free_head_ = kNone;
   free_count_ = high_water_ = live_ = brick_count_ = 0;
-  frame_ = 0;
+  frame_ = settled_through_ = 0;
   have_last_ = false;
   fused_width_ = fused_height_ = 0;
   counters_ = {};
@@ -241,6 +241,7 @@ FuseOutcome SurfelMap::fuse(const hal::RgbdFrame& frame, FuseStats& stats, bool 
     addNew(frame, stats);
     stats.add_ns = monotonicNs() - t1;
   }
+  settled_through_ = frame_;
   ++counters_.frames_fused;
   counters_.added += stats.added;
   counters_.evicted += stats.evicted;
@@ -451,7 +452,7 @@ void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& verte
     s.flags |= kSurfelStable;
     if (frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
   }
-  if (s.flags & kSurfelSettled) explained_[i] = 1;
+  if (explains(s)) explained_[i] = 1;
   s.last_seen = frame_;
 }
 
@@ -499,7 +500,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         // seen at its depth settles once old enough.
         const bool at_depth = seen <= z + tolerance;
         if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
-        if (at_depth && (s.flags & kSurfelSettled)) explained_[i] = 1;
+        if (at_depth && explains(s)) explained_[i] = 1;
         if (!has_normal) continue;
         if (at_depth) {
           // The angle test on the surfel's direction as decoded: (d / |d|) . n < cos

@@ -31,6 +31,7 @@
 // allocates nothing.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <string_view>
@@ -219,6 +220,15 @@ class SurfelMap {
   // surfel explained the pixel (what appendUnexplained() leaves out), and the
   // measured depth in metres (0: no valid measurement).
   const uint8_t* explainedPixels() const { return explained_.data(); }
+  // From now on a settled surfel explains a pixel only when the operator
+  // holds it: `held` (per brick slot, max_bricks of them; null: every settled
+  // surfel explains) is MapDelta::heldFrames(), and a surfel counts as held
+  // when it settled by its brick's frame there. Its settling frame is
+  // taken as first_seen + settle_frames, the earliest it can settle: a surfel
+  // that became stable later may be counted held when the version did not
+  // have it yet (then the operator has a hole there until the brick is due
+  // again, as every such surfel had before).
+  void setHeldFrames(const std::atomic<uint32_t>* held) { held_frames_ = held; }
   const float* measuredDepth() const { return vertex_z_.data(); }
   int indexMapWidth() const { return index_map_.width(); }
   int indexMapHeight() const { return index_map_.height(); }
@@ -226,6 +236,9 @@ class SurfelMap {
   const SurfelMapConfig& config() const { return config_; }
   const SurfelMapCounters& counters() const { return counters_; }
   uint32_t frameNumber() const { return frame_; }
+  // The last frame whose fusion finished: every surfel that settled by then
+  // has its flag (frameNumber() is the one in flight while fusion runs).
+  uint32_t settledThroughFrame() const { return settled_through_; }
   // Bytes allocated by create(), all of it, and by part.
   std::size_t memoryBytes() const;
   SurfelMapMemory memoryParts() const;
@@ -290,6 +303,13 @@ class SurfelMap {
   // not into the free list: removeSurfel() does both.
   void detachSurfel(uint32_t slot);
   void markSettled(Surfel& s);
+  // Whether `s` explains a pixel at its depth: settled, and held when
+  // setHeldFrames() says which are.
+  bool explains(const Surfel& s) const {
+    if (!(s.flags & kSurfelSettled)) return false;
+    if (held_frames_ == nullptr) return true;
+    return s.first_seen + config_.settle_frames <= held_frames_[s.brick].load(std::memory_order_relaxed);
+  }
   // A surfel the camera saw through keeps `left` confidence; true when that is
   // none and it must go (the caller removes it: at once, or after the frame's
   // association while the index map may still name it). Counts both.
@@ -339,6 +359,7 @@ class SurfelMap {
   VertexParams vertex_params_;            // the frame being fused's (computeDepths(); until fuse() returns)
   IndexMap index_map_;                    // step 3's, the tracker's model; its scratch: the late maps
   std::vector<uint32_t> key_histogram_;   // makeRoom()'s counts (lowest_keys.h), kKeyHistogramSize
+  const std::atomic<uint32_t>* held_frames_ = nullptr;  // setHeldFrames()
   std::vector<uint8_t> explained_;        // the last fused frame: 1 where a settled surfel lies at the pixel's depth
   std::vector<float> normal_cos_;         // the normal test's cosine by depth (associate())
   float normal_cos_f_px_ = 0.0f;          // ... for this focal length (0: not made yet)
@@ -346,6 +367,7 @@ class SurfelMap {
   float normal_cos_per_m_ = 0.0f;         // ... and buckets a metre (not a division a pixel)
 
   uint32_t frame_ = 0;                    // frames fused so far
+  uint32_t settled_through_ = 0;          // settledThroughFrame()
   bool have_last_ = false;
   int64_t last_stamp_ns_ = 0;
   Eigen::Vector3d last_position_ = Eigen::Vector3d::Zero();

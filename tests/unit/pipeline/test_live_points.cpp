@@ -275,6 +275,9 @@ TEST(LivePoints, TheMappersSourcesThinIntoASmallCloudAndCountTheWholeFrame) {
   config.map.max_surfels = 1 << 16;
   config.map.max_bricks = 1024;
   config.output = MapOutput::kBricks;
+  // Every settled surfel explains (no bricks are planned here; explaining by
+  // held surfels alone has its own test, test_surfel_map's MapDelta tests).
+  config.delta.explain_held_only = false;
   Mapper mapper = Mapper::create(config).value();
   hal::RgbdFrame frame(kW, kH);
   const auto validPixels = [&] {
