@@ -4,6 +4,7 @@
 //
 //   fovea-map-accuracy [--scene living-room] [--path orbit] [--frames 60] [--size 640x480] [--every 10]
 //                      [--stable C] [--cap C] [--unstable-frames N] [--kernels ref|simd] [--pose truth|track]
+//                      [--carried on|off]
 //                      (SurfelMapConfig's stable_confidence, confidence_cap, unstable_max_frames, kernels;
 //                      the kernels' default is defaultKernelSet(): simd unless FOVEA_FORCE_KERNEL=ref)
 //
@@ -23,6 +24,7 @@
 // through a Mapper whose tracker takes the first frame's true pose and tracks
 // the rest, leaving out the pixels it finds moving (issue 42); it also prints
 // the tracker's outcomes, its error against the true path, and the moving share.
+// --carried off: nothing found carried with the camera (pipeline/map/carried_pixels.h).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -275,6 +277,11 @@ int main(int argc, char** argv) {
     return 2;
   }
   const bool tracking = pose == "track";
+  const std::string carried = option(argc, argv, "--carried", "on");
+  if (carried != "on" && carried != "off") {
+    std::fprintf(stderr, "fovea-map-accuracy: --carried must be on or off\n");
+    return 2;
+  }
   fovea::pipeline::map::MapperConfig config;
   config.map.max_width = k.width;
   config.map.max_height = k.height;
@@ -283,6 +290,7 @@ int main(int argc, char** argv) {
   config.tracker.max_width = k.width;
   config.tracker.max_height = k.height;
   config.tracker.kernels = config.map.kernels;
+  config.tracker.carried.enabled = carried == "on";
   fovea::Result<fovea::pipeline::map::Mapper> created = fovea::pipeline::map::Mapper::create(config);
   if (!created) {
     std::fprintf(stderr, "fovea-map-accuracy: %s\n", created.status().message().c_str());

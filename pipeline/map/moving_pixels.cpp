@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "core/depth_noise.h"
+#include "pipeline/map/depth_region.h"
 
 namespace fovea::pipeline::map {
 
@@ -63,7 +64,7 @@ void MovingPixels::clear() {
 }
 
 uint32_t MovingPixels::update(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R,
-                              const Eigen::Vector3f& t) {
+                              const Eigen::Vector3f& t, const uint8_t* carried) {
   const bool fits = half.width > 0 && half.height > 0 &&
                     static_cast<std::size_t>(half.width) * static_cast<std::size_t>(half.height) <= max_half_pixels_ &&
                     model.width / 2 == half.width && model.height / 2 == half.height;
@@ -81,7 +82,7 @@ uint32_t MovingPixels::update(const FrameIn& half, const ModelIn& model, const E
   const std::size_t pixels = static_cast<std::size_t>(half.width) * static_cast<std::size_t>(half.height);
   for (std::size_t i = 0; i < pixels; ++i) class_[i] = classify(half, model, R, t, i);
   growMovers(half);
-  return age(half);
+  return age(half, carried);
 }
 
 void MovingPixels::nearestModelDepth(const ModelIn& model) {
@@ -147,29 +148,15 @@ void MovingPixels::growMovers(const FrameIn& half) {
 }
 
 std::size_t MovingPixels::growRegion(const FrameIn& half, std::size_t seed) {
-  const auto w = static_cast<std::size_t>(half.width);
-  const std::size_t pixels = w * static_cast<std::size_t>(half.height);
-  const auto step = static_cast<float>(config_.region_step_share);
-  std::size_t tail = 0;
   class_[seed] |= kVisited;
-  queue_[tail++] = static_cast<uint32_t>(seed);
-  for (std::size_t head = 0; head < tail; ++head) {
-    const std::size_t i = queue_[head];
-    const std::size_t u = i % w;
-    const float z = half.z[i];
-    const std::size_t neighbours[4] = {u > 0 ? i - 1 : pixels, u + 1 < w ? i + 1 : pixels, i >= w ? i - w : pixels,
-                                       i + w < pixels ? i + w : pixels};
-    for (std::size_t n : neighbours) {
-      if (n >= pixels || (class_[n] != kInFront && class_[n] != kUnknown)) continue;  // outside, visited, or explained
-      if (!(std::abs(half.z[n] - z) <= step * z)) continue;
-      class_[n] |= kVisited;
-      queue_[tail++] = static_cast<uint32_t>(n);
-    }
-  }
-  return tail;
+  // In front or unknown, and not visited yet: an explained pixel stops it.
+  return growDepthRegion(
+      half.width, half.height, half.z, static_cast<float>(config_.region_step_share), seed, queue_.data(),
+      [this](std::size_t n) { return class_[n] == kInFront || class_[n] == kUnknown; },
+      [this](std::size_t n) { class_[n] |= kVisited; });
 }
 
-uint32_t MovingPixels::age(const FrameIn& half) {
+uint32_t MovingPixels::age(const FrameIn& half, const uint8_t* carried) {
   const auto settle = static_cast<uint8_t>(config_.settle_frames);
   const auto depth_share = static_cast<float>(config_.steady_depth_share);
   const auto steady_i = static_cast<int>(std::lround(config_.steady_intensity * 255.0));
@@ -179,7 +166,10 @@ uint32_t MovingPixels::age(const FrameIn& half) {
     for (std::size_t U = 0; U < hw; ++U) {
       const std::size_t i = V * hw + U;
       uint8_t is_moving = 0;
-      if (class_[i] & kInMover) {
+      if (carried != nullptr && carried[i] != 0) {
+        age_[i] = 0;  // carried: moving as long as it is carried, never settling
+        is_moving = 1;
+      } else if (class_[i] & kInMover) {
         const float z = half.z[i];
         const int intensity = static_cast<int>(std::lround(std::clamp(half.intensity[i], 0.0f, 1.0f) * 255.0f));
         const bool steady = age_[i] > 0 && std::abs(z - depth_[i]) <= depth_share * z &&

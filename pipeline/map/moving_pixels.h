@@ -88,8 +88,11 @@ class MovingPixels {
     const uint8_t* from_surfel = nullptr;
   };
   // Marks the frame's moving pixels (R, t: its camera into the model's) and
-  // returns how many of the finest level's. A size beyond create()'s marks none.
-  uint32_t update(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R, const Eigen::Vector3f& t);
+  // returns how many of the finest level's. carried (null: none): the half
+  // level's pixels carried with the camera (carried_pixels.h), moving
+  // whatever their class, with no age. A size beyond create()'s marks none.
+  uint32_t update(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R, const Eigen::Vector3f& t,
+                  const uint8_t* carried = nullptr);
   // No pixel moving, the ages forgotten (the first frame, a lost one, a reset).
   void clear();
 
@@ -115,8 +118,9 @@ class MovingPixels {
   void growMovers(const FrameIn& half);
   // One region from `seed`, kVisited, into queue_[0, returned).
   std::size_t growRegion(const FrameIn& half, std::size_t seed);
-  // The ages and the finest level's mask from the movers; returns its moving pixels.
-  uint32_t age(const FrameIn& half);
+  // The ages and the finest level's mask from the movers and the carried
+  // pixels (null: none); returns its moving pixels.
+  uint32_t age(const FrameIn& half, const uint8_t* carried);
 
   MovingPixelsConfig config_;
   std::size_t max_half_pixels_ = 0;

@@ -283,6 +283,7 @@ Status TrackerConfig::validate() const {
     return invalidArgument("tracker: icp_robust_scale_m and photometric_robust_scale must be >= 0");
   }
   if (Status s = moving.validate(); !s) return invalidArgument("tracker: " + s.message());
+  if (Status s = carried.validate(); !s) return invalidArgument("tracker: " + s.message());
   if (moving.enabled && moving.min_gap_m < icp_max_distance_m) {
     // A moving pixel must be beyond the finest level's association (leaveOutMovers()).
     return invalidArgument("tracker: moving.min_gap_m must be at least icp_max_distance_m");
@@ -311,14 +312,16 @@ std::size_t FrameToModelTracker::Level::bytes() const {
   return n;
 }
 
-FrameToModelTracker::FrameToModelTracker(const TrackerConfig& config, MovingPixels moving)
-    : config_(config), moving_(std::move(moving)) {}
+FrameToModelTracker::FrameToModelTracker(const TrackerConfig& config, MovingPixels moving, CarriedPixels carried)
+    : config_(config), moving_(std::move(moving)), carried_(std::move(carried)) {}
 
 Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& config) {
   if (Status s = config.validate(); !s.isOk()) return s;
   Result<MovingPixels> moving = MovingPixels::create(config.max_width, config.max_height, config.moving);
   if (!moving) return moving.status();
-  FrameToModelTracker t(config, std::move(moving.value()));
+  Result<CarriedPixels> carried = CarriedPixels::create(config.max_width, config.max_height, config.carried);
+  if (!carried) return carried.status();
+  FrameToModelTracker t(config, std::move(moving.value()), std::move(carried.value()));
   for (int l = 0; l < kLevels; ++l) {
     const std::size_t pixels =
         static_cast<std::size_t>(config.max_width >> l) * static_cast<std::size_t>(config.max_height >> l);
@@ -332,7 +335,7 @@ Result<FrameToModelTracker> FrameToModelTracker::create(const TrackerConfig& con
 }
 
 std::size_t FrameToModelTracker::memoryBytes() const {
-  std::size_t n = model_from_surfel_.capacity() + moving_.memoryBytes();
+  std::size_t n = model_from_surfel_.capacity() + moving_.memoryBytes() + carried_.memoryBytes();
   for (const Level& l : frame_) n += l.bytes();
   for (const Level& l : model_) n += l.bytes();
   return n;
@@ -345,6 +348,7 @@ void FrameToModelTracker::reset() {
   model_pose_ = hal::Pose{};
   residual_count_ = 0;
   moving_.clear();
+  carried_.clear();
 }
 
 // The level below `from`: its camera, and its pixels by the kernel (2x2
@@ -627,7 +631,8 @@ FrameToModelTracker::Attempt FrameToModelTracker::attemptFrom(const hal::Pose& s
   a.solve = solve(Rk_t * start.R_world_cam, Rk_t * (start.t_world_cam - model_pose_.t_world_cam), photometric);
   a.pose.R_world_cam = model_pose_.R_world_cam * a.solve.R;
   a.pose.t_world_cam = model_pose_.R_world_cam * a.solve.t + model_pose_.t_world_cam;
-  a.reason = check(a.solve, a.pose, last_good_, 0);
+  a.left_out = carried_left_out_;
+  a.reason = check(a.solve, a.pose, last_good_, a.left_out);
   return a;
 }
 
@@ -722,6 +727,7 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   stats.valid_pixels = valid_pixels_;
   stats.pyramid_ns = monotonicNs() - t_start;
   if (!has_depth) return lose(LostReason::kNoValidDepth);
+  leaveOutCarried(stats);
   if (!have_model_) {
     pose = prior != nullptr ? *prior : last_good_;
     last_good_ = pose;
@@ -752,12 +758,52 @@ TrackOutcome FrameToModelTracker::track(const hal::RgbdFrame& frame, const hal::
   return finish(outcome);
 }
 
+// Found on the half level, each pixel against its reference (carried_pixels.h); a
+// carried half pixel clears its 2 x 2 block of the finest level and the
+// coarsest level's pixel over it, so that no level of the alignment sees it.
+void FrameToModelTracker::leaveOutCarried(TrackStats& stats) {
+  Level& f0 = frame_[0];
+  Level& f1 = frame_[1];
+  Level& f2 = frame_[2];
+  const int64_t start_ns = monotonicNs();
+  carried_left_out_ = 0;
+  const uint32_t carried = carried_.find(CarriedPixels::FrameIn{f1.width, f1.height, f1.z.data(), f1.intensity.data()});
+  stats.changed_share = carried_.changedShare();
+  if (carried == 0) {
+    stats.carried_ns = monotonicNs() - start_ns;
+    return;
+  }
+  const uint8_t* mask = carried_.mask();
+  const auto hw = static_cast<std::size_t>(f1.width), fw = static_cast<std::size_t>(f0.width);
+  uint32_t cleared = 0;
+  for (int V = 0; V < f1.height; ++V) {
+    for (int U = 0; U < f1.width; ++U) {
+      const std::size_t i = static_cast<std::size_t>(V) * hw + static_cast<std::size_t>(U);
+      if (mask[i] == 0) continue;
+      f1.z[i] = 0.0f;
+      const std::size_t top = 2 * static_cast<std::size_t>(V) * fw + 2 * static_cast<std::size_t>(U);
+      for (std::size_t j : {top, top + 1, top + fw, top + fw + 1}) {
+        cleared += f0.z[j] > 0.0f ? 1u : 0u;
+        f0.z[j] = 0.0f;
+      }
+      if (U / 2 < f2.width && V / 2 < f2.height) {
+        f2.z[static_cast<std::size_t>(V / 2) * static_cast<std::size_t>(f2.width) + static_cast<std::size_t>(U / 2)] = 0.0f;
+      }
+    }
+  }
+  carried_left_out_ = cleared;
+  stats.carried_pixels = cleared;
+  stats.carried_ns = monotonicNs() - start_ns;
+}
+
 void FrameToModelTracker::markMoving(const Solve& s, TrackStats& stats) {
   const Level& F = frame_[1];
   const Level& M = model_[0];
   const MovingPixels::FrameIn half{F.width, F.height, F.x.data(), F.y.data(), F.z.data(), F.intensity.data()};
   const MovingPixels::ModelIn model{M.width, M.height, M.fx, M.fy, M.cx, M.cy, M.z.data(), model_from_surfel_.data()};
-  stats.moving_pixels = moving_.update(half, model, s.R.cast<float>(), s.t.cast<float>());
+  const bool carried_fits = carried_.width() == F.width && carried_.height() == F.height;
+  stats.moving_pixels = moving_.update(half, model, s.R.cast<float>(), s.t.cast<float>(),
+                                       carried_fits ? carried_.mask() : nullptr);
   stats.moving_share = valid_pixels_ > 0 ? static_cast<double>(stats.moving_pixels) / valid_pixels_ : 0.0;
 }
 
@@ -784,7 +830,7 @@ void FrameToModelTracker::leaveOutMovers(Attempt& a, TrackStats& stats) {
   const uint8_t* mask = moving_.mask();
   const int mask_width = moving_.width();
   const int rows = std::min(f0.height, moving_.height()), columns = std::min(f0.width, mask_width);
-  uint32_t left_out = 0;  // valid pixels under the mask
+  uint32_t left_out = carried_left_out_;  // valid pixels under the mask (the carried ones' depth cleared already)
   for (int v = 0; v < rows; ++v) {
     const uint8_t* m = mask + static_cast<std::size_t>(v) * mask_width;
     const float* z = f0.z.data() + static_cast<std::size_t>(v) * f0.width;

@@ -46,6 +46,7 @@
 #include "core/kernel_set.h"
 #include "core/result.h"
 #include "hal/frame.h"
+#include "pipeline/map/carried_pixels.h"
 #include "pipeline/map/moving_pixels.h"
 
 namespace fovea::pipeline::map {
@@ -116,6 +117,11 @@ struct TrackerConfig {
   // ... a frame with more than this share of its valid pixels moving is lost
   // (kMostlyMoving): what static remains is too little to trust.
   double max_moving_share = 0.75;
+  // The pixels still in the image while the rest of it changes: carried with
+  // the camera (carried_pixels.h). Found before the alignment and left out of
+  // it; with `moving` enabled they join the moving pixels (not fused) and
+  // count in max_moving_share.
+  CarriedPixelsConfig carried;
 
   Status validate() const;
 };
@@ -159,13 +165,19 @@ struct TrackStats {
   double prior_disagreement_deg = 0.0;
   int relocalise_candidates = 0;    // poses tried by relocalisation (0: not lost)
   // The pixels found moving after the alignment (in front of the map's
-  // surface, not settled: moving_pixels.h), and their share of the valid pixels;
-  // 0 on a frame lost before that (no model, no depth).
+  // surface, not settled: moving_pixels.h; or carried, below), and their share
+  // of the valid pixels; 0 on a frame lost before that (no model, no depth).
   uint32_t moving_pixels = 0;
   double moving_share = 0.0;
+  // Of those, the finest level's pixels with depth found carried with the
+  // camera before the alignment (carried_pixels.h), and that finding's share
+  // of the pixels with depth not still for long.
+  uint32_t carried_pixels = 0;
+  double changed_share = 0.0;
   int64_t track_ns = 0;             // all of track()
   int64_t pyramid_ns = 0;           // step 1
   int64_t moving_ns = 0;            // finding the moving pixels and checking without them
+  int64_t carried_ns = 0;           // finding the carried pixels and clearing them from the pyramid
   // Building the model for the next frame from the fused map (modelFused(),
   // after fusion; Mapper::addFrame times it): tracking's cost besides track().
   int64_t model_ns = 0;
@@ -209,8 +221,9 @@ class FrameToModelTracker {
   ModelView finestModel() const;
 
   // The last tracked frame's moving pixels (none after a first or lost frame),
-  // which the map does not fuse.
+  // which the map does not fuse; the carried ones among them.
   const MovingPixels& moving() const { return moving_; }
+  const CarriedPixels& carried() const { return carried_; }
   bool lost() const { return lost_; }
   const hal::Pose& lastGoodPose() const { return last_good_; }
   const TrackerConfig& config() const { return config_; }
@@ -218,7 +231,7 @@ class FrameToModelTracker {
   std::size_t memoryBytes() const;
 
  private:
-  FrameToModelTracker(const TrackerConfig& config, MovingPixels moving);
+  FrameToModelTracker(const TrackerConfig& config, MovingPixels moving, CarriedPixels carried);
 
   static constexpr int kLevels = 3;
   // One pyramid level (of the new frame or of the model), structure of arrays.
@@ -278,6 +291,9 @@ class FrameToModelTracker {
   // The moving pixels after the attempt's alignment, and the attempt checked
   // anew without them.
   void leaveOutMovers(Attempt& a, TrackStats& stats);
+  // Before the alignment: the frame's carried pixels, their depth cleared in
+  // the frame pyramid (carried_left_out_: the finest level's with depth).
+  void leaveOutCarried(TrackStats& stats);
 
   TrackerConfig config_;
   TrackerCounters counters_;
@@ -289,6 +305,8 @@ class FrameToModelTracker {
   std::array<Level, kLevels> model_;
   std::vector<uint8_t> model_from_surfel_;  // finest model level: 1 where a surfel gave the pixel
   MovingPixels moving_;
+  CarriedPixels carried_;
+  uint32_t carried_left_out_ = 0;
   std::array<double, 15> residual_history_{};
   int residual_count_ = 0;
   uint32_t valid_pixels_ = 0;

@@ -218,35 +218,58 @@ TEST(TrackerHardCases, ABoxAThirdOfTheViewMovingThroughIsLeftOutAndTheTrackHolds
 
 // The mock camera's `carried` scene: a cardboard box 0.6 to 0.9 m in front of
 // the camera over the lower left of every frame (about 28 % of the view),
-// carried with the orbiting camera (a robot's gripper holding it). MEASURED
-// LIMITATION: the block wins. It is in the map from the first frame, so it is
-// never in front of what the map knows and never found moving; its frontal
-// faces at under a metre carry several times the weight of the room's pixels at
-// 2 to 4 m (the noise weighting), agree with "no motion" exactly, and Cauchy's
-// weights favour them further. The pose follows the block (docs/tracking.md:
-// 154 mm ATE at 640x480). Asserted as measured: treating what moves with the
-// camera as one rigid body (RigidFusion) is the missing piece.
-TEST(TrackerHardCases, ABlockCarriedWithTheCameraHijacksThePose) {
-  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
-  std::vector<hal::RgbdFrame> frames = mockFrames("mock:carried,size=320x240,path=orbit", 20);
-  ASSERT_EQ(frames.size(), 20u);
+// carried with the orbiting camera (a robot's gripper holding it). It is in the
+// map from the first frame, so it is never in front of what the map knows, and
+// near the camera its pixels outweigh the room's (the noise weighting): left
+// in, the pose follows it (docs/tracking.md: 153 mm ATE at 640x480, every frame
+// reported tracked). Found still in the image while the room changes
+// (carried_pixels.h), it is left out of the alignment and of the fusion from
+// the second frame on, and the track holds to issue 42's bound, 10 mm.
+struct CarriedRun {
+  double rmse = 0.0, least_carried_share = 1.0;
+  int tracked = 0, lost = 0;
+};
+CarriedRun trackCarried(std::vector<hal::RgbdFrame>& frames, bool find_carried) {
   Rig rig = Rig::make();
+  if (!find_carried) {
+    TrackerConfig tc = rig.tracker.config();
+    tc.carried.enabled = false;
+    rig.tracker = FrameToModelTracker::create(tc).value();
+  }
+  CarriedRun run;
   TrackStats stats;
   double sq = 0.0;
-  int n = 0, lost = 0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     hal::RgbdFrame& f = frames[i];
     const TrackOutcome o = rig.step(f, stats, i == 0 ? &f.T_world_cam : nullptr);
     if (o == TrackOutcome::kLost) {
-      ++lost;
+      ++run.lost;
       continue;
     }
+    if (i >= 10 && stats.valid_pixels > 0) {
+      run.least_carried_share = std::min(run.least_carried_share, static_cast<double>(stats.carried_pixels) / stats.valid_pixels);
+    }
     const double e = translationError(rig.last_pose, f.T_world_cam);
-    sq += e * e, ++n;
+    sq += e * e, ++run.tracked;
   }
-  const double rmse = std::sqrt(sq / std::max(n, 1));
-  std::printf("orbit carrying a block: %d tracked, %d lost, RMSE %.2f mm\n", n, lost, rmse * 1e3);
-  EXPECT_GT(rmse, 0.05) << "the carried block no longer hijacks the pose: make this a bound (docs/tracking.md)";
+  run.rmse = std::sqrt(sq / std::max(run.tracked, 1));
+  return run;
+}
+
+TEST(TrackerHardCases, ABlockCarriedWithTheCameraIsLeftOutAndTheTrackHolds) {
+  FOVEA_SKIP_LONG_SEQUENCE_UNDER_QEMU();
+  std::vector<hal::RgbdFrame> frames = mockFrames("mock:carried,size=320x240,path=orbit", 30);
+  ASSERT_EQ(frames.size(), 30u);
+  std::vector<hal::RgbdFrame> copies = frames;
+  const CarriedRun found = trackCarried(frames, true);
+  const CarriedRun before = trackCarried(copies, false);
+  std::printf("orbit carrying a block: %d tracked, %d lost, RMSE %.2f mm, carried share at least %.3f from frame 10; "
+              "without finding it RMSE %.2f mm\n",
+              found.tracked, found.lost, found.rmse * 1e3, found.least_carried_share, before.rmse * 1e3);
+  EXPECT_EQ(found.lost, 0);
+  EXPECT_LT(found.rmse, 0.010);
+  EXPECT_GT(found.least_carried_share, 0.2) << "the block is about 28 % of the view";
+  EXPECT_GT(before.rmse, 0.03) << "without the carried pixels the block must still take the pose, or this test shows nothing";
 }
 
 // The mock camera's `walker` scene: a person-sized box walking across the
