@@ -298,6 +298,8 @@ TEST(CarriedPixels, BadInputMarksNothingAndBadConfigsAreRefused) {
   EXPECT_TRUE(refused([](CarriedPixelsConfig& c) { c.min_changed_share = 0.0; }));
   EXPECT_TRUE(refused([&](CarriedPixelsConfig& c) { c.min_region_share = nan; }));
   EXPECT_TRUE(refused([](CarriedPixelsConfig& c) { c.region_step_share = -0.5; }));
+  EXPECT_TRUE(refused([](CarriedPixelsConfig& c) { c.max_depth_m = 0.0; }));
+  EXPECT_TRUE(refused([&](CarriedPixelsConfig& c) { c.max_depth_m = nan; }));
   EXPECT_TRUE(refused([](CarriedPixelsConfig& c) { c.margin_pixels = -1; }));
   EXPECT_TRUE(refused([](CarriedPixelsConfig& c) { c.margin_pixels = 65; }));
   EXPECT_FALSE(CarriedPixels::create(1, 2 * kH, CarriedPixelsConfig{}).isOk());
