@@ -27,18 +27,18 @@
 // at least min_changed_share of the pixels with depth are not still for long,
 // the camera moved (or much of the view did): the pixels still for long are
 // grouped into regions (4-neighbours within region_step_share of each other's
-// depth), and a region of at least min_region_share of the level is carried.
-// Below that share nothing is carried: a camera at rest leaves every pixel
-// still, and there nothing tells the carried from the room.
-//
+// depth), and a region of at least min_region_share of the level whose mean
+// depth is within max_depth_m is carried, widened by margin_pixels. Below that
+// share nothing is: at rest every pixel is still, nothing tells them apart.
 // The carried pixels are left out of the alignment (the tracker clears their
 // depth in its frame pyramid) and join the moving pixels (MovingPixels::update's
 // `carried`): not fused, not taken into the next model, sent as live points.
-// A static surface can be still too while the camera moves, where the motion
-// leaves it unchanged (the point an orbit turns about, a plain floor under a
-// camera moving at a fixed height and pitch); such a region is left out as
-// well, which costs the alignment its constraints for that frame and the map
-// its fusion there (docs/tracking.md measures how often on the static scenes).
+// A static surface within reach can be still too while the camera moves, where
+// the motion leaves it unchanged (a plain desk under a camera moving along it
+// at a fixed height and pitch, the first frames of a slow start); such a
+// region is left out as well, which costs the alignment its constraints and
+// the map its fusion there meanwhile (docs/tracking.md: none on the suite's
+// static scenes, the orbit's turning points being beyond reach).
 //
 // Memory: create() sizes everything for max_width x max_height; find()
 // allocates nothing.
