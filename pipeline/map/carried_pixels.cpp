@@ -5,19 +5,12 @@
 
 #include "core/depth_noise.h"
 #include "pipeline/map/depth_region.h"
+#include "pipeline/map/intensity_level.h"
 
 namespace fovea::pipeline::map {
 
 namespace {
 bool shareOk(double v) { return v >= 0.0 && v <= 1.0; }  // false for NaN
-
-// In 1/255, 0 .. 255 (NaN: 0), rounded as std::lround(c * 255.0f) rounds:
-// for x >= 0, x + 0.5 in double is exact and truncates to the same integer
-// (libm's lround took about a third of find()'s time on the still room).
-int intensityLevel(float intensity) {
-  const float c = intensity >= 0.0f ? std::min(intensity, 1.0f) : 0.0f;
-  return static_cast<int>(static_cast<double>(c * 255.0f) + 0.5);
-}
 }  // namespace
 
 Status CarriedPixelsConfig::validate() const {

@@ -6,6 +6,7 @@
 
 #include "core/depth_noise.h"
 #include "pipeline/map/depth_region.h"
+#include "pipeline/map/intensity_level.h"
 
 namespace fovea::pipeline::map {
 
@@ -171,7 +172,7 @@ uint32_t MovingPixels::age(const FrameIn& half, const uint8_t* carried) {
         is_moving = 1;
       } else if (class_[i] & kInMover) {
         const float z = half.z[i];
-        const int intensity = static_cast<int>(std::lround(std::clamp(half.intensity[i], 0.0f, 1.0f) * 255.0f));
+        const int intensity = intensityLevel(half.intensity[i]);
         const bool steady = age_[i] > 0 && std::abs(z - depth_[i]) <= depth_share * z &&
                             std::abs(intensity - static_cast<int>(intensity_[i])) <= steady_i;
         age_[i] = steady ? static_cast<uint8_t>(std::min(age_[i] + 1, 255)) : uint8_t{1};

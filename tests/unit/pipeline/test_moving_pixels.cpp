@@ -3,7 +3,8 @@
 // before a wall with holes in the map, frame after frame; a box that stops
 // settles after settle_frames frames and one that keeps changing never does;
 // what is not a mover (nothing known behind it, a speckle, a region mostly
-// unknown); and bad input.
+// unknown); and bad input. And the intensity's rounding both references
+// share (intensity_level.h) against std::lround.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -15,6 +16,7 @@
 #include <gtest/gtest.h>
 
 #include "core/depth_noise.h"
+#include "pipeline/map/intensity_level.h"
 #include "pipeline/map/moving_pixels.h"
 
 namespace fovea::pipeline::map {
@@ -324,6 +326,31 @@ TEST(MovingPixels, BadInputMarksNothingAndBadConfigsAreRefused) {
   EXPECT_TRUE(refused([&](MovingPixelsConfig& c) { c.steady_intensity = nan; }));
   EXPECT_FALSE(MovingPixels::create(1, kH, MovingPixelsConfig{}).isOk());
   EXPECT_FALSE(MovingPixels::create(kW, 9000, MovingPixelsConfig{}).isOk());
+}
+
+// As std::lround(c * 255.0f) on [0, 1], the halves between levels and their
+// neighbouring floats included; clamped outside; NaN is level 0.
+TEST(IntensityLevel, IsLroundOfTheClampedIntensityAndNaNIsZero) {
+  const auto lroundLevel = [](float c) { return static_cast<int>(std::lround(c * 255.0f)); };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int k = 0; k < 200000; ++k) {
+    const float c = unit(rng);
+    ASSERT_EQ(intensityLevel(c), lroundLevel(c)) << c;
+  }
+  for (int level = 0; level < 255; ++level) {
+    const float half = (static_cast<float>(level) + 0.5f) / 255.0f;
+    for (float c : {std::nextafter(half, 0.0f), half, std::nextafter(half, 1.0f)}) {
+      ASSERT_EQ(intensityLevel(c), lroundLevel(c)) << c;
+    }
+  }
+  EXPECT_EQ(intensityLevel(0.0f), 0);
+  EXPECT_EQ(intensityLevel(1.0f), 255);
+  EXPECT_EQ(intensityLevel(-0.2f), 0);
+  EXPECT_EQ(intensityLevel(7.0f), 255);
+  EXPECT_EQ(intensityLevel(std::numeric_limits<float>::infinity()), 255);
+  EXPECT_EQ(intensityLevel(-std::numeric_limits<float>::infinity()), 0);
+  EXPECT_EQ(intensityLevel(std::numeric_limits<float>::quiet_NaN()), 0);
 }
 
 }  // namespace
