@@ -1,7 +1,7 @@
 // The tracker's per-pixel kernel (FrameToModelTracker::track(), one Gauss-Newton
 // iteration at one pyramid level; docs/tracking.md): each pixel's residuals and
 // Jacobians against the model, summed into one 6x6 normal system.
-//   trackLevelRef   the scalar reference, the specification (tracker.cpp);
+//   trackLevelRef   the scalar reference, the specification (tracker_kernels.cpp);
 //   trackLevelSimd  Highway, dynamically dispatched (tracker_simd-inl.h,
 //                   tracker_simd.cpp).
 // Beside it, the pyramids' kernels: the normals of a vertex map and the 2x2
@@ -52,11 +52,14 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "core/depth_noise.h"
 #include "core/kernel_set.h"
 
 namespace fovea::pipeline::map {
 
 inline constexpr double kTrackSimdTolerance = 1e-4;
+// depthSigma(1 m) (core/depth_noise.h): the noise-weighted ICP residual's unit.
+inline constexpr float kTrackSigmaAt1m = depthSigma(1.0f);
 
 // One pyramid level of the new frame (structure of arrays, width x height).
 struct TrackFrameLevel {

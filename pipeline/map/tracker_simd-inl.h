@@ -3,7 +3,7 @@
 // function that calls a Highway op sits between HWY_BEFORE_NAMESPACE and
 // HWY_AFTER_NAMESPACE (GCC 12 on aarch64 refuses to inline the ops otherwise).
 //
-// The reference's arithmetic per pixel (trackPixelRef, tracker.cpp), a vector
+// The reference's arithmetic per pixel (trackPixelRef, tracker_kernels.cpp), a vector
 // of pixels at a time: the model is gathered at each lane's projection; lanes
 // that do not associate are computed too and zeroed before they are summed.
 // The products are summed per lane in float across a row (a lane sees width /
@@ -35,7 +35,6 @@ namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
 inline constexpr std::size_t kTrackMaxLanes = HWY_MAX_BYTES / sizeof(float);
-inline constexpr float kTrackSigmaAt1m = depthSigma(1.0f);  // as the reference's
 
 // The 29 running sums of a row, a vector's lanes each, in memory (SVE's
 // vectors are sizeless: no arrays or members of them): J^T J's upper triangle
@@ -208,7 +207,7 @@ HWY_INLINE void TrackVector(DF df, const TrackModelLevel& m, const TrackParams& 
   PhotometricTerms(df, m, p, fu, fv, qx, qy, qz, safe_qz, j, icp, fi_, acc, photo_inliers);
 }
 
-// computeNormalsRef's arithmetic (tracker.cpp) on a vector of interior pixels
+// computeNormalsRef's arithmetic (tracker_kernels.cpp) on a vector of interior pixels
 // starting at i: the same operations in the same order, selects for its
 // branches, so the same bits.
 template <class DF>

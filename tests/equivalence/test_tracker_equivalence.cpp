@@ -1,5 +1,5 @@
 // The tracker's Highway kernel (trackLevelSimd, tracker_simd-inl.h) against its
-// scalar reference (trackLevelRef, tracker.cpp) on every Highway target here:
+// scalar reference (trackLevelRef, tracker_kernels.cpp) on every Highway target here:
 // the same inliers, and each of the 27 sums within kTrackSimdTolerance of the
 // reference's, relative to the sum's Cauchy-Schwarz scale (tracker_kernels.h),
 // on random scenes and on adversarial ones (no valid pixel, NaN and huge depth,
