@@ -262,6 +262,93 @@ std::string teddyPath() {
   return "../shared/data/tum-fr3-teddy";
 }
 
+// The options every run takes (a switch off turns it off in every run of the suite).
+struct Switches {
+  KernelSet kernels = fovea::defaultKernelSet();
+  std::array<int, 3> iterations = TrackerConfig{}.iterations;
+  bool moving = true, robust = true, carried = true;
+};
+
+std::optional<Switches> parseSwitches(int argc, char** argv) {
+  Switches w;
+  const std::optional<KernelSet> kernels = fovea::parseKernelSet(fovea::bench::option(argc, argv, "--kernels", "simd"));
+  if (!kernels) {
+    std::fprintf(stderr, "fovea-track: --kernels ref|simd\n");
+    return std::nullopt;
+  }
+  w.kernels = *kernels;
+  const std::string iteration_text = fovea::bench::option(argc, argv, "--iterations", "");
+  if (!iteration_text.empty() &&
+      std::sscanf(iteration_text.c_str(), "%d,%d,%d", &w.iterations[0], &w.iterations[1], &w.iterations[2]) != 3) {
+    std::fprintf(stderr, "fovea-track: --iterations FINE,MID,COARSE (three counts, as TrackerConfig::iterations)\n");
+    return std::nullopt;
+  }
+  const std::string moving = fovea::bench::option(argc, argv, "--moving", "on");
+  const std::string robust = fovea::bench::option(argc, argv, "--robust", "on");
+  const std::string carried = fovea::bench::option(argc, argv, "--carried", "on");
+  if ((moving != "on" && moving != "off") || (robust != "on" && robust != "off") ||
+      (carried != "on" && carried != "off")) {
+    std::fprintf(stderr, "fovea-track: --moving on|off, --robust on|off, --carried on|off\n");
+    return std::nullopt;
+  }
+  w.moving = moving == "on", w.robust = robust == "on", w.carried = carried == "on";
+  return w;
+}
+
+// One run of the camera the command line names.
+int runOne(int argc, char** argv, const std::string& camera, const Switches& w) {
+  RunOptions o;
+  o.camera = camera;
+  o.name = camera.substr(0, 28);
+  o.frames = std::atoi(fovea::bench::option(argc, argv, "--frames", "60").c_str());
+  o.every = std::max(1, std::atoi(fovea::bench::option(argc, argv, "--every", "1").c_str()));
+  o.hard = fovea::bench::option(argc, argv, "--case", "plain");
+  o.kernels = w.kernels;
+  o.iterations = w.iterations;
+  o.moving = w.moving, o.robust = w.robust, o.carried = w.carried;
+  o.verbose = fovea::bench::option(argc, argv, "--verbose", "off") == "on";
+  const RunResult r = run(o);
+  printRow(o, r);
+  return r.ok ? 0 : 1;
+}
+
+// The suite: TUM teddy, the mock orbit and dolly, the hard cases (each mover
+// also "as before": without the moving pixels, the robust weights and the
+// carried pixels).
+std::vector<RunOptions> suiteRuns(const std::string& tum_dir, KernelSet k) {
+  const std::string tum = "tum:" + tum_dir + ",loop=off";
+  const std::string orbit = "mock:living-room,size=640x480,path=orbit";
+  const std::string dolly = "mock:living-room,size=640x480,path=dolly";
+  const std::string balloon = "mock:balloon,size=640x480,path=orbit";
+  const std::string walker = "mock:walker,size=640x480,path=orbit";    // a person crossing a third of the view
+  const std::string carried = "mock:carried,size=640x480,path=orbit";  // a block carried with the camera
+  const std::string carried_dolly = "mock:carried,size=640x480,path=dolly";  // ... starting slowly
+  return {
+      {"tum-fr3-teddy", tum, 60, 1, "plain", k},
+      {"tum-fr3-teddy (ref kernels)", tum, 60, 1, "plain", KernelSet::kRef},
+      {"mock orbit", orbit, 90, 1, "plain", k},
+      {"mock dolly", dolly, 90, 1, "plain", k},
+      {"hard: orbit, every 2nd", orbit, 45, 2, "skip", k},
+      {"hard: tum, every 2nd", tum, 30, 2, "skip", k},
+      {"hard: invalid depth @30", orbit, 60, 1, "invalid", k},
+      {"hard: wall @30-34", orbit, 60, 1, "wall", k},
+      {"hard: moving object", orbit, 60, 1, "object", k},
+      {"hard: moving object, as before", orbit, 60, 1, "object", k, {}, false, false, false},
+      {"hard: small moving object", orbit, 60, 1, "small", k},
+      {"hard: small object, as before", orbit, 60, 1, "small", k, {}, false, false, false},
+      {"hard: balloon, orbit", balloon, 60, 1, "plain", k},
+      {"hard: balloon, as before", balloon, 60, 1, "plain", k, {}, false, false, false},
+      {"hard: walker, orbit", walker, 90, 1, "plain", k},
+      {"hard: walker, as before", walker, 90, 1, "plain", k, {}, false, false, false},
+      {"hard: carried block, orbit", carried, 60, 1, "plain", k},
+      {"hard: carried, as before", carried, 60, 1, "plain", k, {}, false, false, false},
+      {"hard: carried block, dolly", carried_dolly, 60, 1, "plain", k},
+      {"hard: carried dolly, before", carried_dolly, 60, 1, "plain", k, {}, false, false, false},
+      {"hard: socket jump @30", orbit, 60, 1, "jump", k},
+      {"hard: socket drift 1cm/f", orbit, 60, 1, "drift", k},
+  };
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -275,81 +362,17 @@ int main(int argc, char** argv) {
       return 0;
     }
   }
-  const std::optional<KernelSet> kernels = fovea::parseKernelSet(fovea::bench::option(argc, argv, "--kernels", "simd"));
-  if (!kernels) {
-    std::fprintf(stderr, "fovea-track: --kernels ref|simd\n");
-    return 2;
-  }
-  std::array<int, 3> iterations = TrackerConfig{}.iterations;
-  const std::string iteration_text = fovea::bench::option(argc, argv, "--iterations", "");
-  if (!iteration_text.empty() &&
-      std::sscanf(iteration_text.c_str(), "%d,%d,%d", &iterations[0], &iterations[1], &iterations[2]) != 3) {
-    std::fprintf(stderr, "fovea-track: --iterations FINE,MID,COARSE (three counts, as TrackerConfig::iterations)\n");
-    return 2;
-  }
-  const std::string moving = fovea::bench::option(argc, argv, "--moving", "on");
-  const std::string robust = fovea::bench::option(argc, argv, "--robust", "on");
-  const std::string carried_option = fovea::bench::option(argc, argv, "--carried", "on");
-  if ((moving != "on" && moving != "off") || (robust != "on" && robust != "off") ||
-      (carried_option != "on" && carried_option != "off")) {
-    std::fprintf(stderr, "fovea-track: --moving on|off, --robust on|off, --carried on|off\n");
-    return 2;
-  }
+  const std::optional<Switches> switches = parseSwitches(argc, argv);
+  if (!switches) return 2;
   const std::string camera = fovea::bench::option(argc, argv, "--camera", "");
   printHeader();
-  if (!camera.empty()) {
-    RunOptions o;
-    o.camera = camera;
-    o.name = camera.substr(0, 28);
-    o.frames = std::atoi(fovea::bench::option(argc, argv, "--frames", "60").c_str());
-    o.every = std::max(1, std::atoi(fovea::bench::option(argc, argv, "--every", "1").c_str()));
-    o.hard = fovea::bench::option(argc, argv, "--case", "plain");
-    o.kernels = *kernels;
-    o.iterations = iterations;
-    o.moving = moving == "on";
-    o.robust = robust == "on";
-    o.carried = carried_option == "on";
-    o.verbose = fovea::bench::option(argc, argv, "--verbose", "off") == "on";
-    const RunResult r = run(o);
-    printRow(o, r);
-    return r.ok ? 0 : 1;
-  }
-  const std::string tum = "tum:" + fovea::bench::option(argc, argv, "--tum", teddyPath().c_str()) + ",loop=off";
-  const std::string orbit = "mock:living-room,size=640x480,path=orbit";
-  const std::string dolly = "mock:living-room,size=640x480,path=dolly";
-  const std::string walker = "mock:walker,size=640x480,path=orbit";    // a person crossing a third of the view
-  const std::string carried = "mock:carried,size=640x480,path=orbit";  // a block carried with the camera
-  const std::string carried_dolly = "mock:carried,size=640x480,path=dolly";  // ... starting slowly
-  std::vector<RunOptions> suite = {
-      {"tum-fr3-teddy", tum, 60, 1, "plain", *kernels},
-      {"tum-fr3-teddy (ref kernels)", tum, 60, 1, "plain", KernelSet::kRef},
-      {"mock orbit", orbit, 90, 1, "plain", *kernels},
-      {"mock dolly", dolly, 90, 1, "plain", *kernels},
-      {"hard: orbit, every 2nd", orbit, 45, 2, "skip", *kernels},
-      {"hard: tum, every 2nd", tum, 30, 2, "skip", *kernels},
-      {"hard: invalid depth @30", orbit, 60, 1, "invalid", *kernels},
-      {"hard: wall @30-34", orbit, 60, 1, "wall", *kernels},
-      {"hard: moving object", orbit, 60, 1, "object", *kernels},
-      {"hard: moving object, as before", orbit, 60, 1, "object", *kernels, {}, false, false, false},
-      {"hard: small moving object", orbit, 60, 1, "small", *kernels},
-      {"hard: small object, as before", orbit, 60, 1, "small", *kernels, {}, false, false, false},
-      {"hard: balloon, orbit", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels},
-      {"hard: balloon, as before", "mock:balloon,size=640x480,path=orbit", 60, 1, "plain", *kernels, {}, false, false, false},
-      {"hard: walker, orbit", walker, 90, 1, "plain", *kernels},
-      {"hard: walker, as before", walker, 90, 1, "plain", *kernels, {}, false, false, false},
-      {"hard: carried block, orbit", carried, 60, 1, "plain", *kernels},
-      {"hard: carried, as before", carried, 60, 1, "plain", *kernels, {}, false, false, false},
-      {"hard: carried block, dolly", carried_dolly, 60, 1, "plain", *kernels},
-      {"hard: carried dolly, before", carried_dolly, 60, 1, "plain", *kernels, {}, false, false, false},
-      {"hard: socket jump @30", orbit, 60, 1, "jump", *kernels},
-      {"hard: socket drift 1cm/f", orbit, 60, 1, "drift", *kernels},
-  };
+  if (!camera.empty()) return runOne(argc, argv, camera, *switches);
   int failed = 0;
-  for (RunOptions& o : suite) {
-    o.iterations = iterations;
-    o.moving = o.moving && moving == "on";
-    o.robust = o.robust && robust == "on";
-    o.carried = o.carried && carried_option == "on";
+  for (RunOptions& o : suiteRuns(fovea::bench::option(argc, argv, "--tum", teddyPath().c_str()), switches->kernels)) {
+    o.iterations = switches->iterations;
+    o.moving = o.moving && switches->moving;
+    o.robust = o.robust && switches->robust;
+    o.carried = o.carried && switches->carried;
     const RunResult r = run(o);
     printRow(o, r);
     failed += r.ok ? 0 : 1;
