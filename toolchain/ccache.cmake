@@ -59,3 +59,33 @@ if(FOVEA_CCACHE AND FOVEA_CCACHE_PROGRAM)
 elseif(FOVEA_CCACHE)
   message(STATUS "fovea: ccache not found: compiling without a cache (toolchain/setup-host installs it)")
 endif()
+
+# fovea_cache_shared_file(SUBDIR PREFIX SUFFIX TEXT OUT_VAR): a generated file
+# that compiles refer to by its path (the clang trees' test header, whose path
+# the PCH records; UBSan's ignore list), written once as SUBDIR/PREFIX-KEYSUFFIX,
+# KEY a hash of TEXT, beside the compiler cache, outside every clone: ccache hashes
+# such a path as written, so a path inside the clone missed in every other
+# clone, and a path that did not change with the text would keep stale objects.
+# Without the cache, in the build tree. OUT_VAR: the file's path.
+function(fovea_cache_shared_file subdir prefix suffix text out_var)
+  string(SHA256 key "${text}")
+  string(SUBSTRING "${key}" 0 16 key)
+  set(dir "${PROJECT_BINARY_DIR}/${subdir}")
+  if(FOVEA_CCACHE_DIR AND CMAKE_CXX_COMPILER_LAUNCHER)
+    get_filename_component(shared_dir "${FOVEA_CCACHE_DIR}/../${subdir}" ABSOLUTE)
+    execute_process(COMMAND sh -c "mkdir -p '${shared_dir}' && test -w '${shared_dir}'"
+                    RESULT_VARIABLE dir_status OUTPUT_QUIET ERROR_QUIET)
+    if(dir_status EQUAL 0)
+      set(dir "${shared_dir}")
+    endif()
+  endif()
+  set(path "${dir}/${prefix}-${key}${suffix}")
+  if(NOT EXISTS "${path}")
+    # Written aside and renamed: another clone's configure may write it too.
+    file(WRITE "${path}.${key}.tmp" "${text}")
+    file(RENAME "${path}.${key}.tmp" "${path}")
+  endif()
+  # Removed from outside the tree (the cache's directory emptied): written again.
+  set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS "${path}")
+  set(${out_var} "${path}" PARENT_SCOPE)
+endfunction()
