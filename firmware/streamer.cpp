@@ -137,7 +137,11 @@ Status Streamer::makeEncoders(uint32_t mtu_bytes) {
   if (!encoder) return encoder.status();
   encoder_.emplace(std::move(encoder.value()));
   if (bricks_too) {
-    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points, encoder_points_);
+    // A brick version of more parts than the sender keeps cannot go: the
+    // arena holds that many, not a worst-case brick's (1 414 chunks at the
+    // default MTU for 65 536 points, against 256 parts).
+    Result<net::ChunkEncoder> bricks = net::ChunkEncoder::create(codec, config_.max_brick_points, encoder_points_,
+                                                                 config_.brick_sender.max_parts);
     if (!bricks) return bricks.status();
     brick_encoder_.emplace(std::move(bricks.value()));
   }

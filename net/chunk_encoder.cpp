@@ -331,6 +331,10 @@ ChunkEncoder::ChunkEncoder(ChunkEncoder&&) noexcept = default;
 ChunkEncoder& ChunkEncoder::operator=(ChunkEncoder&&) noexcept = default;
 ChunkEncoder::~ChunkEncoder() = default;
 
+std::size_t zstdWorkspaceBytes(int level, std::size_t max_source_bytes) {
+  return ZSTD_estimateCCtxSize_usingCParams(ZSTD_getCParams(level, max_source_bytes, 0));
+}
+
 std::size_t maxChunks(const CodecConfig& config, std::size_t points) {
   // Every chunk but a region's last holds more than budget - 23 bytes of at
   // most 23 bytes per point (a 127-bit position code, a 17-bit luma code and two
@@ -340,7 +344,7 @@ std::size_t maxChunks(const CodecConfig& config, std::size_t points) {
 }
 
 Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t max_points,
-                                         std::shared_ptr<PointScratch> scratch) {
+                                         std::shared_ptr<PointScratch> scratch, std::size_t max_chunks) {
   if (Status st = validate(config); !st) return st;
   if (max_points == 0 || max_points > (std::size_t{1} << 26)) {
     return Result<ChunkEncoder>(ErrorCode::kInvalidArgument,
@@ -359,7 +363,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   static_assert(kMinPayload >= kMaxHeader + 64);
   s->budget = config.max_payload - kMaxHeader;
 
-  s->max_chunks = maxChunks(config, max_points);
+  s->max_chunks = max_chunks > 0 ? std::min(max_chunks, maxChunks(config, max_points)) : maxChunks(config, max_points);
   // Each chunk starts at a kPayloadAlignment boundary (net/wire.h): the patch
   // below and every decoder read it in place.
   s->arena.resize(s->max_chunks * alignUp(config.max_payload, kPayloadAlignment));
@@ -369,7 +373,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   s->raw.resize(config.max_payload + 64);
   s->packed.resize(ZSTD_compressBound(config.max_payload));
   if (config.entropy_coding) {
-    s->zstd_workspace.resize(ZSTD_estimateCCtxSize(config.zstd_level));
+    s->zstd_workspace.resize(zstdWorkspaceBytes(config.zstd_level, s->raw.size()));
     s->cctx = ZSTD_initStaticCCtx(s->zstd_workspace.data(), s->zstd_workspace.size());
     if (s->cctx == nullptr) return Result<ChunkEncoder>(ErrorCode::kInvalidArgument, "codec: zstd context failed");
   }
@@ -382,6 +386,7 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
 }
 
 const CodecConfig& ChunkEncoder::config() const { return s_->config; }
+std::size_t ChunkEncoder::maxChunkCount() const { return s_->max_chunks; }
 std::size_t ChunkEncoder::chunkCount() const { return s_->chunk_count; }
 std::span<const uint8_t> ChunkEncoder::chunk(std::size_t i) const {
   const State::ChunkRef& c = s_->chunks[i];

@@ -91,6 +91,14 @@ struct EncodeInput {
 // costliest points; the encoder's own capacity).
 std::size_t maxChunks(const CodecConfig& config, std::size_t points);
 
+// The bytes of a static zstd compression context that compresses every source
+// of at most max_source_bytes at `level`: the library's estimate for the
+// parameters it picks for a source of that size (a chunk is at most a
+// datagram, where ZSTD_estimateCCtxSize(level) allows for sources of any size:
+// 48 KiB at level 1 for the default MTU's chunks against 569 KiB, 64 KiB at
+// level 9 against 12.5 MiB). The output does not depend on the context's size.
+std::size_t zstdWorkspaceBytes(int level, std::size_t max_source_bytes);
+
 class ChunkEncoder {
  public:
   // The per-point arrays encode() sorts in (28 bytes a point),
@@ -101,9 +109,14 @@ class ChunkEncoder {
 
   // max_points: points per foveated frame. Allocates every buffer here but the
   // per-point arrays when `scratch` is given (it must hold max_points; the
-  // encoder keeps it alive; kInvalidArgument when it is smaller).
+  // encoder keeps it alive; kInvalidArgument when it is smaller). max_chunks:
+  // the most chunks one encode() may make, when the caller cannot take more
+  // (a brick version has at most BrickSenderConfig::max_parts parts); the
+  // arena is sized for them, and an encode() that needs more fails with
+  // kCapacityExceeded. 0: maxChunks(config, max_points), every frame of
+  // max_points fits.
   static Result<ChunkEncoder> create(const CodecConfig& config, std::size_t max_points,
-                                     std::shared_ptr<PointScratch> scratch = nullptr);
+                                     std::shared_ptr<PointScratch> scratch = nullptr, std::size_t max_chunks = 0);
   ChunkEncoder(ChunkEncoder&&) noexcept;
   ChunkEncoder& operator=(ChunkEncoder&&) noexcept;
   ~ChunkEncoder();
@@ -126,6 +139,9 @@ class ChunkEncoder {
     return encode(EncodeInput::of(cloud), region_voxel_size_m, frame_id, capture_time_ns, brick);
   }
 
+  // The most chunks one encode() may make (create()'s max_chunks, or
+  // maxChunks() of its max_points): what the arena holds.
+  std::size_t maxChunkCount() const;
   // The chunks of the last encode(), fovea first then outward.
   std::size_t chunkCount() const;
   std::span<const uint8_t> chunk(std::size_t i) const;

@@ -88,8 +88,10 @@ struct Rig {
   pipeline::FoveatedCloud live{kLivePoints};
   pipeline::FoveationStats stats;
 
-  // mtu_bytes: the operator's (0: its default); max_frame_bricks: the streamer's.
-  explicit Rig(int64_t resend_after_ns = 100'000'000, uint32_t mtu_bytes = 0, std::size_t max_frame_bricks = 16) {
+  // mtu_bytes: the operator's (0: its default); max_frame_bricks and
+  // max_parts (a brick version's): the streamer's.
+  explicit Rig(int64_t resend_after_ns = 100'000'000, uint32_t mtu_bytes = 0, std::size_t max_frame_bricks = 16,
+               std::size_t max_parts = 256) {
     StreamConfig config;
     config.link.listen = "127.0.0.1:0";
     config.link.insecure = true;
@@ -101,6 +103,7 @@ struct Rig {
     config.map_bricks = true;
     config.brick_sender.max_bricks = kMaxBricks;
     config.brick_sender.resend_after_ns = resend_after_ns;
+    config.brick_sender.max_parts = max_parts;
     config.max_brick_points = 1024;
     config.max_frame_brick_points = 4096;
     config.max_frame_bricks = max_frame_bricks;
@@ -436,6 +439,33 @@ TEST(StreamerBricks, UnacknowledgedPartsGoAgainUntilAcknowledged) {
     ASSERT_TRUE(rig.op->sendBrickAck(ack));
   }
   ASSERT_TRUE(rig.versionsDone(3));
+}
+
+// A brick version needs more parts than the sender keeps (the brick encoder
+// holds no more chunks than that): that brick is told to the planner as not
+// sent, and the batch's other bricks go.
+TEST(StreamerBricks, ABrickOfMorePartsThanTheSenderKeepsIsToldToThePlanner) {
+  Rig rig(100'000'000, 0, 16, /*max_parts=*/2);
+  pipeline::map::BrickBatch batch = makeBatch(1, 100);
+  // A fourth brick, slot 20: 1000 points scattered over half a metre at 1 mm
+  // steps in random colours, at least 3 bytes a point: more than 2 parts.
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> unit(0.0f, 0.5f);
+  auto& big = batch.add();
+  big.brick = 20;
+  big.key = {5, 5, 5};
+  big.version = 1;
+  big.first = static_cast<uint32_t>(batch.points.size());
+  for (int i = 0; i < 1000; ++i) {
+    ASSERT_TRUE(pushBrickPoint(batch, unit(rng), unit(rng), unit(rng),
+                               pipeline::packRgb(rng() & 0xff, rng() & 0xff, rng() & 0xff)));
+  }
+  big.count = 1000;
+  Result<FrameSendReport> sent = rig.send(&batch, 1);
+  ASSERT_TRUE(sent) << sent.status().message();
+  EXPECT_EQ(sent->bricks, 3u);
+  EXPECT_EQ(rig.forgotten(), std::set<std::size_t>({20}));
+  EXPECT_EQ(rig.streamer->brickCounters()->versions, 3u);  // the fourth never began
 }
 
 TEST(StreamerBricks, EvictionsAndFramesThatCannotGoAreToldToThePlanner) {

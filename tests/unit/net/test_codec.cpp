@@ -13,6 +13,10 @@
 
 #include <gtest/gtest.h>
 
+#define ZSTD_STATIC_LINKING_ONLY  // the context size estimates
+#include <zstd.h>
+
+#include "net/chunk_header.h"
 #include "net/codec.h"
 #include "tests/support/clouds.h"
 #include "tests/unit/net/mock_frame.h"
@@ -360,6 +364,92 @@ TEST(CodecScratch, EncodersSharingTheirPointArraysGiveTheBytesOfEncodersAlone) {
   Result<ChunkEncoder> too_big = ChunkEncoder::create(config, frame_points + 1, ChunkEncoder::makePointScratch(frame_points));
   EXPECT_EQ(too_big.status().code(), ErrorCode::kInvalidArgument);
   EXPECT_NE(too_big.status().message().find("shared point scratch"), std::string::npos) << too_big.status().message();
+}
+
+// An encoder capped at fewer chunks than its points may need (the streamer's
+// brick encoder, at the sender's parts a version): the arena holds that many;
+// a cloud within the cap gives the bytes of an encoder without it, one beyond
+// it is a capacity error that leaves no chunk, and a cap above what the points
+// can need changes nothing.
+TEST(CodecCapacity, ACappedEncoderHoldsItsCapAndRefusesACloudBeyondIt) {
+  const std::size_t n = 6000;
+  CodecConfig config;
+  const double voxel[] = {0.0};
+  ChunkEncoder whole = makeEncoder(config, n);
+  EXPECT_EQ(whole.maxChunkCount(), maxChunks(config, n));
+  pipeline::FoveatedCloud cloud(n);
+  cloud.points = test::randomCloud(n, Eigen::Vector3d(1, 2, 3), 2.0f, 17);
+  std::fill(cloud.region.begin(), cloud.region.end(), uint8_t{0});
+  ASSERT_TRUE(whole.encode(cloud, voxel, 3, 4).isOk());
+  const std::size_t needed = whole.chunkCount();
+  ASSERT_GT(needed, 10u);
+  ASSERT_LT(needed, maxChunks(config, n));
+
+  Result<ChunkEncoder> at_need = ChunkEncoder::create(config, n, nullptr, needed);
+  ASSERT_TRUE(at_need.isOk()) << at_need.status().toString();
+  EXPECT_EQ(at_need->maxChunkCount(), needed);
+  ASSERT_TRUE(at_need->encode(cloud, voxel, 3, 4).isOk());
+  EXPECT_EQ(chunksOf(*at_need), chunksOf(whole));
+
+  Result<ChunkEncoder> below = ChunkEncoder::create(config, n, nullptr, needed - 1);
+  ASSERT_TRUE(below.isOk());
+  const Status st = below->encode(cloud, voxel, 3, 4);
+  EXPECT_EQ(st.code(), ErrorCode::kCapacityExceeded);
+  EXPECT_NE(st.message().find(std::to_string(needed - 1) + " chunks"), std::string::npos) << st.message();
+  EXPECT_EQ(below->chunkCount(), 0u);
+  // A smaller cloud still fits it, and the encoder works after the error.
+  ASSERT_TRUE(cloud.points.resize(n / 4));
+  ASSERT_TRUE(below->encode(cloud, voxel, 3, 4).isOk());
+  ASSERT_TRUE(whole.encode(cloud, voxel, 3, 4).isOk());
+  EXPECT_EQ(chunksOf(*below), chunksOf(whole));
+
+  Result<ChunkEncoder> above = ChunkEncoder::create(config, n, nullptr, 10 * maxChunks(config, n));
+  ASSERT_TRUE(above.isOk());
+  EXPECT_EQ(above->maxChunkCount(), maxChunks(config, n));
+}
+
+// zstd's context is sized for a chunk, not for a source of any size
+// (zstdWorkspaceBytes): at every level the configuration allows and at the
+// smallest, the default and the largest MTU, the library's own estimate for
+// every source size up to the largest chunk is within it; and encoders with
+// entropy coding compress chunks at every level (a context too small would
+// fail each compression, which the encoder takes as "does not pay" and sends
+// the chunk as it is: no chunk would carry the zstd flag).
+TEST(CodecEntropy, TheChunkSizedZstdContextCompressesAtEveryLevel) {
+  for (int level = -7; level <= 9; ++level) {
+    SCOPED_TRACE(testing::Message() << "level " << level);
+    for (std::size_t payload : {codec_detail::kMinPayload, kDefaultMtu - kDatagramOverhead, codec_detail::kMaxPayload}) {
+      const std::size_t bound = payload + 64;  // the encoder's raw chunk buffer
+      const std::size_t bytes = zstdWorkspaceBytes(level, bound);
+      EXPECT_LT(bytes, ZSTD_estimateCCtxSize(level));
+      for (std::size_t n = 1; n <= bound; ++n) {
+        ASSERT_LE(ZSTD_estimateCCtxSize_usingCParams(ZSTD_getCParams(level, n, 0)), bytes) << n << " bytes";
+      }
+    }
+  }
+  // A regular grid in one colour: its chunks' data repeats, and zstd pays.
+  const std::size_t n = 8000;
+  pipeline::FoveatedCloud cloud(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    ASSERT_TRUE(cloud.points.push(0.004f * static_cast<float>(i % 20), 0.004f * static_cast<float>((i / 20) % 20),
+                                  1.0f + 0.004f * static_cast<float>(i / 400), 0x406080));
+    cloud.region[i] = 0;
+  }
+  const double voxel[] = {0.0};
+  for (int level = -7; level <= 9; ++level) {
+    SCOPED_TRACE(testing::Message() << "level " << level);
+    CodecConfig config;
+    config.entropy_coding = true;
+    config.zstd_level = level;
+    ChunkEncoder enc = makeEncoder(config, n);
+    ASSERT_TRUE(enc.encode(cloud, voxel, 1, 0).isOk());
+    std::size_t compressed = 0;
+    for (std::size_t i = 0; i < enc.chunkCount(); ++i) {
+      compressed += (enc.chunk(i)[18] & codec_detail::kHeaderFlagZstd) != 0;  // the region and flags byte
+    }
+    EXPECT_EQ(compressed, enc.chunkCount());
+    expectRoundTrip(cloud, decodeAll(enc, n), enc, true);
+  }
 }
 
 TEST(CodecRange, PointsFarFromTheWorldOrigin) {
