@@ -28,13 +28,12 @@ BrickSender::BrickSender(const BrickSenderConfig& config) : config_(config) {
   records_.resize(config.max_in_flight);
   record_of_.assign(config.max_bricks, -1);
   ack_bits_.assign(config.max_in_flight * part_bytes_, 0);
-  part_offset_.assign(config.max_in_flight * config.max_parts, 0);
   part_length_.assign(config.max_in_flight * config.max_parts, 0);
 }
 
 std::size_t BrickSender::memoryBytes() const {
   return ring_.capacity() + records_.capacity() * sizeof(Record) + record_of_.capacity() * sizeof(int32_t) +
-         ack_bits_.capacity() + part_offset_.capacity() * sizeof(uint32_t) + part_length_.capacity() * sizeof(uint16_t);
+         ack_bits_.capacity() + part_length_.capacity() * sizeof(uint16_t);
 }
 
 void BrickSender::release(std::size_t r) {
@@ -46,14 +45,10 @@ void BrickSender::release(std::size_t r) {
   if (current_ == r) current_ = SIZE_MAX;
 }
 
-uint64_t BrickSender::partPosition(std::size_t r, uint16_t part) const {
-  const uint64_t base = records_[r].written;
-  const uint32_t since_begin = part_offset_[r * config_.max_parts + part] - static_cast<uint32_t>(base);  // mod 2^32
-  return base + since_begin;
-}
-
-bool BrickSender::intact(std::size_t r, uint16_t part) const {
-  return part_length_[r * config_.max_parts + part] != 0 && written_ - partPosition(r, part) <= ring_.size();
+// A part never wraps around the ring's end: it skips to its start.
+uint64_t BrickSender::placed(uint64_t written, uint16_t length) const {
+  const std::size_t at = static_cast<std::size_t>(written % ring_.size());
+  return at + length > ring_.size() ? written + (ring_.size() - at) : written;
 }
 
 bool BrickSender::begin(uint16_t brick, uint32_t version, uint16_t parts, int64_t now_ns, int* lost) {
@@ -81,7 +76,7 @@ bool BrickSender::begin(uint16_t brick, uint32_t version, uint16_t parts, int64_
     release(r);
   }
   Record& rec = records_[r];
-  rec = Record{true, brick, version, parts, 0, now_ns, ++begun_, written_};
+  rec = Record{true, brick, version, parts, 0, 0, now_ns, ++begun_, written_};
   record_of_[brick] = static_cast<int32_t>(r);
   std::memset(bits(r), 0, part_bytes_);
   std::fill_n(lengths(r), parts, uint16_t{0});
@@ -92,18 +87,17 @@ bool BrickSender::begin(uint16_t brick, uint32_t version, uint16_t parts, int64_
 }
 
 bool BrickSender::addPart(uint16_t part, std::span<const uint8_t> payload, std::span<const uint8_t>* stored) {
-  if (current_ == SIZE_MAX || part >= records_[current_].parts || payload.empty() || payload.size() > ring_.size() / 10 ||
-      payload.size() > std::numeric_limits<uint16_t>::max()) {
+  if (current_ == SIZE_MAX || part != records_[current_].stored || part >= records_[current_].parts ||
+      payload.empty() || payload.size() > ring_.size() / 10 || payload.size() > std::numeric_limits<uint16_t>::max()) {
     return false;
   }
-  // A part never wraps around the ring's end: skip to its start.
-  const std::size_t at = static_cast<std::size_t>(written_ % ring_.size());
-  if (at + payload.size() > ring_.size()) written_ += ring_.size() - at;
+  const auto length = static_cast<uint16_t>(payload.size());
+  written_ = placed(written_, length);
   const std::size_t start = static_cast<std::size_t>(written_ % ring_.size());
   std::memcpy(ring_.data() + start, payload.data(), payload.size());
-  offsets(current_)[part] = static_cast<uint32_t>(written_);  // the low bits: partPosition()
-  lengths(current_)[part] = static_cast<uint16_t>(payload.size());
-  written_ += payload.size();
+  lengths(current_)[part] = length;
+  ++records_[current_].stored;
+  written_ += length;
   ++counters_.parts;
   if (stored) *stored = std::span<const uint8_t>(ring_.data() + start, payload.size());
   return true;

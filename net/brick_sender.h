@@ -52,8 +52,9 @@ class BrickSender {
   // parts; replaces the brick's version in flight. `lost` (may be null) gets
   // the brick whose version had to go to make room. false: parts out of range.
   bool begin(uint16_t brick, uint32_t version, uint16_t parts, int64_t now_ns, int* lost);
-  // Stores part `part` of the version begun last (its datagram payload). false
-  // when the part is out of range, empty, or larger than a tenth of the store.
+  // Stores part `part` of the version begun last (its datagram payload); the
+  // parts come in order, from 0. false when the part is not the next one,
+  // empty, or larger than a tenth of the store.
   // `stored` (may be null) gets the copy in the store, which stays valid until
   // store_bytes more are written: the caller may send from it.
   bool addPart(uint16_t part, std::span<const uint8_t> payload, std::span<const uint8_t>* stored = nullptr);
@@ -83,17 +84,20 @@ class BrickSender {
     uint16_t brick = 0;
     uint32_t version = 0;
     uint16_t parts = 0;
+    uint16_t stored = 0;     // parts added, in order
     uint16_t acked = 0;
     int64_t sent_ns = 0;     // last (re)send
     uint64_t begun = 0;      // order of begin(), for crowding out the oldest
-    uint64_t written = 0;    // the store's written_ at begin(): its parts' positions are this plus their offsets' distance
+    uint64_t written = 0;    // the store's written_ at begin(): its first part starts here (or at the ring's start)
   };
   explicit BrickSender(const BrickSenderConfig& config);
   void release(std::size_t r);
-  bool intact(std::size_t r, uint16_t part) const;
+  // Where a part of `length` bytes goes when the store's writes stand at
+  // `written`: there, or at the ring's start when it would wrap (absolute).
+  uint64_t placed(uint64_t written, uint16_t length) const;
+  bool intact(uint64_t position) const { return written_ - position <= ring_.size(); }
   uint8_t* bits(std::size_t r) { return ack_bits_.data() + r * part_bytes_; }
-  uint32_t* offsets(std::size_t r) { return part_offset_.data() + r * config_.max_parts; }
-  uint64_t partPosition(std::size_t r, uint16_t part) const;  // absolute, from the record's written
+  bool acked(std::size_t r, uint16_t part) { return (bits(r)[part / 8] & (1u << (part % 8))) != 0; }
   uint16_t* lengths(std::size_t r) { return part_length_.data() + r * config_.max_parts; }
 
   BrickSenderConfig config_;
@@ -103,10 +107,10 @@ class BrickSender {
   std::vector<Record> records_;
   std::vector<int32_t> record_of_;       // per brick: its record, -1 none
   std::vector<uint8_t> ack_bits_;        // per record: max_parts bits
-  // Per record and part: the absolute ring position's low 32 bits (4 bytes a
-  // part, not 8: the record's parts are all written soon after its begin(),
-  // well within 2^32 bytes), and the length (0: not stored; no part is empty).
-  std::vector<uint32_t> part_offset_;
+  // Per record and part: the length (0: not stored; no part is empty). A
+  // record's parts lie one after the other from its written, each placed as
+  // addPart() placed it, so their positions are walked from the lengths (a
+  // table of positions beside them was 4 bytes a part: 0.5 MiB).
   std::vector<uint16_t> part_length_;
   std::size_t in_flight_ = 0;
   std::size_t current_ = SIZE_MAX;       // the record begin() started
@@ -123,13 +127,11 @@ std::size_t BrickSender::collectResends(int64_t now_ns, std::size_t max_parts, R
     const std::size_t r = (scan_ + k) % n;
     Record& rec = records_[r];
     if (!rec.used || now_ns - rec.sent_ns < config_.resend_after_ns) continue;
-    bool whole = true;
-    for (uint16_t p = 0; p < rec.parts; ++p) {
-      if (bits(r)[p / 8] & (1u << (p % 8))) continue;
-      if (!intact(r, p)) {
-        whole = false;
-        break;
-      }
+    bool whole = rec.stored == rec.parts;
+    for (uint64_t at = rec.written, p = 0; whole && p < rec.parts; ++p) {
+      at = placed(at, lengths(r)[p]);
+      whole = acked(r, static_cast<uint16_t>(p)) || intact(at);
+      at += lengths(r)[p];
     }
     if (!whole) {
       const uint16_t brick = rec.brick;
@@ -138,12 +140,16 @@ std::size_t BrickSender::collectResends(int64_t now_ns, std::size_t max_parts, R
       lost(brick);
       continue;
     }
-    for (uint16_t p = 0; p < rec.parts && given < max_parts; ++p) {
-      if (bits(r)[p / 8] & (1u << (p % 8))) continue;
-      const std::size_t at = static_cast<std::size_t>(partPosition(r, p) % ring_.size());
-      resend(rec.brick, p, std::span<const uint8_t>(ring_.data() + at, lengths(r)[p]));
-      ++given;
-      ++counters_.resends;
+    for (uint64_t at = rec.written, p = 0; p < rec.parts && given < max_parts; ++p) {
+      const uint16_t length = lengths(r)[p];
+      at = placed(at, length);
+      if (!acked(r, static_cast<uint16_t>(p))) {
+        resend(rec.brick, static_cast<uint16_t>(p),
+               std::span<const uint8_t>(ring_.data() + static_cast<std::size_t>(at % ring_.size()), length));
+        ++given;
+        ++counters_.resends;
+      }
+      at += length;
     }
     rec.sent_ns = now_ns;
     if (given >= max_parts) scan_ = (r + 1) % n;

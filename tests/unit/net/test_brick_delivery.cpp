@@ -239,10 +239,11 @@ TEST(BrickDelivery, PartsOverwrittenBeforeTheirAcknowledgementLoseTheVersion) {
   EXPECT_EQ(sender.inFlight(), 0u);
 }
 
-// A part's place in the store is kept as the low 32 bits of its absolute
-// position: a version whose parts straddle 4 GiB of the store's writes (hours
-// of bricks at a robot's rates) is still whole and resent as the same bytes,
-// and one overwritten there is still lost. 65 535 parts of 64 KiB get there.
+// A part's place in the store is walked from its version's start and the
+// parts' lengths: a version whose parts straddle 4 GiB of the store's writes
+// (hours of bricks at a robot's rates; the places were once kept in 32 bits)
+// is still whole and resent as the same bytes, and one overwritten there is
+// still lost. 65 535 parts of 64 KiB get there.
 TEST(BrickDelivery, PartsPastFourGibibytesOfWritesAreFoundAsBefore) {
   BrickSenderConfig config;
   config.store_bytes = std::size_t{1} << 20;  // 16 parts of 65 535 bytes a turn, then a skip of 16
@@ -304,6 +305,12 @@ TEST(BrickDelivery, AFullTableCrowdsOutTheOldestVersionAndSaysWhich) {
   EXPECT_FALSE(sender.begin(1, 1, 300, 0, &lost));
   EXPECT_FALSE(sender.addPart(1, std::vector<uint8_t>(10)));
   EXPECT_FALSE(sender.addPart(0, std::vector<uint8_t>{})) << "an empty part";
+  // Parts come in order: one ahead of the next, or one stored already, is refused.
+  ASSERT_TRUE(sender.begin(6, 2, 3, 0, &lost));
+  EXPECT_FALSE(sender.addPart(1, std::vector<uint8_t>(10))) << "part 0 is next";
+  EXPECT_TRUE(sender.addPart(0, std::vector<uint8_t>(10)));
+  EXPECT_FALSE(sender.addPart(0, std::vector<uint8_t>(10))) << "part 0 again";
+  EXPECT_TRUE(sender.addPart(1, std::vector<uint8_t>(10)));
   BrickSenderConfig bad;
   bad.store_bytes = 100;
   EXPECT_FALSE(BrickSender::create(bad));
