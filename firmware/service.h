@@ -141,6 +141,7 @@ struct ServiceStats {
     uint64_t brick_versions_done = 0;
     uint64_t brick_versions_lost = 0;
     uint64_t brick_acks_unknown = 0;
+    uint64_t bricks_unstaged = 0;  // the streamer could not stage them (FrameSendReport::bricks_unstaged): due again
     // The operator's copy against the map, as of the last frame sent: bricks
     // due that did not fit it (of them the fovea's), and versions not yet
     // acknowledged whole. All zero with sent_gaze_stamp_ns at or after a gaze
@@ -330,7 +331,7 @@ class Service {
   std::unique_ptr<BrickFeedback> brick_feedback_;
   std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
   std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},
-      brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0};
+      brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0}, bricks_unstaged_{0};
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> sent_gaze_stamp_ns_{0};

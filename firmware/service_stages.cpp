@@ -430,6 +430,7 @@ void Service::publishSendCounters(const FoveatedFrame& f) {
     brick_versions_done_.store(bc->versions_done, std::memory_order_relaxed);
     brick_versions_lost_.store(bc->versions_lost, std::memory_order_relaxed);
     brick_acks_unknown_.store(bc->acks_unknown, std::memory_order_relaxed);
+    bricks_unstaged_.store(streamer_->bricksUnstaged(), std::memory_order_relaxed);
     bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
     fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);
     bricks_in_flight_.store(streamer_->bricksInFlight(), std::memory_order_relaxed);

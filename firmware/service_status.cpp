@@ -173,9 +173,9 @@ void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t s
   }
   if (map_bricks_ && used > 0 && static_cast<std::size_t>(used) < size) {
     std::snprintf(out + used, size - static_cast<std::size_t>(used),
-                  ", brick versions %" PRIu64 " sent %" PRIu64 " acknowledged %" PRIu64 " lost",
+                  ", brick versions %" PRIu64 " sent %" PRIu64 " acknowledged %" PRIu64 " lost %" PRIu64 " unstaged",
                   brick_versions_.load(std::memory_order_relaxed), brick_versions_done_.load(std::memory_order_relaxed),
-                  brick_versions_lost_.load(std::memory_order_relaxed));
+                  brick_versions_lost_.load(std::memory_order_relaxed), bricks_unstaged_.load(std::memory_order_relaxed));
   }
 }
 

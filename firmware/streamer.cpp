@@ -250,6 +250,8 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
                           uint8_t region, uint32_t frame_id, int64_t now_ns, FrameSendReport& report) {
   auto fail = [&] {
     if (feedback_) feedback_->forget(e.brick);
+    ++report.bricks_unstaged;
+    ++bricks_unstaged_;
     return false;
   };
   // Parts staged this frame are sent from the sender's store: they must not be

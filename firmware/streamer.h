@@ -65,6 +65,10 @@ struct FrameSendReport {
   uint32_t brick_parts = 0;
   uint32_t brick_resends = 0;
   uint32_t brick_parts_sent = 0;
+  // Bricks of the batch that could not be staged (their encode failed, they
+  // need more parts than a version may have, or the frame's share of the
+  // store is full): told to the planner, due again.
+  uint32_t bricks_unstaged = 0;
 };
 
 class Streamer {
@@ -149,6 +153,7 @@ class Streamer {
   const net::BrickSenderCounters* brickCounters() const { return brick_sender_ ? &brick_sender_->counters() : nullptr; }
   // Brick versions sent and not yet acknowledged whole.
   std::size_t bricksInFlight() const { return brick_sender_ ? brick_sender_->inFlight() : 0; }
+  uint64_t bricksUnstaged() const { return bricks_unstaged_; }  // FrameSendReport::bricks_unstaged, summed
 
   // A status report with the link's and the uplink's figures and the caller's
   // frame counts (frames_dropped adds the frames the uplink superseded); the
@@ -215,6 +220,7 @@ class Streamer {
   std::vector<net::BrickKey> slot_key_;             // per map slot: the key sent from it
   GridTable slot_index_;                            // key -> the map slot it was sent from
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
+  uint64_t bricks_unstaged_ = 0;
   BrickFeedback* feedback_ = nullptr;
   // sendFrame's steps. The frame's chunks per region, planned and cut (its summary's).
   using RegionCounts = std::array<uint16_t, pipeline::kMaxRegions>;

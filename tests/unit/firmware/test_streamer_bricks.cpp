@@ -342,6 +342,7 @@ TEST(StreamerBricks, AtTheSmallestMtuAFullFrameAndAFullBatchAreStaged) {
   ASSERT_TRUE(sent) << sent.status().message();
   EXPECT_TRUE(sent->had_session);
   EXPECT_EQ(sent->bricks, kBricks);
+  EXPECT_EQ(sent->bricks_unstaged, 0u);
   EXPECT_GT(sent->chunks, 20u);  // at this MTU the live frame takes many datagrams (a handful at the default)
   EXPECT_EQ(sent->chunks_cut, 0u);  // the budget's burst holds them all
   // Every brick staged, none told to the planner as not sent (parts the
@@ -464,6 +465,8 @@ TEST(StreamerBricks, ABrickOfMorePartsThanTheSenderKeepsIsToldToThePlanner) {
   Result<FrameSendReport> sent = rig.send(&batch, 1);
   ASSERT_TRUE(sent) << sent.status().message();
   EXPECT_EQ(sent->bricks, 3u);
+  EXPECT_EQ(sent->bricks_unstaged, 1u);
+  EXPECT_EQ(rig.streamer->bricksUnstaged(), 1u);
   EXPECT_EQ(rig.forgotten(), std::set<std::size_t>({20}));
   EXPECT_EQ(rig.streamer->brickCounters()->versions, 3u);  // the fourth never began
 }
