@@ -222,7 +222,11 @@ std::string mockCameraHelp() {
          faultHelp();
 }
 
-void MockCamera::CleanImage::resize(std::size_t pixels) {
+void MockCamera::CleanImage::resize(int image_width, int image_height, int ring_rows) {
+  width = image_width;
+  rows = ring_rows;
+  const std::size_t pixels =
+      static_cast<std::size_t>(image_width) * static_cast<std::size_t>(ring_rows > 0 ? ring_rows : image_height);
   depth_m.assign(pixels, 0.0);
   sigma_m.assign(pixels, 0.0f);
   drop_prob.assign(pixels, 1.0f);
@@ -273,14 +277,16 @@ Status MockCamera::open() {
   if (options_.path.kind == PathKind::kKeyframes && options_.path.keyframes.empty()) {
     return invalid("path: no keyframes");
   }
-  const auto pixels = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   ray_x_.resize(static_cast<std::size_t>(w));
   ray_y_.resize(static_cast<std::size_t>(h));
   const CameraIntrinsics& k = info_.intrinsics;
   for (int x = 0; x < w; ++x) ray_x_[static_cast<std::size_t>(x)] = (x - k.cx) / k.fx;
   for (int y = 0; y < h; ++y) ray_y_[static_cast<std::size_t>(y)] = (y - k.cy) / k.fy;
-  work_.resize(pixels);
-  if (scene_.isDynamic()) background_.resize(pixels);
+  // A moving camera re-renders every pixel each frame; a dynamic scene keeps
+  // its static layer (background_) and a static camera its whole render.
+  rows_only_ = options_.stream_rows && !scene_.isDynamic() && options_.path.kind != PathKind::kStatic;
+  work_.resize(w, h, rows_only_ ? 3 : 0);
+  if (scene_.isDynamic()) background_.resize(w, h, 0);
   near_row_min_m_.assign(3 * static_cast<std::size_t>(w), 0.0f);
   const std::size_t shapes = scene_.staticShapeCount();
   if (shapes > 65535) return invalid("scene has more than 65535 static shapes");
@@ -331,11 +337,13 @@ Status MockCamera::acquire(RgbdFrame& slot, std::chrono::nanoseconds timeout) {
   const uint64_t sequence = sequence_;
   const double time_s = static_cast<double>(sequence) / options_.fps;
   const Pose pose = cameraPoseAt(options_.path, scene_.info(), time_s);
-  renderClean(pose, time_s);
+  if (!rows_only_) renderClean(pose, time_s);
   if (garbage_pending_ > 0) {
     --garbage_pending_;
     writeGarbage(slot, sequence);
     counters_.injectedGarbage();
+  } else if (rows_only_) {
+    renderAndWriteRows(pose, time_s, slot, sequence);
   } else {
     writeFrame(slot, sequence);
   }

@@ -76,6 +76,11 @@ struct MockCameraOptions {
   bool temporal_noise = true;
   bool realtime = false;
   std::vector<FaultSpec> faults;  // fault=..., see hal/camera/mock/faults.h
+  // A static scene seen from a moving path is rendered row by row into the
+  // frame (three rows of scratch: the noiseless image would be re-rendered
+  // whole every frame anyway, and is 19 bytes a pixel); false keeps the whole
+  // image as a static path does (tests compare the two bit for bit).
+  bool stream_rows = true;
 };
 
 // Parses "SCENE[,key=value...]" (the spec after "mock:"). Keys: seed=UINT,
@@ -114,13 +119,20 @@ class MockCamera final : public Camera {
   const Scene& scene() const { return scene_; }
 
  private:
-  // The noiseless image the sensor model starts from, one entry per pixel.
+  // The noiseless image the sensor model starts from, one entry per pixel:
+  // the whole image, or a ring of `rows` rows (row y at y % rows).
   struct CleanImage {
+    int width = 0;
+    int rows = 0;  // 0: the whole image
+    std::size_t at(int x, int y) const {
+      return static_cast<std::size_t>(rows > 0 ? y % rows : y) * static_cast<std::size_t>(width) +
+             static_cast<std::size_t>(x);
+    }
     std::vector<double> depth_m;   // z along the optical axis; 0: the ray hit nothing
     std::vector<float> sigma_m;    // axial noise
     std::vector<float> drop_prob;  // incidence, material and random dropout; in work_, with the discontinuity bands (updateDropouts)
     std::vector<uint8_t> rgb;      // shaded colour, 3 bytes per pixel
-    void resize(std::size_t pixels);
+    void resize(int image_width, int image_height, int ring_rows);
   };
   struct PixelRect {  // half-open [x0, x1) x [y0, y1); empty when x0 >= x1 or y0 >= y1
     int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
@@ -145,7 +157,14 @@ class MockCamera final : public Camera {
   void copyRect(const CleanImage& from, const PixelRect& rect, CleanImage& to) const;
   PixelRect dynamicRect(const Pose& pose, double time_s) const;
   void updateDropouts(const PixelRect& rect);
+  float* nearRow(int y);  // near_row_min_m_'s row for image row y
+  void fillNearRow(int y, int x0, int x1);
+  void finishDropoutRow(int y, int x0, int x1);
   void writeFrame(RgbdFrame& slot, uint64_t sequence) const;
+  void writeRows(RgbdFrame& slot, uint64_t sequence, int y0, int y1) const;
+  // The row-by-row path (rows_only_): each row ray-cast, then the row above
+  // it finished (its dropout bands need the rows either side) and written.
+  void renderAndWriteRows(const Pose& pose, double time_s, RgbdFrame& slot, uint64_t sequence);
   void writeGarbage(RgbdFrame& slot, uint64_t sequence) const;
   // Fires the faults due at sequence_; kNotFound when a disconnect fired.
   Status fireFaults();
@@ -171,6 +190,7 @@ class MockCamera final : public Camera {
   std::vector<double> ray_y_;  // (v - cy) / fy per row
   CleanImage background_;
   CleanImage work_;
+  bool rows_only_ = false;  // work_ is a ring of three rows (MockCameraOptions::stream_rows)
   std::vector<float> near_row_min_m_;   // scratch of updateDropouts(): three rows
   // Screen-space culling: each static shape's projected bounds, the shapes in
   // order of their first column, those covering the current row and pixel.

@@ -110,7 +110,6 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
   const Vector3d r0 = pose.R_world_cam.col(0);
   const Vector3d r1 = pose.R_world_cam.col(1);
   const Vector3d r2 = pose.R_world_cam.col(2);
-  const std::size_t width = static_cast<std::size_t>(options_.width);
   const Vector3d row = r1 * ray_y_[static_cast<std::size_t>(y)] + r2;
   std::size_t row_count = 0;
   std::size_t next_in_row = 0;
@@ -123,7 +122,7 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
     }
   }
   for (int x = rect.x0; x < rect.x1; ++x) {
-    const std::size_t i = static_cast<std::size_t>(y) * width + static_cast<std::size_t>(x);
+    const std::size_t i = out.at(x, y);
     // d_cam = (x', y', 1), so the ray parameter t of a hit is its depth z.
     const Vector3d dir = r0 * ray_x_[static_cast<std::size_t>(x)] + row;
     Hit hit;
@@ -171,7 +170,7 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
 // divisions, in a tight loop whose iterations overlap (inline with the
 // ray cast, their latency was a third of the render time).
 void MockCamera::modelRowNoise(int y, std::size_t hit_count, CleanImage& out) {
-  const std::size_t row_start = static_cast<std::size_t>(y) * static_cast<std::size_t>(options_.width);
+  const std::size_t row_start = out.at(0, y);
   for (std::size_t k = 0; k < hit_count; ++k) {
     const RowHit& h = row_hits_[k];
     const std::size_t i = row_start + static_cast<std::size_t>(h.x);
@@ -194,10 +193,9 @@ void MockCamera::modelRowNoise(int y, std::size_t hit_count, CleanImage& out) {
 
 void MockCamera::copyRect(const CleanImage& from, const PixelRect& rect, CleanImage& to) const {
   if (rect.empty()) return;
-  const auto width = static_cast<std::size_t>(options_.width);
   const auto n = static_cast<std::size_t>(rect.x1 - rect.x0);
   for (int y = rect.y0; y < rect.y1; ++y) {
-    const std::size_t i = static_cast<std::size_t>(y) * width + static_cast<std::size_t>(rect.x0);
+    const std::size_t i = to.at(rect.x0, y);  // whole images both (a dynamic scene's)
     std::memcpy(&to.depth_m[i], &from.depth_m[i], n * sizeof(double));
     std::memcpy(&to.sigma_m[i], &from.sigma_m[i], n * sizeof(float));
     std::memcpy(&to.drop_prob[i], &from.drop_prob[i], n * sizeof(float));
@@ -277,57 +275,66 @@ MockCamera::PixelRect MockCamera::grow(const PixelRect& r, int pixels) const {
 // Discontinuity bands: a pixel next to (8-neighbourhood) a surface nearer by
 // more than the jump threshold is always lost; the pixel two to the left of
 // such an occluder (the projector's shadow side) is lost half of the time.
-// The 3 x 3 minimum is separable: a horizontal pass into near_row_min_m_, then
-// a vertical one. The horizontal pass keeps three rows (row r at r % 3), each
-// filled just before the first output row that needs it. In place: work_'s
-// probabilities in rect must be the clean ones (rendered or copied since).
+// The 3 x 3 minimum is separable: a horizontal pass into near_row_min_m_
+// (fillNearRow), then a vertical one (finishDropoutRow). The horizontal pass
+// keeps three rows (row r at r % 3), each filled just before the first output
+// row that needs it. In place: work_'s probabilities in rect must be the clean
+// ones (rendered or copied since).
 void MockCamera::updateDropouts(const PixelRect& rect) {
   if (rect.empty()) return;
-  const int w = options_.width;
   const int h = options_.height;
-  const auto at = [w](int x, int y) {
-    return static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-  };
-  const double* depth = work_.depth_m.data();
-  const auto surface = [](double z) { return z > 0.0 ? z : kInf; };  // 0: nothing there
-  const auto row_min = [this, w](int y) {
-    return near_row_min_m_.data() + static_cast<std::size_t>(y % 3) * static_cast<std::size_t>(w);
-  };
-  const auto fill_row = [&](int y) {
-    float* out = row_min(y);
-    for (int x = rect.x0; x < rect.x1; ++x) {
-      double nearest = surface(depth[at(x, y)]);
-      if (x > 0) nearest = std::min(nearest, surface(depth[at(x - 1, y)]));
-      if (x + 1 < w) nearest = std::min(nearest, surface(depth[at(x + 1, y)]));
-      out[x] = static_cast<float>(nearest);
-    }
-  };
   int filled = std::max(0, rect.y0 - 1) - 1;  // the last row filled
   for (int y = rect.y0; y < rect.y1; ++y) {
-    const int y_above = std::max(0, y - 1);
     const int y_below = std::min(h - 1, y + 1);
-    while (filled < y_below) fill_row(++filled);
-    const float* above = row_min(y_above);
-    const float* here = row_min(y);
-    const float* below = row_min(y_below);
-    for (int x = rect.x0; x < rect.x1; ++x) {
-      const std::size_t i = at(x, y);
-      float p = work_.drop_prob[i];
-      const double z = depth[i];
-      if (z > 0.0 && p < 1.0f) {
-        // z - zq > kEdgeJumpM + kEdgeJumpPerM * zq, solved for zq. The pixel
-        // itself is never nearer than that.
-        const double occluder_below_m = (z - kEdgeJumpM) / (1.0 + kEdgeJumpPerM);
-        const float nearest = std::min({above[x], here[x], below[x]});
-        if (nearest < occluder_below_m) {
-          p = 1.0f;
-        } else if (x + kEdgeReachPx < w) {
-          const double zq = depth[i + kEdgeReachPx];
-          if (zq > 0.0 && zq < occluder_below_m) p = 1.0f - (1.0f - p) * (1.0f - kShadowDropout);
-        }
+    while (filled < y_below) fillNearRow(++filled, rect.x0, rect.x1);
+    finishDropoutRow(y, rect.x0, rect.x1);
+  }
+}
+
+float* MockCamera::nearRow(int y) {
+  return near_row_min_m_.data() + static_cast<std::size_t>(y % 3) * static_cast<std::size_t>(options_.width);
+}
+
+// Row y's nearest depth over each pixel and its left and right neighbours.
+void MockCamera::fillNearRow(int y, int x0, int x1) {
+  const int w = options_.width;
+  const double* depth = work_.depth_m.data() + work_.at(0, y);
+  const auto surface = [](double z) { return z > 0.0 ? z : kInf; };  // 0: nothing there
+  float* out = nearRow(y);
+  for (int x = x0; x < x1; ++x) {
+    double nearest = surface(depth[x]);
+    if (x > 0) nearest = std::min(nearest, surface(depth[x - 1]));
+    if (x + 1 < w) nearest = std::min(nearest, surface(depth[x + 1]));
+    out[x] = static_cast<float>(nearest);
+  }
+}
+
+// Row y's final dropout probabilities; the near rows y - 1 .. y + 1 (clamped
+// to the image) are filled.
+void MockCamera::finishDropoutRow(int y, int x0, int x1) {
+  const int w = options_.width;
+  const float* above = nearRow(std::max(0, y - 1));
+  const float* here = nearRow(y);
+  const float* below = nearRow(std::min(options_.height - 1, y + 1));
+  const std::size_t row = work_.at(0, y);
+  const double* depth = work_.depth_m.data() + row;
+  float* drop_prob = work_.drop_prob.data() + row;
+  for (int x = x0; x < x1; ++x) {
+    float p = drop_prob[x];
+    const double z = depth[x];
+    if (z > 0.0 && p < 1.0f) {
+      // z - zq > kEdgeJumpM + kEdgeJumpPerM * zq, solved for zq. The pixel
+      // itself is never nearer than that.
+      const double occluder_below_m = (z - kEdgeJumpM) / (1.0 + kEdgeJumpPerM);
+      const float nearest = std::min({above[x], here[x], below[x]});
+      if (nearest < occluder_below_m) {
+        p = 1.0f;
+      } else if (x + kEdgeReachPx < w) {
+        const double zq = depth[x + kEdgeReachPx];
+        if (zq > 0.0 && zq < occluder_below_m) p = 1.0f - (1.0f - p) * (1.0f - kShadowDropout);
       }
-      work_.drop_prob[i] = p;
     }
+    drop_prob[x] = p;
   }
 }
 
@@ -336,20 +343,33 @@ void MockCamera::updateDropouts(const PixelRect& rect) {
 // Per pair: hash a = (u1: 24 bits, u2: 24 bits, dropout of the first: 16 bits),
 // hash b = mix64(a) = (dropout of the second: 16 bits, RGB noise: 2 x 24 bits).
 void MockCamera::writeFrame(RgbdFrame& slot, uint64_t sequence) const {
-  const std::size_t pixels =
-      static_cast<std::size_t>(options_.width) * static_cast<std::size_t>(options_.height);
+  writeRows(slot, sequence, 0, options_.height);
+}
+
+// Rows [y0, y1) of the frame from work_, which holds them (a ring of rows:
+// one row a call). A pair may straddle two rows (an odd width): each call
+// draws it and writes its own pixel.
+void MockCamera::writeRows(RgbdFrame& slot, uint64_t sequence, int y0, int y1) const {
+  const auto width = static_cast<std::size_t>(options_.width);
+  const std::size_t begin = static_cast<std::size_t>(y0) * width;
+  const std::size_t end = static_cast<std::size_t>(y1) * width;
+  const std::size_t clean_begin = work_.at(0, y0);  // pixel i's clean values at clean_begin + (i - begin)
   uint16_t* depth = slot.depth();
   uint8_t* rgb = slot.rgb();
   if (!options_.noise) {
-    for (std::size_t i = 0; i < pixels; ++i) {
-      const double z = work_.depth_m[i];
-      depth[i] = inRange(z) ? toDepthUnits(z) : 0;
+    for (int y = y0; y < y1; ++y) {
+      const std::size_t row = static_cast<std::size_t>(y) * width;
+      const std::size_t clean = work_.at(0, y);
+      for (std::size_t x = 0; x < width; ++x) {
+        const double z = work_.depth_m[clean + x];
+        depth[row + x] = inRange(z) ? toDepthUnits(z) : 0;
+      }
+      std::memcpy(rgb + 3 * row, &work_.rgb[3 * clean], 3 * width);
     }
-    std::memcpy(rgb, work_.rgb.data(), 3 * pixels);
     return;
   }
   const uint64_t frame_key = hash2(options_.seed, options_.temporal_noise ? sequence : 0);
-  for (std::size_t first = 0; first < pixels; first += 2) {
+  for (std::size_t first = begin & ~std::size_t{1}; first < end; first += 2) {
     const uint64_t a = hash2(frame_key, first / 2);
     const uint64_t b = mix64(a);
     const double u1 = static_cast<double>((a >> 40) + 1) * 0x1.0p-24;  // (0, 1]
@@ -358,20 +378,38 @@ void MockCamera::writeFrame(RgbdFrame& slot, uint64_t sequence) const {
     const double angle = 2.0 * std::numbers::pi * u2;
     const double gaussian[2] = {radius * std::cos(angle), radius * std::sin(angle)};
     const uint64_t drop_bits[2] = {a & 0xFFFFu, b & 0xFFFFu};
-    const std::size_t count = std::min<std::size_t>(2, pixels - first);
-    for (std::size_t k = 0; k < count; ++k) {
+    for (std::size_t k = 0; k < 2; ++k) {
       const std::size_t i = first + k;
-      const double z = work_.depth_m[i];
+      if (i < begin || i >= end) continue;
+      const std::size_t c = clean_begin + (i - begin);
+      const double z = work_.depth_m[c];
       uint16_t units = 0;
       if (inRange(z)) {
         const float u_drop = static_cast<float>(drop_bits[k]) * 0x1.0p-16f;
-        if (u_drop >= work_.drop_prob[i]) units = toDepthUnits(z + work_.sigma_m[i] * gaussian[k]);
+        if (u_drop >= work_.drop_prob[c]) units = toDepthUnits(z + work_.sigma_m[c] * gaussian[k]);
       }
       depth[i] = units;
       const uint64_t rgb_bits = b >> (16 + 24 * k);
-      for (std::size_t c = 0; c < 3; ++c) {
-        rgb[3 * i + c] = addRgbNoise(work_.rgb[3 * i + c], rgb_bits >> (8 * c));
+      for (std::size_t ch = 0; ch < 3; ++ch) {
+        rgb[3 * i + ch] = addRgbNoise(work_.rgb[3 * c + ch], rgb_bits >> (8 * ch));
       }
+    }
+  }
+}
+
+void MockCamera::renderAndWriteRows(const Pose& pose, double time_s, RgbdFrame& slot, uint64_t sequence) {
+  const int w = options_.width;
+  const int h = options_.height;
+  sortShapeRects(pose);
+  for (int y = 0; y <= h; ++y) {
+    if (y < h) {
+      const std::size_t hits = castRow(pose, time_s, y, fullRect(), /*static_layer=*/true, /*dynamic_layer=*/false, work_);
+      modelRowNoise(y, hits, work_);
+      fillNearRow(y, 0, w);
+    }
+    if (y > 0) {
+      finishDropoutRow(y - 1, 0, w);
+      writeRows(slot, sequence, y - 1, y);
     }
   }
 }

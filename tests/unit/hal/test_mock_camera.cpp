@@ -420,6 +420,37 @@ TEST(MockCamera, NoiseOffFramesEqualABruteForceRayCast) {
   }
 }
 
+// A static scene on a moving path is rendered row by row into the frame
+// (MockCameraOptions::stream_rows): every frame is the whole image's bit for
+// bit, noise and dropout bands included, at an odd width (pairs of pixels that
+// share a draw straddle rows) and an even one, with and without noise, and
+// with a garbage frame between.
+TEST(MockCamera, RowByRowFramesAreTheWholeImagesBitForBit) {
+  for (const char* args : {"living-room,size=161x121,path=orbit,fps=4", "living-room,size=160x120,path=pan,fps=4",
+                           "living-room,size=161x121,path=dolly,fps=4,noise=off",
+                           "living-room,size=160x120,path=orbit,fps=4,temporal_noise=off,fault=garbage@2"}) {
+    SCOPED_TRACE(args);
+    Result<MockCameraOptions> options = parseMockCameraOptions(args);
+    ASSERT_TRUE(options.isOk()) << options.status().toString();
+    MockCameraOptions whole_options = options.value();
+    whole_options.stream_rows = false;
+    MockCamera rows(options.value()), whole(whole_options);
+    for (MockCamera* camera : {&rows, &whole}) {
+      ASSERT_TRUE(camera->open().isOk());
+      ASSERT_TRUE(camera->start().isOk());
+    }
+    RgbdFrame a = makeSlot(rows), b = makeSlot(whole);
+    for (int i = 0; i < 5; ++i) {
+      grab(rows, a);
+      grab(whole, b);
+      EXPECT_TRUE(sameDepth(a, b)) << "frame " << i;
+      EXPECT_EQ(std::memcmp(a.rgb(), b.rgb(), 3 * a.pixelCount()), 0) << "frame " << i;
+      EXPECT_GT(std::count_if(a.depth(), a.depth() + a.pixelCount(), [](uint16_t d) { return d != 0; }),
+                static_cast<std::ptrdiff_t>(a.pixelCount() / 4));
+    }
+  }
+}
+
 TEST(MockCamera, ValidPixelFractionIsSane) {
   for (const char* args : {"living-room", "balloon", "living-room,path=orbit"}) {
     std::unique_ptr<MockCamera> camera = makeStarted(args);
