@@ -18,6 +18,7 @@
 #include <Eigen/Geometry>
 
 #include "bench/bench_input.h"
+#include "hal/camera/mock/mock_camera.h"
 #include "hal/camera/registration/registration.h"
 #include "pipeline/acuity_levels.h"
 #include "pipeline/backproject.h"
@@ -362,6 +363,29 @@ void bmMapFuse(benchmark::State& state) {
   state.counters["add_us"] = add_ns / frames * 1e-3;
 }
 
+// The mock camera's frame on the orbit at 640x480 (realtime off: as fast as it
+// renders), the static room rendered row by row into the frame or through its
+// whole noiseless image (MockCameraOptions::stream_rows; the same frames).
+template <bool kStreamRows>
+void bmMockOrbitFrame(benchmark::State& state) {
+  hal::mock::MockCameraOptions options = hal::mock::parseMockCameraOptions("living-room,path=orbit").value();
+  options.stream_rows = kStreamRows;
+  hal::mock::MockCamera camera(options);
+  if (!camera.open() || !camera.start()) {
+    state.SkipWithError("mock camera did not open");
+    return;
+  }
+  hal::RgbdFrame frame(options.width, options.height);
+  for (auto _ : state) {
+    if (!camera.acquire(frame, std::chrono::seconds(1))) {
+      state.SkipWithError("mock camera acquire failed");
+      return;
+    }
+    benchmark::DoNotOptimize(frame.depth());
+  }
+  setPointCounter(state, frame.pixelCount());
+}
+
 struct KernelBench {
   const char* name;  // "<kernel>/<variant>"
   void (*run)(benchmark::State&);
@@ -394,6 +418,9 @@ const KernelBench kKernels[] = {
     {"map/vertices-simd", &bmMapVertices<fovea::KernelSet::kSimd>},
     {"map/fuse-ref", &bmMapFuse<fovea::KernelSet::kRef>},
     {"map/fuse-simd", &bmMapFuse<fovea::KernelSet::kSimd>},
+    // The mock camera's frame (hal/camera/mock), as the service's capture stage makes it
+    {"mock/orbit-rows", &bmMockOrbitFrame<true>},
+    {"mock/orbit-image", &bmMockOrbitFrame<false>},
 };
 
 }  // namespace
