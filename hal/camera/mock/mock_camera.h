@@ -183,7 +183,8 @@ class MockCamera final : public Camera {
   std::chrono::steady_clock::time_point start_time_;
 
   // Scratch, sized in open(). For a static scene `work_` is the whole render and
-  // is kept while the pose stays the same. For a dynamic scene `background_`
+  // is kept while the pose stays the same (on a moving path, three rows of it:
+  // renderAndWriteRows). For a dynamic scene `background_`
   // holds the static layer for `rendered_pose_`, and each frame re-renders only
   // the dynamic shapes' screen rectangle (restoring last frame's from background_).
   std::vector<double> ray_x_;  // (u - cx) / fx per column
@@ -191,7 +192,7 @@ class MockCamera final : public Camera {
   CleanImage background_;
   CleanImage work_;
   bool rows_only_ = false;  // work_ is a ring of three rows (MockCameraOptions::stream_rows)
-  std::vector<float> near_row_min_m_;   // scratch of updateDropouts(): three rows
+  std::vector<float> near_row_min_m_;   // the dropout bands' horizontal pass: three rows (nearRow)
   // Screen-space culling: each static shape's projected bounds, the shapes in
   // order of their first column, those covering the current row and pixel.
   std::vector<PixelRect> shape_rects_;
