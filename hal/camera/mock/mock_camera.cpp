@@ -282,9 +282,13 @@ Status MockCamera::open() {
   const CameraIntrinsics& k = info_.intrinsics;
   for (int x = 0; x < w; ++x) ray_x_[static_cast<std::size_t>(x)] = (x - k.cx) / k.fx;
   for (int y = 0; y < h; ++y) ray_y_[static_cast<std::size_t>(y)] = (y - k.cy) / k.fy;
-  // A moving camera re-renders every pixel each frame; a dynamic scene keeps
-  // its static layer (background_) and a static camera its whole render.
-  rows_only_ = options_.stream_rows && !scene_.isDynamic() && options_.path.kind != PathKind::kStatic;
+  // A camera that moves every frame (orbit, pan, dolly) re-renders every pixel
+  // each frame; a dynamic scene keeps its static layer (background_), and a
+  // camera that may stand still (static, or keyframes, which hold at their
+  // ends) its whole render.
+  const PathKind kind = options_.path.kind;
+  const bool always_moving = kind == PathKind::kOrbit || kind == PathKind::kPan || kind == PathKind::kDolly;
+  rows_only_ = options_.stream_rows && !scene_.isDynamic() && always_moving;
   work_.resize(w, h, rows_only_ ? 3 : 0);
   if (scene_.isDynamic()) background_.resize(w, h, 0);
   near_row_min_m_.assign(3 * static_cast<std::size_t>(w), 0.0f);

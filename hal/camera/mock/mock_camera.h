@@ -76,10 +76,11 @@ struct MockCameraOptions {
   bool temporal_noise = true;
   bool realtime = false;
   std::vector<FaultSpec> faults;  // fault=..., see hal/camera/mock/faults.h
-  // A static scene seen from a moving path is rendered row by row into the
-  // frame (three rows of scratch: the noiseless image would be re-rendered
-  // whole every frame anyway, and is 19 bytes a pixel); false keeps the whole
-  // image as a static path does (tests compare the two bit for bit).
+  // A static scene seen from a path that moves every frame (orbit, pan, dolly)
+  // is rendered row by row into the frame (three rows of scratch: the
+  // noiseless image would be re-rendered whole every frame anyway, and is 19
+  // bytes a pixel); false keeps the whole image as the other paths do (tests
+  // compare the two bit for bit).
   bool stream_rows = true;
 };
 
@@ -183,8 +184,8 @@ class MockCamera final : public Camera {
   std::chrono::steady_clock::time_point start_time_;
 
   // Scratch, sized in open(). For a static scene `work_` is the whole render and
-  // is kept while the pose stays the same (on a moving path, three rows of it:
-  // renderAndWriteRows). For a dynamic scene `background_`
+  // is kept while the pose stays the same (on an orbit, a pan or a dolly, three
+  // rows of it: renderAndWriteRows). For a dynamic scene `background_`
   // holds the static layer for `rendered_pose_`, and each frame re-renders only
   // the dynamic shapes' screen rectangle (restoring last frame's from background_).
   std::vector<double> ray_x_;  // (u - cx) / fx per column
