@@ -110,11 +110,11 @@ BrickSender::Ack BrickSender::acknowledge(uint16_t brick, uint32_t version, uint
   }
   const auto r = static_cast<std::size_t>(record_of_[brick]);
   Record& rec = records_[r];
-  uint8_t* b = bits(r);
-  if (rec.version != version || part >= rec.parts || (b[part / 8] & (1u << (part % 8)))) {
+  if (rec.version != version || part >= rec.parts || acked(r, part)) {
     ++counters_.acks_unknown;
     return Ack::kUnknown;
   }
+  uint8_t* b = bits(r);
   b[part / 8] = static_cast<uint8_t>(b[part / 8] | (1u << (part % 8)));
   ++counters_.acks;
   if (++rec.acked < rec.parts) return Ack::kPart;

@@ -363,7 +363,8 @@ Result<ChunkEncoder> ChunkEncoder::create(const CodecConfig& config, std::size_t
   static_assert(kMinPayload >= kMaxHeader + 64);
   s->budget = config.max_payload - kMaxHeader;
 
-  s->max_chunks = max_chunks > 0 ? std::min(max_chunks, maxChunks(config, max_points)) : maxChunks(config, max_points);
+  const std::size_t most = maxChunks(config, max_points);
+  s->max_chunks = max_chunks > 0 ? std::min(max_chunks, most) : most;
   // Each chunk starts at a kPayloadAlignment boundary (net/wire.h): the patch
   // below and every decoder read it in place.
   s->arena.resize(s->max_chunks * alignUp(config.max_payload, kPayloadAlignment));

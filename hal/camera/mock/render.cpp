@@ -111,6 +111,7 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
   const Vector3d r1 = pose.R_world_cam.col(1);
   const Vector3d r2 = pose.R_world_cam.col(2);
   const Vector3d row = r1 * ray_y_[static_cast<std::size_t>(y)] + r2;
+  const std::size_t row_start = out.at(0, y);
   std::size_t row_count = 0;
   std::size_t next_in_row = 0;
   std::size_t active_count = 0;
@@ -122,7 +123,7 @@ std::size_t MockCamera::castRow(const Pose& pose, double time_s, int y, const Pi
     }
   }
   for (int x = rect.x0; x < rect.x1; ++x) {
-    const std::size_t i = out.at(x, y);
+    const std::size_t i = row_start + static_cast<std::size_t>(x);
     // d_cam = (x', y', 1), so the ray parameter t of a hit is its depth z.
     const Vector3d dir = r0 * ray_x_[static_cast<std::size_t>(x)] + row;
     Hit hit;
