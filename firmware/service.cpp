@@ -179,9 +179,11 @@ void Service::stop() {
                   "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64
                   " parts resent; %" PRIu64 " versions acknowledged whole, %" PRIu64 " lost (sent again); %" PRIu64
                   " acknowledgements for nothing in flight; %" PRIu64
-                  " not staged (more parts than a version may have, or the frame's share of the store full: due again)",
+                  " not staged (more parts than a version may have, or the frame's share of the store full: due again); "
+                  "%" PRIu64 " frames planned while the last frame's bricks were still being encoded (due next frame)",
                   s.map.bricks_planned, s.map.brick_versions, s.map.brick_parts, s.map.brick_resends,
-                  s.map.brick_versions_done, s.map.brick_versions_lost, s.map.brick_acks_unknown, s.map.bricks_unstaged);
+                  s.map.brick_versions_done, s.map.brick_versions_lost, s.map.brick_acks_unknown, s.map.bricks_unstaged,
+                  s.map.brick_plans_deferred);
       }
     }
   }
@@ -240,6 +242,7 @@ ServiceStats Service::stats() const {
   s.map.brick_versions_lost = brick_versions_lost_.load(std::memory_order_relaxed);
   s.map.brick_acks_unknown = brick_acks_unknown_.load(std::memory_order_relaxed);
   s.map.bricks_unstaged = bricks_unstaged_.load(std::memory_order_relaxed);
+  s.map.brick_plans_deferred = brick_plans_deferred_.load(std::memory_order_relaxed);
   s.sent_gaze_stamp_ns = sent_gaze_stamp_ns_.load(std::memory_order_acquire);
   s.map.bricks_waiting = bricks_waiting_.load(std::memory_order_relaxed);
   s.map.fovea_bricks_waiting = fovea_bricks_waiting_.load(std::memory_order_relaxed);

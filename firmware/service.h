@@ -51,6 +51,7 @@
 #include "firmware/memory_budget.h"
 #include "firmware/session_recorder.h"
 #include "firmware/service_config.h"
+#include "firmware/shared_brick_batch.h"
 #include "firmware/status_lines.h"
 #include "firmware/streamer.h"
 #include "firmware/systemd_notify.h"
@@ -142,6 +143,7 @@ struct ServiceStats {
     uint64_t brick_versions_lost = 0;
     uint64_t brick_acks_unknown = 0;
     uint64_t bricks_unstaged = 0;  // the streamer could not stage them (FrameSendReport::bricks_unstaged): due again
+    uint64_t brick_plans_deferred = 0;  // frames planned while the batch was still out (SharedBrickBatch): due next frame
     // The operator's copy against the map, as of the last frame sent: bricks
     // due that did not fit it (of them the fovea's), and versions not yet
     // acknowledged whole. All zero with sent_gaze_stamp_ns at or after a gaze
@@ -226,12 +228,10 @@ class Service {
     int64_t foveation_start_ns = 0;  // taken from the capture ring
     int64_t backproject_ns = 0;
     int64_t foveated_ns = 0;  // published to the send ring
-    // The map's bricks that go with the frame (map.delta), and whether the
-    // send stage has yet to take them: a slot that comes back to the
-    // foveation stage still pending was dropped by the ring, so its bricks
-    // never went and are due again.
-    pipeline::map::BrickBatch bricks;
-    bool bricks_pending = false;
+    // The map's bricks go with the frame whose slot owns bricks_ (map.delta).
+    // Deferred: none were planned for its gaze (the batch was still out), so
+    // it tells nothing of what the operator holds for that gaze.
+    bool bricks_deferred = false;
     uint32_t bricks_waiting = 0, fovea_bricks_waiting = 0;
     int64_t gaze_stamp_ns = 0;              // the operator's stamp of the gaze foveated for (0: fallback)
     int64_t send_window_ns = 0;             // the time its bricks were planned to fill (map bricks)
@@ -259,10 +259,10 @@ class Service {
   void foveationLoop();
   // One frame through the foveation stage, its slots taken: tracking,
   // back-projection, the gaze, foveation and (map bricks) the bricks' plan.
-  Status foveateFrame(CapturedFrame& f, FoveatedFrame& o);
+  Status foveateFrame(CapturedFrame& f, FoveatedFrame& o, fovea::SlotIndex out);
   // The gaze policy's decision for the frame, from the operator's newest gaze.
   GazePolicy::Decision decideGaze(const hal::RgbdFrame& frame);
-  Status planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o);
+  Status planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o, fovea::SlotIndex out);
   // A frame the foveation stage dropped: counted and logged (rate-limited).
   void countFoveationError(const Status& s, const FoveatedFrame& o);
   // The foveation stage's map figures to the atomics the status line reads.
@@ -273,9 +273,9 @@ class Service {
   // The send stage's link work between frames (streaming only): a reloaded
   // budget cap, the link's datagrams, the operator's gaze, the bricks' budget.
   void pollOperator();
-  // A frame to the operator (streaming, not paused for privacy), then the
-  // counters the status line reads.
-  void sendToOperator(FoveatedFrame& f);
+  // A frame to the operator (streaming, not paused for privacy) with the
+  // bricks its slot owns (null: none), then the counters the status line reads.
+  void sendToOperator(FoveatedFrame& f, fovea::SlotIndex slot, const pipeline::map::BrickBatch* bricks);
   void publishSendCounters(const FoveatedFrame& f);
   // Sends the operator a status report once next_report_ns has come; returns
   // when the next is due.
@@ -329,9 +329,12 @@ class Service {
   bool map_bricks_ = false;
   bool live_points_capped_ = false;  // allocate() sized the frame by map.max_live_points (the warning says so)
   std::unique_ptr<BrickFeedback> brick_feedback_;
+  std::unique_ptr<SharedBrickBatch> bricks_;  // the frame's bricks, foveation -> send
+  fovea::SlotIndex sending_slot_ = 0;        // the send stage's: the frame sendFrame has (its bricks-done hook)
   std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
   std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},
-      brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0}, bricks_unstaged_{0};
+      brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0}, bricks_unstaged_{0},
+      brick_plans_deferred_{0};
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> sent_gaze_stamp_ns_{0};

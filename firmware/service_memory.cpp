@@ -104,20 +104,20 @@ void Service::allocateFrameSlots(const hal::CameraIntrinsics& k, std::size_t dep
 }
 
 void Service::allocateFoveatedSlots(std::size_t points, std::size_t depth) {
-  const std::size_t before = heapInUse();
+  // Without weights: the send stage and the recorder never read them.
+  constexpr auto kNoWeights = pipeline::FoveatedCloud::Weights::kNone;
+  std::size_t before = heapInUse();
   {
-    // Without weights: the send stage and the recorder never read them.
-    constexpr auto kNoWeights = pipeline::FoveatedCloud::Weights::kNone;
     FoveatedFrame prototype;
     prototype.cloud = pipeline::FoveatedCloud(points, kNoWeights);
-    if (map_bricks_) {
-      prototype.bricks =
-          pipeline::map::BrickBatch(config_.map.max_frame_brick_points, config_.map.max_frame_bricks, kNoWeights);
-    }
     foveated_ = std::make_unique<fovea::SlotPoolRing<FoveatedFrame>>(depth, 1, prototype);
   }
-  memory_.add(map_bricks_ ? "foveated cloud and brick slots (foveation -> send)" : "foveated cloud slots (foveation -> send)",
-              foveated_->slotCount(), heapGrowthSince(before));
+  memory_.add("foveated cloud slots (foveation -> send)", foveated_->slotCount(), heapGrowthSince(before));
+  if (!map_bricks_) return;
+  before = heapInUse();
+  bricks_ = std::make_unique<SharedBrickBatch>(pipeline::map::BrickBatch(
+      config_.map.max_frame_brick_points, config_.map.max_frame_bricks, kNoWeights));
+  memory_.add("map: a frame's bricks (foveation -> send, one batch)", 1, heapGrowthSince(before));
 }
 
 // The frame foveator and the gaze policy. The map and the pyramid report their

@@ -164,7 +164,7 @@ void Service::foveationLoop() {
     }
     CapturedFrame& f = frames_->slot(in);  // this stage's while taken: tracking sets its pose
     FoveatedFrame& o = foveated_->slot(out);
-    const Status s = foveateFrame(f, o);
+    const Status s = foveateFrame(f, o, out);
     if (!s) {
       (void)in_ring.release(in);
       out_ring.cancel(out);
@@ -184,16 +184,15 @@ void Service::foveationLoop() {
     foveate_latency_.add(o.foveated_ns - o.foveation_start_ns);
     frames_foveated_.fetch_add(1, std::memory_order_relaxed);
     if (o.stats.coarsened > 0) frames_coarsened_.fetch_add(1, std::memory_order_relaxed);
-    o.bricks_pending = !o.bricks.entries().empty();
     out_ring.publish(out);
   }
   foveation_alive_.store(false, std::memory_order_release);
 }
 
-Status Service::foveateFrame(CapturedFrame& f, FoveatedFrame& o) {
-  if (o.bricks_pending) {  // the ring dropped the frame before the send stage took it
-    stage_->forgetBatch(o.bricks);
-    o.bricks_pending = false;
+Status Service::foveateFrame(CapturedFrame& f, FoveatedFrame& o, fovea::SlotIndex out) {
+  if (bricks_ && bricks_->ownedBy(out)) {  // the ring dropped the frame before the send stage took it
+    stage_->forgetBatch(bricks_->batch());
+    bricks_->takeBack();
   }
   const int64_t t0 = monotonicNs();
   pipeline::BackprojectCounts counts;
@@ -207,7 +206,7 @@ Status Service::foveateFrame(CapturedFrame& f, FoveatedFrame& o) {
     s = stage_->use(decision.foveation);
   }
   if (s) s = stage_->foveate(decision.gaze, o.cloud, o.stats);
-  if (s && map_bricks_) s = planFrameBricks(decision.gaze, o);
+  if (s && map_bricks_) s = planFrameBricks(decision.gaze, o, out);
   o.gaze_stamp_ns = decision.source == GazeSource::kOperator ? gaze_box_.current().stamp_ns : 0;
   o.frame_id = static_cast<uint32_t>(f.frame.sequence);
   o.captured_ns = f.captured_ns;
@@ -232,11 +231,20 @@ GazePolicy::Decision Service::decideGaze(const hal::RgbdFrame& frame) {
 }
 
 // The map's bricks for the frame: what the operator was found to lack is
-// forgotten first, then the planner fills the frame's share of the budget.
-Status Service::planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o) {
+// forgotten first, then the planner fills the frame's share of the budget into
+// the batch, which the frame's slot then owns. While the send stage still
+// encodes the last batch the frame goes without (counted); the next plan's
+// window then spans both frames.
+Status Service::planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o, fovea::SlotIndex out) {
   if (brick_feedback_) {
     brick_feedback_->drain([&](std::size_t brick) { stage_->forgetBrick(static_cast<uint16_t>(brick)); },
                            [&] { stage_->forgetAllBricks(); });
+  }
+  o.bricks_deferred = !bricks_->available();
+  if (o.bricks_deferred) {
+    brick_plans_deferred_.fetch_add(1, std::memory_order_relaxed);
+    o.send_window_ns = period_ns_;
+    return Status::ok();
   }
   // The frame's share of the budget is the time since the last frame's, not
   // the camera's period: fusing a large frame can take longer than that, and
@@ -246,16 +254,18 @@ Status Service::planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o) {
   last_plan_ns_ = now;
   const double budget = static_cast<double>(brick_budget_bytes_per_s_.load(std::memory_order_relaxed)) *
                         static_cast<double>(o.send_window_ns) * 1e-9;
+  pipeline::map::BrickBatch& batch = bricks_->batch();
   const Status s =
-      stage_->planBricks(gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate, o.bricks);
-  if (s) {
-    const MapFrameFigures& figures = stage_->mapFigures();
-    bricks_planned_.fetch_add(figures.plan.bricks_planned, std::memory_order_relaxed);
-    o.bricks_waiting = figures.plan.bricks_waiting;
-    o.fovea_bricks_waiting = figures.plan.fovea_bricks_waiting;
-  } else {
-    stage_->forgetBatch(o.bricks);
+      stage_->planBricks(gaze, budget, static_cast<double>(o.cloud.size()) * kWireBytesPerPointEstimate, batch);
+  if (!s) {
+    stage_->forgetBatch(batch);
+    return s;
   }
+  const MapFrameFigures& figures = stage_->mapFigures();
+  bricks_planned_.fetch_add(figures.plan.bricks_planned, std::memory_order_relaxed);
+  o.bricks_waiting = figures.plan.bricks_waiting;
+  o.fovea_bricks_waiting = figures.plan.fovea_bricks_waiting;
+  if (!batch.entries().empty()) bricks_->lend(out);
   return s;
 }
 
@@ -346,6 +356,14 @@ void Service::sendLoop() {
   fovea::SlotRing& ring = foveated_->ring();
   if (streamer_) {
     streamer_->setPollHook([](void* service) { static_cast<Service*>(service)->publishOperatorGaze(); }, this);
+    if (bricks_) {
+      streamer_->setBricksDoneHook(
+          [](void* service) {
+            auto* self = static_cast<Service*>(service);
+            (void)self->bricks_->giveBack(self->sending_slot_);
+          },
+          this);
+    }
   }
   int64_t next_report_ns = monotonicNs() + 1'000'000'000;
   for (;;) {
@@ -362,18 +380,19 @@ void Service::sendLoop() {
       continue;
     }
     FoveatedFrame& f = foveated_->slot(slot);
-    f.bricks_pending = false;
+    const pipeline::map::BrickBatch* bricks = bricks_ && bricks_->ownedBy(slot) ? &bricks_->batch() : nullptr;
     if (!streamer_) {
       frames_unsent_.fetch_add(1, std::memory_order_relaxed);
-      if (map_bricks_ && brick_feedback_) {
-        for (const pipeline::map::BrickBatchEntry& e : f.bricks.entries()) brick_feedback_->forget(e.brick);
+      if (bricks && brick_feedback_) {
+        for (const pipeline::map::BrickBatchEntry& e : bricks->entries()) brick_feedback_->forget(e.brick);
       }
     } else if (!stream_allowed_.load(std::memory_order_relaxed)) {
       frames_withheld_.fetch_add(1, std::memory_order_relaxed);  // privacy: captured, never sent
-      if (map_bricks_) streamer_->discardBricks(f.bricks);
+      if (bricks) streamer_->discardBricks(*bricks);
     } else {
-      sendToOperator(f);
+      sendToOperator(f, slot, bricks);
     }
+    if (bricks) (void)bricks_->giveBack(slot);  // sendFrame's hook gave it back already if it ran
     if (!ring.release(slot)) foveate_errors_.fetch_add(1, std::memory_order_relaxed);
     if (streamer_) {
       publishOperatorGaze();
@@ -398,7 +417,7 @@ void Service::pollOperator() {
   }
 }
 
-void Service::sendToOperator(FoveatedFrame& f) {
+void Service::sendToOperator(FoveatedFrame& f, fovea::SlotIndex slot, const pipeline::map::BrickBatch* bricks) {
   static LogRateLimit send_site;
   const int64_t t0 = monotonicNs();
   // A frame must be out before the next one is due; what is not goes unsent
@@ -406,8 +425,9 @@ void Service::sendToOperator(FoveatedFrame& f) {
   // due a window after this one's plan (the foveation stage's pace).
   const int64_t window_ns = map_bricks_ ? f.send_window_ns : period_ns_;
   const int64_t deadline_ns = t0 + window_ns - std::min<int64_t>(window_ns / 10, 2'000'000);
-  Result<FrameSendReport> sent = streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns,
-                                                      period_ns_, map_bricks_ ? &f.bricks : nullptr);
+  sending_slot_ = slot;
+  Result<FrameSendReport> sent =
+      streamer_->sendFrame(f.cloud, f.stats, f.frame_id, f.captured_ns, deadline_ns, period_ns_, bricks);
   if (!sent) {
     (void)log().logLimited(send_site, LogLevel::kWarning, "send: %s", sent.status().toString().c_str());
   } else if (sent->had_session) {
@@ -418,7 +438,9 @@ void Service::sendToOperator(FoveatedFrame& f) {
     frames_unsent_.fetch_add(1, std::memory_order_relaxed);
   }
   publishSendCounters(f);
-  if (sent && sent->fovea_completed) sent_gaze_stamp_ns_.store(f.gaze_stamp_ns, std::memory_order_release);
+  if (sent && sent->fovea_completed && !f.bricks_deferred) {
+    sent_gaze_stamp_ns_.store(f.gaze_stamp_ns, std::memory_order_release);
+  }
 }
 
 void Service::publishSendCounters(const FoveatedFrame& f) {
@@ -431,8 +453,10 @@ void Service::publishSendCounters(const FoveatedFrame& f) {
     brick_versions_lost_.store(bc->versions_lost, std::memory_order_relaxed);
     brick_acks_unknown_.store(bc->acks_unknown, std::memory_order_relaxed);
     bricks_unstaged_.store(streamer_->bricksUnstaged(), std::memory_order_relaxed);
-    bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
-    fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);
+    if (!f.bricks_deferred) {  // a deferred frame's plan is the last frame's
+      bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
+      fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);
+    }
     bricks_in_flight_.store(streamer_->bricksInFlight(), std::memory_order_relaxed);
   }
 }

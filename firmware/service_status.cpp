@@ -77,7 +77,7 @@ std::size_t Service::formatStatusLine(char* out, std::size_t size) {
   formatGazeAge(gaze_ns, now, gaze_age, sizeof gaze_age);
   char pose[192] = "";
   formatPoseFields(pose, sizeof pose);
-  char map[256] = "";
+  char map[320] = "";
   formatMapFields(latency[3], map, sizeof map);
   // Frames since start dropped for more voxels or points than configured, and
   // those foveated coarser to fit them (each only once there is one).
@@ -157,7 +157,8 @@ void Service::formatPoseFields(char* out, std::size_t size) const {
 // evicted, the new surfels dropped (pool or brick table full) and the frames
 // refused (no pose; anything else); with a time budget, the frames it left
 // unfused; with a fusion thread, those it was busy for; with bricks, their
-// versions. Empty without a map.
+// versions and the frames planned while the last batch was still out.
+// Empty without a map.
 void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t size) const {
   if (stage_->map() == nullptr) return;
   int used = std::snprintf(
@@ -173,9 +174,11 @@ void Service::formatMapFields(const char* fuse_latency, char* out, std::size_t s
   }
   if (map_bricks_ && used > 0 && static_cast<std::size_t>(used) < size) {
     std::snprintf(out + used, size - static_cast<std::size_t>(used),
-                  ", brick versions %" PRIu64 " sent %" PRIu64 " acknowledged %" PRIu64 " lost %" PRIu64 " unstaged",
+                  ", brick versions %" PRIu64 " sent %" PRIu64 " acknowledged %" PRIu64 " lost %" PRIu64
+                  " unstaged %" PRIu64 " deferred",
                   brick_versions_.load(std::memory_order_relaxed), brick_versions_done_.load(std::memory_order_relaxed),
-                  brick_versions_lost_.load(std::memory_order_relaxed), bricks_unstaged_.load(std::memory_order_relaxed));
+                  brick_versions_lost_.load(std::memory_order_relaxed), bricks_unstaged_.load(std::memory_order_relaxed),
+                  brick_plans_deferred_.load(std::memory_order_relaxed));
   }
 }
 

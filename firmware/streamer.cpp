@@ -315,6 +315,17 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
                                             int64_t capture_ns, int64_t deadline_ns, int64_t interval_ns,
                                             const pipeline::map::BrickBatch* bricks) {
   FrameSendReport report;
+  // The caller hears once that the batch is read no more: after staging, or
+  // on whichever path ends the frame before it.
+  struct BricksDone {
+    const Streamer& streamer;
+    bool pending;
+    void run() {
+      if (pending && streamer.bricks_done_hook_) streamer.bricks_done_hook_(streamer.bricks_done_context_);
+      pending = false;
+    }
+    ~BricksDone() { run(); }
+  } bricks_done{*this, bricks != nullptr};
   if (bricks && !brick_sender_) return Status(ErrorCode::kInvalidArgument, "stream: bricks without map_bricks");
   link_->poll(0);
   if (!link_->hasSession()) {
@@ -341,6 +352,7 @@ Result<FrameSendReport> Streamer::sendFrame(const pipeline::FoveatedCloud& cloud
   const int64_t t0 = monotonicNs();
   LiveChunks live;
   if (Status s = stageFrame(cloud, stats, frame_id, capture_ns, bricks, now, report, live); !s) return s;
+  bricks_done.run();
   now = monotonicNs();
   report.encode_ns = now - t0;
   report.chunks = static_cast<uint32_t>(encoder_->chunkCount());

@@ -128,6 +128,14 @@ class Streamer {
     poll_hook_ = hook;
     poll_hook_context_ = context;
   }
+  // Called once per sendFrame with bricks, when it reads the batch no more (its
+  // bricks staged or discarded), before the frame's datagrams are paced out:
+  // the caller may plan the next frame's bricks into it meanwhile. Null: none.
+  using BricksDoneHook = void (*)(void* context);
+  void setBricksDoneHook(BricksDoneHook hook, void* context) {
+    bricks_done_hook_ = hook;
+    bricks_done_context_ = context;
+  }
   // What a recording (firmware/session_recorder.h) taps: every datagram payload
   // sendFrame hands the link and the link took (chunks, brick chunks, frame
   // summaries, as they went: plaintext, before sealing), and every operator
@@ -256,6 +264,8 @@ class Streamer {
   void* send_tap_context_ = nullptr;
   bool record_unsent_ = false;
   void* poll_hook_context_ = nullptr;
+  BricksDoneHook bricks_done_hook_ = nullptr;
+  void* bricks_done_context_ = nullptr;
   uint64_t unknown_brick_keys_ = 0;
   int64_t frame_interval_ns_ = 33'333'333;  // the last sendFrame's interval_ns (burst_ms 0)
   // The session the encoder and budget were set up for (its start time).

@@ -127,8 +127,8 @@ TEST(Service, MemoryBudgetListsEveryPoolAndTheHeapsGrowth) {
   ASSERT_TRUE(created.isOk()) << created.status().toString();
   const MemoryBudget& memory = created.value()->memory();
   const std::string breakdown = memory.breakdown();
-  for (const char* name : {"camera backend", "frame slots", "foveated cloud and brick slots", "map: surfel pool",
-                           "map: tracker", "map: bricks the operator holds", "point cloud", "foveator",
+  for (const char* name : {"camera backend", "frame slots", "foveated cloud slots", "map: a frame's bricks",
+                           "map: surfel pool", "map: tracker", "map: bricks the operator holds", "point cloud", "foveator",
                            "streamer", "status, latency histograms", "timing log buffer"}) {
     EXPECT_NE(breakdown.find(name), std::string::npos) << "no pool named " << name << " in\n" << breakdown;
   }

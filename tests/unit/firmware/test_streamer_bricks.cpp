@@ -4,7 +4,8 @@
 // same parts again until it does; an
 // eviction, a new session and a frame with no session tell the planner what the
 // operator lacks; acknowledgements of what was never sent are counted and change
-// nothing.
+// nothing. The batch the service's two stages share (SharedBrickBatch) is free
+// once sendFrame has staged it, and never read and written at once.
 #include "firmware/streamer.h"
 
 #include <atomic>
@@ -19,6 +20,8 @@
 #include <gtest/gtest.h>
 
 #include "core/clock.h"
+#include "core/ring.h"
+#include "firmware/shared_brick_batch.h"
 #include "net/brick_cache.h"
 #include "net/operator_link.h"
 #include "tests/support/test_time.h"
@@ -505,6 +508,170 @@ TEST(StreamerBricks, EvictionsAndFramesThatCannotGoAreToldToThePlanner) {
   plain.link.insecure = true;
   std::unique_ptr<Streamer> frames_only = Streamer::create(plain, 100).value();
   EXPECT_FALSE(frames_only->sendFrame(rig.live, rig.stats, 1, 0, monotonicNs() + 1'000'000, 33'000'000, &batch));
+}
+
+// sendFrame is done with the batch once its bricks are staged: the hook runs
+// once for a frame with bricks, before its datagrams go, and a batch emptied
+// and refilled with other points from the hook (the next frame's plan) changes
+// nothing the operator gets. A frame without bricks runs no hook; a frame
+// refused or without a session runs it too (the batch is free then as well).
+TEST(StreamerBricks, TheBatchIsFreeOnceStagedAndRefillingItChangesNothingSent) {
+  Rig rig;
+  Operator op;
+  struct Hooked {
+    pipeline::map::BrickBatch* batch = nullptr;
+    int calls = 0;
+  } hooked;
+  pipeline::map::BrickBatch batch = makeBatch(1);
+  hooked.batch = &batch;
+  rig.streamer->setBricksDoneHook(
+      [](void* context) {
+        auto* h = static_cast<Hooked*>(context);
+        ++h->calls;
+        // The next plan: other points where these were, and no entries.
+        h->batch->clear(Eigen::Vector3d(-5.0, -5.0, -5.0));
+        for (int i = 0; i < 900; ++i) (void)pushBrickPoint(*h->batch, 9.0f, 9.0f, 9.0f, 0xffffff);
+      },
+      &hooked);
+  Result<FrameSendReport> sent = rig.send(&batch, 1);
+  ASSERT_TRUE(sent) << sent.status().message();
+  EXPECT_EQ(hooked.calls, 1);
+  EXPECT_EQ(sent->bricks, 3u);
+  op.receive(*rig.op, 300, true);
+  ASSERT_EQ(op.cache.bricksHeld(), 3u);
+  EXPECT_EQ(op.cache.pointsHeld(), 900u);
+  std::size_t near = 0;
+  for (std::size_t b = 0; b < 3; ++b) {
+    const int held = op.cache.find(net::BrickKey{static_cast<int>(b), -1, 2});
+    ASSERT_GE(held, 0);
+    op.cache.forEachPoint(static_cast<std::size_t>(held), [&](const Eigen::Vector3d& p, uint32_t) {
+      near += std::abs(p.z() - 0.75) < 0.002 ? 1 : 0;  // z: the batch's origin 0.5 + 0.25
+    });
+  }
+  EXPECT_EQ(near, 900u);
+  ASSERT_TRUE(rig.send(nullptr, 2));
+  EXPECT_EQ(hooked.calls, 1);
+  // Refused (a batch without map_bricks) and without a session: the hook runs.
+  StreamConfig plain;
+  plain.link.listen = "127.0.0.1:0";
+  plain.link.insecure = true;
+  std::unique_ptr<Streamer> frames_only = Streamer::create(plain, 100).value();
+  frames_only->setBricksDoneHook([](void* context) { ++static_cast<Hooked*>(context)->calls; }, &hooked);
+  pipeline::map::BrickBatch other = makeBatch(2);
+  EXPECT_FALSE(frames_only->sendFrame(rig.live, rig.stats, 1, 0, monotonicNs() + 1'000'000, 33'000'000, &other));
+  EXPECT_EQ(hooked.calls, 2);
+  BrickFeedback unconnected_feedback{kMaxBricks};  // a streamer no operator connected to
+  StreamConfig alone;
+  alone.link.listen = "127.0.0.1:0";
+  alone.link.insecure = true;
+  alone.map_bricks = true;
+  alone.brick_sender.max_bricks = kMaxBricks;
+  alone.max_brick_points = 1024;
+  alone.max_frame_brick_points = 4096;
+  alone.max_frame_bricks = 16;
+  std::unique_ptr<Streamer> unconnected = Streamer::create(alone, kLivePoints).value();
+  unconnected->attachBrickFeedback(&unconnected_feedback);
+  unconnected->setBricksDoneHook([](void* context) { ++static_cast<Hooked*>(context)->calls; }, &hooked);
+  Result<FrameSendReport> unsent =
+      unconnected->sendFrame(rig.live, rig.stats, 1, 0, monotonicNs() + 1'000'000, 33'000'000, &other);
+  ASSERT_TRUE(unsent);
+  EXPECT_FALSE(unsent->had_session);
+  EXPECT_EQ(hooked.calls, 3);
+}
+
+// Lent to a slot, only that slot gives it back; taken back, it is free.
+TEST(SharedBrickBatch, OnlyTheSlotItIsLentToGivesItBack) {
+  SharedBrickBatch shared(pipeline::map::BrickBatch(16, 2));
+  EXPECT_TRUE(shared.available());
+  EXPECT_FALSE(shared.giveBack(0));  // nobody holds it
+  shared.lend(2);
+  EXPECT_FALSE(shared.available());
+  EXPECT_TRUE(shared.ownedBy(2));
+  EXPECT_FALSE(shared.ownedBy(1));
+  EXPECT_FALSE(shared.giveBack(1));
+  EXPECT_TRUE(shared.ownedBy(2));
+  EXPECT_TRUE(shared.giveBack(2));
+  EXPECT_TRUE(shared.available());
+  EXPECT_FALSE(shared.giveBack(2));  // once
+  shared.lend(0);
+  shared.takeBack();
+  EXPECT_TRUE(shared.available());
+}
+
+// The service's protocol for its one batch, run by two threads over a real
+// ring as its foveation and send stages do (the send side slow at times, so
+// that the ring drops frames): the planner fills the batch only while it is
+// free and lends it to the frame; it takes it back from a frame the ring
+// dropped; the sender reads it only from a frame that owns it, then gives it
+// back. Every batch the sender reads is whole and the frame's own (each point
+// carries its frame's number), every lent batch is read or taken back, and
+// both the deferral and the take-back happen. Under TSan, a batch written
+// while read is a reported race.
+TEST(SharedBrickBatch, TwoStagesNeverShareItAndADroppedFrameGivesItBack) {
+  struct Frame {
+    uint32_t id = 0;
+  };
+  SlotPoolRing<Frame> ring(1, 1, Frame{});
+  SharedBrickBatch shared(pipeline::map::BrickBatch(256, 4));
+  constexpr uint32_t kFrames = 3000;
+  constexpr int kPoints = 200;
+  std::atomic<bool> planner_done{false};
+  uint64_t lent = 0, taken_back = 0, deferred = 0;
+  std::atomic<uint64_t> read{0}, torn{0};
+  std::thread sender([&] {
+    uint32_t n = 0;
+    for (;;) {
+      const bool done = planner_done.load(std::memory_order_acquire);
+      SlotIndex slot;
+      if (!ring.ring().tryTake(slot)) {
+        if (done) break;
+        std::this_thread::yield();
+        continue;
+      }
+      const uint32_t id = ring.slot(slot).id;
+      if (shared.ownedBy(slot)) {
+        const pipeline::map::BrickBatch& b = shared.batch();
+        bool whole = b.entries().size() == 1 && b.entries()[0].version == id && b.points.size() == kPoints;
+        for (std::size_t i = 0; whole && i < b.points.size(); ++i) whole = b.points.points.x()[i] == static_cast<float>(id);
+        if (!whole) torn.fetch_add(1);
+        read.fetch_add(1);
+        EXPECT_TRUE(shared.giveBack(slot));
+      }
+      if (++n % 3 == 0) std::this_thread::sleep_for(std::chrono::microseconds(300));  // a slow send
+      EXPECT_TRUE(ring.ring().release(slot));
+    }
+  });
+  for (uint32_t id = 1; id <= kFrames; ++id) {
+    SlotIndex out;
+    while (!ring.ring().tryAcquire(out)) std::this_thread::yield();  // the instant after a release
+    if (shared.ownedBy(out)) {  // dropped before the sender took it
+      shared.takeBack();
+      ++taken_back;
+    }
+    if (shared.available()) {
+      pipeline::map::BrickBatch& b = shared.batch();
+      b.clear(Eigen::Vector3d::Zero());
+      auto& e = b.add();
+      e.version = id;
+      for (int i = 0; i < kPoints; ++i) ASSERT_TRUE(b.points.points.push(static_cast<float>(id), 0.0f, 1.0f, 0));
+      shared.lend(out);
+      ++lent;
+    } else {
+      ++deferred;
+    }
+    ring.slot(out).id = id;
+    ring.ring().publish(out);
+    if (id % 7 == 0) std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+  planner_done.store(true, std::memory_order_release);
+  sender.join();
+  // A frame dropped last may still own it: nobody takes a slot back after the end.
+  const uint64_t still_out = shared.available() ? 0 : 1;
+  EXPECT_EQ(torn.load(), 0u);
+  EXPECT_EQ(read.load() + taken_back + still_out, lent);
+  EXPECT_GT(taken_back, 0u);
+  EXPECT_GT(deferred, 0u);
+  EXPECT_GT(read.load(), 0u);
 }
 
 }  // namespace
