@@ -192,6 +192,11 @@ class FrameFoveator {
   void forgetBrick(uint16_t brick) {
     if (mapper_) mapper_->forgetBrick(brick);
   }
+  // A version of `brick` with more parts than a version may have: planned a
+  // level coarser from now on.
+  void brickTooLarge(uint16_t brick) {
+    if (mapper_) mapper_->brickTooLarge(brick);
+  }
   // A batch whose bricks never went out (a dropped frame): all due again.
   void forgetBatch(const pipeline::map::BrickBatch& batch) {
     if (mapper_) mapper_->forgetBatch(batch);

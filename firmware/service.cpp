@@ -179,11 +179,13 @@ void Service::stop() {
                   "map bricks: %" PRIu64 " planned; %" PRIu64 " versions in %" PRIu64 " parts sent, %" PRIu64
                   " parts resent; %" PRIu64 " versions acknowledged whole, %" PRIu64 " lost (sent again); %" PRIu64
                   " acknowledgements for nothing in flight; %" PRIu64
-                  " not staged (more parts than a version may have, or the frame's share of the store full: due again); "
-                  "%" PRIu64 " frames planned while the last frame's bricks were still being encoded (due next frame)",
+                  " not staged (due again), %" PRIu64
+                  " of them with more parts than a version may have (due a level coarser), the rest for lack of room"
+                  " this frame; %" PRIu64
+                  " frames planned while the last frame's bricks were still being encoded (due next frame)",
                   s.map.bricks_planned, s.map.brick_versions, s.map.brick_parts, s.map.brick_resends,
                   s.map.brick_versions_done, s.map.brick_versions_lost, s.map.brick_acks_unknown, s.map.bricks_unstaged,
-                  s.map.brick_plans_deferred);
+                  s.map.bricks_too_large, s.map.brick_plans_deferred);
       }
     }
   }
@@ -242,6 +244,7 @@ ServiceStats Service::stats() const {
   s.map.brick_versions_lost = brick_versions_lost_.load(std::memory_order_relaxed);
   s.map.brick_acks_unknown = brick_acks_unknown_.load(std::memory_order_relaxed);
   s.map.bricks_unstaged = bricks_unstaged_.load(std::memory_order_relaxed);
+  s.map.bricks_too_large = bricks_too_large_.load(std::memory_order_relaxed);
   s.map.brick_plans_deferred = brick_plans_deferred_.load(std::memory_order_relaxed);
   s.sent_gaze_stamp_ns = sent_gaze_stamp_ns_.load(std::memory_order_acquire);
   s.map.bricks_waiting = bricks_waiting_.load(std::memory_order_relaxed);

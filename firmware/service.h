@@ -143,6 +143,7 @@ struct ServiceStats {
     uint64_t brick_versions_lost = 0;
     uint64_t brick_acks_unknown = 0;
     uint64_t bricks_unstaged = 0;  // the streamer could not stage them (FrameSendReport::bricks_unstaged): due again
+    uint64_t bricks_too_large = 0;  // ... of them, more parts than a version may have: due again a level coarser
     uint64_t brick_plans_deferred = 0;  // frames planned while the batch was still out (SharedBrickBatch): due next frame
     // The operator's copy against the map, as of the last frame sent: bricks
     // due that did not fit it (of them the fovea's), and versions not yet
@@ -334,7 +335,7 @@ class Service {
   std::atomic<uint64_t> brick_budget_bytes_per_s_{0};
   std::atomic<uint64_t> bricks_planned_{0}, brick_versions_{0}, brick_parts_{0}, brick_resends_{0},
       brick_versions_done_{0}, brick_versions_lost_{0}, brick_acks_unknown_{0}, bricks_unstaged_{0},
-      brick_plans_deferred_{0};
+      bricks_too_large_{0}, brick_plans_deferred_{0};
   // Of the last frame sent (the send stage writes the counts, then the stamp, with release).
   std::atomic<uint64_t> bricks_waiting_{0}, fovea_bricks_waiting_{0}, bricks_in_flight_{0};
   std::atomic<int64_t> sent_gaze_stamp_ns_{0};

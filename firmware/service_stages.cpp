@@ -239,6 +239,7 @@ Status Service::planFrameBricks(const pipeline::Gaze& gaze, FoveatedFrame& o, fo
   if (brick_feedback_) {
     brick_feedback_->drain([&](std::size_t brick) { stage_->forgetBrick(static_cast<uint16_t>(brick)); },
                            [&] { stage_->forgetAllBricks(); });
+    brick_feedback_->drainTooLarge([&](std::size_t brick) { stage_->brickTooLarge(static_cast<uint16_t>(brick)); });
   }
   o.bricks_deferred = !bricks_->available();
   if (o.bricks_deferred) {
@@ -453,6 +454,7 @@ void Service::publishSendCounters(const FoveatedFrame& f) {
     brick_versions_lost_.store(bc->versions_lost, std::memory_order_relaxed);
     brick_acks_unknown_.store(bc->acks_unknown, std::memory_order_relaxed);
     bricks_unstaged_.store(streamer_->bricksUnstaged(), std::memory_order_relaxed);
+    bricks_too_large_.store(streamer_->bricksTooLarge(), std::memory_order_relaxed);
     if (!f.bricks_deferred) {  // a deferred frame's plan is the last frame's
       bricks_waiting_.store(f.bricks_waiting, std::memory_order_relaxed);
       fovea_bricks_waiting_.store(f.fovea_bricks_waiting, std::memory_order_relaxed);

@@ -262,10 +262,16 @@ bool Streamer::stageBrick(const pipeline::map::BrickBatch& batch, const pipeline
   const std::optional<net::EncodeInput> points = net::EncodeInput::slice(batch.points, e.first, e.count);
   if (!points) return fail();
   const net::BrickTag tag{e.key.x, e.key.y, e.key.z, e.version, e.level};
-  if (!brick_encoder_->encode(*points, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id, 0,
-                              &tag)) {
-    return fail();
+  const Status encoded =
+      brick_encoder_->encode(*points, std::span<const double>(batch.level_step_m.data(), e.level + 1u), frame_id, 0, &tag);
+  // More parts than a version may have (the encoder's arena holds max_parts),
+  // or more points than it takes: never fits at this level, so the planner
+  // goes coarser (MapDelta::tooLarge) rather than plan it so again each frame.
+  if (encoded.code() == ErrorCode::kCapacityExceeded) {
+    ++bricks_too_large_;
+    if (feedback_) feedback_->tooLarge(e.brick);
   }
+  if (!encoded) return fail();
   const std::size_t parts = brick_encoder_->chunkCount();
   if (parts == 0 || parts > config_.brick_sender.max_parts || outgoing_count_ + parts > outgoing_.size()) return fail();
   const net::BrickKey key{e.key.x, e.key.y, e.key.z};

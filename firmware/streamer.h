@@ -162,6 +162,7 @@ class Streamer {
   // Brick versions sent and not yet acknowledged whole.
   std::size_t bricksInFlight() const { return brick_sender_ ? brick_sender_->inFlight() : 0; }
   uint64_t bricksUnstaged() const { return bricks_unstaged_; }  // FrameSendReport::bricks_unstaged, summed
+  uint64_t bricksTooLarge() const { return bricks_too_large_; }  // of them, too large for a version at their level
 
   // A status report with the link's and the uplink's figures and the caller's
   // frame counts (frames_dropped adds the frames the uplink superseded); the
@@ -229,6 +230,7 @@ class Streamer {
   GridTable slot_index_;                            // key -> the map slot it was sent from
   std::size_t brick_store_staged_ = 0;              // bytes kept this frame (must stay under the store)
   uint64_t bricks_unstaged_ = 0;
+  uint64_t bricks_too_large_ = 0;
   BrickFeedback* feedback_ = nullptr;
   // sendFrame's steps. The frame's chunks per region, planned and cut (its summary's).
   using RegionCounts = std::array<uint16_t, pipeline::kMaxRegions>;

@@ -51,6 +51,8 @@ Result<MapDelta> MapDelta::create(const MapDeltaConfig& config, std::size_t max_
 MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std::size_t max_bricks)
     : config_(config), bounds_(bounds) {
   held_level_.assign(max_bricks, kNotHeld);
+  sent_level_.assign(max_bricks, 0);
+  level_floor_.assign(max_bricks, 0);
   held_changes_.assign(max_bricks, 0);
   held_settled_.assign(max_bricks, 0);
   held_frame_ = std::make_unique<std::atomic<uint32_t>[]>(max_bricks);
@@ -65,7 +67,7 @@ MapDelta::MapDelta(const MapDeltaConfig& config, const LevelBounds& bounds, std:
 }
 
 std::size_t MapDelta::memoryBytes() const {
-  return held_level_.capacity() + may_draw_.capacity() +
+  return held_level_.capacity() + sent_level_.capacity() + level_floor_.capacity() + may_draw_.capacity() +
          (held_changes_.capacity() + held_settled_.capacity() + version_.capacity() + sent_plan_.capacity() +
           due_since_.capacity() + held_level_.size()) *
              sizeof(uint32_t) +
@@ -113,13 +115,15 @@ Result<std::span<const BrickDue>> MapDelta::plan(const SurfelMap& map, const Gaz
       held_frame_[b].store(0, std::memory_order_relaxed);
       may_draw_[b] = 0;
     }
+    if (settled == 0) level_floor_[b] = 0;  // emptied, or a new place's: dense no more
     const uint8_t held = held_level_[b];
     stats.bricks += settled > 0 ? 1 : 0;
     if (held == kNotHeld && settled == 0 && may_draw_[b] == 0) {
       due_since_[b] = 0;
       continue;
     }
-    const Need need = this->need(map.brickOrigin(brick), size, gaze);
+    Need need = this->need(map.brickOrigin(brick), size, gaze);
+    need.level = std::max(need.level, level_floor_[b]);
     BrickDue due{brick, need.level, BrickNeed::kMissing, need.ecc_deg <= config_.fovea_ecc_deg};
     bool is_due = false;
     if (held == kNotHeld && settled == 0) {
@@ -173,6 +177,7 @@ bool MapDelta::changedEnough(uint32_t changes, uint32_t settled, uint32_t held_s
 
 uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level) {
   held_level_[brick] = level;
+  sent_level_[brick] = level;
   held_changes_[brick] = map.brickChanges(brick);
   held_settled_[brick] = map.brickSettledCount(brick);
   held_frame_[brick].store(map.settledThroughFrame(), std::memory_order_relaxed);
@@ -181,6 +186,12 @@ uint32_t MapDelta::markSent(const SurfelMap& map, uint16_t brick, uint8_t level)
   due_since_[brick] = 0;
   if (++version_[brick] == 0) version_[brick] = 1;
   return version_[brick];
+}
+
+void MapDelta::tooLarge(uint16_t brick) {
+  const auto coarser = static_cast<uint8_t>(std::min<int>(sent_level_[brick] + 1, kMaxRegions - 1));
+  level_floor_[brick] = std::max(level_floor_[brick], coarser);
+  ++too_large_;
 }
 
 void MapDelta::forgetAll() {

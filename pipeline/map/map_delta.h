@@ -129,6 +129,15 @@ class MapDelta {
   }
   // The operator holds nothing (a new session, or an operator that restarted).
   void forgetAll();
+  // The version of `brick` last sent could not go: more parts than a version
+  // may have (the link's sender keeps BrickSenderConfig::max_parts), which only
+  // a dense brick close to the camera reaches at level 0. From now on it is
+  // planned at least a level coarser than that version, until it empties (a
+  // slot given to a new place starts empty): the operator gets the finest
+  // version that fits, not the same one refused every frame.
+  void tooLarge(uint16_t brick);
+  uint8_t levelFloor(uint16_t brick) const { return level_floor_[brick]; }
+  uint64_t tooLargeCount() const { return too_large_; }  // tooLarge() calls, since start
 
   static constexpr uint8_t kNotHeld = 0xff;
   static constexpr uint32_t kEmptyHoldPlans = 64;  // about 2 s at 30 plans a second
@@ -151,6 +160,9 @@ class MapDelta {
   LevelBounds bounds_;
   uint32_t plan_number_ = 0;
   std::vector<uint8_t> held_level_;        // kNotHeld: the operator lacks it
+  std::vector<uint8_t> sent_level_;        // the level of the version last sent (held or not)
+  std::vector<uint8_t> level_floor_;       // tooLarge()'s: planned at this level or coarser
+  uint64_t too_large_ = 0;
   std::vector<uint32_t> held_changes_;     // the map's change counter when sent
   std::vector<uint32_t> held_settled_;      // ... and the settled surfels then
   std::unique_ptr<std::atomic<uint32_t>[]> held_frame_;  // ... and the map's frame number then (0: not held)

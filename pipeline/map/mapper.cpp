@@ -255,6 +255,10 @@ void Mapper::forgetBrick(uint16_t brick) {
   if (delta_ && brick < map_->config().max_bricks) delta_->forget(brick);
 }
 
+void Mapper::brickTooLarge(uint16_t brick) {
+  if (delta_ && brick < map_->config().max_bricks) delta_->tooLarge(brick);
+}
+
 void Mapper::forgetBatch(const BrickBatch& batch) {
   for (const BrickBatchEntry& e : batch.entries()) forgetBrick(e.brick);
 }

@@ -164,6 +164,9 @@ class Mapper {
   // The operator does not hold `brick` (lost, evicted), the batch's bricks
   // (never sent), or anything (a new session): due again.
   void forgetBrick(uint16_t brick);
+  // The version of `brick` last planned had more parts than a version may
+  // have: planned a level coarser from now on (MapDelta::tooLarge).
+  void brickTooLarge(uint16_t brick);
   void forgetBatch(const BrickBatch& batch);
   void forgetAll();
 

@@ -150,6 +150,12 @@ struct Rig {
     if (all) *all = everything;
     return out;
   }
+  // ... and of the bricks found too large for a version.
+  std::set<std::size_t> tooLarge() {
+    std::set<std::size_t> out;
+    feedback.drainTooLarge([&](std::size_t b) { out.insert(b); });
+    return out;
+  }
 };
 
 // The operator: receives for `ms`, brick parts into the cache, and
@@ -447,7 +453,7 @@ TEST(StreamerBricks, UnacknowledgedPartsGoAgainUntilAcknowledged) {
 
 // A brick version needs more parts than the sender keeps (the brick encoder
 // holds no more chunks than that): that brick is told to the planner as not
-// sent, and the batch's other bricks go.
+// sent and as too large (to be planned coarser), and the batch's other bricks go.
 TEST(StreamerBricks, ABrickOfMorePartsThanTheSenderKeepsIsToldToThePlanner) {
   Rig rig(100'000'000, 0, 16, /*max_parts=*/2);
   pipeline::map::BrickBatch batch = makeBatch(1, 100);
@@ -471,7 +477,10 @@ TEST(StreamerBricks, ABrickOfMorePartsThanTheSenderKeepsIsToldToThePlanner) {
   EXPECT_EQ(sent->bricks_unstaged, 1u);
   EXPECT_EQ(rig.streamer->bricksUnstaged(), 1u);
   EXPECT_EQ(rig.forgotten(), std::set<std::size_t>({20}));
+  EXPECT_EQ(rig.tooLarge(), std::set<std::size_t>({20}));
+  EXPECT_EQ(rig.streamer->bricksTooLarge(), 1u);
   EXPECT_EQ(rig.streamer->brickCounters()->versions, 3u);  // the fourth never began
+  EXPECT_TRUE(rig.tooLarge().empty());  // told once
 }
 
 TEST(StreamerBricks, EvictionsAndFramesThatCannotGoAreToldToThePlanner) {

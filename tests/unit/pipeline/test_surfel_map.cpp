@@ -1194,6 +1194,80 @@ struct SentBoxMap {
   }
 };
 
+// A version the link could not take (more parts than a version may have) is
+// due again a level coarser, and no finer while the brick holds surfels: the
+// operator gets the finest version that fits instead of none, while the same
+// version was refused each frame before. Each further refusal goes a level
+// coarser, up to the coarsest; the floor goes with the brick's surfels.
+TEST(MapDelta, ABrickTooLargeForAVersionIsPlannedCoarserUntilItEmpties) {
+  const SurfelMap& map = wallAndBoxMap();
+  MapDelta delta = makeDelta();
+  MapDeltaStats stats;
+  const Gaze gaze = gazeFrom({0, 0, 0}, {0, 0, 1.5});
+  auto plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  ASSERT_FALSE(plan.value().empty());
+  const BrickDue fovea = plan.value().front();
+  ASSERT_TRUE(fovea.fovea);
+  ASSERT_EQ(fovea.level, 0);
+  for (const BrickDue& due : plan.value()) delta.markSent(map, due.brick, due.level);
+  // The sender could not stage the fovea's brick: it forgets it, and says why.
+  delta.forget(fovea.brick);
+  delta.tooLarge(fovea.brick);
+  EXPECT_EQ(delta.levelFloor(fovea.brick), 1);
+  EXPECT_EQ(delta.tooLargeCount(), 1u);
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  ASSERT_EQ(plan.value().size(), 1u);  // only it, the others held as sent
+  EXPECT_EQ(plan.value().front().brick, fovea.brick);
+  EXPECT_EQ(plan.value().front().level, 1);
+  EXPECT_EQ(plan.value().front().need, BrickNeed::kMissing);
+  delta.markSent(map, fovea.brick, 1);
+  // Held at level 1 with the eye still on it: not refined to the level 0 that cannot go.
+  plan = delta.plan(map, gaze, stats);
+  ASSERT_TRUE(plan);
+  EXPECT_TRUE(plan.value().empty());
+  EXPECT_EQ(stats.refine, 0u);
+  // Refused again at level 1: level 2; never past the coarsest.
+  delta.forget(fovea.brick);
+  delta.tooLarge(fovea.brick);
+  EXPECT_EQ(delta.levelFloor(fovea.brick), 2);
+  for (int i = 0; i < 2 * kMaxRegions; ++i) {
+    delta.markSent(map, fovea.brick, delta.levelFloor(fovea.brick));
+    delta.tooLarge(fovea.brick);
+  }
+  EXPECT_EQ(delta.levelFloor(fovea.brick), kMaxRegions - 1);
+}
+
+// The floor goes with the brick's surfels: a slot given to a new place starts
+// empty, and what fills it is planned at the level the eye needs.
+TEST(MapDelta, ABrickThatEmptiesLosesItsLevelFloor) {
+  SentBoxMap sent(15);
+  auto& [map, frame, stamp, delta, gaze] = sent;
+  std::vector<uint16_t> with_surfels;
+  for (std::size_t b = 0; b < map.brickCount(); ++b) {
+    const auto brick = static_cast<uint16_t>(b);
+    if (map.brickSettledCount(brick) > 0) with_surfels.push_back(brick);
+  }
+  ASSERT_FALSE(with_surfels.empty());
+  for (uint16_t brick : with_surfels) delta.tooLarge(brick);
+  fuseStill(map, frame, Scene{}, 30, stamp);  // the box goes: its bricks empty
+  MapDeltaStats stats;
+  ASSERT_TRUE(delta.plan(map, gaze, stats));
+  std::size_t emptied = 0, kept = 0;
+  for (uint16_t brick : with_surfels) {
+    if (map.brickSettledCount(brick) == 0) {
+      EXPECT_EQ(delta.levelFloor(brick), 0) << "brick " << brick;
+      ++emptied;
+    } else {
+      EXPECT_GT(delta.levelFloor(brick), 0) << "brick " << brick;  // the wall's: as dense as it was
+      ++kept;
+    }
+  }
+  EXPECT_GT(emptied, 0u);
+  EXPECT_GT(kept, 0u);
+}
+
 // A brick sent empty is the operator's (it may still draw what the empty
 // version replaces) for kEmptyHoldPlans plans, then no longer; one sent with
 // surfels stays held.
