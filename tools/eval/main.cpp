@@ -57,6 +57,9 @@ constexpr int kExitInterrupted = 130;
 // (FREF on the mock room is about 39 MB/s at 30 fps), so that no condition is cut
 // to fit and the bandwidth measured is what the condition needs (docs/eval.md).
 const std::string kBudgetMbps = "125";
+// The frames a run captures past those it measures, for the ones the operator
+// misses before its hello reaches the service (runOne).
+constexpr int kHeadroomFrames = 15;
 
 const char* kHelp =
     "usage: fovea-eval [--out-dir DIR] [--frames N] [--positions N] [--seed S] [--datasets LIST]\n"
@@ -305,10 +308,13 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
   fs::create_directories(run.dir, ec);
   if (ec) return R(ErrorCode::kIoError, run.dir + ": " + ec.message());
   // The camera runs at 30 fps; frames before the operator's hello are not sent,
-  // so the service captures a second and a half more than are measured. A retry
-  // captures twice and three times that: on a loaded machine (CI runs three stages
-  // on two cores) the service drops frames it cannot foveate in time, and the first
-  // o.frames decoded are measured whatever was captured.
+  // so the service captures half a second more than are measured (the operator
+  // starts once the service runs, and its first decoded frame was the camera's
+  // 0th to 4th in CI's reduced run: 2026-12-03; with a second and a half, four
+  // fifths of that run's frames were captured, foveated and sent after the ones
+  // measured). A retry captures twice and three times that: on a loaded machine
+  // (CI runs three stages on two cores) the service drops frames it cannot
+  // foveate in time, and the first o.frames decoded are measured whatever was captured.
   const int fps = 30;
   std::string last_error;
   // After a short attempt: at least the share of frames it decoded scaled up, plus
@@ -318,9 +324,9 @@ Result<RunResult> runOne(const RunSpec& run, const Options& o, const std::string
   for (int attempt = 0; attempt < 3 && !g_stop; ++attempt) {
     // MAP-DELTA's operator saves what it draws at the quality frame: the camera runs
     // two seconds past it whatever the frames measured.
-    const int captured = std::min(std::max({(o.frames + 45) * (attempt + 1), scaled,
+    const int captured = std::min(std::max({(o.frames + kHeadroomFrames) * (attempt + 1), scaled,
                                             run.held_frame >= 0 ? run.held_frame + 60 : 0}),
-                                  std::max((o.frames + 45) * (attempt + 1), 20 * o.frames));
+                                  std::max((o.frames + kHeadroomFrames) * (attempt + 1), 20 * o.frames));
     const double seconds = static_cast<double>(captured) / fps;
     const int port = freePort();
     fs::remove(run.dir + "/" + kHeldFile, ec);  // an earlier attempt's
@@ -569,7 +575,7 @@ int streamRuns(const std::vector<RunSpec>& plan, const Options& o, const std::st
     const RunSpec& r = plan[k];
     if (resumeRun(r, o, report)) continue;
     const std::size_t left = plan.size() - k;
-    const double per_run = measured > 0 ? measured_s / measured : (o.frames + 45) / 30.0 + 1.0;
+    const double per_run = measured > 0 ? measured_s / measured : (o.frames + kHeadroomFrames) / 30.0 + 1.0;
     std::printf("[%zu/%zu] %s %s position %d (%.2f m from the centre): %d frames (%zu of %zu done); about %s left\n",
                 k + 1, plan.size(), r.dataset.name.c_str(), r.condition.name.c_str(), r.position.index,
                 r.position.distance_m, o.frames, k * static_cast<std::size_t>(o.frames),
