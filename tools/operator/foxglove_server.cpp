@@ -94,13 +94,12 @@ Result<std::unique_ptr<FoxgloveServer>> FoxgloveServer::start(const FoxgloveServ
 
   Result<CivetwebStarted> started = startCivetweb(listen.value(), config.max_clients + 2, s.get(), "--foxglove");
   if (!started) return started.status();
-  s->ctx_ = started->ctx;
-  s->port_ = started->port;
-  s->url_ = "ws://" + started->url_host + ":" + std::to_string(s->port_);
+  s->civetweb_ = *started;
+  s->url_ = "ws://" + started->url_host + ":" + std::to_string(s->civetweb_.port);
   static const char* kProtocols[] = {kFoxgloveSubprotocol};
   static mg_websocket_subprotocols subprotocols{1, kProtocols};
-  mg_set_request_handler(s->ctx_, "/", &FoxgloveServer::onHttp, s.get());
-  mg_set_websocket_handler_with_subprotocols(s->ctx_, "/", &subprotocols, &FoxgloveServer::onWsConnect,
+  mg_set_request_handler(s->civetweb_.ctx, "/", &FoxgloveServer::onHttp, s.get());
+  mg_set_websocket_handler_with_subprotocols(s->civetweb_.ctx, "/", &subprotocols, &FoxgloveServer::onWsConnect,
                                              &FoxgloveServer::onWsReady, &FoxgloveServer::onWsData,
                                              &FoxgloveServer::onWsClose, s.get());
   return s;
@@ -118,7 +117,7 @@ FoxgloveServer::~FoxgloveServer() {
     stopping_ = true;
   }
   wake_.notify_all();
-  if (ctx_ != nullptr) mg_stop(ctx_);
+  stopCivetweb(civetweb_);
   for (Client& c : clients_) {
     if (c.sender.joinable()) c.sender.join();
   }

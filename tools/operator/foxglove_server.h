@@ -35,10 +35,8 @@
 
 #include "core/result.h"
 #include "io/foxglove/foxglove.h"
+#include "tools/operator/civetweb_start.h"
 #include "tools/operator/foxglove_messages.h"
-
-struct mg_context;
-struct mg_connection;
 
 namespace fovea::tools {
 
@@ -82,7 +80,7 @@ class FoxgloveServer {
   FoxgloveServer(const FoxgloveServer&) = delete;
   FoxgloveServer& operator=(const FoxgloveServer&) = delete;
 
-  int port() const { return port_; }
+  int port() const { return civetweb_.port; }
   const std::string& url() const { return url_; }  // ws://ADDR:PORT
 
   // The operator's thread: makes payload the channel's newest message, logged at
@@ -140,8 +138,7 @@ class FoxgloveServer {
   static int onHttp(mg_connection* conn, void* self);
 
   FoxgloveServerConfig config_;
-  mg_context* ctx_ = nullptr;
-  int port_ = 0;
+  CivetwebStarted civetweb_;  // its context, port and host (stopCivetweb)
   std::string url_;
   std::string server_info_;  // the serverInfo message
   std::string advertise_;    // the advertise message of every channel

@@ -47,11 +47,10 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& co
   // A worker per open tab, plus a few for page loads.
   Result<CivetwebStarted> started = startCivetweb(listen.value(), config.max_tabs + 4, s.get(), "--view");
   if (!started) return started.status();
-  s->ctx_ = started->ctx;
-  s->port_ = started->port;
-  s->url_ = "http://" + started->url_host + ":" + std::to_string(s->port_) + "/";
-  mg_set_request_handler(s->ctx_, "/", &ViewServer::onHttp, s.get());
-  mg_set_websocket_handler(s->ctx_, "/ws", &ViewServer::onWsConnect, &ViewServer::onWsReady, &ViewServer::onWsData,
+  s->civetweb_ = *started;
+  s->url_ = "http://" + started->url_host + ":" + std::to_string(s->civetweb_.port) + "/";
+  mg_set_request_handler(s->civetweb_.ctx, "/", &ViewServer::onHttp, s.get());
+  mg_set_websocket_handler(s->civetweb_.ctx, "/ws", &ViewServer::onWsConnect, &ViewServer::onWsReady, &ViewServer::onWsData,
                            &ViewServer::onWsClose, s.get());
   return s;
 }
@@ -63,7 +62,7 @@ ViewServer::~ViewServer() {
   }
   wake_.notify_all();
   // Closes every connection; each close handler joins its tab's sender.
-  if (ctx_ != nullptr) mg_stop(ctx_);
+  stopCivetweb(civetweb_);
   for (Tab& t : tabs_) {
     if (t.sender.joinable()) t.sender.join();
   }

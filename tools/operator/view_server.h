@@ -24,10 +24,8 @@
 #include <vector>
 
 #include "core/result.h"
+#include "tools/operator/civetweb_start.h"
 #include "tools/operator/view_messages.h"
-
-struct mg_context;
-struct mg_connection;
 
 namespace fovea::tools {
 
@@ -72,7 +70,7 @@ class ViewServer {
   ViewServer(const ViewServer&) = delete;
   ViewServer& operator=(const ViewServer&) = delete;
 
-  int port() const { return port_; }
+  int port() const { return civetweb_.port; }
   const std::string& url() const { return url_; }
 
   // The operator's thread: frameBuffer() lends a buffer of viewFrameBytes(max_points)
@@ -118,8 +116,7 @@ class ViewServer {
   static void onWsClose(const mg_connection* conn, void* self);
 
   ViewServerConfig config_;
-  mg_context* ctx_ = nullptr;
-  int port_ = 0;
+  CivetwebStarted civetweb_;  // its context, port and host (stopCivetweb)
   std::string url_;
 
   mutable std::mutex mu_;
