@@ -1,14 +1,15 @@
 #include "tools/operator/civetweb_start.h"
 
-#include <arpa/inet.h>
 #include <civetweb.h>
-#include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <string>
 #include <thread>
+
+#include "net/udp_socket.h"
 
 namespace fovea::tools {
 
@@ -49,45 +50,19 @@ Result<CivetwebStarted> startCivetweb(const std::string& listen, std::size_t thr
   return started;
 }
 
-namespace {
-
-// One connection to host:port, closed at once; false when host is no IPv4 or
-// IPv6 address (a name: the waker gives up and the stop takes its 2 s).
-bool knock(const std::string& host, int port) {
-  sockaddr_storage address{};
-  socklen_t size = 0;
-  auto* v4 = reinterpret_cast<sockaddr_in*>(&address);
-  auto* v6 = reinterpret_cast<sockaddr_in6*>(&address);
-  std::string bare = host;
-  if (bare.size() > 2 && bare.front() == '[' && bare.back() == ']') bare = bare.substr(1, bare.size() - 2);
-  if (inet_pton(AF_INET, bare.c_str(), &v4->sin_addr) == 1) {
-    v4->sin_family = AF_INET;
-    v4->sin_port = htons(static_cast<uint16_t>(port));
-    size = sizeof *v4;
-  } else if (inet_pton(AF_INET6, bare.c_str(), &v6->sin6_addr) == 1) {
-    v6->sin6_family = AF_INET6;
-    v6->sin6_port = htons(static_cast<uint16_t>(port));
-    size = sizeof *v6;
-  } else {
-    return false;
-  }
-  const int fd = ::socket(address.ss_family, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return false;
-  (void)::connect(fd, reinterpret_cast<const sockaddr*>(&address), size);
-  ::close(fd);
-  return true;
-}
-
-}  // namespace
-
 void stopCivetweb(const CivetwebStarted& started) {
   if (started.ctx == nullptr) return;
+  // Where to knock: the address it listens on (url_host, "[V6]" for IPv6).
+  const Result<net::Endpoint> door = net::Endpoint::parse(started.url_host + ":" + std::to_string(started.port));
   std::atomic<bool> stopped{false};
   std::thread waker([&] {
     // A knock before mg_stop has set its flag only wakes the poll early; knock
-    // again until it returns.
-    while (!stopped.load(std::memory_order_acquire)) {
-      if (!knock(started.url_host, started.port)) return;
+    // again until it returns. An address that does not parse: no knocks, the 2 s.
+    while (door && !stopped.load(std::memory_order_acquire)) {
+      const int fd = ::socket(door->family(), SOCK_STREAM | SOCK_CLOEXEC, 0);
+      if (fd < 0) return;
+      (void)::connect(fd, door->addr(), door->size());
+      ::close(fd);
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
   });

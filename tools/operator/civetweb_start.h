@@ -29,9 +29,10 @@ Result<CivetwebStarted> startCivetweb(const std::string& listen, std::size_t thr
 // stop flag only when its poll of the listening sockets returns, which it does
 // every 2 s when nobody connects (civetweb 1.15), so each stop took 1.9 s (the
 // operator's exit, each server a test starts). A thread beside it connects to
-// the listening port until it returns: measured 14 ms. Closes every
+// the listening port until it returns: measured 14 ms with no client connected.
+// A WebSocket client still connected keeps its worker in a poll of the same
+// 2 s, which no knock wakes: such a stop still takes up to 2 s. Closes every
 // connection, running their close handlers. Does nothing for a null ctx.
 void stopCivetweb(const CivetwebStarted& started);
-
 
 }  // namespace fovea::tools
