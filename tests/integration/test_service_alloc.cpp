@@ -149,6 +149,9 @@ const uint64_t kSentDuringTheCount = static_cast<uint64_t>(test::repetitions(10,
 struct StreamingCount {
   uint64_t frames = 0, sent = 0, allocations = 0, gaze_changes = 0;
   uint64_t brick_versions = 0, brick_versions_done = 0;  // during the count (map bricks)
+  // With --record, after the stop: every frame foveated since start, and the
+  // messages the recorder dropped (counted) in the whole run.
+  uint64_t frames_total = 0, record_dropped = 0;
 };
 
 // The service's configuration for the streaming counts: a 100 fps camera, the
@@ -300,6 +303,8 @@ void countWhileStreaming(bool gaps, StreamingCount& count, bool map_bricks = fal
   countSteadyState(service, sink, count);
   played_operator.stop();
   running.stop();
+  count.frames_total = service.stats().frames_foveated;
+  if (service.recorder() != nullptr) count.record_dropped = service.recorder()->counters().dropped();
   std::printf("steady state streaming%s: %llu frames, %llu sent, %llu gaze source changes, %llu heap allocations\n",
               gaps ? " (gaze with gaps)" : "", static_cast<unsigned long long>(count.frames),
               static_cast<unsigned long long>(count.sent), static_cast<unsigned long long>(count.gaze_changes),
@@ -347,15 +352,16 @@ TEST(ServiceAllocation, ThreeHundredFramesStreamedAndRecordedAllocateNothing) {
     }
   }
   EXPECT_TRUE(reader.complete()) << reader.stopReason();
-  if (test::timeScale() == 1.0) {
-    EXPECT_GE(per_topic["/fovea/camera_pose"], 300u);
-    EXPECT_GE(per_topic["/fovea/frame_summary"], count.sent);
-  } else {
-    // Under qemu and the sanitizers the writer thread (zstd, the Foxglove cloud's
-    // encoding) falls behind the stages and drops, counted: it never blocks them.
-    EXPECT_GT(per_topic["/fovea/camera_pose"], 0u);
-    EXPECT_GT(per_topic["/fovea/frame_summary"], 0u);
-  }
+  // Every foveated frame's pose is in the file or among the recorder's counted
+  // drops: its writer thread (zstd, the Foxglove cloud's encoding) may fall
+  // behind on a loaded machine, under qemu and the sanitizers, and then drops,
+  // counted, rather than block the stages. (A frame's summary is not compared
+  // so: a frame counts as sent even when its send window closed before the
+  // summary went.)
+  EXPECT_GT(per_topic["/fovea/camera_pose"], 0u);
+  EXPECT_GT(per_topic["/fovea/frame_summary"], 0u);
+  EXPECT_GE(per_topic["/fovea/camera_pose"] + count.record_dropped, count.frames_total)
+      << count.record_dropped << " messages dropped by the recorder, counted";
   EXPECT_GT(per_topic["/fovea/cloud"], 0u);
   EXPECT_GT(per_topic["/fovea/chunks"], per_topic["/fovea/frame_summary"]);
   EXPECT_GT(per_topic["/fovea/gaze"], 0u);
