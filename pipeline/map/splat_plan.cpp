@@ -6,6 +6,7 @@
 #include <algorithm>
 
 #include "core/depth_noise.h"
+#include "pipeline/map/float3.h"
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/splat_plan.h"
@@ -13,17 +14,6 @@
 namespace fovea::pipeline::map {
 
 namespace {
-
-struct Vec3 {
-  float x, y, z;
-};
-
-Vec3 rotate(const float* r, Vec3 v) {
-  return {r[0] * v.x + (r[1] * v.y + r[2] * v.z), r[3] * v.x + (r[4] * v.y + r[5] * v.z),
-          r[6] * v.x + (r[7] * v.y + r[8] * v.z)};
-}
-
-float dot(Vec3 a, Vec3 b) { return a.x * b.x + (a.y * b.y + a.z * b.z); }
 
 // A splatting surfel's centre at pixel (iu, iv): its footprint's reach from its
 // radius, and its plane (through p, with the camera-frame normal direction n,
@@ -34,11 +24,11 @@ float dot(Vec3 a, Vec3 b) { return a.x * b.x + (a.y * b.y + a.z * b.z); }
 // root) the plane's depth is ill-conditioned, and a plane nearer than the
 // depth range's start is a surfel seen edge on: both take the centre's own
 // depth at every pixel of the footprint.
-void planCentre(const SplatFrame& f, const Surfel& s, Vec3 p, int iu, int iv, std::size_t j, SplatPlan& plan) {
+void planCentre(const SplatFrame& f, const Surfel& s, Float3 p, int iu, int iv, std::size_t j, SplatPlan& plan) {
   const float footprint = f.f * surfelRadius(s) / p.z;
   plan.reach[j] = static_cast<uint32_t>(std::clamp(static_cast<int>(footprint), 0, kMaxReach));
   const Eigen::Vector3f d = surfelDirection(s);
-  const Vec3 n = rotate(f.r, {d.x(), d.y(), d.z()});
+  const Float3 n = rotate(f.r, {d.x(), d.y(), d.z()});
   const float inv_plane = 1.0f / dot(n, p);
   const float rx = (static_cast<float>(iu) - f.cx) * f.inv_fx, ry = (static_cast<float>(iv) - f.cy) * f.inv_fy;
   const float along = n.x * rx + (n.y * ry + n.z);
@@ -68,8 +58,8 @@ SplatPlan::Action planSurfel(const SplatFrame& f, const Surfel& s, std::size_t j
   if (!(s.flags & kSurfelStable) && f.frame - s.first_seen > f.unstable_max) return SplatPlan::kRemoveUnstable;
   if (!f.brick_visible[s.brick]) return SplatPlan::kSkip;
   const float* o = f.brick_cam + 3 * static_cast<std::size_t>(s.brick);
-  const Vec3 q = rotate(f.r, {s.x, s.y, s.z});
-  const Vec3 p{o[0] + q.x, o[1] + q.y, o[2] + q.z};
+  const Float3 q = rotate(f.r, {s.x, s.y, s.z});
+  const Float3 p{o[0] + q.x, o[1] + q.y, o[2] + q.z};
   if (!(p.z >= f.min_z)) return SplatPlan::kSkip;
   const float pu = f.fx * p.x / p.z + f.cx, pv = f.fy * p.y / p.z + f.cy;
   if (!(pu > f.u_lo && pu < f.u_hi && pv > f.v_lo && pv < f.v_hi)) return SplatPlan::kSkip;
