@@ -1,5 +1,5 @@
 // A 3-vector of floats and the two products the map's scalar references
-// (splat_plan.cpp) share with their Highway kernels
+// (splat_plan.cpp, association_plan.cpp) share with their Highway kernels
 // (surfel_simd-inl.h's Dot3 and RotateRow): each written out in one order,
 // a0 b0 + (a1 b1 + a2 b2), Eigen's for the fixed-size products these passes
 // used before, so that the maps are those they made, bit for bit.

@@ -141,6 +141,7 @@ class IndexMap {
   uint32_t slot(std::size_t i) const { return slot_[i]; }
   float depth(std::size_t i) const { return depth_[i]; }
   const uint32_t* slots() const { return slot_.data(); }
+  const float* depths() const { return depth_.data(); }
   CentreGrid grid() const {
     const float* inv_depth = planes_.data();
     return {cell_.data(), inv_depth, inv_depth + cells_, inv_depth + 2 * cells_, width_, height_, stride_};

@@ -59,7 +59,7 @@ RadiusCodeTables makeRadiusCodeTables() {
   for (std::size_t b = 0; b < t.bucket_code.size(); ++b) {
     const uint64_t bits = t.lowest_bits + (static_cast<uint64_t>(b) << RadiusCodeTables::kBucketShift);
     const bool past = bits >= std::bit_cast<uint32_t>(kMaxRadiusM);
-    t.bucket_code[b] = past ? uint8_t{255} : encodeRadiusRef(std::bit_cast<float>(static_cast<uint32_t>(bits)));
+    t.bucket_code[b] = past ? 255u : encodeRadiusRef(std::bit_cast<float>(static_cast<uint32_t>(bits)));
   }
   return t;
 }

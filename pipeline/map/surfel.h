@@ -44,6 +44,10 @@ inline constexpr uint8_t kSurfelStable = 2;
 // explains a pixel: with bricks, once its brick went with it,
 // SurfelMap::setHeldFrames).
 inline constexpr uint8_t kSurfelSettled = 4;
+// Merged or carved by an earlier pixel of the association's batch
+// (SurfelMap::associate, association_plan.h): its plan is made again. Set and
+// cleared within one batch, so that no other pass and no reader sees it.
+inline constexpr uint8_t kSurfelTouched = 8;
 
 // A unit normal as 24 bits: octahedral projection, 12 bits each for u and v.
 // Inline (the index map decodes one per surfel per frame and the association
@@ -115,7 +119,7 @@ uint8_t encodeRadiusRef(float radius_m);
 struct RadiusCodeTables {
   static constexpr int kBucketShift = 17;  // 23 mantissa bits less 6: 64 buckets an octave
   uint32_t lowest_bits = 0;                // kMinRadiusM's float bits: bucket 0 starts there
-  std::array<uint8_t, 1024> bucket_code{};   // the code of each bucket's lowest float
+  std::array<uint32_t, 1024> bucket_code{};  // the code of each bucket's lowest float (32 bits: gathered)
   std::array<float, 257> lowest_radius{};  // per code, the smallest radius that has it; [256]: infinity
 };
 RadiusCodeTables makeRadiusCodeTables();

@@ -415,40 +415,50 @@ void SurfelMap::updateNormalTolerance(float f_px) {
   }
 }
 
-float SurfelMap::normalCosTolerance(float z) const {
-  const auto b = static_cast<std::size_t>(std::max(0.0f, (z - normal_cos_z_min_) * normal_cos_per_m_));
-  return normal_cos_[std::min(b, normal_cos_.size() - 1)];
+// associate()'s view of the frame and the map, but the batch's per-pixel
+// pointers (associationBatch()).
+AssociationFrame SurfelMap::associationFrame(const hal::RgbdFrame& frame) const {
+  static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
+  AssociationFrame f;
+  for (int i = 0; i < 9; ++i) f.r[i] = static_cast<float>(frame.T_world_cam.R_world_cam(i / 3, i % 3));
+  f.brick_cam = brick_cam_.data()->data();
+  f.normal_cos = normal_cos_.data();
+  f.normal_cos_size = static_cast<uint32_t>(normal_cos_.size());
+  f.normal_cos_z_min = normal_cos_z_min_;
+  f.normal_cos_per_m = normal_cos_per_m_;
+  f.sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
+  f.confidence_cap = static_cast<float>(config_.confidence_cap);
+  f.stable_confidence = static_cast<float>(config_.stable_confidence);
+  return f;
 }
 
-// Pixel i's measurement (its world normal n_world) into surfel s, which it
-// sees at its depth and orientation: confidence-weighted averages, the
-// confidence capped so that a changed surface still moves. The surfel's normal
-// comes as its decoded direction and that direction's length, not as a unit
-// vector: the weighted sum of unit normals scaled by the length and the
-// confidences' sum points the same way, and the encoding keeps only the way
-// (it divides by the L1 norm), so the merge needs no division for it.
-void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& vertex, const Eigen::Matrix3f& R_wc_f,
-                          const Eigen::Vector3f& n_world,
-                          const Eigen::Vector3f& surfel_direction, float direction_norm, float weight,
-                          const uint8_t* rgb) {
-  // Relative to the surfel's brick: its origin is in camera coordinates
-  // already (cullBricks, from double), a few metres from the vertex.
-  const Eigen::Vector3f rel = R_wc_f * (vertex - brick_cam_[s.brick]);
-  const float c = decodeConfidence(s.confidence);
-  const float sum = c + weight;
-  const float inv_sum = 1.0f / sum;
-  const float a = c * inv_sum, b = weight * inv_sum;
-  s.x = a * s.x + b * rel.x();
-  s.y = a * s.y + b * rel.y();
-  s.z = a * s.z + b * rel.z();
-  const Eigen::Vector3f n = c * surfel_direction + (weight * direction_norm) * n_world;
-  setNormalAndRadius(s, n.squaredNorm() > 0.0f ? n : n_world, a * surfelRadius(s) + b * lateMap(kRadius)[i]);
+// Points `f` at the batch from pixel i = (u, v) on.
+void SurfelMap::associationBatch(AssociationFrame& f, std::size_t i, int u, int v) const {
+  f.slot = index_map_.slots() + i;
+  f.seen = index_map_.depths() + i;
+  f.weight = weight_.data() + i;
+  f.z = vertex_z_.data() + i;
+  f.nx = lateMap(kNormalX) + i;
+  f.ny = lateMap(kNormalY) + i;
+  f.nz = lateMap(kNormalZ) + i;
+  f.radius = lateMap(kRadius) + i;
+  f.ray_u = tables_.ray_u.data() + kNormalReach + u;
+  f.ray_v = tables_.ray_v[static_cast<std::size_t>(v)];
+}
+
+// Pixel i's merge, planned in lane j, into surfel s (a merge's writes; the
+// arithmetic is the plan's: association_plan.h).
+void SurfelMap::applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan, const uint8_t* rgb) {
+  s.x = plan.x[j];
+  s.y = plan.y[j];
+  s.z = plan.z[j];
+  s.normal_radius = plan.normal_radius[j];
+  const float a = plan.a[j], b = plan.b[j];
   s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
   s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
   s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
-  const float capped = std::min(sum, static_cast<float>(config_.confidence_cap));
-  s.confidence = encodeConfidence(capped);
-  if (capped >= static_cast<float>(config_.stable_confidence)) {
+  s.confidence = static_cast<uint16_t>(plan.confidence[j]);
+  if (plan.bits[j] & AssociationPlan::kStable) {
     s.flags |= kSurfelStable;
     if (frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
   }
@@ -456,77 +466,96 @@ void SurfelMap::mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& verte
   s.last_seen = frame_;
 }
 
+// A batch of pixels, row by row: planned (association_plan.h), then applied in
+// pixel order. A pixel whose surfel an earlier pixel of the batch merged or
+// carved is planned again from the surfel as it is then, so the map is a
+// pixel-by-pixel pass's. The reference kernel set is that pass (a batch of one
+// pixel: nothing planned again), so that the maps fused with either set, which
+// the equivalence tests compare, check the replanning too.
 std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) {
   const int w = frame.width(), h = frame.height();
-  const Eigen::Matrix3f R_wc_f = frame.T_world_cam.R_world_cam.cast<float>();
   updateNormalTolerance(static_cast<float>(0.5 * (frame.intrinsics.fx + frame.intrinsics.fy)));
-  const auto sigmas = static_cast<float>(config_.depth_tolerance_sigmas);
-  const auto carve = static_cast<float>(config_.carve_weight);
-  CarvedChain carved;
-  std::size_t to_add = 0;
-  const std::size_t pixels = frame.pixelCount();
-  constexpr std::size_t kPrefetchPixels = 16;
+  AssociationFrame view = associationFrame(frame);
+  AssociationPlan plan;
+  AssociationRun run;
+  const bool ref = config_.kernels == KernelSet::kRef;
+  const int batch = ref ? 1 : static_cast<int>(AssociationPlan::kSize);
+  std::size_t yielded_block = 0;
   for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
+    for (int u = 0; u < w; u += batch) {
       const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-      if (i % kYieldEvery == 0) yieldGate();
-      // The surfel a few pixels on: the index map names surfels in no order the
-      // cache can guess (a prefetch changes no result).
-      if (i + kPrefetchPixels < pixels) {
-        const uint32_t ahead = index_map_.slot(i + kPrefetchPixels);
-        if (ahead != kNone) __builtin_prefetch(&surfels_[ahead]);
+      const std::size_t count = std::min<std::size_t>(static_cast<std::size_t>(batch), static_cast<std::size_t>(w - u));
+      if (i == 0 || (i + count - 1) / kYieldEvery != yielded_block) {
+        yieldGate();
+        yielded_block = (i + count - 1) / kYieldEvery;
       }
-      const float weight = weight_[i];
-      if (weight == 0.0f) continue;
-      const float z = vertex_z_[i];
-      const float tolerance = sigmas * depthSigma(z);
-      const uint32_t slot = index_map_.slot(i);
-      const Eigen::Vector3f normal = normalAt(i);
-      const bool has_normal = normal.squaredNorm() > 0.0f;
-      if (slot != kNone) {
-        Surfel& s = surfels_[slot];
-        if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
-        const float seen = index_map_.depth(i);
-        if (seen < z - tolerance) {
-          // The camera sees through the surfel: free space where it is.
-          if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight, stats)) carveAway(slot, carved);
-          continue;
-        }
-        // A settled surfel at the measured depth explains the pixel, whether or
-        // not the measurement merges: an edge pixel has no normal, and a far
-        // pixel's normal is too noisy for the tolerance (on the mock living
-        // room these were 35 000 of the 40 000 pixels a static view left
-        // unexplained, and went to the operator every frame). A stable surfel
-        // seen at its depth settles once old enough.
-        const bool at_depth = seen <= z + tolerance;
-        if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
-        if (at_depth && explains(s)) explained_[i] = 1;
-        if (!has_normal) continue;
-        if (at_depth) {
-          // The angle test on the surfel's direction as decoded: (d / |d|) . n < cos
-          // is d . n < cos |d|, a square root and no division.
-          const Eigen::Vector3f n_world = R_wc_f * normal;
-          const Eigen::Vector3f direction = surfelDirection(s);
-          const float direction_norm = direction.norm();
-          if (direction.dot(n_world) < normalCosTolerance(z) * direction_norm) continue;  // another orientation
-          mergeInto(s, i, vertexAt(i, u, v), R_wc_f, n_world, direction, direction_norm, weight,
-                    frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
-          ++stats.merged;
-          continue;
-        }
-        // The measurement lies in front of the surfel: a surface the map does not have.
+      associationBatch(view, i, u, v);
+      if (ref) {
+        planAssociationRef(view, surfels_.data(), count, plan);
+      } else {
+        planAssociationSimd(view, surfels_.data(), count, plan);
       }
-      if (!has_normal) continue;
-      weight_[i] = -weight;
-      ++to_add;
+      applyAssociation(frame, view, i, count, plan, run, stats);
     }
   }
-  if (carved.head != kNone) {
-    links_.setNext(carved.tail, free_head_);
-    free_head_ = carved.head;
-    free_count_ += carved.count;
+  if (run.carved.head != kNone) {
+    links_.setNext(run.carved.tail, free_head_);
+    free_head_ = run.carved.head;
+    free_count_ += run.carved.count;
   }
-  return to_add;
+  return run.to_add;
+}
+
+// A batch's plans applied in pixel order: carvings, settling, explained
+// pixels, merges, and the pixels left to add (marked by a negative weight).
+void SurfelMap::applyAssociation(const hal::RgbdFrame& frame, const AssociationFrame& view, std::size_t i0,
+                                 std::size_t count, AssociationPlan& plan, AssociationRun& run, FuseStats& stats) {
+  const auto carve = static_cast<float>(config_.carve_weight);
+  for (std::size_t j = 0; j < count; ++j) {
+    const uint32_t kind = plan.kind[j];
+    if (kind == AssociationPlan::kNothing) continue;
+    const std::size_t i = i0 + j;
+    const bool has_normal = (plan.bits[j] & AssociationPlan::kHasNormal) != 0;
+    if (kind != AssociationPlan::kEmpty) {
+      const uint32_t slot = plan.slot[j];
+      Surfel& s = surfels_[slot];
+      if (!(s.flags & kSurfelLive)) continue;  // carved away at another pixel this frame
+      if (kind == AssociationPlan::kCarve) {
+        // The camera sees through the surfel: free space where it is.
+        s.flags |= kSurfelTouched;
+        if (carveTo(slot, decodeConfidence(s.confidence) - carve * weight_[i], stats)) carveAway(slot, run.carved);
+        continue;
+      }
+      // A settled surfel at the measured depth explains the pixel, whether or
+      // not the measurement merges: an edge pixel has no normal, and a far
+      // pixel's normal is too noisy for the tolerance (on the mock living
+      // room these were 35 000 of the 40 000 pixels a static view left
+      // unexplained, and went to the operator every frame). A stable surfel
+      // seen at its depth settles once old enough.
+      const bool at_depth = kind == AssociationPlan::kAtDepth;
+      if (at_depth && (s.flags & kSurfelStable) && frame_ - s.first_seen >= config_.settle_frames) markSettled(s);
+      if (at_depth && explains(s)) explained_[i] = 1;
+      if (!has_normal) continue;
+      if (at_depth) {
+        if (s.flags & kSurfelTouched) planMergeRef(view, s, j, plan);
+        if (plan.bits[j] & AssociationPlan::kMerges) {
+          applyMerge(s, i, j, plan, frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
+          s.flags |= kSurfelTouched;
+          ++stats.merged;
+        }
+        continue;
+      }
+      // The measurement lies in front of the surfel: a surface the map does not have.
+    }
+    if (!has_normal) continue;
+    weight_[i] = -weight_[i];
+    ++run.to_add;
+  }
+  for (std::size_t j = 0; j < count; ++j) {
+    if (plan.kind[j] == AssociationPlan::kCarve || plan.kind[j] == AssociationPlan::kAtDepth) {
+      surfels_[plan.slot[j]].flags &= static_cast<uint8_t>(~kSurfelTouched);
+    }
+  }
 }
 
 // Surfels carved away stay out of the free list until every pixel is

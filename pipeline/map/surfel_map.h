@@ -45,6 +45,7 @@
 #include "core/result.h"
 #include "hal/frame.h"
 #include "pipeline/backproject.h"
+#include "pipeline/map/association_plan.h"
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/live_points.h"
 #include "pipeline/map/map_gate.h"
@@ -279,18 +280,24 @@ class SurfelMap {
   void splatSurfels(const hal::RgbdFrame& frame, FuseStats& stats);
   SplatFrame splatFrame(const hal::RgbdFrame& frame) const;
   void applySplats(std::size_t b0, std::size_t count, const SplatPlan& plan, FuseStats& stats);
-  // Merges and carves; returns the pixels left to add (marked by a negative weight).
-  std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
-  // associate()'s normal test (its tolerance by depth, for this focal length) and merge.
-  void updateNormalTolerance(float f_px);
-  float normalCosTolerance(float z) const;
-  void mergeInto(Surfel& s, std::size_t i, const Eigen::Vector3f& vertex, const Eigen::Matrix3f& R_wc_f,
-                 const Eigen::Vector3f& n_world, const Eigen::Vector3f& surfel_direction, float direction_norm,
-                 float weight, const uint8_t* rgb);
   struct CarvedChain {
     uint32_t head = kNoSurfel, tail = kNoSurfel;
     std::size_t count = 0;
   };
+  // Merges and carves; returns the pixels left to add (marked by a negative weight).
+  std::size_t associate(const hal::RgbdFrame& frame, FuseStats& stats);
+  // associate()'s steps: the normal test's tolerance by depth (for this focal
+  // length), the plans' view of the frame, a batch's pixels, its plans applied.
+  void updateNormalTolerance(float f_px);
+  AssociationFrame associationFrame(const hal::RgbdFrame& frame) const;
+  void associationBatch(AssociationFrame& f, std::size_t i, int u, int v) const;
+  struct AssociationRun {
+    CarvedChain carved;
+    std::size_t to_add = 0;
+  };
+  void applyAssociation(const hal::RgbdFrame& frame, const AssociationFrame& view, std::size_t i0, std::size_t count,
+                        AssociationPlan& plan, AssociationRun& run, FuseStats& stats);
+  void applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan, const uint8_t* rgb);
   void carveAway(uint32_t slot, CarvedChain& chain);  // associate()'s: off the brick, onto the chain
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   enum class Added { kYes, kNoSurfel, kNoBrick };

@@ -1,6 +1,7 @@
 // Per-target Highway forms of the surfel's codecs (surfel.h) and the 3-vector
-// arithmetic the map's kernels share (splat_plan_simd-inl.h): each the
-// scalar's operations in its order, so every kernel keeps its reference's bits. Vectors are passed one component at
+// arithmetic the map's kernels share (splat_plan_simd-inl.h,
+// association_plan_simd-inl.h): each the scalar's operations in its order, so
+// every kernel keeps its reference's bits. Vectors are passed one component at
 // a time (SVE's are sizeless: no struct of them).
 
 // Per-target include guard (Highway's toggle idiom).
@@ -12,6 +13,7 @@
 #endif
 
 #include <cstddef>
+#include <limits>
 
 #include "hwy/highway.h"
 #include "pipeline/map/surfel.h"
@@ -58,6 +60,76 @@ HWY_INLINE void DecodeDirection(DF df, VU normal_radius, hn::Vec<DF>& nx, hn::Ve
   nx = hn::IfThenElse(fold, hn::Mul(hn::Sub(one, hn::Abs(v)), sign_u), u);
   ny = hn::IfThenElse(fold, hn::Mul(hn::Sub(one, hn::Abs(u)), sign_v), v);
   nz = z;
+}
+
+// surfel_detail::quantiseUnit, per lane.
+template <class DF, class V>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<DF>> QuantiseUnit(DF df, V x) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du;
+  const auto half = hn::Set(df, 0.5f), steps = hn::Set(df, surfel_detail::kNormalSteps);
+  const auto q = hn::Add(hn::Mul(hn::Add(hn::Mul(x, half), half), steps), half);
+  return hn::BitCast(du, hn::ConvertTo(di, hn::Min(hn::Max(q, hn::Zero(df)), steps)));
+}
+
+// encodeNormal (surfel.h) of (nx, ny, nz), per lane.
+template <class DF, class V>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<DF>> EncodeNormal(DF df, V nx, V ny, V nz) {
+  const hn::RebindToUnsigned<DF> du;
+  const auto one = hn::Set(df, 1.0f), zero = hn::Zero(df);
+  const auto l1 = hn::Add(hn::Add(hn::Abs(nx), hn::Abs(ny)), hn::Abs(nz));
+  const auto usable = hn::And(hn::Gt(l1, zero), hn::Lt(l1, hn::Set(df, std::numeric_limits<float>::infinity())));
+  const auto inv_l1 = hn::Div(one, l1);
+  auto u = hn::Mul(nx, inv_l1), v = hn::Mul(ny, inv_l1);
+  const auto sign_u = hn::IfThenElse(hn::Lt(u, zero), hn::Set(df, -1.0f), one);
+  const auto sign_v = hn::IfThenElse(hn::Lt(v, zero), hn::Set(df, -1.0f), one);
+  const auto fold = hn::Lt(nz, zero);
+  const auto fu = hn::Mul(hn::Sub(one, hn::Abs(v)), sign_u);
+  const auto fv = hn::Mul(hn::Sub(one, hn::Abs(u)), sign_v);
+  u = hn::IfThenElse(fold, fu, u);
+  v = hn::IfThenElse(fold, fv, v);
+  // An unusable lane's operands may be NaN: quantised as 0 first, then replaced.
+  const auto code = hn::Or(hn::ShiftLeft<12>(QuantiseUnit(df, hn::IfThenElseZero(usable, u))),
+                           QuantiseUnit(df, hn::IfThenElseZero(usable, v)));
+  const uint32_t plus_z = (surfel_detail::quantiseUnit(0.0f) << 12) | surfel_detail::quantiseUnit(0.0f);
+  return hn::IfThenElse(hn::RebindMask(du, usable), code, hn::Set(du, plus_z));
+}
+
+// encodeRadius (surfel.h), per lane: the tables of kRadiusCodes.
+template <class DF, class V>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<DF>> EncodeRadius(DF df, V radius) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du;
+  const auto small = hn::Not(hn::Gt(radius, hn::Set(df, kMinRadiusM)));
+  const auto large = hn::Ge(radius, hn::Set(df, kMaxRadiusM));
+  const auto inside = hn::RebindMask(du, hn::Not(hn::Or(small, large)));
+  const auto bucket = hn::IfThenElseZero(
+      inside, hn::ShiftRight<RadiusCodeTables::kBucketShift>(hn::Sub(hn::BitCast(du, radius), hn::Set(du, kRadiusCodes.lowest_bits))));
+  const auto code = hn::GatherIndex(du, kRadiusCodes.bucket_code.data(), hn::BitCast(di, bucket));
+  const auto next = hn::GatherIndex(df, kRadiusCodes.lowest_radius.data(), hn::BitCast(di, hn::Add(code, hn::Set(du, 1u))));
+  const auto rounded = hn::IfThenElse(hn::RebindMask(du, hn::Ge(radius, next)), hn::Add(code, hn::Set(du, 1u)), code);
+  return hn::IfThenElse(hn::RebindMask(du, small), hn::Zero(du),
+                        hn::IfThenElse(hn::RebindMask(du, large), hn::Set(du, 255u), rounded));
+}
+
+// decodeConfidence (surfel.h) of 16-bit codes in 32-bit lanes.
+template <class DF, class VU>
+HWY_INLINE hn::Vec<DF> DecodeConfidence(DF df, VU code) {
+  const hn::RebindToSigned<DF> di;
+  return hn::Div(hn::ConvertTo(df, hn::BitCast(di, code)), hn::Set(df, kConfidenceScale));
+}
+
+// encodeConfidence (surfel.h), per lane, as 32-bit lanes.
+template <class DF, class V>
+HWY_INLINE hn::Vec<hn::RebindToUnsigned<DF>> EncodeConfidence(DF df, V c) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du;
+  const auto scaled = hn::Add(hn::Mul(c, hn::Set(df, kConfidenceScale)), hn::Set(df, 0.5f));
+  const auto top = hn::Ge(scaled, hn::Set(df, 65535.0f));
+  const auto bottom = hn::Le(scaled, hn::Zero(df));
+  const auto inside = hn::Not(hn::Or(top, bottom));
+  const auto code = hn::BitCast(du, hn::ConvertTo(di, hn::IfThenElseZero(inside, scaled)));
+  return hn::IfThenElse(hn::RebindMask(du, top), hn::Set(du, 65535u), code);
 }
 
 }  // namespace HWY_NAMESPACE

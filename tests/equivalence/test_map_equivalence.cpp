@@ -4,9 +4,10 @@
 // Highway target compiled in and supported here (TargetTest/<Case>/<TARGET>);
 // the index map's gather (pipeline/map/index_map.h) the same way, and its
 // reference against a brute force over every centre of the grid; the index
-// map's first pass (pipeline/map/splat_plan.h) the same way, and the explained
-// view's judgement of a row (pipeline/map/view_judge.h); then whole maps fused
-// with either kernel set, which must be the same map.
+// map's first pass (pipeline/map/splat_plan.h) and the association's plans
+// (pipeline/map/association_plan.h) the same way, and the explained view's
+// judgement of a row (pipeline/map/view_judge.h); then whole maps fused with
+// either kernel set, which must be the same map.
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -28,6 +29,7 @@
 #include "hal/camera.h"
 #include "core/depth_noise.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/map/association_plan.h"
 #include "pipeline/map/index_map.h"
 #include "pipeline/map/map_kernels.h"
 #include "pipeline/map/splat_plan.h"
@@ -669,6 +671,144 @@ TEST_P(TargetTest, TheSplatPlansOfRunsOutOfViewAreTheReference) {
   EXPECT_EQ(actions[SplatPlan::kRemoveUnstable], broken_removed);
   EXPECT_EQ(actions[SplatPlan::kSplat], broken_visible);
   EXPECT_EQ(actions[SplatPlan::kSkip], surfels.size() - broken_visible - broken_removed);
+}
+
+// ---- the association: its plans ---------------------------------------------
+
+// A batch's pixels and the pool they name, for the association's plans
+// (pipeline/map/association_plan.h): measurements missing and without a
+// normal, slots none or into the pool (several pixels naming one surfel), the
+// index map's depth clearly behind, exactly at either edge of, within and in
+// front of the tolerance, every normal, radius and confidence code in the
+// pool, and pixel normals near the surfel's (so that many merge) or anywhere.
+struct AssociationScene {
+  static constexpr int kBricks = 16;
+  static constexpr std::size_t kPool = 300;
+  std::vector<float> brick_cam, weight, z, nx, ny, nz, radius, seen, ray_u, normal_cos;
+  std::vector<uint32_t> slot;
+  std::vector<Surfel> surfels;
+  AssociationFrame frame;
+
+  AssociationScene(const AssociationScene&) = delete;  // the frame points into this scene's arrays
+  AssociationScene& operator=(const AssociationScene&) = delete;
+  AssociationScene(std::size_t pixels, std::mt19937_64& rng) {
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    const Eigen::Matrix3f r =
+        Eigen::AngleAxisf(unit(rng) * 6.0f, Eigen::Vector3f(unit(rng), unit(rng) - 0.5f, unit(rng) + 0.1f).normalized())
+            .toRotationMatrix();
+    for (int i = 0; i < 9; ++i) frame.r[i] = r(i / 3, i % 3);
+    frame.sigmas = 3.0f, frame.confidence_cap = 20.0f, frame.stable_confidence = 1.5f;
+    for (int b = 0; b < 3 * kBricks; ++b) brick_cam.push_back(8.0f * unit(rng) - 4.0f);
+    for (int b = 0; b < 64; ++b) normal_cos.push_back(0.05f + 0.85f * unit(rng));
+    surfels.resize(kPool);
+    for (Surfel& s : surfels) {
+      s = Surfel{unit(rng) * 0.3f, unit(rng) * 0.3f, unit(rng) * 0.3f};
+      s.normal_radius = static_cast<uint32_t>(rng());
+      s.confidence = static_cast<uint16_t>(rng() % 4 == 0 ? rng() : rng() % 6000);
+      s.brick = static_cast<uint16_t>(rng() % kBricks);
+      s.flags = kSurfelLive;
+      s.red = static_cast<uint8_t>(rng()), s.green = static_cast<uint8_t>(rng()), s.blue = static_cast<uint8_t>(rng());
+    }
+    surfels[1].confidence = 0;  // no confidence: the pixel's measurement alone
+    for (std::size_t j = 0; j < pixels; ++j) addPixel(r, rng);
+    frame.brick_cam = brick_cam.data();
+    frame.slot = slot.data(), frame.seen = seen.data(), frame.weight = weight.data(), frame.z = z.data();
+    frame.nx = nx.data(), frame.ny = ny.data(), frame.nz = nz.data(), frame.radius = radius.data();
+    frame.ray_u = ray_u.data();
+    frame.ray_v = unit(rng) - 0.5f;
+    frame.normal_cos = normal_cos.data();
+    frame.normal_cos_size = static_cast<uint32_t>(normal_cos.size());
+    frame.normal_cos_z_min = 0.3f, frame.normal_cos_per_m = 64.0f / 4.2f;
+  }
+
+  void addPixel(const Eigen::Matrix3f& r, std::mt19937_64& rng) {
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    const uint64_t pick = rng();
+    weight.push_back(pick % 9 == 0 ? 0.0f : pick % 11 == 0 ? 1.0f : 1.5f * unit(rng));
+    const float depth = pick % 13 == 0 ? 0.3f : 0.3f + 5.0f * unit(rng);
+    z.push_back(depth);
+    const uint32_t s = pick % 7 == 0 ? IndexMap::kNoSurfel : static_cast<uint32_t>(rng() % (pick % 5 == 0 ? 4 : kPool));
+    slot.push_back(s);
+    Eigen::Vector3f n(unit(rng) - 0.5f, unit(rng) - 0.5f, unit(rng) - 0.5f);
+    if (s != IndexMap::kNoSurfel && rng() % 3 != 0) {  // near the surfel's normal, seen from the camera
+      n = r.transpose() * decodeNormal(surfels[s].normal_radius >> 8) + 0.2f * n;
+    }
+    if (pick % 10 == 0) n.setZero();                 // no normal: an edge
+    if (pick % 17 == 0) n = Eigen::Vector3f(1e-30f, 0.0f, 0.0f);  // its square underflows: none either
+    nx.push_back(n.x()), ny.push_back(n.y()), nz.push_back(n.z());
+    const float radii[] = {kMinRadiusM, kMaxRadiusM, 0.0f, 0.5f};
+    radius.push_back(pick % 19 == 0 ? radii[rng() % 4] : 1e-4f + 0.02f * unit(rng));
+    const float tolerance = frame.sigmas * depthSigma(depth);
+    const float offsets[] = {-1.5f * tolerance, -tolerance, tolerance, 2.0f * tolerance, 0.0f, 0.3f * tolerance};
+    const uint64_t which = rng() % 8;
+    seen.push_back(which < 6 ? (which == 1 ? depth - tolerance : which == 2 ? depth + tolerance : depth + offsets[which])
+                             : which == 6 ? std::numeric_limits<float>::infinity() : 6.0f * unit(rng));
+    ray_u.push_back(1.4f * unit(rng) - 0.7f);
+  }
+};
+
+// Lane by lane the same kind and bits, and for a merge the same bits in every field.
+int expectSamePlans(const AssociationPlan& a, const AssociationPlan& b, std::size_t count, const std::string& what) {
+  int reported = 0, merges = 0;
+  auto same = [](float x, float y) { return std::bit_cast<uint32_t>(x) == std::bit_cast<uint32_t>(y); };
+  for (std::size_t j = 0; j < count; ++j) {
+    bool ok = a.kind[j] == b.kind[j] && a.bits[j] == b.bits[j];
+    if (ok && a.kind[j] != AssociationPlan::kNothing) ok = a.slot[j] == b.slot[j];
+    if (ok && (a.bits[j] & AssociationPlan::kMerges)) {
+      ++merges;
+      ok = same(a.x[j], b.x[j]) && same(a.y[j], b.y[j]) && same(a.z[j], b.z[j]) && same(a.a[j], b.a[j]) &&
+           same(a.b[j], b.b[j]) && a.normal_radius[j] == b.normal_radius[j] && a.confidence[j] == b.confidence[j];
+    }
+    if (!ok && reported++ < 5) {
+      ADD_FAILURE() << what << ": pixel " << j << ": kind " << a.kind[j] << " against " << b.kind[j] << ", bits "
+                    << a.bits[j] << " against " << b.bits[j] << ", normal and radius " << std::hex << a.normal_radius[j]
+                    << " against " << b.normal_radius[j] << std::dec << ", confidence " << a.confidence[j]
+                    << " against " << b.confidence[j] << ", x " << a.x[j] << " against " << b.x[j];
+    }
+  }
+  return merges;
+}
+
+TEST_P(TargetTest, TheAssociationPlansAreTheReference) {
+  std::mt19937_64 rng(61);
+  int merges = 0;
+  uint64_t kinds[5] = {}, stable = 0;
+  const int reps = test::repetitions(60, 15);
+  for (int rep = 0; rep < reps; ++rep) {
+    const AssociationScene scene(AssociationPlan::kSize, rng);
+    for (std::size_t count : {AssociationPlan::kSize, std::size_t{1}, std::size_t{1} + rng() % AssociationPlan::kSize}) {
+      AssociationPlan ref{}, simd{};
+      planAssociationRef(scene.frame, scene.surfels.data(), count, ref);
+      planAssociationSimd(scene.frame, scene.surfels.data(), count, simd);
+      merges += expectSamePlans(ref, simd, count, "batch of " + std::to_string(count));
+      for (std::size_t j = 0; j < count; ++j) {
+        ++kinds[ref.kind[j]];
+        if (ref.bits[j] & AssociationPlan::kStable) ++stable;
+      }
+    }
+  }
+  for (int k = 0; k < 5; ++k) EXPECT_GT(kinds[k], 20u * static_cast<unsigned>(reps) / 15) << "kind " << k;
+  EXPECT_GT(merges, 10 * reps);
+  EXPECT_GT(stable, static_cast<uint64_t>(reps));
+}
+
+// A pixel replanned at its turn (planMergeRef) from a surfel an earlier pixel
+// changed: the same lane as a whole batch's plan against that surfel.
+TEST(AssociationPlan, APixelPlannedAgainIsItsBatchsLane) {
+  std::mt19937_64 rng(67);
+  AssociationScene scene(AssociationPlan::kSize, rng);
+  AssociationPlan batch{};
+  planAssociationRef(scene.frame, scene.surfels.data(), AssociationPlan::kSize, batch);
+  int checked = 0;
+  for (std::size_t j = 0; j < AssociationPlan::kSize; ++j) {
+    if (batch.kind[j] != AssociationPlan::kAtDepth || !(batch.bits[j] & AssociationPlan::kHasNormal)) continue;
+    AssociationPlan again = batch;
+    again.bits[j] |= AssociationPlan::kMerges | AssociationPlan::kStable;  // cleared or set anew
+    planMergeRef(scene.frame, scene.surfels[batch.slot[j]], j, again);
+    expectSamePlans(batch, again, AssociationPlan::kSize, "pixel " + std::to_string(j));
+    ++checked;
+  }
+  EXPECT_GT(checked, 10);
 }
 
 // ---- whole maps --------------------------------------------------------------
