@@ -490,6 +490,7 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         yielded_block = (i + count - 1) / kYieldEvery;
       }
       associationBatch(view, i, u, v);
+      prefetchSurfels(i + count, std::min(i + 2 * count, frame.pixelCount()));
       if (ref) {
         planAssociationRef(view, surfels_.data(), count, plan);
       } else {
@@ -504,6 +505,17 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
     free_count_ += run.carved.count;
   }
   return run.to_add;
+}
+
+// The surfels the index map names at pixels [begin, end): the next batch's,
+// fetched while this one is planned and applied (the index map names surfels
+// in no order the cache can guess; with a pool of 920 000 surfels the
+// association took as long as before its plans without it). Changes no result.
+void SurfelMap::prefetchSurfels(std::size_t begin, std::size_t end) const {
+  for (std::size_t i = begin; i < end; ++i) {
+    const uint32_t slot = index_map_.slot(i);
+    if (slot != kNone) __builtin_prefetch(&surfels_[slot]);
+  }
 }
 
 // A batch's plans applied in pixel order: carvings, settling, explained

@@ -291,6 +291,7 @@ class SurfelMap {
   void updateNormalTolerance(float f_px);
   AssociationFrame associationFrame(const hal::RgbdFrame& frame) const;
   void associationBatch(AssociationFrame& f, std::size_t i, int u, int v) const;
+  void prefetchSurfels(std::size_t begin, std::size_t end) const;
   struct AssociationRun {
     CarvedChain carved;
     std::size_t to_add = 0;
