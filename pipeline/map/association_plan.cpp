@@ -49,6 +49,14 @@ void planPixel(const AssociationFrame& f, const Surfel* surfels, std::size_t j, 
   }
 }
 
+// The surfel's colour and the pixel's, weighted a and b: red | green << 8 | blue << 16.
+uint32_t mergedColour(const Surfel& s, const uint8_t* rgb, float a, float b) {
+  const auto red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
+  const auto green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
+  const auto blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
+  return static_cast<uint32_t>(red) | static_cast<uint32_t>(green) << 8 | static_cast<uint32_t>(blue) << 16;
+}
+
 }  // namespace
 
 // The surfel's normal comes as its decoded direction and that direction's
@@ -73,8 +81,7 @@ void planMergeRef(const AssociationFrame& f, const Surfel& s, std::size_t j, Ass
   const float sum = c + weight;
   const float inv_sum = 1.0f / sum;
   const float a = c * inv_sum, b = weight * inv_sum;
-  plan.a[j] = a;
-  plan.b[j] = b;
+  plan.rgb[j] = mergedColour(s, f.rgb == nullptr ? kGreyRgb : f.rgb + 3 * j, a, b);
   plan.x[j] = a * s.x + b * rel.x;
   plan.y[j] = a * s.y + b * rel.y;
   plan.z[j] = a * s.z + b * rel.z;

@@ -3,7 +3,7 @@
 // the index map shows there (nothing, a surfel the camera sees through, one at
 // the measured depth, one behind the measurement) and, for a surfel at its
 // depth, the normal test and the whole merge (position, normal, radius,
-// confidence and the colour's two weights) computed from the surfel as it is
+// confidence and colour) computed from the surfel as it is
 // when the batch is planned. SurfelMap then applies the plans in pixel order.
 // A pixel whose surfel an earlier pixel of the same batch merged or carved
 // (about 7 % of the merges: a surfel's footprint covers up to 13 pixels) is
@@ -40,6 +40,7 @@ struct AssociationFrame {
   const float* ny = nullptr;
   const float* nz = nullptr;
   const float* radius = nullptr;   // its footprint's radius
+  const uint8_t* rgb = nullptr;    // its colour, 3 bytes a pixel (null: grey, a frame without colour)
   const float* ray_u = nullptr;    // per pixel: the vertex's x over its depth (the column's ray)
   float ray_v = 0.0f;              // the row's: the vertex's y over its depth
   // The normal test's cosine by depth: bucket (z - z_min) * per_m of `size`.
@@ -71,7 +72,7 @@ struct AssociationPlan {
   float x[kSize], y[kSize], z[kSize];  // the merged position, from the surfel's brick
   uint32_t normal_radius[kSize];       // the merged normal's and radius's codes
   uint32_t confidence[kSize];          // the merged confidence's code (capped)
-  float a[kSize], b[kSize];            // the surfel's and the pixel's weights (the colour's)
+  uint32_t rgb[kSize];                 // the merged colour: red | green << 8 | blue << 16
 };
 
 // Plans pixels [begin, count) of `frame`, count at most AssociationPlan::kSize,

@@ -29,6 +29,37 @@ namespace fovea::pipeline::map {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
+// One colour channel merged: a * surfel + b * pixel + 0.5, truncated (the
+// reference's conversion to a byte).
+template <class DF, class V, class VU>
+HWY_INLINE VU MergedChannel(DF df, VU surfel, VU pixel, V a, V b) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du;
+  const V mixed = hn::Add(hn::Add(hn::Mul(a, hn::ConvertTo(df, hn::BitCast(di, surfel))),
+                                  hn::Mul(b, hn::ConvertTo(df, hn::BitCast(di, pixel)))),
+                          hn::Set(df, 0.5f));
+  return hn::BitCast(du, hn::ConvertTo(di, mixed));
+}
+
+// mergedColour (association_plan.cpp) of the surfels' colour words (red, green,
+// blue, flags) and the pixels at j0 (grey without a colour image).
+template <class DF, class V, class VU>
+HWY_INLINE VU MergedColour(DF df, const AssociationFrame& f, VU surfel_rgb, std::size_t j0, V a, V b) {
+  const hn::RebindToUnsigned<DF> du;
+  const hn::Rebind<uint8_t, DF> d8;
+  VU red = hn::Set(du, kGreyRgb[0]), green = hn::Set(du, kGreyRgb[1]), blue = hn::Set(du, kGreyRgb[2]);
+  if (f.rgb != nullptr) {
+    hn::Vec<decltype(d8)> r8, g8, b8;
+    hn::LoadInterleaved3(d8, f.rgb + 3 * j0, r8, g8, b8);
+    red = hn::PromoteTo(du, r8), green = hn::PromoteTo(du, g8), blue = hn::PromoteTo(du, b8);
+  }
+  const auto byte = hn::Set(du, 0xffu);
+  const VU r = MergedChannel(df, hn::And(surfel_rgb, byte), red, a, b);
+  const VU g = MergedChannel(df, hn::And(hn::ShiftRight<8>(surfel_rgb), byte), green, a, b);
+  const VU bl = MergedChannel(df, hn::And(hn::ShiftRight<16>(surfel_rgb), byte), blue, a, b);
+  return hn::Or(r, hn::Or(hn::ShiftLeft<8>(g), hn::ShiftLeft<16>(bl)));
+}
+
 // planMergeRef for the lanes of `merging` at j0 (the others' merge arrays and
 // bits are left as the reference leaves a lane it does not merge: no bits).
 // n*: the pixels' camera-frame normals; slot: their surfels.
@@ -63,8 +94,7 @@ HWY_NOINLINE void MergeVector(DF df, const AssociationFrame& f, const Surfel* su
   const V sum = hn::Add(c, weight);
   const V inv_sum = hn::Div(hn::Set(df, 1.0f), sum);
   const V a = hn::Mul(c, inv_sum), b = hn::Mul(weight, inv_sum);
-  hn::StoreU(a, df, plan.a + j0);
-  hn::StoreU(b, df, plan.b + j0);
+  hn::StoreU(MergedColour(df, f, GatherField(du, surfels, offsetof(Surfel, red), word), j0, a, b), du, plan.rgb + j0);
   const V sx = GatherField(df, surfels, offsetof(Surfel, x), word);
   const V sy = GatherField(df, surfels, offsetof(Surfel, y), word);
   const V sz = GatherField(df, surfels, offsetof(Surfel, z), word);

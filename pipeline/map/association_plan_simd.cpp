@@ -16,10 +16,11 @@
 namespace fovea::pipeline::map {
 
 // The kernel reads a surfel's words as the layout below and little-endian
-// (the brick the top half of the word the confidence starts).
+// (the colour the low three bytes of the word at red, the brick the top half of
+// the word the confidence starts).
 static_assert(std::endian::native == std::endian::little);
-static_assert(offsetof(Surfel, normal_radius) == 12 && offsetof(Surfel, confidence) == 20 &&
-              offsetof(Surfel, brick) == 22);
+static_assert(offsetof(Surfel, normal_radius) == 12 && offsetof(Surfel, red) == 16 && offsetof(Surfel, green) == 17 &&
+              offsetof(Surfel, blue) == 18 && offsetof(Surfel, confidence) == 20 && offsetof(Surfel, brick) == 22);
 
 HWY_EXPORT(PlanAssociationT);
 

@@ -49,6 +49,9 @@ inline constexpr uint8_t kSurfelSettled = 4;
 // cleared within one batch, so that no other pass and no reader sees it.
 inline constexpr uint8_t kSurfelTouched = 8;
 
+// The colour a frame without one gives its surfels.
+inline constexpr uint8_t kGreyRgb[3] = {128, 128, 128};
+
 // A unit normal as 24 bits: octahedral projection, 12 bits each for u and v.
 // Inline (the index map decodes one per surfel per frame and the association
 // decodes and encodes one per merged pixel: as calls they were a fifth of

@@ -19,7 +19,6 @@ namespace fovea::pipeline::map {
 namespace {
 
 constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
-constexpr uint8_t kGrey[3] = {128, 128, 128};  // the colour of a frame without one
 constexpr std::size_t kNormalCosBuckets = 1024;  // the normal tolerance's table over the depth range
 
 }  // namespace
@@ -432,8 +431,8 @@ AssociationFrame SurfelMap::associationFrame(const hal::RgbdFrame& frame) const 
   return f;
 }
 
-// Points `f` at the batch from pixel i = (u, v) on.
-void SurfelMap::associationBatch(AssociationFrame& f, std::size_t i, int u, int v) const {
+// Points `f` at the batch from pixel i = (u, v) on (rgb: the frame's colour, null: none).
+void SurfelMap::associationBatch(AssociationFrame& f, const uint8_t* rgb, std::size_t i, int u, int v) const {
   f.slot = index_map_.slots() + i;
   f.seen = index_map_.depths() + i;
   f.weight = weight_.data() + i;
@@ -444,19 +443,19 @@ void SurfelMap::associationBatch(AssociationFrame& f, std::size_t i, int u, int 
   f.radius = lateMap(kRadius) + i;
   f.ray_u = tables_.ray_u.data() + kNormalReach + u;
   f.ray_v = tables_.ray_v[static_cast<std::size_t>(v)];
+  f.rgb = rgb == nullptr ? nullptr : rgb + 3 * i;
 }
 
 // Pixel i's merge, planned in lane j, into surfel s (a merge's writes; the
 // arithmetic is the plan's: association_plan.h).
-void SurfelMap::applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan, const uint8_t* rgb) {
+void SurfelMap::applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan) {
   s.x = plan.x[j];
   s.y = plan.y[j];
   s.z = plan.z[j];
   s.normal_radius = plan.normal_radius[j];
-  const float a = plan.a[j], b = plan.b[j];
-  s.red = static_cast<uint8_t>(a * s.red + b * rgb[0] + 0.5f);
-  s.green = static_cast<uint8_t>(a * s.green + b * rgb[1] + 0.5f);
-  s.blue = static_cast<uint8_t>(a * s.blue + b * rgb[2] + 0.5f);
+  s.red = static_cast<uint8_t>(plan.rgb[j]);
+  s.green = static_cast<uint8_t>(plan.rgb[j] >> 8);
+  s.blue = static_cast<uint8_t>(plan.rgb[j] >> 16);
   s.confidence = static_cast<uint16_t>(plan.confidence[j]);
   if (plan.bits[j] & AssociationPlan::kStable) {
     s.flags |= kSurfelStable;
@@ -489,14 +488,14 @@ std::size_t SurfelMap::associate(const hal::RgbdFrame& frame, FuseStats& stats) 
         yieldGate();
         yielded_block = (i + count - 1) / kYieldEvery;
       }
-      associationBatch(view, i, u, v);
+      associationBatch(view, frame.has_rgb ? frame.rgb() : nullptr, i, u, v);
       prefetchSurfels(i + count, std::min(i + 2 * count, frame.pixelCount()));
       if (ref) {
         planAssociationRef(view, surfels_.data(), count, plan);
       } else {
         planAssociationSimd(view, surfels_.data(), count, plan);
       }
-      applyAssociation(frame, view, i, count, plan, run, stats);
+      applyAssociation(view, i, count, plan, run, stats);
     }
   }
   if (run.carved.head != kNone) {
@@ -520,8 +519,8 @@ void SurfelMap::prefetchSurfels(std::size_t begin, std::size_t end) const {
 
 // A batch's plans applied in pixel order: carvings, settling, explained
 // pixels, merges, and the pixels left to add (marked by a negative weight).
-void SurfelMap::applyAssociation(const hal::RgbdFrame& frame, const AssociationFrame& view, std::size_t i0,
-                                 std::size_t count, AssociationPlan& plan, AssociationRun& run, FuseStats& stats) {
+void SurfelMap::applyAssociation(const AssociationFrame& view, std::size_t i0, std::size_t count, AssociationPlan& plan,
+                                 AssociationRun& run, FuseStats& stats) {
   const auto carve = static_cast<float>(config_.carve_weight);
   for (std::size_t j = 0; j < count; ++j) {
     const uint32_t kind = plan.kind[j];
@@ -551,7 +550,7 @@ void SurfelMap::applyAssociation(const hal::RgbdFrame& frame, const AssociationF
       if (at_depth) {
         if (s.flags & kSurfelTouched) planMergeRef(view, s, j, plan);
         if (plan.bits[j] & AssociationPlan::kMerges) {
-          applyMerge(s, i, j, plan, frame.has_rgb ? frame.rgb() + 3 * i : kGrey);
+          applyMerge(s, i, j, plan);
           s.flags |= kSurfelTouched;
           ++stats.merged;
         }
@@ -591,7 +590,7 @@ void SurfelMap::addNew(const hal::RgbdFrame& frame, FuseStats& stats) {
       const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
       if (i % kYieldEvery == 0) yieldGate();
       if (!(weight_[i] < 0.0f)) continue;
-      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGreyRgb;
       const Eigen::Vector3d p_world = R_wc * vertexAt(i, u, v).cast<double>() + t;
       const Added added = addSurfel(p_world, R_wc_f * normalAt(i), lateMap(kRadius)[i], -weight_[i], rgb);
       if (added == Added::kYes) {
@@ -628,7 +627,7 @@ bool SurfelMap::visitUnexplained(const hal::RgbdFrame& frame, const Eigen::Vecto
       const std::size_t i = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
       if (explained_[i] || vertex_z_[i] == 0.0f || sink.skips(u, v)) continue;
       const Eigen::Vector3f p = R_f * vertexAt(i, u, v) + t;
-      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGrey;
+      const uint8_t* rgb = frame.has_rgb ? frame.rgb() + 3 * i : kGreyRgb;
       if (!sink.take(u, v, p, packRgb(rgb[0], rgb[1], rgb[2]))) return true;
     }
   }

@@ -290,15 +290,15 @@ class SurfelMap {
   // length), the plans' view of the frame, a batch's pixels, its plans applied.
   void updateNormalTolerance(float f_px);
   AssociationFrame associationFrame(const hal::RgbdFrame& frame) const;
-  void associationBatch(AssociationFrame& f, std::size_t i, int u, int v) const;
+  void associationBatch(AssociationFrame& f, const uint8_t* rgb, std::size_t i, int u, int v) const;
   void prefetchSurfels(std::size_t begin, std::size_t end) const;
   struct AssociationRun {
     CarvedChain carved;
     std::size_t to_add = 0;
   };
-  void applyAssociation(const hal::RgbdFrame& frame, const AssociationFrame& view, std::size_t i0, std::size_t count,
-                        AssociationPlan& plan, AssociationRun& run, FuseStats& stats);
-  void applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan, const uint8_t* rgb);
+  void applyAssociation(const AssociationFrame& view, std::size_t i0, std::size_t count, AssociationPlan& plan,
+                        AssociationRun& run, FuseStats& stats);
+  void applyMerge(Surfel& s, std::size_t i, std::size_t j, const AssociationPlan& plan);
   void carveAway(uint32_t slot, CarvedChain& chain);  // associate()'s: off the brick, onto the chain
   void addNew(const hal::RgbdFrame& frame, FuseStats& stats);
   enum class Added { kYes, kNoSurfel, kNoBrick };

@@ -679,13 +679,15 @@ TEST_P(TargetTest, TheSplatPlansOfRunsOutOfViewAreTheReference) {
 // (pipeline/map/association_plan.h): measurements missing and without a
 // normal, slots none or into the pool (several pixels naming one surfel), the
 // index map's depth clearly behind, exactly at either edge of, within and in
-// front of the tolerance, every normal, radius and confidence code in the
-// pool, and pixel normals near the surfel's (so that many merge) or anywhere.
+// front of the tolerance, every normal, radius, confidence and colour in the
+// pool, pixel normals near the surfel's (so that many merge) or anywhere, and
+// colour images or none (grey).
 struct AssociationScene {
   static constexpr int kBricks = 16;
   static constexpr std::size_t kPool = 300;
   std::vector<float> brick_cam, weight, z, nx, ny, nz, radius, seen, ray_u, normal_cos;
   std::vector<uint32_t> slot;
+  std::vector<uint8_t> rgb;
   std::vector<Surfel> surfels;
   AssociationFrame frame;
 
@@ -716,6 +718,8 @@ struct AssociationScene {
     frame.nx = nx.data(), frame.ny = ny.data(), frame.nz = nz.data(), frame.radius = radius.data();
     frame.ray_u = ray_u.data();
     frame.ray_v = unit(rng) - 0.5f;
+    for (std::size_t k = 0; k < 3 * pixels; ++k) rgb.push_back(static_cast<uint8_t>(rng()));
+    frame.rgb = rng() % 4 == 0 ? nullptr : rgb.data();  // a frame without colour: grey
     frame.normal_cos = normal_cos.data();
     frame.normal_cos_size = static_cast<uint32_t>(normal_cos.size());
     frame.normal_cos_z_min = 0.3f, frame.normal_cos_per_m = 64.0f / 4.2f;
@@ -756,8 +760,8 @@ int expectSamePlans(const AssociationPlan& a, const AssociationPlan& b, std::siz
     if (ok && a.kind[j] != AssociationPlan::kNothing) ok = a.slot[j] == b.slot[j];
     if (ok && (a.bits[j] & AssociationPlan::kMerges)) {
       ++merges;
-      ok = same(a.x[j], b.x[j]) && same(a.y[j], b.y[j]) && same(a.z[j], b.z[j]) && same(a.a[j], b.a[j]) &&
-           same(a.b[j], b.b[j]) && a.normal_radius[j] == b.normal_radius[j] && a.confidence[j] == b.confidence[j];
+      ok = same(a.x[j], b.x[j]) && same(a.y[j], b.y[j]) && same(a.z[j], b.z[j]) && a.rgb[j] == b.rgb[j] &&
+           a.normal_radius[j] == b.normal_radius[j] && a.confidence[j] == b.confidence[j];
     }
     if (!ok && reported++ < 5) {
       ADD_FAILURE() << what << ": pixel " << j << ": kind " << a.kind[j] << " against " << b.kind[j] << ", bits "
