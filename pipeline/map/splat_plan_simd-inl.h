@@ -124,7 +124,7 @@ HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, 
   const auto measured = hn::GatherIndex(df, f.measured_z, centre);
   const auto behind = hn::Lt(pz, hn::Sub(measured, hn::Mul(hn::Set(df, f.sigmas), DepthSigma(df, measured))));
   const auto carve = hn::And(candidate, hn::And(hn::RebindMask(df, in_image), hn::And(hn::Gt(measured, hn::Zero(df)), behind)));
-  const auto decoded = hn::Div(hn::ConvertTo(df, hn::BitCast(di, confidence)), hn::Set(df, kConfidenceScale));
+  const auto decoded = DecodeConfidence(df, confidence);
   const auto weight = hn::GatherIndex(df, f.weight, centre);
   hn::StoreU(hn::Sub(hn::Mul(hn::Set(df, 0.5f), decoded), hn::Mul(hn::Set(df, f.carve), weight)), df, plan.kept + j0);
   const auto splat = hn::AndNot(carve, candidate);
