@@ -29,8 +29,17 @@ class Tab {
     error_ = error;
   }
   ~Tab() { close(); }
+  // Closes as a browser's tab does, with a close frame: the server's answer
+  // ends the client's read at once, where mg_close_connection alone waits out
+  // its 2 s poll.
   void close() {
-    if (conn_ != nullptr) mg_close_connection(conn_);
+    if (conn_ == nullptr) return;
+    closing_.store(true);  // a slow tab reads what is still in flight at once
+    if (!closed_.load()) {
+      static constexpr char kNormal[] = "\x03\xe8";  // close code 1000
+      mg_websocket_client_write(conn_, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, kNormal, sizeof kNormal - 1);
+    }
+    mg_close_connection(conn_);
     conn_ = nullptr;
   }
   bool connected() const { return conn_ != nullptr; }
@@ -57,34 +66,49 @@ class Tab {
     return last_frame_;
   }
   bool closedByServer() const { return closed_.load(); }
+  // The payload of the close frame the server sent (its code, two bytes big
+  // endian, then its reason), empty if none came.
+  std::string closeFrame() {
+    std::lock_guard lock(mu_);
+    return close_frame_;
+  }
+  // From now on it reads at full speed (what is in flight, then the newest).
+  void hurry() { delay_ms_.store(0); }
 
  private:
-  static int onData(mg_connection*, int bits, char* data, std::size_t len, void* self_ptr) {
+  static int onData(mg_connection* conn, int bits, char* data, std::size_t len, void* self_ptr) {
     auto* self = static_cast<Tab*>(self_ptr);
     const int opcode = bits & 0x0f;
     {
       std::lock_guard lock(self->mu_);
       if (opcode == MG_WEBSOCKET_OPCODE_TEXT) self->texts_.emplace_back(data, len);
+      if (opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) self->close_frame_.assign(data, len);
       if (opcode == MG_WEBSOCKET_OPCODE_BINARY) {
         ++self->frames_;
         self->last_frame_.assign(data, data + len);
       }
     }
-    if (opcode == MG_WEBSOCKET_OPCODE_BINARY && self->delay_ms_ > 0) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(self->delay_ms_));
+    if (opcode == MG_WEBSOCKET_OPCODE_BINARY && self->delay_ms_.load() > 0 && !self->closing_.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(self->delay_ms_.load()));
     }
-    return opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE ? 0 : 1;
+    if (opcode != MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 1;
+    // A browser answers a close frame with its own (RFC 6455 5.5.1); civetweb's
+    // client does not, so the tab does it as a browser would.
+    mg_websocket_client_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, data, len);
+    return 0;
   }
   static void onClose(const mg_connection*, void* self_ptr) { static_cast<Tab*>(self_ptr)->closed_.store(true); }
 
-  int delay_ms_;
+  std::atomic<int> delay_ms_;
   mg_connection* conn_ = nullptr;
   std::string error_;
   std::mutex mu_;
   std::vector<std::string> texts_;
   std::size_t frames_ = 0;
   std::vector<uint8_t> last_frame_;
+  std::string close_frame_;
   std::atomic<bool> closed_{false};
+  std::atomic<bool> closing_{false};
 };
 
 // For a process without a ViewServer of its own.

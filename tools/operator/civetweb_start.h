@@ -4,7 +4,10 @@
 // client and the same timeouts and WebSocket pings.
 #pragma once
 
+#include <chrono>
+#include <condition_variable>
 #include <cstddef>
+#include <mutex>
 #include <string>
 
 #include "core/result.h"
@@ -31,8 +34,35 @@ Result<CivetwebStarted> startCivetweb(const std::string& listen, std::size_t thr
 // operator's exit, each server a test starts). A thread beside it connects to
 // the listening port until it returns: measured 14 ms with no client connected.
 // A WebSocket client still connected keeps its worker in a poll of the same
-// 2 s, which no knock wakes: such a stop still takes up to 2 s. Closes every
-// connection, running their close handlers. Does nothing for a null ctx.
+// 2 s, which no knock wakes: each server's senders say goodbye first
+// (endSending), and the client's answering close frame wakes that poll.
+// Closes every connection, running their close handlers. Does nothing for a
+// null ctx.
 void stopCivetweb(const CivetwebStarted& started);
+
+// Sends a WebSocket close frame, code 1001 ("going away"), to a client of a
+// server that is stopping. A client answers with a close frame of its own
+// (RFC 6455 5.5.1): its arrival ends the worker's read at once, where a silent
+// client would keep it in its 2 s poll. Returns whether the frame was written.
+bool sayGoingAway(mg_connection* conn);
+
+// How long a stopping server waits for its senders' goodbyes before
+// stopCivetweb: once civetweb's stop flag is set its writes send nothing.
+inline constexpr std::chrono::milliseconds kGoodbyeWait{1000};
+
+// The end of a client's sender thread (ViewServer's tabs, FoxgloveServer's
+// clients: a `conn`, `closing` and `sending`): when the server stops, it says
+// goodbye; then it is done, which the server's destructor waits for on `wake`.
+// `lock` holds the server's mutex; `ok`: its last write went out.
+template <class Peer>
+void endSending(Peer& peer, bool ok, bool stopping, std::unique_lock<std::mutex>& lock, std::condition_variable& wake) {
+  if (ok && stopping && !peer.closing) {
+    lock.unlock();
+    sayGoingAway(peer.conn);
+    lock.lock();
+  }
+  peer.sending = false;
+  wake.notify_all();
+}
 
 }  // namespace fovea::tools

@@ -112,11 +112,16 @@ uint64_t FoxgloveServer::realtimeSessionId() {
 }
 
 FoxgloveServer::~FoxgloveServer() {
-  {
-    std::lock_guard lock(mu_);
-    stopping_ = true;
-  }
+  std::unique_lock lock(mu_);
+  stopping_ = true;
   wake_.notify_all();
+  // Every sender says goodbye before mg_stop sets civetweb's stop flag, after
+  // which its writes send nothing (bounded: a client that reads nothing holds
+  // its sender in a write).
+  wake_.wait_for(lock, kGoodbyeWait, [&] {
+    return std::none_of(clients_.begin(), clients_.end(), [](const Client& c) { return c.sending; });
+  });
+  lock.unlock();
   stopCivetweb(civetweb_);
   for (Client& c : clients_) {
     if (c.sender.joinable()) c.sender.join();
@@ -225,6 +230,7 @@ void FoxgloveServer::sendLoop(Client& client) {
     lock.lock();
     if (ok) ++counters_.sent;
   }
+  endSending(client, ok, stopping_, lock, wake_);
 }
 
 void FoxgloveServer::handleText(Client& client, std::string_view text) {
@@ -322,6 +328,7 @@ void FoxgloveServer::onWsReady(mg_connection* conn, void* self_ptr) {
   ++self->counters_.clients_open;
   ++self->counters_.clients_served;
   mg_set_user_connection_data(conn, &c);
+  c.sending = true;
   c.sender = std::thread([self, &c] { self->sendLoop(c); });
 }
 

@@ -113,6 +113,7 @@ class FoxgloveServer {
   struct Client {
     bool used = false;
     bool closing = false;
+    bool sending = false;  // its sender runs; at a stop it says goodbye first
     int id = 0;
     mg_connection* conn = nullptr;
     std::thread sender;

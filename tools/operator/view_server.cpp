@@ -56,11 +56,16 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& co
 }
 
 ViewServer::~ViewServer() {
-  {
-    std::lock_guard lock(mu_);
-    stopping_ = true;
-  }
+  std::unique_lock lock(mu_);
+  stopping_ = true;
   wake_.notify_all();
+  // Every sender says goodbye before mg_stop sets civetweb's stop flag, after
+  // which its writes send nothing (bounded: a client that reads nothing holds
+  // its sender in a write).
+  wake_.wait_for(lock, kGoodbyeWait, [&] {
+    return std::none_of(tabs_.begin(), tabs_.end(), [](const Tab& t) { return t.sending; });
+  });
+  lock.unlock();
   // Closes every connection; each close handler joins its tab's sender.
   stopCivetweb(civetweb_);
   for (Tab& t : tabs_) {
@@ -178,6 +183,7 @@ void ViewServer::sendLoop(Tab& tab) {
     --b.readers;
     if (ok) ++counters_.frames_sent;
   }
+  endSending(tab, ok, stopping_, lock, wake_);
 }
 
 int ViewServer::onHttp(mg_connection* conn, void* self_ptr) {
@@ -237,6 +243,7 @@ void ViewServer::onWsReady(mg_connection* conn, void* self_ptr) {
   ++self->counters_.tabs_open;
   ++self->counters_.tabs_served;
   mg_set_user_connection_data(conn, &t);
+  t.sending = true;
   t.sender = std::thread([self, &t] { self->sendLoop(t); });
 }
 
