@@ -1,7 +1,7 @@
 // Per-target body of planSplatsSimd (splat_plan.h); compiled once per Highway
 // target by splat_plan_simd.cpp. Bit for bit planSplatsRef: a vector of slots
-// at a time, each field of the 32-byte surfels gathered into a vector of its
-// own (the pool read as structure of arrays), the tables (brick origins and
+// at a time, the 32-byte surfels transposed into a vector a field (the pool
+// read as structure of arrays), the tables (brick origins and
 // culling, normal and radius codes, the frame's depth and weight) gathered by
 // index, and every lane computed in the reference's order of operations (Add,
 // Sub, Mul, Div, never MulAdd). Lanes past `count` repeat the last surfel and
@@ -76,19 +76,42 @@ HWY_NOINLINE void PlanCentres(DF df, const SplatFrame& f, VU normal_radius, VU c
   hn::StoreU(rank, du, plan.rank + j0);
 }
 
+// The surfels at j0, a field a vector: a whole vector of them loaded and
+// transposed (LoadSurfels), the last, partial one gathered with the lanes past
+// count repeating the last surfel.
+template <class DF, class V, class VU>
+HWY_INLINE void SurfelFields(DF df, const Surfel* surfels, std::size_t j0, std::size_t count, V& x, V& y, V& z,
+                             VU& normal_radius, VU& colour, VU& confidence_brick, VU& first_seen) {
+  const hn::RebindToSigned<DF> di;
+  const hn::RebindToUnsigned<DF> du;
+#if HWY_TARGET != HWY_SCALAR
+  if (j0 + hn::Lanes(df) <= count) {
+    LoadSurfels(df, surfels + j0, x, y, z, normal_radius, colour, confidence_brick, first_seen);
+    return;
+  }
+#endif
+  const auto lane = hn::Min(hn::Iota(di, static_cast<int32_t>(j0)), hn::Set(di, static_cast<int32_t>(count - 1)));
+  const auto word = hn::Mul(lane, hn::Set(di, static_cast<int32_t>(sizeof(Surfel) / sizeof(uint32_t))));
+  x = GatherField(df, surfels, offsetof(Surfel, x), word);
+  y = GatherField(df, surfels, offsetof(Surfel, y), word);
+  z = GatherField(df, surfels, offsetof(Surfel, z), word);
+  normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
+  colour = GatherField(du, surfels, offsetof(Surfel, red), word);
+  confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
+  first_seen = GatherField(du, surfels, offsetof(Surfel, first_seen), word);
+}
+
 // The lanes at j0: their actions, the carved ones' confidence left and the splatted ones' centres.
 template <class DF>
 HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, std::size_t j0, std::size_t count,
                            SplatPlan& plan) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du;
-  // Lanes past count repeat the last surfel.
-  const auto lane = hn::Min(hn::Iota(di, static_cast<int32_t>(j0)), hn::Set(di, static_cast<int32_t>(count - 1)));
-  const auto word = hn::Mul(lane, hn::Set(di, static_cast<int32_t>(sizeof(Surfel) / sizeof(uint32_t))));
-  const auto flags = hn::ShiftRight<24>(GatherField(du, surfels, offsetof(Surfel, red), word));
-  const auto confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
+  hn::Vec<DF> x, y, z;
+  hn::Vec<decltype(du)> normal_radius, colour, confidence_brick, first_seen;
+  SurfelFields(df, surfels, j0, count, x, y, z, normal_radius, colour, confidence_brick, first_seen);
+  const auto flags = hn::ShiftRight<24>(colour);
   const auto confidence = hn::And(confidence_brick, hn::Set(du, 0xffffu));
-  const auto first_seen = GatherField(du, surfels, offsetof(Surfel, first_seen), word);
   const auto live = hn::Ne(hn::And(flags, hn::Set(du, kSurfelLive)), hn::Zero(du));
   const auto stable = hn::Ne(hn::And(flags, hn::Set(du, kSurfelStable)), hn::Zero(du));
   const auto old = hn::Gt(hn::Sub(hn::Set(du, f.frame), first_seen), hn::Set(du, f.unstable_max));
@@ -102,10 +125,6 @@ HWY_NOINLINE void PlanVector(DF df, const SplatFrame& f, const Surfel* surfels, 
     hn::StoreU(hn::Set(du, SplatPlan::kSkip), du, plan.action + j0);
     return;
   }
-  const auto x = GatherField(df, surfels, offsetof(Surfel, x), word);
-  const auto y = GatherField(df, surfels, offsetof(Surfel, y), word);
-  const auto z = GatherField(df, surfels, offsetof(Surfel, z), word);
-  const auto normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
   const auto b3 = hn::Mul(brick, hn::Set(di, 3));
   const auto px = hn::Add(hn::GatherIndex(df, f.brick_cam, b3), RotateRow(df, f.r, x, y, z));
   const auto py = hn::Add(hn::GatherIndex(df, f.brick_cam + 1, b3), RotateRow(df, f.r + 3, x, y, z));

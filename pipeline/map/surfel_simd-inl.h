@@ -31,6 +31,38 @@ HWY_INLINE hn::Vec<D> GatherField(D d, const Surfel* surfels, std::size_t offset
   return hn::GatherIndex(d, reinterpret_cast<const hn::TFromD<D>*>(surfels) + offset / 4, word);
 }
 
+// The surfels at `surfels`, one a lane (as many as DF has), loaded whole and
+// transposed into their fields, where GatherField would load each field lane
+// by lane: a surfel is four 64-bit words (x|y, z|normal_radius,
+// colour|confidence, first_seen|last_seen, the first of each pair in its low
+// half on the little-endian targets fovea builds for), which two
+// LoadInterleaved4 split by word and ConcatEven and ConcatOdd by half. On the
+// orbit's pool a gather of a field cost as much as the plan's arithmetic.
+// `colour`: red, green, blue, flags; `confidence_brick`: confidence | brick << 16.
+// (Not on HWY_SCALAR: one lane, no 64-bit half vector.)
+#if HWY_TARGET != HWY_SCALAR
+template <class DF, class V, class VU>
+HWY_INLINE void LoadSurfels(DF df, const Surfel* surfels, V& x, V& y, V& z, VU& normal_radius, VU& colour,
+                            VU& confidence_brick, VU& first_seen) {
+  static_assert(offsetof(Surfel, y) == 4 && offsetof(Surfel, z) == 8 && offsetof(Surfel, normal_radius) == 12 &&
+                offsetof(Surfel, red) == 16 && offsetof(Surfel, confidence) == 20 && offsetof(Surfel, brick) == 22 &&
+                offsetof(Surfel, first_seen) == 24);
+  const hn::RebindToUnsigned<DF> du;
+  const hn::Repartition<uint64_t, DF> d64;
+  const auto* words = reinterpret_cast<const uint64_t*>(surfels);
+  hn::Vec<decltype(d64)> lo0, lo1, lo2, lo3, hi0, hi1, hi2, hi3;
+  hn::LoadInterleaved4(d64, words, lo0, lo1, lo2, lo3);                     // the first half of the surfels
+  hn::LoadInterleaved4(d64, words + 4 * hn::Lanes(d64), hi0, hi1, hi2, hi3);  // the second
+  x = hn::BitCast(df, hn::ConcatEven(du, hn::BitCast(du, hi0), hn::BitCast(du, lo0)));
+  y = hn::BitCast(df, hn::ConcatOdd(du, hn::BitCast(du, hi0), hn::BitCast(du, lo0)));
+  z = hn::BitCast(df, hn::ConcatEven(du, hn::BitCast(du, hi1), hn::BitCast(du, lo1)));
+  normal_radius = hn::ConcatOdd(du, hn::BitCast(du, hi1), hn::BitCast(du, lo1));
+  colour = hn::ConcatEven(du, hn::BitCast(du, hi2), hn::BitCast(du, lo2));
+  confidence_brick = hn::ConcatOdd(du, hn::BitCast(du, hi2), hn::BitCast(du, lo2));
+  first_seen = hn::ConcatEven(du, hn::BitCast(du, hi3), hn::BitCast(du, lo3));
+}
+#endif
+
 // A 3-vector dot product in the reference's order, a0 b0 + (a1 b1 + a2 b2).
 template <class V>
 HWY_INLINE V Dot3(V a0, V a1, V a2, V b0, V b1, V b2) {
