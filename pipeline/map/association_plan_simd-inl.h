@@ -1,8 +1,8 @@
 // Per-target body of planAssociationSimd (association_plan.h); compiled once
 // per Highway target by association_plan_simd.cpp. Bit for bit
 // planAssociationRef: a vector of pixels at a time, the per-pixel maps loaded,
-// the surfels the index map names there gathered field by field (the pool
-// read as structure of arrays), the bricks' origins and the codecs' tables
+// the surfels the index map names there copied and transposed into a vector a
+// field (LoadSurfelsAt: the pool read as structure of arrays), the bricks' origins and the codecs' tables
 // gathered by index, and every lane computed in the reference's order of
 // operations (Add, Sub, Mul, Div, Sqrt, never MulAdd). A vector none of whose
 // pixels has a surfel at its depth and a normal skips the merge. The pixels
@@ -68,9 +68,10 @@ HWY_NOINLINE void MergeVector(DF df, const AssociationFrame& f, const Surfel* su
                               V nx, V ny, V nz, VU& bits, AssociationPlan& plan) {
   const hn::RebindToSigned<DF> di;
   const hn::RebindToUnsigned<DF> du;
-  const auto word = hn::BitCast(di, hn::Mul(hn::IfThenElseZero(hn::RebindMask(du, merging), slot),
-                                            hn::Set(du, static_cast<uint32_t>(sizeof(Surfel) / sizeof(uint32_t)))));
-  const auto normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
+  V sx, sy, sz;
+  VU normal_radius, colour, confidence_brick, first_seen;
+  LoadSurfelsAt(df, surfels, hn::IfThenElseZero(hn::RebindMask(du, merging), slot), sx, sy, sz, normal_radius, colour,
+                confidence_brick, first_seen);
   const V weight = hn::LoadU(df, f.weight + j0), z = hn::LoadU(df, f.z + j0);
   // The normal test on the surfel's direction as decoded.
   const V wx = RotateRow(df, f.r, nx, ny, nz), wy = RotateRow(df, f.r + 3, nx, ny, nz),
@@ -85,7 +86,6 @@ HWY_NOINLINE void MergeVector(DF df, const AssociationFrame& f, const Surfel* su
   const auto merges = hn::And(merging, hn::Not(hn::Lt(Dot3(dx, dy, dz, wx, wy, wz), hn::Mul(cos_tolerance, d_norm))));
   if (hn::AllFalse(df, merges)) return;
   // The position, relative to the surfel's brick.
-  const auto confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
   const auto b3 = hn::BitCast(di, hn::Mul(hn::ShiftRight<16>(confidence_brick), hn::Set(du, 3u)));
   const V vx = hn::Sub(hn::Mul(hn::LoadU(df, f.ray_u + j0), z), hn::GatherIndex(df, f.brick_cam, b3));
   const V vy = hn::Sub(hn::Mul(hn::Set(df, f.ray_v), z), hn::GatherIndex(df, f.brick_cam + 1, b3));
@@ -94,10 +94,7 @@ HWY_NOINLINE void MergeVector(DF df, const AssociationFrame& f, const Surfel* su
   const V sum = hn::Add(c, weight);
   const V inv_sum = hn::Div(hn::Set(df, 1.0f), sum);
   const V a = hn::Mul(c, inv_sum), b = hn::Mul(weight, inv_sum);
-  hn::StoreU(MergedColour(df, f, GatherField(du, surfels, offsetof(Surfel, red), word), j0, a, b), du, plan.rgb + j0);
-  const V sx = GatherField(df, surfels, offsetof(Surfel, x), word);
-  const V sy = GatherField(df, surfels, offsetof(Surfel, y), word);
-  const V sz = GatherField(df, surfels, offsetof(Surfel, z), word);
+  hn::StoreU(MergedColour(df, f, colour, j0, a, b), du, plan.rgb + j0);
   hn::StoreU(hn::Add(hn::Mul(a, sx), hn::Mul(b, RotateRow(df, f.r, vx, vy, vz))), df, plan.x + j0);
   hn::StoreU(hn::Add(hn::Mul(a, sy), hn::Mul(b, RotateRow(df, f.r + 3, vx, vy, vz))), df, plan.y + j0);
   hn::StoreU(hn::Add(hn::Mul(a, sz), hn::Mul(b, RotateRow(df, f.r + 6, vx, vy, vz))), df, plan.z + j0);

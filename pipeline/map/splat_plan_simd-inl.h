@@ -83,7 +83,6 @@ template <class DF, class V, class VU>
 HWY_INLINE void SurfelFields(DF df, const Surfel* surfels, std::size_t j0, std::size_t count, V& x, V& y, V& z,
                              VU& normal_radius, VU& colour, VU& confidence_brick, VU& first_seen) {
   const hn::RebindToSigned<DF> di;
-  const hn::RebindToUnsigned<DF> du;
 #if HWY_TARGET != HWY_SCALAR
   if (j0 + hn::Lanes(df) <= count) {
     LoadSurfels(df, surfels + j0, x, y, z, normal_radius, colour, confidence_brick, first_seen);
@@ -92,13 +91,7 @@ HWY_INLINE void SurfelFields(DF df, const Surfel* surfels, std::size_t j0, std::
 #endif
   const auto lane = hn::Min(hn::Iota(di, static_cast<int32_t>(j0)), hn::Set(di, static_cast<int32_t>(count - 1)));
   const auto word = hn::Mul(lane, hn::Set(di, static_cast<int32_t>(sizeof(Surfel) / sizeof(uint32_t))));
-  x = GatherField(df, surfels, offsetof(Surfel, x), word);
-  y = GatherField(df, surfels, offsetof(Surfel, y), word);
-  z = GatherField(df, surfels, offsetof(Surfel, z), word);
-  normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
-  colour = GatherField(du, surfels, offsetof(Surfel, red), word);
-  confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
-  first_seen = GatherField(du, surfels, offsetof(Surfel, first_seen), word);
+  GatherSurfels(df, surfels, word, x, y, z, normal_radius, colour, confidence_brick, first_seen);
 }
 
 // The lanes at j0: their actions, the carved ones' confidence left and the splatted ones' centres.

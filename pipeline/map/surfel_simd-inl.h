@@ -13,6 +13,7 @@
 #endif
 
 #include <cstddef>
+#include <cstring>
 #include <limits>
 
 #include "hwy/highway.h"
@@ -62,6 +63,42 @@ HWY_INLINE void LoadSurfels(DF df, const Surfel* surfels, V& x, V& y, V& z, VU& 
   first_seen = hn::ConcatEven(du, hn::BitCast(du, hi3), hn::BitCast(du, lo3));
 }
 #endif
+
+// The same fields of the surfels at `word` (a surfel's first word, by lane),
+// gathered a field at a time.
+template <class DF, class VI, class V, class VU>
+HWY_INLINE void GatherSurfels(DF df, const Surfel* surfels, VI word, V& x, V& y, V& z, VU& normal_radius, VU& colour,
+                              VU& confidence_brick, VU& first_seen) {
+  const hn::RebindToUnsigned<DF> du;
+  x = GatherField(df, surfels, offsetof(Surfel, x), word);
+  y = GatherField(df, surfels, offsetof(Surfel, y), word);
+  z = GatherField(df, surfels, offsetof(Surfel, z), word);
+  normal_radius = GatherField(du, surfels, offsetof(Surfel, normal_radius), word);
+  colour = GatherField(du, surfels, offsetof(Surfel, red), word);
+  confidence_brick = GatherField(du, surfels, offsetof(Surfel, confidence), word);
+  first_seen = GatherField(du, surfels, offsetof(Surfel, first_seen), word);
+}
+
+// The same fields of the surfels at `slot` (a slot a lane, anywhere in the
+// pool): each surfel copied whole into a row of a buffer, the rows transposed
+// (LoadSurfels), where a gather a field loads lane by lane.
+template <class DF, class V, class VU>
+HWY_INLINE void LoadSurfelsAt(DF df, const Surfel* surfels, VU slot, V& x, V& y, V& z, VU& normal_radius, VU& colour,
+                              VU& confidence_brick, VU& first_seen) {
+  const hn::RebindToUnsigned<DF> du;
+#if HWY_TARGET != HWY_SCALAR
+  constexpr std::size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  HWY_ALIGN uint32_t at[kMaxLanes];
+  alignas(sizeof(Surfel)) unsigned char rows[kMaxLanes * sizeof(Surfel)];
+  hn::Store(slot, du, at);
+  for (std::size_t l = 0; l < hn::Lanes(du); ++l) std::memcpy(rows + l * sizeof(Surfel), &surfels[at[l]], sizeof(Surfel));
+  LoadSurfels(df, reinterpret_cast<const Surfel*>(rows), x, y, z, normal_radius, colour, confidence_brick, first_seen);
+#else
+  const hn::RebindToSigned<DF> di;
+  const auto word = hn::BitCast(di, hn::Mul(slot, hn::Set(du, static_cast<uint32_t>(sizeof(Surfel) / sizeof(uint32_t)))));
+  GatherSurfels(df, surfels, word, x, y, z, normal_radius, colour, confidence_brick, first_seen);
+#endif
+}
 
 // A 3-vector dot product in the reference's order, a0 b0 + (a1 b1 + a2 b2).
 template <class V>
