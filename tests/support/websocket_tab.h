@@ -34,7 +34,7 @@ class Tab {
   // its 2 s poll.
   void close() {
     if (conn_ == nullptr) return;
-    closing_.store(true);  // a slow tab reads what is still in flight at once
+    hurry();  // a slow tab reads what is still in flight at once
     if (!closed_.load()) {
       static constexpr char kNormal[] = "\x03\xe8";  // close code 1000
       mg_websocket_client_write(conn_, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, kNormal, sizeof kNormal - 1);
@@ -88,7 +88,7 @@ class Tab {
         self->last_frame_.assign(data, data + len);
       }
     }
-    if (opcode == MG_WEBSOCKET_OPCODE_BINARY && self->delay_ms_.load() > 0 && !self->closing_.load()) {
+    if (opcode == MG_WEBSOCKET_OPCODE_BINARY && self->delay_ms_.load() > 0) {
       std::this_thread::sleep_for(std::chrono::milliseconds(self->delay_ms_.load()));
     }
     if (opcode != MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 1;
@@ -108,7 +108,6 @@ class Tab {
   std::vector<uint8_t> last_frame_;
   std::string close_frame_;
   std::atomic<bool> closed_{false};
-  std::atomic<bool> closing_{false};
 };
 
 // For a process without a ViewServer of its own.

@@ -71,9 +71,9 @@ void stopCivetweb(const CivetwebStarted& started) {
   waker.join();
 }
 
-bool sayGoingAway(mg_connection* conn) {
+void sayGoingAway(mg_connection* conn) {
   static constexpr char kGoingAway[] = "\x03\xe9the operator is stopping";  // close code 1001
-  return mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, kGoingAway, sizeof kGoingAway - 1) > 0;
+  mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, kGoingAway, sizeof kGoingAway - 1);
 }
 
 }  // namespace fovea::tools

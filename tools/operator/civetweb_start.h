@@ -43,12 +43,25 @@ void stopCivetweb(const CivetwebStarted& started);
 // Sends a WebSocket close frame, code 1001 ("going away"), to a client of a
 // server that is stopping. A client answers with a close frame of its own
 // (RFC 6455 5.5.1): its arrival ends the worker's read at once, where a silent
-// client would keep it in its 2 s poll. Returns whether the frame was written.
-bool sayGoingAway(mg_connection* conn);
+// client would keep it in its 2 s poll.
+void sayGoingAway(mg_connection* conn);
 
 // How long a stopping server waits for its senders' goodbyes before
 // stopCivetweb: once civetweb's stop flag is set its writes send nothing.
 inline constexpr std::chrono::milliseconds kGoodbyeWait{1000};
+
+// A stopping server's destructor, `stopping` already set and `wake` notified:
+// waits, at most kGoodbyeWait (a client that reads nothing holds its sender in
+// a write), until no peer's sender runs any more. `lock` holds the server's mutex.
+template <class Peers>
+void waitForGoodbyes(std::unique_lock<std::mutex>& lock, std::condition_variable& wake, const Peers& peers) {
+  wake.wait_for(lock, kGoodbyeWait, [&] {
+    for (const auto& peer : peers) {
+      if (peer.sending) return false;
+    }
+    return true;
+  });
+}
 
 // The end of a client's sender thread (ViewServer's tabs, FoxgloveServer's
 // clients: a `conn`, `closing` and `sending`): when the server stops, it says

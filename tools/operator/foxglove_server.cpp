@@ -115,12 +115,7 @@ FoxgloveServer::~FoxgloveServer() {
   std::unique_lock lock(mu_);
   stopping_ = true;
   wake_.notify_all();
-  // Every sender says goodbye before mg_stop sets civetweb's stop flag, after
-  // which its writes send nothing (bounded: a client that reads nothing holds
-  // its sender in a write).
-  wake_.wait_for(lock, kGoodbyeWait, [&] {
-    return std::none_of(clients_.begin(), clients_.end(), [](const Client& c) { return c.sending; });
-  });
+  waitForGoodbyes(lock, wake_, clients_);  // before mg_stop, after which writes send nothing
   lock.unlock();
   stopCivetweb(civetweb_);
   for (Client& c : clients_) {

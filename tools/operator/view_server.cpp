@@ -59,12 +59,7 @@ ViewServer::~ViewServer() {
   std::unique_lock lock(mu_);
   stopping_ = true;
   wake_.notify_all();
-  // Every sender says goodbye before mg_stop sets civetweb's stop flag, after
-  // which its writes send nothing (bounded: a client that reads nothing holds
-  // its sender in a write).
-  wake_.wait_for(lock, kGoodbyeWait, [&] {
-    return std::none_of(tabs_.begin(), tabs_.end(), [](const Tab& t) { return t.sending; });
-  });
+  waitForGoodbyes(lock, wake_, tabs_);  // before mg_stop, after which writes send nothing
   lock.unlock();
   // Closes every connection; each close handler joins its tab's sender.
   stopCivetweb(civetweb_);
