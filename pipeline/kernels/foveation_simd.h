@@ -97,12 +97,12 @@ Status prepareBackprojection(const hal::RgbdFrame& frame, const DepthRange& rang
 // Valid pixels of rows [row0, row1); adds the rejected ones to *no_depth and *out_of_range.
 std::size_t backprojectCountRows(const BackprojectParams& params, int row0, int row1, std::size_t* no_depth,
                                  std::size_t* out_of_range);
-// Writes the valid pixels of rows [row0, row1) at out_* + out_offset, in image order.
-// Writes the valid pixels of rows [row0, row1) from out_offset on. out_limit: the end
-// of what the call may write (its rows' last point + 1, or the cloud's capacity):
-// below it, whole vectors are stored, lanes past the last point included, because a
-// full store costs a fraction of a masked one (AVX2's vmaskmovps); nothing at or past
-// out_limit is written. The points are the same either way.
+// Writes the valid pixels of rows [row0, row1) at out_* + out_offset on, in image
+// order. out_limit: the end of what the call may write (its rows' last point + 1, or
+// the cloud's capacity): below it, whole vectors are stored, lanes past the last point
+// included, because a full store costs a fraction of a masked one (AVX2's
+// vmaskmovps); nothing at or past out_limit is read or written, so threads may write
+// neighbouring ranges of one cloud. The points are the same either way.
 void backprojectRows(const BackprojectParams& params, int row0, int row1, std::size_t out_offset,
                      std::size_t out_limit);
 

@@ -17,6 +17,7 @@
 
 #include "hwy/highway.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/store_first_lanes-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace fovea::pipeline::kernels {
@@ -83,7 +84,8 @@ struct CompressNibbleTable {
 };
 inline constexpr CompressNibbleTable kCompressNibbles{};
 
-// full: the whole vector may be stored (lanes past the selected ones are don't-care).
+// full: the whole vector may be stored (lanes past the selected ones are don't-care);
+// otherwise only the selected lanes are (StoreFirstLanes, store_first_lanes-inl.h).
 // colour/oc4: a fourth vector (the packed colours) compacted alike, when oc4 is not null.
 template <class DF>
 HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, hn::Vec<DF> b, hn::Vec<DF> c,
@@ -106,14 +108,14 @@ HWY_INLINE std::size_t CompressStore3(DF df, hn::Mask<DF> mask, hn::Vec<DF> a, h
       hn::StoreU(hn::TableLookupLanes(c, idx), df, oc);
       if (oc4 != nullptr) hn::StoreU(hn::TableLookupLanes(colour, idx_u), du, oc4);
     } else {
-      const auto keep = hn::FirstN(df, count);
-      hn::BlendedStore(hn::TableLookupLanes(a, idx), keep, df, oa);
-      hn::BlendedStore(hn::TableLookupLanes(b, idx), keep, df, ob);
-      hn::BlendedStore(hn::TableLookupLanes(c, idx), keep, df, oc);
-      if (oc4 != nullptr) hn::BlendedStore(hn::TableLookupLanes(colour, idx_u), hn::FirstN(du, count), du, oc4);
+      StoreFirstLanes(hn::TableLookupLanes(a, idx), df, count, oa);
+      StoreFirstLanes(hn::TableLookupLanes(b, idx), df, count, ob);
+      StoreFirstLanes(hn::TableLookupLanes(c, idx), df, count, oc);
+      if (oc4 != nullptr) StoreFirstLanes(hn::TableLookupLanes(colour, idx_u), du, count, oc4);
     }
     return count;
   } else {
+    // SVE, RVV and AVX3: CompressBlendedStore is a true masked store there.
     (void)full;
     hn::CompressBlendedStore(a, mask, df, oa);
     hn::CompressBlendedStore(b, mask, df, ob);

@@ -19,6 +19,7 @@
 
 #include "hwy/highway.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/store_first_lanes-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace fovea::pipeline::kernels {
@@ -184,7 +185,10 @@ inline std::size_t HitConeRangeT(const float* x, const float* y, const float* z,
       const auto d = FromGazeAxis(dd, l, vx, vy, vz, t);
       const auto inside = hn::And(hn::And(hn::Gt(hn::Load(dd, reg), zero), hn::Gt(t, zero)),
                                   hn::Le(d, hn::Mul(hn::Set(dd, tan_cone), t)));
-      m += hn::CompressBlendedStore(t, inside, dd, t_out + m);
+      // Not CompressBlendedStore: t_out may end within this vector (StoreFirstLanes).
+      const std::size_t inside_count = hn::CountTrue(dd, inside);
+      StoreFirstLanes(hn::Compress(t, inside), dd, inside_count, t_out + m);
+      m += inside_count;
     }
   }
   return m;

@@ -22,10 +22,12 @@
 #include "pipeline/backproject.h"
 #include "pipeline/foveator.h"
 #include "pipeline/kernels/foveation_simd.h"
+#include "pipeline/kernels/worker_pool.h"
 #include "pipeline/partition.h"
 #include "pipeline/pyramid_sampler.h"
 #include "pipeline/voxel_sampler.h"
 #include "tests/support/clouds.h"
+#include "tests/support/guarded_array.h"
 
 namespace fovea::pipeline {
 namespace {
@@ -158,6 +160,49 @@ TEST_P(TargetTest, BackprojectErrorsMatch) {
   expectSameBackprojection(frame, DepthRange{2.0, 1.0}, 185);  // bad range
   frame.T_world_cam.R_world_cam(1, 1) = std::numeric_limits<double>::quiet_NaN();
   expectSameBackprojection(frame, DepthRange{}, 185);  // bad pose
+}
+
+// Rows back-projected into outputs that end exactly at their last point, before a
+// page the process may not touch, cut into row ranges as Backprojector's threads cut
+// them: nothing past a range's end is read or written (a store that loads and
+// rewrites a whole vector would undo the next thread's points), and the ranges
+// together are the reference's cloud.
+TEST_P(TargetTest, BackprojectRowsTouchNothingPastTheirEnd) {
+  std::mt19937_64 rng(13);
+  const int sizes[][2] = {{7, 3}, {1, 5}, {33, 1}, {17, 4}, {129, 17}, {640, 6}};
+  for (const auto& s : sizes) {
+    const hal::RgbdFrame frame = randomFrame(s[0], s[1], rng);
+    const DepthRange range{0.0, 1e9};
+    PointCloud ref(frame.pixelCount());
+    BackprojectCounts cr;
+    ASSERT_TRUE(backprojectRef(frame, range, ref, cr).isOk());
+    kernels::BackprojectParams p;
+    ASSERT_TRUE(kernels::prepareBackprojection(frame, range, p).isOk());
+    for (int parts = 1; parts <= 4; ++parts) {
+      std::size_t done = 0;
+      for (int part = 0; part < parts; ++part) {
+        const auto h = static_cast<std::size_t>(frame.height());
+        const int row0 = static_cast<int>(WorkerPool::rangeBegin(h, part, parts));
+        const int row1 = static_cast<int>(WorkerPool::rangeBegin(h, part + 1, parts));
+        std::size_t no_depth = 0, out_of_range = 0;
+        const std::size_t valid = kernels::backprojectCountRows(p, row0, row1, &no_depth, &out_of_range);
+        test::GuardedArray<float> x(valid), y(valid), z(valid);
+        test::GuardedArray<uint32_t> rgb(valid);
+        p.out_x = x.data(), p.out_y = y.data(), p.out_z = z.data(), p.out_rgb = rgb.data();
+        kernels::backprojectRows(p, row0, row1, 0, valid);
+        ASSERT_LE(done + valid, ref.size());
+        for (std::size_t i = 0; i < valid; ++i) {
+          const std::size_t r = done + i;
+          ASSERT_EQ(std::bit_cast<uint32_t>(x[i]), std::bit_cast<uint32_t>(ref.x()[r])) << s[0] << "x" << s[1];
+          ASSERT_EQ(std::bit_cast<uint32_t>(y[i]), std::bit_cast<uint32_t>(ref.y()[r]));
+          ASSERT_EQ(std::bit_cast<uint32_t>(z[i]), std::bit_cast<uint32_t>(ref.z()[r]));
+          ASSERT_EQ(rgb[i], ref.rgb()[r]);
+        }
+        done += valid;
+      }
+      EXPECT_EQ(done, ref.size()) << s[0] << "x" << s[1] << " in " << parts << " parts";
+    }
+  }
 }
 
 // ---- partition --------------------------------------------------------------
