@@ -3,10 +3,11 @@
 // planAssociationRef: a vector of pixels at a time, the per-pixel maps loaded,
 // the surfels the index map names there copied and transposed into a vector a
 // field (LoadSurfelsAt: the pool read as structure of arrays), the bricks'
-// origins and the codecs' tables gathered by index, and every lane computed in the reference's order of
-// operations (Add, Sub, Mul, Div, Sqrt, never MulAdd). A vector none of whose
-// pixels has a surfel at its depth and a normal skips the merge. The pixels
-// past the last whole vector are the reference's.
+// origins and the codecs' tables gathered by index, and every lane computed in
+// the reference's order of operations (Add, Sub, Mul, Div, Sqrt, never
+// MulAdd). A vector none of whose pixels has a surfel at its depth and a
+// normal skips the merge. The pixels past the last whole vector are the
+// reference's.
 
 // Per-target include guard (Highway's toggle idiom).
 #if defined(FOVEA_PIPELINE_MAP_ASSOCIATION_PLAN_SIMD_INL_H_) == defined(HWY_TARGET_TOGGLE)
