@@ -86,28 +86,45 @@ uint32_t MovingPixels::update(const FrameIn& half, const ModelIn& model, const E
   return age(half, carried);
 }
 
+// Two passes of minima over 4 x 4 finest pixels, written for the compiler to
+// vectorise (as plain loops of selects and minima; the minimum of positive
+// depths and infinity does not depend on the order, so the result is the
+// window's as before, when each half-level pixel's window was searched with
+// clamped bounds: more than half of the moving pixels' time, perf on fovea-track).
 void MovingPixels::nearestModelDepth(const ModelIn& model) {
   const int w = model.width, h = model.height, hw = w / 2, hh = h / 2;
-  const auto surfel = [&](int u, int v) {
-    const std::size_t j = static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-    return model.from_surfel[j] && model.z[j] > 0.0f ? model.z[j] : kNoSurface;
+  for (int v = 0; v < h; ++v) nearestAlongRow(model, v, column_near_.data() + static_cast<std::size_t>(v) * hw);
+  for (int V = 0; V < hh; ++V) {  // ... then down the finest rows 2V - 1 .. 2V + 2
+    float* out = near_.data() + static_cast<std::size_t>(V) * hw;
+    std::fill_n(out, hw, kNoSurface);
+    for (int v = std::max(2 * V - 1, 0); v <= std::min(2 * V + 2, h - 1); ++v) {
+      const float* in = column_near_.data() + static_cast<std::size_t>(v) * hw;
+      for (int U = 0; U < hw; ++U) out[U] = std::min(out[U], in[U]);
+    }
+    for (int U = 0; U < hw; ++U) out[U] = out[U] < kNoSurface ? out[U] : 0.0f;
+  }
+}
+
+// Along finest row v: for each half-level column U, the nearest surfel depth over
+// the finest columns 2U - 1 .. 2U + 2 (kNoSurface: none), into out[0, w / 2).
+void MovingPixels::nearestAlongRow(const ModelIn& model, int v, float* out) {
+  const int w = model.width, hw = w / 2;
+  const std::size_t row = static_cast<std::size_t>(v) * static_cast<std::size_t>(w);
+  const uint8_t* from_surfel = model.from_surfel + row;
+  const float* z = model.z + row;
+  const auto surfel = [&](int u) { return ((from_surfel[u] != 0) & (z[u] > 0.0f)) ? z[u] : kNoSurface; };
+  const auto clamped = [&](int U) {
+    float m = kNoSurface;
+    for (int u = std::max(2 * U - 1, 0); u <= std::min(2 * U + 2, w - 1); ++u) m = std::min(m, surfel(u));
+    return m;
   };
-  for (int v = 0; v < h; ++v) {  // along each row: the finest columns 2U - 1 .. 2U + 2
-    for (int U = 0; U < hw; ++U) {
-      float m = kNoSurface;
-      for (int u = std::max(2 * U - 1, 0); u <= std::min(2 * U + 2, w - 1); ++u) m = std::min(m, surfel(u, v));
-      column_near_[static_cast<std::size_t>(v) * hw + U] = m;
-    }
+  // The columns whose window lies inside the row: 2U - 1 >= 0 and 2U + 2 <= w - 1.
+  const int inner_end = std::max(1, std::min(hw, (w - 3) / 2 + 1));
+  if (hw > 0) out[0] = clamped(0);
+  for (int U = 1; U < inner_end; ++U) {
+    out[U] = std::min(std::min(surfel(2 * U - 1), surfel(2 * U)), std::min(surfel(2 * U + 1), surfel(2 * U + 2)));
   }
-  for (int V = 0; V < hh; ++V) {  // ... then down the rows 2V - 1 .. 2V + 2
-    for (int U = 0; U < hw; ++U) {
-      float m = kNoSurface;
-      for (int v = std::max(2 * V - 1, 0); v <= std::min(2 * V + 2, h - 1); ++v) {
-        m = std::min(m, column_near_[static_cast<std::size_t>(v) * hw + U]);
-      }
-      near_[static_cast<std::size_t>(V) * hw + U] = m < kNoSurface ? m : 0.0f;
-    }
-  }
+  for (int U = inner_end; U < hw; ++U) out[U] = clamped(U);
 }
 
 uint8_t MovingPixels::classify(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R,

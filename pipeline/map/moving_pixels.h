@@ -111,6 +111,8 @@ class MovingPixels {
   // near_: per half-level pixel, the nearest surfel depth of the model's 4 x 4
   // finest pixels around its block; 0 where none has a surfel.
   void nearestModelDepth(const ModelIn& model);
+  // Its pass along finest row v into out (column_near_'s row).
+  static void nearestAlongRow(const ModelIn& model, int v, float* out);
   // Half-level pixel i against the model's surface: kExplained (also without depth), kUnknown, kInFront.
   uint8_t classify(const FrameIn& half, const ModelIn& model, const Eigen::Matrix3f& R, const Eigen::Vector3f& t,
                    std::size_t i) const;

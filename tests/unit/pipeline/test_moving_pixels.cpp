@@ -3,8 +3,9 @@
 // before a wall with holes in the map, frame after frame; a box that stops
 // settles after settle_frames frames and one that keeps changing never does;
 // what is not a mover (nothing known behind it, a speckle, a region mostly
-// unknown); and bad input. And the intensity's rounding both references
-// share (intensity_level.h) against std::lround.
+// unknown); each pixel judged by the nearest surfel of its window; and bad
+// input. And the intensity's rounding both references share
+// (intensity_level.h) against std::lround.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -59,7 +60,13 @@ struct Reference {
     if (!(pz > 0.0f)) return kExplained;
     const float fu = kF * s.x[i] / pz + kC, fv = kF * s.y[i] / pz + kCy;
     if (!(fu >= -0.5f && fu < kW - 0.5f && fv >= -0.5f && fv < kH - 0.5f)) return kUnknown;
-    const int bu = static_cast<int>(fu + 0.5f) / 2, bv = static_cast<int>(fv + 0.5f) / 2;
+    const float near = windowNear(s, static_cast<int>(fu + 0.5f) / 2, static_cast<int>(fv + 0.5f) / 2);
+    if (std::isinf(near)) return kUnknown;
+    return pz < near - gap(near) ? kInFront : kExplained;
+  }
+  // The nearest surfel depth of the finest pixels 2 bu - 1 .. 2 bu + 2 by 2 bv - 1 .. 2 bv + 2
+  // (infinity: none).
+  static float windowNear(const Scene& s, int bu, int bv) {
     float near = std::numeric_limits<float>::infinity();
     for (int v = 2 * bv - 1; v <= 2 * bv + 2; ++v) {
       for (int u = 2 * bu - 1; u <= 2 * bu + 2; ++u) {
@@ -68,9 +75,10 @@ struct Reference {
         if (s.from_surfel[j] && s.model_z[j] > 0.0f) near = std::min(near, s.model_z[j]);
       }
     }
-    if (std::isinf(near)) return kUnknown;
-    const float gap = std::max(static_cast<float>(config.min_gap_m), static_cast<float>(config.gap_sigmas) * depthSigma(near));
-    return pz < near - gap ? kInFront : kExplained;
+    return near;
+  }
+  float gap(float near) const {
+    return std::max(static_cast<float>(config.min_gap_m), static_cast<float>(config.gap_sigmas) * depthSigma(near));
   }
   // The finest mask after one more frame.
   std::vector<uint8_t> step(const Scene& s) {
@@ -239,6 +247,39 @@ TEST(MovingPixels, AStoppedBoxSettlesAndAChangingOneNever) {
     EXPECT_EQ(changing.update(s.half(), s.model(), Eigen::Matrix3f::Identity(), Eigen::Vector3f::Zero()),
               4u * 12 * 12)
         << "frame " << k;
+  }
+}
+
+// A model whose depth differs from pixel to pixel (some without a surfel) and a
+// frame whose every pixel lies just in front of, or just behind, the nearest
+// surfel of its window less the gap: the window decides each pixel, so a window
+// searched a column too narrow or shifted, or cut wrong at the image's edge,
+// shows (the random scenes above, a flat wall, did not tell).
+TEST(MovingPixels, EachPixelIsJudgedByTheNearestSurfelOfItsWindow) {
+  MovingPixelsConfig config;
+  config.min_region_share = 1e-6;  // one pixel in front is a mover: each pixel's class shows
+  Scene s;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> rough(0.0f, 0.02f);  // 1 % of the depth: one region
+  for (int v = 0; v < kH; ++v) {
+    for (int u = 0; u < kW; ++u) {
+      s.model_z[v * kW + u] = 2.0f + rough(rng);
+      s.from_surfel[v * kW + u] = (u * 5 + v * 3) % 11 == 0 ? 0 : 1;
+    }
+  }
+  for (const float side : {-0.0002f, 0.0002f}) {  // in front, behind
+    Reference reference{config};
+    for (int v = 0; v < kHalfH; ++v) {
+      for (int u = 0; u < kHalfW; ++u) {
+        const float near = Reference::windowNear(s, u, v);
+        s.setDepth(u, v, near - reference.gap(near) + side, 0.5f);
+      }
+    }
+    MovingPixels moving = MovingPixels::create(kW, kH, config).value();
+    const uint32_t count = moving.update(s.half(), s.model(), Eigen::Matrix3f::Identity(), Eigen::Vector3f::Zero());
+    const std::vector<uint8_t> expected = reference.step(s);
+    for (int i = 0; i < kW * kH; ++i) ASSERT_EQ(moving.mask()[i], expected[i]) << "pixel " << i << ", side " << side;
+    EXPECT_EQ(count, side < 0.0f ? static_cast<uint32_t>(kW * kH) : 0u) << "side " << side;
   }
 }
 
