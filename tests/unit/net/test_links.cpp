@@ -238,7 +238,9 @@ TEST(Links, SecondOperatorRefusedWhileFirstKeepsReceiving) {
   const std::string& why = bob.status().message();
   EXPECT_NE(why.find("busy: serving alice at 127.0.0.1:" + std::to_string((*alice)->localPort())), std::string::npos)
       << why;
-  EXPECT_EQ(robot->counters().refusals, 1u);
+  // Each Hello bob sent before the refusal reached him is refused and counted: one,
+  // or two when the poll lags past his first retry (100 ms; under qemu it did).
+  EXPECT_GE(robot->counters().refusals, 1u);
   EXPECT_EQ(robot->session()->operator_name.view(), "alice");
   ASSERT_EQ(robot->send(MessageType::kChunk, chunkPayload(100, 1)), SendResult::kSent);
   EXPECT_TRUE(receiveType(**alice, MessageType::kChunk));
